@@ -1,0 +1,29 @@
+"""GMWM engine: wavelet variance, latent processes, GMWM fitting, loaders (pure numerics, no UI).
+
+>>> import engine as eg
+>>> wv = eg.wavelet_variance(x, fs=100.0)                 # doctest: +SKIP
+>>> res = eg.fit_gmwm(wv, eg.WN() + eg.RW() + 2 * eg.GM())  # doctest: +SKIP
+>>> print(res.summary())                                  # doctest: +SKIP
+"""
+
+from .fit import FitError, GMWMResult, ParamRecord, fit_gmwm, weight_matrix
+from .model import Model, ModelError, parse_model
+from .processes import AR1, DR, GM, QN, RW, WN, Process, ar1_wv
+from .units import datasheet, param_unit
+from .wavelet import (
+    WaveletVariance,
+    biweight_constant,
+    default_levels,
+    haar_coefficients,
+    robust_scale_biweight,
+    wavelet_variance,
+)
+
+__all__ = [
+    "AR1", "DR", "GM", "QN", "RW", "WN", "Process", "Model", "ModelError", "parse_model",
+    "WaveletVariance", "wavelet_variance", "default_levels", "haar_coefficients",
+    "biweight_constant", "robust_scale_biweight", "ar1_wv",
+    "fit_gmwm", "GMWMResult", "ParamRecord", "FitError", "weight_matrix",
+    "datasheet", "param_unit",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,312 @@
+"""Composite latent models: ``WN() + RW() + 2 * GM()``, parsing ``"2*GM+WN+RW"``, validation.
+
+A :class:`Model` is an immutable, flat tuple of processes kept in a canonical order
+(GM, AR1, QN, WN, RW, DR), so that ``"WN+RW+2*GM"`` and ``"2*GM+RW+WN"`` are the same model.
+Parameter names are unique: ``WN.sigma2``, ``GM_1.beta``, ``GM_2.beta`` (the index counts the
+processes of one kind, from 1, and appears only when there are several).
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .processes import AR1, DR, GM, PROCESS_TYPES, QN, RW, WN, Process
+
+__all__ = ["Model", "parse_model", "ModelError"]
+
+_ORDER = {code: i for i, code in enumerate(PROCESS_TYPES)}  # GM, AR1, QN, WN, RW, DR
+_UNIQUE = ("WN", "QN", "RW", "DR")
+
+
+class ModelError(ValueError):
+    """A model specification that cannot be parsed or cannot be identified."""
+
+
+@dataclass(frozen=True)
+class Model:
+    """An immutable sum of independent latent processes.
+
+    Build with ``WN() + RW() + 2 * GM()`` or :func:`parse_model`. ``repr`` evaluates back to
+    the same model (with ``from engine import *``).
+    """
+
+    processes: tuple[Process, ...] = ()
+
+    def __post_init__(self) -> None:
+        procs = tuple(sorted(self.processes, key=lambda p: _ORDER[p.code]))
+        object.__setattr__(self, "processes", procs)
+
+    # ---- algebra ----------------------------------------------------------------------
+    @staticmethod
+    def coerce(other: Any) -> Model:
+        if isinstance(other, Model):
+            return other
+        if isinstance(other, Process):
+            return Model((other,))
+        if isinstance(other, str):
+            return parse_model(other)
+        raise TypeError(f"cannot add a {type(other).__name__} to a model")
+
+    def __add__(self, other: Any) -> Model:
+        return Model(self.processes + Model.coerce(other).processes)
+
+    def __radd__(self, other: Any) -> Model:
+        if other == 0:
+            return self
+        return Model.coerce(other) + self
+
+    def __mul__(self, k: int) -> Model:
+        if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or k < 1:
+            raise TypeError(f"a model can only be multiplied by a positive integer, got {k!r}")
+        return Model(self.processes * int(k))
+
+    __rmul__ = __mul__
+
+    def __len__(self) -> int:
+        return len(self.processes)
+
+    def __iter__(self):
+        return iter(self.processes)
+
+    def __getitem__(self, i: int) -> Process:
+        return self.processes[i]
+
+    # ---- names ------------------------------------------------------------------------
+    @property
+    def labels(self) -> list[str]:
+        """One label per process: ``WN``, or ``GM_1``, ``GM_2`` when a kind repeats."""
+        counts = Counter(p.code for p in self.processes)
+        seen: Counter[str] = Counter()
+        out = []
+        for p in self.processes:
+            seen[p.code] += 1
+            out.append(p.code if counts[p.code] == 1 else f"{p.code}_{seen[p.code]}")
+        return out
+
+    @property
+    def indices(self) -> list[int]:
+        """Index of each process among the processes of its kind, from 1."""
+        seen: Counter[str] = Counter()
+        out = []
+        for p in self.processes:
+            seen[p.code] += 1
+            out.append(seen[p.code])
+        return out
+
+    @property
+    def param_names(self) -> list[str]:
+        """Unique parameter names, ``label.name``."""
+        return [f"{lab}.{n}" for lab, p in zip(self.labels, self.processes, strict=True)
+                for n in p.param_names]
+
+    @property
+    def n_params(self) -> int:
+        return sum(len(p.param_names) for p in self.processes)
+
+    @property
+    def is_set(self) -> bool:
+        """True when every parameter has a value."""
+        return all(p.is_set for p in self.processes)
+
+    @property
+    def is_linear(self) -> bool:
+        """True for a model made only of QN, WN, RW and DR (closed-form GMWM)."""
+        return all(p.nonlinear is None for p in self.processes)
+
+    def values(self) -> dict[str, float | None]:
+        """Parameter values by unique name."""
+        return dict(zip(self.param_names,
+                        [v for p in self.processes for v in p.values], strict=True))
+
+    def cleared(self) -> Model:
+        """The same structure with every value unknown."""
+        return Model(tuple(p.cleared() for p in self.processes))
+
+    def spec(self, values: bool = False) -> str:
+        """Canonical specification string, e.g. ``2*GM+WN+RW``.
+
+        With ``values=True`` every process is written with its values
+        (``GM(beta=0.1, sigma2_gm=1e-4)+...``), one term per process.
+        """
+        if values:
+            return "+".join(p.spec() for p in self.processes)
+        counts = Counter(p.code for p in self.processes)
+        parts = []
+        for code in PROCESS_TYPES:
+            k = counts.get(code, 0)
+            if k:
+                parts.append(code if k == 1 else f"{k}*{code}")
+        return "+".join(parts)
+
+    def __str__(self) -> str:
+        return self.spec()
+
+    def __repr__(self) -> str:
+        return " + ".join(repr(p) for p in self.processes) if self.processes else "Model(())"
+
+    # ---- validation ---------------------------------------------------------------------
+    def validate(self, n_levels: int | None = None) -> Model:
+        """Check identifiability; return self or raise :class:`ModelError` saying why.
+
+        Rules: at least one process; at most one WN, QN, RW and DR (two of a kind have the
+        same WV shape, only their sum is identifiable); AR1 and GM not mixed (same WV family,
+        different parametrisations); no more parameters than WV levels.
+        """
+        if not self.processes:
+            raise ModelError("the model is empty: add at least one process (WN, QN, RW, DR, AR1, GM)")
+        counts = Counter(p.code for p in self.processes)
+        for code in _UNIQUE:
+            if counts.get(code, 0) > 1:
+                raise ModelError(
+                    f"the model has {counts[code]} {code} terms; only their sum is identifiable "
+                    f"(they have the same WV shape): keep one {code}"
+                )
+        if counts.get("AR1") and counts.get("GM"):
+            raise ModelError(
+                "the model mixes AR1 and GM: they are the same process in two parametrisations; "
+                "use only GM (continuous time) or only AR1 (per sample)"
+            )
+        if n_levels is not None and self.n_params > n_levels:
+            raise ModelError(
+                f"the model has {self.n_params} parameters but the WV has only {n_levels} levels: "
+                "use a longer series or a smaller model"
+            )
+        return self
+
+    # ---- implied WV and simulation ---------------------------------------------------------
+    def components(self, tau: np.ndarray, fs: float = 1.0) -> dict[str, np.ndarray]:
+        """Implied WV of each process, by label (the decomposition)."""
+        tau = np.asarray(tau, float)
+        return {lab: p.wv(tau, fs) for lab, p in zip(self.labels, self.processes, strict=True)}
+
+    def wv(self, tau: np.ndarray, fs: float = 1.0) -> np.ndarray:
+        """Implied Haar WV at scales ``tau`` (samples): the sum of the components."""
+        tau = np.asarray(tau, float)
+        total = np.zeros_like(tau)
+        for p in self.processes:
+            total = total + p.wv(tau, fs)
+        return total
+
+    def simulate(self, n: int, *, fs: float = 1.0,
+                 rng: np.random.Generator | int | None = None) -> np.ndarray:
+        """Simulate ``n`` samples of the sum of the processes (independent draws each)."""
+        if n < 1:
+            raise ValueError(f"n must be >= 1, got {n}")
+        missing = [name for name, v in self.values().items() if v is None]
+        if missing:
+            raise ModelError(f"cannot simulate: no value for {', '.join(missing)}; "
+                             "write e.g. WN(sigma2=1e-4)+RW(gamma2=1e-8)")
+        g = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        x = np.zeros(n)
+        for p in self.processes:
+            x += p.simulate(n, g, fs)
+        return x
+
+    def autocovariance(self, lags: np.ndarray, fs: float = 1.0) -> np.ndarray:
+        """Autocovariance of a stationary model at integer lags."""
+        return sum((p.autocovariance(lags, fs) for p in self.processes),
+                   np.zeros(np.shape(lags)))
+
+
+_TERM = re.compile(
+    r"^\s*(?:(?P<k>\d+)\s*\*\s*)?(?P<code>[A-Za-z][A-Za-z0-9]*)\s*(?:\((?P<args>[^()]*)\))?"
+    r"\s*(?:\*\s*(?P<k2>\d+))?\s*$"
+)
+_ALIASES = {"AR": "AR1", "GAUSSMARKOV": "GM", "WHITE": "WN", "RANDOMWALK": "RW", "DRIFT": "DR",
+            "QUANTIZATION": "QN"}
+
+
+def _split_top(spec: str) -> list[str]:
+    parts, depth, cur = [], 0, []
+    for ch in spec:
+        if ch == "(":
+            depth += 1
+        elif ch == ")":
+            depth -= 1
+            if depth < 0:
+                raise ModelError(f"unbalanced ')' in model {spec!r}")
+        if ch == "+" and depth == 0:
+            parts.append("".join(cur))
+            cur = []
+        else:
+            cur.append(ch)
+    if depth != 0:
+        raise ModelError(f"unbalanced '(' in model {spec!r}")
+    parts.append("".join(cur))
+    return parts
+
+
+def _parse_number(text: str, where: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ModelError(f"{where}: {text.strip()!r} is not a number") from None
+
+
+def parse_model(spec: str | Model | Process) -> Model:
+    """Parse a model specification.
+
+    Terms joined by ``+`` in any order, each ``CODE``, ``k*CODE`` or ``CODE*k``, optionally with
+    values: ``"WN(sigma2=1)+RW(gamma2=1e-4)"``, ``"GM(0.1, 1e-4)"`` (positional in the
+    process's parameter order). Codes: WN, QN, RW, DR, AR1, GM (case-insensitive).
+
+    Raises
+    ------
+    ModelError
+        With the offending term and what is accepted.
+    """
+    if isinstance(spec, Model):
+        return spec
+    if isinstance(spec, Process):
+        return Model((spec,))
+    if not isinstance(spec, str) or not spec.strip():
+        raise ModelError("the model specification is empty: write e.g. WN+RW+2*GM")
+    procs: list[Process] = []
+    for term in _split_top(spec):
+        if not term.strip():
+            raise ModelError(f"empty term in model {spec!r} (a '+' too many?)")
+        m = _TERM.match(term)
+        if not m:
+            raise ModelError(f"cannot read the term {term.strip()!r} in model {spec!r}; "
+                             "write terms like WN, 2*GM or GM(beta=0.1, sigma2_gm=1e-4)")
+        code = m.group("code").upper()
+        code = _ALIASES.get(code, code)
+        if code not in PROCESS_TYPES:
+            raise ModelError(f"unknown process {m.group('code')!r} in model {spec!r}; "
+                             f"known processes: {', '.join(PROCESS_TYPES)}")
+        cls = PROCESS_TYPES[code]
+        k = int(m.group("k") or 1) * int(m.group("k2") or 1)
+        if k < 1:
+            raise ModelError(f"the multiplier in {term.strip()!r} must be at least 1")
+        p = cls()
+        args = m.group("args")
+        if args is not None and args.strip():
+            pos: list[float] = []
+            named: dict[str, float] = {}
+            for a in args.split(","):
+                a = a.strip()
+                if not a:
+                    continue
+                if "=" in a:
+                    name, val = (s.strip() for s in a.split("=", 1))
+                    named[name] = _parse_number(val, f"{code}.{name}")
+                else:
+                    if named:
+                        raise ModelError(f"in {term.strip()!r} a positional value follows a "
+                                         "named one")
+                    pos.append(_parse_number(a, code))
+            try:
+                p = p.with_values(*pos, **named)
+            except ValueError as e:
+                raise ModelError(str(e)) from None
+        procs.extend([p] * k)
+    return Model(tuple(procs))
+
+
+# Names exported so that repr(model) evaluates back with ``from engine import *``.
+_REPR_NAMESPACE = {"WN": WN, "QN": QN, "RW": RW, "DR": DR, "AR1": AR1, "GM": GM, "Model": Model}

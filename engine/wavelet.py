@@ -1,0 +1,425 @@
+"""Haar MODWT wavelet variance (WV): classical and robust, with intervals.
+
+Conventions (see ``CONVENTIONS.md``): level ``j = 1..J``, scale ``tau_j = 2^j`` samples,
+``M_j = N - 2^j + 1`` boundary-free coefficients,
+
+    W_{j,t} = (sum of the latest 2^(j-1) samples - sum of the 2^(j-1) before them) / 2^j,
+
+and the WV ``nu2_j = mean_t W_{j,t}^2``. With ``S`` the cumulative sum of the de-meaned series
+and ``m = 2^(j-1)``, ``W_{j,t} = (S_t - 2 S_{t-m} + S_{t-2m}) / 2^j``.
+
+Reference: Percival & Walden (2000), *Wavelet Methods for Time Series Analysis*, ch. 8;
+Guerrier et al. (2020), the GMWM paper, section II.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+from scipy import integrate, optimize, stats
+
+__all__ = [
+    "WaveletVariance",
+    "wavelet_variance",
+    "default_levels",
+    "haar_coefficients",
+    "biweight_constant",
+    "robust_scale_biweight",
+]
+
+# Block length (samples) of the cache-blocked classical WV.  Every level of a block reads the
+# regions S[a-2^k : b-2^k], k = 0..J, which are shared between consecutive levels, so a block
+# of this size keeps all of them in the CPU cache.
+_BLOCK = 1 << 15
+
+
+def default_levels(n: int) -> int:
+    """Default number of levels ``J = floor(log2(N - 1))``: the largest J with ``M_J >= 2``.
+
+    Parameters
+    ----------
+    n : int
+        Series length (samples), at least 3.
+    """
+    if n < 3:
+        raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
+    return int(np.floor(np.log2(n - 1)))
+
+
+@dataclass(frozen=True, eq=False)
+class WaveletVariance:
+    """Empirical Haar wavelet variance of one series, with its intervals.
+
+    Attributes
+    ----------
+    levels : ndarray of int, shape (J,)
+        Levels ``1..J``.
+    tau_samples : ndarray of int, shape (J,)
+        Scales ``2^j`` in samples.
+    variance, ci_low, ci_high : ndarray of float, shape (J,)
+        WV and its ``1 - alpha`` interval, in (signal unit)^2.
+    n_coef : ndarray of int, shape (J,)
+        Boundary-free coefficients ``M_j`` per level.
+    n : int
+        Series length (samples).
+    fs : float
+        Sampling frequency (Hz).
+    robust, eff, alpha
+        Settings: robust (Tukey biweight) or classical, its Gaussian efficiency, interval level.
+    unit : str
+        Signal unit (the WV is in unit^2); empty when unknown.
+    classical : WaveletVariance or None
+        For a robust WV, the classical one of the same series (for side-by-side views).
+    """
+
+    levels: np.ndarray
+    tau_samples: np.ndarray
+    variance: np.ndarray
+    ci_low: np.ndarray
+    ci_high: np.ndarray
+    n_coef: np.ndarray
+    n: int
+    fs: float = 1.0
+    robust: bool = False
+    eff: float = 0.6
+    alpha: float = 0.05
+    unit: str = ""
+    classical: WaveletVariance | None = field(default=None, repr=False)
+
+    @property
+    def tau_s(self) -> np.ndarray:
+        """Scales in seconds, ``2^j / fs``."""
+        return self.tau_samples / self.fs
+
+    @property
+    def n_levels(self) -> int:
+        """Number of levels J."""
+        return int(self.levels.size)
+
+    def __len__(self) -> int:
+        return self.n_levels
+
+    def truncate(self, levels: int) -> WaveletVariance:
+        """The first ``levels`` levels of this WV (no recomputation)."""
+        if not 1 <= levels <= self.n_levels:
+            raise ValueError(f"levels must be between 1 and {self.n_levels}, got {levels}")
+        s = slice(0, levels)
+        return WaveletVariance(
+            levels=self.levels[s], tau_samples=self.tau_samples[s], variance=self.variance[s],
+            ci_low=self.ci_low[s], ci_high=self.ci_high[s], n_coef=self.n_coef[s], n=self.n,
+            fs=self.fs, robust=self.robust, eff=self.eff, alpha=self.alpha, unit=self.unit,
+            classical=None if self.classical is None else self.classical.truncate(levels),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (the ``gmwm wv --json`` object)."""
+        return {
+            "n": int(self.n),
+            "fs": float(self.fs),
+            "levels": [int(v) for v in self.levels],
+            "tau_samples": [int(v) for v in self.tau_samples],
+            "tau_s": [float(v) for v in self.tau_s],
+            "variance": [float(v) for v in self.variance],
+            "ci_low": [float(v) for v in self.ci_low],
+            "ci_high": [float(v) for v in self.ci_high],
+            "n_coef": [int(v) for v in self.n_coef],
+            "robust": bool(self.robust),
+            "eff": float(self.eff),
+            "alpha": float(self.alpha),
+            "unit": self.unit,
+        }
+
+    def table(self) -> str:
+        """Readable table with units."""
+        u = f"({self.unit})^2" if self.unit else "unit^2"
+        kind = f"robust (biweight, eff={self.eff:g})" if self.robust else "classical"
+        ci = f"{100 * (1 - self.alpha):g}%"
+        lines = [
+            f"Haar wavelet variance, {kind}; N = {self.n} samples, fs = {self.fs:g} Hz",
+            f"{'level':>5} {'tau [samples]':>14} {'tau [s]':>12} {'WV [' + u + ']':>16} "
+            f"{ci + ' low':>12} {ci + ' high':>12} {'M_j':>10}",
+        ]
+        for i in range(self.n_levels):
+            lines.append(
+                f"{self.levels[i]:>5d} {self.tau_samples[i]:>14d} {self.tau_s[i]:>12.5g} "
+                f"{self.variance[i]:>16.6e} {self.ci_low[i]:>12.4e} {self.ci_high[i]:>12.4e} "
+                f"{self.n_coef[i]:>10d}"
+            )
+        return "\n".join(lines)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        variance: np.ndarray,
+        *,
+        n: int,
+        fs: float = 1.0,
+        ci_low: np.ndarray | None = None,
+        ci_high: np.ndarray | None = None,
+        alpha: float = 0.05,
+        robust: bool = False,
+        eff: float = 0.6,
+        unit: str = "",
+    ) -> WaveletVariance:
+        """Build a WV from stored numbers (e.g. a summary file); missing intervals are eta3.
+
+        Parameters
+        ----------
+        variance : array_like, shape (J,)
+            WV at levels 1..J.
+        n : int
+            Length of the series it was computed from (samples); gives ``M_j``.
+        """
+        v = np.asarray(variance, dtype=float)
+        if v.ndim != 1 or v.size == 0:
+            raise ValueError("variance must be a non-empty 1-D array")
+        if not np.all(np.isfinite(v)) or np.any(v < 0):
+            raise ValueError("variance must be finite and non-negative at every level")
+        levels = np.arange(1, v.size + 1)
+        tau = 2**levels
+        m = np.maximum(n - tau + 1, 0)
+        if ci_low is None or ci_high is None:
+            ci_low, ci_high = eta3_interval(v, m, tau, alpha)
+        return cls(
+            levels=levels, tau_samples=tau, variance=v, ci_low=np.asarray(ci_low, float),
+            ci_high=np.asarray(ci_high, float), n_coef=m, n=int(n), fs=float(fs), robust=robust,
+            eff=eff, alpha=alpha, unit=unit,
+        )
+
+
+def eta3_interval(
+    variance: np.ndarray, n_coef: np.ndarray, tau: np.ndarray, alpha: float = 0.05
+) -> tuple[np.ndarray, np.ndarray]:
+    """Percival's eta3 chi-square interval of a WV.
+
+    ``eta_j = max(M_j / 2^j, 1)``, interval ``[eta nu2 / chi2_{1-a/2}(eta), eta nu2 / chi2_{a/2}(eta)]``.
+    """
+    eta = np.maximum(np.asarray(n_coef, float) / np.asarray(tau, float), 1.0)
+    lo = eta * variance / stats.chi2.ppf(1 - alpha / 2, eta)
+    hi = eta * variance / stats.chi2.ppf(alpha / 2, eta)
+    return lo, hi
+
+
+def _as_series(x: Any) -> np.ndarray:
+    a = np.asarray(x)
+    if a.dtype.kind not in "fiu" and a.dtype != bool:
+        raise TypeError(f"the series must be numeric, got dtype {a.dtype}")
+    a = np.ravel(a) if a.ndim > 1 and 1 in a.shape else a
+    if a.ndim != 1:
+        raise ValueError(f"the series must be one-dimensional, got shape {a.shape}")
+    if a.size < 4:
+        raise ValueError(f"the series has {a.size} samples; a wavelet variance needs at least 4")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        bad = np.flatnonzero(~np.isfinite(a))
+        raise ValueError(
+            f"the series contains {bad.size} NaN/Inf value(s), first at sample {bad[0]}; "
+            "remove or interpolate them first"
+        )
+    return a
+
+
+def _cumsum_demeaned(x: np.ndarray) -> np.ndarray:
+    """Cumulative sum of ``x - mean(x)`` in float64, with a leading 0 (length N + 1).
+
+    The mean is removed before summing (CONVENTIONS: a cumulative sum of a series with an
+    offset loses digits on long logs).  Two passes, one float64 array of extra memory.
+    """
+    s = np.empty(x.size + 1, dtype=np.float64)
+    s[0] = 0.0
+    np.subtract(x, np.mean(x, dtype=np.float64), out=s[1:], dtype=np.float64)
+    np.cumsum(s[1:], out=s[1:])
+    return s
+
+
+def _classical_sums(s: np.ndarray, n: int, levels: int) -> np.ndarray:
+    """Sum over t of (S_t - 2 S_{t-m} + S_{t-2m})^2 for every level, cache-blocked."""
+    sums = np.zeros(levels)
+    buf = np.empty(_BLOCK)
+    # index t runs over positions of S: coefficient at level j uses S[t], S[t-m], S[t-2m],
+    # t = 2m .. n.  Loop over blocks of t, levels inside, so the shared regions stay cached.
+    for a in range(2, n + 1, _BLOCK):
+        b = min(a + _BLOCK, n + 1)
+        for j in range(1, levels + 1):
+            m = 1 << (j - 1)
+            lo = max(a, 2 * m)
+            if lo >= b:
+                break  # higher levels start even later
+            k = b - lo
+            d = buf[:k]
+            np.multiply(s[lo - m : b - m], -2.0, out=d)
+            d += s[lo:b]
+            d += s[lo - 2 * m : b - 2 * m]
+            sums[j - 1] += np.dot(d, d)
+    return sums
+
+
+def haar_coefficients(x: Any, level: int) -> np.ndarray:
+    """Boundary-free Haar MODWT coefficients ``W_{j,t}`` of one level (length ``N - 2^j + 1``).
+
+    The mean is removed first; the coefficients do not depend on it.
+    """
+    a = _as_series(x)
+    m = 1 << (level - 1)
+    if 2 * m > a.size:
+        raise ValueError(f"level {level} needs at least {2 * m} samples, the series has {a.size}")
+    s = _cumsum_demeaned(a)
+    return (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+
+
+@lru_cache(maxsize=64)
+def _biweight_moments(c: float) -> tuple[float, float, float]:
+    """E[g], E[z^2 g], E[g^2] for g(z) = psi(z)^2 = z^2 (1 - z^2/c^2)^4 1{|z|<=c}, Z ~ N(0,1)."""
+    def g(z: float) -> float:
+        return z * z * (1 - z * z / (c * c)) ** 4
+
+    phi = stats.norm.pdf
+    e_g = 2 * integrate.quad(lambda z: g(z) * phi(z), 0, c, epsabs=1e-13)[0]
+    e_z2g = 2 * integrate.quad(lambda z: z * z * g(z) * phi(z), 0, c, epsabs=1e-13)[0]
+    e_g2 = 2 * integrate.quad(lambda z: g(z) ** 2 * phi(z), 0, c, epsabs=1e-13)[0]
+    return e_g, e_z2g, e_g2
+
+
+def _biweight_efficiency(c: float) -> float:
+    a, z2g, g2 = _biweight_moments(c)
+    m = z2g - a
+    q = g2 - a * a
+    return 0.5 * m * m / q
+
+
+@lru_cache(maxsize=64)
+def biweight_constant(eff: float = 0.6) -> float:
+    """Tukey biweight constant c whose scale M-estimator has Gaussian efficiency ``eff``.
+
+    The estimator solves ``mean(psi(W / sigma)^2) = E[psi(Z)^2]`` with the biweight
+    ``psi(r) = r (1 - r^2/c^2)^2`` on ``|r| <= c``; its efficiency relative to the sample
+    variance is ``0.5 M^2 / Q`` (Guerrier, Molinari & Victoria-Feser 2014, robust WV).
+    eff = 0.6 gives c of about 4.40.
+    """
+    if not 0.0 < eff < 0.99:
+        raise ValueError(f"eff must be in (0, 0.99), got {eff}")
+    return float(optimize.brentq(lambda c: _biweight_efficiency(c) - eff, 0.5, 60.0, xtol=1e-10))
+
+
+def robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
+    """Robust (Tukey biweight M-estimator) variance of zero-mean coefficients ``w``.
+
+    Solves ``mean(psi(w / sigma)^2) = E[psi(Z)^2]`` for ``sigma^2``; Gaussian efficiency
+    ``eff`` relative to ``mean(w^2)``.
+    """
+    c = biweight_constant(eff)
+    a_c = _biweight_moments(c)[0]
+    w = np.asarray(w, dtype=np.float64)
+    # start from the MAD (robust) and bracket the root on a log scale
+    mad = np.median(np.abs(w)) * 1.482602218505602
+    if mad <= 0:
+        mad = float(np.sqrt(np.mean(w * w)))
+    if mad <= 0:
+        return 0.0
+    w2 = (w / mad) ** 2
+    c2 = c * c
+
+    def f(log_s2: float) -> float:
+        r2 = w2 / np.exp(log_s2)
+        inside = r2 <= c2
+        r2i = r2[inside]
+        return float(np.sum(r2i * (1 - r2i / c2) ** 4) / w.size - a_c)
+
+    # psi^2 mean decreases in sigma once sigma exceeds the bulk of |w|/c; search from above
+    lo, hi = -1.0, 1.0
+    while f(hi) > 0:
+        hi += 2.0
+    while f(lo) < 0 and lo > -60:
+        lo -= 2.0
+        if f(lo) > 0:
+            break
+    root = optimize.brentq(f, lo, hi, xtol=1e-12)
+    return float(np.exp(root) * mad * mad)
+
+
+def wavelet_variance(
+    x: Any,
+    *,
+    fs: float = 1.0,
+    levels: int | None = None,
+    robust: bool = False,
+    eff: float = 0.6,
+    alpha: float = 0.05,
+    unit: str = "",
+) -> WaveletVariance:
+    """Empirical Haar MODWT wavelet variance at levels 1..J with intervals.
+
+    Parameters
+    ----------
+    x : array_like, shape (N,)
+        One channel, float32/float64 or integer, ``N >= 4``. The mean is removed first.
+    fs : float
+        Sampling frequency in Hz (scales in seconds are ``2^j / fs``).
+    levels : int, optional
+        Number of levels J; default ``floor(log2(N - 1))`` (every level with ``M_j >= 2``).
+    robust : bool
+        Tukey biweight M-estimator of each level's variance instead of the mean of squares.
+    eff : float
+        Gaussian efficiency of the robust estimator, in (0, 0.99); 0.6 by default.
+    alpha : float
+        Interval level: ``1 - alpha`` (eta3 chi-square interval, widened by ``1/sqrt(eff)``
+        for the robust WV, as in the R ``wv`` package).
+    unit : str
+        Signal unit, carried for display.
+
+    Returns
+    -------
+    WaveletVariance
+
+    Notes
+    -----
+    Classical WV: one cumulative sum of the de-meaned series (float64), then for each level
+    ``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2 / (4^j M_j)``, computed in cache-sized blocks:
+    O(N J) flops, one float64 copy of the series as extra memory.
+    """
+    a = _as_series(x)
+    n = a.size
+    if not (np.isfinite(fs) and fs > 0):
+        raise ValueError(f"fs must be a positive number of Hz, got {fs}")
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    jmax = default_levels(n)
+    if levels is None:
+        levels = jmax
+    levels = int(levels)
+    if levels < 1 or levels > jmax:
+        raise ValueError(
+            f"levels={levels} is out of range: a series of {n} samples supports 1 to {jmax} levels"
+        )
+    if robust and not 0 < eff < 0.99:
+        raise ValueError(f"eff must be in (0, 0.99), got {eff}")
+    s = _cumsum_demeaned(a)
+    lv = np.arange(1, levels + 1)
+    tau = 2**lv
+    m_j = n - tau + 1
+    sums = _classical_sums(s, n, levels)
+    nu = sums / (tau.astype(float) ** 2 * m_j)
+    lo, hi = eta3_interval(nu, m_j, tau, alpha)
+    classical = WaveletVariance(
+        levels=lv, tau_samples=tau, variance=nu, ci_low=lo, ci_high=hi, n_coef=m_j, n=n,
+        fs=float(fs), robust=False, eff=eff, alpha=alpha, unit=unit,
+    )
+    if not robust:
+        return classical
+    nu_r = np.empty(levels)
+    for j in lv:
+        m = 1 << (j - 1)
+        w = (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+        nu_r[j - 1] = robust_scale_biweight(w, eff)
+    coef = np.sqrt(1.0 / eff)
+    rel_lo = (nu - lo) / np.where(nu > 0, nu, 1.0)
+    rel_hi = (hi - nu) / np.where(nu > 0, nu, 1.0)
+    lo_r = nu_r * (1.0 - coef * rel_lo)
+    lo_r = np.where(lo_r > 0, lo_r, nu_r * 1e-3)
+    hi_r = nu_r * (1.0 + coef * rel_hi)
+    return WaveletVariance(
+        levels=lv, tau_samples=tau, variance=nu_r, ci_low=lo_r, ci_high=hi_r, n_coef=m_j, n=n,
+        fs=float(fs), robust=True, eff=eff, alpha=alpha, unit=unit, classical=classical,
+    )
