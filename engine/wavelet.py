@@ -327,14 +327,27 @@ def robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
         r2i = r2[inside]
         return float(np.sum(r2i * (1 - r2i / c2) ** 4) / w.size - a_c)
 
-    # psi^2 mean decreases in sigma once sigma exceeds the bulk of |w|/c; search from above
-    lo, hi = -1.0, 1.0
-    while f(hi) > 0:
-        hi += 2.0
-    while f(lo) < 0 and lo > -60:
-        lo -= 2.0
-        if f(lo) > 0:
-            break
+    # f is negative for sigma -> 0 (every point outside c) and for sigma -> inf (psi -> 0) and
+    # positive in between; the consistent estimate is the upper root, where f decreases.
+    step = 0.5
+    f0 = f(0.0)
+    if f0 > 0:
+        lo, hi = 0.0, step
+        while f(hi) > 0:
+            lo, hi = hi, hi + step
+            if hi > 80:  # pragma: no cover - cannot happen for finite data
+                return float(np.mean(w * w))
+    else:
+        hi, lo, f_prev = 0.0, -step, f0
+        while True:
+            f_lo = f(lo)
+            if f_lo > 0:
+                break
+            if f_lo < f_prev or lo < -80:
+                # past the peak without a root (contamination beyond the breakdown point):
+                # take the closest value, as minimising (f)^2 would
+                return float(np.exp(lo + step) * mad * mad)
+            hi, lo, f_prev = lo, lo - step, f_lo
     root = optimize.brentq(f, lo, hi, xtol=1e-12)
     return float(np.exp(root) * mad * mad)
 

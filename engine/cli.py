@@ -1,0 +1,178 @@
+"""The ``gmwm`` command: wavelet variance, GMWM fit and simulation from the shell.
+
+::
+
+    gmwm wv INPUT [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E] [--alpha A] [--json]
+    gmwm fit INPUT --model SPEC [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E]
+             [--weights ci] [--json]
+    gmwm simulate --model SPEC_WITH_VALUES -n N [--fs HZ] [--seed S] -o OUT(.h5|.npy|.csv)
+
+Without ``--json`` a readable table with units is printed; with ``--json`` exactly one JSON
+object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .fit import FitError, fit_gmwm
+from .model import ModelError, parse_model
+from .wavelet import WaveletVariance, wavelet_variance
+
+__all__ = ["main"]
+
+
+class CliError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+def _positive(kind: type, name: str):
+    def conv(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text!r}")
+        return v
+
+    return conv
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)
+        raise CliError(f"{self.prog}: {message}")
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="gmwm", description="GMWM stochastic calibration of inertial sensors.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def data_args(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5 or a WV summary HDF5")
+        sp.add_argument("--channel", help="channel name or index (default: the first)")
+        sp.add_argument("--fs", type=_positive(float, "--fs"), help="sampling frequency in Hz")
+        sp.add_argument("--levels", type=_positive(int, "--levels"), help="number of WV levels J")
+        sp.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
+        sp.add_argument("--eff", type=float, default=0.6,
+                        help="efficiency of the robust WV, in (0, 0.99) (default 0.6)")
+        sp.add_argument("--json", action="store_true", help="print one JSON object")
+
+    wv = sub.add_parser("wv", help="empirical Haar wavelet variance with intervals")
+    data_args(wv)
+    wv.add_argument("--alpha", type=float, default=0.05, help="interval level 1-alpha (0.05)")
+
+    fit = sub.add_parser("fit", help="fit a latent model by GMWM")
+    data_args(fit)
+    fit.add_argument("--model", required=True, help="model, e.g. '2*GM+WN+RW'")
+    fit.add_argument("--weights", default="ci", choices=["ci", "identity"],
+                     help="weighting matrix (default ci: 1/(ci_high-ci_low)^2)")
+
+    sim = sub.add_parser("simulate", help="simulate a model with given values")
+    sim.add_argument("--model", required=True,
+                     help="model with values, e.g. 'WN(sigma2=1e-4)+RW(gamma2=1e-9)'")
+    sim.add_argument("-n", type=_positive(int, "-n"), required=True, help="number of samples")
+    sim.add_argument("--fs", type=_positive(float, "--fs"), default=1.0, help="Hz (default 1)")
+    sim.add_argument("--seed", type=int, default=None, help="random seed")
+    sim.add_argument("--channel", default="x", help="channel name in the output (default x)")
+    sim.add_argument("--unit", default="", help="signal unit stored in the output")
+    sim.add_argument("-o", "--output", required=True, help="output file (.h5, .npy or .csv)")
+    return p
+
+
+def _load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVariance, str]:
+    """The WV of the selected channel (computed, or read from a summary file)."""
+    from .io import load_log
+
+    log = load_log(args.input, channel=args.channel, fs=args.fs)
+    name = log.names[0]
+    if log.is_summary:
+        wv = log.wv[name]
+        if args.robust:
+            raise CliError(f"{args.input}: a WV summary file holds a fixed WV; --robust needs "
+                           "the raw log")
+        if args.levels is not None:
+            if args.levels > wv.n_levels:
+                raise CliError(f"--levels {args.levels} is too many: {args.input} has "
+                               f"{wv.n_levels} levels for {name}")
+            wv = wv.truncate(args.levels)
+        return wv, name
+    x = log[name]
+    if x.size >= 4 and np.ptp(x) == 0:
+        raise CliError(f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
+                       f"{x[0]:g}): there is no noise to analyse")
+    wv = wavelet_variance(x, fs=log.fs, levels=args.levels, robust=args.robust, eff=args.eff,
+                          alpha=alpha, unit=log.units.get(name, ""))
+    return wv, name
+
+
+def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
+    if not 0 < args.alpha < 1:
+        raise CliError(f"--alpha must be in (0, 1), got {args.alpha}")
+    wv, name = _load_wv(args, args.alpha)
+    if args.json:
+        d = wv.to_dict()
+        d["channel"] = name
+        return d
+    return f"{args.input} [{name}]\n{wv.table()}"
+
+
+def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
+    model = parse_model(args.model)
+    wv, name = _load_wv(args)
+    res = fit_gmwm(wv, model, weights=args.weights)
+    if args.json:
+        d = res.to_dict()
+        d["channel"] = name
+        return d
+    return f"{args.input} [{name}]\n{res.summary()}"
+
+
+def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
+    from .io import save_log
+
+    model = parse_model(args.model)
+    model.validate()
+    x = model.simulate(args.n, fs=args.fs, rng=args.seed)
+    out = args.output
+    if not out.lower().endswith((".h5", ".hdf5", ".npy", ".csv")):
+        raise CliError(f"output {out!r}: use a .h5, .npy or .csv file name")
+    save_log(out, {args.channel: x}, args.fs, units={args.channel: args.unit},
+             attrs={"model": model.spec(values=True),
+                    "seed": "" if args.seed is None else str(args.seed)})
+    return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``gmwm`` console script; returns the exit status."""
+    from .io import LoadError
+
+    try:
+        args = _build_parser().parse_args(argv)
+        handler = {"wv": _cmd_wv, "fit": _cmd_fit, "simulate": _cmd_simulate}[args.command]
+        out = handler(args)
+    except (CliError, LoadError, ModelError, FitError) as e:
+        print(f"gmwm: error: {e}", file=sys.stderr)
+        return 2
+    except (ValueError, OSError, TypeError) as e:  # data-dependent errors from numpy/h5py
+        print(f"gmwm: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:  # pragma: no cover
+        print("gmwm: interrupted", file=sys.stderr)
+        return 130
+    if isinstance(out, dict):
+        print(json.dumps(out, allow_nan=False))
+    else:
+        print(out)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
