@@ -7,6 +7,7 @@
 """
 
 from .fit import FitError, GMWMResult, ParamRecord, fit_gmwm, weight_matrix
+from .io import ImuLog, LoadError, load_log, save_log
 from .model import Model, ModelError, parse_model
 from .processes import AR1, DR, GM, QN, RW, WN, Process, ar1_wv
 from .units import datasheet, param_unit
@@ -24,6 +25,6 @@ __all__ = [
     "WaveletVariance", "wavelet_variance", "default_levels", "haar_coefficients",
     "biweight_constant", "robust_scale_biweight", "ar1_wv",
     "fit_gmwm", "GMWMResult", "ParamRecord", "FitError", "weight_matrix",
-    "datasheet", "param_unit",
+    "datasheet", "param_unit", "ImuLog", "LoadError", "load_log", "save_log",
 ]
 __version__ = "0.1.0"

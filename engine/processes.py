@@ -20,7 +20,6 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
-from scipy.signal import lfilter
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import Model
@@ -333,6 +332,8 @@ class DR(Process):
 
 
 def _simulate_ar1(n: int, phi: float, sigma2: float, rng: np.random.Generator) -> np.ndarray:
+    from scipy.signal import lfilter  # lazy: scipy.signal takes 0.3 s to import
+
     e = rng.normal(0.0, math.sqrt(sigma2), n)
     x0 = rng.normal(0.0, math.sqrt(sigma2 / (1.0 - phi * phi)))  # stationary start
     # x_1 = phi x0 + e_1, x_t = phi x_{t-1} + e_t

@@ -14,12 +14,13 @@ Guerrier et al. (2020), the GMWM paper, section II.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy import integrate, optimize, stats
+from scipy import special
 
 __all__ = [
     "WaveletVariance",
@@ -198,8 +199,9 @@ def eta3_interval(
     ``eta_j = max(M_j / 2^j, 1)``, interval ``[eta nu2 / chi2_{1-a/2}(eta), eta nu2 / chi2_{a/2}(eta)]``.
     """
     eta = np.maximum(np.asarray(n_coef, float) / np.asarray(tau, float), 1.0)
-    lo = eta * variance / stats.chi2.ppf(1 - alpha / 2, eta)
-    hi = eta * variance / stats.chi2.ppf(alpha / 2, eta)
+    # chi2.ppf(p, eta) = chdtri(eta, 1 - p) (scipy.special is light to import)
+    lo = eta * variance / special.chdtri(eta, alpha / 2)
+    hi = eta * variance / special.chdtri(eta, 1 - alpha / 2)
     return lo, hi
 
 
@@ -272,10 +274,13 @@ def haar_coefficients(x: Any, level: int) -> np.ndarray:
 @lru_cache(maxsize=64)
 def _biweight_moments(c: float) -> tuple[float, float, float]:
     """E[g], E[z^2 g], E[g^2] for g(z) = psi(z)^2 = z^2 (1 - z^2/c^2)^4 1{|z|<=c}, Z ~ N(0,1)."""
+    from scipy import integrate
+
     def g(z: float) -> float:
         return z * z * (1 - z * z / (c * c)) ** 4
 
-    phi = stats.norm.pdf
+    def phi(z: float) -> float:
+        return math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi)
     e_g = 2 * integrate.quad(lambda z: g(z) * phi(z), 0, c, epsabs=1e-13)[0]
     e_z2g = 2 * integrate.quad(lambda z: z * z * g(z) * phi(z), 0, c, epsabs=1e-13)[0]
     e_g2 = 2 * integrate.quad(lambda z: g(z) ** 2 * phi(z), 0, c, epsabs=1e-13)[0]
@@ -298,6 +303,8 @@ def biweight_constant(eff: float = 0.6) -> float:
     variance is ``0.5 M^2 / Q`` (Guerrier, Molinari & Victoria-Feser 2014, robust WV).
     eff = 0.6 gives c of about 4.40.
     """
+    from scipy import optimize
+
     if not 0.0 < eff < 0.99:
         raise ValueError(f"eff must be in (0, 0.99), got {eff}")
     return float(optimize.brentq(lambda c: _biweight_efficiency(c) - eff, 0.5, 60.0, xtol=1e-10))
@@ -309,6 +316,8 @@ def robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
     Solves ``mean(psi(w / sigma)^2) = E[psi(Z)^2]`` for ``sigma^2``; Gaussian efficiency
     ``eff`` relative to ``mean(w^2)``.
     """
+    from scipy import optimize
+
     c = biweight_constant(eff)
     a_c = _biweight_moments(c)[0]
     w = np.asarray(w, dtype=np.float64)

@@ -1,0 +1,73 @@
+"""``gmwm-app [FILE] [--port N] [--address A] [--no-show]``: serve the GMWM app.
+
+Every browser tab gets its own session (a fresh state). ``FILE`` is loaded (as a path on the
+server) instead of the bundled demo log. Also ``python -m gmwm_app``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+__all__ = ["main", "build_parser"]
+
+_LOCAL = {"localhost", "127.0.0.1", "::1"}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line parser of ``gmwm-app``."""
+    p = argparse.ArgumentParser(
+        prog="gmwm-app",
+        description="Serve the GMWM browser app: load an IMU log, build a latent model "
+                    "live, read its parameters.")
+    p.add_argument("file", nargs="?", metavar="FILE",
+                   help="log to open (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5); "
+                        "default: the bundled demo log")
+    p.add_argument("--port", type=int, default=5006,
+                   help="port to serve on (default 5006; 0 picks a free one)")
+    p.add_argument("--address", default=None,
+                   help="address to listen on (default localhost; 0.0.0.0 for every interface)")
+    p.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
+                   help="extra origin allowed to connect (needed when serving beyond localhost)")
+    p.add_argument("--no-show", action="store_true", help="do not open a browser")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the server until interrupted; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    path = None
+    if args.file:
+        f = Path(args.file).expanduser()
+        if not f.is_file():
+            print(f"gmwm-app: error: no such file: {f}", file=sys.stderr)
+            return 2
+        path = str(f.resolve())
+    if not 0 <= args.port <= 65535:
+        print(f"gmwm-app: error: --port must be 0..65535, got {args.port}", file=sys.stderr)
+        return 2
+
+    import panel as pn
+
+    from gmwm_app.app import create_app_factory
+
+    kwargs = {}
+    origins = list(args.allow_websocket_origin or [])
+    if args.address and args.address not in _LOCAL and not origins:
+        origins = ["*"]
+        print("gmwm-app: serving beyond localhost: any origin may connect; "
+              "restrict it with --allow-websocket-origin", file=sys.stderr)
+    if origins:
+        kwargs["websocket_origin"] = origins
+    pn.serve(
+        {"/": create_app_factory(path)}, port=args.port, address=args.address,
+        show=not args.no_show, title="GMWM", websocket_max_message_size=64 * 1024 * 1024,
+        **kwargs,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
