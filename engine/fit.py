@@ -200,7 +200,8 @@ def weight_matrix(wv: WaveletVariance, weights: str | np.ndarray = "ci") -> tupl
             if np.any(~np.isfinite(width)) or np.any(width <= 0):
                 bad = int(np.flatnonzero(~(np.isfinite(width) & (width > 0)))[0]) + 1
                 raise FitError(f"the WV interval at level {bad} is empty or not finite, so "
-                               "weights='ci' is undefined (constant signal?); use another weighting")
+                               "weights='ci' is undefined (constant signal?); "
+                               "use another weighting")
             return np.diag(1.0 / width**2), "ci"
         if weights == "identity":
             return np.eye(j), "identity"
@@ -309,7 +310,9 @@ def _grid(prob: _Problem) -> list[tuple[float, ...]]:
     return list(itertools.combinations(g[::-1], prob.k))
 
 
-def _grid_search(prob: _Problem, cands: list[tuple[float, ...]], keep: int) -> list[tuple[float, tuple]]:
+def _grid_search(
+    prob: _Problem, cands: list[tuple[float, ...]], keep: int
+) -> list[tuple[float, tuple]]:
     """Exact profiled objective of the best candidates, found by branch and bound.
 
     The unconstrained weighted least squares (all candidates at once, batched QR) is a lower

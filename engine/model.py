@@ -158,7 +158,8 @@ class Model:
         different parametrisations); no more parameters than WV levels.
         """
         if not self.processes:
-            raise ModelError("the model is empty: add at least one process (WN, QN, RW, DR, AR1, GM)")
+            raise ModelError("the model is empty: add at least one process "
+                             "(WN, QN, RW, DR, AR1, GM)")
         counts = Counter(p.code for p in self.processes)
         for code in _UNIQUE:
             if counts.get(code, 0) > 1:

@@ -32,7 +32,7 @@ TC_MAX_FACTOR = 1e4  # times the series length
 
 
 def _ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
-    """:func:`ar1_wv` for one ``0 < phi < 1`` and unit innovation variance (the fitter's hot path)."""
+    """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path)."""
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
     e_1 = math.expm1(-x)
@@ -50,7 +50,9 @@ def _ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
     return out
 
 
-def ar1_wv(tau: np.ndarray, phi: float | np.ndarray, sigma2: float | np.ndarray = 1.0) -> np.ndarray:
+def ar1_wv(
+    tau: np.ndarray, phi: float | np.ndarray, sigma2: float | np.ndarray = 1.0
+) -> np.ndarray:
     """Haar WV of an AR1(phi, sigma2) at scales ``tau`` (samples), numerically stable.
 
     ``sigma2 [(phi^2-1) tau + 2 phi (phi^tau - 4 phi^(tau/2) + 3)] / [(phi-1)^3 (phi+1) tau^2]``.
@@ -79,8 +81,9 @@ def ar1_wv(tau: np.ndarray, phi: float | np.ndarray, sigma2: float | np.ndarray 
     pos = ph > 0
     with np.errstate(all="ignore"):
         x = np.where(pos, -np.log(np.where(pos, ph, 0.5)), 0.0)
-        e_t = np.where(pos, np.expm1(-x * t), np.abs(ph) ** t * np.sign(ph) ** (t % 2) - 1)
-        e_h = np.where(pos, np.expm1(-x * t / 2), np.abs(ph) ** (t / 2) * np.sign(ph) ** ((t / 2) % 2) - 1)
+        # phi^k - 1 (expm1 for phi > 0; a plain power, sign included, for phi < 0)
+        e_t = np.where(pos, np.expm1(-x * t), ph**t - 1)
+        e_h = np.where(pos, np.expm1(-x * t / 2), ph ** (t / 2) - 1)
         e_2 = np.where(pos, np.expm1(-2 * x), ph * ph - 1)
         e_1 = np.where(pos, np.expm1(-x), ph - 1)
         closed = (e_2 * t + 2 * ph * (e_t - 4 * e_h)) / (e_1**3 * (ph + 1) * t**2)
@@ -381,7 +384,7 @@ class AR1(Process):
 
 @dataclass(frozen=True, repr=False)
 class GM(Process):
-    """Gauss-Markov (continuous-time first order): ``beta`` [1/s], stationary variance ``sigma2_gm``.
+    """Gauss-Markov (continuous time): ``beta`` [1/s], stationary variance ``sigma2_gm``.
 
     Sampled at ``fs`` it is an AR1 with ``phi = exp(-beta/fs)`` and innovation variance
     ``sigma2_gm (1 - exp(-2 beta/fs))``.

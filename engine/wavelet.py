@@ -196,7 +196,8 @@ def eta3_interval(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Percival's eta3 chi-square interval of a WV.
 
-    ``eta_j = max(M_j / 2^j, 1)``, interval ``[eta nu2 / chi2_{1-a/2}(eta), eta nu2 / chi2_{a/2}(eta)]``.
+    ``eta_j = max(M_j / 2^j, 1)``, interval
+    ``[eta nu2 / chi2_{1-a/2}(eta), eta nu2 / chi2_{a/2}(eta)]``.
     """
     eta = np.maximum(np.asarray(n_coef, float) / np.asarray(tau, float), 1.0)
     # chi2.ppf(p, eta) = chdtri(eta, 1 - p) (scipy.special is light to import)

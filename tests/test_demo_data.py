@@ -43,6 +43,7 @@ def test_demo_metadata_and_size():
 @pytest.mark.parametrize("channel", ["gyro_x", "accel_x", "accel_z"])
 def test_demo_white_noise_is_recovered(channel):
     log = eg.load_log(DATA / "demo_imu.h5", channel=channel)
-    truth = eg.parse_model(json.loads((DATA / "demo_imu_truth.json").read_text())["models"][channel])
+    models = json.loads((DATA / "demo_imu_truth.json").read_text())["models"]
+    truth = eg.parse_model(models[channel])
     res = eg.fit_gmwm(eg.wavelet_variance(log[channel], fs=log.fs), truth.cleared())
     assert res.params["WN.sigma2"] == pytest.approx(truth.values()["WN.sigma2"], rel=0.05)

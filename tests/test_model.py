@@ -44,7 +44,8 @@ def test_repr_evaluates_back():
 
 
 def test_implied_wv_is_sum_of_components():
-    m = eg.parse_model("GM(beta=1, sigma2_gm=1)+QN(q2=0.1)+WN(sigma2=1)+RW(gamma2=1e-6)+DR(omega=1e-4)")
+    m = eg.parse_model("GM(beta=1, sigma2_gm=1)+QN(q2=0.1)+WN(sigma2=1)+RW(gamma2=1e-6)"
+                       "+DR(omega=1e-4)")
     tau = 2.0 ** np.arange(1, 15)
     comps = m.components(tau, fs=10.0)
     assert list(comps) == ["GM", "QN", "WN", "RW", "DR"]

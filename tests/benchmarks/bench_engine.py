@@ -57,7 +57,7 @@ def main() -> None:
     eg.wavelet_variance(x, fs=fs)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    print("\nWV of all levels (best / median of %d)" % args.repeat)
+    print(f"\nWV of all levels (best / median of {args.repeat})")
     print(f"  ours                 {ours_min * 1e3:8.1f} / {ours_med * 1e3:8.1f} ms "
           f"({wv.n_levels} levels)")
     print(f"  allantools.oadev     {ref_min * 1e3:8.1f} / {ref_med * 1e3:8.1f} ms (octave taus)")
@@ -84,7 +84,8 @@ def main() -> None:
     print(f"  WV + fit in process  {tot_min * 1e3:8.1f} / {tot_med * 1e3:8.1f} ms   target < 1000")
     print(f"  gmwm fit command     {cli_min * 1e3:8.1f} / {cli_med * 1e3:8.1f} ms "
           f"(of which interpreter + imports {imp_min * 1e3:.0f} ms)")
-    print(f"  refit on cached WV   {refit_min * 1e3:8.2f} / {refit_med * 1e3:8.2f} ms   target < 30")
+    print(f"  refit on cached WV   {refit_min * 1e3:8.2f} / {refit_med * 1e3:8.2f} ms   "
+          "target < 30")
     print(f"  objective {res.objective:.4g}; estimates: "
           + ", ".join(f"{k}={v:.3g}" for k, v in res.params.items()))
 
