@@ -158,6 +158,25 @@ class Process:
         if v < 0:
             raise ValueError(f"{self.code}.{name} must be >= 0, got {v}")
 
+    # ---- bounds and the unconstrained space ------------------------------------------------
+    def bounds(self, fs: float = 1.0) -> dict[str, tuple[float, float]]:
+        """Admissible range of each parameter (open where the transform is)."""
+        return {n: (0.0, math.inf) for n in self.param_names}
+
+    def to_unconstrained(self, fs: float = 1.0) -> np.ndarray:
+        """Values mapped to R^k: log of variances and rates, atanh of phi, omega as is."""
+        vals = self._require()
+        return np.array([_FORWARD[n](v) for n, v in zip(self.param_names, vals, strict=True)])
+
+    def from_unconstrained(self, u: np.ndarray, fs: float = 1.0) -> Process:
+        """Inverse of :meth:`to_unconstrained`: a process with the mapped-back values."""
+        u = np.asarray(u, dtype=float)
+        if u.shape != (len(self.param_names),):
+            raise ValueError(f"{self.code} takes {len(self.param_names)} unconstrained values, "
+                             f"got shape {u.shape}")
+        return type(self)(*(_BACKWARD[n](float(x)) for n, x in
+                            zip(self.param_names, u, strict=True)))
+
     # ---- fitting interface ----------------------------------------------------------------
     def basis(self, tau: np.ndarray, fs: float, nl: float | None = None) -> np.ndarray:
         """WV per unit of the linear coefficient, at scales ``tau`` (samples)."""
@@ -222,6 +241,15 @@ class Process:
         if all(v is None for v in self.values):
             return f"{self.code}()"
         return self.spec()
+
+
+# Transforms to the unconstrained space, by parameter name: variances and rates by log, the AR1
+# coefficient by atanh (|phi| < 1), the drift slope (either sign) unchanged.
+_FORWARD = {"sigma2": math.log, "q2": math.log, "gamma2": math.log, "sigma2_gm": math.log,
+            "beta": math.log, "phi": math.atanh, "omega": float}
+_BACKWARD = {"sigma2": math.exp, "q2": math.exp, "gamma2": math.exp, "sigma2_gm": math.exp,
+             "beta": math.exp, "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
+             "omega": float}
 
 
 def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
@@ -319,6 +347,9 @@ class DR(Process):
     def _check_value(self, name, v):
         pass  # a drift may have either sign; its WV depends on omega^2
 
+    def bounds(self, fs=1.0):
+        return {"omega": (-math.inf, math.inf)}
+
     def basis(self, tau, fs, nl=None):
         return tau**2 / 16.0
 
@@ -359,6 +390,9 @@ class AR1(Process):
             raise ValueError(f"AR1.phi must be in (-1, 1), got {v}")
         if name == "sigma2" and v < 0:
             raise ValueError(f"AR1.sigma2 must be >= 0, got {v}")
+
+    def bounds(self, fs=1.0):
+        return {"phi": (-1.0, 1.0), "sigma2": (0.0, math.inf)}
 
     # non-linear value: phi itself
     def basis(self, tau, fs, nl=None):
