@@ -6,10 +6,22 @@
 >>> print(res.summary())                                  # doctest: +SKIP
 """
 
+from .allan import (
+    AllanVariance,
+    MethodEstimate,
+    allan_variance,
+    avsm,
+    avsm_auto,
+    compare_table,
+    fit_armav,
+    fit_gmwfm,
+    from_gmwm,
+)
 from .fit import FitError, GMWMResult, ParamRecord, fit_gmwm, weight_matrix
 from .io import ImuLog, LoadError, load_log, save_log
 from .model import Model, ModelError, parse_model
 from .processes import AR1, DR, GM, QN, RW, WN, Process, ar1_wv
+from .study import run_slope_study
 from .units import datasheet, param_unit
 from .wavelet import (
     WaveletVariance,
@@ -26,5 +38,7 @@ __all__ = [
     "biweight_constant", "robust_scale_biweight", "ar1_wv",
     "fit_gmwm", "GMWMResult", "ParamRecord", "FitError", "weight_matrix",
     "datasheet", "param_unit", "ImuLog", "LoadError", "load_log", "save_log",
+    "AllanVariance", "allan_variance", "MethodEstimate", "from_gmwm", "avsm", "avsm_auto",
+    "fit_gmwfm", "fit_armav", "compare_table", "run_slope_study",
 ]
 __version__ = "0.1.0"

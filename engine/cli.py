@@ -6,6 +6,8 @@
     gmwm fit INPUT --model SPEC [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E]
              [--weights ci] [--json]
     gmwm simulate --model SPEC_WITH_VALUES -n N [--fs HZ] [--seed S] -o OUT(.h5|.npy|.csv)
+    gmwm study slope --reps R --seed S [--n 2.5e6,6.3e6] [--workers 2] [--out DIR] [--json]
+    gmwm select INPUT --max-model SPEC | --models SPEC1,SPEC2 [--optimism asymptotic|bootstrap]
 
 Without ``--json`` a readable table with units is printed; with ``--json`` exactly one JSON
 object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
@@ -72,8 +74,29 @@ def _build_parser() -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit a latent model by GMWM")
     data_args(fit)
     fit.add_argument("--model", required=True, help="model, e.g. '2*GM+WN+RW'")
-    fit.add_argument("--weights", default="ci", choices=["ci", "identity"],
-                     help="weighting matrix (default ci: 1/(ci_high-ci_low)^2)")
+    fit.add_argument("--weights", default="ci", choices=["ci", "identity", "efficient"],
+                     help="weighting matrix: ci (default, 1/(ci_high-ci_low)^2), identity, "
+                          "or efficient (two-step, V^-1 from the first fit)")
+    fit.add_argument("--ci", choices=["asymptotic", "bootstrap"],
+                     help="parameter intervals: asymptotic sandwich or parametric bootstrap")
+    fit.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
+    fit.add_argument("-B", "--bootstrap", type=_positive(int, "-B"), default=100,
+                     help="bootstrap replicates (100)")
+    fit.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
+    fit.add_argument("--workers", type=_positive(int, "--workers"), default=2,
+                     help="processes for the bootstrap (2)")
+
+    sel = sub.add_parser("select", help="rank candidate models by WVIC")
+    data_args(sel)
+    sel.add_argument("--max-model", help="rank every sub-model of this model, "
+                                         "e.g. '3*GM+WN+QN+RW+DR'")
+    sel.add_argument("--models", help="candidate models separated by commas")
+    sel.add_argument("--optimism", choices=["asymptotic", "bootstrap"], default="asymptotic")
+    sel.add_argument("-B", "--bootstrap", type=_positive(int, "-B"), default=100,
+                     help="bootstrap replicates (100)")
+    sel.add_argument("--seed", type=int, default=0)
+    sel.add_argument("--workers", type=_positive(int, "--workers"), default=2)
+    sel.add_argument("--top", type=_positive(int, "--top"), help="print only the best N")
 
     sim = sub.add_parser("simulate", help="simulate a model with given values")
     sim.add_argument("--model", required=True,
@@ -84,6 +107,20 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--channel", default="x", help="channel name in the output (default x)")
     sim.add_argument("--unit", default="", help="signal unit stored in the output")
     sim.add_argument("-o", "--output", required=True, help="output file (.h5, .npy or .csv)")
+    st = sub.add_parser("study", help="Monte Carlo studies: slope = AVSM vs ARMAV vs GMWM "
+                                      "(the GMWM paper, Fig. 1-2)")
+    st.add_argument("name", choices=["slope"], help="the study to run")
+    st.add_argument("--reps", type=_positive(int, "--reps"), default=100,
+                    help="replicates per log length and sensor (100)")
+    st.add_argument("--seed", type=int, default=1, help="base seed (1)")
+    st.add_argument("--n", default="2.5e6,6.3e6",
+                    help="log lengths in samples, separated by commas (2.5e6,6.3e6)")
+    st.add_argument("--workers", type=_positive(int, "--workers"), default=2,
+                    help="worker processes (2)")
+    st.add_argument("--methods", default="GMWM,ARMAV,AVSM",
+                    help="methods among GMWM,ARMAV,AVSM,AVSM-auto (GMWM,ARMAV,AVSM)")
+    st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
+    st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     return p
 
 
@@ -125,14 +162,59 @@ def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
+    from .inference import fit_efficient, param_intervals
+
+    if not 0 < args.level < 1:
+        raise CliError(f"--level must be in (0, 1), got {args.level}")
     model = parse_model(args.model)
     wv, name = _load_wv(args)
-    res = fit_gmwm(wv, model, weights=args.weights)
+    if args.weights == "efficient":
+        res = fit_efficient(wv, model)
+    else:
+        res = fit_gmwm(wv, model, weights=args.weights)
+    intervals = None
+    if args.ci:
+        intervals = param_intervals(res, method=args.ci, level=args.level, B=args.bootstrap,
+                                    seed=args.seed, workers=args.workers)
     if args.json:
         d = res.to_dict()
         d["channel"] = name
+        if intervals is not None:
+            d["intervals"] = [iv.to_dict() for iv in intervals]
+        return json.loads(json.dumps(d).replace("NaN", "null"))
+    text = f"{args.input} [{name}]\n{res.summary()}"
+    if intervals is not None:
+        text += f"\n\n  {100 * args.level:g}% intervals ({args.ci}):\n"
+        text += "\n".join(f"  {iv.name:<16} {iv.value:>12.5e}  [{iv.low:.5e}, {iv.high:.5e}]  "
+                          f"{iv.unit}" for iv in intervals)
+    return text
+
+
+def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
+    from .selection import rank_models
+
+    if not args.max_model and not args.models:
+        raise CliError("give --max-model SPEC or --models 'SPEC1,SPEC2,...'")
+    wv, name = _load_wv(args)
+    cands = [m for m in args.models.split(",") if m.strip()] if args.models else None
+
+    def progress(done: int, total: int) -> None:
+        if sys.stderr.isatty():
+            print(f"\rfitting candidates: {done}/{total}", end="", file=sys.stderr, flush=True)
+
+    sel = rank_models(wv, cands, max_model=args.max_model, optimism=args.optimism,
+                      B=args.bootstrap, seed=args.seed, workers=args.workers,
+                      progress=progress)
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    if args.top:
+        object.__setattr__(sel, "candidates", sel.candidates[: args.top])
+    if args.json:
+        d = sel.to_dict()
+        d["channel"] = name
+        d["wv"] = wv.to_dict()
         return d
-    return f"{args.input} [{name}]\n{res.summary()}"
+    return f"{args.input} [{name}]\n{sel.table()}"
 
 
 def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
@@ -150,19 +232,42 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}"
 
 
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split())
+
+
+def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
+    from .study import run_slope_study
+
+    try:
+        n_values = [float(v) for v in args.n.split(",") if v.strip()]
+    except ValueError:
+        raise CliError(f"--n takes sample counts separated by commas, got {args.n!r}") from None
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    res = run_slope_study(args.reps, seed=args.seed, n_values=n_values, methods=methods,
+                          workers=args.workers, progress=True)
+    paths = res.save(args.out) if args.out else {}
+    if args.json:
+        d = res.to_dict(raw=False)
+        d["files"] = paths
+        return d
+    return res.table() + ("\n\nwrote " + ", ".join(paths.values()) if paths else "")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``gmwm`` console script; returns the exit status."""
     from .io import LoadError
 
     try:
         args = _build_parser().parse_args(argv)
-        handler = {"wv": _cmd_wv, "fit": _cmd_fit, "simulate": _cmd_simulate}[args.command]
+        handler = {"wv": _cmd_wv, "fit": _cmd_fit, "simulate": _cmd_simulate,
+                   "select": _cmd_select, "study": _cmd_study}[args.command]
         out = handler(args)
     except (CliError, LoadError, ModelError, FitError) as e:
-        print(f"gmwm: error: {e}", file=sys.stderr)
+        print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except (ValueError, OSError, TypeError) as e:  # data-dependent errors from numpy/h5py
-        print(f"gmwm: error: {e}", file=sys.stderr)
+        print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # pragma: no cover
         print("gmwm: interrupted", file=sys.stderr)

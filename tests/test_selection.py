@@ -1,0 +1,86 @@
+"""WVIC model selection: sub-model enumeration, ranking, recovery of the true model."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import engine as eg
+from engine.cli import main
+from engine.selection import rank_models, submodels
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def test_submodels_of_the_maximal_model():
+    subs = submodels("3*GM+WN+QN+RW+DR")
+    specs = {m.spec() for m in subs}
+    assert len(subs) == len(specs) == 4 * 2**4 - 1
+    assert "3*GM+QN+WN+RW+DR" in specs and "WN" in specs and "2*GM+RW" in specs
+
+
+@pytest.mark.slow
+def test_wvic_picks_the_true_model_among_nested_candidates_in_most_replicates():
+    # every term visible over some scales: the GM bump near 1 s, the RW at the long scales
+    truth = eg.parse_model("GM(beta=1, sigma2_gm=0.1)+WN(sigma2=1)+RW(gamma2=1e-5)")
+    cands = ["WN+RW", "GM+WN", "GM+WN+RW", "2*GM+WN+RW", "GM+QN+WN+RW"]
+    rng = np.random.default_rng(3)
+    picks = []
+    for _ in range(15):
+        wv = eg.wavelet_variance(truth.simulate(2**17, fs=100.0, rng=rng), fs=100.0)
+        picks.append(rank_models(wv, cands).best.model)
+    assert picks.count("GM+WN+RW") >= 0.6 * len(picks), picks
+
+
+def test_ranking_table_has_every_column_and_is_sorted():
+    x = eg.parse_model("GM(beta=1, sigma2_gm=1)+WN(sigma2=1)").simulate(2**14, fs=50.0, rng=1)
+    wv = eg.wavelet_variance(x, fs=50.0)
+    sel = rank_models(wv, max_model="2*GM+WN+RW")
+    crit = [c.criterion for c in sel.candidates]
+    assert crit == sorted(crit) or np.allclose(crit, sorted(crit), rtol=1e-6)
+    assert len(sel.candidates) == 3 * 4 - 1
+    for c in sel.candidates:
+        assert c.criterion == pytest.approx(c.objective + c.optimism)
+        assert c.optimism >= 0 and 0 <= c.j_p_value <= 1
+    d = json.loads(json.dumps(sel.to_dict()))
+    assert set(d["candidates"][0]) >= {"model", "n_params", "objective", "optimism",
+                                       "criterion", "j_stat", "j_df", "j_p_value"}
+    assert "WVIC" in sel.table()
+
+
+def test_bootstrap_optimism_close_to_asymptotic():
+    x = eg.parse_model("WN(sigma2=1)+RW(gamma2=1e-4)").simulate(2**13, rng=2)
+    wv = eg.wavelet_variance(x)
+    a = rank_models(wv, ["WN+RW"])
+    b = rank_models(wv, ["WN+RW"], optimism="bootstrap", B=200, seed=1)
+    assert b.best.optimism == pytest.approx(a.best.optimism, rel=0.4)
+
+
+def test_unfittable_candidates_are_reported_not_raised():
+    wv = eg.wavelet_variance(np.random.default_rng(0).standard_normal(64))
+    sel = rank_models(wv, ["WN", "3*GM+WN+RW"])
+    bad = [c for c in sel.candidates if c.error]
+    assert len(bad) == 1 and "parameters but the WV has only" in bad[0].error
+    assert sel.best.model == "WN"
+
+
+def test_adis_gyro_prefers_models_with_gm_terms():
+    log = eg.load_log(SHARED / "adis16405_imu1.h5", channel="gyro_x")
+    wv = eg.wavelet_variance(log["gyro_x"], fs=log.fs)
+    sel = rank_models(wv, ["WN+QN+RW+DR", "GM+WN+RW", "2*GM+WN+RW", "2*GM+QN+WN+RW"])
+    assert "GM" in sel.best.model
+    by = {c.model: c.criterion for c in sel.candidates}
+    assert by["QN+WN+RW+DR"] > 10 * by[sel.best.model]
+
+
+def test_cli_select(capsys):
+    code = main(["select", str(SHARED / "adis16405_imu2.h5"), "--channel", "gyro_y",
+                 "--models", "WN+QN+RW+DR,2*GM+WN+RW", "--json"])
+    assert code == 0
+    d = json.loads(capsys.readouterr().out)
+    assert [c["model"] for c in d["candidates"]][0] == "2*GM+WN+RW"
+    assert main(["select", str(SHARED / "adis16405_imu2.h5")]) == 2
+    assert "--max-model" in capsys.readouterr().err
