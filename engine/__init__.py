@@ -17,11 +17,36 @@ from .allan import (
     fit_gmwfm,
     from_gmwm,
 )
+from .export import (
+    ExportError,
+    datasheet_table,
+    export,
+    fit_report,
+    kalibr_imu,
+    kalibr_models,
+    read_kalibr,
+    write_kalibr,
+)
 from .fit import FitError, GMWMResult, ParamRecord, fit_gmwm, weight_matrix
 from .io import ImuLog, LoadError, load_log, save_log
+from .mgmwm import (
+    DependenceTest,
+    MGMWMResult,
+    MultiModel,
+    ReplicateResult,
+    SharedEstimate,
+    SharedProcess,
+    dependence_test,
+    fit_mgmwm,
+    fit_replicates,
+    moment_covariance,
+)
 from .model import Model, ModelError, parse_model
 from .processes import AR1, DR, GM, QN, RW, WN, Process, ar1_wv
+from .session import Session, SessionError, load_session, save_session
+from .stream import wavelet_variance_stream
 from .study import run_slope_study
+from .timecheck import TimeReport, check_time
 from .units import datasheet, param_unit
 from .wavelet import (
     WaveletVariance,
@@ -31,6 +56,7 @@ from .wavelet import (
     robust_scale_biweight,
     wavelet_variance,
 )
+from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix
 
 __all__ = [
     "AR1", "DR", "GM", "QN", "RW", "WN", "Process", "Model", "ModelError", "parse_model",
@@ -40,5 +66,16 @@ __all__ = [
     "datasheet", "param_unit", "ImuLog", "LoadError", "load_log", "save_log",
     "AllanVariance", "allan_variance", "MethodEstimate", "from_gmwm", "avsm", "avsm_auto",
     "fit_gmwfm", "fit_armav", "compare_table", "run_slope_study",
+]
+__all__ += [  # exports, sessions, long and messy logs (issue 7)
+    "ExportError", "datasheet_table", "export", "fit_report", "kalibr_imu", "kalibr_models",
+    "read_kalibr", "write_kalibr", "Session", "SessionError", "load_session", "save_session",
+    "wavelet_variance_stream", "TimeReport", "check_time",
+]
+__all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
+    "WaveletCrossCovariance", "WVMatrix", "wavelet_cross_covariance", "wv_matrix",
+    "MultiModel", "SharedProcess", "fit_mgmwm", "MGMWMResult", "SharedEstimate",
+    "moment_covariance", "dependence_test", "DependenceTest", "fit_replicates",
+    "ReplicateResult",
 ]
 __version__ = "0.1.0"

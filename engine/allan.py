@@ -635,15 +635,19 @@ def avsm_auto(
     *,
     fs: float | None = None,
     unit: str = "",
+    read: str = "line",
 ) -> MethodEstimate:
     """The "automatic" slope read-off of the ROS IMU-calibration tools.
 
-    As in the MathWorks example *Inertial sensor noise analysis using Allan variance* that tools
-    such as ``allan_variance_ros`` and ``imu_utils`` follow: the local log-log slope between
-    consecutive points of the Allan deviation is computed; the point where it is closest to
-    -1/2 carries a line of slope -1/2, read at tau = 1 s (white noise N); the point where it
-    is closest to +1/2 carries a line of slope +1/2, read at tau = 3 s (random walk K). The
-    bias instability is the smallest Allan deviation divided by 0.664.
+    ``read="line"`` (default), as in the MathWorks example *Inertial sensor noise analysis
+    using Allan variance* that ROS tools such as ``imu_utils`` and ``allan_variance_ros``
+    follow: the local log-log slope between consecutive points of the Allan deviation is
+    computed; the point where it is closest to -1/2 carries a line of slope -1/2, read at
+    tau = 1 s (white noise N); the point where it is closest to +1/2 carries a line of slope
+    +1/2, read at tau = 3 s (random walk K). ``read="curve"``: N and K are the Allan deviation
+    curve itself at 1 s and 3 s (log-log interpolation, clamped to the measured range), as
+    many users read a Kalibr noise density. Either way the bias instability is the smallest
+    Allan deviation divided by 0.664.
 
     Parameters
     ----------
@@ -652,6 +656,8 @@ def avsm_auto(
         or a log-spaced array) mimic the tools more closely; octave times work too.
     fs, unit
         For a raw series.
+    read : {"line", "curve"}
+        Where the values are read (see above).
 
     Returns
     -------
@@ -666,18 +672,32 @@ def avsm_auto(
         y = np.log10(av.adev)
     if not np.all(np.isfinite(y)):
         raise ValueError("the Allan deviation is zero at some averaging time (constant signal?)")
+    if read not in ("line", "curve"):
+        raise ValueError(f"read must be 'line' or 'curve', got {read!r}")
     local = np.diff(y) / np.diff(x)
     lines: dict[str, dict[str, Any]] = {}
-    notes = ["automatic read-off (ROS tools / MathWorks example): line through the point of "
-             "closest local slope"]
+    if read == "line":
+        notes = ["automatic read-off (ROS tools / MathWorks example): line through the point "
+                 "of closest local slope"]
+    else:
+        notes = ["automatic read-off of the Allan deviation curve at 1 s (N) and 3 s (K)"]
     for code in ("WN", "RW"):
         slope = SLOPES[code]
-        i = int(np.argmin(np.abs(local - slope)))
-        lines[code] = {"slope": slope, "intercept": float(y[i] - slope * x[i]),
-                       "tau_lo": float(av.tau_s[i]), "tau_hi": float(av.tau_s[i + 1]),
-                       "n_points": 1, "local_slope": float(local[i])}
-        notes.append(f"{code}: closest local slope {local[i]:+.3f} (target {slope:+g}) at "
-                     f"{av.tau_s[i]:.4g} s")
+        if read == "line":
+            i = int(np.argmin(np.abs(local - slope)))
+            lines[code] = {"slope": slope, "intercept": float(y[i] - slope * x[i]),
+                           "tau_lo": float(av.tau_s[i]), "tau_hi": float(av.tau_s[i + 1]),
+                           "n_points": 1, "local_slope": float(local[i])}
+            notes.append(f"{code}: closest local slope {local[i]:+.3f} (target {slope:+g}) at "
+                         f"{av.tau_s[i]:.4g} s")
+        else:
+            lt = math.log10(READ_TAU[code])
+            yt = float(np.interp(lt, x, y))
+            lines[code] = {"slope": slope, "intercept": yt - slope * lt,
+                           "tau_lo": READ_TAU[code], "tau_hi": READ_TAU[code], "n_points": 1}
+            if not x[0] <= lt <= x[-1]:
+                notes.append(f"{code}: {READ_TAU[code]:g} s is outside the measured averaging "
+                             "times; the nearest end was read")
     k = int(np.argmin(y))
     lines["BI"] = {"slope": 0.0, "intercept": float(y[k]), "tau_lo": float(av.tau_s[k]),
                    "tau_hi": float(av.tau_s[k]), "n_points": 1}
@@ -773,7 +793,8 @@ def fit_gmwfm(
     objective being flat there) and the log correlation time in
     samples; the fit runs bounded trust-region least squares (``scipy.optimize.least_squares``)
     from the GMWM estimate and from an equal-share start (and, with AR1/GM, from correlation
-    times 4x shorter and longer) and keeps the lowest objective.
+    times 4x shorter and longer) and keeps the lowest objective. AR1 coefficients are searched
+    in (0, 1), as correlation times.
     """
     fname, fun = _resolve_f(f)
     name = method or f"GMWFM({fname})"

@@ -66,6 +66,9 @@ def _build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--eff", type=float, default=0.6,
                         help="efficiency of the robust WV, in (0, 0.99) (default 0.6)")
         sp.add_argument("--json", action="store_true", help="print one JSON object")
+        from .cli_export import add_log_options  # --segment --scale --units --topic --stream
+
+        add_log_options(sp)
 
     wv = sub.add_parser("wv", help="empirical Haar wavelet variance with intervals")
     data_args(wv)
@@ -74,6 +77,13 @@ def _build_parser() -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit a latent model by GMWM")
     data_args(fit)
     fit.add_argument("--model", required=True, help="model, e.g. '2*GM+WN+RW'")
+    fit.add_argument("more_inputs", nargs="*", metavar="INPUT",  # several channels/files
+                     help="more recordings of the same sensor: one model fitted to all")
+    fit.add_argument("--channels", help="channels of INPUT fitted together by the "
+                                        "multivariate GMWM, e.g. gyro_x,gyro_y,gyro_z")
+    fit.add_argument("--shared", help="processes shared by --channels, e.g. WN,RW")
+    fit.add_argument("--dependence-test", action="store_true",
+                     help="with --shared: parametric-bootstrap test of dependence (-B)")
     fit.add_argument("--weights", default="ci", choices=["ci", "identity", "efficient"],
                      help="weighting matrix: ci (default, 1/(ci_high-ci_low)^2), identity, "
                           "or efficient (two-step, V^-1 from the first fit)")
@@ -118,17 +128,24 @@ def _build_parser() -> argparse.ArgumentParser:
     st.add_argument("--workers", type=_positive(int, "--workers"), default=2,
                     help="worker processes (2)")
     st.add_argument("--methods", default="GMWM,ARMAV,AVSM",
-                    help="methods among GMWM,ARMAV,AVSM,AVSM-auto (GMWM,ARMAV,AVSM)")
+                    help="comma-separated among GMWM, ARMAV, ARMAV-unweighted, AVSM, "
+                         "AVSM-auto (default GMWM,ARMAV,AVSM)")
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
+    from .cli_export import add_export_parser  # gmwm export: Kalibr, JSON, CSV, datasheet
+
+    add_export_parser(sub)
     return p
 
 
 def _load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVariance, str]:
     """The WV of the selected channel (computed, or read from a summary file)."""
+    from .cli_export import log_kwargs, stream_wv
     from .io import load_log
 
-    log = load_log(args.input, channel=args.channel, fs=args.fs)
+    if getattr(args, "stream", False):  # long logs: blocks from .npy/HDF5, bounded memory
+        return stream_wv(args, alpha)
+    log = load_log(args.input, channel=args.channel, fs=args.fs, **log_kwargs(args))
     name = log.names[0]
     if log.is_summary:
         wv = log.wv[name]
@@ -166,6 +183,10 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
 
     if not 0 < args.level < 1:
         raise CliError(f"--level must be in (0, 1), got {args.level}")
+    if args.channels or args.more_inputs or args.shared or args.dependence_test:
+        from .mgmwm import cli_fit  # multivariate GMWM (--channels) or replicates (files)
+
+        return cli_fit(args)
     model = parse_model(args.model)
     wv, name = _load_wv(args)
     if args.weights == "efficient":
@@ -254,6 +275,12 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
     return res.table() + ("\n\nwrote " + ", ".join(paths.values()) if paths else "")
 
 
+def _cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
+    from .cli_export import cmd_export
+
+    return cmd_export(args)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``gmwm`` console script; returns the exit status."""
     from .io import LoadError
@@ -261,7 +288,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = _build_parser().parse_args(argv)
         handler = {"wv": _cmd_wv, "fit": _cmd_fit, "simulate": _cmd_simulate,
-                   "select": _cmd_select, "study": _cmd_study}[args.command]
+                   "select": _cmd_select, "study": _cmd_study,
+                   "export": _cmd_export}[args.command]
         out = handler(args)
     except (CliError, LoadError, ModelError, FitError) as e:
         print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)

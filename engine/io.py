@@ -1,10 +1,18 @@
-"""Loading and saving static IMU logs: text (CSV/TSV/whitespace), NPY/NPZ and HDF5.
+"""Loading and saving static IMU logs: text (CSV/TSV/whitespace), NPY/NPZ, HDF5, ROS bags.
 
 :func:`load_log` returns an :class:`ImuLog`: raw channels (1-D arrays) with their sampling
 frequency and units, or, for the wavelet-variance summary files of ``shared/data/derived``,
 one precomputed :class:`~engine.wavelet.WaveletVariance` per channel. Every failure raises
 :class:`LoadError`, whose message names the file, the column or dataset, what is wrong and
-how to fix it. :func:`save_log` writes the raw HDF5 layout of ``shared/data`` (``kind = "raw"``),
+how to fix it (library errors on damaged files are converted too).
+
+Time columns (and ROS message stamps) are checked for gaps, duplicates and jitter
+(:mod:`engine.timecheck`); ``segment=`` chooses between stopping with a report (default),
+the longest clean segment, or keeping every sample with a note. ``scale=`` turns raw integer
+counts into units; float32 samples stay float32. ROS 1/2 bags with ``sensor_msgs/Imu`` are
+read through :mod:`engine.rosbag` (the pure-Python ``rosbags`` package).
+
+:func:`save_log` writes the raw HDF5 layout of ``shared/data`` (``kind = "raw"``),
 a ``.npy`` array or a ``.csv`` file with a time column.
 
 Sample indices in messages are 0-based; line numbers are 1-based, as in an editor.
@@ -16,6 +24,9 @@ import json
 import math
 import os
 import re
+import struct
+import zipfile
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +40,8 @@ from .wavelet import WaveletVariance
 __all__ = ["LoadError", "ImuLog", "load_log", "save_log"]
 
 _H5_EXT = {".h5", ".hdf5", ".hdf", ".he5"}
-_MAGIC = {b"\x89HDF\r\n\x1a\n": "hdf5", b"\x93NUMPY": "npy", b"PK\x03\x04": "npz"}
+_MAGIC = {b"\x89HDF\r\n\x1a\n": "hdf5", b"\x93NUMPY": "npy", b"PK\x03\x04": "npz",
+          b"#ROSBAG V2.0": "bag", b"\x89MCAP0\r\n": "bag", b"SQLite format 3\x00": "bag"}
 _TIME_RE = re.compile(r"(time|t|timestamp|stamp|sec|seconds)(?:_(s|ms|us|ns))?|(ms|us|ns)")
 _TIME_DIV = {"s": 1.0, "sec": 1.0, "seconds": 1.0, "ms": 1e3, "us": 1e6, "µs": 1e6, "ns": 1e9}
 _UNIT_RE = re.compile(r"(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*")
@@ -213,78 +225,235 @@ def _as_float(src: str, name: str, a: np.ndarray, rows: np.ndarray | None) -> np
     return np.ascontiguousarray(a)
 
 
-def _fs_from_time(
-    src: str, name: str, t: np.ndarray, div: tuple[float, bool], rows: np.ndarray | None,
-    notes: list[str],
-) -> float:
-    """``fs`` from a time column: (n-1)/span for uniform steps, else 1/median(step)."""
-    t = np.asarray(t, dtype=np.float64)
-    fix = "sort the rows, remove duplicates and NaN, or pass fs= to ignore the time column"
-    bad = np.flatnonzero(~np.isfinite(t))
-    if bad.size:
-        raise LoadError(f"file '{src}': time column '{name}' is not finite at "
-                        f"{_where(int(bad[0]), rows)}: {fix}")
-    d = np.diff(t)
-    bad = np.flatnonzero(~(d > 0))
-    if bad.size:
-        raise LoadError(f"file '{src}': time column '{name}' is not strictly increasing at "
-                        f"{_where(int(bad[0]) + 1, rows)}: {fix}")
-    med = float(np.median(d))
+@dataclass(frozen=True)
+class _Opts:
+    """Loader options shared by every reader (see :func:`load_log`)."""
+
+    fs_user: float | None = None
+    segment: str | tuple[int, int] | None = None
+    scale: float | Mapping[str, float] | None = None
+    units: str | Mapping[str, str] | None = None
+    topic: str | None = None
+
+
+_SEGMENT_HELP = ("choose segment='longest' (CLI: --segment longest) to analyse the longest "
+                 "clean segment, segment=(start, stop) for another one, or segment='report' to "
+                 "keep every sample as if uniformly spaced (samples joined across the breaks); "
+                 "or fix the log, or pass fs= to ignore the time column")
+
+
+def _time_scale(name: str, t: np.ndarray, div: tuple[float, bool], notes: list[str]) -> float:
+    """Divisor of the stamps to seconds; unitless stamps with huge steps are nanoseconds."""
     scale, explicit = div
-    if not explicit and med > 1e5:
-        scale = 1e9
+    if explicit:
+        return scale
+    with np.errstate(invalid="ignore"):
+        d = np.diff(np.asarray(t[: min(t.size, 100_001)], dtype=np.float64))
+    pos = d[d > 0]
+    med = float(np.median(pos)) if pos.size else 0.0
+    if med > 1e5:
         notes.append(f"time column '{name}' has a median step of {med:g}: read as nanoseconds "
                      "(name it time_s, time_ms or time_ns, or pass fs=, to be explicit)")
-    uniform = bool(np.all(np.abs(d - med) <= 0.01 * med))
-    fs = scale * ((t.size - 1) / (t[-1] - t[0]) if uniform else 1.0 / med)
-    if not uniform:
-        notes.append(f"time column '{name}' is not uniform (steps {d.min():g} to {d.max():g}); "
-                     "samples are treated as uniformly spaced at 1 / median step")
-    return float(f"{fs:.12g}")  # drop the last-digit noise of printed timestamps
+        return 1e9
+    return scale
+
+
+def _check_scale(src: str, scale: Any, names: list[str]) -> dict[str, float]:
+    """Per-channel scale factors from a number or a {channel: factor} mapping."""
+    def num(v: Any, what: str) -> float:
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            f = math.nan
+        if isinstance(v, bool) or not math.isfinite(f) or f == 0:
+            raise LoadError(f"file '{src}': {what} = {v!r} is not a valid scale factor (a finite, "
+                            "non-zero number of units per count, e.g. scale=0.05)")
+        return f
+
+    if isinstance(scale, Mapping):
+        unknown = [k for k in scale if k not in names]
+        if unknown:
+            raise LoadError(f"file '{src}': scale given for unknown channel(s) {unknown}; "
+                            f"channels: {', '.join(names)}")
+        return {str(k): num(v, f"scale[{k!r}]") for k, v in scale.items()}
+    s = num(scale, "scale")
+    return dict.fromkeys(names, s)
+
+
+def _apply_time(
+    src: str, cols: dict[str, Any], n: int, time: tuple[str, np.ndarray, tuple[float, bool]],
+    rows: np.ndarray | None, opts: _Opts, notes: list[str], meta: dict[str, Any],
+) -> tuple[dict[str, Any], np.ndarray | None, float]:
+    """Check the time column, apply the segment policy; return (cols, rows, fs of the stamps)."""
+    from .timecheck import check_time, segment_fs
+
+    name, t, div = time
+    scale = _time_scale(name, t, div, notes)
+    rep = check_time(t, scale=scale, rows=rows, column=name)
+    meta["time_report"] = rep.to_dict()
+    policy = opts.segment
+    if policy is None:
+        policy = "report" if opts.fs_user is not None else "stop"
+    if isinstance(policy, str) and policy not in ("stop", "longest", "report"):
+        raise LoadError(f"file '{src}': segment={policy!r} is not a choice: use 'stop', "
+                        "'longest', 'report' or a (start, stop) pair of sample indices")
+    if rep.jitter > 0.01:
+        notes.append(f"time column '{name}' jitters: the regular steps vary by "
+                     f"{100 * rep.jitter:.3g} % (relative std); samples are treated as "
+                     "uniformly spaced")
+    ts = None
+    if not isinstance(policy, str):
+        a, b = _segment_range(src, policy, n)
+        inside = [e for e in rep.events if a < e.index < b or (e.kind == "invalid"
+                                                                 and a <= e.index < b)]
+        if inside:
+            raise LoadError(f"file '{src}': segment=({a}, {b}) is not clean: "
+                            f"{inside[0].describe()}; clean segments are listed in the time "
+                            "report (segment='report' keeps every sample)")
+        sel = (a, b)
+    elif rep.ok or policy == "report":
+        sel = (0, n)
+        if not rep.ok:
+            notes.append(f"{rep.message()}; segment='report': every sample kept as if "
+                         "uniformly spaced (samples joined across the breaks)")
+    elif policy == "longest":
+        sel = rep.longest
+        notes.append(f"{rep.message()}; segment='longest': samples {sel[0]} to {sel[1] - 1} "
+                     "analysed, the rest dropped")
+    else:
+        raise LoadError(f"file '{src}': {rep.message()}. To go on, {_SEGMENT_HELP}")
+    if sel != (0, n):
+        cols = {k: _slice(v, *sel) for k, v in cols.items()}
+        rows = None if rows is None else rows[sel[0]:sel[1]]
+        meta["segment"] = [int(sel[0]), int(sel[1])]
+        ts = np.asarray(t[sel[0]:sel[1]])
+    if rep.ok or sel != (0, n):
+        from .timecheck import as_seconds
+
+        fs = segment_fs(as_seconds(ts if ts is not None else t, scale))
+    else:  # report mode across breaks: the median step
+        fs = float(f"{1.0 / rep.median_step:.12g}") if rep.median_step > 0 else math.nan
+    return cols, rows, fs
+
+
+def _check_magnitude(src: str, name: str, x: np.ndarray) -> None:
+    """Refuse samples so large that the squares in a variance overflow float64."""
+    if x.size and x.dtype.itemsize == 8:
+        big = float(np.max(np.abs(x)))
+        if big * x.size > 1e150:
+            raise LoadError(f"file '{src}', column '{name}': values up to {big:.3g} are too large "
+                            "for a variance in float64 (their squares overflow): check the units "
+                            "or the scale factor")
+
+
+def _segment_range(src: str, segment: Any, n: int) -> tuple[int, int]:
+    """Validate an explicit ``segment=(start, stop)``."""
+    try:
+        a, b = (int(v) for v in segment)
+    except (TypeError, ValueError):
+        raise LoadError(f"file '{src}': segment={segment!r} is not a (start, stop) pair of "
+                        "sample indices") from None
+    if not 0 <= a < b <= n:
+        raise LoadError(f"file '{src}': segment=({a}, {b}) is outside the log's samples "
+                        f"0..{n}: give 0 <= start < stop <= {n}")
+    return a, b
+
+
+def _slice(a: Any, start: int, stop: int) -> Any:
+    if callable(a):
+        return lambda: a()[start:stop]
+    return a[start:stop]
+
+
+def _length(a: Any) -> int:
+    shape = getattr(a, "shape", None)
+    if shape is not None and len(shape) >= 1:
+        return int(shape[0])
+    return int(np.asarray(a() if callable(a) else a).shape[0])
 
 
 def _finish(
     src: str, cols: dict[str, Any], units: Mapping[str, str], *, fmt: str,
-    channel: str | int | None, fs_user: float | None, fs_file: tuple[Any, str] | None = None,
+    channel: str | int | None, opts: _Opts, fs_file: tuple[Any, str] | None = None,
     time: tuple[str, np.ndarray, tuple[float, bool]] | None = None,
     rows: np.ndarray | None = None, meta: dict[str, Any] | None = None,
     notes: list[str] | None = None,
 ) -> ImuLog:
-    """Select, validate and convert the channels, resolve fs, and build the ImuLog.
+    """Select, check the time column, convert and scale the channels, resolve fs, build the log.
 
     ``cols`` values are arrays or zero-argument callables returning arrays (lazy HDF5 reads).
     """
     notes = notes if notes is not None else []
+    meta = {"format": fmt, **(meta or {})}
     if not cols:
         raise LoadError(f"file '{src}' contains no numeric channel: expected 1-D numeric "
                         "columns/datasets of samples")
     if channel is not None:
         name = _pick(src, list(cols), channel)
         cols = {name: cols[name]}
+    n = _length(next(iter(cols.values())))
+    fs_time = None
+    if time is not None:
+        meta["time_column"] = time[0]
+        if np.asarray(time[1]).shape == (n,):
+            cols, rows, fs_time = _apply_time(src, cols, n, time, rows, opts, notes, meta)
+        else:
+            notes.append(f"time column '{time[0]}' has {np.asarray(time[1]).size} stamps for "
+                         f"{n} samples: ignored")
+            time = None
+    if time is None and opts.segment is not None and not isinstance(opts.segment, str):
+        a, b = _segment_range(src, opts.segment, n)  # a sample range, without time stamps
+        cols = {k: _slice(v, a, b) for k, v in cols.items()}
+        rows = None if rows is None else rows[a:b]
+        meta["segment"] = [a, b]
+    elif time is None and opts.segment not in (None, "stop", "longest", "report"):
+        raise LoadError(f"file '{src}': segment={opts.segment!r} is not a choice: use 'stop', "
+                        "'longest', 'report' or a (start, stop) pair of sample indices")
+    scales = {} if opts.scale is None else _check_scale(src, opts.scale, list(cols))
     out: dict[str, np.ndarray] = {}
     for name, a in cols.items():
-        out[name] = _as_float(src, name, a() if callable(a) else a, rows)
+        x = _as_float(src, name, a() if callable(a) else a, rows)
+        if name in scales:
+            with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+                x = np.multiply(x, scales[name], dtype=np.float64)  # counts x scale: 1 rounding
+            if not np.all(np.isfinite(x)):
+                raise LoadError(f"file '{src}', column '{name}': the scale factor "
+                                f"{scales[name]:g} makes values overflow: check it")
+        _check_magnitude(src, name, x)
+        out[name] = x
+    if scales:
+        meta["scale"] = {k: scales[k] for k in out if k in scales}
     n = next(iter(out.values())).size
     if n < 4:
-        raise LoadError(f"file '{src}' has only {n} sample(s) per channel: a wavelet variance "
+        what = " in the selected segment" if "segment" in meta else " per channel"
+        raise LoadError(f"file '{src}' has only {n} sample(s){what}: a wavelet variance "
                         "needs at least 4 (a static log of minutes to hours is typical)")
-    if fs_user is not None:
-        fs, fs_source = fs_user, "user"
+    if opts.fs_user is not None:
+        fs, fs_source = opts.fs_user, "user"
     elif fs_file is not None:
         fix = "fix it in the file, or pass fs= to override it"
         fs, fs_source = _check_fs(fs_file[0], src, fs_file[1], fix), "file"
-    elif time is not None and time[1].size == n:
-        fs, fs_source = _fs_from_time(src, time[0], time[1], time[2], rows, notes), "time column"
+        if fs_time is not None and math.isfinite(fs_time) and abs(fs_time / fs - 1) > 0.01:
+            notes.append(f"the time column gives {fs_time:g} Hz but {fs_file[1]} says {fs:g} Hz; "
+                         "the file's value is used")
+    elif fs_time is not None and math.isfinite(fs_time):
+        fs, fs_source = fs_time, "time column"
     else:
         fs, fs_source = 1.0, "default"
         notes.append("no sampling frequency in the file: fs = 1 Hz assumed (pass fs= to set it)")
-    meta = {"format": fmt, **(meta or {})}
-    if time is not None:
-        meta["time_column"] = time[0]
+    unit_map = {k: _unit(units.get(k, "")) for k in out}
+    if opts.units is not None:
+        if isinstance(opts.units, Mapping):
+            unknown = [k for k in opts.units if k not in out]
+            if unknown:
+                raise LoadError(f"file '{src}': units given for unknown channel(s) {unknown}; "
+                                f"channels: {', '.join(out)}")
+            unit_map.update({str(k): _unit(v) for k, v in opts.units.items()})
+        else:
+            unit_map = dict.fromkeys(out, _unit(opts.units))
     if notes:
         meta["notes"] = notes
-    return ImuLog(channels=out, fs=fs, fs_source=fs_source,
-                  units={k: _unit(units.get(k, "")) for k in out}, source=src, meta=meta)
+    return ImuLog(channels=out, fs=fs, fs_source=fs_source, units=unit_map, source=src, meta=meta)
 
 
 # ----------------------------------------------------------------------------- text
@@ -329,7 +498,7 @@ def _decode(raw: bytes, src: str) -> str:
         return text
 
 
-def _read_text(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuLog:
+def _read_text(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     text = _decode(path.read_bytes(), src)
     contents: list[str] = []
     linenos: list[int] = []
@@ -349,6 +518,11 @@ def _read_text(path: Path, src: str, channel: Any, fs_user: float | None) -> Imu
         notes.append("semicolon-separated with decimal commas")
     if delim is not None and contents[-1].endswith(delim):  # trailing delimiter on every row
         contents = [c.rstrip(delim).rstrip() for c in contents]
+        keep = [i for i, c in enumerate(contents) if c]  # a row of delimiters only: blank
+        contents, linenos = [contents[i] for i in keep], [linenos[i] for i in keep]
+        if not contents:
+            raise LoadError(f"file '{src}' holds only delimiters, no values: check that the "
+                            "logger wrote samples")
     first = _split(contents[0], delim)
     header = any(_num(f) is None for f in first)
     names: list[str] = []
@@ -391,7 +565,7 @@ def _read_text(path: Path, src: str, channel: Any, fs_user: float | None) -> Imu
         notes.append("first column read as a time column in seconds (strictly increasing, "
                      "near-constant step); pass fs= to set the rate explicitly")
     meta = {"delimiter": {None: "whitespace", "\t": "tab"}.get(delim, delim), "header": header}
-    return _finish(src, cols, units, fmt="text", channel=channel, fs_user=fs_user, time=time,
+    return _finish(src, cols, units, fmt="text", channel=channel, opts=opts, time=time,
                    rows=rows, meta=meta, notes=notes)
 
 
@@ -436,7 +610,7 @@ def _columns(
     return {fmt.format(key=key, j=j): a[:, j] for j in range(a.shape[1])}
 
 
-def _read_npy(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuLog:
+def _read_npy(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     try:
         a = np.load(path, allow_pickle=False)
     except Exception as exc:
@@ -457,11 +631,11 @@ def _read_npy(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuL
     else:
         raise LoadError(f"file '{src}': array of shape {a.shape} is not 1-D (N,) or 2-D (N, k): "
                         "save one column per channel")
-    return _finish(src, cols, {}, fmt="npy", channel=channel, fs_user=fs_user, time=time,
+    return _finish(src, cols, {}, fmt="npy", channel=channel, opts=opts, time=time,
                    notes=notes)
 
 
-def _read_npz(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuLog:
+def _read_npz(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     cols: dict[str, np.ndarray] = {}
     notes: list[str] = []
     meta: dict[str, Any] = {}
@@ -491,12 +665,12 @@ def _read_npz(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuL
                 meta[key] = _attr(a.item())
             else:
                 notes.append(f"key '{key}' (shape {a.shape}, dtype {a.dtype}) was skipped")
-    return _finish(src, cols, units, fmt="npz", channel=channel, fs_user=fs_user, fs_file=fs_file,
+    return _finish(src, cols, units, fmt="npz", channel=channel, opts=opts, fs_file=fs_file,
                    time=time, meta=meta, notes=notes)
 
 
 # ----------------------------------------------------------------------------- hdf5
-def _read_h5(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuLog:
+def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
@@ -509,7 +683,10 @@ def _read_h5(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuLo
         meta = {k: v for k, v in attrs.items() if v is not None}
         fs_file = next(((attrs[k], f"attribute '{k}'") for k in _FS_KEYS if k in attrs), None)
         if str(attrs.get("kind", "")) in _SUMMARY_KINDS or isinstance(f.get("wv"), h5py.Group):
-            return _read_summary(f, src, channel, fs_user, fs_file, units, meta, notes)
+            if opts.scale is not None:
+                raise LoadError(f"file '{src}' is a wavelet-variance summary: scale= applies to "
+                                "raw samples (counts); load the raw log instead")
+            return _read_summary(f, src, channel, opts.fs_user, fs_file, units, meta, notes)
         found: dict[str, tuple[int, Callable[[], np.ndarray], h5py.Dataset]] = {}
         times: list[tuple[str, h5py.Dataset, tuple[float, bool]]] = []
         scalar_fs: list[tuple[Any, str]] = []
@@ -563,7 +740,7 @@ def _read_h5(path: Path, src: str, channel: Any, fs_user: float | None) -> ImuLo
             except (OSError, ValueError) as exc:
                 raise LoadError(f"file '{src}', dataset '{k}' could not be read ({exc}): the file "
                                 "may be truncated or corrupt; re-export it") from exc
-    return _finish(src, cols, units, fmt="hdf5", channel=None, fs_user=fs_user, fs_file=fs_file,
+    return _finish(src, cols, units, fmt="hdf5", channel=None, opts=opts, fs_file=fs_file,
                    time=time, meta=meta, notes=notes)
 
 
@@ -625,7 +802,14 @@ def _read_summary(
 
 # ----------------------------------------------------------------------------- public API
 def load_log(
-    path: str | os.PathLike[str], *, channel: str | int | None = None, fs: float | None = None
+    path: str | os.PathLike[str],
+    *,
+    channel: str | int | None = None,
+    fs: float | None = None,
+    segment: str | tuple[int, int] | None = None,
+    scale: float | Mapping[str, float] | None = None,
+    units: str | Mapping[str, str] | None = None,
+    topic: str | None = None,
 ) -> ImuLog:
     """Load a static IMU log (or a wavelet-variance summary file).
 
@@ -633,42 +817,102 @@ def load_log(
     ----------
     path : str or path-like
         CSV/TSV/whitespace text (``.csv .tsv .txt .dat`` or any unknown extension), ``.npy``,
-        ``.npz`` or HDF5 (``.h5 .hdf5``). The content's magic bytes win over the extension.
+        ``.npz``, HDF5 (``.h5 .hdf5``), or a ROS bag with ``sensor_msgs/Imu`` messages: ROS 1
+        ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``. The
+        content's magic bytes win over the extension.
     channel : str or int, optional
         Keep only this channel (name, or index into :attr:`ImuLog.names`).
     fs : float, optional
-        Sampling frequency in Hz; overrides the file (``fs_source == "user"``).
+        Sampling frequency in Hz; overrides the file (``fs_source == "user"``). The time
+        column, if any, is still checked and its report kept (``segment`` then defaults to
+        ``"report"``).
+    segment : {"stop", "longest", "report"} or (start, stop), optional
+        What to do when the time column has gaps, duplicate or backward stamps (see
+        :mod:`engine.timecheck`): ``"stop"`` (the default without ``fs``) raises a
+        :class:`LoadError` saying what was found, where, and how to choose; ``"longest"``
+        keeps the longest clean segment; ``"report"`` keeps every sample as if uniformly
+        spaced; ``(start, stop)`` keeps those samples (0-based, stop excluded), which must be
+        clean (without a time column it simply selects a sample range). Samples are never
+        joined across a break without a note in ``meta["notes"]``.
+        The report is in ``meta["time_report"]`` (a dict, see ``TimeReport.to_dict``), the
+        kept range in ``meta["segment"]``.
+    scale : float or mapping of str to float, optional
+        Scale factor (units per count) for raw integer counts or scaled floats, for every
+        channel or per channel (``{"gyro_x": 0.05}``): samples become ``float64(x) * scale``
+        (exact for integer counts: one correctly rounded product). ``meta["scale"]`` records it.
+    units : str or mapping of str to str, optional
+        Signal unit of every channel, or per channel; overrides the file (e.g. after scaling
+        counts: ``scale=0.05, units="deg/s"``).
+    topic : str, optional
+        ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several.
 
     Returns
     -------
     ImuLog
-        Raw channels with ``fs`` and units, or ``wv`` for summary files.
+        Raw channels with ``fs`` and units (float64; float32 files stay float32 unless
+        scaled), or ``wv`` for summary files.
 
     Raises
     ------
     LoadError
         Missing/empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
-        fewer than 4 samples, unknown channel, invalid ``fs``.
+        fewer than 4 samples, unknown channel, invalid ``fs`` or ``scale``, a time column
+        with gaps under ``segment="stop"``.
     """
     src = str(path)
     p = Path(path)
     fs_user = None if fs is None else _check_fs(fs, src, "fs", "pass fs in Hz, e.g. fs=100")
+    opts = _Opts(fs_user=fs_user, segment=segment, scale=scale, units=units, topic=topic)
     if not p.exists():
         raise LoadError(f"no such file: '{src}' (check the path)")
     if p.is_dir():
-        raise LoadError(f"'{src}' is a directory, not a log file: pass the path of a file")
+        if (p / "metadata.yaml").is_file():
+            return _guarded(_read_bag, p, src, channel, opts, "bag")
+        raise LoadError(f"'{src}' is a directory, not a log file: pass the path of a file "
+                        "(or of a ROS 2 bag directory with a metadata.yaml)")
     try:
         with open(p, "rb") as fh:
-            head = fh.read(8)
+            head = fh.read(16)
     except OSError as exc:
         raise LoadError(f"cannot read file '{src}' ({exc.strerror}): check permissions") from exc
     if not head:
         raise LoadError(f"file '{src}' is empty (0 bytes): check that the logger wrote data")
     fmt = next((v for k, v in _MAGIC.items() if head.startswith(k)), None)
     ext = p.suffix.lower()
-    fmt = fmt or ("hdf5" if ext in _H5_EXT else ext[1:] if ext in (".npy", ".npz") else "text")
-    reader = {"hdf5": _read_h5, "npy": _read_npy, "npz": _read_npz, "text": _read_text}[fmt]
-    return reader(p, src, channel, fs_user)
+    fmt = fmt or ("hdf5" if ext in _H5_EXT else ext[1:] if ext in (".npy", ".npz") else
+                  "bag" if ext in (".bag", ".db3", ".mcap") else "text")
+    reader = {"hdf5": _read_h5, "npy": _read_npy, "npz": _read_npz, "text": _read_text,
+              "bag": _read_bag}[fmt]
+    return _guarded(reader, p, src, channel, opts, fmt)
+
+
+_CORRUPT = (OSError, RuntimeError, KeyError, IndexError, TypeError, ValueError, AttributeError,
+            EOFError, OverflowError, UnicodeError, zipfile.BadZipFile, zlib.error, struct.error)
+
+
+def _guarded(reader: Callable[..., ImuLog], p: Path, src: str, channel: Any, opts: _Opts,
+             fmt: str) -> ImuLog:
+    """Run a reader; a library error on damaged content becomes a LoadError (with its type, so
+    that the cause stays visible)."""
+    try:
+        return reader(p, src, channel, opts)
+    except LoadError:
+        raise
+    except _CORRUPT as exc:
+        what = {"text": "text", "npy": ".npy", "npz": ".npz", "hdf5": "HDF5", "bag": "ROS bag"}
+        raise LoadError(f"file '{src}' could not be read as {what.get(fmt, fmt)} "
+                        f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}): it may be "
+                        "truncated or corrupt; check it or export it again") from exc
+
+
+def _read_bag(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
+    """ROS 1/2 bag with sensor_msgs/Imu messages (see :mod:`engine.rosbag`)."""
+    from .rosbag import read_imu_bag
+
+    bag = read_imu_bag(path, topic=opts.topic, src=src)
+    return _finish(src, bag.channels, bag.units, fmt=bag.format, channel=channel, opts=opts,
+                   time=(bag.stamp_source, bag.stamps_ns, (1e9, True)), meta=bag.meta,
+                   notes=list(bag.notes))
 
 
 def save_log(

@@ -21,6 +21,7 @@ __all__ = ["Model", "parse_model", "ModelError"]
 
 _ORDER = {code: i for i, code in enumerate(PROCESS_TYPES)}  # GM, AR1, QN, WN, RW, DR
 _UNIQUE = ("WN", "QN", "RW", "DR")
+_MAX_REPEAT = 20  # more AR1/GM terms than this cannot be identified from any real log
 
 
 class ModelError(ValueError):
@@ -282,8 +283,9 @@ def parse_model(spec: str | Model | Process) -> Model:
                              f"known processes: {', '.join(PROCESS_TYPES)}")
         cls = PROCESS_TYPES[code]
         k = int(m.group("k") or 1) * int(m.group("k2") or 1)
-        if k < 1:
-            raise ModelError(f"the multiplier in {term.strip()!r} must be at least 1")
+        if not 1 <= k <= _MAX_REPEAT:
+            raise ModelError(f"the multiplier in {term.strip()!r} must be between 1 and "
+                             f"{_MAX_REPEAT}")
         p = cls()
         args = m.group("args")
         if args is not None and args.strip():

@@ -6,6 +6,7 @@ each log length T and each replicate: simulate the true model at 250 Hz, compute
 
 * ``GMWM``: :func:`engine.fit_gmwm`, default weights ``diag(1/(ci_high - ci_low)^2)``;
 * ``ARMAV``: :func:`engine.allan.fit_armav` (``f = log10``, log-space interval weights);
+  optionally ``ARMAV-unweighted`` (``f = log10``, identity weights);
 * ``AVSM``: :func:`engine.allan.avsm` on the regions a typical user picks
   (:func:`typical_regions`);
 * optionally ``AVSM-auto``: :func:`engine.allan.avsm_auto` (WN and RW only).
@@ -36,7 +37,7 @@ import sys
 import time
 from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -64,7 +65,7 @@ __all__ = [
 
 STUDY_FS = 250.0
 STUDY_N = (2_500_000, 6_300_000)
-METHODS = ("GMWM", "ARMAV", "AVSM", "AVSM-auto")
+METHODS = ("GMWM", "ARMAV", "ARMAV-unweighted", "AVSM", "AVSM-auto")
 DEFAULT_METHODS = ("GMWM", "ARMAV", "AVSM")
 _SENSOR_ID = {"gyro": 1, "accel": 2}
 
@@ -85,6 +86,7 @@ TABLE_I: dict[str, dict[str, Any]] = {
                    ("DR", "omega", 4.14e1, "m/s/h/h")),
     },
 }
+_SHORT = {"ARMAV-unweighted": "ARMAV-unw"}  # plot labels
 _PARAM_OF = {"QN": "QN.q2", "WN": "WN.sigma2", "RW": "RW.gamma2", "DR": "DR.omega"}
 
 
@@ -151,9 +153,9 @@ def typical_regions(sensor: str, n: int, fs: float = STUDY_FS) -> dict[str, tupl
     Chosen by looking at the Allan deviation of one simulated log, as a user does, without
     knowledge of where the processes overlap:
 
-    * gyroscope: WN over the straight -1/2 part, from the first point up to 10 s (a decade
-      before the minimum, near 700 s; at most the first half of the points); RW over the
-      last three points, where the curve turns up.
+    * gyroscope: WN over the straight -1/2 part, from the first point up to 10 s (well before
+      the minimum, near 700 s; for short logs at most up to the sixth point from the end);
+      RW over the last three points, where the curve turns up.
     * accelerometer (the model says QN, WN, RW and DR): QN (slope -1) over the first two
       points (4 and 8 ms; on the plot the curve has slope -1/2 there: the QN is hidden under
       the WN); WN over 15 ms to 1.1 s; RW over 30 to 300 s, the straight +1/2 part after the
@@ -172,7 +174,7 @@ def typical_regions(sensor: str, n: int, fs: float = STUDY_FS) -> dict[str, tupl
     if tau.size < 6:
         raise ValueError(f"a log of {n} samples is too short for the slope method's regions")
     if sensor == "gyro":
-        wn_hi = min(10.0, float(tau[tau.size // 2 - 1]))
+        wn_hi = min(10.0, float(tau[-6]))
         return {"WN": (float(tau[0]), wn_hi), "RW": (float(tau[-3]), float(tau[-1]))}
     if sensor == "accel":
         dr = (float(tau[-2]), float(tau[-1]))
@@ -207,7 +209,7 @@ def estimate_all(
     fs : float
         Sampling frequency (Hz).
     methods : sequence of str
-        Among ``GMWM``, ``ARMAV``, ``AVSM``, ``AVSM-auto``.
+        Among ``GMWM``, ``ARMAV``, ``ARMAV-unweighted``, ``AVSM``, ``AVSM-auto``.
     regions : dict, optional
         AVSM regions (s); default :func:`typical_regions`.
 
@@ -229,6 +231,9 @@ def _estimate_one(meth: str, wv: WaveletVariance, sensor: str,
         return from_gmwm(fit_gmwm(wv, model))
     if meth == "ARMAV":
         return fit_armav(wv, model)
+    if meth == "ARMAV-unweighted":
+        est = fit_armav(wv, model, weights="identity")
+        return replace(est, method=meth)
     av = AllanVariance.from_wv(wv)
     if meth == "AVSM":
         return avsm(av, regions or typical_regions(sensor, wv.n, wv.fs))
@@ -296,6 +301,12 @@ class _Progress:
 # -------------------------------------------------------------------------------------------
 # results
 # -------------------------------------------------------------------------------------------
+def _sci(n: float) -> str:
+    """2500000 -> '2.5e6'."""
+    e = int(math.floor(math.log10(n)))
+    return f"{n / 10**e:g}e{e}"
+
+
 def _json_num(v: Any) -> Any:
     """NaN/inf as None (JSON has no NaN)."""
     if isinstance(v, float) and not math.isfinite(v):
@@ -355,8 +366,21 @@ class StudyResult:
                             "bias": mean - truth, "rel_bias": (mean - truth) / truth,
                             "sd": sd, "rmse": rmse, "rel_rmse": rmse / truth,
                             "n_ok": int(ok.size), "n_failed": int(v.size - ok.size),
+                            "zero_frac": float(np.mean(ok == 0.0)),
                         })
         return rows
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike) -> StudyResult:
+        """Reload a saved study (``study.json`` with its raw estimates), e.g. to redraw it."""
+        d = json.loads(Path(path).read_text())
+        if "estimates" not in d:
+            raise ValueError(f"{path} has no raw estimates (it is a summary)")
+        est = {int(n): {s: {m: {c: np.array([math.nan if x is None else x for x in v], float)
+                                for c, v in bm.items()} for m, bm in bs.items()}
+                        for s, bs in bn.items()} for n, bn in d["estimates"].items()}
+        return cls(estimates=est, errors=d.get("errors", []), settings=d["settings"],
+                   wall_time_s=float(d["wall_time_s"]))
 
     # ---- ranking -----------------------------------------------------------------------
     def ranking(self) -> dict[str, Any]:
@@ -373,6 +397,7 @@ class StudyResult:
             if g and win["method"] != "GMWM":
                 losses.append({"n": n, "sensor": sensor, "process": code,
                                "best": win["method"], "best_rmse": win["rmse"],
+                               "best_zero_frac": win.get("zero_frac", 0.0),
                                "gmwm_rmse": g[0]["rmse"]})
         return {"best": best, "gmwm_lowest_everywhere": not losses, "exceptions": losses}
 
@@ -382,8 +407,10 @@ class StudyResult:
         if rk["gmwm_lowest_everywhere"]:
             return ("The paper's ranking holds: GMWM has the lowest RMSE on every parameter, "
                     "for both sensors and both log lengths.")
-        parts = [f"{e['sensor']} {e['process']} at T = {e['n']:.2g} ({e['best']}: "
-                 f"{_fmt(e['best_rmse'])} vs GMWM {_fmt(e['gmwm_rmse'])})"
+        parts = [f"{e['sensor']} {e['process']} at T = {_sci(e['n'])} ({e['best']}: "
+                 f"{_fmt(e['best_rmse'])} vs GMWM {_fmt(e['gmwm_rmse'])}"
+                 + (f", {e['best']} estimates 0 in {100 * e['best_zero_frac']:.0f} % of the "
+                    "replicates" if e.get("best_zero_frac", 0.0) >= 0.2 else "") + ")"
                  for e in rk["exceptions"]]
         return ("The paper's ranking does not hold everywhere: GMWM's RMSE is not the lowest "
                 "for " + "; ".join(parts) + ".")
@@ -402,7 +429,7 @@ class StudyResult:
             p = f"{r['process']} {r['symbol']} [{r['unit']}]"
             lines.append(
                 f"{r['n']:>9.3g} {r['sensor']:<6} {p:<22} {_fmt(r['truth']):>10} "
-                f"{r['method']:<10} {_fmt(r['mean']):>10} {_fmt(r['bias']):>10} "
+                f"{r['method']:<16} {_fmt(r['mean']):>10} {_fmt(r['bias']):>10} "
                 f"{100 * r['rel_bias']:>8.1f} {_fmt(r['sd']):>10} {_fmt(r['rmse']):>10} "
                 f"{_fmt(r['rel_rmse']):>10}")
         lines += ["", self.ranking_text()]
@@ -419,7 +446,7 @@ class StudyResult:
                "in Table I's units (and relative to the truth)."]
         for n in self.estimates:
             hours = n / s["fs"] / 3600.0
-            out += ["", f"**T = {n:.3g} samples ({hours:.1f} h at {s['fs']:g} Hz)**", "",
+            out += ["", f"**T = {_sci(n)} samples ({hours:.1f} h at {s['fs']:g} Hz)**", "",
                     "| Sensor | Parameter | Truth | Method | Bias (%) | SD | RMSE | "
                     "RMSE / truth |",
                     "|---|---|---|---|---|---|---|---|"]
@@ -436,6 +463,14 @@ class StudyResult:
                         f"[{r['unit']}] | {_fmt(r['truth'])} | {r['method']} | "
                         f"{_fmt(r['bias'])} ({100 * r['rel_bias']:+.1f} %) | {_fmt(r['sd'])} | "
                         f"{b}{_fmt(r['rmse'])}{b} | {b}{_fmt(r['rel_rmse'])}{b} |")
+        regs = self.settings.get("regions") or {}
+        if regs and "AVSM" in self.settings["methods"]:
+            out += ["", "AVSM regions (averaging time, s), as a typical user picks them:"]
+            for n, by_s in regs.items():
+                parts = [f"{TABLE_I[s]['label'].lower()} "
+                         + ", ".join(f"{c} {_fmt(lo)}-{_fmt(hi)}" for c, (lo, hi) in r.items())
+                         for s, r in by_s.items()]
+                out.append(f"- T = {_sci(float(n))}: " + "; ".join(parts))
         out += ["", self.ranking_text()]
         return "\n".join(out)
 
@@ -486,10 +521,15 @@ class StudyResult:
                 data = [np.asarray(by_m[m][code])[np.isfinite(by_m[m][code])] / truth
                         for m in meths]
                 ax.boxplot(data, showfliers=True, flierprops={"markersize": 2})
-                ax.set_xticks(range(1, len(meths) + 1), meths, rotation=30, fontsize=8)
+                ax.set_xticks(range(1, len(meths) + 1), [_SHORT.get(m, m) for m in meths],
+                              rotation=30, fontsize=8)
                 ax.axhline(1.0, color="k", ls="--", lw=0.8)
-                ax.set_yscale("log")
-                ax.set_title(f"{TABLE_I[sensor]['label']} {code} ({sym})\nT = {n:.2g}",
+                allv = np.concatenate(data) if data else np.ones(1)
+                if allv.size and (allv.min() < 0.5 or allv.max() > 2.0):
+                    # wide spread: log scale, linear near 0 so that estimates at 0 show
+                    ax.set_yscale("symlog", linthresh=0.1)
+                    ax.set_ylim(bottom=0.0)
+                ax.set_title(f"{TABLE_I[sensor]['label']} {code} ({sym})\nT = {_sci(n)}",
                              fontsize=9)
                 if j == 0:
                     ax.set_ylabel("estimate / truth")
@@ -521,12 +561,12 @@ class StudyResult:
                          and r["process"] == code and r["method"] == m]
                     vals.append(r[0]["rel_rmse"] if r else np.nan)
                 ax.bar(np.arange(len(panels)) + (k - (len(meths) - 1) / 2) * width, vals,
-                       width, label=m)
+                       width, label=_SHORT.get(m, m))
             ax.set_xticks(range(len(panels)),
                           [f"{TABLE_I[s]['label']} {c}" for s, c, *_ in panels], fontsize=8)
             ax.set_yscale("log")
             ax.set_ylabel("RMSE / truth")
-            ax.set_title(f"T = {n:.2g} samples")
+            ax.set_title(f"T = {_sci(n)} samples")
             ax.legend(fontsize=8)
         fig.tight_layout()
         p = Path(path)
@@ -581,7 +621,7 @@ def run_slope_study(
         Log lengths T in samples (default 2.5e6 and 6.3e6, i.e. 2.8 h and 7 h at 250 Hz).
     sensors : sequence of {"gyro", "accel"}
     methods : sequence of str
-        Among ``GMWM``, ``ARMAV``, ``AVSM``, ``AVSM-auto``.
+        Among ``GMWM``, ``ARMAV``, ``ARMAV-unweighted``, ``AVSM``, ``AVSM-auto``.
     fs : float
         Sampling frequency (Hz).
     workers : int or None
@@ -638,10 +678,15 @@ def run_slope_study(
         for t in tasks:
             store(_replicate(t))
     else:
-        with ProcessPoolExecutor(max_workers=workers) as ex:
+        ex = ProcessPoolExecutor(max_workers=workers)
+        try:
             futs = [ex.submit(_replicate, t) for t in tasks]
             for f in as_completed(futs):
                 store(f.result())
+        except BaseException:  # Ctrl-C or a worker crash: drop the queued replicates
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise
+        ex.shutdown(wait=True)
     wall = time.perf_counter() - t0
     errors.sort(key=lambda e: (e["n"], e["sensor"], e["rep"], e["method"]))
     settings = {"reps": reps, "seed": int(seed), "n_values": ns, "fs": float(fs),

@@ -1,17 +1,24 @@
 """GMWM browser app (Panel + Bokeh): load an IMU log, build a latent model live, read the fit.
 
 Three layers: :mod:`gmwm_app.state` (session state, no widgets), :mod:`gmwm_app.views`
-(Bokeh figures updated in place) and :mod:`gmwm_app.app` (``create_app()`` per browser
-session). Start it with ``gmwm-app`` or ``python -m gmwm_app``.
+(Bokeh figures and tables updated in place) and :mod:`gmwm_app.app` (``create_app()`` per
+browser session). Start it with ``gmwm-app`` or ``python -m gmwm_app``.
 """
+
+from __future__ import annotations
+
+from typing import Any
 
 from .state import AppState, demo_path
 
 __all__ = ["AppState", "demo_path", "create_app"]
 
 
-def create_app(**kwargs):  # noqa: ANN201 - thin lazy wrapper (importing panel is slow)
-    """Build the page of one session; see :func:`gmwm_app.app.create_app`."""
+def create_app(**kwargs: Any) -> Any:
+    """Build the page of one session; see :func:`gmwm_app.app.create_app`.
+
+    Imported lazily: importing Panel is slow and the state layer does not need it.
+    """
     from .app import create_app as _create_app
 
     return _create_app(**kwargs)

@@ -6,8 +6,11 @@ sliders and the exports; the main area with messages, the WV plot, the residual 
 fit summary and the parameter and datasheet tables.
 
 Responsiveness: reading a file and computing a WV run in a worker thread (the event loop,
-and so every other session, stays free) with a loading indicator; a fit takes milliseconds and
-runs inline; every redraw replaces ColumnDataSource data in place (``views.WVFigures``).
+and so every other session, stays free) with a loading indicator; the data a URL names are
+read while the browser is still loading the page; a fit takes milliseconds and runs inline;
+every redraw replaces ColumnDataSource data in place (``views.WVFigures``, ``FitTables``), and
+the process rows and what-if sliders come from fixed pools, so an add or a remove creates no
+new Bokeh model (which would make Bokeh re-walk the whole document).
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
@@ -17,10 +20,14 @@ from __future__ import annotations
 import asyncio
 import io
 import logging
+import os
 import sys
+import threading
 import time
 import weakref
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode
@@ -28,9 +35,9 @@ from urllib.parse import urlencode
 if __package__ in (None, ""):  # run as a script by `panel serve gmwm_app/app.py`
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import pandas as pd  # noqa: E402
 import panel as pn  # noqa: E402
 from bokeh.models import CustomJSTickFormatter  # noqa: E402
+from panel.io.state import set_curdoc  # noqa: E402
 
 from gmwm_app.state import (  # noqa: E402
     PROCESS_CODES,
@@ -40,20 +47,101 @@ from gmwm_app.state import (  # noqa: E402
     format_value,
 )
 from gmwm_app.views import (  # noqa: E402
+    FitTables,
     WVFigures,
     component_color,
-    datasheet_rows,
     fit_summary,
-    parameter_rows,
 )
 
 __all__ = ["GMWMApp", "create_app", "create_app_factory", "live_apps"]
 
 log = logging.getLogger(__name__)
 
-pn.extension("tabulator", "filedropper", notifications=False)
+pn.extension("filedropper", notifications=False)
+
+
+def limit_blas_threads(n: int = 1) -> bool:
+    """Limit the BLAS (OpenBLAS) thread pool of this process to ``n`` threads.
+
+    In a server, the event loop thread is busy while a worker computes a WV; OpenBLAS's own
+    threads then fight them for the cores at every small ``np.dot`` (the WV's per-block sums),
+    which made a 1e6-sample WV 30x slower (1 s instead of 30 ms) on a 2-core machine. The
+    engine's matrices are small, so one BLAS thread loses nothing. Uses threadpoolctl when
+    installed, else OpenBLAS's ``*_set_num_threads`` through ctypes (Linux). Returns True
+    when a limit was set.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        pass
+    else:
+        threadpool_limits(n, user_api="blas")
+        return True
+    import ctypes
+
+    done = False
+    paths: set[str] = set()
+    try:
+        with open("/proc/self/maps") as f:  # the shared libraries loaded in this process
+            for line in f:
+                parts = line.split()
+                if len(parts) >= 6 and "openblas" in parts[-1].lower() and ".so" in parts[-1]:
+                    paths.add(parts[-1])
+    except OSError:
+        return False
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
+                     "openblas_set_num_threads64_", "openblas_set_num_threads"):
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn(int(n))
+                done = True
+                break
+    return done
+
+
+_BLAS_LIMITED = False
+
+
+def _limit_blas_once() -> None:
+    global _BLAS_LIMITED
+    if not _BLAS_LIMITED:
+        _BLAS_LIMITED = True
+        limit_blas_threads(1)
 
 _APPS: weakref.WeakSet[GMWMApp] = weakref.WeakSet()
+
+def _lower_priority() -> None:
+    """Run this worker thread at a lower CPU priority (Linux: nice applies per thread), so
+    that on a busy machine the event loop, which serves every session, comes first."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
+    except (AttributeError, OSError):  # not Linux, or not allowed: keep the priority
+        pass
+
+
+#: Worker threads for reading files and computing WVs (numpy releases the GIL there).
+_EXECUTOR = ThreadPoolExecutor(max_workers=4, thread_name_prefix="gmwm-app",
+                               initializer=_lower_priority)
+
+#: Process rows created up front (more are added if a model grows beyond).
+N_POOL = 8
+
+# Save the WV plot as an image (PNG or SVG) in the browser; the file name follows the data.
+_EXPORT_JS = """
+const view = Bokeh.index.find_one(plot);
+if (view == null) { return; }
+view.export("KIND").to_blob().then((blob) => {
+  const link = document.createElement("a");
+  link.href = URL.createObjectURL(blob);
+  link.download = (save.filename || "gmwm_wv") + ".KIND";
+  link.dispatchEvent(new MouseEvent("click"));
+});
+"""
 
 _PROCESS_HELP = {
     "WN": "white noise: WV falls as 1/τ (angle/velocity random walk)",
@@ -63,11 +151,6 @@ _PROCESS_HELP = {
     "AR1": "first-order autoregression (per sample phi, sigma2)",
     "GM": "Gauss-Markov: a bump at its correlation time 1/beta (bias instability)",
 }
-
-_CSS = """
-.gmwm-proc-label { font-size: 13px; line-height: 28px; white-space: nowrap; }
-.gmwm-swatch { display: inline-block; width: 14px; height: 4px; margin: 0 6px 3px 0; }
-"""
 
 
 def live_apps() -> list[GMWMApp]:
@@ -101,6 +184,14 @@ class GMWMApp:
         self._proc_key: tuple | None = None
         self._slider_key: Any = None
         self.last_refresh_s = 0.0
+        self.busy = False
+        self._query: dict[str, Any] = {}
+        self._prefetched: Future | None = None
+        # the session this app belongs to (async continuations lose pn.state.curdoc)
+        self._doc = pn.state.curdoc
+        self._location = pn.state.location if self._served else None
+        if self._served:
+            _limit_blas_once()  # a server process: see limit_blas_threads
         self._build_widgets()
         self._build_layout()
         self.state.param.watch(self._on_state, "revision")
@@ -112,58 +203,72 @@ class GMWMApp:
     # -------------------------------------------------------------------------------------
     def _build_widgets(self) -> None:
         s = self.state
-        self.demo_button = pn.widgets.Button(name="Load the demo log", button_type="default",
+        self.demo_button = pn.widgets.Button(label="Load the demo log", color="default",
                                              sizing_mode="stretch_width")
         self.demo_button.on_click(self._on_demo)
         self.upload = pn.widgets.FileDropper(
             multiple=False, max_file_size="2000MB", chunk_size=8_000_000, layout="compact",
-            sizing_mode="stretch_width", height=90, name="upload",
+            sizing_mode="stretch_width", height=90,
         )
         self.upload.param.watch(self._on_upload, "value")
         self.path_input = pn.widgets.TextInput(
-            name="Log file on the server", placeholder="/path/to/log.h5 (press Enter)",
+            label="Log file on the server", placeholder="/path/to/log.h5 (press Enter)",
             sizing_mode="stretch_width")
         self.path_input.param.watch(self._on_path, "enter_pressed")
-        self.path_button = pn.widgets.Button(name="Load path", button_type="default",
+        self.path_button = pn.widgets.Button(label="Load path", color="default",
                                              sizing_mode="stretch_width")
         self.path_button.on_click(self._on_path)
-        self.channel_select = pn.widgets.Select(name="Channel", options=[],
+        self.channel_select = pn.widgets.Select(label="Channel", options=[],
                                                 sizing_mode="stretch_width")
         self.channel_select.param.watch(self._on_channel, "value")
-        self.fs_input = pn.widgets.FloatInput(name="Sampling frequency fs [Hz]", value=None,
+        self.fs_input = pn.widgets.FloatInput(label="Sampling frequency fs [Hz]", value=None,
                                               start=0.0, sizing_mode="stretch_width",
                                               format="0[.]########")
         self.fs_input.param.watch(self._on_fs, "value")
         self.data_info = pn.pane.Markdown("", sizing_mode="stretch_width",
                                           styles={"font-size": "13px"}, margin=(0, 10))
         self.robust_check = pn.widgets.Checkbox(
-            name="Robust WV (Tukey biweight, 60% efficiency), beside the classical one",
-            value=s.robust)
+            label="Robust WV (Tukey biweight, 60% efficiency), beside the classical one",
+            value=s.robust, css_classes=["gmwm-robust"])
         self.robust_check.param.watch(self._on_robust, "value")
 
         self.add_buttons = {}
         for code in PROCESS_CODES:
-            b = pn.widgets.Button(name=f"+ {code}", button_type="primary", button_style="outline",
+            b = pn.widgets.Button(label=f"+ {code}", color="primary", variant="outline",
                                   description=f"Add {_PROCESS_HELP[code]}", width=82,
                                   margin=(3, 3))
             b.on_click(lambda _e, c=code: self._add(c))
             self.add_buttons[code] = b
         self.spec_input = pn.widgets.TextInput(
-            name="Model (type a spec, press Enter)", placeholder="e.g. WN+RW+2*GM",
+            label="Model (type a spec, press Enter)", placeholder="e.g. WN+RW+2*GM",
             sizing_mode="stretch_width")
         self.spec_input.param.watch(self._on_spec, "enter_pressed")
         self.process_list = pn.Column(sizing_mode="stretch_width", margin=0)
-        self.clear_button = pn.widgets.Button(name="Remove all", button_type="light",
+        self.empty_model_note = pn.pane.Markdown(
+            "*Empty model: only the empirical WV is shown.*", margin=(0, 10),
+            styles={"font-size": "13px"})
+        self.process_list.append(self.empty_model_note)
+        self._proc_rows: list[tuple[pn.Row, pn.pane.HTML, pn.widgets.Button]] = []
+        for _ in range(N_POOL):
+            self._new_process_row()
+        self.clear_button = pn.widgets.Button(label="Remove all", color="light",
                                               width=100, margin=(3, 3))
         self.clear_button.on_click(lambda _e: self.state.clear_model())
 
-        self.whatif_toggle = pn.widgets.Switch(name="What if", value=False, margin=(8, 10))
+        self.whatif_toggle = pn.widgets.Checkbox(
+            label="What if: move the parameters by hand", value=False, css_classes=["gmwm-whatif"])
         self.whatif_toggle.param.watch(self._on_whatif, "value")
         self.sliders = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
-        self.reset_button = pn.widgets.Button(name="Back to the fit", button_type="light",
+        self._slider_pool: list[pn.widgets.FloatSlider] = []
+        self._slider_specs: list[SliderSpec] = []
+        self._log_format = CustomJSTickFormatter(
+            code="return Math.pow(10, tick).toExponential(3)")
+        self._phi_format = CustomJSTickFormatter(
+            code="return (1 - Math.pow(10, tick)).toPrecision(6)")
+        self.reset_button = pn.widgets.Button(label="Back to the fit", color="light",
                                               width=130, margin=(3, 3))
         self.reset_button.on_click(lambda _e: self._reset_whatif())
-        self.fit_button = pn.widgets.Button(name="Fit from here", button_type="primary",
+        self.fit_button = pn.widgets.Button(label="Fit from here", color="primary",
                                             width=130, margin=(3, 3),
                                             description="Refit using the slider values as a "
                                                         "starting point")
@@ -172,11 +277,16 @@ class GMWMApp:
 
         self.download = pn.widgets.FileDownload(
             callback=self._export_json, filename="gmwm_fit.json", label="Download fit (JSON)",
-            button_type="primary", sizing_mode="stretch_width", embed=False)
-        self.plot_format = pn.widgets.RadioButtonGroup(
-            name="Plot export format", options=["PNG", "SVG"], value="PNG",
-            button_type="default", margin=(3, 10))
-        self.plot_format.param.watch(self._on_plot_format, "value")
+            color="primary", sizing_mode="stretch_width", embed=False)
+        # plot images are made in the browser by BokehJS (PlotView.export), like the toolbar's
+        # save tool, but in either format whatever the plot's output backend
+        self.png_button = pn.widgets.Button(label="Plot as PNG", color="default", width=150,
+                                            margin=(3, 5))
+        self.svg_button = pn.widgets.Button(label="Plot as SVG", color="default", width=150,
+                                            margin=(3, 5))
+        for btn, kind in ((self.png_button, "png"), (self.svg_button, "svg")):
+            btn.js_on_click(args={"plot": self.views.figure, "save": self.views.save_tool},
+                            code=_EXPORT_JS.replace("KIND", kind))
 
         # main area
         self.alert = pn.pane.Alert("", alert_type="danger", visible=False,
@@ -188,19 +298,15 @@ class GMWMApp:
         self.status = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
                                        styles={"color": "#555", "font-size": "13px"})
         self.plot_pane = pn.pane.Bokeh(self.views.figure, sizing_mode="stretch_width",
-                                       height=500, margin=(5, 10))
+                                       margin=(5, 10))
         self.resid_pane = pn.pane.Bokeh(self.views.residual, sizing_mode="stretch_width",
-                                        height=190, margin=(0, 10))
+                                        margin=(0, 10))
         self.summary = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
-        common = dict(show_index=False, disabled=True, sizing_mode="stretch_width",
-                      layout="fit_data_stretch", selectable=False, theme="simple",
-                      margin=(5, 10), min_height=60)
-        self.param_table = pn.widgets.Tabulator(
-            pd.DataFrame(columns=["process", "parameter", "value", "unit"]),
-            name="parameters", **common)
-        self.datasheet_table = pn.widgets.Tabulator(
-            pd.DataFrame(columns=["process", "quantity", "value", "unit"]),
-            name="datasheet", **common)
+        self.tables = FitTables()
+        self.param_table = pn.pane.Bokeh(self.tables.params, sizing_mode="stretch_width",
+                                         margin=(5, 10))
+        self.datasheet_table = pn.pane.Bokeh(self.tables.datasheet, sizing_mode="stretch_width",
+                                             margin=(5, 10))
 
     def _build_layout(self) -> None:
         h = pn.pane.Markdown
@@ -219,33 +325,40 @@ class GMWMApp:
             self.process_list,
             self.clear_button,
             pn.layout.Divider(),
-            pn.Row(h("### What if", margin=(0, 10)), self.whatif_toggle),
-            h("Move each parameter on a log scale; the curves follow as you drag.",
-              margin=(0, 10), styles={"font-size": "12px", "color": "#555"}),
+            h("### What if", margin=(0, 10)),
+            self.whatif_toggle,
+            h("Each parameter on a log scale, 3 decades either side; the curves follow as "
+              "you drag.", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}),
             self.sliders, self.whatif_buttons,
             pn.layout.Divider(),
             h("### Export", margin=(0, 10)),
             self.download,
-            h("Plot image: the save tool of the plot toolbar, as", margin=(0, 10),
-              styles={"font-size": "12px", "color": "#555"}),
-            self.plot_format,
+            pn.Row(self.png_button, self.svg_button, margin=(0, 5)),
+            h("The plot toolbar's save tool also saves a PNG; each plot's toolbar zooms "
+              "and pans.", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}),
         ]
         tables = pn.Row(
-            pn.Column(h("#### Parameters", margin=(0, 10)), self.param_table,
-                      sizing_mode="stretch_width"),
+            pn.Column(h("#### Parameters", margin=(0, 10)), self.param_table, width=420),
             pn.Column(h("#### Datasheet values", margin=(0, 10)), self.datasheet_table,
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width",
         )
-        main = [pn.Column(self.alert, self.notice, self.warning, self.status, self.plot_pane,
-                          self.resid_pane, self.summary, tables, sizing_mode="stretch_width")]
-        self.template = pn.template.FastListTemplate(
+        # visibility and loading are set on layouts, not on the Bokeh panes (Panel 1.9.4
+        # fails on Layoutable changes of a Bokeh pane: "Bokeh.stylesheets items must be str")
+        self.resid_box = pn.Column(self.resid_pane, sizing_mode="stretch_width", margin=0)
+        self.plot_box = pn.Column(self.plot_pane, self.resid_box, sizing_mode="stretch_width",
+                                  margin=0)
+        main = [pn.Column(self.alert, self.notice, self.warning, self.status, self.plot_box,
+                          self.summary, tables, sizing_mode="stretch_width")]
+        # BootstrapTemplate: every resource is bundled with Panel (the Fast design pulls a web
+        # font from a CDN, which is a console error offline)
+        self.template = pn.template.BootstrapTemplate(
             title="GMWM: stochastic calibration of inertial sensors",
-            sidebar=sidebar, main=main, sidebar_width=350, theme_toggle=False,
-            accent="#1F5FAD", main_layout=None, raw_css=[_CSS],
+            sidebar=sidebar, main=main, sidebar_width=360,
+            header_background="#1F4E8C",
         )
 
-    def view(self) -> pn.template.FastListTemplate:
+    def view(self) -> pn.template.BootstrapTemplate:
         """The page of this session."""
         return self.template
 
@@ -253,7 +366,12 @@ class GMWMApp:
     # refresh (state -> widgets and views)
     # -------------------------------------------------------------------------------------
     def _on_state(self, _event: Any = None) -> None:
-        self.refresh()
+        try:
+            self.refresh()
+        except Exception as e:  # a display problem must not look like a state error
+            log.exception("refresh failed")
+            self.alert.param.update(object=f"Display error: {type(e).__name__}: {e}",
+                                    visible=True)
 
     def refresh(self) -> None:
         """Bring every view and widget in line with the state (in place, one batch)."""
@@ -263,12 +381,14 @@ class GMWMApp:
         try:
             with pn.io.hold():
                 self.views.update(s)
+                self.resid_box.visible = s.display_model() is not None
                 self._refresh_tables()
                 self._refresh_data_widgets()
                 self._refresh_process_list()
                 self._refresh_sliders()
                 self._refresh_messages()
                 self.download.filename = s.export_filename()
+                self.views.save_tool.filename = s.export_filename()[:-5].replace("+", "_")
         finally:
             self._syncing = False
         self._sync_url()
@@ -276,10 +396,7 @@ class GMWMApp:
 
     def _refresh_tables(self) -> None:
         s = self.state
-        self.param_table.value = pd.DataFrame(
-            parameter_rows(s), columns=["process", "parameter", "value", "unit"])
-        self.datasheet_table.value = pd.DataFrame(
-            datasheet_rows(s), columns=["process", "quantity", "value", "unit"])
+        self.tables.update(s)
         self.summary.object = fit_summary(s)
 
     def _refresh_data_widgets(self) -> None:
@@ -300,7 +417,7 @@ class GMWMApp:
         if s.wv is None:
             self.data_info.object = "No data loaded."
         else:
-            u = s.unit or "unknown unit (set it in the file)"
+            u = (s.unit or "unknown unit (set it in the file)").replace("^2", "²")
             kind = "WV summary file (no raw samples)" if s.is_summary else "raw log"
             self.data_info.object = (
                 f"**{s.filename}** ({kind}, source: {s.source})  \n"
@@ -309,29 +426,40 @@ class GMWMApp:
                 f"fs = {s.fs:g} Hz ({s.fs_source}), unit: {u}, {len(s.wv)} WV levels")
 
     def _refresh_process_list(self) -> None:
+        """One row per process from a fixed pool (no new Bokeh models on add/remove)."""
         s = self.state
         key = tuple(s.model.labels)
         if key == self._proc_key:
             return
         self._proc_key = key
-        rows = []
-        for i, (lab, p) in enumerate(zip(s.model.labels, s.model.processes, strict=True)):
-            color = component_color(lab)
-            label = pn.pane.HTML(
-                f'<span class="gmwm-proc-label"><span class="gmwm-swatch" '
-                f'style="background:{color}"></span><b>{lab}</b> {PROCESS_NAMES[p.code]}</span>',
-                sizing_mode="stretch_width", margin=(0, 10))
-            btn = pn.widgets.Button(name="✕", button_type="light", width=34, height=28,
-                                    margin=(0, 5), description=f"Remove {lab}",
-                                    css_classes=["gmwm-remove"])
-            btn.on_click(lambda _e, i=i: self._remove(i))
-            rows.append(pn.Row(label, btn, sizing_mode="stretch_width", margin=0))
-        if not rows:
-            rows = [pn.pane.Markdown("*Empty model: only the empirical WV is shown.*",
-                                     margin=(0, 10), styles={"font-size": "13px"})]
-        self.process_list.objects = rows
+        procs = list(zip(s.model.labels, s.model.processes, strict=True))
+        while len(self._proc_rows) < len(procs):  # grows only past the initial pool
+            self._new_process_row()
+        for i, (row, label, _btn) in enumerate(self._proc_rows):
+            if i < len(procs):
+                lab, p = procs[i]
+                label.object = (
+                    f'<span style="font-size:13px;line-height:28px;white-space:nowrap">'
+                    f'<span style="display:inline-block;width:18px;height:4px;'
+                    f'margin:0 6px 3px 0;background:{component_color(lab)}"></span>'
+                    f'<b>{lab}</b> {PROCESS_NAMES[p.code]}</span>')
+                row.visible = True
+            else:
+                row.visible = False
+        self.empty_model_note.visible = not procs
+
+    def _new_process_row(self) -> None:
+        i = len(self._proc_rows)
+        label = pn.pane.HTML("", sizing_mode="stretch_width", margin=(0, 10))
+        btn = pn.widgets.Button(label="✕", color="light", width=34, height=28, margin=(0, 5),
+                                css_classes=["gmwm-remove"], description="Remove this process")
+        btn.on_click(lambda _e, i=i: self._remove(i))
+        row = pn.Row(label, btn, sizing_mode="stretch_width", margin=0, visible=False)
+        self._proc_rows.append((row, label, btn))
+        self.process_list.append(row)
 
     def _refresh_sliders(self) -> None:
+        """What-if sliders from the parameter specs, from a pool of slider widgets."""
         s = self.state
         on = bool(s.whatif and len(s.model))
         self.sliders.visible = on
@@ -339,24 +467,31 @@ class GMWMApp:
         if not on:
             self._slider_key = None
             return
-        key = (s.model.spec(values=True), id(s.result), s.channel)
+        key = (s.model.spec(values=True), id(s.result), s.channel, s.fs)
         if key == self._slider_key:
             return
         self._slider_key = key
-        widgets = []
-        for spec in s.slider_specs():
-            if spec.transform == "log10(1-x)":
-                code = "return (1 - Math.pow(10, tick)).toPrecision(6)"
-            else:
-                code = "return Math.pow(10, tick).toExponential(3)"
-            w = pn.widgets.FloatSlider(
-                name=f"{spec.name} [{spec.unit}]", start=spec.lo, end=spec.hi,
-                value=min(max(spec.x, spec.lo), spec.hi), step=(spec.hi - spec.lo) / 600,
-                format=CustomJSTickFormatter(code=code), sizing_mode="stretch_width",
-                margin=(2, 10), bar_color=component_color(spec.label))
-            w.param.watch(lambda e, sp=spec: self._on_slider(sp, e.new), "value")
-            widgets.append(w)
-        self.sliders.objects = widgets
+        specs = s.slider_specs()
+        while len(self._slider_pool) < len(specs):
+            i = len(self._slider_pool)
+            w = pn.widgets.FloatSlider(label="", start=0.0, end=1.0, value=0.5, step=0.01,
+                                       format=self._log_format, sizing_mode="stretch_width",
+                                       margin=(2, 10), visible=False)
+            w.param.watch(lambda e, i=i: self._on_slider(i, e.new), "value")
+            self._slider_pool.append(w)
+            self.sliders.append(w)
+        self._slider_specs = specs
+        for i, w in enumerate(self._slider_pool):
+            if i < len(specs):
+                sp = specs[i]
+                phi = sp.transform == "log10(1-x)"
+                w.param.update(
+                    label=f"{sp.name} [{sp.unit.replace('^2', '²')}]", start=sp.lo, end=sp.hi,
+                    value=min(max(sp.x, sp.lo), sp.hi), step=(sp.hi - sp.lo) / 600,
+                    format=self._phi_format if phi else self._log_format,
+                    bar_color=component_color(sp.label), visible=True)
+            elif w.visible:
+                w.visible = False
 
     def _refresh_messages(self) -> None:
         s = self.state
@@ -369,63 +504,115 @@ class GMWMApp:
         self.warning.visible = bool(warn)
 
     def _sync_url(self) -> None:
-        if not self._ready:
-            return
-        loc = pn.state.location
-        if loc is None:
+        if not self._ready or self._location is None:
             return
         q = self.state.to_query()
         if q != self._last_query:
             self._last_query = q
-            loc.search = "?" + urlencode(q, safe="*/")
+            self._location.search = "?" + urlencode(q, safe="*/")
 
     # -------------------------------------------------------------------------------------
     # heavy work off the event loop
     # -------------------------------------------------------------------------------------
+    @property
+    def _served(self) -> bool:
+        return self._doc is not None and self._doc.session_context is not None
+
+    def _locked(self, fn: Callable[[], Any]) -> None:
+        """Run ``fn`` with the session's document lock (next tick of the server loop).
+
+        Async jobs run without the lock (so the session stays responsive); every change of
+        the state, and so of Bokeh models, goes through here.
+        """
+        if not self._served:
+            fn()
+            return
+        doc = self._doc
+
+        def run() -> None:
+            with set_curdoc(doc):
+                try:
+                    fn()
+                except Exception as e:  # never leave the page without a word
+                    log.exception("app callback failed")
+                    self.state.report_error(f"Internal error: {type(e).__name__}: {e}")
+
+        doc.add_next_tick_callback(run)
+
+    def _spawn(self, coro_fn: Callable[[], Any]) -> None:
+        """Start an async job: on the server loop when served, else run it to completion."""
+        if self._served:
+            with set_curdoc(self._doc):
+                pn.state.execute(coro_fn)
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no loop (tests, scripts): run it now
+            asyncio.run(coro_fn())
+        else:  # a notebook's loop
+            loop.create_task(coro_fn())
+
     def _busy(self, on: bool, message: str = "") -> None:
-        self.plot_pane.loading = on
-        self.status.object = f"⏳ {message}" if on else ""
+        self.busy = on
+        self.plot_box.loading = on  # (not on the Bokeh pane itself: Panel 1.9 fails there)
+        self.status.object = f"⏳ {message} ..." if on else ""
         for w in (self.demo_button, self.path_button, self.upload, self.channel_select):
             w.disabled = on
 
-    async def _offload(self, message: str, work: Callable[[], Any],
+    async def _offload(self, message: str, work: Callable[[], Any] | Future,
                        apply: Callable[[Any], Any]) -> None:
         """Run ``work`` in a worker thread (loading indicator on), then ``apply`` its result.
 
-        A later job supersedes an earlier one (its result is dropped).
+        ``apply`` runs under the document lock. A later job supersedes an earlier one (the
+        earlier result is dropped).
         """
         self._job += 1
         job = self._job
-        self._busy(True, message)
+        self._locked(lambda: self._busy(True, message))
+        out: Any = None
+        err: BaseException | None = None
         try:
-            loop = asyncio.get_running_loop()
-            try:
-                out = await loop.run_in_executor(None, work)
-            except Exception as e:  # reported in the page
-                if job == self._job:
-                    self.state._fail(f"{message}: {e}")
+            if isinstance(work, Future):  # already running (started with the session)
+                out = await asyncio.wrap_future(work)
+            else:
+                out = await asyncio.get_running_loop().run_in_executor(_EXECUTOR, work)
+        except Exception as e:  # reported in the page
+            err = e
+
+        def finish() -> None:
+            if job != self._job:
                 return
-            if job == self._job:
-                apply(out)
-        finally:
-            if job == self._job:
+            try:
+                if err is not None:
+                    self.state.report_error(f"{message}: {err}")
+                else:
+                    apply(out)
+            finally:
                 self._busy(False)
+                self._ready = True
+                self._sync_url()
+
+        self._locked(finish)
+
+    def prefetch(self) -> None:
+        """Start reading the data the URL names in a worker thread, while the page loads."""
+        query = dict(self._location.query_params) if self._location is not None else {}
+        self._query = query
+        self._prefetched = _EXECUTOR.submit(self.state.prepare_query, query,
+                                            self.default_source, self.default_path)
 
     async def start(self) -> None:
-        """Load the data named by the URL (or the default) when the page opens."""
-        loc = pn.state.location
-        query = dict(loc.query_params) if loc is not None else {}
-
-        def work() -> Any:
-            return self.state.prepare_query(query, self.default_source, self.default_path)
+        """Show the data named by the URL (or the default) once the page has opened."""
+        if self._prefetched is None:
+            self.prefetch()
+        query = self._query
 
         def apply(prepared: Any) -> None:
             self.state.from_query(query, prepared=prepared, default_source=self.default_source,
                                   default_path=self.default_path)
 
-        await self._offload("Loading the data and computing its wavelet variance", work, apply)
-        self._ready = True
-        self._sync_url()
+        await self._offload("Loading the data and computing its wavelet variance",
+                            self._prefetched, apply)
 
     def start_sync(self) -> None:
         """Synchronous :meth:`start` (no server: tests, notebooks)."""
@@ -434,51 +621,56 @@ class GMWMApp:
         self._ready = True
 
     # -------------------------------------------------------------------------------------
-    # callbacks
+    # callbacks (synchronous watchers; heavy work is spawned as an async job)
     # -------------------------------------------------------------------------------------
-    async def _on_demo(self, _event: Any = None) -> None:
-        s = self.state
-        await self._offload("Loading the demo log",
-                            lambda: self._read_and_warm("demo"), s.install)
-
     def _read_and_warm(self, source: str, **kw: Any) -> Any:
         loaded = self.state.read(source, **kw)
         self.state.precompute(loaded, self.state.channel, None, self.state.robust)
         return loaded
 
-    async def _on_upload(self, event: Any) -> None:
+    def _on_demo(self, _event: Any = None) -> None:
+        self._spawn(partial(self._offload, "Loading the demo log",
+                            partial(self._read_and_warm, "demo"), self.state.install))
+
+    def _on_upload(self, event: Any) -> None:
         files = event.new or {}
         if not files:
             return
-        name, data = next(iter(files.items()))
-        await self._offload(f"Reading {name}",
-                            lambda: self._read_and_warm("upload", data=data, filename=name),
-                            self.state.install)
+        name, data = list(files.items())[-1]
 
-    async def _on_path(self, _event: Any = None) -> None:
+        def apply(loaded: Any) -> None:
+            self.state.install(loaded)
+            self.upload.value = {}  # the log is in the state now; free the upload's bytes
+
+        self._spawn(partial(self._offload, f"Reading {name}",
+                            partial(self._read_and_warm, "upload", data=data, filename=name),
+                            apply))
+
+    def _on_path(self, _event: Any = None) -> None:
         path = (self.path_input.value_input or self.path_input.value or "").strip()
         if not path:
-            self.state._fail("Type the path of a log file on the server first")
+            self.state.report_error("Type the path of a log file on the server first")
             return
-        await self._offload(f"Reading {path}",
-                            lambda: self._read_and_warm("path", path=path), self.state.install)
+        self._spawn(partial(self._offload, f"Reading {path}",
+                            partial(self._read_and_warm, "path", path=path),
+                            self.state.install))
 
-    async def _on_channel(self, event: Any) -> None:
+    def _on_channel(self, event: Any) -> None:
         if self._syncing or not event.new or event.new == self.state.channel:
             return
         ch = event.new
-        await self._offload(f"Computing the wavelet variance of {ch}",
-                            lambda: self.state.warm(ch),
-                            lambda _out: self.state.select_channel(ch))
+        self._spawn(partial(self._offload, f"Computing the wavelet variance of {ch}",
+                            partial(self.state.warm, ch),
+                            lambda _out: self.state.select_channel(ch)))
 
-    async def _on_robust(self, event: Any) -> None:
+    def _on_robust(self, event: Any) -> None:
         if self._syncing or bool(event.new) == self.state.robust:
             return
         rob = bool(event.new)
         what = "robust" if rob else "classical"
-        await self._offload(f"Computing the {what} wavelet variance",
-                            lambda: self.state.warm(robust=rob),
-                            lambda _out: self._after_robust(rob))
+        self._spawn(partial(self._offload, f"Computing the {what} wavelet variance",
+                            partial(self.state.warm, robust=rob),
+                            lambda _out: self._after_robust(rob)))
 
     def _after_robust(self, rob: bool) -> None:
         if not self.state.set_robust(rob):
@@ -507,9 +699,10 @@ class GMWMApp:
             return
         self.state.set_whatif(bool(event.new))
 
-    def _on_slider(self, spec: SliderSpec, x: float) -> None:
-        if self._syncing:
+    def _on_slider(self, slot: int, x: float) -> None:
+        if self._syncing or slot >= len(self._slider_specs):
             return
+        spec = self._slider_specs[slot]
         self.state.set_whatif_value(spec.name, spec.value_of(x))
 
     def _reset_whatif(self) -> None:
@@ -519,11 +712,6 @@ class GMWMApp:
     def _fit_from_whatif(self) -> None:
         if self.state.fit_from_whatif():
             self.state.set_whatif(False)
-
-    def _on_plot_format(self, event: Any) -> None:
-        backend = "svg" if event.new == "SVG" else "canvas"
-        self.views.figure.output_backend = backend
-        self.views.residual.output_backend = backend
 
     def _export_json(self) -> io.StringIO:
         return io.StringIO(self.state.export_json())
@@ -544,7 +732,7 @@ def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn
 
     Returns
     -------
-    panel.template.FastListTemplate
+    panel.template.BootstrapTemplate
         The page; its ``gmwm_app`` attribute is the :class:`GMWMApp`.
     """
     app = GMWMApp(default_source=source, default_path=path)
@@ -552,6 +740,7 @@ def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn
     page.gmwm_app = app  # type: ignore[attr-defined]
     if load:
         if pn.state.curdoc is not None and pn.state.curdoc.session_context is not None:
+            app.prefetch()  # the file is read while the browser loads the page
             pn.state.onload(app.start)
         else:
             app.start_sync()

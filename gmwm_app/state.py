@@ -253,9 +253,12 @@ class AppState(param.Parameterized):
         """The loaded ``ImuLog`` (None before the first load)."""
         return self._log
 
-    def _fail(self, message: str) -> bool:
+    def report_error(self, message: str) -> bool:
+        """Show ``message`` as the error of the page (state otherwise unchanged); False."""
         self.param.update(error=message, revision=self.revision + 1)
         return False
+
+    _fail = report_error
 
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool:
         """Run ``fn``; any exception becomes a message in :attr:`error` (never raised)."""
@@ -263,7 +266,7 @@ class AppState(param.Parameterized):
             return fn()
         except (ValueError, KeyError, OSError, TypeError, IndexError) as e:
             return self._fail(f"{action}: {_message(e)}")
-        except Exception as e:  # noqa: BLE001 - the UI must keep working
+        except Exception as e:  # the UI must keep working
             log.exception("unexpected error while %s", action)
             return self._fail(f"{action}: unexpected {type(e).__name__}: {e}")
 
@@ -348,7 +351,7 @@ class AppState(param.Parameterized):
             if _wv_from_cache(loaded.wv_cache, ch, f, robust) is None:
                 AppState._store(loaded.wv_cache, ch, f, robust, _compute_wv(lg, ch, f, robust))
                 loaded.computations += 1
-        except Exception:  # noqa: BLE001 - reported when installed
+        except Exception:  # reported when installed
             pass
 
     def warm(self, channel: str | None = None, fs: float | None = None,
@@ -357,7 +360,8 @@ class AppState(param.Parameterized):
 
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
         """
-        lg = self._log
+        with self._lock:  # the log and its cache, together (a new log brings a new cache)
+            lg, cache = self._log, self._wv_cache
         if lg is None:
             return
         ch = channel or self.channel
@@ -365,13 +369,13 @@ class AppState(param.Parameterized):
         rob = self.robust if robust is None else bool(robust)
         try:
             with self._lock:
-                if _wv_from_cache(self._wv_cache, ch, f, rob) is not None:
+                if _wv_from_cache(cache, ch, f, rob) is not None:
                     return
             wv = _compute_wv(lg, ch, f, rob)
             with self._lock:
-                self._store(self._wv_cache, ch, f, rob, wv)
+                self._store(cache, ch, f, rob, wv)
                 self.wv_computations += 1
-        except Exception:  # noqa: BLE001 - reported by the state change that follows
+        except Exception:  # reported by the state change that follows
             pass
 
     # ---------------------------------------------------------------------------------

@@ -20,10 +20,13 @@ from bokeh.core.properties import value
 from bokeh.models import (
     ColumnDataSource,
     DataRange1d,
+    DataTable,
     HoverTool,
     Legend,
     LegendItem,
+    SaveTool,
     Span,
+    TableColumn,
 )
 from bokeh.plotting import figure
 
@@ -37,6 +40,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "WVFigures",
+    "FitTables",
     "N_COMPONENTS",
     "component_color",
     "unit_squared",
@@ -48,6 +52,9 @@ __all__ = [
 
 #: Size of the pool of component renderers (a model with more processes draws the first ones).
 N_COMPONENTS = 12
+#: Minimum legend label width (px); the residual strip has a legend as wide, so the two
+#: plot frames line up on the shared x axis.
+LEGEND_LABEL_WIDTH = 175
 #: Points per octave of the smooth model curves.
 GRID_PER_OCTAVE = 8
 
@@ -126,21 +133,23 @@ class WVFigures:
     """
 
     def __init__(self, n_components: int = N_COMPONENTS) -> None:
-        self.emp = ColumnDataSource(_empty_wv())
-        self.alt = ColumnDataSource(_empty_wv())
-        self.total = ColumnDataSource(dict(_EMPTY_CURVE))
-        self.comps = [ColumnDataSource(dict(_EMPTY_CURVE)) for _ in range(n_components)]
+        # names: handles for browser tests and benchmarks (Bokeh's get_model_by_name)
+        self.emp = ColumnDataSource(_empty_wv(), name="empirical")
+        self.alt = ColumnDataSource(_empty_wv(), name="classical")
+        self.total = ColumnDataSource(dict(_EMPTY_CURVE), name="model_total")
+        self.comps = [ColumnDataSource(dict(_EMPTY_CURVE), name=f"component_{i}")
+                      for i in range(n_components)]
         self.resid = ColumnDataSource({"tau_s": np.zeros(0), "ratio": np.zeros(0),
                                        "lo": np.zeros(0), "hi": np.zeros(0),
-                                       "level": np.zeros(0)})
+                                       "level": np.zeros(0)}, name="residual")
         self._shown_wv: Any = None
         self._unit: str | None = None
 
         p = figure(
-            x_axis_type="log", y_axis_type="log", sizing_mode="stretch_both", min_height=380,
+            x_axis_type="log", y_axis_type="log", sizing_mode="stretch_width", height=480,
             tools="pan,wheel_zoom,box_zoom,reset,save", toolbar_location="above",
             x_range=DataRange1d(range_padding=0.08), y_range=DataRange1d(range_padding=0.08),
-            title="Load a log to see its wavelet variance", name="wv_plot",
+            title="Load a log to see its wavelet variance", name="wv_plot", min_border_left=80,
         )
         p.xaxis.axis_label = "scale τ [s]"
         p.yaxis.axis_label = f"wavelet variance ν² [{unit_squared('')}]"
@@ -197,6 +206,7 @@ class WVFigures:
                    *self.comp_items],
             location="top_left", click_policy="hide", label_text_font_size="12px",
             spacing=1, padding=6, border_line_alpha=0.3, background_fill_alpha=0.85,
+            label_width=LEGEND_LABEL_WIDTH,
         )
         p.add_layout(self.legend, "right")
 
@@ -208,9 +218,11 @@ class WVFigures:
                                      mode="mouse", line_policy="nearest")
         p.add_tools(self.emp_hover, self.model_hover)
         self.figure = p
+        self.save_tool = p.select_one(SaveTool)
 
         r = figure(
-            x_axis_type="log", y_axis_type="log", x_range=p.x_range, height=180,
+            x_axis_type="log", x_range=p.x_range, height=180,
+            y_range=DataRange1d(range_padding=0.6, start=0.0), min_border_left=80,
             sizing_mode="stretch_width", tools="pan,wheel_zoom,reset,save",
             toolbar_location="above", name="residual_plot",
             title="Residuals: empirical / model, with the 95% interval",
@@ -220,13 +232,22 @@ class WVFigures:
         r.yaxis.axis_label = "empirical / model [1]"
         r.axis.axis_label_text_font_style = "normal"
         r.grid.grid_line_alpha = 0.35
-        r.varea(x="tau_s", y1="lo", y2="hi", source=self.resid, fill_color=BAND_COLOR,
-                fill_alpha=0.25)
-        r.line("tau_s", "ratio", source=self.resid, line_color=EMPIRICAL_COLOR, line_width=1)
+        rband = r.varea(x="tau_s", y1="lo", y2="hi", source=self.resid, fill_color=BAND_COLOR,
+                        fill_alpha=0.25)
+        rline = r.line("tau_s", "ratio", source=self.resid, line_color=EMPIRICAL_COLOR,
+                       line_width=1)
         ratio_pts = r.scatter("tau_s", "ratio", source=self.resid, size=6,
                               line_color=EMPIRICAL_COLOR, fill_color=EMPIRICAL_COLOR)
+        # linear ratio axis that follows the points (the interval at the longest scales is
+        # orders of magnitude wide and would flatten them)
+        r.y_range.renderers = [ratio_pts]
         r.add_layout(Span(location=1.0, dimension="width", line_color=TOTAL_COLOR,
                           line_dash="dashed", line_width=1.5))
+        r.add_layout(Legend(
+            items=[LegendItem(label=value("empirical / model"), renderers=[rline, ratio_pts]),
+                   LegendItem(label=value("95% interval / model"), renderers=[rband])],
+            location="top_left", label_text_font_size="12px", spacing=1, padding=6,
+            border_line_alpha=0.3, label_width=LEGEND_LABEL_WIDTH), "right")
         r.add_tools(HoverTool(renderers=[ratio_pts], tooltips=[
             ("level", "@level"), ("τ", "@tau_s{%.4g} s"), ("empirical / model", "@ratio{%.3f}"),
             ("95% interval / model", "@lo{%.3f} to @hi{%.3f}")],
@@ -333,6 +354,56 @@ class WVFigures:
 # -----------------------------------------------------------------------------------------
 # tables
 # -----------------------------------------------------------------------------------------
+PARAM_COLUMNS = ("process", "parameter", "value", "unit")
+DATASHEET_COLUMNS = ("process", "quantity", "value", "unit")
+
+
+def _table(columns: tuple[str, ...], widths: dict[str, int], name: str,
+           height: int, css: str) -> tuple[DataTable, ColumnDataSource]:
+    src = ColumnDataSource({c: [] for c in columns}, name=f"{name}_rows")
+    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False)
+            for c in columns]
+    # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
+    table = DataTable(source=src, columns=cols, index_position=None, sortable=False,
+                      reorderable=False, selectable=False, autosize_mode="force_fit",
+                      height=height, row_height=26, sizing_mode="stretch_width", name=name,
+                      css_classes=[css])
+    return table, src
+
+
+class FitTables:
+    """The parameter and datasheet tables (Bokeh DataTables, data replaced in place).
+
+    Attributes
+    ----------
+    params, datasheet : bokeh.models.DataTable
+        Columns ``process, parameter, value, unit`` and ``process, quantity, value, unit``.
+    param_source, datasheet_source : ColumnDataSource
+        Their data (strings: values formatted with 4 significant digits, units spelled out).
+    """
+
+    def __init__(self) -> None:
+        self.params, self.param_source = _table(
+            PARAM_COLUMNS, {"process": 60, "parameter": 90, "value": 90, "unit": 90},
+            "parameters", 300, "gmwm-params")
+        self.datasheet, self.datasheet_source = _table(
+            DATASHEET_COLUMNS, {"process": 60, "quantity": 250, "value": 80, "unit": 110},
+            "datasheet", 300, "gmwm-datasheet")
+
+    def update(self, state: AppState) -> None:
+        """Refresh both tables from the drawn model (fit or what-if)."""
+        for src, rows, cols in ((self.param_source, parameter_rows(state), PARAM_COLUMNS),
+                                (self.datasheet_source, datasheet_rows(state),
+                                 DATASHEET_COLUMNS)):
+            data = {c: [r[c] for r in rows] for c in cols}
+            if data != src.data:
+                src.data = data
+
+
+def _pretty(unit: str) -> str:
+    return unit.replace("^2", "²")
+
+
 def parameter_rows(state: AppState) -> list[dict[str, str]]:
     """Rows ``{"process", "parameter", "value", "unit"}`` of the drawn model (fit or what-if)."""
     m = state.display_model()
@@ -342,7 +413,7 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
     for lab, p in zip(m.labels, m.processes, strict=True):
         for name, v in zip(p.param_names, p.values, strict=True):
             rows.append({"process": lab, "parameter": name, "value": format_value(float(v)),
-                         "unit": eg.param_unit(p.code, name, state.unit)})
+                         "unit": _pretty(eg.param_unit(p.code, name, state.unit))})
     return rows
 
 
@@ -352,7 +423,7 @@ def datasheet_rows(state: AppState) -> list[dict[str, str]]:
     if m is None or not state.fs:
         return []
     return [{"process": r["label"], "quantity": r["quantity"],
-             "value": format_value(float(r["value"])), "unit": r["unit"]}
+             "value": format_value(float(r["value"])), "unit": _pretty(r["unit"])}
             for r in eg.datasheet(m, float(state.fs), state.unit)]
 
 

@@ -1,0 +1,56 @@
+"""Shared pytest fixtures.
+
+App fixtures: a demo log for the app tests (the bundled ``data/demo_imu.h5`` when it exists,
+else a small simulated one in the same layout) and ``app_demo``, which points the app at it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import pytest
+
+import engine as eg
+
+APP_DEMO_CHANNELS = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
+APP_DEMO_MODEL = "GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)+RW(gamma2=1e-9)"
+
+
+def write_small_demo(path: Path, n: int = 20_000, fs: float = 100.0) -> Path:
+    """A six-channel demo log in the bundled layout (root 1-D datasets, ``fs_hz``, ``units``)."""
+    model = eg.parse_model(APP_DEMO_MODEL)
+    with h5py.File(path, "w") as f:
+        for i, name in enumerate(APP_DEMO_CHANNELS):
+            ds = f.create_dataset(name, data=model.simulate(n, fs=fs, rng=i + 1))
+            ds.attrs["units"] = "deg/s" if name.startswith("gyro") else "m/s^2"
+        f.attrs["fs_hz"] = fs
+    return path
+
+
+@pytest.fixture(scope="session")
+def app_demo_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The demo log the app tests use."""
+    from gmwm_app.state import demo_path
+
+    real = demo_path()
+    if real.exists():
+        return real
+    return write_small_demo(tmp_path_factory.mktemp("app_demo") / "demo_imu.h5")
+
+
+@pytest.fixture
+def app_demo(app_demo_file: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Point ``gmwm_app.state.demo_path()`` at the test demo log; returns its path."""
+    monkeypatch.setenv("GMWM_APP_DEMO", str(app_demo_file))
+    return app_demo_file
+
+
+@pytest.fixture
+def app_state(app_demo: Path):
+    """A fresh session state with the demo log loaded."""
+    from gmwm_app.state import AppState
+
+    s = AppState()
+    assert s.load_demo(), s.error
+    return s

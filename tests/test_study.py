@@ -1,0 +1,194 @@
+"""The slope-method Monte Carlo: Table I conversions, regions, end-to-end run, CLI."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+
+import engine as eg
+from engine.cli import main
+from engine.study import (
+    STUDY_FS,
+    TABLE_I,
+    StudyResult,
+    estimate_all,
+    from_datasheet,
+    run_slope_study,
+    table1_model,
+    to_datasheet,
+    typical_regions,
+)
+
+
+# -------------------------------------------------------------------------------------------
+# Table I in per-sample parameters
+# -------------------------------------------------------------------------------------------
+def test_table1_per_sample_values_from_first_principles():
+    fs = 250.0
+    gyro = table1_model("gyro", fs).values()
+    # ARW 0.157 deg/sqrt(h) = 0.157/60 deg/s/sqrt(Hz) = N; sigma2 = N^2 fs
+    assert gyro["WN.sigma2"] == pytest.approx((0.157 / 60) ** 2 * 250, rel=1e-12)
+    # RRW 1.34 deg/h/sqrt(h) = 1.34/3600/60 deg/s/sqrt(s) = K; gamma2 = K^2 / fs
+    assert gyro["RW.gamma2"] == pytest.approx((1.34 / 3600 / 60) ** 2 / 250, rel=1e-12)
+    acc = table1_model("accel", fs).values()
+    assert acc["QN.q2"] == pytest.approx((1.79e-6 * 250) ** 2, rel=1e-12)      # Q = sqrt(q2)/fs
+    assert acc["WN.sigma2"] == pytest.approx((4.70e-2 / 60) ** 2 * 250, rel=1e-12)
+    assert acc["RW.gamma2"] == pytest.approx((43.5 / 216000) ** 2 / 250, rel=1e-12)
+    assert acc["DR.omega"] == pytest.approx(41.4 / 3600**2 / 250, rel=1e-12)  # R = omega fs
+
+
+@pytest.mark.parametrize("sensor", ["gyro", "accel"])
+def test_table1_allan_shapes_give_back_the_datasheet_values(sensor):
+    """The implied AVAR has the IEEE shapes N^2/T, K^2 T/3, 3Q^2/T^2, R^2 T^2/2 (T in s)."""
+    fs = STUDY_FS
+    model = table1_model(sensor, fs)
+    t = np.array([0.004, 1.0, 100.0, 4000.0])          # averaging times (s)
+    m = np.round(t * fs)
+    comps = model.components(2 * m, fs)                  # WV at tau = 2m
+    vals = {c: v for c, _, v, _ in TABLE_I[sensor]["params"]}
+    if "WN" in vals:
+        n = vals["WN"] / 60.0                              # u/sqrt(Hz)
+        np.testing.assert_allclose(2 * comps["WN"], n**2 / t, rtol=1e-12)
+    if "RW" in vals:
+        k = vals["RW"] / 216000.0                          # u/sqrt(s)
+        np.testing.assert_allclose(2 * comps["RW"][1:], k**2 * t[1:] / 3, rtol=1e-5)
+    if "QN" in vals:
+        np.testing.assert_allclose(2 * comps["QN"], 3 * vals["QN"] ** 2 / t**2, rtol=1e-12)
+    if "DR" in vals:
+        r = vals["DR"] / 3600.0**2                         # u/s
+        np.testing.assert_allclose(2 * comps["DR"], r**2 * t**2 / 2, rtol=1e-12)
+
+
+@pytest.mark.parametrize("sensor", ["gyro", "accel"])
+def test_conversions_agree_with_the_engine_datasheet(sensor):
+    model = table1_model(sensor)
+    rows = {r["quantity"]: r["value"] for r in eg.datasheet(model, STUDY_FS,
+                                                             TABLE_I[sensor]["unit"])}
+    key = {"WN": "angle random walk" if sensor == "gyro" else "velocity random walk",
+           "RW": "rate random walk" if sensor == "gyro" else "acceleration random walk",
+           "QN": "quantization Q", "DR": "rate ramp R"}
+    for code, _, value, _ in TABLE_I[sensor]["params"]:
+        ds = rows[key[code]] * (3600.0**2 if code == "DR" else 1.0)
+        assert ds == pytest.approx(value, rel=1e-12)
+        per_sample = from_datasheet(code, value, STUDY_FS)
+        assert to_datasheet(code, per_sample, STUDY_FS) == pytest.approx(value, rel=1e-12)
+    with pytest.raises(ValueError, match="sensor"):
+        table1_model("magnetometer")
+
+
+# -------------------------------------------------------------------------------------------
+# the typical user's regions
+# -------------------------------------------------------------------------------------------
+def test_typical_regions_at_the_paper_lengths():
+    g = typical_regions("gyro", 2_500_000)
+    assert g["WN"] == (0.004, 10.0)
+    assert g["RW"] == pytest.approx((2**18 / 250, 2**20 / 250))           # the last 3 points
+    a = typical_regions("accel", 6_300_000)
+    assert a["QN"] == (0.004, 0.008)
+    assert a["WN"] == (0.015, 1.1)
+    assert a["RW"] == pytest.approx((2**13 / 250, 2**16 / 250))           # 33 to 262 s
+    assert a["DR"] == pytest.approx((2**20 / 250, 2**21 / 250))           # the last 2 points
+    short = typical_regions("accel", 200_000)
+    assert short["RW"][1] < short["DR"][0]
+    with pytest.raises(ValueError, match="too short"):
+        typical_regions("gyro", 40)
+
+
+def test_estimate_all_returns_every_method():
+    x = table1_model("accel").simulate(2**18, fs=STUDY_FS, rng=5)
+    ests = estimate_all(x, "accel", methods=("GMWM", "ARMAV", "ARMAV-unweighted", "AVSM",
+                                               "AVSM-auto"))
+    assert [e.method for e in ests.values()] == list(ests)
+    truth = table1_model("accel").values()
+    for m in ("GMWM", "ARMAV", "AVSM"):
+        assert set(ests[m].params) == set(truth)
+    assert ests["GMWM"].params["WN.sigma2"] == pytest.approx(truth["WN.sigma2"], rel=0.02)
+    with pytest.raises(ValueError, match="unknown method"):
+        estimate_all(x, "accel", methods=("PSD",))
+
+
+# -------------------------------------------------------------------------------------------
+# end to end
+# -------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def small_study() -> StudyResult:
+    stream = io.StringIO()
+    res = run_slope_study(3, seed=4, n_values=(2e5,), workers=2, progress=stream,
+                          methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"))
+    object.__setattr__(res, "_progress_text", stream.getvalue())
+    return res
+
+
+def test_study_runs_end_to_end_and_writes_its_outputs(small_study, tmp_path):
+    res = small_study
+    assert "3/6 (50 %)" in res._progress_text and "6/6 (100 %)" in res._progress_text
+    assert not res.errors
+    # 2 gyro + 4 accel parameters x 3 methods, plus AVSM-auto's WN and RW for both sensors
+    assert len(res.rows) == 6 * 3 + 4
+    for r in res.rows:
+        assert r["n_ok"] == 3 and math.isfinite(r["rmse"])
+        assert r["rmse"] ** 2 == pytest.approx(r["bias"] ** 2 + r["sd"] ** 2 * 2 / 3, rel=1e-9)
+    paths = res.save(tmp_path / "out")
+    d = json.loads((tmp_path / "out" / "study.json").read_text())
+    assert d["settings"]["reps"] == 3 and d["settings"]["n_values"] == [200000]
+    assert len(d["estimates"]["200000"]["accel"]["AVSM"]["QN"]) == 3
+    assert d["truth"]["accel"]["DR"]["value"] == 41.4
+    again = StudyResult.from_json(paths["json"])
+    assert again.rows == res.rows and again.markdown() == res.markdown()
+    md = (tmp_path / "out" / "study.md").read_text()
+    assert "| Accel | QN Q [m/s] | 1.79e-06 | AVSM |" in md and "**" in md
+    assert "RMSE" in (tmp_path / "out" / "study.txt").read_text()
+    pytest.importorskip("matplotlib")
+    for k in ("boxplot", "rmse"):
+        with open(paths[k], "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_study_does_not_depend_on_the_number_of_workers_or_replicates(small_study):
+    # replicate r has its own seed: 2 replicates in process equal the first 2 of 3 on 2 workers
+    one = run_slope_study(2, seed=4, n_values=(2e5,), workers=1, progress=False,
+                          methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"))
+    for n, by_s in small_study.estimates.items():
+        for s, by_m in by_s.items():
+            for m, by_c in by_m.items():
+                for c, v in by_c.items():
+                    np.testing.assert_array_equal(v[:2], one.estimates[n][s][m][c])
+
+
+def test_ranking_logic():
+    est = {100: {"gyro": {"GMWM": {"WN": np.array([0.157, 0.157]), "RW": np.array([1.3, 1.4])},
+                          "AVSM": {"WN": np.array([0.16, 0.15]), "RW": np.array([1.34, 1.34])}}}}
+    res = StudyResult(estimates=est, errors=[], wall_time_s=1.0,
+                      settings={"reps": 2, "seed": 0, "n_values": [100], "fs": 250.0,
+                                "methods": ["GMWM", "AVSM"], "sensors": ["gyro"], "workers": 1})
+    rk = res.ranking()
+    assert rk["best"] == {"100/gyro/WN": "GMWM", "100/gyro/RW": "AVSM"}
+    assert not rk["gmwm_lowest_everywhere"] and rk["exceptions"][0]["process"] == "RW"
+    assert "does not hold" in res.ranking_text()
+
+
+def test_bad_settings():
+    with pytest.raises(ValueError, match="reps"):
+        run_slope_study(1)
+    with pytest.raises(ValueError, match="unknown method"):
+        run_slope_study(2, methods=("GMWM", "PSD"))
+    with pytest.raises(ValueError, match="sensor"):
+        run_slope_study(2, sensors=("baro",))
+
+
+def test_cli_study(tmp_path, capsys):
+    rc = main(["study", "slope", "--reps", "2", "--seed", "3", "--n", "1e5", "--workers", "1",
+               "--out", str(tmp_path), "--json"])
+    cap = capsys.readouterr()
+    assert rc == 0
+    d = json.loads(cap.out)
+    assert d["study"] == "slope" and "estimates" not in d
+    assert {r["method"] for r in d["summary"]} == {"GMWM", "ARMAV", "AVSM"}
+    assert (tmp_path / "study.md").exists() and d["files"]["json"].endswith("study.json")
+    assert "gmwm study slope" in cap.err
+    assert main(["study", "slope", "--reps", "2", "--n", "many"]) == 2
+    assert "--n" in capsys.readouterr().err
