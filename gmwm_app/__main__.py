@@ -1,4 +1,6 @@
-"""``gmwm-app [FILE] [--port N] [--address A] [--no-show]``: serve the GMWM app.
+"""``gmwm-app [FILE] [--port N] [--address A] [--no-show] [--max-upload-mb N] [--data-dir DIR]``.
+
+Serve the GMWM app.
 
 Every browser tab gets its own session (a fresh state). ``FILE`` is loaded (as a path on the
 server) instead of the bundled demo log. Also ``python -m gmwm_app``.
@@ -32,6 +34,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
                    help="extra origin allowed to connect (needed when serving beyond localhost)")
     p.add_argument("--no-show", action="store_true", help="do not open a browser")
+    p.add_argument("--max-upload-mb", type=float, default=None, metavar="N",
+                   help="refuse uploads larger than N MB (default 200)")
+    p.add_argument("--data-dir", action="append", default=None, metavar="DIR",
+                   help="folder whose files may be loaded by server path (repeatable; default: "
+                        "the current directory, the repository's data/ folder and the shared "
+                        "data folder next to the repository); other paths are refused")
     return p
 
 
@@ -48,6 +56,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not 0 <= args.port <= 65535:
         print(f"gmwm-app: error: --port must be 0..65535, got {args.port}", file=sys.stderr)
         return 2
+
+    from gmwm_app import limits
+
+    dirs = args.data_dir if args.data_dir else limits.default_data_dirs()
+    missing = [d for d in dirs if not Path(d).expanduser().is_dir()]
+    if missing:
+        print(f"gmwm-app: error: --data-dir is not a folder: {missing[0]}", file=sys.stderr)
+        return 2
+    if args.max_upload_mb is not None and not args.max_upload_mb > 0:
+        print(f"gmwm-app: error: --max-upload-mb must be positive, got {args.max_upload_mb}",
+              file=sys.stderr)
+        return 2
+    limits.configure(max_upload_mb=args.max_upload_mb, data_dirs=dirs,
+                     allowed_files=[path] if path else ())
 
     import panel as pn
 

@@ -3,7 +3,9 @@
 Layout: a sidebar with the data (demo, upload, server path, channel, fs, robust WV), the model
 builder (one add button per process, a remove button per process, a text spec), the what-if
 sliders and the exports; the main area with messages, the WV plot, the residual strip, the
-fit summary and the parameter and datasheet tables.
+fit summary and the parameter and datasheet tables (with 95% intervals and a J-test badge on
+request), in a "Fit" tab; a "Model selection" tab ranks candidate models by WVIC
+(``selection_view.SelectionView``).
 
 Responsiveness: reading a file and computing a WV run in a worker thread (the event loop,
 and so every other session, stays free) with a loading indicator; the data a URL names are
@@ -39,6 +41,9 @@ import panel as pn  # noqa: E402
 from bokeh.models import CustomJSTickFormatter  # noqa: E402
 from panel.io.state import set_curdoc  # noqa: E402
 
+from gmwm_app.limits import current as current_limits  # noqa: E402
+from gmwm_app.selection_view import SelectionView, jtest_badge  # noqa: E402
+from gmwm_app.session_view import SessionPanel  # noqa: E402
 from gmwm_app.state import (  # noqa: E402
     PROCESS_CODES,
     PROCESS_NAMES,
@@ -207,7 +212,8 @@ class GMWMApp:
                                              sizing_mode="stretch_width")
         self.demo_button.on_click(self._on_demo)
         self.upload = pn.widgets.FileDropper(
-            multiple=False, max_file_size="2000MB", chunk_size=8_000_000, layout="compact",
+            multiple=False, max_file_size=f"{max(1, int(current_limits().max_upload_mb))}MB",
+            chunk_size=8_000_000, layout="compact",
             sizing_mode="stretch_width", height=90,
         )
         self.upload.param.watch(self._on_upload, "value")
@@ -307,6 +313,16 @@ class GMWMApp:
                                          margin=(5, 10))
         self.datasheet_table = pn.pane.Bokeh(self.tables.datasheet, sizing_mode="stretch_width",
                                              margin=(5, 10))
+        # 95% intervals in the parameter table and the J-test badge (computed off the loop)
+        self.intervals_check = pn.widgets.Checkbox(
+            label="Intervals (95%, asymptotic) and goodness of fit", value=False,
+            css_classes=["gmwm-intervals"], margin=(0, 10))
+        self.intervals_check.param.watch(self._on_intervals, "value")
+        self.jtest_pane = pn.pane.HTML("", margin=(0, 10), visible=False)
+        # the "Model selection" tab
+        self.selection = SelectionView(self)
+        # session download/restore, Kalibr and datasheet exports, time-gap box
+        self.session_panel = SessionPanel(self)
 
     def _build_layout(self) -> None:
         h = pn.pane.Markdown
@@ -336,9 +352,11 @@ class GMWMApp:
             pn.Row(self.png_button, self.svg_button, margin=(0, 5)),
             h("The plot toolbar's save tool also saves a PNG; each plot's toolbar zooms "
               "and pans.", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}),
+            *self.session_panel.sidebar(),
         ]
         tables = pn.Row(
-            pn.Column(h("#### Parameters", margin=(0, 10)), self.param_table, width=420),
+            pn.Column(h("#### Parameters", margin=(0, 10)), self.intervals_check,
+                      self.jtest_pane, self.param_table, width=540),
             pn.Column(h("#### Datasheet values", margin=(0, 10)), self.datasheet_table,
                       sizing_mode="stretch_width"),
             sizing_mode="stretch_width",
@@ -348,13 +366,20 @@ class GMWMApp:
         self.resid_box = pn.Column(self.resid_pane, sizing_mode="stretch_width", margin=0)
         self.plot_box = pn.Column(self.plot_pane, self.resid_box, sizing_mode="stretch_width",
                                   margin=0)
-        main = [pn.Column(self.alert, self.notice, self.warning, self.status, self.plot_box,
+        main = [pn.Column(self.alert, *self.session_panel.main(), self.notice, self.warning,
+                          self.status, self.plot_box,
                           self.summary, tables, sizing_mode="stretch_width")]
+        self.tabs = pn.Tabs(("Fit", main[0]), ("Model selection", self.selection.panel),
+                            dynamic=False, sizing_mode="stretch_width")
+        main = [self.tabs]
         # BootstrapTemplate: every resource is bundled with Panel (the Fast design pulls a web
         # font from a CDN, which is a console error offline)
         self.template = pn.template.BootstrapTemplate(
             title="GMWM: stochastic calibration of inertial sensors",
-            sidebar=sidebar, main=main, sidebar_width=360,
+            # the sidebar as one root: the template adds each root with a walk of the whole
+            # document, so 30 roots made opening a page take twice as long on the server loop
+            sidebar=[pn.Column(*sidebar, sizing_mode="stretch_width", margin=0)], main=main,
+            sidebar_width=360,
             header_background="#1F4E8C",
         )
 
@@ -398,6 +423,14 @@ class GMWMApp:
         s = self.state
         self.tables.update(s)
         self.summary.object = fit_summary(s)
+        show = bool(s.show_intervals and s.result is not None and not s.whatif)
+        if show:
+            self.selection.ensure_inference(s.result)
+        badge = jtest_badge(s.inference(), pending=True) if show else ""
+        self.jtest_pane.param.update(object=badge, visible=bool(badge))
+        if self.intervals_check.value != s.show_intervals:
+            self.intervals_check.value = s.show_intervals
+        self.selection.refresh()
 
     def _refresh_data_widgets(self) -> None:
         s = self.state
@@ -585,6 +618,7 @@ class GMWMApp:
             try:
                 if err is not None:
                     self.state.report_error(f"{message}: {err}")
+                    self.session_panel.failed(err)  # time gaps: offer the longest segment
                 else:
                     apply(out)
             finally:
@@ -624,13 +658,17 @@ class GMWMApp:
     # callbacks (synchronous watchers; heavy work is spawned as an async job)
     # -------------------------------------------------------------------------------------
     def _read_and_warm(self, source: str, **kw: Any) -> Any:
-        loaded = self.state.read(source, **kw)
+        try:
+            loaded = self.state.read(source, **kw)
+        except ValueError as e:
+            e.gmwm_read = (source, kw)  # type: ignore[attr-defined]  # to read it again
+            raise
         self.state.precompute(loaded, self.state.channel, None, self.state.robust)
         return loaded
 
     def _on_demo(self, _event: Any = None) -> None:
         self._spawn(partial(self._offload, "Loading the demo log",
-                            partial(self._read_and_warm, "demo"), self.state.install))
+                            partial(self._read_and_warm, "demo"), self._install))
 
     def _on_upload(self, event: Any) -> None:
         files = event.new or {}
@@ -639,7 +677,7 @@ class GMWMApp:
         name, data = list(files.items())[-1]
 
         def apply(loaded: Any) -> None:
-            self.state.install(loaded)
+            self._install(loaded)
             self.upload.value = {}  # the log is in the state now; free the upload's bytes
 
         self._spawn(partial(self._offload, f"Reading {name}",
@@ -653,7 +691,14 @@ class GMWMApp:
             return
         self._spawn(partial(self._offload, f"Reading {path}",
                             partial(self._read_and_warm, "path", path=path),
-                            self.state.install))
+                            self._install))
+
+    def _install(self, loaded: Any) -> None:
+        """Make newly read data the session's (and remember how they were read)."""
+        self.session_panel.loaded(loaded)
+        self.state.install(loaded)
+        if self.upload.value:
+            self.upload.value = {}  # free an upload's bytes
 
     def _on_channel(self, event: Any) -> None:
         if self._syncing or not event.new or event.new == self.state.channel:
@@ -693,6 +738,10 @@ class GMWMApp:
             else self.spec_input.value
         if not self.state.set_model(spec or ""):
             self.refresh()
+
+    def _on_intervals(self, event: Any) -> None:
+        if not self._syncing and bool(event.new) != self.state.show_intervals:
+            self.state.set_show_intervals(bool(event.new))
 
     def _on_whatif(self, event: Any) -> None:
         if self._syncing:

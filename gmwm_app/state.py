@@ -34,6 +34,7 @@ import numpy as np
 import param
 
 import engine as eg
+from gmwm_app.limits import check_path, check_upload_size
 
 __all__ = [
     "AppState",
@@ -87,7 +88,8 @@ def format_value(v: float, digits: int = 4) -> str:
 # ---------------------------------------------------------------------------------------------
 # reading files
 # ---------------------------------------------------------------------------------------------
-def read_log(path: str | os.PathLike[str], *, fs: float | None = None) -> Any:
+def read_log(path: str | os.PathLike[str], *, fs: float | None = None,
+             segment: str | None = None) -> Any:
     """Read an IMU log with the engine's loader (``engine.load_log``).
 
     Parameters
@@ -108,7 +110,7 @@ def read_log(path: str | os.PathLike[str], *, fs: float | None = None) -> Any:
     """
     from engine.io import load_log  # imported here: the app module loads without h5py work
 
-    return load_log(path, fs=fs)
+    return load_log(path, fs=fs, segment=segment)
 
 
 @dataclass
@@ -138,6 +140,17 @@ class LoadedData:
     wv_cache: dict[tuple[str, float, bool], eg.WaveletVariance] = field(default_factory=dict)
     elapsed_s: float = 0.0
     computations: int = 0
+    load: dict[str, Any] = field(default_factory=dict)  # load_log options (segment)
+
+
+@dataclass
+class Inference:
+    """95% asymptotic intervals (``ParamInterval`` list) and J-test of one fit."""
+
+    result: Any
+    intervals: list[Any]
+    j_test: Any = None  # engine.inference.JTest, None when it cannot be computed
+    j_error: str = ""
 
 
 @dataclass
@@ -233,6 +246,9 @@ class AppState(param.Parameterized):
     whatif = param.Boolean(default=False, doc="Draw the what-if values instead of the fit.")
     whatif_values = param.Dict(default={}, doc="What-if values by unique parameter name.")
     weights = param.String(default="ci", doc="GMWM weighting ('ci' or 'identity').")
+    # model selection and inference (see gmwm_app/selection_view.py)
+    selection = param.Parameter(default=None, doc="Last WVIC ranking (SelectionResult).")
+    show_intervals = param.Boolean(default=False, doc="Show 95% intervals and the J-test.")
     # messages
     error = param.String(default="", doc="Last error, in words (empty when fine).")
     notice = param.String(default="", doc="Information (not an error), e.g. a URL fallback.")
@@ -244,6 +260,7 @@ class AppState(param.Parameterized):
         self._wv_cache: dict[tuple[str, float, bool], eg.WaveletVariance] = {}
         self._lock = threading.Lock()
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
+        self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
 
     # ---------------------------------------------------------------------------------
     # helpers
@@ -275,7 +292,8 @@ class AppState(param.Parameterized):
     # ---------------------------------------------------------------------------------
     @staticmethod
     def read(source: str, *, path: str | os.PathLike[str] | None = None,
-             data: bytes | str | None = None, filename: str = "") -> LoadedData:
+             data: bytes | str | None = None, filename: str = "",
+             segment: str | None = None) -> LoadedData:
         """Read a log from a source. Heavy; touches no state, safe in a worker thread.
 
         Parameters
@@ -300,16 +318,18 @@ class AppState(param.Parameterized):
             if not path or not str(path).strip():
                 raise ValueError("no path given: type the path of a log file on the server")
             p = Path(str(path).strip()).expanduser()
-            if not p.exists():
+            check_path(p)  # only the configured folders (gmwm-app --data-dir), checked first
+            if not p.exists():  # so that nothing is said about files outside them
                 raise ValueError(f"no such file on the server: {p}")
             if p.is_dir():
                 raise ValueError(f"{p} is a folder: give the path of a log file")
-            out = LoadedData(read_log(p), "path", p.name, str(p))
+            out = LoadedData(read_log(p, segment=segment), "path", p.name, str(p))
         elif source == "upload":
             if data is None or len(data) == 0:
                 raise ValueError(f"the uploaded file {filename or ''} is empty".replace("  ", " "))
             if isinstance(data, str):
                 data = data.encode("utf-8")
+            check_upload_size(len(data), filename)
             name = Path(filename or "upload.csv").name
             suffix = "".join(Path(name).suffixes[-2:]) or ".csv"
             fd, tmp = tempfile.mkstemp(prefix="gmwm_upload_", suffix=suffix)
@@ -317,7 +337,7 @@ class AppState(param.Parameterized):
                 with os.fdopen(fd, "wb") as f:
                     f.write(data)
                 try:
-                    lg = read_log(tmp)
+                    lg = read_log(tmp, segment=segment)
                 except ValueError as e:  # name the user's file, not the temporary one
                     raise ValueError(str(e).replace(tmp, name)
                                      .replace(Path(tmp).name, name)) from None
@@ -332,6 +352,8 @@ class AppState(param.Parameterized):
         if not out.log.is_summary and not out.log.channels:
             raise ValueError(f"{out.name} has no data channel")
         out.elapsed_s = time.perf_counter() - t0
+        if segment:
+            out.load["segment"] = segment
         return out
 
     @staticmethod
@@ -738,6 +760,77 @@ class AppState(param.Parameterized):
         if not res.converged:
             out.append(f"not converged: {res.message}")
         return out
+
+    # ---------------------------------------------------------------------------------
+    # model selection and inference (compute_* are worker-thread safe: no parameter change)
+    # ---------------------------------------------------------------------------------
+    def compute_ranking(self, spec: str, *, progress: Callable[[int, int], None] | None = None
+                        ) -> tuple[eg.WaveletVariance, Any]:
+        """Rank models by WVIC on the current WV: every sub-model of a maximal model
+        (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
+        from engine.selection import rank_models
+
+        wv = self.wv
+        if wv is None:
+            raise ValueError("load data before ranking models")
+        parts = [p.strip() for p in (spec or "").split(",") if p.strip()]
+        if not parts:
+            raise ValueError("type a maximal model (e.g. 3*GM+WN+QN+RW+DR) or candidate "
+                             "models separated by commas")
+        try:
+            if len(parts) == 1:
+                sel = rank_models(wv, max_model=parts[0], weights=self.weights,
+                                  progress=progress)
+            else:
+                sel = rank_models(wv, parts, weights=self.weights, progress=progress)
+        except (eg.ModelError, eg.FitError) as e:
+            raise ValueError(_message(e)) from None
+        return wv, sel
+
+    def install_ranking(self, out: tuple[eg.WaveletVariance, Any]) -> bool:
+        """Show a ranking from :meth:`compute_ranking` (refused if the data changed since)."""
+        wv, sel = out
+        if wv is not self.wv:
+            return self._fail("The data changed while ranking: rank again")
+        self.param.update(selection=sel, error="", revision=self.revision + 1)
+        return True
+
+    def rank(self, spec: str, *, progress: Callable[[int, int], None] | None = None) -> bool:
+        """:meth:`compute_ranking` then :meth:`install_ranking` (synchronous)."""
+        return self._guard("Could not rank the models", lambda: self.install_ranking(
+            self.compute_ranking(spec, progress=progress)))
+
+    def compute_inference(self, result: eg.GMWMResult) -> Inference:
+        """95% asymptotic intervals and the J-test of a fit (worker-thread safe)."""
+        from engine.inference import j_test, param_intervals
+
+        try:
+            intervals = param_intervals(result, method="asymptotic", level=0.95)
+        except (eg.FitError, np.linalg.LinAlgError) as e:
+            raise ValueError(f"no intervals for {result.model.spec()}: {_message(e)}") from None
+        try:
+            return Inference(result, intervals, j_test(result), "")
+        except (eg.FitError, ValueError, np.linalg.LinAlgError) as e:
+            return Inference(result, intervals, None, _message(e))
+
+    def install_inference(self, inf: Inference) -> bool:
+        """Cache intervals and J-test of a fit (at most 32 fits kept) and redraw."""
+        if len(self._inference) >= 32:
+            self._inference.pop(next(iter(self._inference)))
+        self._inference[id(inf.result)] = inf
+        self.param.update(revision=self.revision + 1)
+        return True
+
+    def inference(self, result: eg.GMWMResult | None = None) -> Inference | None:
+        """The cached intervals and J-test of a fit (the current one by default), or None."""
+        res = self.result if result is None else result
+        inf = self._inference.get(id(res)) if res is not None else None
+        return inf if inf is not None and inf.result is res else None
+
+    def set_show_intervals(self, on: bool) -> bool:
+        """Show (or hide) the interval columns and the goodness-of-fit badge."""
+        self.param.update(show_intervals=bool(on), revision=self.revision + 1)
+        return True
 
     # ---------------------------------------------------------------------------------
     # URL round trip and export

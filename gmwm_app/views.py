@@ -354,7 +354,7 @@ class WVFigures:
 # -----------------------------------------------------------------------------------------
 # tables
 # -----------------------------------------------------------------------------------------
-PARAM_COLUMNS = ("process", "parameter", "value", "unit")
+PARAM_COLUMNS = ("process", "parameter", "value", "low", "high", "unit")
 DATASHEET_COLUMNS = ("process", "quantity", "value", "unit")
 
 
@@ -371,6 +371,16 @@ def _table(columns: tuple[str, ...], widths: dict[str, int], name: str,
     return table, src
 
 
+def redraw_table(table: DataTable) -> None:
+    """Make BokehJS redraw a DataTable's cells after a data change that keeps the row count.
+
+    BokehJS 3.9.2 redraws a DataTable when its CDSView's indices change; new values in as many
+    rows leave the old cells on screen. Any change of the table model re-renders it.
+    """
+    n = int(table.tags[0]) + 1 if table.tags and isinstance(table.tags[0], int) else 1
+    table.tags = [n]
+
+
 class FitTables:
     """The parameter and datasheet tables (Bokeh DataTables, data replaced in place).
 
@@ -384,8 +394,16 @@ class FitTables:
 
     def __init__(self) -> None:
         self.params, self.param_source = _table(
-            PARAM_COLUMNS, {"process": 60, "parameter": 90, "value": 90, "unit": 90},
-            "parameters", 300, "gmwm-params")
+            PARAM_COLUMNS, {"process": 60, "parameter": 90, "value": 90, "low": 90,
+                            "high": 90, "unit": 90}, "parameters", 300, "gmwm-params")
+        # the 95% interval columns, shown on request (the column list is swapped: BokehJS
+        # 3.9 draws a column made visible later without its cells)
+        self._all_columns = list(self.params.columns)
+        for col in self._all_columns:
+            if col.field in ("low", "high"):
+                col.title = f"{col.field} (95%)"
+        self._base_columns = [c for c in self._all_columns if c.field not in ("low", "high")]
+        self.params.columns = list(self._base_columns)
         self.datasheet, self.datasheet_source = _table(
             DATASHEET_COLUMNS, {"process": 60, "quantity": 250, "value": 80, "unit": 110},
             "datasheet", 300, "gmwm-datasheet")
@@ -397,7 +415,14 @@ class FitTables:
                                  DATASHEET_COLUMNS)):
             data = {c: [r[c] for r in rows] for c in cols}
             if data != src.data:
+                same = len(rows) == len(next(iter(src.data.values()), []))
                 src.data = data
+                if same:
+                    redraw_table(self.params if src is self.param_source else self.datasheet)
+        cols_shown = self._all_columns if any(self.param_source.data["low"]) \
+            else self._base_columns
+        if list(self.params.columns) != cols_shown:
+            self.params.columns = list(cols_shown)
 
 
 def _pretty(unit: str) -> str:
@@ -409,10 +434,15 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
     m = state.display_model()
     if m is None:
         return []
+    inf = state.inference() if state.show_intervals and not state.whatif else None
+    ci = {i.name: i for i in inf.intervals} if inf is not None else {}
     rows = []
     for lab, p in zip(m.labels, m.processes, strict=True):
         for name, v in zip(p.param_names, p.values, strict=True):
+            i = ci.get(f"{lab}.{name}")
             rows.append({"process": lab, "parameter": name, "value": format_value(float(v)),
+                         "low": format_value(i.low) if i else "",
+                         "high": format_value(i.high) if i else "",
                          "unit": _pretty(eg.param_unit(p.code, name, state.unit))})
     return rows
 

@@ -279,3 +279,32 @@ def test_exports(server: str, new_tab: Callable[[], Tab]) -> None:
         assert dl.value.suggested_filename.endswith("_gyro_x_WN_RW." + kind.lower())
         assert Path(dl.value.path()).read_bytes().startswith(magic)
     assert t.errors == []
+
+
+def test_model_selection_tab_ranks_and_loads_a_row(server: str,
+                                                   new_tab: Callable[[], Tab]) -> None:
+    t = new_tab().open(server + "?channel=gyro_y&model=WN")
+    page = t.page
+    t.wait_for(lambda: "sigma2" in t.table_text(), "the WN fit")
+    app = _app_for(lambda a: a.state.channel == "gyro_y" and a.state.model.spec() == "WN"
+                   and a.state.selection is None)
+    assert app is not None
+    page.locator(".bk-tab", has_text="Model selection").first.click()
+    box = page.locator(".gmwm-max-model input").first
+    box.wait_for(timeout=TIMEOUT_MS)
+    box.fill("GM+WN+RW")
+    box.press("Enter")
+    t.click_button("Rank")
+    t.wait_for(lambda: app.state.selection is not None, "the ranking on the server")
+    t.wait_for(lambda: t.table_text(".gmwm-ranking").count("+") >= 4, "the ranked rows")
+    models = list(app.selection.source.data["model"])
+    assert len(models) == 7 and all(m in t.table_text(".gmwm-ranking") for m in models)
+    # click the third row (the table is unsorted: data order = rank order)
+    page.locator(".gmwm-ranking .slick-row").nth(2).locator(".slick-cell").nth(1).click()
+    t.wait_for(lambda: app.state.model.spec() == models[2], "the row's model in the builder")
+    page.locator(".bk-tab", has_text="Fit").first.click()
+    t.wait_for(lambda: t.page.locator(".gmwm-params").first.is_visible(), "the Fit tab")
+    names = {"GM": "beta", "RW": "gamma2", "WN": "sigma2"}
+    want = [names[code] for code in models[2].split("+")]
+    t.wait_for(lambda: all(w in t.table_text() for w in want), "the Fit tab's parameter table")
+    assert t.errors == []

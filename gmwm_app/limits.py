@@ -1,0 +1,92 @@
+"""Server limits of the app: the largest accepted upload and the folders server paths may name.
+
+``gmwm-app`` configures them from ``--max-upload-mb`` and ``--data-dir`` (default folders: the
+current directory, the repository's ``data/`` folder and the shared ``data`` folder next to the
+repository when it exists). Without :func:`configure` (scripts, tests) uploads are limited to
+:data:`DEFAULT_MAX_UPLOAD_MB` and any server path may be read.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["DEFAULT_MAX_UPLOAD_MB", "ServerLimits", "configure", "current", "default_data_dirs",
+           "check_path", "check_upload_size"]
+
+#: Upload limit (MB) when none is configured.
+DEFAULT_MAX_UPLOAD_MB = 200.0
+
+_REPO = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class ServerLimits:
+    """``max_upload_mb``: largest upload (MB, 1 MB = 1e6 bytes); ``data_dirs``: folders that
+    server paths must lie in (None: any path); ``allowed_files``: single files allowed besides
+    (the ``gmwm-app FILE`` argument)."""
+
+    max_upload_mb: float = DEFAULT_MAX_UPLOAD_MB
+    data_dirs: tuple[Path, ...] | None = None
+    allowed_files: tuple[Path, ...] = ()
+
+    @property
+    def max_upload_bytes(self) -> int:
+        return int(self.max_upload_mb * 1e6)
+
+
+_LIMITS = ServerLimits()
+
+
+def default_data_dirs() -> list[Path]:
+    """The current directory, ``<repo>/data`` and ``<repo>/../shared/data`` (when they exist)."""
+    out = [Path.cwd(), _REPO / "data", _REPO.parent / "shared" / "data"]
+    return [p.resolve() for p in out if p.is_dir()]
+
+
+def configure(*, max_upload_mb: float | None = None,
+              data_dirs: Iterable[str | os.PathLike[str]] | None = None,
+              allowed_files: Iterable[str | os.PathLike[str]] = ()) -> ServerLimits:
+    """Set the limits of this process (every session); returns them.
+
+    ``data_dirs=None`` lifts the folder restriction; ``max_upload_mb=None`` keeps the default.
+    """
+    global _LIMITS
+    mb = DEFAULT_MAX_UPLOAD_MB if max_upload_mb is None else float(max_upload_mb)
+    if not mb > 0:
+        raise ValueError(f"the upload limit must be a positive number of MB, got {max_upload_mb}")
+    dirs = None if data_dirs is None else tuple(Path(d).expanduser().resolve() for d in data_dirs)
+    files = tuple(Path(f).expanduser().resolve() for f in allowed_files)
+    _LIMITS = ServerLimits(mb, dirs, files)
+    return _LIMITS
+
+
+def current() -> ServerLimits:
+    """The limits in force."""
+    return _LIMITS
+
+
+def check_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` resolved, if it lies in a configured folder; else ValueError saying which."""
+    p = Path(path).expanduser()
+    lim = _LIMITS
+    if lim.data_dirs is None:
+        return p
+    r = p.resolve()
+    if r in lim.allowed_files or any(r.is_relative_to(d) for d in lim.data_dirs):
+        return p
+    dirs = ", ".join(str(d) for d in lim.data_dirs) or "none"
+    raise ValueError(f"{p} is outside the folders this server may read ({dirs}): copy the file "
+                     "into one of them, upload it, or start gmwm-app with --data-dir FOLDER")
+
+
+def check_upload_size(n_bytes: int, name: str = "") -> None:
+    """ValueError when an upload of ``n_bytes`` is larger than the configured limit."""
+    lim = _LIMITS
+    if n_bytes > lim.max_upload_bytes:
+        what = f"the uploaded file {name}" if name else "the uploaded file"
+        raise ValueError(f"{what} is {n_bytes / 1e6:.1f} MB, more than this server accepts "
+                         f"({lim.max_upload_mb:g} MB): put it in a data folder of the server "
+                         "and load it by path, or start gmwm-app with a larger --max-upload-mb")

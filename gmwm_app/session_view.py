@@ -1,0 +1,328 @@
+"""Sessions, exports and time gaps in the page: save/restore a session, Kalibr and datasheet.
+
+Two layers, like the rest of the app:
+
+* functions on an :class:`~gmwm_app.state.AppState` (no widgets, testable without a browser):
+  :func:`session_json` writes the session (data reference, load options, channel, fs, robust
+  WV, model, WV and fit) with :func:`engine.session.session_to_json`; :func:`prepare_restore`
+  (worker-thread safe) reads a session file and its data again; :func:`apply_restore` puts it
+  in the state; :func:`export_text` gives the Kalibr ``imu.yaml`` or the datasheet of the fit;
+* :class:`SessionPanel`: the widgets of one page (downloads, restore input, the time-gap box
+  with "Analyse the longest clean segment"), driven by a :class:`~gmwm_app.app.GMWMApp`.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import panel as pn
+
+from engine.export import export
+from engine.session import Session, SessionError, session_from_json, session_to_json
+from gmwm_app.limits import check_path, check_upload_size
+from gmwm_app.state import AppState, LoadedData, demo_path
+
+if TYPE_CHECKING:
+    from gmwm_app.app import GMWMApp
+
+__all__ = ["session_json", "session_filename", "prepare_restore", "apply_restore",
+           "RestorePlan", "export_text", "is_gap_error", "SessionPanel"]
+
+#: Text of the engine's time-gap error that says the longest clean segment can be analysed.
+_GAP_MARK = "segment='longest'"
+
+
+# ---------------------------------------------------------------------------------------------
+# state layer
+# ---------------------------------------------------------------------------------------------
+def _data_path(state: AppState) -> str:
+    if state.source == "path" and state.path:
+        return str(Path(state.path).resolve())
+    if state.source == "demo":
+        return str(demo_path().resolve())
+    return state.filename or "upload"
+
+
+def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
+    """The session of ``state`` as JSON text (:func:`engine.session.session_to_json`).
+
+    ``load``: the ``load_log`` options the data were read with (e.g. ``{"segment": "longest"}``).
+    The app part holds the source, file name, channel, fs, robust flag and model spec.
+    """
+    ch = state.channel
+    models = {ch: state.model.spec()} if ch and len(state.model) else {}
+    wvs = {ch: state.wv} if ch and state.wv is not None else {}
+    fits = {ch: state.result} if ch and state.result is not None else {}
+    app = {"source": state.source, "filename": state.filename, "channel": ch,
+           "fs": state.fs, "fs_source": state.fs_source, "robust": bool(state.robust),
+           "model": state.model.spec(), "query": state.to_query()}
+    return session_to_json(data_path=_data_path(state), load=dict(load or {}), models=models,
+                           wvs=wvs, fits=fits, app=app,
+                           fingerprint=state.source in ("path", "demo"))
+
+
+def session_filename(state: AppState) -> str:
+    """``gmwm_session_<file>_<channel>.json``."""
+    stem = Path(state.filename or "data").stem
+    return f"gmwm_session_{stem}_{state.channel or 'none'}.json"
+
+
+@dataclass
+class RestorePlan:
+    """What :func:`prepare_restore` found: the session, its data (None if missing), notes."""
+
+    session: Session
+    loaded: LoadedData | None
+    problems: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
+    """Read a session file and (when it is on the server) its data file; worker-thread safe.
+
+    Raises
+    ------
+    ValueError
+        The text is not a GMWM session file (``SessionError``), or is too large.
+    """
+    check_upload_size(len(text), name)
+    sess = session_from_json(text, source=name)
+    app = sess.app or {}
+    source = str(app.get("source") or "path")
+    channel = app.get("channel") or next(iter(sess.models), None)
+    fs = app.get("fs")
+    robust = bool(app.get("robust", False))
+    segment = sess.load.get("segment")
+    segment = segment if isinstance(segment, str) else None
+    plan = RestorePlan(sess, None)
+    fname = app.get("filename") or Path(sess.data_path).name
+    if source == "upload":
+        plan.problems.append(
+            f"the session's data were the uploaded file {fname}, which the server does not "
+            f"keep: upload {fname} again, then restore the session")
+        return plan
+    path = sess.data_path
+    if not path or not Path(path).is_file():
+        plan.problems.append(f"the session's data file {path or fname} is not on this server: "
+                             "copy it back to that path (or upload it) and restore again")
+        return plan
+    try:
+        check_path(path)
+        why = sess.data_changed()
+        if why:
+            plan.notes.append(f"{why} since the session was saved: the model was fitted again "
+                              "on the current data")
+        if source == "demo" and Path(path).resolve() == demo_path().resolve():
+            loaded = AppState.read("demo", segment=segment)
+        else:
+            loaded = AppState.read("path", path=path, segment=segment)
+    except ValueError as e:
+        plan.problems.append(f"the session's data file could not be read: {e}")
+        return plan
+    AppState.precompute(loaded, channel, fs, robust)
+    plan.loaded = loaded
+    return plan
+
+
+def apply_restore(state: AppState, plan: RestorePlan) -> bool:
+    """Put a prepared session in the state: data, channel, fs, robust WV, model (refitted).
+
+    Returns True when everything was restored; otherwise :attr:`AppState.error` says what is
+    missing (and the session is left as it was when the data are missing).
+    """
+    app = plan.session.app or {}
+    problems = list(plan.problems)
+    if (plan.loaded is None and app.get("source") == "upload" and state.source == "upload"
+            and state.log is not None and state.filename == app.get("filename")):
+        # the uploaded file is loaded in this session again: restore the session on it
+        plan = RestorePlan(plan.session, LoadedData(state.log, "upload", state.filename, "",
+                                                    wv_cache=dict(state._wv_cache)))
+        problems = []
+    if plan.loaded is not None:
+        fs = app.get("fs")
+        user_fs = fs if app.get("fs_source") == "user" else None
+        state.install(plan.loaded, channel=app.get("channel") or None, fs=user_fs,
+                      robust=bool(app.get("robust", False)))
+        if state.error:
+            problems.append(state.error)
+        model = app.get("model")
+        if model is None:
+            model = plan.session.models.get(state.channel, "")
+        if (model or len(state.model)) and not state.set_model(model or ""):
+            problems.append(state.error)
+    if problems:
+        state.report_error("Session not fully restored: " + "; ".join(dict.fromkeys(problems)))
+        return False
+    notes = "; ".join(plan.notes)
+    state.param.update(error="", notice=notes, revision=state.revision + 1)
+    return True
+
+
+def export_text(state: AppState, fmt: str) -> str:
+    """The Kalibr ``imu.yaml`` (``fmt="kalibr"``) or datasheet (``"datasheet"``) of the fit.
+
+    One channel (the shown one); the Kalibr file is partial (that axis only).
+
+    Raises
+    ------
+    ValueError
+        No fit yet, or the fit cannot be exported (e.g. an unknown unit); the message says why.
+    """
+    if state.result is None:
+        raise ValueError("no fit yet: add processes to the model first")
+    fits = {state.channel: state.result}
+    units = {state.channel: state.unit} if state.unit else None
+    src = state.filename
+    if fmt == "kalibr":
+        return export(None, fits, "kalibr", units=units, source=src, allow_partial=True)
+    return export(None, fits, fmt, units=units, source=src)
+
+
+def is_gap_error(err: BaseException | str) -> bool:
+    """True for the loader's "time gaps, choose a segment" error."""
+    return _GAP_MARK in str(err)
+
+
+# ---------------------------------------------------------------------------------------------
+# widgets
+# ---------------------------------------------------------------------------------------------
+_SMALL = {"font-size": "12px", "color": "#555"}
+
+
+class SessionPanel:
+    """The session, export and time-gap widgets of one page (see the module docstring)."""
+
+    def __init__(self, app: GMWMApp) -> None:
+        self.app = app
+        s = app.state
+        self._retry: tuple[str, dict[str, Any]] | None = None
+        self._load: dict[str, Any] = {}  # load options of the data shown (for the session)
+        self.session_download = pn.widgets.FileDownload(
+            callback=self._session_file, filename="gmwm_session.json",
+            label="Download session", color="primary", sizing_mode="stretch_width",
+            embed=False)
+        self.restore_input = pn.widgets.FileInput(accept=".json", multiple=False,
+                                                  sizing_mode="stretch_width")
+        self.restore_input.param.watch(self._on_restore, "value")
+        self.kalibr_download = pn.widgets.FileDownload(
+            callback=partial(self._export, "kalibr"), filename="imu.yaml",
+            label="Kalibr imu.yaml", color="default", sizing_mode="stretch_width", embed=False)
+        self.datasheet_download = pn.widgets.FileDownload(
+            callback=partial(self._export, "datasheet"), filename="gmwm_datasheet.txt",
+            label="Datasheet (text)", color="default", sizing_mode="stretch_width", embed=False)
+        self.export_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
+        self.gap_report = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.longest_button = pn.widgets.Button(
+            label="Analyse the longest clean segment", color="warning", margin=(3, 10))
+        self.longest_button.on_click(self._on_longest)
+        self.gap_box = pn.Column(
+            pn.pane.Markdown("#### Time gaps in the log", margin=(0, 10)), self.gap_report,
+            self.longest_button, visible=False, sizing_mode="stretch_width",
+            styles={"border": "1px solid #e0a800", "border-radius": "4px"}, margin=(5, 10))
+        s.param.watch(self._on_state, "revision")
+        self.refresh()
+
+    # layout pieces ---------------------------------------------------------------------------
+    def sidebar(self) -> list[Any]:
+        """Export and session widgets for the sidebar."""
+        h = pn.pane.Markdown
+        return [pn.Column(  # one Bokeh root (each template root costs a document walk)
+            pn.Row(self.kalibr_download, self.datasheet_download, margin=0),
+            self.export_note,
+            pn.layout.Divider(),
+            h("### Session", margin=(0, 10)),
+            self.session_download,
+            h("Restore a session file (the data are read again from their server path):",
+              margin=(0, 10), styles=_SMALL),
+            self.restore_input, sizing_mode="stretch_width", margin=0)]
+
+    def main(self) -> list[Any]:
+        """The time-gap box for the main area."""
+        return [self.gap_box]
+
+    # refresh ---------------------------------------------------------------------------------
+    def _on_state(self, _event: Any = None) -> None:
+        try:
+            self.refresh()
+        except Exception:  # never break the page over a label
+            pass
+
+    def refresh(self) -> None:
+        s = self.app.state
+        self.session_download.filename = session_filename(s)
+        stem = Path(s.filename or "data").stem
+        self.kalibr_download.filename = f"imu_{stem}_{s.channel or 'none'}.yaml"
+        self.datasheet_download.filename = f"datasheet_{stem}_{s.channel or 'none'}.txt"
+        fit = s.result is not None
+        self.kalibr_download.disabled = self.datasheet_download.disabled = not fit
+        self.export_note.object = (
+            f"Exports of the fit of **{s.channel}** only (one axis; the Kalibr file is "
+            "partial: fit and export the other axes with the `gmwm` CLI)." if fit else
+            "Kalibr and datasheet exports need a fit: add processes to the model.")
+        if self.gap_box.visible and not is_gap_error(s.error):
+            self.gap_box.visible = False
+
+    # callbacks -------------------------------------------------------------------------------
+    def _session_file(self) -> io.StringIO:
+        s = self.app.state
+        try:
+            return io.StringIO(session_json(s, self._load))
+        except (SessionError, ValueError) as e:
+            s.report_error(f"Could not write the session: {e}")
+            return io.StringIO(f"# could not write the session: {e}\n")
+
+    def _export(self, fmt: str) -> io.StringIO:
+        s = self.app.state
+        try:
+            return io.StringIO(export_text(s, fmt))
+        except ValueError as e:
+            s.report_error(f"Could not export ({fmt}): {e}")
+            return io.StringIO(f"# could not export: {e}\n")
+
+    def _on_restore(self, event: Any) -> None:
+        data = event.new
+        if not data:
+            return
+        name = self.restore_input.filename or "session.json"
+
+        def apply(plan: RestorePlan) -> None:
+            if plan.loaded is not None:
+                self._load = dict(plan.loaded.load)
+            apply_restore(self.app.state, plan)
+            self.restore_input.value = None  # the same file can be restored again
+
+        self.app._spawn(partial(self.app._offload, f"Restoring the session {name}",
+                                partial(prepare_restore, data, name), apply))
+
+    def loaded(self, loaded: LoadedData) -> None:
+        """Remember the load options of newly installed data (for the session file)."""
+        self._load = dict(loaded.load)
+        self._retry = None
+
+    def failed(self, err: BaseException) -> None:
+        """A load failed: offer the longest clean segment when the log has time gaps."""
+        read = getattr(err, "gmwm_read", None)
+        if read is None or not is_gap_error(err):
+            return
+        self._retry = read
+        text = str(err).split(". To go on,")[0]
+        self.gap_report.object = (
+            f"{text}.\n\nThe samples are not joined across the breaks. Analyse the longest "
+            "clean segment, or fix the log and load it again.")
+        self.gap_box.visible = True
+
+    def _on_longest(self, _event: Any = None) -> None:
+        if self._retry is None:
+            return
+        source, kw = self._retry
+        self._retry = None
+        self.gap_box.visible = False
+        kw = {**kw, "segment": "longest"}
+        what = kw.get("filename") or kw.get("path") or source
+        self.app._spawn(partial(self.app._offload, f"Reading the longest clean segment of {what}",
+                                partial(self.app._read_and_warm, source, **kw),
+                                self.app._install))

@@ -1,0 +1,346 @@
+"""The app under load: eight concurrent sessions loading different files and fitting.
+
+No browser: (1) eight threads drive eight separate session states (load, channel switch, fits)
+while a ninth computes a heavy robust WV; (2) the real server on 127.0.0.1 (a background
+thread of this process) opens nine sessions at once over HTTP, each naming its own file in the
+URL, and runs their start-up (read, WV, fit) on the server loop; then one session computes the
+robust WV of a long log (seconds, in a worker thread) while the eight others refit, and an
+HTTP probe checks that the server loop keeps answering within a second; (3) the sessions are
+discarded by the server (what happens when a closed tab's session expires) and must leave
+``live_apps()``, and repeated open/close cycles must not grow the resident memory.
+
+Opening a page builds its Bokeh document on the server loop (~1.5 s on two cores), so a burst
+of nine page opens holds the loop for their sum; that figure is printed, not asserted.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import os
+import socket
+import threading
+import time
+import urllib.request
+import weakref
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlencode
+
+import h5py
+import numpy as np
+import pytest
+
+from gmwm_app.state import AppState
+
+N_SESSIONS = 8
+MAX_BLOCK_S = 1.0
+_MINE: list[weakref.ref] = []  # the apps of the sessions this module opened
+MODEL = "WN+RW"
+
+
+def _write_log(path: Path, seed: int, n: int = 20_000, fs: float = 100.0) -> Path:
+    """Two channels whose white-noise level differs per file (so a mix-up shows in the fit)."""
+    rng = np.random.default_rng(seed)
+    with h5py.File(path, "w") as f:
+        for i, name in enumerate(("gyro_x", "gyro_y")):
+            sigma = 1e-3 * (1 + seed) * (1 + i)
+            x = rng.normal(0, sigma, n) + np.cumsum(rng.normal(0, 1e-5, n))
+            f.create_dataset(name, data=x).attrs["units"] = "deg/s"
+        f.attrs["fs_hz"] = fs
+    return path
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    d = tmp_path_factory.mktemp("load")
+    files = [_write_log(d / f"log_{i}.h5", i) for i in range(N_SESSIONS)]
+    heavy = _write_log(d / "heavy.h5", 99, n=400_000)
+    ref = {}
+    for f in files:  # the reference fits, one session at a time
+        s = AppState()
+        assert s.load_path(f) and s.select_channel("gyro_y") and s.set_model(MODEL), s.error
+        ref[str(f)] = dict(s.result.params)
+    return {"files": files, "heavy": heavy, "ref": ref}
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+# ---------------------------------------------------------------------------------------------
+# (1) eight session states in eight threads, beside a heavy robust WV
+# ---------------------------------------------------------------------------------------------
+def test_eight_threads_no_cross_talk_no_blocking(logs: dict[str, Any]) -> None:
+    files, ref = logs["files"], logs["ref"]
+    heavy_done = threading.Event()
+    heavy_s: list[float] = []
+
+    def heavy() -> None:
+        t = time.perf_counter()
+        s = AppState()
+        assert s.load_path(logs["heavy"]) and s.set_robust(True), s.error
+        heavy_s.append(time.perf_counter() - t)
+        heavy_done.set()
+
+    results: dict[int, Any] = {}
+    slowest: dict[int, float] = {}
+    start = threading.Barrier(N_SESSIONS + 1)
+
+    def session(i: int) -> None:
+        s = AppState()
+        start.wait()
+        worst = 0.0
+        rounds = 0
+        while rounds < 3 or not heavy_done.is_set():  # keep working while the heavy job runs
+            for op in (lambda: s.load_path(files[i]), lambda: s.select_channel("gyro_y"),
+                       lambda: s.set_model(MODEL), lambda: s.add_process("GM"),
+                       lambda: s.set_model(MODEL)):
+                t = time.perf_counter()
+                assert op(), s.error
+                worst = max(worst, time.perf_counter() - t)
+            rounds += 1
+            if rounds > 200:
+                break
+        results[i] = (s.filename, s.channel, s.model.spec(), dict(s.result.params))
+        slowest[i] = worst
+
+    threads = [threading.Thread(target=session, args=(i,)) for i in range(N_SESSIONS)]
+    for t in threads:
+        t.start()
+    h = threading.Thread(target=heavy)
+    t0 = time.perf_counter()
+    start.wait()
+    h.start()
+    for t in [*threads, h]:
+        t.join(timeout=60)
+    assert not any(t.is_alive() for t in [*threads, h])
+    assert time.perf_counter() - t0 < 60
+    for i, f in enumerate(files):
+        name, ch, spec, params = results[i]
+        assert (name, ch, spec) == (f.name, "gyro_y", MODEL)
+        assert params == pytest.approx(ref[str(f)], rel=1e-9)  # its own data, its own fit
+    worst = max(slowest.values())
+    print(f"\n8 threads: heavy robust WV {heavy_s[0]:.2f} s; slowest action of the others "
+          f"{worst * 1000:.0f} ms")
+    assert worst < MAX_BLOCK_S
+
+
+# ---------------------------------------------------------------------------------------------
+# (2) the served app on localhost
+# ---------------------------------------------------------------------------------------------
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
+    """The app on 127.0.0.1 in a background thread; yields its URL and its Bokeh server."""
+    import panel as pn
+
+    from gmwm_app.app import create_app_factory
+
+    old = os.environ.get("GMWM_APP_DEMO")
+    os.environ["GMWM_APP_DEMO"] = str(app_demo_file)
+    port = _free_port()
+    thread = pn.serve({"/": create_app_factory()}, port=port, address="127.0.0.1", show=False,
+                      threaded=True, start=True, verbose=False,
+                      websocket_origin=[f"127.0.0.1:{port}"],
+                      unused_session_lifetime_milliseconds=120_000)
+    try:
+        deadline = time.time() + 20
+        while time.time() < deadline:
+            try:
+                with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                    break
+            except OSError:
+                time.sleep(0.05)
+        def find() -> Any:  # registered by Panel just after the server started listening
+            return next((s for s, *_ in list(pn.state._servers.values()) if s.port == port),
+                        None)
+
+        _wait(lambda: find() is not None, "the server to register", 20)
+        server = find()
+        yield {"url": f"http://127.0.0.1:{port}/", "thread": thread, "server": server}
+    finally:
+        thread.stop()
+        thread.join(timeout=10)
+        if old is None:
+            os.environ.pop("GMWM_APP_DEMO", None)
+        else:
+            os.environ["GMWM_APP_DEMO"] = old
+
+
+def _get(url: str, timeout: float = 30) -> float:
+    t = time.perf_counter()
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:
+            r.read()
+    except urllib.error.HTTPError:  # a 404 probe is still an answer of the loop
+        pass
+    return time.perf_counter() - t
+
+
+def _wait(pred: Any, what: str, timeout: float = 30) -> None:
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        if pred():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def _on_loop(server: Any, coro_fn: Any, timeout: float = 30) -> Any:
+    return asyncio.run_coroutine_threadsafe(coro_fn(), server.io_loop.asyncio_loop).result(
+        timeout)
+
+
+def _close_sessions(server: Any) -> None:
+    """Discard every session, as the server does when a closed tab's session expires."""
+    ctx = server._tornado._applications["/"]
+
+    async def discard() -> None:
+        for sess in list(ctx.sessions):
+            await ctx._discard_session(sess, lambda _s: True)
+
+    _on_loop(server, discard)
+
+
+def _in_session(app: Any, fn: Any) -> None:
+    """Run ``fn`` in the session of ``app`` on the server loop (as a widget event would)."""
+    from panel.io.state import set_curdoc
+
+    def run() -> None:
+        with set_curdoc(app._doc):
+            fn()
+
+    app._doc.add_next_tick_callback(run)
+
+
+class _Probe:
+    """Answers of the server loop to an HTTP request every 20 ms, in a thread."""
+
+    def __init__(self, url: str) -> None:
+        self.url, self.times = url + "gmwm-probe-404", []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.times.append(_get(self.url, timeout=20))
+            time.sleep(0.02)
+
+    def __enter__(self) -> _Probe:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._stop.set()
+        self._thread.join(timeout=25)
+
+    @property
+    def worst(self) -> float:
+        return max(self.times) if self.times else 0.0
+
+
+def _open(served: dict[str, Any], queries: list[dict[str, str]]) -> tuple[list[Any], float]:
+    """Open one page per query at once (HTTP GET), start them; the apps and the opening time."""
+    from gmwm_app.app import live_apps
+
+    url = served["url"]
+    before = live_apps()  # sessions of other servers in this process (other test modules)
+    t0 = time.perf_counter()
+    gets = [threading.Thread(target=_get, args=(url + "?" + urlencode(q),)) for q in queries]
+    for g in gets:
+        g.start()
+    for g in gets:
+        g.join(timeout=60)
+    apps = [a for a in live_apps() if a._served and not any(a is b for b in before)]
+    del before
+    assert len(apps) == len(queries)
+    _MINE.extend(weakref.ref(a) for a in apps)
+    for a in apps:  # what the page does once the browser opened it: read, WV, fit
+        a._doc.add_next_tick_callback(a.start)
+    _wait(lambda: all(a._ready and not a.busy for a in apps), "the sessions to start", 40)
+    return apps, time.perf_counter() - t0
+
+
+def _close_and_check(served: dict[str, Any]) -> None:
+    """Discard the sessions; their apps must leave ``live_apps()`` (a weak registry)."""
+    _close_sessions(served["server"])
+    _wait(lambda: (gc.collect(), all(r() is None for r in _MINE))[1],
+          "the sessions to be released", 20)
+    _MINE.clear()
+
+
+def _work(served: dict[str, Any], logs: dict[str, Any]) -> dict[str, Any]:
+    files, ref = logs["files"], logs["ref"]
+    queries = [{"source": "path", "path": str(f), "channel": "gyro_y", "model": MODEL}
+               for f in files]
+    heavy_q = {"source": "path", "path": str(logs["heavy"]), "model": MODEL}
+    with _Probe(served["url"]) as opening:
+        apps, t_open = _open(served, [heavy_q, *queries])
+    by_path = {a._query.get("path"): a for a in apps}
+    assert set(by_path) == {str(f) for f in files} | {str(logs["heavy"])}
+    heavy_app = by_path[str(logs["heavy"])]
+    others = [by_path[str(f)] for f in files]
+    lags: list[float] = []
+    with _Probe(served["url"]) as working:
+        # one session computes the robust WV of its long log (seconds, in a worker) ...
+        _in_session(heavy_app, lambda: setattr(heavy_app.robust_check, "value", True))
+        _wait(lambda: heavy_app.busy or heavy_app.state.robust, "the robust WV to start")
+        # ... while each other session refits twice (request -> done, measured)
+        for spec in ("GM+WN", MODEL):
+            for a in others:
+                t = time.perf_counter()
+                _in_session(a, lambda a=a, spec=spec: a.state.set_model(spec))
+                _wait(lambda a=a, spec=spec: a.state.model.spec() == spec, "a refit")
+                lags.append(time.perf_counter() - t)
+        overlap = heavy_app.busy
+        _wait(lambda: heavy_app.state.robust and not heavy_app.busy, "the robust WV", 40)
+    assert heavy_app.state.filename == "heavy.h5" and heavy_app.state.error == ""
+    for f in files:  # every session has its own data, channel, model and fit
+        s = by_path[str(f)].state
+        assert s.error == "", s.error
+        assert (s.filename, s.channel, s.model.spec()) == (f.name, "gyro_y", MODEL)
+        assert not s.robust
+        assert dict(s.result.params) == pytest.approx(ref[str(f)], rel=1e-9)
+    return {"open_s": t_open, "open_probe": opening.worst, "work_probe": working.worst,
+            "probes": len(working.times), "refit_max": max(lags), "overlap": overlap}
+
+
+def test_served_sessions_isolated_and_responsive(served: dict[str, Any],
+                                                 logs: dict[str, Any]) -> None:
+    t0 = time.perf_counter()
+    st = _work(served, logs)
+    _close_and_check(served)
+    elapsed = time.perf_counter() - t0
+    print(f"\n9 pages opened and started at once in {st['open_s']:.1f} s (server loop answered "
+          f"within {st['open_probe']:.2f} s meanwhile); during the heavy robust WV (still "
+          f"running at the end: {st['overlap']}): loop probe max {st['work_probe'] * 1000:.0f} "
+          f"ms over {st['probes']} probes, slowest refit of another session "
+          f"{st['refit_max'] * 1000:.0f} ms; total {elapsed:.1f} s")
+    assert elapsed < 60
+    assert st["work_probe"] < MAX_BLOCK_S and st["refit_max"] < MAX_BLOCK_S
+
+
+def test_served_sessions_memory_returned(served: dict[str, Any], logs: dict[str, Any]) -> None:
+    t0 = time.perf_counter()
+    rss = []
+    for k in range(3):  # 4 sessions a cycle (opening a page costs ~1.5 s of the server loop)
+        _open(served, [{"source": "path", "path": str(f), "channel": "gyro_y", "model": MODEL}
+                       for f in logs["files"][4 * (k % 2):4 * (k % 2) + 4]])
+        _close_and_check(served)
+        rss.append(_rss_mb())
+    elapsed = time.perf_counter() - t0
+    print("\nRSS after each of 3 open/close cycles of 4 sessions: "
+          f"{[round(r) for r in rss]} MB; {elapsed:.1f} s")
+    assert elapsed < 60
+    assert rss[-1] - rss[0] < 40, rss
