@@ -168,7 +168,17 @@ def test_ranking_logic():
     rk = res.ranking()
     assert rk["best"] == {"100/gyro/WN": "GMWM", "100/gyro/RW": "AVSM"}
     assert not rk["gmwm_lowest_everywhere"] and rk["exceptions"][0]["process"] == "RW"
-    assert "does not hold" in res.ranking_text()
+    assert rk["exceptions"][0]["z"] == pytest.approx(2.6, abs=0.01)
+    assert not rk["exceptions"][0]["tie"] and "clearly lower" in res.ranking_text()
+    # a noisy win is a tie: paired z = 0.37
+    est[100]["gyro"]["GMWM"]["RW"] = np.array([1.30, 1.38, 1.34])
+    est[100]["gyro"]["AVSM"]["RW"] = np.array([1.33, 1.36, 1.30])
+    for m in ("GMWM", "AVSM"):
+        est[100]["gyro"][m]["WN"] = np.r_[est[100]["gyro"][m]["WN"], 0.157]
+    res = StudyResult(estimates=est, errors=[], wall_time_s=1.0, settings=res.settings)
+    rk = res.ranking()
+    assert rk["exceptions"][0]["tie"] and rk["gmwm_lowest_or_tied_everywhere"]
+    assert "holds within Monte Carlo error" in res.ranking_text()
 
 
 def test_bad_settings():
