@@ -240,7 +240,7 @@ def _second_difference_sums(s: np.ndarray, n: int, ms: np.ndarray) -> np.ndarray
             np.multiply(s[lo - m : b - m], -2.0, out=d)
             d += s[lo:b]
             d += s[lo - 2 * m : b - 2 * m]
-            sums[i] += np.dot(d, d)
+            sums[i] += np.einsum("i,i->", d, d)  # as the WV: BLAS dot stalls on a busy machine
     return sums
 
 
