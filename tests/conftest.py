@@ -6,7 +6,13 @@ else a small simulated one in the same layout) and ``app_demo``, which points th
 
 from __future__ import annotations
 
+import contextlib
+import os
+import socket
+import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import h5py
 import pytest
@@ -54,3 +60,37 @@ def app_state(app_demo: Path):
     s = AppState()
     assert s.load_demo(), s.error
     return s
+
+
+@contextlib.contextmanager
+def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
+    """Serve the app on a free 127.0.0.1 port in a background thread with ``demo_file`` as
+    the demo; yields (port, server thread) once the port accepts connections; always stops."""
+    import panel as pn
+
+    from gmwm_app.app import create_app_factory
+
+    old = os.environ.get("GMWM_APP_DEMO")
+    os.environ["GMWM_APP_DEMO"] = str(demo_file)
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    thread = pn.serve({"/": create_app_factory()}, port=port, address="127.0.0.1", show=False,
+                      threaded=True, start=True, verbose=False,
+                      websocket_origin=[f"127.0.0.1:{port}"], **serve_kw)
+    try:
+        deadline = time.time() + 20
+        while time.time() < deadline:
+            try:
+                with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                    break
+            except OSError:
+                time.sleep(0.05)
+        yield port, thread
+    finally:
+        thread.stop()
+        thread.join(timeout=10)
+        if old is None:
+            os.environ.pop("GMWM_APP_DEMO", None)
+        else:
+            os.environ["GMWM_APP_DEMO"] = old

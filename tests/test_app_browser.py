@@ -8,13 +8,13 @@ skip, except in CI (env ``CI`` set), where they fail: CI must install chromium.
 from __future__ import annotations
 
 import os
-import socket
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import served_app
 
 pytestmark = pytest.mark.browser
 
@@ -38,43 +38,12 @@ def _require_chromium() -> None:
         pytest.skip("playwright is not installed")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def server(app_demo_file: Path) -> Iterator[str]:
     """The app served in a background thread; yields its URL; always shut down."""
     _require_chromium()
-    import panel as pn
-
-    from gmwm_app.app import create_app_factory
-
-    old = os.environ.get("GMWM_APP_DEMO")
-    os.environ["GMWM_APP_DEMO"] = str(app_demo_file)
-    port = _free_port()
-    thread = pn.serve({"/": create_app_factory()}, port=port, address="127.0.0.1", show=False,
-                      threaded=True, start=True, verbose=False,
-                      websocket_origin=[f"127.0.0.1:{port}"])
-    try:
-        url = f"http://127.0.0.1:{port}/"
-        deadline = time.time() + 20
-        while time.time() < deadline:
-            try:
-                with socket.create_connection(("127.0.0.1", port), timeout=0.5):
-                    break
-            except OSError:
-                time.sleep(0.1)
-        yield url
-    finally:
-        thread.stop()
-        thread.join(timeout=10)
-        if old is None:
-            os.environ.pop("GMWM_APP_DEMO", None)
-        else:
-            os.environ["GMWM_APP_DEMO"] = old
+    with served_app(app_demo_file) as (port, _thread):
+        yield f"http://127.0.0.1:{port}/"
 
 
 @pytest.fixture(scope="module")

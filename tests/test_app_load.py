@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import os
-import socket
 import threading
 import time
 import urllib.request
@@ -31,6 +29,7 @@ from urllib.parse import urlencode
 import h5py
 import numpy as np
 import pytest
+from conftest import served_app
 
 from gmwm_app.state import AppState
 
@@ -134,34 +133,13 @@ def test_eight_threads_no_cross_talk_no_blocking(logs: dict[str, Any]) -> None:
 # ---------------------------------------------------------------------------------------------
 # (2) the served app on localhost
 # ---------------------------------------------------------------------------------------------
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
     """The app on 127.0.0.1 in a background thread; yields its URL and its Bokeh server."""
     import panel as pn
 
-    from gmwm_app.app import create_app_factory
-
-    old = os.environ.get("GMWM_APP_DEMO")
-    os.environ["GMWM_APP_DEMO"] = str(app_demo_file)
-    port = _free_port()
-    thread = pn.serve({"/": create_app_factory()}, port=port, address="127.0.0.1", show=False,
-                      threaded=True, start=True, verbose=False,
-                      websocket_origin=[f"127.0.0.1:{port}"],
-                      unused_session_lifetime_milliseconds=120_000)
-    try:
-        deadline = time.time() + 20
-        while time.time() < deadline:
-            try:
-                with socket.create_connection(("127.0.0.1", port), timeout=0.5):
-                    break
-            except OSError:
-                time.sleep(0.05)
+    with served_app(app_demo_file, unused_session_lifetime_milliseconds=120_000) as (port,
+                                                                                     thread):
         def find() -> Any:  # registered by Panel just after the server started listening
             return next((s for s, *_ in list(pn.state._servers.values()) if s.port == port),
                         None)
@@ -169,13 +147,6 @@ def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
         _wait(lambda: find() is not None, "the server to register", 20)
         server = find()
         yield {"url": f"http://127.0.0.1:{port}/", "thread": thread, "server": server}
-    finally:
-        thread.stop()
-        thread.join(timeout=10)
-        if old is None:
-            os.environ.pop("GMWM_APP_DEMO", None)
-        else:
-            os.environ["GMWM_APP_DEMO"] = old
 
 
 def _get(url: str, timeout: float = 30) -> float:
