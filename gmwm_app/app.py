@@ -158,6 +158,22 @@ _PROCESS_HELP = {
 }
 
 
+def _lazy_view_factories() -> list[tuple[str, Callable[[GMWMApp], Any]]]:
+    """Tabs built on first opening: (title, factory taking the app, returning a view)."""
+    out: list[tuple[str, Callable[[GMWMApp], Any]]] = []
+    try:
+        from gmwm_app.slope_view import SlopeView
+        out.append(("Slope method", SlopeView))
+    except ImportError:  # pragma: no cover - view not yet written
+        pass
+    try:
+        from gmwm_app.multi_view import MultiView
+        out.append(("Multi-channel", MultiView))
+    except ImportError:  # pragma: no cover - view not yet written
+        pass
+    return out
+
+
 def live_apps() -> list[GMWMApp]:
     """The app objects of the sessions alive in this process (for tests and diagnostics)."""
     return list(_APPS)
@@ -371,6 +387,16 @@ class GMWMApp:
                           self.summary, tables, sizing_mode="stretch_width")]
         self.tabs = pn.Tabs(("Fit", main[0]), ("Model selection", self.selection.panel),
                             dynamic=False, sizing_mode="stretch_width")
+        # further views are built on first opening of their tab: a page opens with the
+        # Fit tab only, so opening it costs the server loop no more than before
+        self.lazy_views: dict[str, Any] = {}
+        self._lazy_factories: dict[str, Callable[[], Any]] = {}
+        for title, factory in _lazy_view_factories():
+            self._lazy_factories[title] = partial(factory, self)
+            self.tabs.append((title, pn.Column(
+                pn.pane.Markdown(f"Opening {title} ...", margin=(10, 10)),
+                sizing_mode="stretch_width", margin=0)))
+        self.tabs.param.watch(self._on_tab, "active")
         main = [self.tabs]
         # BootstrapTemplate: every resource is bundled with Panel (the Fast design pulls a web
         # font from a CDN, which is a console error offline)
@@ -386,6 +412,35 @@ class GMWMApp:
     def view(self) -> pn.template.BootstrapTemplate:
         """The page of this session."""
         return self.template
+
+    def open_view(self, title: str) -> Any:
+        """The view of the lazily built tab ``title``, built on first call.
+
+        Parameters
+        ----------
+        title : str
+            Tab title, e.g. ``"Slope method"`` or ``"Multi-channel"``.
+
+        Returns
+        -------
+        object
+            The view object (it has a ``panel`` attribute shown in the tab).
+        """
+        if title not in self.lazy_views:
+            view = self._lazy_factories[title]()
+            self.lazy_views[title] = view
+            index = list(self.tabs._names).index(title)
+            self.tabs[index] = (title, view.panel)
+        return self.lazy_views[title]
+
+    def _on_tab(self, event: Any) -> None:
+        title = self.tabs._names[event.new]
+        if title in self._lazy_factories and title not in self.lazy_views:
+            try:
+                self.open_view(title)
+            except Exception as e:  # a view that fails to build must not end the session
+                log.exception("building tab %s failed", title)
+                self.alert.param.update(object=f"Could not open {title}: {e}", visible=True)
 
     # -------------------------------------------------------------------------------------
     # refresh (state -> widgets and views)
