@@ -59,7 +59,7 @@ PROCESS_NAMES: dict[str, str] = {
 }
 
 #: Sources a session can load from.
-SOURCES: tuple[str, ...] = ("demo", "upload", "path")
+SOURCES: tuple[str, ...] = ("demo", "upload", "path", "scenario")
 
 _REPO = Path(__file__).resolve().parents[1]
 
@@ -226,7 +226,8 @@ class AppState(param.Parameterized):
 
     # data
     source = param.Selector(default="demo", objects=list(SOURCES), doc="Where the data came from.")
-    path = param.String(default="", doc="Server path of the loaded file (source 'path').")
+    path = param.String(default="", doc="Server path of the loaded file (source 'path'); "
+                       "the scenario key for source 'scenario'.")
     filename = param.String(default="", doc="Name of the loaded file.")
     channels = param.List(default=[], item_type=str, doc="Channel names of the loaded log.")
     channel = param.String(default="", doc="Selected channel.")
@@ -347,6 +348,14 @@ class AppState(param.Parameterized):
                 except OSError:
                     pass
             out = LoadedData(lg, "upload", name, "")
+        elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path
+            from engine.teaching import get_scenario, simulate_scenario
+
+            try:
+                sc = get_scenario(str(path or "").strip())
+            except KeyError as e:
+                raise ValueError(e.args[0]) from None
+            out = LoadedData(simulate_scenario(sc), "scenario", f"scenario {sc.key}", sc.key)
         else:
             raise ValueError(f"unknown data source {source!r}: use demo, upload or path")
         if not out.log.is_summary and not out.log.channels:
@@ -491,7 +500,8 @@ class AppState(param.Parameterized):
                 self.wv_computations += computed + loaded.computations
             fs_src = "user" if fs is not None and f != f_file else _fs_source(lg)
             self.param.update(
-                source=loaded.source, path=loaded.path if loaded.source == "path" else "",
+                source=loaded.source,
+                path=loaded.path if loaded.source in ("path", "scenario") else "",
                 filename=loaded.name, channels=list(names), channel=ch, fs=f, fs_source=fs_src,
                 robust=rob, is_summary=bool(lg.is_summary), wv=wv,
                 **self._data_info(lg, ch, wv),
@@ -844,6 +854,8 @@ class AppState(param.Parameterized):
         q = {"source": self.source}
         if self.source == "path" and self.path:
             q["path"] = self.path
+        if self.source == "scenario" and self.path:
+            q["scenario"] = self.path
         if self.channel:
             q["channel"] = self.channel
         if self.fs:
@@ -865,6 +877,8 @@ class AppState(param.Parameterized):
         src = q.get("source", "").strip().lower()
         if src == "path" or (not src and q.get("path")):
             out["source"], out["path"] = "path", q.get("path", "")
+        elif src == "scenario":
+            out["source"], out["path"] = "scenario", q.get("scenario", "")
         elif src == "upload":
             out["source"] = None  # an upload cannot be replayed from a link
             out["problems"].append("the link refers to an uploaded file, which is not part of "
@@ -902,7 +916,7 @@ class AppState(param.Parameterized):
         s = self.parse_query(query)
         problems = list(s["problems"])
         src = s.get("source") or default_source
-        path = s.get("path") if s.get("source") == "path" else default_path
+        path = s.get("path") if s.get("source") in ("path", "scenario") else default_path
         loaded = None
         try:
             loaded = self.read(src, path=path)
