@@ -475,14 +475,14 @@ class SlopeView:
     def _build_widgets(self) -> None:
         opts = {"(your data: choose a teaching scenario to load one)": ""}
         opts.update({sc.title: key for key, sc in SCENARIOS.items()})
-        self.scenario_select = pn.widgets.Select(name="Teaching scenario", options=opts,
+        self.scenario_select = pn.widgets.Select(label="Teaching scenario", options=opts,
                                                  value="", width=420,
                                                  css_classes=["gmwm-scenario"])
         self.scenario_select.param.watch(self._on_scenario, "value")
         self.process = pn.widgets.RadioButtonGroup(
-            name="Process", options=PROCESS_CHOICES, value="WN", button_type="default",
-            button_style="outline", margin=(22, 10, 5, 10), css_classes=["gmwm-slope-process"])
-        self.clear_button = pn.widgets.Button(name="Clear regions", button_type="light",
+            label="Process", options=PROCESS_CHOICES, value="WN", color="default",
+            variant="outline", margin=(22, 10, 5, 10), css_classes=["gmwm-slope-process"])
+        self.clear_button = pn.widgets.Button(label="Clear regions", color="light",
                                               width=130, margin=(22, 5, 5, 5))
         self.clear_button.on_click(lambda _e: self.clear_regions())
         self.explain = pn.pane.Alert("", alert_type="info", visible=False,
