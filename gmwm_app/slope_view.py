@@ -458,7 +458,7 @@ class SlopeView:
         self._key: Any = None
         self._dirty = True
         self._syncing = False
-        self._gmwm_cache: dict[tuple[int, str], MethodEstimate] = {}
+        self._gmwm_cache: dict[tuple[eg.WaveletVariance, str], MethodEstimate] = {}
         self.computing = False
 
         self._build_widgets()
@@ -613,6 +613,7 @@ class SlopeView:
             if self.state.source == "scenario" and self.state.path == key:
                 self.state.set_model(sc.model.cleared())  # the Fit tab fits the true form
 
+        self.status.object = f"⏳ Simulating the scenario '{sc.title}' ..."
         self.app._spawn(partial(self.app._offload, f"Simulating the scenario '{sc.title}'",
                                 work, apply))
 
@@ -666,7 +667,8 @@ class SlopeView:
         """Recompute when the data or the regions changed (only while the tab is shown)."""
         s = self.state
         self._sync_scenario()
-        key = (id(s.wv), s.unit, s.source, s.path, s.channel, s.fs,
+        # the WV object itself (identity), not its id(): an id can be reused after collection
+        key = (s.wv, s.unit, s.source, s.path, s.channel, s.fs,
                tuple(sorted(self.regions.items())))
         if key == self._key and not force:
             return
@@ -696,7 +698,7 @@ class SlopeView:
 
     def _gmwm(self, wv: eg.WaveletVariance, spec: str) -> MethodEstimate:
         """GMWM of ``spec`` on ``wv``, cached (moving a region does not refit)."""
-        key = (id(wv), spec)
+        key = (wv, spec)  # holds the WV: identity, never a reused id
         est = self._gmwm_cache.get(key)
         if est is None:
             est = from_gmwm(eg.fit_gmwm(wv, spec))

@@ -204,6 +204,24 @@ def test_a_stale_result_does_not_overwrite_a_newer_one(app: Any, view: Any) -> N
     assert view.result is shown and "stale" not in view.message.object
 
 
+def test_hidden_tab_waits_and_robust_wv_still_shows_the_allan_deviation(app: Any,
+                                                                       view: Any) -> None:
+    shown = view.result
+    view._visible = lambda: False  # as when another tab is open in the browser
+    other = [c for c in app.state.channels if c != app.state.channel][0]
+    assert app.state.select_channel(other), app.state.error
+    assert view.result is shown and view._dirty  # nothing computed while hidden
+    view._visible = lambda: True
+    view._on_tab()  # the tab is opened
+    assert view.result is not shown and not view._dirty
+    ref = allan_variance(_raw(app), fs=app.state.fs)
+    np.testing.assert_allclose(view.adev_src.data["adev"], ref.adev, rtol=1e-9)
+    # the robust WV is not an Allan variance: the tab keeps the classical one
+    assert app.state.set_robust(True), app.state.error
+    assert app.state.wv.robust
+    np.testing.assert_allclose(view.adev_src.data["adev"], ref.adev, rtol=1e-9)
+
+
 def test_scenario_url_round_trip_and_unknown_key(app_demo: Path) -> None:
     s = AppState()
     assert s.from_query({"source": "scenario", "scenario": "rw_dr"}), s.error
