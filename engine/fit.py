@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 
+from ._optim import nelder_mead, nnls
 from .model import Model, parse_model
 from .processes import AR1, GM, TC_MAX_FACTOR, TC_MIN, Process, _ar1_wv_pos
 from .units import param_unit
@@ -255,6 +255,7 @@ class _Problem:
                 self.x_fixed[:, i] = pr.basis(self.tau, self.fs)
         self.is_gm = [isinstance(pr, GM) for pr in model.processes]
         self.n_eval = 0
+        self._passive: np.ndarray | None = None
 
     # the non-linear coordinate: log of the correlation time (samples); AR1 may also be < 0
     def phi_of(self, i: int, u: float) -> float:
@@ -282,7 +283,9 @@ class _Problem:
         c = self.a @ x
         norms = np.sqrt(np.sum(c * c, axis=0))
         norms[norms == 0] = 1.0
-        g, _ = optimize.nnls(c / norms, self.b, maxiter=50 * self.p)
+        # warm start from the previous solve's positive set (Nelder-Mead moves little)
+        g, _ = nnls(c / norms, self.b, maxiter=50 * self.p, passive=self._passive)
+        self._passive = g > 0
         h = g / norms
         r = self.b - c @ h
         return float(r @ r), h, x
@@ -367,9 +370,8 @@ def _local(prob: _Problem, u0: tuple[float, ...], step: float) -> tuple[float, n
     converged = False
     for _ in range(8):
         simplex = np.vstack([x] + [x + step * e for e in np.eye(prob.k)])
-        res = optimize.minimize(prob.profile, x, method="Nelder-Mead",
-                                options={"xatol": 1e-6, "fatol": 1e-10 * max(f, 1e-300),
-                                         "maxfev": 400 * prob.k, "initial_simplex": simplex})
+        res = nelder_mead(prob.profile, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300),
+                          maxfev=400 * prob.k)
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.asarray(res.x, float), fn

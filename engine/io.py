@@ -30,12 +30,14 @@ import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import h5py
 import numpy as np
 
 from .wavelet import WaveletVariance
+
+if TYPE_CHECKING:  # pragma: no cover
+    import h5py
 
 __all__ = ["LoadError", "ImuLog", "load_log", "save_log"]
 
@@ -216,7 +218,9 @@ def _as_float(src: str, name: str, a: np.ndarray, rows: np.ndarray | None) -> np
             f"file '{src}', column '{name}': dtype {a.dtype} is not real-valued numeric data: "
             "store the samples as integers or floats"
         )
-    bad = np.flatnonzero(~np.isfinite(a))
+    # NaN and Inf propagate to the extremes: two passes, no temporaries, for clean data
+    finite = a.size == 0 or (math.isfinite(float(np.min(a))) and math.isfinite(float(np.max(a))))
+    bad = np.flatnonzero(~np.isfinite(a)) if not finite else np.empty(0, dtype=np.intp)
     if bad.size:
         raise LoadError(
             f"file '{src}': column '{name}' has {bad.size} NaN/Inf value(s), first at "
@@ -339,7 +343,7 @@ def _apply_time(
 def _check_magnitude(src: str, name: str, x: np.ndarray) -> None:
     """Refuse samples so large that the squares in a variance overflow float64."""
     if x.size and x.dtype.itemsize == 8:
-        big = float(np.max(np.abs(x)))
+        big = max(float(np.max(x)), -float(np.min(x)))  # no |x| temporary
         if big * x.size > 1e150:
             raise LoadError(f"file '{src}', column '{name}': values up to {big:.3g} are too large "
                             "for a variance in float64 (their squares overflow): check the units "
@@ -671,6 +675,8 @@ def _read_npz(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
 
 # ----------------------------------------------------------------------------- hdf5
 def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
+    import h5py  # lazily: 0.1 s to import, not needed for text and NPY logs
+
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
@@ -749,6 +755,8 @@ def _read_summary(
     units: dict[str, str], meta: dict[str, Any], notes: list[str],
 ) -> ImuLog:
     """WV summary (``derived/`` schema): one WaveletVariance per ``/wv/<channel>`` group."""
+    import h5py
+
     g = f.get("wv")
     names = [k for k in g if isinstance(g[k], h5py.Group)] if isinstance(g, h5py.Group) else []
     if not names:
@@ -950,6 +958,8 @@ def save_log(
         Unknown extension, no channels, non-1-D/non-numeric/unequal channels, invalid fs,
         names unusable in the format, or an extra attribute clashing with a reserved one.
     """
+    import h5py  # lazily: 0.1 s to import, not needed for text and NPY logs
+
     p = Path(path)
     ext = p.suffix.lower()
     fs = _check_fs(fs, str(p), "fs", "pass the sampling frequency in Hz")

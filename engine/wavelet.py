@@ -20,7 +20,8 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy import special
+
+from ._optim import chi2_isf
 
 __all__ = [
     "WaveletVariance",
@@ -200,9 +201,9 @@ def eta3_interval(
     ``[eta nu2 / chi2_{1-a/2}(eta), eta nu2 / chi2_{a/2}(eta)]``.
     """
     eta = np.maximum(np.asarray(n_coef, float) / np.asarray(tau, float), 1.0)
-    # chi2.ppf(p, eta) = chdtri(eta, 1 - p) (scipy.special is light to import)
-    lo = eta * variance / special.chdtri(eta, alpha / 2)
-    hi = eta * variance / special.chdtri(eta, 1 - alpha / 2)
+    # chi2.ppf(p, eta) = chi2_isf(eta, 1 - p) (scipy.special.chdtri, without SciPy's import)
+    lo = eta * variance / chi2_isf(eta, alpha / 2)
+    hi = eta * variance / chi2_isf(eta, 1 - alpha / 2)
     return lo, hi
 
 

@@ -1,0 +1,413 @@
+"""Small numerical kernels the fit path needs, without importing SciPy.
+
+Importing any part of SciPy 1.17 costs about 0.3 s (``scipy._lib`` clones the NumPy namespace
+for its array-API layer), which is a third of the ``gmwm fit`` command's 1 s budget. The fit of
+a composite model needs only three things from it, each small enough to write here and test
+against SciPy (``tests/test_optim.py``):
+
+* :func:`nnls`: non-negative least squares (Lawson and Hanson's active-set algorithm);
+* :func:`nelder_mead`: the Nelder-Mead simplex minimiser, step for step the algorithm of
+  ``scipy.optimize.minimize(method="Nelder-Mead")`` with a user initial simplex;
+* :func:`chi2_isf`: the chi-square inverse survival function (``scipy.special.chdtri``),
+  from the regularised incomplete gamma function's power series, inverted by Newton's method.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["nnls", "nelder_mead", "NMResult", "chi2_isf", "gamma_p"]
+
+
+# -----------------------------------------------------------------------------------------
+# non-negative least squares
+# -----------------------------------------------------------------------------------------
+def nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None,
+         passive: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Solve ``min ||a x - b||_2`` subject to ``x >= 0`` (Lawson and Hanson, 1974).
+
+    Parameters
+    ----------
+    a : ndarray, shape (m, n)
+        Design matrix.
+    b : ndarray, shape (m,)
+        Right-hand side.
+    maxiter : int, optional
+        Maximum number of inner (step-back) iterations; default ``3 n``.
+    passive : ndarray of bool, shape (n,), optional
+        A guess of the set of positive coefficients (e.g. the previous solution's, in a
+        sequence of close problems): when the least-squares solution on that set is positive
+        and optimal (Karush-Kuhn-Tucker conditions), it is returned after a single solve;
+        otherwise the active-set iterations start from zero as usual.
+
+    Returns
+    -------
+    x : ndarray, shape (n,)
+        The non-negative solution.
+    rnorm : float
+        The residual norm ``||a x - b||``.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    m, n = a.shape
+    tol = 10.0 * np.finfo(float).eps * max(m, n) * max(float(np.abs(a).sum(axis=0).max()), 1.0)
+    if passive is not None and passive.any():
+        x = np.zeros(n)
+        x[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+        if np.all(x[passive] > 0.0):
+            r = b - a @ x
+            w = a.T @ r
+            if passive.all() or float(np.max(w[~passive])) <= tol:
+                return x, float(math.sqrt(float(r @ r)))
+    maxiter = 3 * n if maxiter is None else int(maxiter)
+    x = np.zeros(n)
+    passive = np.zeros(n, dtype=bool)
+    w = a.T @ b
+    inner = 0
+    while not passive.all():
+        cand = np.where(passive, -np.inf, w)
+        j = int(np.argmax(cand))
+        if cand[j] <= tol:
+            break
+        passive[j] = True
+        s = np.zeros(n)
+        s[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+        while np.any(s[passive] <= 0.0):
+            inner += 1
+            if inner > maxiter:
+                break
+            bad = passive & (s <= 0.0)
+            alpha = float(np.min(x[bad] / (x[bad] - s[bad])))
+            x = x + alpha * (s - x)
+            passive &= x > tol
+            x[~passive] = 0.0
+            s = np.zeros(n)
+            if passive.any():
+                s[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+        x = s
+        if inner > maxiter:
+            break
+        w = a.T @ (b - a @ x)
+    x = np.maximum(x, 0.0)
+    r = b - a @ x
+    return x, float(math.sqrt(float(r @ r)))
+
+
+# -----------------------------------------------------------------------------------------
+# Nelder-Mead
+# -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NMResult:
+    """Result of :func:`nelder_mead`: best point, its value, evaluations, stop reason."""
+
+    x: np.ndarray
+    fun: float
+    nfev: int
+    nit: int
+    success: bool
+
+
+def nelder_mead(
+    fun: Callable[[np.ndarray], float],
+    initial_simplex: np.ndarray,
+    *,
+    xatol: float = 1e-4,
+    fatol: float = 1e-4,
+    maxfev: int | None = None,
+) -> NMResult:
+    """Minimise ``fun`` by the Nelder-Mead simplex method from a given simplex.
+
+    The reflection (1), expansion (2), contraction (1/2) and shrink (1/2) steps, the order of
+    the tests and the stopping rule (every vertex within ``xatol`` of the best in every
+    coordinate and every value within ``fatol`` of the best) are SciPy's, so the iterates are
+    the same as ``scipy.optimize.minimize(fun, x0, method="Nelder-Mead",
+    options={"initial_simplex": s, "xatol": ..., "fatol": ..., "maxfev": ...})``.
+
+    Parameters
+    ----------
+    fun : callable
+        Objective of a 1-d array.
+    initial_simplex : ndarray, shape (n + 1, n)
+        Starting vertices.
+    xatol, fatol : float
+        Absolute tolerances on the vertices and on the values.
+    maxfev : int, optional
+        Maximum number of evaluations (default ``200 n``).
+
+    Returns
+    -------
+    NMResult
+    """
+    sim = np.array(initial_simplex, dtype=float)
+    npt, n = sim.shape
+    if npt != n + 1:
+        raise ValueError(f"initial_simplex must have shape (n + 1, n), got {sim.shape}")
+    maxfev = 200 * n if maxfev is None else int(maxfev)
+    nfev = 0
+
+    def f(v: np.ndarray) -> float:
+        nonlocal nfev
+        nfev += 1
+        return float(fun(v))
+
+    fsim = np.array([f(v) for v in sim])
+    order = np.argsort(fsim, kind="stable")
+    sim, fsim = sim[order], fsim[order]
+    nit = 1
+    while nfev < maxfev:
+        if (np.max(np.abs(sim[1:] - sim[0])) <= xatol
+                and np.max(np.abs(fsim[0] - fsim[1:])) <= fatol):
+            break
+        xbar = sim[:-1].mean(axis=0)
+        xr = 2.0 * xbar - sim[-1]
+        fxr = f(xr)
+        shrink = False
+        if fxr < fsim[0]:
+            xe = 3.0 * xbar - 2.0 * sim[-1]
+            fxe = f(xe)
+            if fxe < fxr:
+                sim[-1], fsim[-1] = xe, fxe
+            else:
+                sim[-1], fsim[-1] = xr, fxr
+        elif fxr < fsim[-2]:
+            sim[-1], fsim[-1] = xr, fxr
+        elif fxr < fsim[-1]:
+            xc = 1.5 * xbar - 0.5 * sim[-1]
+            fxc = f(xc)
+            if fxc <= fxr:
+                sim[-1], fsim[-1] = xc, fxc
+            else:
+                shrink = True
+        else:
+            xcc = 0.5 * xbar + 0.5 * sim[-1]
+            fxcc = f(xcc)
+            if fxcc < fsim[-1]:
+                sim[-1], fsim[-1] = xcc, fxcc
+            else:
+                shrink = True
+        if shrink:
+            for j in range(1, npt):
+                sim[j] = sim[0] + 0.5 * (sim[j] - sim[0])
+                fsim[j] = f(sim[j])
+        order = np.argsort(fsim, kind="stable")
+        sim, fsim = sim[order], fsim[order]
+        nit += 1
+    return NMResult(x=sim[0].copy(), fun=float(fsim[0]), nfev=nfev, nit=nit,
+                    success=nfev < maxfev)
+
+
+# -----------------------------------------------------------------------------------------
+# chi-square quantiles
+# -----------------------------------------------------------------------------------------
+def _log1pmx(d: float) -> float:
+    """``log(1 + d) - d`` without cancellation for small ``d``."""
+    if abs(d) > 0.1:
+        return math.log1p(d) - d
+    # -d^2/2 + d^3/3 - d^4/4 + ...
+    total, term, k = 0.0, d, 1
+    while True:
+        term *= -d
+        k += 1
+        add = term / k
+        total += add
+        if abs(add) <= 1e-17 * abs(total):
+            return total
+
+
+def _log_prefactor(a: float, x: float) -> float:
+    """``log(x^a e^-x / Gamma(a + 1))``, accurate for large ``a`` and ``x`` near ``a``."""
+    if a < 10.0:
+        return a * math.log(x) - x - math.lgamma(a + 1.0)
+    # a log x - x - lgamma(a + 1) = a log1pmx((x - a) / a) - log(2 pi a) / 2 - stirling(a)
+    ia = 1.0 / a
+    ia2 = ia * ia
+    stirling = ia * (1 / 12 - ia2 * (1 / 360 - ia2 * (1 / 1260 - ia2 / 1680)))
+    return a * _log1pmx((x - a) / a) - 0.5 * math.log(2.0 * math.pi * a) - stirling
+
+
+def _series_sum(start_ratio: Callable[[np.ndarray], np.ndarray], n_hint: float) -> float:
+    """``1 + sum_n prod_{i<=n} r_i``, ratios ``r_i`` of index array ``i`` (1-based), blockwise."""
+    total, last, start = 1.0, 1.0, 1
+    block = int(min(max(64.0, n_hint), 4e6))
+    for _ in range(64):
+        ratios = start_ratio(start + np.arange(block, dtype=float))
+        terms = last * np.cumprod(ratios)
+        total += float(np.sum(terms))
+        last = float(terms[-1])
+        start += block
+        if (last <= 1e-17 * total and ratios[-1] < 1.0) or last == 0.0:
+            break
+    return total
+
+
+def _gamma_pq(a: float, x: float) -> tuple[float, float]:
+    """Regularised incomplete gamma ``(P(a, x), Q(a, x))``, each with full relative accuracy."""
+    if x <= 0.0:
+        return 0.0, 1.0
+    if x <= a or x < a + 1.0:
+        # P = x^a e^-x / Gamma(a+1) * sum_n x^n / ((a+1)...(a+n))
+        s = _series_sum(lambda i: x / (a + i), x - a + 12.0 * math.sqrt(x + 1.0) + 32.0)
+        p = min(1.0, math.exp(_log_prefactor(a, x)) * s)
+        return p, 1.0 - p
+    if a >= 100.0:
+        # Q = x^(a-1) e^-x / Gamma(a) * sum_n (a-1)...(a-n) / x^n; the remainder
+        # Q(a - n, x) is negligible long before a - n reaches 0 when a >= 100, x >= a + 1
+        s = _series_sum(lambda i: np.maximum(a - i, 0.0) / x, 12.0 * math.sqrt(x) + 32.0)
+        q = min(1.0, math.exp(_log_prefactor(a, x) + math.log(a / x)) * s)
+        return 1.0 - q, q
+    # small a, x > a + 1: Legendre's continued fraction (modified Lentz), fast here
+    tiny = 1e-300
+    b = x + 1.0 - a
+    c = 1.0 / tiny
+    d = 1.0 / b
+    h = d
+    for i in range(1, 10_000):
+        an = -i * (i - a)
+        b += 2.0
+        d = an * d + b
+        d = tiny if abs(d) < tiny else d
+        c = b + an / c
+        c = tiny if abs(c) < tiny else c
+        d = 1.0 / d
+        delta = d * c
+        h *= delta
+        if abs(delta - 1.0) < 1e-16:
+            break
+    q = min(1.0, math.exp(_log_prefactor(a, x) + math.log(a / x)) * x * h)
+    return 1.0 - q, q
+
+
+def gamma_p(a: float, x: float) -> float:
+    """Regularised lower incomplete gamma function ``P(a, x)`` (``scipy.special.gammainc``).
+
+    Power series below ``a + 1``; above it the downward series of ``Q`` for ``a >= 100`` and
+    Legendre's continued fraction otherwise, with the prefactor
+    ``x^a e^-x / Gamma(a + 1)`` from Stirling's series so that large ``a`` keeps full
+    accuracy.
+    """
+    if a <= 0.0:
+        raise ValueError(f"a must be > 0, got {a}")
+    return _gamma_pq(a, x)[0]
+
+
+def _chi2_isf_one(df: float, p: float) -> float:
+    if not 0.0 < p < 1.0:
+        if p == 0.0:
+            return math.inf
+        if p == 1.0:
+            return 0.0
+        raise ValueError(f"p must be in [0, 1], got {p}")
+    a = 0.5 * df
+    # Wilson-Hilferty start: chi2 = df (1 - 2/(9 df) + z sqrt(2/(9 df)))^3, z = Phi^-1(1 - p)
+    z = _norm_isf(p)
+    c = 2.0 / (9.0 * df)
+    base = 1.0 - c + z * math.sqrt(c)
+    if base > 0:
+        u = math.log(0.5 * df * base**3)  # log of the gamma(a) variable
+    else:  # far lower tail: P(a, y) ~ y^a / Gamma(a + 1)
+        u = (math.log1p(-p) + math.lgamma(a + 1.0)) / a
+    # Newton on u = log y for h(u) = log F(y) - log target (F = P in the lower half, where
+    # p >= 1/2, and h = log target - log Q in the upper half; both increase with u), which
+    # is nearly linear in the tails; kept inside a bracket, bisected when it leaves it
+    upper = p < 0.5
+    log_t = math.log(p) if upper else math.log1p(-p)
+    lo, hi = -math.inf, math.inf
+    for _ in range(200):
+        y = math.exp(u)
+        if y == 0.0:  # underflow, far lower tail: log P = a u - lgamma(a + 1)
+            h = a * u - math.lgamma(a + 1.0) - log_t
+            if h >= 0 or upper:
+                break
+            lo, u = u, u - h / a
+            continue
+        pp, qq = _gamma_pq(a, y)
+        f = qq if upper else pp
+        if f <= 0.0:
+            h = math.inf if upper else -math.inf
+        else:
+            h = (log_t - math.log(f)) if upper else (math.log(f) - log_t)
+        if h > 0:
+            hi = min(hi, u)
+        elif h < 0:
+            lo = max(lo, u)
+        else:
+            break
+        log_dens = _log_prefactor(a, y) + math.log(a / y)  # log of y^(a-1) e^-y / Gamma(a)
+        slope = math.exp(log_dens + u - math.log(f)) if f > 0 else 0.0
+        step = h / slope if slope > 0 and math.isfinite(h) else math.nan
+        tol = 4e-16 * (1.0 + abs(u))  # rounding level of u (h carries ~1e-14 of noise)
+        if abs(step) <= tol:
+            u -= step
+            break
+        u_new = u - step
+        if not (lo < u_new < hi):  # Newton left the bracket: bisect, or walk towards the root
+            if math.isfinite(lo) and math.isfinite(hi):
+                u_new = 0.5 * (lo + hi)
+            else:
+                u_new = u + (1.0 if h < 0 else -1.0)
+        if hi - lo <= tol:
+            break
+        u = u_new
+    y = math.exp(u)
+    return 2.0 * y
+
+
+def _norm_isf(p: float) -> float:
+    """Standard normal upper quantile (Acklam's rational approximation, |rel err| < 1.2e-9)."""
+    q = 1.0 - p
+    if q < 0.02425:
+        t = math.sqrt(-2.0 * math.log(q))
+        return -_acklam_tail(t)
+    if q > 1.0 - 0.02425:
+        t = math.sqrt(-2.0 * math.log(1.0 - q))
+        return _acklam_tail(t)
+    r = q - 0.5
+    s = r * r
+    num = (((((-3.969683028665376e01 * s + 2.209460984245205e02) * s - 2.759285104469687e02)
+             * s + 1.383577518672690e02) * s - 3.066479806614716e01) * s + 2.506628277459239e00)
+    den = (((((-5.447609879822406e01 * s + 1.615858368580409e02) * s - 1.556989798598866e02)
+             * s + 6.680131188771972e01) * s - 1.328068155288572e01) * s + 1.0)
+    return num * r / den
+
+
+def _acklam_tail(t: float) -> float:
+    num = (((((-7.784894002430293e-03 * t - 3.223964580411365e-01) * t - 2.400758277161838e00)
+             * t - 2.549732539343734e00) * t + 4.374664141464968e00) * t + 2.938163982698783e00)
+    den = ((((7.784695709041462e-03 * t + 3.224671290700398e-01) * t + 2.445134137142996e00)
+            * t + 3.754408661907416e00) * t + 1.0)
+    return -num / den
+
+
+def chi2_isf(df: np.ndarray | float, p: np.ndarray | float) -> np.ndarray:
+    """Chi-square inverse survival function: ``x`` with ``P(chi2_df > x) = p``.
+
+    Equals ``scipy.special.chdtri(df, p)`` (relative difference below 1e-12 over the
+    degrees of freedom of wavelet variances, 1 to 1e8).
+
+    Parameters
+    ----------
+    df : array_like
+        Degrees of freedom (> 0).
+    p : array_like
+        Upper-tail probabilities in [0, 1].
+
+    Returns
+    -------
+    ndarray
+        The quantiles, broadcast over ``df`` and ``p``.
+    """
+    d, q = np.broadcast_arrays(np.asarray(df, dtype=float), np.asarray(p, dtype=float))
+    out = np.empty(d.shape)
+    cache: dict[tuple[float, float], float] = {}
+    for idx in np.ndindex(d.shape):
+        key = (float(d[idx]), float(q[idx]))
+        if key not in cache:
+            if not key[0] > 0:
+                raise ValueError(f"degrees of freedom must be > 0, got {key[0]}")
+            cache[key] = _chi2_isf_one(*key)
+        out[idx] = cache[key]
+    return out

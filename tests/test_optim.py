@@ -1,0 +1,94 @@
+"""The SciPy-free kernels of the fit path (engine._optim) against SciPy and analytic values."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import optimize, special
+
+from engine._optim import chi2_isf, gamma_p, nelder_mead, nnls
+
+DFS = [0.3, 1.0, 1.3, 2.0, 3.7, 10.0, 19.9, 20.1, 55.5, 150.0, 199.0, 201.0, 1e3, 3.2e4, 1e5,
+       3.15e6]
+
+
+@pytest.mark.parametrize("p", [0.025, 0.975, 0.005, 0.995, 0.5, 0.3, 1e-6, 1e-12])
+def test_chi2_isf_equals_scipy(p: float) -> None:
+    ours = chi2_isf(np.array(DFS), p)
+    ref = special.chdtri(np.array(DFS), p)
+    np.testing.assert_allclose(ours, ref, rtol=1e-12)
+
+
+def test_chi2_isf_far_lower_tail_of_huge_df_matches_cornish_fisher() -> None:
+    # scipy's chdtri loses ~1e-5 here; the Cornish-Fisher expansion is exact to O(1/sqrt(df))
+    for df in (1e8, 1e10):
+        for p_low in (1e-6, 1e-12):
+            z = -float(special.ndtri(1 - p_low))  # the lower p_low quantile of N(0, 1)
+            cf = (df + z * math.sqrt(2 * df) + 2 / 3 * (z * z - 1)
+                  + (z**3 - 7 * z) / (9 * math.sqrt(2 * df)))
+            assert chi2_isf(df, 1 - p_low) == pytest.approx(cf, rel=0, abs=1e-2)
+
+
+def test_chi2_isf_analytic_cases() -> None:
+    # df = 2: exponential with mean 2, isf = -2 log p
+    for p in (0.9, 0.5, 0.025, 1e-9):
+        assert chi2_isf(2.0, p) == pytest.approx(-2 * math.log(p), rel=1e-14)
+    # df = 1: (Phi^-1(1 - p/2))^2
+    assert chi2_isf(1.0, 0.05) == pytest.approx(1.959963984540054**2, rel=1e-13)
+    assert chi2_isf(3.0, 0.0) == math.inf and chi2_isf(3.0, 1.0) == 0.0
+    with pytest.raises(ValueError):
+        chi2_isf(0.0, 0.5)
+
+
+@pytest.mark.parametrize("a,x", [(0.5, 0.01), (1.0, 3.0), (100.0, 90.0), (1e6, 1.003e6),
+                                 (5.0, 40.0), (150.0, 300.0), (50.0, 80.0), (20.0, 21.5),
+                                 (3.0, 0.5), (99.0, 150.0)])
+def test_gamma_p_equals_scipy(a: float, x: float) -> None:
+    assert gamma_p(a, x) == pytest.approx(special.gammainc(a, x), rel=1e-13, abs=1e-300)
+    # a = 1: P = 1 - exp(-x)
+    assert gamma_p(1.0, x) == pytest.approx(-math.expm1(-x), rel=1e-14)
+
+
+def test_nnls_reaches_scipy_residual() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        m, n = int(rng.integers(3, 25)), int(rng.integers(1, 8))
+        a = rng.normal(size=(m, n)) * np.exp(rng.uniform(-6, 6, n))  # badly scaled columns
+        b = rng.normal(size=m)
+        x1, r1 = nnls(a, b)
+        x2, r2 = optimize.nnls(a, b)
+        assert np.all(x1 >= 0)
+        assert r1 <= r2 * (1 + 1e-9) + 1e-12
+        if m >= n:  # unique solution
+            np.testing.assert_allclose(a @ x1, a @ x2, rtol=1e-7, atol=1e-9 * np.abs(b).max())
+
+
+def test_nnls_kkt_conditions() -> None:
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(20, 6))
+    b = rng.normal(size=20)
+    x, _ = nnls(a, b)
+    grad = a.T @ (a @ x - b)
+    free = x > 0
+    np.testing.assert_allclose(grad[free], 0.0, atol=1e-10)
+    assert np.all(grad[~free] >= -1e-10)
+
+
+def test_nelder_mead_iterates_as_scipy() -> None:
+    def f(v: np.ndarray) -> float:
+        return float((1 - v[0]) ** 2 + 100 * (v[1] - v[0] ** 2) ** 2 + 0.1 * abs(v[0]))
+
+    for s0 in ([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]], [[2.0, -1.0], [2.5, -1.0], [2.0, 0.0]]):
+        s0 = np.array(s0)
+        ours = nelder_mead(f, s0, xatol=1e-8, fatol=1e-12, maxfev=2000)
+        ref = optimize.minimize(f, s0[0], method="Nelder-Mead",
+                                options={"initial_simplex": s0, "xatol": 1e-8, "fatol": 1e-12,
+                                         "maxfev": 2000})
+        assert ours.nfev == ref.nfev
+        np.testing.assert_array_equal(ours.x, ref.x)
+        assert ours.success and ref.success
+    # budget exhausted: success is False
+    assert not nelder_mead(f, np.array([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]]),
+                           xatol=1e-12, fatol=0.0, maxfev=20).success
