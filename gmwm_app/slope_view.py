@@ -776,7 +776,9 @@ class SlopeView:
 
     def _show_messages(self, msgs: list[str]) -> None:
         text = "  \n".join(f"• {m}" for m in msgs)
-        self.message.param.update(object=text, visible=bool(msgs))
+        hint = len(msgs) == 1 and msgs[0].startswith("choose a process")  # guidance, no fault
+        self.message.param.update(object=text, visible=bool(msgs),
+                                  alert_type="info" if hint else "warning")
 
     def _sync_scenario(self) -> None:
         """The scenario menu and the explanation follow the session's data."""
