@@ -561,16 +561,16 @@ class MultiView:
         self.grid: _Grid | None = None
 
         self.channel_choice = pn.widgets.MultiChoice(
-            name=f"Channels ({MIN_CHANNELS} to {MAX_CHANNELS}, in grid order)", options=[],
+            label=f"Channels ({MIN_CHANNELS} to {MAX_CHANNELS}, in grid order)", options=[],
             value=[], max_items=MAX_CHANNELS, sizing_mode="stretch_width",
             css_classes=["gmwm-mchannels"])
         self.channel_choice.param.watch(self._on_channels, "value")
         self.spec_input = pn.widgets.TextInput(
-            name="Model of every channel (press Enter)", value=DEFAULT_SPEC,
+            label="Model of every channel (press Enter)", value=DEFAULT_SPEC,
             placeholder="e.g. WN+RW or GM+WN+RW", width=260, css_classes=["gmwm-mspec"])
         self.spec_input.param.watch(self._on_control, "value")
         self.override_input = pn.widgets.TextAreaInput(
-            name="Other models for some channels (optional, one 'channel: spec' per line)",
+            label="Other models for some channels (optional, one 'channel: spec' per line)",
             value="", placeholder="gyro_z: 2*GM+WN+RW", height=62, sizing_mode="stretch_width")
         self.override_input.param.watch(self._on_control, "value")
         self.share_widgets: list[pn.widgets.MultiChoice] = []
@@ -651,7 +651,7 @@ class MultiView:
     # controls
     # ------------------------------------------------------------------------------------
     def _new_share_widget(self, i: int) -> None:
-        w = pn.widgets.MultiChoice(name="", options=[], value=[], visible=False,
+        w = pn.widgets.MultiChoice(label="", options=[], value=[], visible=False,
                                    sizing_mode="stretch_width", margin=(2, 10),
                                    css_classes=[f"gmwm-mshare-{i}"])
         w.param.watch(lambda e, i=i: self._on_share(i, e.new), "value")
@@ -699,7 +699,7 @@ class MultiView:
                 if i < len(labels):
                     lab, has = labels[i]
                     val = [c for c in groups.get(lab, []) if c in has]
-                    w.param.update(name=f"{lab} shared by", options=list(has), value=val,
+                    w.param.update(label=f"{lab} shared by", options=list(has), value=val,
                                    visible=True)
                 elif w.visible:
                     w.param.update(options=[], value=[], visible=False)
