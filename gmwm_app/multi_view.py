@@ -548,6 +548,7 @@ class MultiView:
         self._dirty = False
         self._stale = False
         self._scheduled = False
+        self._ticker: Any = None
         self._idle = threading.Event()
         self._idle.set()
         self._cache_lock = threading.Lock()
@@ -967,12 +968,29 @@ class MultiView:
     # display
     # ------------------------------------------------------------------------------------
     def _set_busy(self, on: bool, message: str = "") -> None:
+        """Spinner and progress text; on a server the text counts the seconds of a long fit
+        (the figures keep the previous result meanwhile)."""
         self.spinner.visible = on
-        if on:
-            self._t0 = time.perf_counter()
-            self.status.object = f"⏳ {html.escape(message)} ..."
-        elif self.status.object.startswith("⏳"):
-            self.status.object = ""
+        doc = self.app._doc if self.app._served else None
+        if self._ticker is not None and doc is not None:
+            try:
+                doc.remove_periodic_callback(self._ticker)
+            except ValueError:  # already removed
+                pass
+        self._ticker = None
+        if not on:
+            if self.status.object.startswith("⏳"):
+                self.status.object = ""
+            return
+        t0 = time.perf_counter()
+        text = html.escape(message)
+        self.status.object = f"⏳ {text} ..."
+        if doc is not None:
+            def tick() -> None:
+                self.status.object = (f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
+                                      "grid shows the previous fit until this one ends)")
+
+            self._ticker = doc.add_periodic_callback(tick, 1000)
 
     def _message(self, text: str) -> None:
         self.error = text

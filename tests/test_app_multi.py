@@ -389,6 +389,22 @@ def test_browser_tab_renders_the_grid_and_the_table(app_demo_file: Path) -> None
             assert page.locator("canvas").count() >= n_canvas + 6
             obj = " ".join(page.locator(".gmwm-mobjective p").all_inner_texts())
             assert "Objective" in obj and format_value(v.result.objective) in obj
+            # type another model: the served view refits (debounced, in a worker thread)
+            fits = v.n_fits
+            box = page.locator(".gmwm-mspec input")
+            box.fill("WN+RW")
+            box.press("Enter")
+            want = "gyro_x,gyro_y,gyro_z: WN+RW | shared: RW"
+            while time.time() < deadline + 20 and (
+                    v.result is None or v.result.model.spec() != want or v.busy):
+                page.wait_for_timeout(100)
+            assert v.result.model.spec() == want and v.n_fits == fits + 1
+            ref = v.result.shared["RW"].corr[0, 1]
+            end = time.time() + TIMEOUT_MS / 1000
+            while time.time() < end and f"{ref:.4f}" not in " ".join(cells.all_inner_texts()):
+                page.wait_for_timeout(100)
+            assert f"{ref:.4f}" in " ".join(cells.all_inner_texts())
+            assert not [e for e in errors if "favicon" not in e], errors
             assert not [e for e in errors if "favicon" not in e], errors
         finally:
             browser.close()
