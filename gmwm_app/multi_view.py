@@ -24,9 +24,12 @@ fit. Data changes made while the tab is hidden only mark the view stale; it refi
 tab is shown again. Figures are built once per grid size; updates replace
 ColumnDataSource ``data`` in place.
 
-Not included: the dependence test (``engine.dependence_test``): its parametric bootstrap
-refits 2 B simulated logs (B = 100: tens of seconds on the demo log) and the engine offers
-no progress or cancel hook yet; the CLI runs it.
+Test of dependence (``engine.dependence_test``, the multivariate paper, section IV): on
+request, in the worker pool, with a progress bar and a Cancel button. The parametric
+bootstrap refits 2 B simulated logs (B = 100 on the demo log with a linear model: about half
+a minute), so it is never run live. ``engine.dependence_test`` has no progress hook, so the
+view runs the engine's own replicate function (``engine.mgmwm._boot_dependence``) one
+replicate at a time with the same seeds: the result is identical to the engine's.
 """
 
 from __future__ import annotations
@@ -56,7 +59,8 @@ from bokeh.models import (
 from bokeh.plotting import figure
 
 import engine as eg
-from engine.mgmwm import SHAREABLE, MultiModel
+from engine.fit import FitError
+from engine.mgmwm import SHAREABLE, DependenceTest, MultiModel, _boot_dependence
 from engine.model import ModelError, parse_model
 from engine.units import squared
 
@@ -86,6 +90,8 @@ __all__ = [
     "parse_overrides",
     "shareable_labels",
     "build_model",
+    "run_dependence_test",
+    "dependence_text",
 ]
 
 log = logging.getLogger(__name__)
@@ -397,6 +403,63 @@ def fit_text(result: Any) -> str:
     return " ".join(parts)
 
 
+class Cancelled(Exception):
+    """Raised by the progress callback when the user cancels the dependence test."""
+
+
+def run_dependence_test(wvm: eg.WVMatrix, model: MultiModel, *, B: int = 100, seed: int = 0,
+                        progress: Callable[[int, int], None] | None = None) -> DependenceTest:
+    """:func:`engine.dependence_test` of every shared process, one replicate at a time.
+
+    Same seeds, same replicate function, same p-value as the engine's (``weights="ci"``,
+    one worker); ``progress(done, B)`` is called after the two observed fits (``done = 0``)
+    and after every replicate, and may raise to stop.
+
+    Raises
+    ------
+    ModelError
+        The model shares nothing.
+    FitError
+        Half of the replicates or more failed.
+    """
+    if B < 1:
+        raise ValueError(f"B must be at least 1, got {B}")
+    if not model.shared:
+        raise ModelError("the model shares no process: mark the channels that share one "
+                         "first (nothing to test)")
+    h1 = model.cleared()
+    h0 = model.without_dependence().cleared()
+    labels = tuple(sp.label for sp in model.shared)
+    fit1 = eg.fit_mgmwm(wvm, h1, weights="ci")
+    fit0 = eg.fit_mgmwm(wvm, h0, weights="ci")
+    stat = fit0.objective - fit1.objective
+    if progress is not None:
+        progress(0, B)
+    boot: list[float] = []
+    for i, sd in enumerate(np.random.SeedSequence(seed).spawn(B)):
+        d = _boot_dependence((fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, "ci", sd))
+        if d is not None:
+            boot.append(d)
+        if progress is not None:
+            progress(i + 1, B)
+    if len(boot) < max(1, B // 2):
+        raise FitError("too many bootstrap replicates failed; the model may be unidentifiable")
+    p = (1 + sum(d >= stat for d in boot)) / (1 + len(boot))
+    return DependenceTest(float(stat), float(p), float(fit0.objective), float(fit1.objective),
+                          labels, len(boot), tuple(float(d) for d in boot))
+
+
+def dependence_text(t: DependenceTest, spec: str) -> str:
+    """The test's outcome in words (Markdown)."""
+    verdict = ("the channels are dependent (the shared covariances improve the fit more "
+               "than chance)" if t.p_value < 0.05 else
+               "no evidence of dependence at the 5% level")
+    return (f"**Dependence test** of {', '.join(t.labels)} in *{html.escape(spec)}*: "
+            f"D = Q(independent) - Q(shared) = {format_value(t.statistic)} [1], "
+            f"p = {format_value(t.p_value, 3)} from {t.B} parametric-bootstrap replicates: "
+            f"{verdict}.")
+
+
 # -----------------------------------------------------------------------------------------
 # figures (built once per grid size, updated in place)
 # -----------------------------------------------------------------------------------------
@@ -606,6 +669,26 @@ class MultiView:
              ("unit", "unit", 80, None)],
             "mgmwm_params", "gmwm-mparams", 240)
 
+        self.dep_running = False
+        self.dependence: DependenceTest | None = None
+        self._dep_cancel = threading.Event()
+        self._dep_last = 0.0
+        self.dep_b = pn.widgets.IntInput(label="Bootstrap replicates B", value=100, start=10,
+                                         end=2000, step=10, width=170)
+        self.dep_button = pn.widgets.Button(label="Test dependence", color="primary",
+                                            width=150, margin=(22, 5, 5, 10),
+                                            description="Parametric bootstrap of the objective "
+                                                        "difference (shared vs independent)")
+        self.dep_button.on_click(lambda _e: self.start_dependence_test())
+        self.dep_cancel = pn.widgets.Button(label="Cancel", color="light", width=90,
+                                            margin=(22, 5, 5, 5), disabled=True)
+        self.dep_cancel.on_click(lambda _e: self.cancel_dependence_test())
+        self.dep_progress = pn.indicators.Progress(value=0, max=100, bar_color="primary",
+                                                   height=14, visible=False,
+                                                   sizing_mode="stretch_width", margin=(0, 10))
+        self.dep_text = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
+                                         css_classes=["gmwm-mdependence"])
+
         h = pn.pane.Markdown
         small = {"font-size": "12px", "color": "#555"}
         self.caption = h(
@@ -640,6 +723,8 @@ class MultiView:
                                            margin=(5, 10)),
                              sizing_mode="stretch_width"),
                    sizing_mode="stretch_width"),
+            pn.Row(self.dep_button, self.dep_b, self.dep_cancel, sizing_mode="stretch_width"),
+            self.dep_progress, self.dep_text,
             sizing_mode="stretch_width",
         )
         self.state.param.watch(self._on_state, "revision")
@@ -946,7 +1031,7 @@ class MultiView:
             self.app._locked(done)
             raise
         except Exception as e:  # reported in the view, never a traceback
-            if not isinstance(e, (ValueError, KeyError, TypeError)):
+            if not isinstance(e, (ValueError, KeyError, TypeError, Cancelled)):
                 log.exception("multi-channel fit failed")
             err = e
 
@@ -963,6 +1048,77 @@ class MultiView:
                 done()
 
         self.app._locked(finish)
+
+    # ------------------------------------------------------------------------------------
+    # test of dependence (on request, worker thread, progress and cancel)
+    # ------------------------------------------------------------------------------------
+    def _dep_running(self, on: bool) -> None:
+        self.dep_running = on
+        self.dep_button.disabled = on
+        self.dep_cancel.disabled = not on
+        self.dep_progress.param.update(visible=on, value=0)
+
+    def _dep_progress(self, done: int, total: int,
+                      observer: Callable[[int, int], None] | None) -> None:
+        """Progress callback (worker thread): bar, text, cancel point."""
+        if observer is not None:
+            observer(done, total)
+        if self._dep_cancel.is_set():
+            raise Cancelled
+        now = time.perf_counter()
+        if done == total or now - self._dep_last > 0.1:  # at most ~10 updates a second
+            self._dep_last = now
+            value = int(100 * done / max(total, 1))
+            text = f"⏳ Bootstrap replicate {done} of {total} ..."
+            self.app._locked(lambda: (self.dep_progress.param.update(value=value),
+                                      setattr(self.dep_text, "object", text)))
+
+    def start_dependence_test(self, B: int | None = None, *, seed: int = 0,
+                              observer: Callable[[int, int], None] | None = None) -> bool:
+        """Test the dependence of the shown fit's shared processes in a worker thread.
+
+        ``observer(done, total)`` sees every progress step (tests). Returns False (with a
+        message) when there is nothing to test.
+        """
+        if self.dep_running:
+            return False
+        res, wvm = self.result, self.wvm
+        if res is None or wvm is None:
+            self.dep_text.object = "Fit a model first."
+            return False
+        if not res.model.shared:
+            self.dep_text.object = ("The model shares no process: mark the channels that "
+                                    "share one first (nothing to test).")
+            return False
+        b = int(B if B is not None else self.dep_b.value or 100)
+        model, spec = res.model, res.model.spec()
+        self._dep_cancel.clear()
+        self._dep_running(True)
+        self.dep_text.object = f"⏳ Fitting the independent model of {html.escape(spec)} ..."
+
+        def work() -> DependenceTest:
+            return run_dependence_test(wvm, model, B=b, seed=seed,
+                                       progress=lambda d, t: self._dep_progress(d, t, observer))
+
+        def apply(t: DependenceTest) -> None:
+            self.dependence = t
+            self.dep_text.object = dependence_text(t, spec)
+
+        def fail(e: BaseException) -> None:
+            if isinstance(e, Cancelled):
+                self.dep_text.object = "Dependence test cancelled."
+            else:
+                self.dep_text.object = f"**Dependence test failed:** {html.escape(_message(e))}"
+
+        self.app._spawn(partial(self._background, work, apply, fail,
+                                lambda: self._dep_running(False)))
+        return True
+
+    def cancel_dependence_test(self) -> None:
+        """Stop the running dependence test at its next replicate."""
+        if self.dep_running:
+            self._dep_cancel.set()
+            self.dep_text.object = "Cancelling ..."
 
     # ------------------------------------------------------------------------------------
     # display

@@ -345,6 +345,36 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(app: Any,
 
 
 # -------------------------------------------------------------------------------------------
+# the test of dependence
+# -------------------------------------------------------------------------------------------
+def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> None:
+    v = open_view(app)
+    v.spec_input.value = "WN+RW"  # RW shared by the three gyros (the default marks)
+    mm = MultiModel(GYROS, "WN+RW", shared=["RW"])
+    ref = eg.dependence_test(eg.wv_matrix(app.state.log, channels=GYROS), mm, B=4, seed=0)
+    seen: list[int] = []
+    assert v.start_dependence_test(4, observer=lambda d, t: seen.append(d))
+    assert seen == [0, 1, 2, 3, 4] and not v.dep_running
+    t = v.dependence
+    assert t.labels == ("RW",) and t.B == 4
+    assert t.statistic == pytest.approx(ref.statistic, rel=1e-9)
+    assert t.p_value == ref.p_value
+    np.testing.assert_allclose(t.bootstrap, ref.bootstrap, rtol=1e-9)
+    assert f"p = {format_value(ref.p_value, 3)}" in v.dep_text.object
+    # cancel after the second replicate: the previous outcome is kept
+    def observer(done: int, total: int) -> None:
+        if done == 2:
+            v.cancel_dependence_test()
+
+    assert v.start_dependence_test(50, observer=observer)
+    assert v.dependence is t and "cancelled" in v.dep_text.object
+    assert not v.dep_running and not v.dep_button.disabled and v.dep_cancel.disabled
+    # nothing shared: nothing to test
+    v.set_shared("RW", [])
+    assert not v.start_dependence_test(4) and "shares no process" in v.dep_text.object
+
+
+# -------------------------------------------------------------------------------------------
 # a real browser
 # -------------------------------------------------------------------------------------------
 @pytest.mark.browser
