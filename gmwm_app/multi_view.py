@@ -638,7 +638,7 @@ class MultiView:
             value="", placeholder="gyro_z: 2*GM+WN+RW", height=62, sizing_mode="stretch_width")
         self.override_input.param.watch(self._on_control, "value")
         self.share_widgets: list[pn.widgets.MultiChoice] = []
-        self.share_box = pn.Column(margin=0, sizing_mode="stretch_width")
+        self.share_box = pn.FlexBox(margin=0, sizing_mode="stretch_width")
         for i in range(N_SHARE_POOL):
             self._new_share_widget(i)
         self.share_note = pn.pane.Markdown("", margin=(0, 10),
@@ -661,13 +661,13 @@ class MultiView:
             [("process", "shared process", 150, None), ("channel_a", "channel", 80, None),
              ("channel_b", "with", 80, None), ("covariance", "covariance", 95, sci),
              ("unit", "unit", 80, None),
-             ("correlation", "correlation [1]", 90, NumberFormatter(format="0.0000"))],
-            "mgmwm_cov", "gmwm-mcov", 240)
+             ("correlation", "correlation [1]", 110, NumberFormatter(format="0.0000"))],
+            "mgmwm_cov", "gmwm-mcov", 300)
         self.param_source, self.param_table = _table(
             [("channel", "channel", 110, None), ("process", "process", 60, None),
              ("parameter", "parameter", 75, None), ("value", "value", 95, sci),
              ("unit", "unit", 80, None)],
-            "mgmwm_params", "gmwm-mparams", 240)
+            "mgmwm_params", "gmwm-mparams", 300)
 
         self.dep_running = False
         self.dependence: DependenceTest | None = None
@@ -738,7 +738,7 @@ class MultiView:
     # ------------------------------------------------------------------------------------
     def _new_share_widget(self, i: int) -> None:
         w = pn.widgets.MultiChoice(label="", options=[], value=[], visible=False,
-                                   sizing_mode="stretch_width", margin=(2, 10),
+                                   width=330, margin=(2, 10),
                                    css_classes=[f"gmwm-mshare-{i}"])
         w.param.watch(lambda e, i=i: self._on_share(i, e.new), "value")
         self.share_widgets.append(w)
