@@ -840,7 +840,7 @@ class MultiView:
 
     def _on_state(self, _event: Any = None) -> None:
         s = self.state
-        key = (id(s.log), s.fs)
+        key = (id(s.log), s.fs, s.robust)
         if key == self._data_key:
             return  # another kind of change (model, channel of the Fit tab ...): nothing here
         if not self.visible:
@@ -851,7 +851,7 @@ class MultiView:
     def _sync_data(self, force: bool = False) -> None:
         """Follow a new log (or fs): channel options, default choice, refit."""
         s = self.state
-        key = (id(s.log), s.fs)
+        key = (id(s.log), s.fs, s.robust)
         if key == self._data_key and not force:
             return
         new_log = self._data_key is None or key[0] != self._data_key[0]

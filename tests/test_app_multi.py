@@ -151,6 +151,15 @@ def test_data_changes_follow_cheaply_while_hidden(app: Any, tmp_path: Path) -> N
     assert abs(rho[1]) < 0.07
 
 
+def test_robust_setting_gives_a_notice_and_keeps_the_classical_matrix(app: Any) -> None:
+    v = open_view(app)
+    before, wvms = v.wvm, v.n_wvm
+    assert not v.notice.visible
+    assert app.state.set_robust(True), app.state.error
+    assert v.notice.visible and "classical WV/WCCV" in v.notice.object
+    assert v.wvm is before and v.n_wvm == wvms  # the cached (classical) matrix
+
+
 # -------------------------------------------------------------------------------------------
 # tables
 # -------------------------------------------------------------------------------------------
