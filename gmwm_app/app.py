@@ -20,6 +20,7 @@ Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import io
 import logging
 import os
@@ -63,6 +64,39 @@ __all__ = ["GMWMApp", "create_app", "create_app_factory", "live_apps"]
 log = logging.getLogger(__name__)
 
 pn.extension("filedropper", notifications=False)
+
+
+def _light_text_updates() -> bool:
+    """Make a text pane's ``object`` change send its text only (Panel 1.9: also stylesheets).
+
+    Panel's HTML/Markdown/Alert panes re-send their whole property set on every ``object``
+    change, the stylesheets included; the first time, that list differs from the one the page
+    was built with (the template's design sheets), and a changed list of Bokeh models makes
+    Bokeh recompute the graph of every model of the document: 0.05-0.1 s per pane and
+    session on the server loop, with about a thousand models per page. The stylesheets a pane
+    was built with are kept (they do not depend on its text). Returns whether it applied.
+    """
+    from panel.pane.markup import HTMLBasePane
+
+    if getattr(HTMLBasePane._update, "_gmwm_light", False):
+        return True
+    original = HTMLBasePane._update
+    if not callable(original) or not hasattr(HTMLBasePane, "_get_properties"):
+        return False  # pragma: no cover - another Panel: leave it alone
+
+    def _update(self: Any, ref: str, model: Any) -> None:
+        if getattr(self, "enable_streaming", False):
+            return original(self, ref, model)
+        props = self._get_properties(model.document)
+        props.pop("stylesheets", None)
+        model.update(**props)
+
+    _update._gmwm_light = True  # type: ignore[attr-defined]
+    HTMLBasePane._update = _update
+    return True
+
+
+_light_text_updates()
 
 
 def limit_blas_threads(n: int = 1) -> bool:
@@ -859,6 +893,99 @@ def create_app_factory(path: str | None = None) -> Callable[[], pn.viewable.View
         return create_app()
 
     return factory
+
+
+_BUILD_POOL: ThreadPoolExecutor | None = None
+_PREBUILT: weakref.WeakSet[Any] = weakref.WeakSet()  # documents built off the loop
+
+
+def _no_validation() -> None:
+    """Stands for ``Document.validate`` on documents already validated off the loop."""
+
+
+def _build_pool() -> ThreadPoolExecutor:
+    global _BUILD_POOL
+    if _BUILD_POOL is None:
+        # one thread: builds queue in order (the GIL would not run two at once anyway)
+        _BUILD_POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gmwm-page")
+    return _BUILD_POOL
+
+
+def create_application(path: str | None = None) -> Any:
+    """The Bokeh application of the app for ``pn.serve``: each page is built off the loop.
+
+    Opening a page builds a Bokeh document of about a thousand models, 0.3-1 s of Python.
+    Panel builds it in the server's event loop, so a burst of page opens would hold every
+    other session for the sum of their builds. Here the build (the page factory and the
+    document's models) runs in a worker thread while the session is being created (Bokeh
+    awaits ``on_session_created`` before it initialises the document); the loop only waits
+    for it, and keeps serving the other sessions, their events and their HTTP requests
+    meanwhile. If the threaded build fails, the page is built on the loop as usual.
+
+    Parameters
+    ----------
+    path : str, optional
+        Server path preloaded by every session (``gmwm-app FILE``); the demo log otherwise.
+
+    Returns
+    -------
+    panel.io.application.Application
+        Pass it to ``pn.serve({"/": create_application()})``.
+    """
+    from panel.io.application import Application, _eval_panel
+    from panel.io.handlers import FunctionHandler
+    from panel.io.state import state as pn_state
+
+    factory = create_app_factory(path)
+
+    class OffLoopHandler(FunctionHandler):
+        async def on_session_created(self, session_context: Any) -> None:
+            await super().on_session_created(session_context)
+            doc = session_context._document
+            loop = asyncio.get_running_loop()
+            try:
+                # in a context of its own: whatever the build leaves in context variables
+                # (Panel's current document) must not stay with the pool's thread
+                await loop.run_in_executor(_build_pool(), contextvars.Context().run,
+                                           self._build, doc)
+            except Exception:  # built again on the loop by modify_document
+                log.exception("building the page off the loop failed; building it on the loop")
+
+        def _build(self, doc: Any) -> None:
+            # what Panel's run_app does for a function handler, without its patch of Bokeh's
+            # global curdoc() stack (shared by all threads: a build in a thread would leave
+            # another session's document in Bokeh's global state); the current document is
+            # Panel's context variable, which is per thread. The document belongs to this
+            # thread while it is built (Panel applies model changes directly only on the
+            # document's thread); Panel's initialize_document gives it to the loop's after.
+            pn_state._thread_id_[doc] = threading.get_ident()
+            pn_state._launching.add(doc)
+            try:
+                _eval_panel(factory, None, title, True, False, doc)
+            except BaseException:
+                doc.clear()  # built again on the loop
+                raise
+            finally:
+                pn_state._launching.discard(doc)
+            doc.config.update(reconnect_session=pn.config.reconnect is True,
+                              notifications=None, notify_connection_status=False)
+            if not doc.roots:
+                raise RuntimeError("the page factory produced an empty document")
+            # Bokeh validates the document after the handlers ran, on the loop (a walk of
+            # every model, ~0.1 s): done here instead, and skipped there for this document
+            doc.validate()
+            doc.validate = _no_validation
+            _PREBUILT.add(doc)
+
+        def modify_document(self, doc: Any) -> None:
+            if doc in _PREBUILT:
+                _PREBUILT.discard(doc)
+                return
+            super().modify_document(doc)
+
+    title = "GMWM: stochastic calibration of inertial sensors"
+    handler = OffLoopHandler(partial(_eval_panel, factory, None, title, True, False))
+    return Application(handler, admin=False)
 
 
 if __name__.startswith("bokeh"):  # `panel serve gmwm_app/app.py`

@@ -68,14 +68,14 @@ def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
     the demo; yields (port, server thread) once the port accepts connections; always stops."""
     import panel as pn
 
-    from gmwm_app.app import create_app_factory
+    from gmwm_app.app import create_application
 
     old = os.environ.get("GMWM_APP_DEMO")
     os.environ["GMWM_APP_DEMO"] = str(demo_file)
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    thread = pn.serve({"/": create_app_factory()}, port=port, address="127.0.0.1", show=False,
+    thread = pn.serve({"/": create_application()}, port=port, address="127.0.0.1", show=False,
                       threaded=True, start=True, verbose=False,
                       websocket_origin=[f"127.0.0.1:{port}"], **serve_kw)
     try:

@@ -9,8 +9,9 @@ HTTP probe checks that the server loop keeps answering within a second; (3) the 
 discarded by the server (what happens when a closed tab's session expires) and must leave
 ``live_apps()``, and repeated open/close cycles must not grow the resident memory.
 
-Opening a page builds its Bokeh document on the server loop (~1.5 s on two cores), so a burst
-of nine page opens holds the loop for their sum; that figure is printed, not asserted.
+Opening a page builds a Bokeh document of about a thousand models (~1 s of Python on two
+cores); the app builds it in a worker thread (``gmwm_app.app.create_application``), so during
+the burst of nine page opens the server loop must also keep answering within a second.
 """
 
 from __future__ import annotations
@@ -298,6 +299,7 @@ def test_served_sessions_isolated_and_responsive(served: dict[str, Any],
           f"running at the end: {st['overlap']}): loop probe max {st['work_probe'] * 1000:.0f} "
           f"ms over {st['probes']} probes, slowest refit of another session "
           f"{st['refit_max'] * 1000:.0f} ms; total {elapsed:.1f} s")
+    assert st["open_probe"] < MAX_BLOCK_S  # page builds run off the loop
     assert elapsed < 60
     assert st["work_probe"] < MAX_BLOCK_S and st["refit_max"] < MAX_BLOCK_S
 
