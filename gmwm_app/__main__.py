@@ -73,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import panel as pn
 
-    from gmwm_app.app import create_app_factory
+    from gmwm_app.app import create_application
 
     kwargs = {}
     origins = list(args.allow_websocket_origin or [])
@@ -84,7 +84,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if origins:
         kwargs["websocket_origin"] = origins
     pn.serve(
-        {"/": create_app_factory(path)}, port=args.port, address=args.address,
+        {"/": create_application(path)}, port=args.port, address=args.address,
         show=not args.no_show, title="GMWM", websocket_max_message_size=64 * 1024 * 1024,
         **kwargs,
     )
