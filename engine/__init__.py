@@ -87,6 +87,9 @@ _LAZY: dict[str, str] = {
     "wavelet_variance_stream": "stream",
     "run_slope_study": "study",
     "TimeReport": "timecheck",
+    "Scenario": "teaching",
+    "SCENARIOS": "teaching",
+    "simulate_scenario": "teaching",
     "check_time": "timecheck",
     "WaveletCrossCovariance": "wccv",
     "WVMatrix": "wccv",
@@ -146,6 +149,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .study import (
         run_slope_study,
     )
+    from .teaching import SCENARIOS, Scenario, simulate_scenario
     from .timecheck import (
         TimeReport,
         check_time,
@@ -192,3 +196,4 @@ __all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
     "ReplicateResult",
 ]
 __version__ = "0.1.0"
+__all__ += ["Scenario", "SCENARIOS", "simulate_scenario"]  # teaching (issue 4)

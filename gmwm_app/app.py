@@ -194,18 +194,10 @@ _PROCESS_HELP = {
 
 def _lazy_view_factories() -> list[tuple[str, Callable[[GMWMApp], Any]]]:
     """Tabs built on first opening: (title, factory taking the app, returning a view)."""
-    out: list[tuple[str, Callable[[GMWMApp], Any]]] = []
-    try:
-        from gmwm_app.slope_view import SlopeView
-        out.append(("Slope method", SlopeView))
-    except ImportError:  # pragma: no cover - view not yet written
-        pass
-    try:
-        from gmwm_app.multi_view import MultiView
-        out.append(("Multi-channel", MultiView))
-    except ImportError:  # pragma: no cover - view not yet written
-        pass
-    return out
+    from gmwm_app.multi_view import MultiView
+    from gmwm_app.slope_view import SlopeView
+
+    return [("Slope method", SlopeView), ("Multi-channel", MultiView)]
 
 
 def live_apps() -> list[GMWMApp]:

@@ -44,6 +44,8 @@ def _data_path(state: AppState) -> str:
         return str(Path(state.path).resolve())
     if state.source == "demo":
         return str(demo_path().resolve())
+    if state.source == "scenario":  # simulated again from its key and seed on restore
+        return f"scenario:{state.path}"
     return state.filename or "upload"
 
 
@@ -60,6 +62,8 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
     app = {"source": state.source, "filename": state.filename, "channel": ch,
            "fs": state.fs, "fs_source": state.fs_source, "robust": bool(state.robust),
            "model": state.model.spec(), "query": state.to_query()}
+    if state.source == "scenario":
+        app["scenario"] = state.path
     return session_to_json(data_path=_data_path(state), load=dict(load or {}), models=models,
                            wvs=wvs, fits=fits, app=app,
                            fingerprint=state.source in ("path", "demo"))
@@ -104,6 +108,17 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
         plan.problems.append(
             f"the session's data were the uploaded file {fname}, which the server does not "
             f"keep: upload {fname} again, then restore the session")
+        return plan
+    if source == "scenario":  # a teaching scenario: deterministic, simulated again
+        key = str(app.get("scenario") or sess.data_path.removeprefix("scenario:"))
+        try:
+            loaded = AppState.read("scenario", path=key)
+        except ValueError as e:
+            plan.problems.append(f"the session's teaching scenario {key!r} could not be "
+                                 f"simulated: {e}")
+            return plan
+        AppState.precompute(loaded, channel, fs, robust)
+        plan.loaded = loaded
         return plan
     path = sess.data_path
     if not path or not Path(path).is_file():

@@ -60,6 +60,24 @@ def test_session_round_trip(app_state: AppState, app_demo: Path, tmp_path: Path)
     assert saved.params == pytest.approx(s.result.params, rel=1e-12)
 
 
+def test_session_round_trip_of_a_teaching_scenario() -> None:
+    """A scenario session names its key, not a file: restoring simulates the same log."""
+    s = AppState()
+    loaded = AppState.read("scenario", path="wn_gm")
+    assert s.install(loaded), s.error
+    assert s.set_model("GM+WN"), s.error
+    text = sv.session_json(s)
+    assert json.loads(text)["app"]["scenario"] == "wn_gm"
+    other = AppState()
+    assert other.load_demo()
+    plan = sv.prepare_restore(text, "s.json")
+    assert plan.loaded is not None and not plan.problems, plan.problems
+    assert sv.apply_restore(other, plan), other.error
+    assert (other.source, other.path, other.channel) == ("scenario", "wn_gm", s.channel)
+    assert other.model.spec() == "GM+WN"
+    assert other.result.params == pytest.approx(s.result.params, rel=1e-9)  # same samples
+
+
 def test_restore_says_what_is_missing(app_state: AppState, tmp_path: Path) -> None:
     s = app_state
     assert s.set_model("WN+RW")
