@@ -453,6 +453,7 @@ class SlopeView:
         self.app = app
         self.state: AppState = app.state
         self.regions: dict[str, tuple[float, float]] = {}
+        self._scenario_seen = ""  # last scenario whose naive regions were offered
         self.result: SlopeResult | None = None
         self._job = 0
         self._key: Any = None
@@ -608,6 +609,7 @@ class SlopeView:
 
         def apply(loaded: Any) -> None:
             self.regions = dict(sc.region_dict)
+            self._scenario_seen = key
             self._key = None
             self.app._install(loaded)
             if self.state.source == "scenario" and self.state.path == key:
@@ -790,6 +792,14 @@ class SlopeView:
                 self.scenario_select.value = key
             finally:
                 self._syncing = False
+        if key and key != self._scenario_seen:
+            # a scenario arrived by other means than the menu (a link, a restored session):
+            # its naive regions, and its true model form when the session has no model yet
+            self._scenario_seen = key
+            if not self.regions:
+                self.regions = dict(SCENARIOS[key].region_dict)
+            if not len(s.model):
+                s.set_model(SCENARIOS[key].model.cleared())
         if key:
             sc = SCENARIOS[key]
             self.explain.param.update(

@@ -233,6 +233,23 @@ def test_scenario_url_round_trip_and_unknown_key(app_demo: Path) -> None:
     assert "unknown teaching scenario" in s2.error and s2.source == "demo"
 
 
+def test_scenario_from_a_link_gets_its_naive_regions_and_model(app_demo: Path) -> None:
+    """A scenario opened by URL (no menu click) shows the pitfall at once."""
+    from gmwm_app.app import GMWMApp
+
+    app = GMWMApp()
+    assert app.state.from_query({"source": "scenario", "scenario": "wn_gm"}), app.state.error
+    view = app.open_view("Slope method")
+    sc = SCENARIOS["wn_gm"]
+    assert view.regions == dict(sc.region_dict)
+    assert app.state.model.spec() == sc.model.cleared().spec()
+    res = view.result
+    assert res is not None and res.estimates.get("AVSM") is not None
+    # the naive white-noise line overstates sigma2 (the pitfall the scenario teaches)
+    avsm = res.estimates["AVSM"].model.values()
+    assert avsm["WN.sigma2"] > 1.2 * sc.model.values()["WN.sigma2"]
+
+
 def test_pure_helpers_curves_and_table_rows() -> None:
     # WN + DR: AVAR(T) = N^2/T + R^2 T^2/2 exactly (CONVENTIONS), for the truth curve
     fs, s2, om = 50.0, 2e-3, 3e-6
