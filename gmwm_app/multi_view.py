@@ -27,9 +27,8 @@ ColumnDataSource ``data`` in place.
 Test of dependence (``engine.dependence_test``, the multivariate paper, section IV): on
 request, in the worker pool, with a progress bar and a Cancel button. The parametric
 bootstrap refits 2 B simulated logs (B = 100 on the demo log with a linear model: about half
-a minute), so it is never run live. ``engine.dependence_test`` has no progress hook, so the
-view runs the engine's own replicate function (``engine.mgmwm._boot_dependence``) one
-replicate at a time with the same seeds: the result is identical to the engine's.
+a minute), so it is never run live; its ``progress`` callback feeds the bar and raises to
+cancel.
 """
 
 from __future__ import annotations
@@ -59,8 +58,7 @@ from bokeh.models import (
 from bokeh.plotting import figure
 
 import engine as eg
-from engine.fit import FitError
-from engine.mgmwm import SHAREABLE, DependenceTest, MultiModel, _boot_dependence
+from engine.mgmwm import SHAREABLE, DependenceTest, MultiModel
 from engine.model import ModelError, parse_model
 from engine.units import squared
 
@@ -409,11 +407,10 @@ class Cancelled(Exception):
 
 def run_dependence_test(wvm: eg.WVMatrix, model: MultiModel, *, B: int = 100, seed: int = 0,
                         progress: Callable[[int, int], None] | None = None) -> DependenceTest:
-    """:func:`engine.dependence_test` of every shared process, one replicate at a time.
+    """:func:`engine.dependence_test` of every shared process (``weights="ci"``, one worker).
 
-    Same seeds, same replicate function, same p-value as the engine's (``weights="ci"``,
-    one worker); ``progress(done, B)`` is called after the two observed fits (``done = 0``)
-    and after every replicate, and may raise to stop.
+    ``progress(done, B)`` is called first with ``done = 0`` and then after every replicate;
+    it may raise to stop the test.
 
     Raises
     ------
@@ -427,26 +424,10 @@ def run_dependence_test(wvm: eg.WVMatrix, model: MultiModel, *, B: int = 100, se
     if not model.shared:
         raise ModelError("the model shares no process: mark the channels that share one "
                          "first (nothing to test)")
-    h1 = model.cleared()
-    h0 = model.without_dependence().cleared()
-    labels = tuple(sp.label for sp in model.shared)
-    fit1 = eg.fit_mgmwm(wvm, h1, weights="ci")
-    fit0 = eg.fit_mgmwm(wvm, h0, weights="ci")
-    stat = fit0.objective - fit1.objective
     if progress is not None:
-        progress(0, B)
-    boot: list[float] = []
-    for i, sd in enumerate(np.random.SeedSequence(seed).spawn(B)):
-        d = _boot_dependence((fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, "ci", sd))
-        if d is not None:
-            boot.append(d)
-        if progress is not None:
-            progress(i + 1, B)
-    if len(boot) < max(1, B // 2):
-        raise FitError("too many bootstrap replicates failed; the model may be unidentifiable")
-    p = (1 + sum(d >= stat for d in boot)) / (1 + len(boot))
-    return DependenceTest(float(stat), float(p), float(fit0.objective), float(fit1.objective),
-                          labels, len(boot), tuple(float(d) for d in boot))
+        progress(0, B)  # the two observed fits come first
+    return eg.dependence_test(wvm, model, B=B, seed=seed, workers=1, weights="ci",
+                              progress=progress)
 
 
 def dependence_text(t: DependenceTest, spec: str) -> str:
