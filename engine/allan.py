@@ -38,12 +38,12 @@ from .model import Model, parse_model
 from .processes import AR1, DR, QN, RW, WN, Process
 from .units import datasheet, param_unit
 from .wavelet import (
-    _BLOCK,
     WaveletVariance,
     _as_series,
     _cumsum_demeaned,
     default_levels,
     eta3_interval,
+    second_difference_sums,
 )
 
 __all__ = [
@@ -221,29 +221,6 @@ def _decade_taus(n: int) -> np.ndarray:
     return np.asarray(out, dtype=np.int64)
 
 
-def _second_difference_sums(s: np.ndarray, n: int, ms: np.ndarray) -> np.ndarray:
-    """``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2`` over ``t = 2m..N`` for increasing ``ms``.
-
-    Cache-blocked over t with every m inside a block, as the WV's level sums (for octave ``ms``
-    the arithmetic is the WV's, term for term).
-    """
-    sums = np.zeros(ms.size)
-    buf = np.empty(_BLOCK)
-    for a in range(2, n + 1, _BLOCK):
-        b = min(a + _BLOCK, n + 1)
-        for i, m in enumerate(ms):
-            m = int(m)
-            lo = max(a, 2 * m)
-            if lo >= b:
-                break  # larger m start even later
-            d = buf[: b - lo]
-            np.multiply(s[lo - m : b - m], -2.0, out=d)
-            d += s[lo:b]
-            d += s[lo - 2 * m : b - 2 * m]
-            sums[i] += np.einsum("i,i->", d, d)  # as the WV: BLAS dot stalls on a busy machine
-    return sums
-
-
 def allan_variance(
     x: Any,
     *,
@@ -321,7 +298,7 @@ def allan_variance(
             raise ValueError(f"averaging time {bad} samples is out of range: a series of {n} "
                              f"samples supports 1 to {mmax}")
     s = _cumsum_demeaned(a)
-    sums = _second_difference_sums(s, n, ms)
+    sums = second_difference_sums(s, n, ms)
     terms = n - 2 * ms + 1
     m_f = ms.astype(float)
     avar = sums / (2.0 * m_f**2 * terms)

@@ -283,8 +283,11 @@ def _cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``gmwm`` console script; returns the exit status."""
+    from ._blas import set_blas_threads
     from .io import LoadError
 
+    if argv is None:  # the command itself (not a call from Python): see engine._blas
+        set_blas_threads(1)
     try:
         args = _build_parser().parse_args(argv)
         handler = {"wv": _cmd_wv, "fit": _cmd_fit, "simulate": _cmd_simulate,

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ._blas import blas_threads
 from ._optim import chi2_isf
 
 __all__ = [
@@ -238,27 +239,49 @@ def _cumsum_demeaned(x: np.ndarray) -> np.ndarray:
     return s
 
 
+_DOT_CHUNK = 8192  # OpenBLAS computes a dot product of <= 10,000 elements in the caller
+
+
+def _chunked_sumsq(a: np.ndarray, b: np.ndarray) -> float:
+    """``a @ b`` in chunks small enough that a multi-threaded BLAS keeps them in this thread."""
+    total = 0.0
+    for i in range(0, a.size, _DOT_CHUNK):
+        total += float(np.dot(a[i : i + _DOT_CHUNK], b[i : i + _DOT_CHUNK]))
+    return total
+
+
 def _classical_sums(s: np.ndarray, n: int, levels: int) -> np.ndarray:
-    """Sum over t of (S_t - 2 S_{t-m} + S_{t-2m})^2 for every level, cache-blocked."""
-    sums = np.zeros(levels)
+    """Sum over t of (S_t - 2 S_{t-m} + S_{t-2m})^2 for every level (m = 2^(j-1))."""
+    return second_difference_sums(s, n, 1 << np.arange(levels))
+
+
+def second_difference_sums(s: np.ndarray, n: int, ms: np.ndarray) -> np.ndarray:
+    """``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2`` over ``t = 2m..n`` for increasing ``ms``.
+
+    ``s`` is the cumulative sum with a leading 0 (:func:`_cumsum_demeaned`). Loops over
+    cache-sized blocks of t with every m inside a block, so that the regions of ``s`` that
+    consecutive m share stay in cache; the WV's level sums (m = 2^(j-1)) and the Allan
+    variance's (any m) both use it.
+    """
+    sums = np.zeros(len(ms))
     buf = np.empty(_BLOCK)
-    # index t runs over positions of S: coefficient at level j uses S[t], S[t-m], S[t-2m],
-    # t = 2m .. n.  Loop over blocks of t, levels inside, so the shared regions stay cached.
+    # the per-block sum of squares by BLAS dot (3x faster than einsum), whole when the BLAS
+    # pool has one thread; otherwise in chunks that OpenBLAS keeps in this thread: split over
+    # its threads, this small product is slower, and 4-30x slower as soon as anything else
+    # keeps a core busy (engine._blas)
+    sumsq = np.dot if blas_threads() == 1 else _chunked_sumsq
     for a in range(2, n + 1, _BLOCK):
         b = min(a + _BLOCK, n + 1)
-        for j in range(1, levels + 1):
-            m = 1 << (j - 1)
+        for i, m in enumerate(ms):
+            m = int(m)
             lo = max(a, 2 * m)
             if lo >= b:
-                break  # higher levels start even later
-            k = b - lo
-            d = buf[:k]
+                break  # larger m start even later
+            d = buf[: b - lo]
             np.multiply(s[lo - m : b - m], -2.0, out=d)
             d += s[lo:b]
             d += s[lo - 2 * m : b - 2 * m]
-            # einsum, not np.dot: BLAS dot hands this small product to OpenBLAS's spinning
-            # thread pool, which is 4-30x slower as soon as another process or thread is busy
-            sums[j - 1] += np.einsum("i,i->", d, d)
+            sums[i] += sumsq(d, d)
     return sums
 
 

@@ -103,44 +103,14 @@ def limit_blas_threads(n: int = 1) -> bool:
     """Limit the BLAS (OpenBLAS) thread pool of this process to ``n`` threads.
 
     In a server, the event loop thread is busy while a worker computes a WV; OpenBLAS's own
-    threads then fight them for the cores at every small ``np.dot`` (the WV's per-block sums),
-    which made a 1e6-sample WV 30x slower (1 s instead of 30 ms) on a 2-core machine. The
-    engine's matrices are small, so one BLAS thread loses nothing. Uses threadpoolctl when
-    installed, else OpenBLAS's ``*_set_num_threads`` through ctypes (Linux). Returns True
+    threads then fight them for the cores at every small ``np.dot``, which made a 1e6-sample
+    WV 30x slower (1 s instead of 30 ms) on a 2-core machine. The engine's matrices are small,
+    so one BLAS thread loses nothing (:func:`engine._blas.set_blas_threads`). Returns True
     when a limit was set.
     """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        pass
-    else:
-        threadpool_limits(n, user_api="blas")
-        return True
-    import ctypes
+    from engine._blas import set_blas_threads
 
-    done = False
-    paths: set[str] = set()
-    try:
-        with open("/proc/self/maps") as f:  # the shared libraries loaded in this process
-            for line in f:
-                parts = line.split()
-                if len(parts) >= 6 and "openblas" in parts[-1].lower() and ".so" in parts[-1]:
-                    paths.add(parts[-1])
-    except OSError:
-        return False
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-                     "openblas_set_num_threads64_", "openblas_set_num_threads"):
-            fn = getattr(lib, name, None)
-            if fn is not None:
-                fn(int(n))
-                done = True
-                break
-    return done
+    return set_blas_threads(n)
 
 
 _BLAS_LIMITED = False

@@ -92,3 +92,31 @@ def test_nelder_mead_iterates_as_scipy() -> None:
     # budget exhausted: success is False
     assert not nelder_mead(f, np.array([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]]),
                            xatol=1e-12, fatol=0.0, maxfev=20).success
+
+
+def test_second_difference_sums_same_with_any_blas_pool(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Whole BLAS dot (one-thread pool) and chunked dot (threaded pool) give the same sums,
+    equal to the direct definition."""
+    import engine.wavelet as W
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=100_003).cumsum() * 1e-3 + rng.normal(size=100_003)
+    s = W._cumsum_demeaned(x)
+    ms = np.array([1, 2, 3, 8, 100, 4096, 30_000])
+    direct = np.array([np.sum((s[2 * m:] - 2 * s[m:-m] + s[: s.size - 2 * m]) ** 2) for m in ms])
+    for threads in (1, 4, None):
+        monkeypatch.setattr(W, "blas_threads", lambda t=threads: t)
+        np.testing.assert_allclose(W.second_difference_sums(s, x.size, ms), direct, rtol=1e-11)
+
+
+def test_blas_pool_can_be_read_and_limited() -> None:
+    from engine._blas import blas_threads, set_blas_threads
+
+    before = blas_threads()
+    if before is None:
+        pytest.skip("no OpenBLAS found in this process")
+    try:
+        assert set_blas_threads(1) and blas_threads() == 1
+    finally:
+        set_blas_threads(before)
+    assert blas_threads() == before
