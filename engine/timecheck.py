@@ -223,7 +223,8 @@ def segment_fs(t: np.ndarray, start: int = 0, stop: int | None = None) -> float:
 
     ``(n - 1) / span`` when every step is within 1 % of the median step, else
     ``1 / median step``; rounded to 12 significant digits (printed stamps carry last-digit
-    noise). NaN for fewer than 2 samples.
+    noise). NaN for fewer than 2 samples and when the steps are too small to give a finite
+    rate.
     """
     seg = np.asarray(t[start:stop], dtype=np.float64)
     if seg.size < 2:
@@ -233,8 +234,9 @@ def segment_fs(t: np.ndarray, start: int = 0, stop: int | None = None) -> float:
     if not med > 0:
         return math.nan
     uniform = bool(np.all(np.abs(d - med) <= 0.01 * med))
-    fs = (seg.size - 1) / (seg[-1] - seg[0]) if uniform else 1.0 / med
-    return float(f"{fs:.12g}")
+    with np.errstate(over="ignore", divide="ignore"):  # steps of ~1e-308 s: no usable rate
+        fs = (seg.size - 1) / (seg[-1] - seg[0]) if uniform else 1.0 / med
+    return float(f"{fs:.12g}") if math.isfinite(fs) else math.nan
 
 
 def as_seconds(t: Any, scale: float = 1.0) -> np.ndarray:
