@@ -154,10 +154,7 @@ class GMWMResult:
             for row in ds:
                 lines.append(f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
                              f"{row['unit']}")
-        if self.at_bound:
-            lines += ["", f"  warning: at a bound: {', '.join(self.at_bound)}"]
-        if not self.converged:
-            lines += ["", f"  warning: {self.message}"]
+        lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -293,6 +290,16 @@ class _Problem:
     def profile(self, u: np.ndarray) -> float:
         phis = tuple(self.phi_of(i, float(ui)) for i, ui in zip(self.nl_idx, u, strict=True))
         return self.solve(phis)[0]
+
+
+def _warning_lines(at_bound: Any, converged: bool, message: str) -> list[str]:
+    """The warning lines that end a fit summary (parameters at a bound, no convergence)."""
+    lines: list[str] = []
+    if at_bound:
+        lines += ["", f"  warning: at a bound: {', '.join(at_bound)}"]
+    if not converged:
+        lines += ["", f"  warning: {message}"]
+    return lines
 
 
 def _grid_axis(prob: _Problem) -> np.ndarray:

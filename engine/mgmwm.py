@@ -70,7 +70,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
-from .fit import FitError, GMWMResult, fit_gmwm, weight_matrix
+from .fit import FitError, GMWMResult, _warning_lines, fit_gmwm, weight_matrix
 from .model import Model, ModelError, parse_model
 from .processes import AR1, TC_MAX_FACTOR, TC_MIN, Process
 from .units import param_unit
@@ -1364,10 +1364,7 @@ class MGMWMResult:
             for a, ca in enumerate(g):
                 lines.append(f"    {ca:<{width}}" + "".join(f"{rho[a, b]:>{width}.4f}"
                                                           for b in range(len(g))))
-        if self.at_bound:
-            lines += ["", f"  warning: at a bound: {', '.join(self.at_bound)}"]
-        if not self.converged:
-            lines += ["", f"  warning: {self.message}"]
+        lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -1983,10 +1980,7 @@ class ReplicateResult:
                 lines.append(f"  {lab + '.' + name:<16} {v:>14.6e}  {param_unit(p.code, name, u)}")
         lines += ["", "  objective by replicate: "
                   + ", ".join(f"{v:.4g}" for v in self.objectives)]
-        if self.at_bound:
-            lines += ["", f"  warning: at a bound: {', '.join(self.at_bound)}"]
-        if not self.converged:
-            lines += ["", f"  warning: {self.message}"]
+        lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
     def __str__(self) -> str:
