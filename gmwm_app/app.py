@@ -167,7 +167,8 @@ def _lazy_view_factories() -> list[tuple[str, Callable[[GMWMApp], Any]]]:
     from gmwm_app.multi_view import MultiView
     from gmwm_app.slope_view import SlopeView
 
-    return [("Slope method", SlopeView), ("Multi-channel", MultiView)]
+    return [("Model selection", SelectionView), ("Slope method", SlopeView),
+            ("Multi-channel", MultiView)]
 
 
 def live_apps() -> list[GMWMApp]:
@@ -331,8 +332,6 @@ class GMWMApp:
             css_classes=["gmwm-intervals"], margin=(0, 10))
         self.intervals_check.param.watch(self._on_intervals, "value")
         self.jtest_pane = pn.pane.HTML("", margin=(0, 10), visible=False)
-        # the "Model selection" tab
-        self.selection = SelectionView(self)
         # session download/restore, Kalibr and datasheet exports, time-gap box
         self.session_panel = SessionPanel(self)
 
@@ -381,10 +380,9 @@ class GMWMApp:
         main = [pn.Column(self.alert, *self.session_panel.main(), self.notice, self.warning,
                           self.status, self.plot_box,
                           self.summary, tables, sizing_mode="stretch_width")]
-        self.tabs = pn.Tabs(("Fit", main[0]), ("Model selection", self.selection.panel),
-                            dynamic=False, sizing_mode="stretch_width")
-        # further views are built on first opening of their tab: a page opens with the
-        # Fit tab only, so opening it costs the server loop no more than before
+        self.tabs = pn.Tabs(("Fit", main[0]), dynamic=False, sizing_mode="stretch_width")
+        # the other views are built on first opening of their tab (or first use): a page
+        # opens with the Fit tab only, about half the models of a page with every tab built
         self.lazy_views: dict[str, Any] = {}
         self._lazy_factories: dict[str, Callable[[], Any]] = {}
         for title, factory in _lazy_view_factories():
@@ -427,7 +425,14 @@ class GMWMApp:
             self.lazy_views[title] = view
             index = list(self.tabs._names).index(title)
             self.tabs[index] = (title, view.panel)
+            if title == "Model selection":
+                view.refresh()
         return self.lazy_views[title]
+
+    @property
+    def selection(self) -> SelectionView:
+        """The "Model selection" view (built on first use)."""
+        return self.open_view("Model selection")
 
     def _on_tab(self, event: Any) -> None:
         title = self.tabs._names[event.new]
@@ -481,7 +486,8 @@ class GMWMApp:
         self.jtest_pane.param.update(object=badge, visible=bool(badge))
         if self.intervals_check.value != s.show_intervals:
             self.intervals_check.value = s.show_intervals
-        self.selection.refresh()
+        if "Model selection" in self.lazy_views:
+            self.selection.refresh()
 
     def _refresh_data_widgets(self) -> None:
         s = self.state
