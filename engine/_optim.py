@@ -54,10 +54,18 @@ def nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None,
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     m, n = a.shape
-    tol = 10.0 * np.finfo(float).eps * max(m, n) * max(float(np.abs(a).sum(axis=0).max()), 1.0)
+    # rounding level of the gradient a'(b - a x): relative to the columns' and b's norms
+    col = float(np.sqrt(np.max(np.sum(a * a, axis=0)))) if a.size else 0.0
+    tol = 10.0 * np.finfo(float).eps * max(m, n) * max(col * float(np.linalg.norm(b)), 1e-300)
+
+    def ls(p: np.ndarray) -> np.ndarray:
+        out = np.zeros(n)
+        if p.any():
+            out[p] = np.linalg.lstsq(a[:, p], b, rcond=None)[0]
+        return out
+
     if passive is not None and passive.any():
-        x = np.zeros(n)
-        x[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+        x = ls(passive)
         if np.all(x[passive] > 0.0):
             r = b - a @ x
             w = a.T @ r
@@ -66,31 +74,34 @@ def nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None,
     maxiter = 3 * n if maxiter is None else int(maxiter)
     x = np.zeros(n)
     passive = np.zeros(n, dtype=bool)
+    skip = np.zeros(n, dtype=bool)  # entered and rejected at this x (a rounding artefact)
     w = a.T @ b
     inner = 0
-    while not passive.all():
-        cand = np.where(passive, -np.inf, w)
+    for _ in range(10 * n + maxiter):
+        cand = np.where(passive | skip, -np.inf, w)
         j = int(np.argmax(cand))
         if cand[j] <= tol:
             break
         passive[j] = True
-        s = np.zeros(n)
-        s[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
-        while np.any(s[passive] <= 0.0):
+        s = ls(passive)
+        if s[j] <= 0.0:  # Lawson and Hanson: the new coefficient must come out positive
+            passive[j] = False
+            skip[j] = True
+            continue
+        while np.any(s[passive] <= 0.0) and inner <= maxiter:
             inner += 1
-            if inner > maxiter:
-                break
-            bad = passive & (s <= 0.0)
-            alpha = float(np.min(x[bad] / (x[bad] - s[bad])))
-            x = x + alpha * (s - x)
-            passive &= x > tol
+            bad = np.flatnonzero(passive & (s <= 0.0))
+            ratios = x[bad] / (x[bad] - s[bad])
+            k = int(np.argmin(ratios))
+            x = x + float(ratios[k]) * (s - x)
+            x[bad[k]] = 0.0  # the step ends where this coefficient reaches 0 (no rounding)
+            passive &= x > 0.0
             x[~passive] = 0.0
-            s = np.zeros(n)
-            if passive.any():
-                s[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
-        x = s
-        if inner > maxiter:
+            s = ls(passive)
+        if inner > maxiter:  # out of iterations: keep the last feasible point
             break
+        x = s
+        skip[:] = False
         w = a.T @ (b - a @ x)
     x = np.maximum(x, 0.0)
     r = b - a @ x

@@ -120,3 +120,35 @@ def test_blas_pool_can_be_read_and_limited() -> None:
     finally:
         set_blas_threads(before)
     assert blas_threads() == before
+
+
+# property-based: any small problem, the KKT conditions; any df and p, the quantile's defining
+# equation and monotonicity
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=150, deadline=None)
+@given(m=st.integers(1, 30), n=st.integers(1, 8), seed=st.integers(0, 2**32 - 1),
+       scale=st.floats(-8, 8))
+def test_nnls_kkt_on_random_problems(m: int, n: int, seed: int, scale: float) -> None:
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(m, n)) * 10.0**scale
+    b = rng.normal(size=m)
+    x, r = nnls(a, b)
+    assert np.all(x >= 0) and np.isfinite(r)
+    grad = a.T @ (a @ x - b)
+    tol = 1e-8 * max(1.0, float(np.abs(a).max()) ** 2 * max(1.0, float(np.abs(x).max())))
+    assert np.all(grad >= -tol)  # no descent direction into the feasible set
+    assert np.all(np.abs(grad[x > 0]) <= tol)
+    assert r <= np.linalg.norm(b) * (1 + 1e-12)  # never worse than x = 0
+
+
+@settings(max_examples=150, deadline=None)
+@given(df=st.floats(0.5, 1e7), p=st.floats(1e-9, 1 - 1e-9))
+def test_chi2_isf_inverts_the_survival_function(df: float, p: float) -> None:
+    x = float(chi2_isf(df, p))
+    assert x > 0 and math.isfinite(x)
+    q = float(special.chdtrc(df, x))  # survival function at our quantile
+    assert q == pytest.approx(p, rel=1e-7, abs=1e-13)
+    assert float(chi2_isf(df, min(p * 1.01, 1 - 1e-12))) <= x  # decreasing in p
