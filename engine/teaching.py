@@ -101,8 +101,7 @@ def gmwm_spec(codes: list[str] | tuple[str, ...]) -> str:
     Returns
     -------
     str
-        A model spec in the engine's order, e.g. ``["WN", "BI"] -> "GM+QN+WN"`` without QN:
-        ``"GM+WN"``.
+        A model spec in the engine's order, e.g. ``["WN", "BI"] -> "GM+WN"``.
     """
     order = ("BI", "QN", "WN", "RW", "DR")
     bad = [c for c in codes if c not in order]
