@@ -179,8 +179,6 @@ def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .inference import fit_efficient, param_intervals
-
     if not 0 < args.level < 1:
         raise CliError(f"--level must be in (0, 1), got {args.level}")
     if args.channels or args.more_inputs or args.shared or args.dependence_test:
@@ -190,11 +188,15 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     model = parse_model(args.model)
     wv, name = _load_wv(args)
     if args.weights == "efficient":
+        from .inference import fit_efficient
+
         res = fit_efficient(wv, model)
     else:
         res = fit_gmwm(wv, model, weights=args.weights)
     intervals = None
     if args.ci:
+        from .inference import param_intervals
+
         intervals = param_intervals(res, method=args.ci, level=args.level, B=args.bootstrap,
                                     seed=args.seed, workers=args.workers)
     if args.json:
