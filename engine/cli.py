@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from ._jsonutil import json_ready
 from .fit import FitError, fit_gmwm
 from .model import ModelError, parse_model
 from .wavelet import WaveletVariance, wavelet_variance
@@ -204,7 +205,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         d["channel"] = name
         if intervals is not None:
             d["intervals"] = [iv.to_dict() for iv in intervals]
-        return json.loads(json.dumps(d).replace("NaN", "null"))
+        return json_ready(d)
     text = f"{args.input} [{name}]\n{res.summary()}"
     if intervals is not None:
         text += f"\n\n  {100 * args.level:g}% intervals ({args.ci}):\n"

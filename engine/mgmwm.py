@@ -70,6 +70,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
+from ._jsonutil import json_ready
 from .fit import FitError, GMWMResult, _warning_lines, fit_gmwm, weight_matrix
 from .model import Model, ModelError, parse_model
 from .processes import AR1, TC_MAX_FACTOR, TC_MIN, Process
@@ -2200,7 +2201,6 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
     ModelError / LoadError (the command prints them on one line, exit status 2).
     """
     import argparse
-    import json
 
     from .io import load_log
 
@@ -2229,7 +2229,7 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
             d = res.to_dict()
             d["inputs"] = files
             d["channels"] = names
-            return json.loads(json.dumps(d).replace("NaN", "null"))
+            return json_ready(d)
         head = "\n".join(f"{f} [{n}]" for f, n in zip(files, names, strict=True))
         return f"{head}\n{res.summary()}"
     if len(files) > 1:
@@ -2266,7 +2266,7 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
         d["input"] = args.input
         if test is not None:
             d["dependence_test"] = test.to_dict()
-        return json.loads(json.dumps(d).replace("NaN", "null"))
+        return json_ready(d)
     text = f"{args.input} [{', '.join(names)}]\n{res.summary()}"
     if test is not None:
         text += (f"\n\n  test of dependence ({', '.join(test.labels)} shared vs independent): "

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ._jsonutil import json_ready as _nan_none
 from .fit import FitError, GMWMResult, weight_matrix
 from .model import parse_model
 from .wavelet import WaveletVariance
@@ -44,21 +45,6 @@ _LOAD_KEYS = ("channel", "fs", "segment", "scale", "units", "topic")
 class SessionError(ValueError):
     """A session file cannot be read or does not match its data; the message says why."""
 
-
-def _nan_none(o: Any) -> Any:
-    if isinstance(o, dict):
-        return {str(k): _nan_none(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_nan_none(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _nan_none(o.tolist())
-    if isinstance(o, (float, np.floating)):
-        return float(o) if math.isfinite(o) else None
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.bool_):
-        return bool(o)
-    return o
 
 
 def _arr(v: Any, dtype: Any = float) -> np.ndarray:

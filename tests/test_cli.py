@@ -168,3 +168,15 @@ def test_command_line_entry_point_has_no_traceback(tmp_path):
     r = subprocess.run([sys.executable, "-m", "engine.cli"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "Traceback" not in r.stderr
+
+
+def test_fit_json_keeps_strings_with_nan_in_them(capsys, tmp_path):
+    """Non-finite numbers become null; a channel named 'NaNo' stays 'NaNo'."""
+    x = eg.parse_model("WN(sigma2=1)+RW(gamma2=1e-4)").simulate(4096, rng=3)
+    path = tmp_path / "log.csv"
+    np.savetxt(path, x[:, None], header="NaNo", comments="")
+    code, out, err = run(capsys, "fit", str(path), "--model", "WN+RW", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["channel"] == "NaNo"
+    assert d["params"][0]["value"] == pytest.approx(1.0, rel=0.2)
