@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from .wavelet import WaveletVariance, default_levels, eta3_interval
+from .wavelet import WaveletVariance, default_levels, eta3_interval, sumsq_kernel
 
 __all__ = ["wavelet_variance_stream", "open_series", "SeriesSource"]
 
@@ -387,6 +387,7 @@ def _small_sums(h: np.ndarray, base: int, t_lo: int, t_hi: int, levels: list[int
                 sums: np.ndarray, tmp: np.ndarray) -> None:
     """Add sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2 over t in [t_lo, t_hi) for small levels;
     ``h[i]`` holds ``S_{base + i}``."""
+    sumsq = sumsq_kernel()
     for a in range(t_lo, t_hi, _SUB):
         b = min(a + _SUB, t_hi)
         for j in levels:
@@ -400,7 +401,7 @@ def _small_sums(h: np.ndarray, base: int, t_lo: int, t_hi: int, levels: list[int
             np.multiply(h[i0 - m:i0 - m + k], -2.0, out=d)
             d += h[i0:i0 + k]
             d += h[i0 - 2 * m:i0 - 2 * m + k]
-            sums[j - 1] += np.dot(d, d)
+            sums[j - 1] += sumsq(d, d)
 
 
 def wavelet_variance_stream(
@@ -491,6 +492,7 @@ def wavelet_variance_stream(
             clones.append(c)
             lags[o // block] = _Stream(c, n, block, mean, scale)
         tmp = np.empty(max(_SUB, block))
+        sumsq = sumsq_kernel()
         for k in range(nblocks):
             a = k * block
             s_blk = main.advance()
@@ -507,7 +509,7 @@ def wavelet_variance_stream(
                 np.multiply(s1, -2.0, out=d)
                 d += s_blk[:used]
                 d += s2
-                sums[j - 1] += np.dot(d, d)
+                sums[j - 1] += sumsq(d, d)
             if k < nblocks - 1:
                 hist[:block] = hist[block:2 * block]
             if progress is not None:

@@ -15,6 +15,7 @@ Guerrier et al. (2020), the GMWM paper, section II.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -250,6 +251,14 @@ def _chunked_sumsq(a: np.ndarray, b: np.ndarray) -> float:
     return total
 
 
+def sumsq_kernel() -> Callable[[np.ndarray, np.ndarray], float]:
+    """The dot product for sums of squares of long vectors: BLAS dot, whole when the BLAS pool
+    has one thread, otherwise in chunks that a multi-threaded OpenBLAS keeps in the calling
+    thread (split over its threads, this small product is slower, and 4-30x slower as soon as
+    anything else keeps a core busy; see engine._blas)."""
+    return np.dot if blas_threads() == 1 else _chunked_sumsq
+
+
 def _classical_sums(s: np.ndarray, n: int, levels: int) -> np.ndarray:
     """Sum over t of (S_t - 2 S_{t-m} + S_{t-2m})^2 for every level (m = 2^(j-1))."""
     return second_difference_sums(s, n, 1 << np.arange(levels))
@@ -265,11 +274,8 @@ def second_difference_sums(s: np.ndarray, n: int, ms: np.ndarray) -> np.ndarray:
     """
     sums = np.zeros(len(ms))
     buf = np.empty(_BLOCK)
-    # the per-block sum of squares by BLAS dot (3x faster than einsum), whole when the BLAS
-    # pool has one thread; otherwise in chunks that OpenBLAS keeps in this thread: split over
-    # its threads, this small product is slower, and 4-30x slower as soon as anything else
-    # keeps a core busy (engine._blas)
-    sumsq = np.dot if blas_threads() == 1 else _chunked_sumsq
+    # the per-block sum of squares by BLAS dot (3x faster than einsum), see sumsq_kernel
+    sumsq = sumsq_kernel()
     for a in range(2, n + 1, _BLOCK):
         b = min(a + _BLOCK, n + 1)
         for i, m in enumerate(ms):
@@ -359,7 +365,7 @@ def robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
     c2 = c * c
     r2 = np.empty_like(w2)
     u = np.empty_like(w2)
-    sumsq = np.dot if blas_threads() == 1 else _chunked_sumsq
+    sumsq = sumsq_kernel()
 
     def f(log_s2: float) -> float:
         # mean of r2 (1 - r2/c^2)^4 over r2 = w2 / s2 <= c^2, in preallocated buffers
