@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._jsonutil import json_ready as _nan_none
+from ._jsonutil import json_ready
 from .fit import FitError, GMWMResult, weight_matrix
 from .model import parse_model
 from .wavelet import WaveletVariance
@@ -262,7 +262,7 @@ def session_to_json(
         "channels": chans, "app": dict(app or {}),
     }
     try:
-        return json.dumps(_nan_none(doc), indent=1, allow_nan=False) + "\n"
+        return json.dumps(json_ready(doc), indent=1, allow_nan=False) + "\n"
     except (TypeError, ValueError) as exc:
         raise SessionError(f"the session cannot be written as JSON ({exc}): keep the app "
                            "state to numbers, strings, lists and dicts") from exc

@@ -53,8 +53,30 @@ def default_levels(n: int) -> int:
     return int(np.floor(np.log2(n - 1)))
 
 
+class LevelScales:
+    """``tau_s``, ``n_levels`` and ``len`` of a per-level result with ``levels``,
+    ``tau_samples`` (2^j) and ``fs`` attributes (the WV, the WCCV and the WV matrix)."""
+
+    levels: np.ndarray
+    tau_samples: np.ndarray
+    fs: float
+
+    @property
+    def tau_s(self) -> np.ndarray:
+        """Scales in seconds, ``2^j / fs``."""
+        return self.tau_samples / self.fs
+
+    @property
+    def n_levels(self) -> int:
+        """Number of levels J."""
+        return int(self.levels.size)
+
+    def __len__(self) -> int:
+        return self.n_levels
+
+
 @dataclass(frozen=True, eq=False)
-class WaveletVariance:
+class WaveletVariance(LevelScales):
     """Empirical Haar wavelet variance of one series, with its intervals.
 
     Attributes
@@ -92,19 +114,6 @@ class WaveletVariance:
     alpha: float = 0.05
     unit: str = ""
     classical: WaveletVariance | None = field(default=None, repr=False)
-
-    @property
-    def tau_s(self) -> np.ndarray:
-        """Scales in seconds, ``2^j / fs``."""
-        return self.tau_samples / self.fs
-
-    @property
-    def n_levels(self) -> int:
-        """Number of levels J."""
-        return int(self.levels.size)
-
-    def __len__(self) -> int:
-        return self.n_levels
 
     def truncate(self, levels: int) -> WaveletVariance:
         """The first ``levels`` levels of this WV (no recomputation)."""

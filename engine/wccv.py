@@ -62,6 +62,7 @@ from scipy import special
 
 from .io import ImuLog
 from .wavelet import (
+    LevelScales,
     WaveletVariance,
     _as_series,
     _cumsum_demeaned,
@@ -95,7 +96,7 @@ def _t_quantile(alpha: float, df: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class WaveletCrossCovariance:
+class WaveletCrossCovariance(LevelScales):
     """Empirical Haar WCCV (lag 0) of two series, with its asymptotic interval.
 
     Attributes
@@ -149,19 +150,6 @@ class WaveletCrossCovariance:
     unit: str = ""
 
     @property
-    def tau_s(self) -> np.ndarray:
-        """Scales in seconds, ``2^j / fs``."""
-        return self.tau_samples / self.fs
-
-    @property
-    def n_levels(self) -> int:
-        """Number of levels J."""
-        return int(self.levels.size)
-
-    def __len__(self) -> int:
-        return self.n_levels
-
-    @property
     def correlation(self) -> np.ndarray:
         """Wavelet correlation ``nu_xy / sqrt(nu_xx nu_yy)`` per level (nan where a WV is 0)."""
         den = np.sqrt(self.variance_x * self.variance_y)
@@ -199,7 +187,7 @@ class WaveletCrossCovariance:
 
 
 @dataclass(frozen=True, eq=False)
-class WVMatrix:
+class WVMatrix(LevelScales):
     """Wavelet variances (diagonal) and cross-covariances (off-diagonal) of k channels.
 
     ``values[j - 1]`` is the k x k matrix at level j: symmetric, the WV of channel p at
@@ -256,19 +244,6 @@ class WVMatrix:
     def k(self) -> int:
         """Number of channels."""
         return len(self.channels)
-
-    @property
-    def n_levels(self) -> int:
-        """Number of levels J."""
-        return int(self.levels.size)
-
-    def __len__(self) -> int:
-        return self.n_levels
-
-    @property
-    def tau_s(self) -> np.ndarray:
-        """Scales in seconds, ``2^j / fs``."""
-        return self.tau_samples / self.fs
 
     def index(self, channel: str | int) -> int:
         """Position of a channel (by name, or an index checked against k)."""

@@ -425,8 +425,6 @@ class GMWMApp:
             self.lazy_views[title] = view
             index = list(self.tabs._names).index(title)
             self.tabs[index] = (title, view.panel)
-            if title == "Model selection":
-                view.refresh()
         return self.lazy_views[title]
 
     @property
@@ -929,7 +927,7 @@ def create_application(path: str | None = None) -> Any:
             pn_state._thread_id_[doc] = threading.get_ident()
             pn_state._launching.add(doc)
             try:
-                _eval_panel(factory, None, title, True, False, doc)
+                self._func(doc)  # the page factory and its document (Panel's _eval_panel)
             except BaseException:
                 doc.clear()  # built again on the loop
                 raise

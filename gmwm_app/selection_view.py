@@ -248,6 +248,7 @@ class SelectionView:
             pn.pane.Bokeh(self.compare_table, sizing_mode="stretch_width", margin=(5, 10)),
             sizing_mode="stretch_width",
         )
+        self.refresh()  # built on first opening: show the session's ranking at once
 
     # ------------------------------------------------------------------------------------
     # ranking (off the event loop, with progress and cancel)

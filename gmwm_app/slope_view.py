@@ -794,12 +794,10 @@ class SlopeView:
                 self._syncing = False
         if key and key != self._scenario_seen:
             # a scenario arrived by other means than the menu (a link, a restored session):
-            # its naive regions, and its true model form when the session has no model yet
+            # its naive regions (the state gave it its true model form)
             self._scenario_seen = key
             if not self.regions:
                 self.regions = dict(SCENARIOS[key].region_dict)
-            if not len(s.model):
-                s.set_model(SCENARIOS[key].model.cleared())
         if key:
             sc = SCENARIOS[key]
             self.explain.param.update(

@@ -460,8 +460,9 @@ class AppState(param.Parameterized):
         """Make a read log the session's data; select a channel, compute (or reuse) its WV.
 
         The channel is ``channel`` if given, else the current one if the new log has it, else
-        the first. The model is kept and refitted; if it does not fit the new data it is
-        cleared (with a message). Nothing changes if the new data cannot be used.
+        the first. The model is kept and refitted (an empty model becomes the form of a teaching
+        scenario's true model); if it does not fit the new data it is cleared (with a
+        message). Nothing changes if the new data cannot be used.
         """
         def run() -> bool:
             lg = loaded.log
@@ -489,11 +490,18 @@ class AppState(param.Parameterized):
                 wv = _compute_wv(lg, ch, f, rob)
                 computed = 1
             self._store(cache, ch, f, rob, wv)
-            fit = self._fit_or_none(wv, self.model)
-            new_model, result = (self.model, fit) if isinstance(fit, eg.GMWMResult) else (
+            model = self.model
+            if loaded.source == "scenario" and not len(model):
+                # a teaching scenario starts with the form of its true model
+                from engine.teaching import SCENARIOS
+
+                if loaded.path in SCENARIOS:
+                    model = SCENARIOS[loaded.path].model.cleared()
+            fit = self._fit_or_none(wv, model)
+            new_model, result = (model, fit) if isinstance(fit, eg.GMWMResult) else (
                 eg.Model(), None)
             if fit is not None and not isinstance(fit, eg.GMWMResult):
-                msgs.append(f"the model {self.model.spec()} was cleared: {fit}")
+                msgs.append(f"the model {model.spec()} was cleared: {fit}")
             with self._lock:
                 self._log = lg
                 self._wv_cache = cache

@@ -369,6 +369,14 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
     assert t.statistic == pytest.approx(ref.statistic, rel=1e-9)
     assert t.p_value == ref.p_value
     np.testing.assert_allclose(t.bootstrap, ref.bootstrap, rtol=1e-9)
+    # independently of dependence_test: the statistic is the drop of the objective that the
+    # shared covariance brings, and the p-value counts the bootstrap differences above it
+    wvm = eg.wv_matrix(app.state.log, channels=GYROS)
+    q1 = eg.fit_mgmwm(wvm, mm.cleared(), weights="ci").objective
+    q0 = eg.fit_mgmwm(wvm, mm.without_dependence().cleared(), weights="ci").objective
+    assert t.statistic == pytest.approx(q0 - q1, rel=1e-9, abs=1e-12)
+    boot = np.asarray(t.bootstrap)
+    assert t.p_value == pytest.approx((1 + np.sum(boot >= t.statistic)) / (1 + boot.size))
     assert f"p = {format_value(ref.p_value, 3)}" in v.dep_text.object
     # cancel after the second replicate: the previous outcome is kept
     def observer(done: int, total: int) -> None:
