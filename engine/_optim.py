@@ -26,8 +26,9 @@ __all__ = ["nnls", "nelder_mead", "NMResult", "chi2_isf", "gamma_p"]
 # -----------------------------------------------------------------------------------------
 # non-negative least squares
 # -----------------------------------------------------------------------------------------
-def nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None,
-         passive: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+def nnls(
+    a: np.ndarray, b: np.ndarray, maxiter: int | None = None, passive: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
     """Solve ``min ||a x - b||_2`` subject to ``x >= 0`` (Lawson and Hanson, 1974).
 
     Parameters
@@ -170,8 +171,10 @@ def nelder_mead(
     sim, fsim = sim[order], fsim[order]
     nit = 1
     while nfev < maxfev:
-        if (np.max(np.abs(sim[1:] - sim[0])) <= xatol
-                and np.max(np.abs(fsim[0] - fsim[1:])) <= fatol):
+        if (
+            np.max(np.abs(sim[1:] - sim[0])) <= xatol
+            and np.max(np.abs(fsim[0] - fsim[1:])) <= fatol
+        ):
             break
         xbar = sim[:-1].mean(axis=0)
         xr = 2.0 * xbar - sim[-1]
@@ -207,8 +210,7 @@ def nelder_mead(
         order = np.argsort(fsim, kind="stable")
         sim, fsim = sim[order], fsim[order]
         nit += 1
-    return NMResult(x=sim[0].copy(), fun=float(fsim[0]), nfev=nfev, nit=nit,
-                    success=nfev < maxfev)
+    return NMResult(x=sim[0].copy(), fun=float(fsim[0]), nfev=nfev, nit=nit, success=nfev < maxfev)
 
 
 # -----------------------------------------------------------------------------------------
@@ -378,18 +380,38 @@ def _norm_isf(p: float) -> float:
         return _acklam_tail(t)
     r = q - 0.5
     s = r * r
-    num = (((((-3.969683028665376e01 * s + 2.209460984245205e02) * s - 2.759285104469687e02)
-             * s + 1.383577518672690e02) * s - 3.066479806614716e01) * s + 2.506628277459239e00)
-    den = (((((-5.447609879822406e01 * s + 1.615858368580409e02) * s - 1.556989798598866e02)
-             * s + 6.680131188771972e01) * s - 1.328068155288572e01) * s + 1.0)
+    num = (
+        (
+            ((-3.969683028665376e01 * s + 2.209460984245205e02) * s - 2.759285104469687e02) * s
+            + 1.383577518672690e02
+        )
+        * s
+        - 3.066479806614716e01
+    ) * s + 2.506628277459239e00
+    den = (
+        (
+            ((-5.447609879822406e01 * s + 1.615858368580409e02) * s - 1.556989798598866e02) * s
+            + 6.680131188771972e01
+        )
+        * s
+        - 1.328068155288572e01
+    ) * s + 1.0
     return num * r / den
 
 
 def _acklam_tail(t: float) -> float:
-    num = (((((-7.784894002430293e-03 * t - 3.223964580411365e-01) * t - 2.400758277161838e00)
-             * t - 2.549732539343734e00) * t + 4.374664141464968e00) * t + 2.938163982698783e00)
-    den = ((((7.784695709041462e-03 * t + 3.224671290700398e-01) * t + 2.445134137142996e00)
-            * t + 3.754408661907416e00) * t + 1.0)
+    num = (
+        (
+            ((-7.784894002430293e-03 * t - 3.223964580411365e-01) * t - 2.400758277161838e00) * t
+            - 2.549732539343734e00
+        )
+        * t
+        + 4.374664141464968e00
+    ) * t + 2.938163982698783e00
+    den = (
+        ((7.784695709041462e-03 * t + 3.224671290700398e-01) * t + 2.445134137142996e00) * t
+        + 3.754408661907416e00
+    ) * t + 1.0
     return -num / den
 
 

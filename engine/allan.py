@@ -152,10 +152,16 @@ class AllanVariance:
         if wv.robust:
             raise ValueError("a robust WV is not an Allan variance; use wv.classical")
         return cls(
-            tau_samples=(wv.tau_samples // 2).astype(np.int64), avar=2.0 * wv.variance,
-            ci_low=2.0 * wv.ci_low, ci_high=2.0 * wv.ci_high,
-            n_terms=np.asarray(wv.n_coef, dtype=np.int64), n=int(wv.n), fs=float(wv.fs),
-            alpha=float(wv.alpha), interval="chi2", unit=wv.unit,
+            tau_samples=(wv.tau_samples // 2).astype(np.int64),
+            avar=2.0 * wv.variance,
+            ci_low=2.0 * wv.ci_low,
+            ci_high=2.0 * wv.ci_high,
+            n_terms=np.asarray(wv.n_coef, dtype=np.int64),
+            n=int(wv.n),
+            fs=float(wv.fs),
+            alpha=float(wv.alpha),
+            interval="chi2",
+            unit=wv.unit,
         )
 
     def to_wv(self) -> WaveletVariance:
@@ -164,8 +170,14 @@ class AllanVariance:
         if self.tau_samples[0] != 1 or not np.allclose(lv, np.arange(1, lv.size + 1)):
             raise ValueError("only octave averaging times 1, 2, 4, ... map to WV levels 1..J")
         return WaveletVariance.from_arrays(
-            self.avar / 2.0, n=self.n, fs=self.fs, ci_low=self.ci_low / 2.0,
-            ci_high=self.ci_high / 2.0, alpha=self.alpha, unit=self.unit)
+            self.avar / 2.0,
+            n=self.n,
+            fs=self.fs,
+            ci_low=self.ci_low / 2.0,
+            ci_high=self.ci_high / 2.0,
+            alpha=self.alpha,
+            unit=self.unit,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -199,7 +211,8 @@ class AllanVariance:
         for i in range(len(self)):
             lines.append(
                 f"{self.tau_samples[i]:>12d} {self.tau_s[i]:>12.5g} {self.adev[i]:>16.6e} "
-                f"{self.adev_low[i]:>12.4e} {self.adev_high[i]:>12.4e} {self.n_terms[i]:>10d}")
+                f"{self.adev_low[i]:>12.4e} {self.adev_high[i]:>12.4e} {self.n_terms[i]:>10d}"
+            )
         return "\n".join(lines)
 
 
@@ -279,8 +292,10 @@ def allan_variance(
         ms = _octave_taus(n)
     elif isinstance(taus, str):
         if taus != "decade":
-            raise ValueError(f"taus={taus!r}: use None, 'octave', 'decade' or an array of "
-                             "averaging times in samples")
+            raise ValueError(
+                f"taus={taus!r}: use None, 'octave', 'decade' or an array of "
+                "averaging times in samples"
+            )
         ms = _decade_taus(n)
     else:
         t = np.asarray(taus)
@@ -288,15 +303,19 @@ def allan_variance(
             raise ValueError("taus must be a non-empty 1-D array of averaging times in samples")
         if t.dtype.kind == "f":
             if not np.all(np.isfinite(t)) or np.any(t != np.round(t)):
-                raise ValueError(f"taus are averaging times in samples and must be integers, "
-                                 f"got {t[np.flatnonzero(t != np.round(t))[0]]!r}")
+                raise ValueError(
+                    f"taus are averaging times in samples and must be integers, "
+                    f"got {t[np.flatnonzero(t != np.round(t))[0]]!r}"
+                )
         elif t.dtype.kind not in "iu":
             raise ValueError(f"taus must be integers (samples), got dtype {t.dtype}")
         ms = np.unique(t.astype(np.int64))
         if ms[0] < 1 or ms[-1] > mmax:
             bad = ms[0] if ms[0] < 1 else ms[-1]
-            raise ValueError(f"averaging time {bad} samples is out of range: a series of {n} "
-                             f"samples supports 1 to {mmax}")
+            raise ValueError(
+                f"averaging time {bad} samples is out of range: a series of {n} "
+                f"samples supports 1 to {mmax}"
+            )
     s = _cumsum_demeaned(a)
     sums = second_difference_sums(s, n, ms)
     terms = n - 2 * ms + 1
@@ -310,9 +329,18 @@ def allan_variance(
         adev = np.sqrt(avar)
         lo = (adev * np.maximum(1.0 - z * rel, 1e-3)) ** 2
         hi = (adev * (1.0 + z * rel)) ** 2
-    return AllanVariance(tau_samples=ms, avar=avar, ci_low=lo, ci_high=hi, n_terms=terms,
-                         n=int(n), fs=float(fs), alpha=float(alpha), interval=interval,
-                         unit=unit)
+    return AllanVariance(
+        tau_samples=ms,
+        avar=avar,
+        ci_low=lo,
+        ci_high=hi,
+        n_terms=terms,
+        n=int(n),
+        fs=float(fs),
+        alpha=float(alpha),
+        interval=interval,
+        unit=unit,
+    )
 
 
 # -------------------------------------------------------------------------------------------
@@ -397,14 +425,22 @@ class MethodEstimate:
         """Datasheet rows (see :func:`engine.datasheet`), plus the bias instability if any."""
         rows = datasheet(self.model, self.fs, self.unit) if len(self.model) else []
         if "BI.B" in self.extras:
-            rows.append({"label": "BI", "quantity": "bias instability B",
-                         "value": float(self.extras["BI.B"]), "unit": self.unit or "u"})
+            rows.append(
+                {
+                    "label": "BI",
+                    "quantity": "bias instability B",
+                    "value": float(self.extras["BI.B"]),
+                    "unit": self.unit or "u",
+                }
+            )
         return rows
 
     def summary(self) -> str:
         """Readable summary: method, parameters with units, datasheet view, notes."""
-        lines = [f"{self.method} estimate of {self.model.spec() or '(no process)'}",
-                 f"  fs = {self.fs:g} Hz, {self.tau_samples.size} scales"]
+        lines = [
+            f"{self.method} estimate of {self.model.spec() or '(no process)'}",
+            f"  fs = {self.fs:g} Hz, {self.tau_samples.size} scales",
+        ]
         if self.objective is not None:
             lines[-1] += f", objective = {self.objective:.6g}"
         lines += ["", f"  {'parameter':<16} {'value':>14}  unit"]
@@ -418,8 +454,10 @@ class MethodEstimate:
         if ds:
             lines += ["", "  datasheet view:"]
             for row in ds:
-                lines.append(f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
-                             f"{row['unit']}")
+                lines.append(
+                    f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
+                    f"{row['unit']}"
+                )
         if self.notes:
             lines += [""] + [f"  note: {s}" for s in self.notes]
         return "\n".join(lines)
@@ -452,10 +490,16 @@ def from_gmwm(res: GMWMResult, method: str = "GMWM") -> MethodEstimate:
     if res.at_bound:
         notes.append(f"at a bound: {', '.join(res.at_bound)}")
     return MethodEstimate(
-        method=method, model=res.model, params=dict(res.params),
-        tau_samples=np.asarray(res.wv.tau_samples), implied=np.asarray(res.implied),
-        components=dict(res.components), fs=float(res.wv.fs), unit=res.wv.unit,
-        objective=float(res.objective), notes=tuple(notes),
+        method=method,
+        model=res.model,
+        params=dict(res.params),
+        tau_samples=np.asarray(res.wv.tau_samples),
+        implied=np.asarray(res.implied),
+        components=dict(res.components),
+        fs=float(res.wv.fs),
+        unit=res.wv.unit,
+        objective=float(res.objective),
+        notes=tuple(notes),
         details={"weights": res.weights, "at_bound": list(res.at_bound)},
     )
 
@@ -478,23 +522,29 @@ def _as_allan(data: Any, fs: float | None, unit: str) -> AllanVariance:
 def _process_from_reading(code: str, value: float, fs: float) -> Process:
     """Per-sample process from an IEEE datasheet coefficient (CONVENTIONS, units)."""
     dt = 1.0 / fs
-    if code == "WN":   # N = sqrt(sigma2 dt)
+    if code == "WN":  # N = sqrt(sigma2 dt)
         return WN(value**2 / dt)
-    if code == "RW":   # K = sqrt(gamma2 / dt)
+    if code == "RW":  # K = sqrt(gamma2 / dt)
         return RW(value**2 * dt)
-    if code == "QN":   # Q = sqrt(q2) dt
+    if code == "QN":  # Q = sqrt(q2) dt
         return QN((value / dt) ** 2)
-    if code == "DR":   # R = omega / dt
+    if code == "DR":  # R = omega / dt
         return DR(value * dt)
     raise ValueError(code)  # pragma: no cover
 
 
-_READING_NAMES = {"QN": ("Q", "{u}*s"), "WN": ("N", "{u}/sqrt(Hz)"), "BI": ("B", "{u}"),
-                  "RW": ("K", "{u}/sqrt(s)"), "DR": ("R", "{u}/s")}
+_READING_NAMES = {
+    "QN": ("Q", "{u}*s"),
+    "WN": ("N", "{u}/sqrt(Hz)"),
+    "BI": ("B", "{u}"),
+    "RW": ("K", "{u}/sqrt(s)"),
+    "DR": ("R", "{u}/s"),
+}
 
 
-def _slope_estimate(av: AllanVariance, lines: dict[str, dict[str, Any]], method: str,
-                    notes: list[str]) -> MethodEstimate:
+def _slope_estimate(
+    av: AllanVariance, lines: dict[str, dict[str, Any]], method: str, notes: list[str]
+) -> MethodEstimate:
     """Build the estimate from fitted lines ``{code: {"intercept", "slope", ...}}``."""
     procs: list[Process] = []
     extras: dict[str, float] = {}
@@ -521,9 +571,18 @@ def _slope_estimate(av: AllanVariance, lines: dict[str, dict[str, Any]], method:
         comps["BI"] = np.full(tau.shape, 0.5 * (BI_FACTOR * extras["BI.B"]) ** 2)
     implied = np.sum(np.array(list(comps.values())), axis=0) if comps else np.zeros(tau.shape)
     return MethodEstimate(
-        method=method, model=model, params=model.values(), tau_samples=tau, implied=implied,
-        components=comps, fs=av.fs, unit=av.unit, extras=extras, objective=None,
-        notes=tuple(notes), details={"lines": lines},
+        method=method,
+        model=model,
+        params=model.values(),
+        tau_samples=tau,
+        implied=implied,
+        components=comps,
+        fs=av.fs,
+        unit=av.unit,
+        extras=extras,
+        objective=None,
+        notes=tuple(notes),
+        details={"lines": lines},
     )
 
 
@@ -586,8 +645,10 @@ def avsm(
         y = np.log10(av.adev)
     for code, reg in regions.items():
         if code not in SLOPES:
-            raise ValueError(f"unknown process {code!r} for the slope method; use one of "
-                             f"{', '.join(_AVSM_ORDER)}")
+            raise ValueError(
+                f"unknown process {code!r} for the slope method; use one of "
+                f"{', '.join(_AVSM_ORDER)}"
+            )
         lo, hi = (float(v) for v in reg)
         if not (lo <= hi and lo >= 0):
             raise ValueError(f"region {code}=({lo}, {hi}) s is not an interval of averaging times")
@@ -595,15 +656,25 @@ def avsm(
         if not np.any(sel):
             raise ValueError(
                 f"region {code}=({lo:g}, {hi:g}) s holds no averaging time of the Allan "
-                f"variance (available: {av.tau_s[0]:g} to {av.tau_s[-1]:g} s)")
+                f"variance (available: {av.tau_s[0]:g} to {av.tau_s[-1]:g} s)"
+            )
         slope = SLOPES[code]
         b = float(np.mean(y[sel] - slope * x[sel]))
-        lines[code] = {"slope": slope, "intercept": b, "tau_lo": float(av.tau_s[sel][0]),
-                       "tau_hi": float(av.tau_s[sel][-1]), "n_points": int(np.sum(sel))}
-    notes = [f"slope method (IEEE Std 952) on {av.interval} Allan deviation at "
-             f"{len(av)} averaging times"]
-    notes += [f"{c}: slope {ln['slope']:+g} over {ln['tau_lo']:.4g}-{ln['tau_hi']:.4g} s "
-              f"({ln['n_points']} points)" for c, ln in lines.items()]
+        lines[code] = {
+            "slope": slope,
+            "intercept": b,
+            "tau_lo": float(av.tau_s[sel][0]),
+            "tau_hi": float(av.tau_s[sel][-1]),
+            "n_points": int(np.sum(sel)),
+        }
+    notes = [
+        f"slope method (IEEE Std 952) on {av.interval} Allan deviation at {len(av)} averaging times"
+    ]
+    notes += [
+        f"{c}: slope {ln['slope']:+g} over {ln['tau_lo']:.4g}-{ln['tau_hi']:.4g} s "
+        f"({ln['n_points']} points)"
+        for c, ln in lines.items()
+    ]
     return _slope_estimate(av, lines, "AVSM", notes)
 
 
@@ -654,30 +725,51 @@ def avsm_auto(
     local = np.diff(y) / np.diff(x)
     lines: dict[str, dict[str, Any]] = {}
     if read == "line":
-        notes = ["automatic read-off (ROS tools / MathWorks example): line through the point "
-                 "of closest local slope"]
+        notes = [
+            "automatic read-off (ROS tools / MathWorks example): line through the point "
+            "of closest local slope"
+        ]
     else:
         notes = ["automatic read-off of the Allan deviation curve at 1 s (N) and 3 s (K)"]
     for code in ("WN", "RW"):
         slope = SLOPES[code]
         if read == "line":
             i = int(np.argmin(np.abs(local - slope)))
-            lines[code] = {"slope": slope, "intercept": float(y[i] - slope * x[i]),
-                           "tau_lo": float(av.tau_s[i]), "tau_hi": float(av.tau_s[i + 1]),
-                           "n_points": 1, "local_slope": float(local[i])}
-            notes.append(f"{code}: closest local slope {local[i]:+.3f} (target {slope:+g}) at "
-                         f"{av.tau_s[i]:.4g} s")
+            lines[code] = {
+                "slope": slope,
+                "intercept": float(y[i] - slope * x[i]),
+                "tau_lo": float(av.tau_s[i]),
+                "tau_hi": float(av.tau_s[i + 1]),
+                "n_points": 1,
+                "local_slope": float(local[i]),
+            }
+            notes.append(
+                f"{code}: closest local slope {local[i]:+.3f} (target {slope:+g}) at "
+                f"{av.tau_s[i]:.4g} s"
+            )
         else:
             lt = math.log10(READ_TAU[code])
             yt = float(np.interp(lt, x, y))
-            lines[code] = {"slope": slope, "intercept": yt - slope * lt,
-                           "tau_lo": READ_TAU[code], "tau_hi": READ_TAU[code], "n_points": 1}
+            lines[code] = {
+                "slope": slope,
+                "intercept": yt - slope * lt,
+                "tau_lo": READ_TAU[code],
+                "tau_hi": READ_TAU[code],
+                "n_points": 1,
+            }
             if not x[0] <= lt <= x[-1]:
-                notes.append(f"{code}: {READ_TAU[code]:g} s is outside the measured averaging "
-                             "times; the nearest end was read")
+                notes.append(
+                    f"{code}: {READ_TAU[code]:g} s is outside the measured averaging "
+                    "times; the nearest end was read"
+                )
     k = int(np.argmin(y))
-    lines["BI"] = {"slope": 0.0, "intercept": float(y[k]), "tau_lo": float(av.tau_s[k]),
-                   "tau_hi": float(av.tau_s[k]), "n_points": 1}
+    lines["BI"] = {
+        "slope": 0.0,
+        "intercept": float(y[k]),
+        "tau_lo": float(av.tau_s[k]),
+        "tau_hi": float(av.tau_s[k]),
+        "n_points": 1,
+    }
     return _slope_estimate(av, lines, "AVSM-auto", notes)
 
 
@@ -703,15 +795,18 @@ def _resolve_f(f: str | Callable[[np.ndarray], np.ndarray]) -> tuple[str, Callab
     raise FitError(f"f must be a name or a callable, got {type(f).__name__}")
 
 
-def _f_weights(wv: WaveletVariance, fun: Callable, weights: str | np.ndarray,
-               fname: str) -> tuple[np.ndarray, str]:
+def _f_weights(
+    wv: WaveletVariance, fun: Callable, weights: str | np.ndarray, fname: str
+) -> tuple[np.ndarray, str]:
     """Omega in f-space: ``"ci"`` is ``diag(1 / (f(ci_high) - f(ci_low))^2)``."""
     if isinstance(weights, str) and weights == "ci":
         with np.errstate(all="ignore"):
             width = np.asarray(fun(wv.ci_high), float) - np.asarray(fun(wv.ci_low), float)
         if np.any(~np.isfinite(width)) or np.any(width <= 0):
-            raise FitError(f"the interval of {fname}(WV) is empty or not finite at some level, "
-                           "so weights='ci' is undefined; use another weighting")
+            raise FitError(
+                f"the interval of {fname}(WV) is empty or not finite at some level, "
+                "so weights='ci' is undefined; use another weighting"
+            )
         return np.diag(1.0 / width**2), "ci"
     return weight_matrix(wv, weights)
 
@@ -812,8 +907,10 @@ def fit_gmwfm(
     tc0 = np.ones(k)
     if gm_model is not None:
         # match processes by kind (AR1/GM most persistent first in both)
-        pool = {c: [q for q in gm_model.processes if q.code == c] for c in
-                {q.code for q in gm_model.processes}}
+        pool = {
+            c: [q for q in gm_model.processes if q.code == c]
+            for c in {q.code for q in gm_model.processes}
+        }
         taken: dict[str, int] = {}
         for i in range(p):
             c = m.processes[i].code
@@ -846,8 +943,9 @@ def fit_gmwfm(
 
     def start(h: np.ndarray, tcs: np.ndarray) -> np.ndarray:
         u = np.log(np.maximum(h, 1e-30 * scale) / scale)
-        return np.concatenate([np.clip(u, _U_LO + 1, _U_HI - 1),
-                               np.clip(np.log(tcs), lo_tc + 1e-6, hi_tc - 1e-6)])
+        return np.concatenate(
+            [np.clip(u, _U_LO + 1, _U_HI - 1), np.clip(np.log(tcs), lo_tc + 1e-6, hi_tc - 1e-6)]
+        )
 
     starts = [start(np.full(p, 1.0 / p) * scale, tc0)]
     if gm_model is not None:
@@ -859,9 +957,18 @@ def fit_gmwfm(
     best = None
     for z0 in starts:
         z0 = np.clip(z0, lb + 1e-9, ub - 1e-9)
-        r = optimize.least_squares(resid, z0, bounds=(lb, ub), method="trf", jac="3-point",
-                                   x_scale=1.0, ftol=1e-12, xtol=1e-10, gtol=1e-12,
-                                   max_nfev=2000)
+        r = optimize.least_squares(
+            resid,
+            z0,
+            bounds=(lb, ub),
+            method="trf",
+            jac="3-point",
+            x_scale=1.0,
+            ftol=1e-12,
+            xtol=1e-10,
+            gtol=1e-12,
+            max_nfev=2000,
+        )
         if best is None or r.cost < best.cost:
             best = r
     assert best is not None
@@ -885,26 +992,41 @@ def fit_gmwfm(
         pr = m.processes[i]
         if zero[i]:
             at_bound.append(f"{lab}.{pr.param_names[-1] if pr.nonlinear else pr.param_names[0]}")
-    nonlin = sorted((q for q in procs if q.nonlinear is not None),
-                    key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / wv.fs)))
+    nonlin = sorted(
+        (q for q in procs if q.nonlinear is not None),
+        key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / wv.fs)),
+    )
     fitted = Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
     comps = fitted.components(wv.tau_samples, wv.fs)
     implied = np.sum(np.array(list(comps.values())), axis=0)
     with np.errstate(all="ignore"):
         rr = a @ (fy - np.asarray(fun(np.maximum(implied, 1e-300)), float))
     objective = float(rr @ rr)
-    notes = [f"f = {fname}, weights {wname}"
-             + (" (1/(f(ci_high) - f(ci_low))^2)" if wname == "ci" else ""),
-             f"bounded least squares, {len(starts)} starts, {int(best.nfev)} evaluations in the "
-             "best run"]
+    notes = [
+        f"f = {fname}, weights {wname}"
+        + (" (1/(f(ci_high) - f(ci_low))^2)" if wname == "ci" else ""),
+        f"bounded least squares, {len(starts)} starts, {int(best.nfev)} evaluations in the "
+        "best run",
+    ]
     if at_bound:
         notes.append(f"at a bound (estimated as 0): {', '.join(at_bound)}")
     return MethodEstimate(
-        method=name, model=fitted, params=fitted.values(), tau_samples=np.asarray(wv.tau_samples),
-        implied=implied, components=comps, fs=float(wv.fs), unit=wv.unit, objective=objective,
+        method=name,
+        model=fitted,
+        params=fitted.values(),
+        tau_samples=np.asarray(wv.tau_samples),
+        implied=implied,
+        components=comps,
+        fs=float(wv.fs),
+        unit=wv.unit,
+        objective=objective,
         notes=tuple(notes),
-        details={"f": fname, "weights": wname, "at_bound": at_bound,
-                 "converged": bool(best.status > 0)},
+        details={
+            "f": fname,
+            "weights": wname,
+            "at_bound": at_bound,
+            "converged": bool(best.status > 0),
+        },
     )
 
 

@@ -64,8 +64,12 @@ def _build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--fs", type=_positive(float, "--fs"), help="sampling frequency in Hz")
         sp.add_argument("--levels", type=_positive(int, "--levels"), help="number of WV levels J")
         sp.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
-        sp.add_argument("--eff", type=float, default=0.6,
-                        help="efficiency of the robust WV, in (0, 0.99) (default 0.6)")
+        sp.add_argument(
+            "--eff",
+            type=float,
+            default=0.6,
+            help="efficiency of the robust WV, in (0, 0.99) (default 0.6)",
+        )
         sp.add_argument("--json", action="store_true", help="print one JSON object")
         from .cli_export import add_log_options  # --segment --scale --units --topic --stream
 
@@ -78,59 +82,105 @@ def _build_parser() -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit a latent model by GMWM")
     data_args(fit)
     fit.add_argument("--model", required=True, help="model, e.g. '2*GM+WN+RW'")
-    fit.add_argument("more_inputs", nargs="*", metavar="INPUT",  # several channels/files
-                     help="more recordings of the same sensor: one model fitted to all")
-    fit.add_argument("--channels", help="channels of INPUT fitted together by the "
-                                        "multivariate GMWM, e.g. gyro_x,gyro_y,gyro_z")
+    fit.add_argument(
+        "more_inputs",
+        nargs="*",
+        metavar="INPUT",  # several channels/files
+        help="more recordings of the same sensor: one model fitted to all",
+    )
+    fit.add_argument(
+        "--channels",
+        help="channels of INPUT fitted together by the "
+        "multivariate GMWM, e.g. gyro_x,gyro_y,gyro_z",
+    )
     fit.add_argument("--shared", help="processes shared by --channels, e.g. WN,RW")
-    fit.add_argument("--dependence-test", action="store_true",
-                     help="with --shared: parametric-bootstrap test of dependence (-B)")
-    fit.add_argument("--weights", default="ci", choices=["ci", "identity", "efficient"],
-                     help="weighting matrix: ci (default, 1/(ci_high-ci_low)^2), identity, "
-                          "or efficient (two-step, V^-1 from the first fit)")
-    fit.add_argument("--ci", choices=["asymptotic", "bootstrap"],
-                     help="parameter intervals: asymptotic sandwich or parametric bootstrap")
+    fit.add_argument(
+        "--dependence-test",
+        action="store_true",
+        help="with --shared: parametric-bootstrap test of dependence (-B)",
+    )
+    fit.add_argument(
+        "--weights",
+        default="ci",
+        choices=["ci", "identity", "efficient"],
+        help="weighting matrix: ci (default, 1/(ci_high-ci_low)^2), identity, "
+        "or efficient (two-step, V^-1 from the first fit)",
+    )
+    fit.add_argument(
+        "--ci",
+        choices=["asymptotic", "bootstrap"],
+        help="parameter intervals: asymptotic sandwich or parametric bootstrap",
+    )
     fit.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
-    fit.add_argument("-B", "--bootstrap", type=_positive(int, "-B"), default=100,
-                     help="bootstrap replicates (100)")
+    fit.add_argument(
+        "-B",
+        "--bootstrap",
+        type=_positive(int, "-B"),
+        default=100,
+        help="bootstrap replicates (100)",
+    )
     fit.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
-    fit.add_argument("--workers", type=_positive(int, "--workers"), default=2,
-                     help="processes for the bootstrap (2)")
+    fit.add_argument(
+        "--workers",
+        type=_positive(int, "--workers"),
+        default=2,
+        help="processes for the bootstrap (2)",
+    )
 
     sel = sub.add_parser("select", help="rank candidate models by WVIC")
     data_args(sel)
-    sel.add_argument("--max-model", help="rank every sub-model of this model, "
-                                         "e.g. '3*GM+WN+QN+RW+DR'")
+    sel.add_argument(
+        "--max-model", help="rank every sub-model of this model, e.g. '3*GM+WN+QN+RW+DR'"
+    )
     sel.add_argument("--models", help="candidate models separated by commas")
     sel.add_argument("--optimism", choices=["asymptotic", "bootstrap"], default="asymptotic")
-    sel.add_argument("-B", "--bootstrap", type=_positive(int, "-B"), default=100,
-                     help="bootstrap replicates (100)")
+    sel.add_argument(
+        "-B",
+        "--bootstrap",
+        type=_positive(int, "-B"),
+        default=100,
+        help="bootstrap replicates (100)",
+    )
     sel.add_argument("--seed", type=int, default=0)
     sel.add_argument("--workers", type=_positive(int, "--workers"), default=2)
     sel.add_argument("--top", type=_positive(int, "--top"), help="print only the best N")
 
     sim = sub.add_parser("simulate", help="simulate a model with given values")
-    sim.add_argument("--model", required=True,
-                     help="model with values, e.g. 'WN(sigma2=1e-4)+RW(gamma2=1e-9)'")
+    sim.add_argument(
+        "--model", required=True, help="model with values, e.g. 'WN(sigma2=1e-4)+RW(gamma2=1e-9)'"
+    )
     sim.add_argument("-n", type=_positive(int, "-n"), required=True, help="number of samples")
     sim.add_argument("--fs", type=_positive(float, "--fs"), default=1.0, help="Hz (default 1)")
     sim.add_argument("--seed", type=int, default=None, help="random seed")
     sim.add_argument("--channel", default="x", help="channel name in the output (default x)")
     sim.add_argument("--unit", default="", help="signal unit stored in the output")
     sim.add_argument("-o", "--output", required=True, help="output file (.h5, .npy or .csv)")
-    st = sub.add_parser("study", help="Monte Carlo studies: slope = AVSM vs ARMAV vs GMWM "
-                                      "(the GMWM paper, Fig. 1-2)")
+    st = sub.add_parser(
+        "study",
+        help="Monte Carlo studies: slope = AVSM vs ARMAV vs GMWM (the GMWM paper, Fig. 1-2)",
+    )
     st.add_argument("name", choices=["slope"], help="the study to run")
-    st.add_argument("--reps", type=_positive(int, "--reps"), default=100,
-                    help="replicates per log length and sensor (100)")
+    st.add_argument(
+        "--reps",
+        type=_positive(int, "--reps"),
+        default=100,
+        help="replicates per log length and sensor (100)",
+    )
     st.add_argument("--seed", type=int, default=1, help="base seed (1)")
-    st.add_argument("--n", default="2.5e6,6.3e6",
-                    help="log lengths in samples, separated by commas (2.5e6,6.3e6)")
-    st.add_argument("--workers", type=_positive(int, "--workers"), default=2,
-                    help="worker processes (2)")
-    st.add_argument("--methods", default="GMWM,ARMAV,AVSM",
-                    help="comma-separated among GMWM, ARMAV, ARMAV-unweighted, AVSM, "
-                         "AVSM-auto (default GMWM,ARMAV,AVSM)")
+    st.add_argument(
+        "--n",
+        default="2.5e6,6.3e6",
+        help="log lengths in samples, separated by commas (2.5e6,6.3e6)",
+    )
+    st.add_argument(
+        "--workers", type=_positive(int, "--workers"), default=2, help="worker processes (2)"
+    )
+    st.add_argument(
+        "--methods",
+        default="GMWM,ARMAV,AVSM",
+        help="comma-separated among GMWM, ARMAV, ARMAV-unweighted, AVSM, "
+        "AVSM-auto (default GMWM,ARMAV,AVSM)",
+    )
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     from .cli_export import add_export_parser  # gmwm export: Kalibr, JSON, CSV, datasheet
@@ -151,20 +201,32 @@ def _load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVari
     if log.is_summary:
         wv = log.wv[name]
         if args.robust:
-            raise CliError(f"{args.input}: a WV summary file holds a fixed WV; --robust needs "
-                           "the raw log")
+            raise CliError(
+                f"{args.input}: a WV summary file holds a fixed WV; --robust needs the raw log"
+            )
         if args.levels is not None:
             if args.levels > wv.n_levels:
-                raise CliError(f"--levels {args.levels} is too many: {args.input} has "
-                               f"{wv.n_levels} levels for {name}")
+                raise CliError(
+                    f"--levels {args.levels} is too many: {args.input} has "
+                    f"{wv.n_levels} levels for {name}"
+                )
             wv = wv.truncate(args.levels)
         return wv, name
     x = log[name]
     if x.size >= 4 and np.ptp(x) == 0:
-        raise CliError(f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
-                       f"{x[0]:g}): there is no noise to analyse")
-    wv = wavelet_variance(x, fs=log.fs, levels=args.levels, robust=args.robust, eff=args.eff,
-                          alpha=alpha, unit=log.units.get(name, ""))
+        raise CliError(
+            f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
+            f"{x[0]:g}): there is no noise to analyse"
+        )
+    wv = wavelet_variance(
+        x,
+        fs=log.fs,
+        levels=args.levels,
+        robust=args.robust,
+        eff=args.eff,
+        alpha=alpha,
+        unit=log.units.get(name, ""),
+    )
     return wv, name
 
 
@@ -198,8 +260,14 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     if args.ci:
         from .inference import param_intervals
 
-        intervals = param_intervals(res, method=args.ci, level=args.level, B=args.bootstrap,
-                                    seed=args.seed, workers=args.workers)
+        intervals = param_intervals(
+            res,
+            method=args.ci,
+            level=args.level,
+            B=args.bootstrap,
+            seed=args.seed,
+            workers=args.workers,
+        )
     if args.json:
         d = res.to_dict()
         d["channel"] = name
@@ -209,8 +277,10 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     text = f"{args.input} [{name}]\n{res.summary()}"
     if intervals is not None:
         text += f"\n\n  {100 * args.level:g}% intervals ({args.ci}):\n"
-        text += "\n".join(f"  {iv.name:<16} {iv.value:>12.5e}  [{iv.low:.5e}, {iv.high:.5e}]  "
-                          f"{iv.unit}" for iv in intervals)
+        text += "\n".join(
+            f"  {iv.name:<16} {iv.value:>12.5e}  [{iv.low:.5e}, {iv.high:.5e}]  {iv.unit}"
+            for iv in intervals
+        )
     return text
 
 
@@ -226,9 +296,16 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
         if sys.stderr.isatty():
             print(f"\rfitting candidates: {done}/{total}", end="", file=sys.stderr, flush=True)
 
-    sel = rank_models(wv, cands, max_model=args.max_model, optimism=args.optimism,
-                      B=args.bootstrap, seed=args.seed, workers=args.workers,
-                      progress=progress)
+    sel = rank_models(
+        wv,
+        cands,
+        max_model=args.max_model,
+        optimism=args.optimism,
+        B=args.bootstrap,
+        seed=args.seed,
+        workers=args.workers,
+        progress=progress,
+    )
     if sys.stderr.isatty():
         print(file=sys.stderr)
     if args.top:
@@ -250,9 +327,16 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     out = args.output
     if not out.lower().endswith((".h5", ".hdf5", ".npy", ".csv")):
         raise CliError(f"output {out!r}: use a .h5, .npy or .csv file name")
-    save_log(out, {args.channel: x}, args.fs, units={args.channel: args.unit},
-             attrs={"model": model.spec(values=True),
-                    "seed": "" if args.seed is None else str(args.seed)})
+    save_log(
+        out,
+        {args.channel: x},
+        args.fs,
+        units={args.channel: args.unit},
+        attrs={
+            "model": model.spec(values=True),
+            "seed": "" if args.seed is None else str(args.seed),
+        },
+    )
     return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}"
 
 
@@ -268,8 +352,14 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
     except ValueError:
         raise CliError(f"--n takes sample counts separated by commas, got {args.n!r}") from None
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    res = run_slope_study(args.reps, seed=args.seed, n_values=n_values, methods=methods,
-                          workers=args.workers, progress=True)
+    res = run_slope_study(
+        args.reps,
+        seed=args.seed,
+        n_values=n_values,
+        methods=methods,
+        workers=args.workers,
+        progress=True,
+    )
     paths = res.save(args.out) if args.out else {}
     if args.json:
         d = res.to_dict(raw=False)
@@ -293,9 +383,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         set_blas_threads(1)
     try:
         args = _build_parser().parse_args(argv)
-        handler = {"wv": _cmd_wv, "fit": _cmd_fit, "simulate": _cmd_simulate,
-                   "select": _cmd_select, "study": _cmd_study,
-                   "export": _cmd_export}[args.command]
+        handler = {
+            "wv": _cmd_wv,
+            "fit": _cmd_fit,
+            "simulate": _cmd_simulate,
+            "select": _cmd_select,
+            "study": _cmd_study,
+            "export": _cmd_export,
+        }[args.command]
         out = handler(args)
     except (CliError, LoadError, ModelError, FitError) as e:
         print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)

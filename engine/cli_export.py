@@ -24,8 +24,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["add_log_options", "log_kwargs", "stream_wv", "add_export_parser", "cmd_export",
-           "UsageError"]
+__all__ = [
+    "add_log_options",
+    "log_kwargs",
+    "stream_wv",
+    "add_export_parser",
+    "cmd_export",
+    "UsageError",
+]
 
 
 class UsageError(ValueError):
@@ -47,8 +53,9 @@ def _float_map(opt: str) -> Any:
             try:
                 v = float(s)
             except ValueError:
-                raise argparse.ArgumentTypeError(f"{opt} takes a number or NAME=NUMBER pairs "
-                                                 f"separated by commas, got {text!r}") from None
+                raise argparse.ArgumentTypeError(
+                    f"{opt} takes a number or NAME=NUMBER pairs separated by commas, got {text!r}"
+                ) from None
             if not math.isfinite(v) or v == 0:
                 raise argparse.ArgumentTypeError(f"{opt} must be finite and non-zero, got {s!r}")
             return v
@@ -80,37 +87,57 @@ def _str_map(text: str) -> str | dict[str, str]:
 
 def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None:
     """Add ``--segment --scale --units --topic`` (and ``--stream``) to a sub-command."""
-    sp.add_argument("--segment", choices=["stop", "longest", "report"],
-                    help="time column with gaps/duplicates: stop with a report (default), "
-                         "analyse the longest clean segment, or keep every sample (report)")
-    sp.add_argument("--scale", type=_float_map("--scale"),
-                    help="scale factor for raw counts: 0.05, or gyro_x=0.05,accel_z=0.001")
-    sp.add_argument("--units", type=_str_map,
-                    help="signal unit(s) overriding the file: deg/s, or gyro_x=deg/s,accel_x=g")
+    sp.add_argument(
+        "--segment",
+        choices=["stop", "longest", "report"],
+        help="time column with gaps/duplicates: stop with a report (default), "
+        "analyse the longest clean segment, or keep every sample (report)",
+    )
+    sp.add_argument(
+        "--scale",
+        type=_float_map("--scale"),
+        help="scale factor for raw counts: 0.05, or gyro_x=0.05,accel_z=0.001",
+    )
+    sp.add_argument(
+        "--units",
+        type=_str_map,
+        help="signal unit(s) overriding the file: deg/s, or gyro_x=deg/s,accel_x=g",
+    )
     sp.add_argument("--topic", help="ROS bag: the sensor_msgs/Imu topic")
     if stream:
-        sp.add_argument("--stream", action="store_true",
-                        help="stream a .npy/HDF5 log larger than memory in blocks (classical WV)")
+        sp.add_argument(
+            "--stream",
+            action="store_true",
+            help="stream a .npy/HDF5 log larger than memory in blocks (classical WV)",
+        )
 
 
 def log_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """The :func:`engine.io.load_log` keyword arguments given on the command line."""
-    return {k: getattr(args, k) for k in ("segment", "scale", "units", "topic")
-            if getattr(args, k, None) is not None}
+    return {
+        k: getattr(args, k)
+        for k in ("segment", "scale", "units", "topic")
+        if getattr(args, k, None) is not None
+    }
 
 
-def stream_wv(args: argparse.Namespace, alpha: float = 0.05,
-              channel: str | None = None) -> tuple[Any, str]:
+def stream_wv(
+    args: argparse.Namespace, alpha: float = 0.05, channel: str | None = None
+) -> tuple[Any, str]:
     """``(WaveletVariance, channel name)`` of ``--stream``."""
     from .stream import open_series, wavelet_variance_stream
 
     if getattr(args, "robust", False):
-        raise _cli_error("--stream computes the classical WV; the robust WV needs the whole "
-                         "log in memory (drop --robust or --stream)")
+        raise _cli_error(
+            "--stream computes the classical WV; the robust WV needs the whole "
+            "log in memory (drop --robust or --stream)"
+        )
     for opt in ("segment", "topic"):
         if getattr(args, opt, None) is not None:
-            raise _cli_error(f"--{opt} does not apply to --stream (streaming reads .npy/HDF5 "
-                             "samples as uniformly spaced)")
+            raise _cli_error(
+                f"--{opt} does not apply to --stream (streaming reads .npy/HDF5 "
+                "samples as uniformly spaced)"
+            )
     ch = channel if channel is not None else getattr(args, "channel", None)
     kw: dict[str, Any] = {}
     if ch is not None and str(ch).lstrip("-").isdigit() and str(args.input).endswith(".npy"):
@@ -124,11 +151,13 @@ def stream_wv(args: argparse.Namespace, alpha: float = 0.05,
     name = src.name
     units = getattr(args, "units", None)
     unit = units.get(name, None) if isinstance(units, dict) else units
-    wv = wavelet_variance_stream(src, fs=args.fs, levels=args.levels, scale=scale,
-                                 alpha=alpha, unit=unit)
+    wv = wavelet_variance_stream(
+        src, fs=args.fs, levels=args.levels, scale=scale, alpha=alpha, unit=unit
+    )
     if not np.any(wv.variance > 0):
-        raise _cli_error(f"{args.input}: channel {name!r} is constant: there is no noise to "
-                         "analyse")
+        raise _cli_error(
+            f"{args.input}: channel {name!r} is constant: there is no noise to analyse"
+        )
     return wv, name
 
 
@@ -139,8 +168,10 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
     for k in re.findall(r"(\d+)\s*\*|\*\s*(\d+)", spec):
         v = int(k[0] or k[1])
         if v > limit:
-            raise _cli_error(f"{opt}: the multiplier {v} is too large (a model has at most "
-                             f"{limit} terms of a kind)")
+            raise _cli_error(
+                f"{opt}: the multiplier {v} is too large (a model has at most "
+                f"{limit} terms of a kind)"
+            )
     return spec
 
 
@@ -148,17 +179,27 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
     from .cli import _positive
 
-    ex = sub.add_parser("export", help="fit channels and export Kalibr imu.yaml, a JSON report, "
-                                       "WV curves (CSV) or a datasheet table")
+    ex = sub.add_parser(
+        "export",
+        help="fit channels and export Kalibr imu.yaml, a JSON report, "
+        "WV curves (CSV) or a datasheet table",
+    )
     ex.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
-    ex.add_argument("--model-for", action="append", default=[], metavar="CH=SPEC",
-                    help="model of one channel (repeatable), e.g. gyro_z=2*GM+WN+RW")
+    ex.add_argument(
+        "--model-for",
+        action="append",
+        default=[],
+        metavar="CH=SPEC",
+        help="model of one channel (repeatable), e.g. gyro_z=2*GM+WN+RW",
+    )
     ex.add_argument("--channels", help="channels separated by commas (default: all)")
-    ex.add_argument("--format", default="kalibr",
-                    choices=["kalibr", "json", "csv", "datasheet", "datasheet-csv"],
-                    help="kalibr imu.yaml (default), json report, csv WV curves, datasheet "
-                         "table (text or csv)")
+    ex.add_argument(
+        "--format",
+        default="kalibr",
+        choices=["kalibr", "json", "csv", "datasheet", "datasheet-csv"],
+        help="kalibr imu.yaml (default), json report, csv WV curves, datasheet table (text or csv)",
+    )
     ex.add_argument("-o", "--output", required=True, help="output file, or - for stdout")
     ex.add_argument("--fs", type=_positive(float, "--fs"), help="sampling frequency in Hz")
     ex.add_argument("--levels", type=_positive(int, "--levels"), help="number of WV levels J")
@@ -171,8 +212,11 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument("--seed", type=int, default=0)
     ex.add_argument("--workers", type=_positive(int, "--workers"), default=2)
     ex.add_argument("--rostopic", default="/imu0", help="Kalibr rostopic entry (/imu0)")
-    ex.add_argument("--partial", action="store_true",
-                    help="Kalibr: allow a file with only gyroscope or only accelerometer keys")
+    ex.add_argument(
+        "--partial",
+        action="store_true",
+        help="Kalibr: allow a file with only gyroscope or only accelerometer keys",
+    )
     ex.add_argument("--json", action="store_true", help="print one JSON object (what was written)")
     add_log_options(ex)
     return ex
@@ -213,46 +257,82 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
         for ch in names:
             if log.is_summary:
                 if ch not in log.wv:
-                    raise _cli_error(f"{args.input} has no channel {ch!r}; channels: "
-                                     f"{', '.join(log.names)}")
+                    raise _cli_error(
+                        f"{args.input} has no channel {ch!r}; channels: {', '.join(log.names)}"
+                    )
                 if args.robust:
-                    raise _cli_error(f"{args.input}: a WV summary file holds a fixed WV; "
-                                     "--robust needs the raw log")
+                    raise _cli_error(
+                        f"{args.input}: a WV summary file holds a fixed WV; "
+                        "--robust needs the raw log"
+                    )
                 wv = log.wv[ch]
                 if args.levels is not None:
                     if args.levels > wv.n_levels:
-                        raise _cli_error(f"--levels {args.levels} is too many: {ch} has "
-                                         f"{wv.n_levels} levels")
+                        raise _cli_error(
+                            f"--levels {args.levels} is too many: {ch} has {wv.n_levels} levels"
+                        )
                     wv = wv.truncate(args.levels)
             else:
                 x = log[ch]
                 if np.ptp(x) == 0:
-                    raise _cli_error(f"{args.input}: channel {ch!r} is constant: there is no "
-                                     "noise to analyse")
-                wv = wavelet_variance(x, fs=log.fs, levels=args.levels, robust=args.robust,
-                                      eff=args.eff, unit=log.units.get(ch, ""))
+                    raise _cli_error(
+                        f"{args.input}: channel {ch!r} is constant: there is no noise to analyse"
+                    )
+                wv = wavelet_variance(
+                    x,
+                    fs=log.fs,
+                    levels=args.levels,
+                    robust=args.robust,
+                    eff=args.eff,
+                    unit=log.units.get(ch, ""),
+                )
             wvs[ch] = wv
     unknown = [c for c in per if c not in wvs]
     if unknown:
-        raise _cli_error(f"--model-for names unknown channel(s) {unknown}; channels: "
-                         f"{', '.join(wvs)}")
+        raise _cli_error(
+            f"--model-for names unknown channel(s) {unknown}; channels: {', '.join(wvs)}"
+        )
     fits, intervals = {}, {}
     for ch, wv in wvs.items():
         m = per.get(ch, model)
-        fits[ch] = (fit_efficient(wv, m) if args.weights == "efficient"
-                    else fit_gmwm(wv, m, weights=args.weights))
+        fits[ch] = (
+            fit_efficient(wv, m)
+            if args.weights == "efficient"
+            else fit_gmwm(wv, m, weights=args.weights)
+        )
         if args.ci:
-            intervals[ch] = param_intervals(fits[ch], method=args.ci, level=args.level,
-                                            B=args.bootstrap, seed=args.seed,
-                                            workers=args.workers)
-    units = args.units if isinstance(args.units, dict) else (
-        dict.fromkeys(fits, args.units) if args.units else None)
+            intervals[ch] = param_intervals(
+                fits[ch],
+                method=args.ci,
+                level=args.level,
+                B=args.bootstrap,
+                seed=args.seed,
+                workers=args.workers,
+            )
+    units = (
+        args.units
+        if isinstance(args.units, dict)
+        else (dict.fromkeys(fits, args.units) if args.units else None)
+    )
     out = None if args.output == "-" else args.output
-    text = export(out, fits, args.format, intervals=intervals or None, log=log, units=units,
-                  source=str(args.input), rostopic=args.rostopic, allow_partial=args.partial)
+    text = export(
+        out,
+        fits,
+        args.format,
+        intervals=intervals or None,
+        log=log,
+        units=units,
+        source=str(args.input),
+        rostopic=args.rostopic,
+        allow_partial=args.partial,
+    )
     if out is None:
         return text.rstrip("\n")
     if args.json:
-        return {"output": out, "format": args.format, "channels": list(fits),
-                "models": {ch: r.model.spec(values=True) for ch, r in fits.items()}}
+        return {
+            "output": out,
+            "format": args.format,
+            "channels": list(fits),
+            "models": {ch: r.model.spec(values=True) for ch, r in fits.items()},
+        }
     return f"wrote {args.format} export of {len(fits)} channel(s) ({', '.join(fits)}) to {out}"

@@ -58,9 +58,23 @@ if TYPE_CHECKING:  # pragma: no cover
     from .io import ImuLog
 
 __all__ = [
-    "ExportError", "DatasheetRow", "si_factor", "channel_axis", "datasheet_table",
-    "datasheet_text", "datasheet_csv", "allan_floor", "KalibrImu", "kalibr_imu", "write_kalibr",
-    "read_kalibr", "kalibr_models", "fit_report", "write_report", "curves_csv", "export",
+    "ExportError",
+    "DatasheetRow",
+    "si_factor",
+    "channel_axis",
+    "datasheet_table",
+    "datasheet_text",
+    "datasheet_csv",
+    "allan_floor",
+    "KalibrImu",
+    "kalibr_imu",
+    "write_kalibr",
+    "read_kalibr",
+    "kalibr_models",
+    "fit_report",
+    "write_report",
+    "curves_csv",
+    "export",
     "BI_FACTOR",
 ]
 
@@ -70,13 +84,21 @@ _DEG = math.pi / 180.0
 
 # unit -> (sensor, factor to SI): rad/s for rates, m/s^2 for accelerations
 _SI: dict[str, tuple[str, float]] = {
-    "rad/s": ("gyroscope", 1.0), "mrad/s": ("gyroscope", 1e-3), "deg/s": ("gyroscope", _DEG),
-    "dps": ("gyroscope", _DEG), "deg/h": ("gyroscope", _DEG / 3600.0),
-    "deg/hr": ("gyroscope", _DEG / 3600.0), "rad/h": ("gyroscope", 1.0 / 3600.0),
+    "rad/s": ("gyroscope", 1.0),
+    "mrad/s": ("gyroscope", 1e-3),
+    "deg/s": ("gyroscope", _DEG),
+    "dps": ("gyroscope", _DEG),
+    "deg/h": ("gyroscope", _DEG / 3600.0),
+    "deg/hr": ("gyroscope", _DEG / 3600.0),
+    "rad/h": ("gyroscope", 1.0 / 3600.0),
     "rpm": ("gyroscope", 2.0 * math.pi / 60.0),
-    "m/s^2": ("accelerometer", 1.0), "g": ("accelerometer", G0), "mg": ("accelerometer", 1e-3 * G0),
-    "ug": ("accelerometer", 1e-6 * G0), "cm/s^2": ("accelerometer", 1e-2),
-    "mm/s^2": ("accelerometer", 1e-3), "gal": ("accelerometer", 1e-2),
+    "m/s^2": ("accelerometer", 1.0),
+    "g": ("accelerometer", G0),
+    "mg": ("accelerometer", 1e-3 * G0),
+    "ug": ("accelerometer", 1e-6 * G0),
+    "cm/s^2": ("accelerometer", 1e-2),
+    "mm/s^2": ("accelerometer", 1e-3),
+    "gal": ("accelerometer", 1e-2),
 }
 
 
@@ -118,12 +140,16 @@ def si_factor(unit: str, channel: str = "") -> tuple[str, float]:
     where = f" of channel {channel!r}" if channel else ""
     known = "deg/s, rad/s, deg/h, mrad/s, g, mg, ug, m/s^2"
     if not unit or not unit.strip():
-        raise ExportError(f"the unit{where} is unknown: SI conversion needs it; give it with "
-                          f"units={{{channel or 'name'!r}: 'deg/s'}} (CLI: --units) among {known}")
+        raise ExportError(
+            f"the unit{where} is unknown: SI conversion needs it; give it with "
+            f"units={{{channel or 'name'!r}: 'deg/s'}} (CLI: --units) among {known}"
+        )
     got = _SI.get(_norm_unit(unit))
     if got is None:
-        raise ExportError(f"unknown unit {unit!r}{where}: cannot convert to SI; use one of "
-                          f"{known} (CLI: --units NAME=UNIT)")
+        raise ExportError(
+            f"unknown unit {unit!r}{where}: cannot convert to SI; use one of "
+            f"{known} (CLI: --units NAME=UNIT)"
+        )
     return got
 
 
@@ -242,9 +268,13 @@ def allan_floor(res: GMWMResult, *, points_per_octave: int = 16) -> dict[str, An
     avar = np.where(np.isfinite(avar) & (avar > 0), avar, np.inf)
     i = int(np.argmin(avar))
     adev = float(math.sqrt(avar[i])) if math.isfinite(avar[i]) else math.nan
-    return {"adev_min": adev, "T_s": float(m[i] / fs), "bias_instability": adev / BI_FACTOR,
-            "at_edge": bool(i == 0 or i == m.size - 1),
-            "T_range_s": [float(m[0] / fs), float(m[-1] / fs)]}
+    return {
+        "adev_min": adev,
+        "T_s": float(m[i] / fs),
+        "bias_instability": adev / BI_FACTOR,
+        "at_edge": bool(i == 0 or i == m.size - 1),
+        "T_range_s": [float(m[0] / fs), float(m[-1] / fs)],
+    }
 
 
 def datasheet_table(
@@ -288,8 +318,9 @@ def datasheet_table(
     return rows
 
 
-def _channel_rows(ch: str, res: GMWMResult, unit: str, ivs: dict[str, tuple[float, float]],
-                  si: bool) -> list[DatasheetRow]:
+def _channel_rows(
+    ch: str, res: GMWMResult, unit: str, ivs: dict[str, tuple[float, float]], si: bool
+) -> list[DatasheetRow]:
     fs = res.fs
     dt = 1.0 / fs
     u = unit or "u"
@@ -304,53 +335,108 @@ def _channel_rows(ch: str, res: GMWMResult, unit: str, ivs: dict[str, tuple[floa
     su = "rad/s" if gyro else "m/s^2"
     rows: list[DatasheetRow] = []
 
-    def add(proc: str, qty: str, sym: str, val: float, un: str, iv: tuple[float, float] = (
-            math.nan, math.nan), note: str = "") -> None:
-        rows.append(DatasheetRow(ch, proc, qty, sym, float(val), un, float(iv[0]), float(iv[1]),
-                                 note))
+    def add(
+        proc: str,
+        qty: str,
+        sym: str,
+        val: float,
+        un: str,
+        iv: tuple[float, float] = (math.nan, math.nan),
+        note: str = "",
+    ) -> None:
+        rows.append(
+            DatasheetRow(ch, proc, qty, sym, float(val), un, float(iv[0]), float(iv[1]), note)
+        )
 
     for lab, p in zip(res.model.labels, res.model.processes, strict=True):
         v = dict(zip(p.param_names, p.values, strict=True))
         iv = {name: ivs.get(f"{lab}.{name}") for name in p.param_names}
         if p.code == "WN":
+
             def n_of(s2: float) -> float:
                 return math.sqrt(max(s2, 0.0) * dt)
+
             n, n_iv = n_of(v["sigma2"]), _map_iv(iv["sigma2"], n_of)
             add(lab, "white noise density", "N", n, f"{u}/sqrt(Hz)", n_iv)
             if kind:
-                add(lab, "white noise density (SI)", "N", n * f_si, f"{su}/sqrt(Hz)",
-                    _scale(n_iv, f_si))
+                add(
+                    lab,
+                    "white noise density (SI)",
+                    "N",
+                    n * f_si,
+                    f"{su}/sqrt(Hz)",
+                    _scale(n_iv, f_si),
+                )
                 if gyro:
                     c = 60.0 / _DEG
-                    add(lab, "angle random walk", "ARW", n * f_si * c, "deg/sqrt(h)",
-                        _scale(n_iv, f_si * c))
+                    add(
+                        lab,
+                        "angle random walk",
+                        "ARW",
+                        n * f_si * c,
+                        "deg/sqrt(h)",
+                        _scale(n_iv, f_si * c),
+                    )
                 else:
-                    add(lab, "velocity random walk", "VRW", n * f_si * 60.0, "m/s/sqrt(h)",
-                        _scale(n_iv, f_si * 60.0))
+                    add(
+                        lab,
+                        "velocity random walk",
+                        "VRW",
+                        n * f_si * 60.0,
+                        "m/s/sqrt(h)",
+                        _scale(n_iv, f_si * 60.0),
+                    )
         elif p.code == "RW":
+
             def k_of(g2: float) -> float:
                 return math.sqrt(max(g2, 0.0) / dt)
+
             k, k_iv = k_of(v["gamma2"]), _map_iv(iv["gamma2"], k_of)
-            add(lab, "rate random walk" if gyro or not kind else "acceleration random walk",
-                "K", k, f"{_per_s(u)}/sqrt(Hz)", k_iv)
+            add(
+                lab,
+                "rate random walk" if gyro or not kind else "acceleration random walk",
+                "K",
+                k,
+                f"{_per_s(u)}/sqrt(Hz)",
+                k_iv,
+            )
             if kind:
-                add(lab, "random walk (SI)", "K", k * f_si, f"{_per_s(su)}/sqrt(Hz)",
-                    _scale(k_iv, f_si))
+                add(
+                    lab,
+                    "random walk (SI)",
+                    "K",
+                    k * f_si,
+                    f"{_per_s(su)}/sqrt(Hz)",
+                    _scale(k_iv, f_si),
+                )
                 c = 216000.0 * (1.0 / _DEG if gyro else 1.0)
-                add(lab, "rate random walk" if gyro else "acceleration random walk", "RRW" if
-                    gyro else "AccRW", k * f_si * c, "deg/h/sqrt(h)" if gyro else "m/s/h/sqrt(h)",
-                    _scale(k_iv, f_si * c))
+                add(
+                    lab,
+                    "rate random walk" if gyro else "acceleration random walk",
+                    "RRW" if gyro else "AccRW",
+                    k * f_si * c,
+                    "deg/h/sqrt(h)" if gyro else "m/s/h/sqrt(h)",
+                    _scale(k_iv, f_si * c),
+                )
         elif p.code == "QN":
+
             def q_of(q2: float) -> float:
                 return math.sqrt(max(q2, 0.0)) * dt
+
             q, q_iv = q_of(v["q2"]), _map_iv(iv["q2"], q_of)
             add(lab, "quantization", "Q", q, _times_s(u), q_iv)
             if kind:
                 add(lab, "quantization (SI)", "Q", q * f_si, _times_s(su), _scale(q_iv, f_si))
         elif p.code == "DR":
             r, r_iv = abs(v["omega"]) * fs, _map_iv(_abs_iv(iv["omega"]), lambda w: w * fs)
-            add(lab, "rate ramp" if gyro or not kind else "acceleration ramp", "R", r,
-                _per_s(u), r_iv)
+            add(
+                lab,
+                "rate ramp" if gyro or not kind else "acceleration ramp",
+                "R",
+                r,
+                _per_s(u),
+                r_iv,
+            )
             if kind:
                 add(lab, "ramp (SI)", "R", r * f_si, _per_s(su), _scale(r_iv, f_si))
                 if gyro:
@@ -364,13 +450,19 @@ def _channel_rows(ch: str, res: GMWMResult, unit: str, ivs: dict[str, tuple[floa
             else:
                 phi, s2i = v["phi"], v["sigma2"]
                 if not 0 < phi < 1:
-                    add(lab, "AR1 coefficient (no correlation time: phi outside (0, 1))", "phi",
-                        phi, "1")
+                    add(
+                        lab,
+                        "AR1 coefficient (no correlation time: phi outside (0, 1))",
+                        "phi",
+                        phi,
+                        "1",
+                    )
                     continue
                 beta = -math.log(phi) * fs
                 s2 = s2i / (1.0 - phi * phi)
-                tc_iv = _map_iv(iv["phi"], lambda ph: -dt / math.log(ph) if 0 < ph < 1 else
-                                math.nan)
+                tc_iv = _map_iv(
+                    iv["phi"], lambda ph: -dt / math.log(ph) if 0 < ph < 1 else math.nan
+                )
                 std_iv = (math.nan, math.nan)
             q = 2.0 * beta * s2
             add(lab, "correlation time", "T_c", 1.0 / beta, "s", tc_iv)
@@ -378,11 +470,18 @@ def _channel_rows(ch: str, res: GMWMResult, unit: str, ivs: dict[str, tuple[floa
             add(lab, "driving-noise PSD", "q", q, f"{_sq(u)}/s", note="q = 2 beta sigma2_gm")
             add(lab, "driving-noise density", "sqrt(q)", math.sqrt(q), f"{_per_s(u)}/sqrt(Hz)")
             if kind:
-                add(lab, "driving-noise density (SI)", "sqrt(q)", math.sqrt(q) * f_si,
-                    f"{_per_s(su)}/sqrt(Hz)")
+                add(
+                    lab,
+                    "driving-noise density (SI)",
+                    "sqrt(q)",
+                    math.sqrt(q) * f_si,
+                    f"{_per_s(su)}/sqrt(Hz)",
+                )
     fl = allan_floor(res)
-    note = (f"min over T = {fl['T_range_s'][0]:.4g}..{fl['T_range_s'][1]:.4g} s of the implied "
-            f"ADEV / 0.664, at T = {fl['T_s']:.4g} s")
+    note = (
+        f"min over T = {fl['T_range_s'][0]:.4g}..{fl['T_range_s'][1]:.4g} s of the implied "
+        f"ADEV / 0.664, at T = {fl['T_s']:.4g} s"
+    )
     if fl["at_edge"]:
         note += "; no floor inside the analysed scales: an upper bound"
     b = fl["bias_instability"]
@@ -390,11 +489,18 @@ def _channel_rows(ch: str, res: GMWMResult, unit: str, ivs: dict[str, tuple[floa
     if kind:
         add("model", "bias instability (Allan floor, SI)", "B", b * f_si, su, note=note)
         if gyro:
-            add("model", "bias instability (Allan floor)", "B", b * f_si / _DEG * 3600.0,
-                "deg/h", note=note)
+            add(
+                "model",
+                "bias instability (Allan floor)",
+                "B",
+                b * f_si / _DEG * 3600.0,
+                "deg/h",
+                note=note,
+            )
         else:
-            add("model", "bias instability (Allan floor)", "B", b * f_si / G0 * 1e3, "mg",
-                note=note)
+            add(
+                "model", "bias instability (Allan floor)", "B", b * f_si / G0 * 1e3, "mg", note=note
+            )
     if note_si:
         rows.append(DatasheetRow(ch, "model", "units", "", math.nan, "", note=note_si))
     return rows
@@ -406,16 +512,17 @@ def _scale(iv: tuple[float, float], c: float) -> tuple[float, float]:
 
 def datasheet_text(rows: Sequence[DatasheetRow]) -> str:
     """A readable table of :func:`datasheet_table` rows."""
-    out = [f"{'channel':<10} {'process':<8} {'quantity':<40} {'value':>12} "
-           f"{'interval':>27}  unit"]
+    out = [f"{'channel':<10} {'process':<8} {'quantity':<40} {'value':>12} {'interval':>27}  unit"]
     for r in rows:
         if not math.isfinite(r.value):
             out.append(f"{r.channel:<10} {r.process:<8} {r.note}")
             continue
-        ivl = (f"[{r.low:.4g}, {r.high:.4g}]" if math.isfinite(r.low) and math.isfinite(r.high)
-               else "")
-        out.append(f"{r.channel:<10} {r.process:<8} {r.quantity:<40} {r.value:>12.5g} "
-                   f"{ivl:>27}  {r.unit}")
+        ivl = (
+            f"[{r.low:.4g}, {r.high:.4g}]" if math.isfinite(r.low) and math.isfinite(r.high) else ""
+        )
+        out.append(
+            f"{r.channel:<10} {r.process:<8} {r.quantity:<40} {r.value:>12.5g} {ivl:>27}  {r.unit}"
+        )
     return "\n".join(out)
 
 
@@ -423,11 +530,21 @@ def datasheet_csv(rows: Sequence[DatasheetRow]) -> str:
     """CSV of :func:`datasheet_table` rows (empty cells for missing intervals)."""
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["channel", "process", "quantity", "symbol", "value", "low", "high", "unit",
-                "note"])
+    w.writerow(["channel", "process", "quantity", "symbol", "value", "low", "high", "unit", "note"])
     for r in rows:
-        w.writerow([r.channel, r.process, r.quantity, r.symbol, _fmt(r.value), _fmt(r.low),
-                    _fmt(r.high), r.unit, r.note])
+        w.writerow(
+            [
+                r.channel,
+                r.process,
+                r.quantity,
+                r.symbol,
+                _fmt(r.value),
+                _fmt(r.low),
+                _fmt(r.high),
+                r.unit,
+                r.note,
+            ]
+        )
     return buf.getvalue()
 
 
@@ -436,8 +553,12 @@ def _fmt(v: float) -> str:
 
 
 # ------------------------------------------------------------------------------ Kalibr
-_KALIBR_KEYS = ("accelerometer_noise_density", "accelerometer_random_walk",
-                "gyroscope_noise_density", "gyroscope_random_walk")
+_KALIBR_KEYS = (
+    "accelerometer_noise_density",
+    "accelerometer_random_walk",
+    "gyroscope_noise_density",
+    "gyroscope_random_walk",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -479,8 +600,12 @@ class KalibrImu:
     def to_yaml(self) -> str:
         """The ``imu.yaml`` text (YAML 1.1 floats, readable by Kalibr's PyYAML)."""
         unit = {"noise_density": "/sqrt(Hz)", "random_walk": "/sqrt(Hz)"}
-        si = {"gyroscope_noise_density": "rad/s", "gyroscope_random_walk": "rad/s^2",
-              "accelerometer_noise_density": "m/s^2", "accelerometer_random_walk": "m/s^3"}
+        si = {
+            "gyroscope_noise_density": "rad/s",
+            "gyroscope_random_walk": "rad/s^2",
+            "accelerometer_noise_density": "m/s^2",
+            "accelerometer_random_walk": "m/s^3",
+        }
         lines = [f"# {c}" for c in self.comments]
         lines += [f"# warning: {w}" for w in self.warnings]
         lines.append(f"rostopic: {self.rostopic}")
@@ -491,8 +616,10 @@ class KalibrImu:
                 continue
             kind = "noise_density" if key.endswith("noise_density") else "random_walk"
             axes = self.per_axis.get(key, {})
-            lines.append(f"# {key} [{si[key]}{unit[kind]}]: conservative choice = max over "
-                         f"axes {', '.join(axes) or '-'}; largest on {self.chosen.get(key, '-')}")
+            lines.append(
+                f"# {key} [{si[key]}{unit[kind]}]: conservative choice = max over "
+                f"axes {', '.join(axes) or '-'}; largest on {self.chosen.get(key, '-')}"
+            )
             lines.append(f"{key}: {_yfloat(self.values[key])}  # from {self.chosen.get(key, '-')}")
             if axes:
                 flow = ", ".join(f"{a}: {_yfloat(v)}" for a, v in axes.items())
@@ -502,9 +629,15 @@ class KalibrImu:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
-        return {"rostopic": self.rostopic, "update_rate": self.update_rate, **self.values,
-                "chosen": dict(self.chosen), "per_axis": self.per_axis,
-                "sources": dict(self.sources), "warnings": list(self.warnings)}
+        return {
+            "rostopic": self.rostopic,
+            "update_rate": self.update_rate,
+            **self.values,
+            "chosen": dict(self.chosen),
+            "per_axis": self.per_axis,
+            "sources": dict(self.sources),
+            "warnings": list(self.warnings),
+        }
 
 
 def _yfloat(v: float) -> str:
@@ -569,8 +702,10 @@ def kalibr_imu(
     fss = {ch: r.fs for ch, r in fits.items()}
     fs0 = next(iter(fss.values()))
     if any(not math.isclose(f, fs0, rel_tol=1e-9) for f in fss.values()):
-        raise ExportError(f"the channels have different sampling frequencies {fss}: Kalibr's "
-                          "update_rate is one number")
+        raise ExportError(
+            f"the channels have different sampling frequencies {fss}: Kalibr's "
+            "update_rate is one number"
+        )
     per_axis: dict[str, dict[str, float]] = {}
     sources: dict[str, str] = {}
     chan_of: dict[tuple[str, str], str] = {}
@@ -584,20 +719,23 @@ def kalibr_imu(
         procs = res.model.processes
         wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == "WN"]
         if not wn:
-            raise ExportError(f"the model of {ch!r} ({res.model.spec()}) has no WN term: the "
-                              "noise density needs one; fit a model with WN")
+            raise ExportError(
+                f"the model of {ch!r} ({res.model.spec()}) has no WN term: the "
+                "noise density needs one; fit a model with WN"
+            )
         nd = math.sqrt(vals[f"{wn[0]}.sigma2"] / res.fs) * f_si
         rw = [lab for lab, p in zip(labels, procs, strict=True) if p.code == "RW"]
         if rw:
             rwd = math.sqrt(vals[f"{rw[0]}.gamma2"] * res.fs) * f_si
             src_rw = f"{ch}: {rw[0]}"
         else:
-            gm = [(lab, p) for lab, p in zip(labels, procs, strict=True)
-                  if p.code in ("GM", "AR1")]
+            gm = [(lab, p) for lab, p in zip(labels, procs, strict=True) if p.code in ("GM", "AR1")]
             if not gm:
-                raise ExportError(f"the model of {ch!r} ({res.model.spec()}) has neither RW nor "
-                                  "GM/AR1: the random walk cannot be set; fit a model with RW "
-                                  "(e.g. WN+RW or GM+WN+RW)")
+                raise ExportError(
+                    f"the model of {ch!r} ({res.model.spec()}) has neither RW nor "
+                    "GM/AR1: the random walk cannot be set; fit a model with RW "
+                    "(e.g. WN+RW or GM+WN+RW)"
+                )
             lab, p = gm[0]  # most persistent first
             if p.code == "GM":
                 beta, s2 = p.beta, p.sigma2_gm
@@ -606,28 +744,40 @@ def kalibr_imu(
                 s2 = p.sigma2 / (1 - p.phi**2)
             rwd = math.sqrt(2 * beta * s2) * f_si if beta > 0 else math.nan
             if not math.isfinite(rwd):
-                raise ExportError(f"the model of {ch!r} has no RW and its {lab} term has no "
-                                  "positive correlation time: fit a model with RW")
+                raise ExportError(
+                    f"the model of {ch!r} has no RW and its {lab} term has no "
+                    "positive correlation time: fit a model with RW"
+                )
             src_rw = f"{ch}: {lab} driving noise sqrt(2 beta sigma2_gm) (no RW in the model)"
-            warnings.append(f"{ch}: no RW term; random walk set from {lab}'s driving noise "
-                            f"(correlation time {1 / beta:.4g} s)")
-        for key, val, src in ((f"{kind}_noise_density", nd, f"{ch}: {wn[0]}"),
-                              (f"{kind}_random_walk", rwd, src_rw)):
+            warnings.append(
+                f"{ch}: no RW term; random walk set from {lab}'s driving noise "
+                f"(correlation time {1 / beta:.4g} s)"
+            )
+        for key, val, src in (
+            (f"{kind}_noise_density", nd, f"{ch}: {wn[0]}"),
+            (f"{kind}_random_walk", rwd, src_rw),
+        ):
             if axis in per_axis.get(key, {}):
-                raise ExportError(f"two {kind} channels map to axis {axis!r} "
-                                  f"({chan_of[(key, axis)]}, {ch}): export one of them")
+                raise ExportError(
+                    f"two {kind} channels map to axis {axis!r} "
+                    f"({chan_of[(key, axis)]}, {ch}): export one of them"
+                )
             per_axis.setdefault(key, {})[axis] = float(val)
             chan_of[(key, axis)] = ch
             if not val > 0:
-                warnings.append(f"{ch}: {key} estimated as 0 ({src.split(': ', 1)[-1]} on the "
-                                "boundary); the conservative value comes from another axis")
+                warnings.append(
+                    f"{ch}: {key} estimated as 0 ({src.split(': ', 1)[-1]} on the "
+                    "boundary); the conservative value comes from another axis"
+                )
             sources[f"{key}[{axis}]"] = src
     missing = [k for k in _KALIBR_KEYS if k not in per_axis]
     if missing and not allow_partial:
         have = sorted({k.split("_")[0] for k in per_axis})
-        raise ExportError(f"Kalibr needs gyroscope and accelerometer noise; the fits give only "
-                          f"{' and '.join(have)} ({', '.join(fits)}). Add the other channels, "
-                          "or allow a partial file (allow_partial=True, CLI --partial)")
+        raise ExportError(
+            f"Kalibr needs gyroscope and accelerometer noise; the fits give only "
+            f"{' and '.join(have)} ({', '.join(fits)}). Add the other channels, "
+            "or allow a partial file (allow_partial=True, CLI --partial)"
+        )
     values, chosen = {}, {}
     for key in _KALIBR_KEYS:
         if key in per_axis:
@@ -646,12 +796,21 @@ def kalibr_imu(
         "(conservative choice). Kalibr's own advice is to inflate them further for "
         "unmodelled effects (temperature, vibration).",
     ]
-    return KalibrImu(values=values, chosen=chosen, per_axis=per_axis, sources=sources,
-                     update_rate=rate, rostopic=rostopic, comments=comments, warnings=warnings)
+    return KalibrImu(
+        values=values,
+        chosen=chosen,
+        per_axis=per_axis,
+        sources=sources,
+        update_rate=rate,
+        rostopic=rostopic,
+        comments=comments,
+        warnings=warnings,
+    )
 
 
-def write_kalibr(path: str | os.PathLike[str], fits: Mapping[str, GMWMResult],
-                 **kwargs: Any) -> Path:
+def write_kalibr(
+    path: str | os.PathLike[str], fits: Mapping[str, GMWMResult], **kwargs: Any
+) -> Path:
     """Write :func:`kalibr_imu` as a YAML file; returns the path."""
     p = Path(path)
     p.write_text(kalibr_imu(fits, **kwargs).to_yaml())
@@ -704,8 +863,9 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
         Unreadable file, or a line that is not ``key: value``.
     """
     text = str(source)
-    if isinstance(source, os.PathLike) or ("\n" not in text and ":" not in text.split("/")[0]
-                                            and Path(text).is_file()):
+    if isinstance(source, os.PathLike) or (
+        "\n" not in text and ":" not in text.split("/")[0] and Path(text).is_file()
+    ):
         try:
             text = Path(source).read_text()
         except (OSError, UnicodeDecodeError) as exc:
@@ -735,8 +895,9 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
     return out
 
 
-def kalibr_models(kalibr: str | os.PathLike[str] | Mapping[str, Any], *,
-                  per_axis: bool = False) -> dict[str, Model]:
+def kalibr_models(
+    kalibr: str | os.PathLike[str] | Mapping[str, Any], *, per_axis: bool = False
+) -> dict[str, Model]:
     """Models (per sample, SI units) that simulate the sensor described by a Kalibr file.
 
     ``WN(sigma2 = N^2 fs) + RW(gamma2 = K^2 / fs)`` with ``fs = update_rate``, for
@@ -766,10 +927,15 @@ def kalibr_models(kalibr: str | os.PathLike[str] | Mapping[str, Any], *,
             pairs[sensor] = (d.get(nk), d.get(rk))
         for name, (n, k) in pairs.items():
             for key, v in ((nk, n), (rk, k)):
-                if not isinstance(v, (int, float)) or isinstance(v, bool) or not v >= 0 \
-                        or not math.isfinite(v):
-                    raise ExportError(f"Kalibr file: {key} of {name} = {v!r} is not a "
-                                      "non-negative number")
+                if (
+                    not isinstance(v, (int, float))
+                    or isinstance(v, bool)
+                    or not v >= 0
+                    or not math.isfinite(v)
+                ):
+                    raise ExportError(
+                        f"Kalibr file: {key} of {name} = {v!r} is not a non-negative number"
+                    )
             out[name] = WN(sigma2=float(n) ** 2 * fs) + RW(gamma2=float(k) ** 2 / fs)
     if not out:
         raise ExportError("Kalibr file has no gyroscope_* or accelerometer_* noise keys")
@@ -826,34 +992,50 @@ def fit_report(
             kind = None
         ivs = (intervals or {}).get(ch)
         chans[ch] = {
-            "unit": unit, "sensor": kind, "axis": channel_axis(ch),
+            "unit": unit,
+            "sensor": kind,
+            "axis": channel_axis(ch),
             "fit": res.to_dict(),
             "intervals": [iv.to_dict() for iv in ivs] if ivs else None,
-            "datasheet": [r.to_dict() for r in
-                          datasheet_table({ch: res}, intervals={ch: ivs} if ivs else None,
-                                          units={ch: unit})],
+            "datasheet": [
+                r.to_dict()
+                for r in datasheet_table(
+                    {ch: res}, intervals={ch: ivs} if ivs else None, units={ch: unit}
+                )
+            ],
             "allan_floor": allan_floor(res),
         }
-    out: dict[str, Any] = {"schema": "gmwm-report/1", "engine_version": __version__,
-                           "source": source or (log.source if log is not None else ""),
-                           "channels": chans}
+    out: dict[str, Any] = {
+        "schema": "gmwm-report/1",
+        "engine_version": __version__,
+        "source": source or (log.source if log is not None else ""),
+        "channels": chans,
+    }
     if log is not None:
-        out["log"] = {"fs": log.fs, "fs_source": log.fs_source, "n": log.n,
-                      "units": dict(log.units), "format": log.meta.get("format"),
-                      "time_report": log.meta.get("time_report"),
-                      "segment": log.meta.get("segment"), "scale": log.meta.get("scale"),
-                      "notes": log.meta.get("notes", [])}
+        out["log"] = {
+            "fs": log.fs,
+            "fs_source": log.fs_source,
+            "n": log.n,
+            "units": dict(log.units),
+            "format": log.meta.get("format"),
+            "time_report": log.meta.get("time_report"),
+            "segment": log.meta.get("segment"),
+            "scale": log.meta.get("scale"),
+            "notes": log.meta.get("notes", []),
+        }
     if kalibr:
         try:
-            out["kalibr"] = kalibr_imu(fits, units=units or None, source=out["source"],
-                                       allow_partial=True).to_dict()
+            out["kalibr"] = kalibr_imu(
+                fits, units=units or None, source=out["source"], allow_partial=True
+            ).to_dict()
         except ExportError as e:
             out["kalibr"] = {"error": str(e)}
     return _clean(out)
 
 
-def write_report(path: str | os.PathLike[str], fits: Mapping[str, GMWMResult],
-                 **kwargs: Any) -> Path:
+def write_report(
+    path: str | os.PathLike[str], fits: Mapping[str, GMWMResult], **kwargs: Any
+) -> Path:
     """Write :func:`fit_report` as strict JSON (no NaN); returns the path."""
     p = Path(path)
     p.write_text(json.dumps(fit_report(fits, **kwargs), indent=1, allow_nan=False) + "\n")
@@ -875,16 +1057,38 @@ def curves_csv(fits: GMWMResult | Mapping[str, GMWMResult]) -> str:
         labels += [lab for lab in res.components if lab not in labels]
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["channel", "level", "tau_samples", "tau_s", "wv", "ci_low", "ci_high",
-                "implied", *labels, "wv_unit"])
+    w.writerow(
+        [
+            "channel",
+            "level",
+            "tau_samples",
+            "tau_s",
+            "wv",
+            "ci_low",
+            "ci_high",
+            "implied",
+            *labels,
+            "wv_unit",
+        ]
+    )
     for ch, res in fits.items():
         wv = res.wv
         for i in range(wv.n_levels):
-            comp = [_fmt(res.components[lab][i]) if lab in res.components else ""
-                    for lab in labels]
-            w.writerow([ch, int(wv.levels[i]), int(wv.tau_samples[i]), _fmt(wv.tau_s[i]),
-                        _fmt(wv.variance[i]), _fmt(wv.ci_low[i]), _fmt(wv.ci_high[i]),
-                        _fmt(res.implied[i]), *comp, _sq(wv.unit) if wv.unit else ""])
+            comp = [_fmt(res.components[lab][i]) if lab in res.components else "" for lab in labels]
+            w.writerow(
+                [
+                    ch,
+                    int(wv.levels[i]),
+                    int(wv.tau_samples[i]),
+                    _fmt(wv.tau_s[i]),
+                    _fmt(wv.variance[i]),
+                    _fmt(wv.ci_low[i]),
+                    _fmt(wv.ci_high[i]),
+                    _fmt(res.implied[i]),
+                    *comp,
+                    _sq(wv.unit) if wv.unit else "",
+                ]
+            )
     return buf.getvalue()
 
 
@@ -912,11 +1116,18 @@ def export(
         datasheet table, datasheet CSV.
     """
     if fmt == "kalibr":
-        text = kalibr_imu(fits, units=units, rostopic=rostopic, source=source,
-                          allow_partial=allow_partial).to_yaml()
+        text = kalibr_imu(
+            fits, units=units, rostopic=rostopic, source=source, allow_partial=allow_partial
+        ).to_yaml()
     elif fmt == "json":
-        text = json.dumps(fit_report(fits, intervals=intervals, log=log, units=units,
-                                     source=source), indent=1, allow_nan=False) + "\n"
+        text = (
+            json.dumps(
+                fit_report(fits, intervals=intervals, log=log, units=units, source=source),
+                indent=1,
+                allow_nan=False,
+            )
+            + "\n"
+        )
     elif fmt == "csv":
         text = curves_csv(fits)
     elif fmt in ("datasheet", "datasheet-csv"):

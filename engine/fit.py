@@ -55,8 +55,13 @@ class ParamRecord:
         return f"{self.label}.{self.name}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"process": self.process, "index": self.index, "name": self.name,
-                "value": float(self.value), "unit": self.unit}
+        return {
+            "process": self.process,
+            "index": self.index,
+            "name": self.name,
+            "value": float(self.value),
+            "unit": self.unit,
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,8 +124,11 @@ class GMWMResult:
         m = self.model
         for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True):
             for name, v in zip(p.param_names, p.values, strict=True):
-                out.append(ParamRecord(p.code, idx, lab, name, float(v),
-                                       param_unit(p.code, name, self.wv.unit)))
+                out.append(
+                    ParamRecord(
+                        p.code, idx, lab, name, float(v), param_unit(p.code, name, self.wv.unit)
+                    )
+                )
         return out
 
     @property
@@ -152,8 +160,10 @@ class GMWMResult:
         if ds:
             lines += ["", "  datasheet view:"]
             for row in ds:
-                lines.append(f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
-                             f"{row['unit']}")
+                lines.append(
+                    f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
+                    f"{row['unit']}"
+                )
         lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
@@ -196,9 +206,11 @@ def weight_matrix(wv: WaveletVariance, weights: str | np.ndarray = "ci") -> tupl
             width = wv.ci_high - wv.ci_low
             if np.any(~np.isfinite(width)) or np.any(width <= 0):
                 bad = int(np.flatnonzero(~(np.isfinite(width) & (width > 0)))[0]) + 1
-                raise FitError(f"the WV interval at level {bad} is empty or not finite, so "
-                               "weights='ci' is undefined (constant signal?); "
-                               "use another weighting")
+                raise FitError(
+                    f"the WV interval at level {bad} is empty or not finite, so "
+                    "weights='ci' is undefined (constant signal?); "
+                    "use another weighting"
+                )
             return np.diag(1.0 / width**2), "ci"
         if weights == "identity":
             return np.eye(j), "identity"
@@ -207,8 +219,10 @@ def weight_matrix(wv: WaveletVariance, weights: str | np.ndarray = "ci") -> tupl
     if w.ndim == 1:
         w = np.diag(w)
     if w.shape != (j, j):
-        raise FitError(f"the weight matrix has shape {w.shape}, the WV has {j} levels: "
-                       f"give a ({j},) vector or a ({j}, {j}) matrix")
+        raise FitError(
+            f"the weight matrix has shape {w.shape}, the WV has {j} levels: "
+            f"give a ({j},) vector or a ({j}, {j}) matrix"
+        )
     if not np.all(np.isfinite(w)) or not np.allclose(w, w.T, rtol=1e-10, atol=0):
         raise FitError("the weight matrix must be finite and symmetric")
     return w, "user"
@@ -377,8 +391,9 @@ def _local(prob: _Problem, u0: tuple[float, ...], step: float) -> tuple[float, n
     converged = False
     for _ in range(8):
         simplex = np.vstack([x] + [x + step * e for e in np.eye(prob.k)])
-        res = nelder_mead(prob.profile, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300),
-                          maxfev=400 * prob.k)
+        res = nelder_mead(
+            prob.profile, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300), maxfev=400 * prob.k
+        )
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.asarray(res.x, float), fn
@@ -443,8 +458,10 @@ def fit_gmwm(
         wv = wv.truncate(levels)
     m.validate(wv.n_levels)
     if not np.any(wv.variance > 0):
-        raise FitError("the wavelet variance is zero at every level (constant signal): "
-                       "there is no noise to model")
+        raise FitError(
+            "the wavelet variance is zero at every level (constant signal): "
+            "there is no noise to model"
+        )
     omega, wname = weight_matrix(wv, weights)
     prob = _Problem(m, wv, _sqrt_weight(omega))
 
@@ -472,18 +489,28 @@ def fit_gmwm(
         phis = tuple(prob.phi_of(i, float(ui)) for i, ui in zip(prob.nl_idx, u, strict=True))
         f, h, x = prob.solve(phis)
         method = "grid+nelder-mead"
-        msg = ("converged" if converged else
-               "the local search stopped before meeting its tolerance; the estimate may be "
-               "slightly above the minimum")
+        msg = (
+            "converged"
+            if converged
+            else "the local search stopped before meeting its tolerance; the estimate may be "
+            "slightly above the minimum"
+        )
 
     # build the fitted model; AR1/GM most persistent first
     procs: list[Process] = []
-    nl_vals = dict(zip(prob.nl_idx, (prob.phi_of(i, float(ui)) for i, ui in
-                                     zip(prob.nl_idx, u, strict=True)), strict=True))
+    nl_vals = dict(
+        zip(
+            prob.nl_idx,
+            (prob.phi_of(i, float(ui)) for i, ui in zip(prob.nl_idx, u, strict=True)),
+            strict=True,
+        )
+    )
     for i, p in enumerate(m.processes):
         procs.append(p.from_fit(float(h[i]), nl_vals.get(i), wv.fs))
-    nonlin = sorted((q for q in procs if q.nonlinear is not None),
-                    key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / wv.fs)))
+    nonlin = sorted(
+        (q for q in procs if q.nonlinear is not None),
+        key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / wv.fs)),
+    )
     lin = [q for q in procs if q.nonlinear is None]
     fitted = Model(tuple(nonlin + lin))
     comps = fitted.components(wv.tau_samples, wv.fs)
@@ -502,9 +529,19 @@ def fit_gmwm(
                 if tc <= prob.tc_min * 1.0001 or tc >= prob.tc_max / 1.0001:
                     at_bound.append(f"{lab}.{q.nonlinear}")
     return GMWMResult(
-        model=fitted, wv=wv, omega=omega, weights=wname, objective=objective, implied=implied,
-        components=comps, converged=converged, at_bound=at_bound, n_evaluations=prob.n_eval,
-        method=method, message=msg, elapsed_s=time.perf_counter() - t0,
+        model=fitted,
+        wv=wv,
+        omega=omega,
+        weights=wname,
+        objective=objective,
+        implied=implied,
+        components=comps,
+        converged=converged,
+        at_bound=at_bound,
+        n_evaluations=prob.n_eval,
+        method=method,
+        message=msg,
+        elapsed_s=time.perf_counter() - t0,
     )
 
 

@@ -41,8 +41,15 @@ from .processes import _BACKWARD, _FORWARD, AR1, DR, GM, QN, RW, WN, Process
 from .wavelet import WaveletVariance, _as_series, _cumsum_demeaned, wavelet_variance
 
 __all__ = [
-    "wv_cov_data", "wv_cov_model", "wv_cov_bootstrap", "fit_efficient", "param_intervals",
-    "ParamInterval", "j_test", "JTest", "jacobian",
+    "wv_cov_data",
+    "wv_cov_model",
+    "wv_cov_bootstrap",
+    "fit_efficient",
+    "param_intervals",
+    "ParamInterval",
+    "j_test",
+    "JTest",
+    "jacobian",
 ]
 
 
@@ -69,7 +76,7 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
     out = np.empty(wv.n_levels)
     for i, j in enumerate(wv.levels):
         m = 1 << (int(j) - 1)
-        w = (s[2 * m:] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+        w = (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
         nfft = 1 << int(math.ceil(math.log2(2 * w.size)))
         spec = np.fft.rfft(w, nfft)
         acf = np.fft.irfft(spec.real**2 + spec.imag**2, nfft)[: w.size] / w.size
@@ -144,7 +151,7 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
     chunk = 1 << 14
     g = np.empty((levels, chunk))
     for a in range(0, f.size, chunk):
-        fc, wc = f[a:a + chunk], wts[a:a + chunk]
+        fc, wc = f[a : a + chunk], wts[a : a + chunk]
         k = fc.size
         s = np.zeros_like(fc)
         for p in model.processes:
@@ -192,8 +199,9 @@ def _map(fn, items: list, workers: int) -> list:
                 os.environ[k] = v
 
 
-def wv_cov_bootstrap(model: Model, wv: WaveletVariance, *, B: int = 100, seed: int | None = 0,
-                     workers: int = 1) -> np.ndarray:
+def wv_cov_bootstrap(
+    model: Model, wv: WaveletVariance, *, B: int = 100, seed: int | None = 0, workers: int = 1
+) -> np.ndarray:
     """Parametric-bootstrap covariance of the WV: simulate ``B`` series of the model's length.
 
     Parameters
@@ -221,9 +229,16 @@ def _inverse(v: np.ndarray) -> np.ndarray:
     return (inv + inv.T) / 2
 
 
-def fit_efficient(wv: WaveletVariance, model: Model | str, *, v: str | np.ndarray = "model",
-                  x: Any = None, B: int = 100, seed: int | None = 0,
-                  workers: int = 1) -> GMWMResult:
+def fit_efficient(
+    wv: WaveletVariance,
+    model: Model | str,
+    *,
+    v: str | np.ndarray = "model",
+    x: Any = None,
+    B: int = 100,
+    seed: int | None = 0,
+    workers: int = 1,
+) -> GMWMResult:
     """Two-step efficient GMWM: ``weights="ci"``, then ``Omega = V^-1`` with V estimated.
 
     Parameters
@@ -239,8 +254,15 @@ def fit_efficient(wv: WaveletVariance, model: Model | str, *, v: str | np.ndarra
     return res
 
 
-def _covariance(res: GMWMResult, v: str | np.ndarray, *, x: Any = None, B: int = 100,
-                seed: int | None = 0, workers: int = 1) -> np.ndarray:
+def _covariance(
+    res: GMWMResult,
+    v: str | np.ndarray,
+    *,
+    x: Any = None,
+    B: int = 100,
+    seed: int | None = 0,
+    workers: int = 1,
+) -> np.ndarray:
     if isinstance(v, np.ndarray):
         if v.shape != (res.wv.n_levels,) * 2:
             raise FitError(f"V has shape {v.shape}, expected {(res.wv.n_levels,) * 2}")
@@ -296,8 +318,9 @@ def jacobian(res: GMWMResult, free: list[tuple[int, str]] | None = None) -> np.n
         up, dn = u0.copy(), u0.copy()
         up[k] += h
         dn[k] -= h
-        jac[:, k] = (_set(res.model, free, up).wv(tau, res.fs)
-                     - _set(res.model, free, dn).wv(tau, res.fs)) / (2 * h)
+        jac[:, k] = (
+            _set(res.model, free, up).wv(tau, res.fs) - _set(res.model, free, dn).wv(tau, res.fs)
+        ) / (2 * h)
     return jac
 
 
@@ -314,8 +337,15 @@ class ParamInterval:
     level: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "value": self.value, "low": self.low, "high": self.high,
-                "unit": self.unit, "method": self.method, "level": self.level}
+        return {
+            "name": self.name,
+            "value": self.value,
+            "low": self.low,
+            "high": self.high,
+            "unit": self.unit,
+            "method": self.method,
+            "level": self.level,
+        }
 
 
 def _boot_fit(args: tuple) -> dict[str, float] | None:
@@ -329,9 +359,17 @@ def _boot_fit(args: tuple) -> dict[str, float] | None:
         return None
 
 
-def param_intervals(res: GMWMResult, *, method: str = "asymptotic", level: float = 0.95,
-                    v: str | np.ndarray = "model", x: Any = None, B: int = 100,
-                    seed: int | None = 0, workers: int = 1) -> list[ParamInterval]:
+def param_intervals(
+    res: GMWMResult,
+    *,
+    method: str = "asymptotic",
+    level: float = 0.95,
+    v: str | np.ndarray = "model",
+    x: Any = None,
+    B: int = 100,
+    seed: int | None = 0,
+    workers: int = 1,
+) -> list[ParamInterval]:
     """Two-sided intervals for every parameter of a fit.
 
     Parameters
@@ -372,14 +410,19 @@ def param_intervals(res: GMWMResult, *, method: str = "asymptotic", level: float
             lo, hi = bounds.get((r.label, r.name), (math.nan, math.nan))
             if r.name == "omega":  # the sign of a drift is not identified: report |omega|
                 lo, hi = (max(lo, 0.0), hi) if r.value >= 0 else (lo, hi)
-            out.append(ParamInterval(r.full_name, r.value, float(lo), float(hi), r.unit,
-                                     "asymptotic", level))
+            out.append(
+                ParamInterval(
+                    r.full_name, r.value, float(lo), float(hi), r.unit, "asymptotic", level
+                )
+            )
         return out
     if method == "bootstrap":
         seeds = np.random.SeedSequence(seed).spawn(B)
         omega = None if res.weights == "ci" else res.omega
-        items = [(res.model, res.model.cleared(), res.wv.n, res.fs, res.wv.n_levels, omega, s)
-                 for s in seeds]
+        items = [
+            (res.model, res.model.cleared(), res.wv.n, res.fs, res.wv.n_levels, omega, s)
+            for s in seeds
+        ]
         fits = [f for f in _map(_boot_fit, items, workers) if f is not None]
         if len(fits) < max(10, B // 2):
             raise FitError("too many bootstrap refits failed; the model may be unidentifiable")
@@ -387,8 +430,11 @@ def param_intervals(res: GMWMResult, *, method: str = "asymptotic", level: float
         for r in recs:
             vals = np.array([f[r.full_name] for f in fits])
             lo, hi = np.quantile(vals, [0.5 - level / 2, 0.5 + level / 2])
-            out.append(ParamInterval(r.full_name, r.value, float(lo), float(hi), r.unit,
-                                     "bootstrap", level))
+            out.append(
+                ParamInterval(
+                    r.full_name, r.value, float(lo), float(hi), r.unit, "bootstrap", level
+                )
+            )
         return out
     raise ValueError(f"unknown interval method {method!r}: use 'asymptotic' or 'bootstrap'")
 
@@ -403,12 +449,24 @@ class JTest:
     method: str
 
     def to_dict(self) -> dict[str, Any]:
-        return {"statistic": self.statistic, "df": self.df, "p_value": self.p_value,
-                "method": self.method}
+        return {
+            "statistic": self.statistic,
+            "df": self.df,
+            "p_value": self.p_value,
+            "method": self.method,
+        }
 
 
-def j_test(res: GMWMResult, *, v: str | np.ndarray = "model", x: Any = None, B: int = 200,
-           seed: int | None = 0, workers: int = 1, method: str = "asymptotic") -> JTest:
+def j_test(
+    res: GMWMResult,
+    *,
+    v: str | np.ndarray = "model",
+    x: Any = None,
+    B: int = 200,
+    seed: int | None = 0,
+    workers: int = 1,
+    method: str = "asymptotic",
+) -> JTest:
     """Goodness of fit: ``T = (nu_hat - nu(theta_hat))' V^-1 (nu_hat - nu(theta_hat))``.
 
     Under a correct model and efficient weights, ``T ~ chi2(J - p)`` asymptotically

@@ -42,8 +42,14 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["LoadError", "ImuLog", "load_log", "save_log"]
 
 _H5_EXT = {".h5", ".hdf5", ".hdf", ".he5"}
-_MAGIC = {b"\x89HDF\r\n\x1a\n": "hdf5", b"\x93NUMPY": "npy", b"PK\x03\x04": "npz",
-          b"#ROSBAG V2.0": "bag", b"\x89MCAP0\r\n": "bag", b"SQLite format 3\x00": "bag"}
+_MAGIC = {
+    b"\x89HDF\r\n\x1a\n": "hdf5",
+    b"\x93NUMPY": "npy",
+    b"PK\x03\x04": "npz",
+    b"#ROSBAG V2.0": "bag",
+    b"\x89MCAP0\r\n": "bag",
+    b"SQLite format 3\x00": "bag",
+}
 _TIME_RE = re.compile(r"(time|t|timestamp|stamp|sec|seconds)(?:_(s|ms|us|ns))?|(ms|us|ns)")
 _TIME_DIV = {"s": 1.0, "sec": 1.0, "seconds": 1.0, "ms": 1e3, "us": 1e6, "µs": 1e6, "ns": 1e9}
 _UNIT_RE = re.compile(r"(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*")
@@ -240,10 +246,12 @@ class _Opts:
     topic: str | None = None
 
 
-_SEGMENT_HELP = ("choose segment='longest' (CLI: --segment longest) to analyse the longest "
-                 "clean segment, segment=(start, stop) for another one, or segment='report' to "
-                 "keep every sample as if uniformly spaced (samples joined across the breaks); "
-                 "or fix the log, or pass fs= to ignore the time column")
+_SEGMENT_HELP = (
+    "choose segment='longest' (CLI: --segment longest) to analyse the longest "
+    "clean segment, segment=(start, stop) for another one, or segment='report' to "
+    "keep every sample as if uniformly spaced (samples joined across the breaks); "
+    "or fix the log, or pass fs= to ignore the time column"
+)
 
 
 def _time_scale(name: str, t: np.ndarray, div: tuple[float, bool], notes: list[str]) -> float:
@@ -256,37 +264,50 @@ def _time_scale(name: str, t: np.ndarray, div: tuple[float, bool], notes: list[s
     pos = d[d > 0]
     med = float(np.median(pos)) if pos.size else 0.0
     if med > 1e5:
-        notes.append(f"time column '{name}' has a median step of {med:g}: read as nanoseconds "
-                     "(name it time_s, time_ms or time_ns, or pass fs=, to be explicit)")
+        notes.append(
+            f"time column '{name}' has a median step of {med:g}: read as nanoseconds "
+            "(name it time_s, time_ms or time_ns, or pass fs=, to be explicit)"
+        )
         return 1e9
     return scale
 
 
 def _check_scale(src: str, scale: Any, names: list[str]) -> dict[str, float]:
     """Per-channel scale factors from a number or a {channel: factor} mapping."""
+
     def num(v: Any, what: str) -> float:
         try:
             f = float(v)
         except (TypeError, ValueError):
             f = math.nan
         if isinstance(v, bool) or not math.isfinite(f) or f == 0:
-            raise LoadError(f"file '{src}': {what} = {v!r} is not a valid scale factor (a finite, "
-                            "non-zero number of units per count, e.g. scale=0.05)")
+            raise LoadError(
+                f"file '{src}': {what} = {v!r} is not a valid scale factor (a finite, "
+                "non-zero number of units per count, e.g. scale=0.05)"
+            )
         return f
 
     if isinstance(scale, Mapping):
         unknown = [k for k in scale if k not in names]
         if unknown:
-            raise LoadError(f"file '{src}': scale given for unknown channel(s) {unknown}; "
-                            f"channels: {', '.join(names)}")
+            raise LoadError(
+                f"file '{src}': scale given for unknown channel(s) {unknown}; "
+                f"channels: {', '.join(names)}"
+            )
         return {str(k): num(v, f"scale[{k!r}]") for k, v in scale.items()}
     s = num(scale, "scale")
     return dict.fromkeys(names, s)
 
 
 def _apply_time(
-    src: str, cols: dict[str, Any], n: int, time: tuple[str, np.ndarray, tuple[float, bool]],
-    rows: np.ndarray | None, opts: _Opts, notes: list[str], meta: dict[str, Any],
+    src: str,
+    cols: dict[str, Any],
+    n: int,
+    time: tuple[str, np.ndarray, tuple[float, bool]],
+    rows: np.ndarray | None,
+    opts: _Opts,
+    notes: list[str],
+    meta: dict[str, Any],
 ) -> tuple[dict[str, Any], np.ndarray | None, float]:
     """Check the time column, apply the segment policy; return (cols, rows, fs of the stamps)."""
     from .timecheck import check_time, segment_fs
@@ -299,38 +320,49 @@ def _apply_time(
     if policy is None:
         policy = "report" if opts.fs_user is not None else "stop"
     if isinstance(policy, str) and policy not in ("stop", "longest", "report"):
-        raise LoadError(f"file '{src}': segment={policy!r} is not a choice: use 'stop', "
-                        "'longest', 'report' or a (start, stop) pair of sample indices")
+        raise LoadError(
+            f"file '{src}': segment={policy!r} is not a choice: use 'stop', "
+            "'longest', 'report' or a (start, stop) pair of sample indices"
+        )
     if rep.jitter > 0.01:
-        notes.append(f"time column '{name}' jitters: the regular steps vary by "
-                     f"{100 * rep.jitter:.3g} % (relative std); samples are treated as "
-                     "uniformly spaced")
+        notes.append(
+            f"time column '{name}' jitters: the regular steps vary by "
+            f"{100 * rep.jitter:.3g} % (relative std); samples are treated as "
+            "uniformly spaced"
+        )
     ts = None
     if not isinstance(policy, str):
         a, b = _segment_range(src, policy, n)
-        inside = [e for e in rep.events if a < e.index < b or (e.kind == "invalid"
-                                                                 and a <= e.index < b)]
+        inside = [
+            e for e in rep.events if a < e.index < b or (e.kind == "invalid" and a <= e.index < b)
+        ]
         if inside:
-            raise LoadError(f"file '{src}': segment=({a}, {b}) is not clean: "
-                            f"{inside[0].describe()}; clean segments are listed in the time "
-                            "report (segment='report' keeps every sample)")
+            raise LoadError(
+                f"file '{src}': segment=({a}, {b}) is not clean: "
+                f"{inside[0].describe()}; clean segments are listed in the time "
+                "report (segment='report' keeps every sample)"
+            )
         sel = (a, b)
     elif rep.ok or policy == "report":
         sel = (0, n)
         if not rep.ok:
-            notes.append(f"{rep.message()}; segment='report': every sample kept as if "
-                         "uniformly spaced (samples joined across the breaks)")
+            notes.append(
+                f"{rep.message()}; segment='report': every sample kept as if "
+                "uniformly spaced (samples joined across the breaks)"
+            )
     elif policy == "longest":
         sel = rep.longest
-        notes.append(f"{rep.message()}; segment='longest': samples {sel[0]} to {sel[1] - 1} "
-                     "analysed, the rest dropped")
+        notes.append(
+            f"{rep.message()}; segment='longest': samples {sel[0]} to {sel[1] - 1} "
+            "analysed, the rest dropped"
+        )
     else:
         raise LoadError(f"file '{src}': {rep.message()}. To go on, {_SEGMENT_HELP}")
     if sel != (0, n):
         cols = {k: _slice(v, *sel) for k, v in cols.items()}
-        rows = None if rows is None else rows[sel[0]:sel[1]]
+        rows = None if rows is None else rows[sel[0] : sel[1]]
         meta["segment"] = [int(sel[0]), int(sel[1])]
-        ts = np.asarray(t[sel[0]:sel[1]])
+        ts = np.asarray(t[sel[0] : sel[1]])
     if rep.ok or sel != (0, n):
         from .timecheck import as_seconds
 
@@ -345,9 +377,11 @@ def _check_magnitude(src: str, name: str, x: np.ndarray) -> None:
     if x.size and x.dtype.itemsize == 8:
         big = max(float(np.max(x)), -float(np.min(x)))  # no |x| temporary
         if big * x.size > 1e150:
-            raise LoadError(f"file '{src}', column '{name}': values up to {big:.3g} are too large "
-                            "for a variance in float64 (their squares overflow): check the units "
-                            "or the scale factor")
+            raise LoadError(
+                f"file '{src}', column '{name}': values up to {big:.3g} are too large "
+                "for a variance in float64 (their squares overflow): check the units "
+                "or the scale factor"
+            )
 
 
 def _segment_range(src: str, segment: Any, n: int) -> tuple[int, int]:
@@ -355,11 +389,14 @@ def _segment_range(src: str, segment: Any, n: int) -> tuple[int, int]:
     try:
         a, b = (int(v) for v in segment)
     except (TypeError, ValueError):
-        raise LoadError(f"file '{src}': segment={segment!r} is not a (start, stop) pair of "
-                        "sample indices") from None
+        raise LoadError(
+            f"file '{src}': segment={segment!r} is not a (start, stop) pair of sample indices"
+        ) from None
     if not 0 <= a < b <= n:
-        raise LoadError(f"file '{src}': segment=({a}, {b}) is outside the log's samples "
-                        f"0..{n}: give 0 <= start < stop <= {n}")
+        raise LoadError(
+            f"file '{src}': segment=({a}, {b}) is outside the log's samples "
+            f"0..{n}: give 0 <= start < stop <= {n}"
+        )
     return a, b
 
 
@@ -377,10 +414,17 @@ def _length(a: Any) -> int:
 
 
 def _finish(
-    src: str, cols: dict[str, Any], units: Mapping[str, str], *, fmt: str,
-    channel: str | int | None, opts: _Opts, fs_file: tuple[Any, str] | None = None,
+    src: str,
+    cols: dict[str, Any],
+    units: Mapping[str, str],
+    *,
+    fmt: str,
+    channel: str | int | None,
+    opts: _Opts,
+    fs_file: tuple[Any, str] | None = None,
     time: tuple[str, np.ndarray, tuple[float, bool]] | None = None,
-    rows: np.ndarray | None = None, meta: dict[str, Any] | None = None,
+    rows: np.ndarray | None = None,
+    meta: dict[str, Any] | None = None,
     notes: list[str] | None = None,
 ) -> ImuLog:
     """Select, check the time column, convert and scale the channels, resolve fs, build the log.
@@ -390,8 +434,10 @@ def _finish(
     notes = notes if notes is not None else []
     meta = {"format": fmt, **(meta or {})}
     if not cols:
-        raise LoadError(f"file '{src}' contains no numeric channel: expected 1-D numeric "
-                        "columns/datasets of samples")
+        raise LoadError(
+            f"file '{src}' contains no numeric channel: expected 1-D numeric "
+            "columns/datasets of samples"
+        )
     if channel is not None:
         name = _pick(src, list(cols), channel)
         cols = {name: cols[name]}
@@ -402,8 +448,10 @@ def _finish(
         if np.asarray(time[1]).shape == (n,):
             cols, rows, fs_time = _apply_time(src, cols, n, time, rows, opts, notes, meta)
         else:
-            notes.append(f"time column '{time[0]}' has {np.asarray(time[1]).size} stamps for "
-                         f"{n} samples: ignored")
+            notes.append(
+                f"time column '{time[0]}' has {np.asarray(time[1]).size} stamps for "
+                f"{n} samples: ignored"
+            )
             time = None
     if time is None and opts.segment is not None and not isinstance(opts.segment, str):
         a, b = _segment_range(src, opts.segment, n)  # a sample range, without time stamps
@@ -411,8 +459,10 @@ def _finish(
         rows = None if rows is None else rows[a:b]
         meta["segment"] = [a, b]
     elif time is None and opts.segment not in (None, "stop", "longest", "report"):
-        raise LoadError(f"file '{src}': segment={opts.segment!r} is not a choice: use 'stop', "
-                        "'longest', 'report' or a (start, stop) pair of sample indices")
+        raise LoadError(
+            f"file '{src}': segment={opts.segment!r} is not a choice: use 'stop', "
+            "'longest', 'report' or a (start, stop) pair of sample indices"
+        )
     scales = {} if opts.scale is None else _check_scale(src, opts.scale, list(cols))
     out: dict[str, np.ndarray] = {}
     for name, a in cols.items():
@@ -421,8 +471,10 @@ def _finish(
             with np.errstate(over="ignore", invalid="ignore"):  # checked just below
                 x = np.multiply(x, scales[name], dtype=np.float64)  # counts x scale: 1 rounding
             if not np.all(np.isfinite(x)):
-                raise LoadError(f"file '{src}', column '{name}': the scale factor "
-                                f"{scales[name]:g} makes values overflow: check it")
+                raise LoadError(
+                    f"file '{src}', column '{name}': the scale factor "
+                    f"{scales[name]:g} makes values overflow: check it"
+                )
         _check_magnitude(src, name, x)
         out[name] = x
     if scales:
@@ -430,16 +482,20 @@ def _finish(
     n = next(iter(out.values())).size
     if n < 4:
         what = " in the selected segment" if "segment" in meta else " per channel"
-        raise LoadError(f"file '{src}' has only {n} sample(s){what}: a wavelet variance "
-                        "needs at least 4 (a static log of minutes to hours is typical)")
+        raise LoadError(
+            f"file '{src}' has only {n} sample(s){what}: a wavelet variance "
+            "needs at least 4 (a static log of minutes to hours is typical)"
+        )
     if opts.fs_user is not None:
         fs, fs_source = opts.fs_user, "user"
     elif fs_file is not None:
         fix = "fix it in the file, or pass fs= to override it"
         fs, fs_source = _check_fs(fs_file[0], src, fs_file[1], fix), "file"
         if fs_time is not None and math.isfinite(fs_time) and abs(fs_time / fs - 1) > 0.01:
-            notes.append(f"the time column gives {fs_time:g} Hz but {fs_file[1]} says {fs:g} Hz; "
-                         "the file's value is used")
+            notes.append(
+                f"the time column gives {fs_time:g} Hz but {fs_file[1]} says {fs:g} Hz; "
+                "the file's value is used"
+            )
     elif fs_time is not None and math.isfinite(fs_time):
         fs, fs_source = fs_time, "time column"
     else:
@@ -450,8 +506,10 @@ def _finish(
         if isinstance(opts.units, Mapping):
             unknown = [k for k in opts.units if k not in out]
             if unknown:
-                raise LoadError(f"file '{src}': units given for unknown channel(s) {unknown}; "
-                                f"channels: {', '.join(out)}")
+                raise LoadError(
+                    f"file '{src}': units given for unknown channel(s) {unknown}; "
+                    f"channels: {', '.join(out)}"
+                )
             unit_map.update({str(k): _unit(v) for k, v in opts.units.items()})
         else:
             unit_map = dict.fromkeys(out, _unit(opts.units))
@@ -477,8 +535,10 @@ def _split_header(line: str, delim: str | None) -> list[str]:
         return _split(line, delim)
     out: list[str] = []  # whitespace: keep "gyro_x [deg/s]" together
     for tok in line.split():
-        if out and (tok[0] in "[(" or out[-1].count("[") + out[-1].count("(")
-                    > out[-1].count("]") + out[-1].count(")")):
+        if out and (
+            tok[0] in "[("
+            or out[-1].count("[") + out[-1].count("(") > out[-1].count("]") + out[-1].count(")")
+        ):
             out[-1] += " " + tok
         else:
             out.append(tok.strip("\"'"))
@@ -486,9 +546,11 @@ def _split_header(line: str, delim: str | None) -> list[str]:
 
 
 def _decode(raw: bytes, src: str) -> str:
-    not_text = LoadError(f"file '{src}' is not a text file (binary data, or an encoding other than "
-                         "UTF-8/Latin-1): expected CSV/TSV text, .npy/.npz or HDF5; check the "
-                         "file and its extension")
+    not_text = LoadError(
+        f"file '{src}' is not a text file (binary data, or an encoding other than "
+        "UTF-8/Latin-1): expected CSV/TSV text, .npy/.npz or HDF5; check the "
+        "file and its extension"
+    )
     if b"\x00" in raw[:65536]:
         raise not_text
     try:
@@ -512,8 +574,10 @@ def _read_text(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
             contents.append(s)
             linenos.append(i)
     if not contents:
-        raise LoadError(f"file '{src}' is empty (no data rows, only blank or '#' comment "
-                        "lines): check that the logger wrote samples")
+        raise LoadError(
+            f"file '{src}' is empty (no data rows, only blank or '#' comment "
+            "lines): check that the logger wrote samples"
+        )
     probe = contents[min(1, len(contents) - 1)]
     delim = next((d for d in ("\t", ";", ",") if d in probe), None)
     notes: list[str] = []
@@ -525,8 +589,10 @@ def _read_text(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
         keep = [i for i, c in enumerate(contents) if c]  # a row of delimiters only: blank
         contents, linenos = [contents[i] for i in keep], [linenos[i] for i in keep]
         if not contents:
-            raise LoadError(f"file '{src}' holds only delimiters, no values: check that the "
-                            "logger wrote samples")
+            raise LoadError(
+                f"file '{src}' holds only delimiters, no values: check that the "
+                "logger wrote samples"
+            )
     first = _split(contents[0], delim)
     header = any(_num(f) is None for f in first)
     names: list[str] = []
@@ -543,14 +609,17 @@ def _read_text(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
             units[name] = _unit(unit)
         contents, linenos = contents[1:], linenos[1:]
         if not contents:
-            raise LoadError(f"file '{src}' has a header ({', '.join(names)}) but no data rows: "
-                            "check that the logger wrote samples")
+            raise LoadError(
+                f"file '{src}' has a header ({', '.join(names)}) but no data rows: "
+                "check that the logger wrote samples"
+            )
     else:
         names = [f"col{j}" for j in range(len(first))]
     rows = np.asarray(linenos)
     try:
-        data = np.loadtxt(contents, delimiter=delim, dtype=np.float64, ndmin=2, comments=None,
-                          quotechar='"')
+        data = np.loadtxt(
+            contents, delimiter=delim, dtype=np.float64, ndmin=2, comments=None, quotechar='"'
+        )
         if data.shape[1] != len(names):
             raise ValueError("header and data column counts differ")
     except ValueError as exc:
@@ -562,15 +631,30 @@ def _read_text(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
         if div is not None:
             time = time or (name, cols[name], div)
             del cols[name]
-    if not header and len(names) >= 2 and _looks_like_time(cols["col0"]) and not any(
-        _looks_like_time(cols[k], strict_only=True) for k in names[1:]
+    if (
+        not header
+        and len(names) >= 2
+        and _looks_like_time(cols["col0"])
+        and not any(_looks_like_time(cols[k], strict_only=True) for k in names[1:])
     ):
         time = ("col0", cols.pop("col0"), (1.0, False))
-        notes.append("first column read as a time column in seconds (strictly increasing, "
-                     "near-constant step); pass fs= to set the rate explicitly")
+        notes.append(
+            "first column read as a time column in seconds (strictly increasing, "
+            "near-constant step); pass fs= to set the rate explicitly"
+        )
     meta = {"delimiter": {None: "whitespace", "\t": "tab"}.get(delim, delim), "header": header}
-    return _finish(src, cols, units, fmt="text", channel=channel, opts=opts, time=time,
-                   rows=rows, meta=meta, notes=notes)
+    return _finish(
+        src,
+        cols,
+        units,
+        fmt="text",
+        channel=channel,
+        opts=opts,
+        time=time,
+        rows=rows,
+        meta=meta,
+        notes=notes,
+    )
 
 
 def _looks_like_time(a: np.ndarray, strict_only: bool = False) -> bool:
@@ -580,8 +664,14 @@ def _looks_like_time(a: np.ndarray, strict_only: bool = False) -> bool:
     return strict_only or bool(np.mean(np.abs(d - np.median(d)) <= 0.1 * np.median(d)) >= 0.99)
 
 
-def _diagnose(src: str, contents: list[str], linenos: list[int], delim: str | None,
-              names: list[str], exc: Exception) -> None:
+def _diagnose(
+    src: str,
+    contents: list[str],
+    linenos: list[int],
+    delim: str | None,
+    names: list[str],
+    exc: Exception,
+) -> None:
     """Find the first ragged row or non-number after np.loadtxt failed, and raise."""
     k = len(names)
     for line, ln in zip(contents, linenos, strict=True):
@@ -595,8 +685,10 @@ def _diagnose(src: str, contents: list[str], linenos: list[int], delim: str | No
         for j, s in enumerate(fields):
             if _num(s) is None:
                 what = "an empty field" if not s else f"{s!r}"
-                raise LoadError(f"file '{src}', column '{names[j]}', line {ln}: {what} is not a "
-                                "number: fix the value or remove the line")
+                raise LoadError(
+                    f"file '{src}', column '{names[j]}', line {ln}: {what} is not a "
+                    "number: fix the value or remove the line"
+                )
     raise LoadError(f"file '{src}' could not be parsed as numbers ({exc}): check the format")
 
 
@@ -618,8 +710,10 @@ def _read_npy(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     try:
         a = np.load(path, allow_pickle=False)
     except Exception as exc:
-        raise LoadError(f"file '{src}' is not a readable .npy array of numbers ({exc}): "
-                        "re-save it with numpy.save(path, array)") from exc
+        raise LoadError(
+            f"file '{src}' is not a readable .npy array of numbers ({exc}): "
+            "re-save it with numpy.save(path, array)"
+        ) from exc
     notes: list[str] = []
     time = None
     if a.dtype.names and a.ndim == 1:  # structured array: one channel per field
@@ -633,10 +727,11 @@ def _read_npy(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     elif a.ndim in (1, 2) and not a.dtype.names:
         cols = {"x": a} if a.ndim == 1 else _columns("array", a, notes, "col{j}")
     else:
-        raise LoadError(f"file '{src}': array of shape {a.shape} is not 1-D (N,) or 2-D (N, k): "
-                        "save one column per channel")
-    return _finish(src, cols, {}, fmt="npy", channel=channel, opts=opts, time=time,
-                   notes=notes)
+        raise LoadError(
+            f"file '{src}': array of shape {a.shape} is not 1-D (N,) or 2-D (N, k): "
+            "save one column per channel"
+        )
+    return _finish(src, cols, {}, fmt="npy", channel=channel, opts=opts, time=time, notes=notes)
 
 
 def _read_npz(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
@@ -648,8 +743,10 @@ def _read_npz(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as exc:
-        raise LoadError(f"file '{src}' is not a readable .npz archive ({exc}): re-save it with "
-                        "numpy.savez(path, gyro_x=..., fs=100.0)") from exc
+        raise LoadError(
+            f"file '{src}' is not a readable .npz archive ({exc}): re-save it with "
+            "numpy.savez(path, gyro_x=..., fs=100.0)"
+        ) from exc
     with z:
         for key in z.files:
             try:
@@ -669,8 +766,18 @@ def _read_npz(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
                 meta[key] = _attr(a.item())
             else:
                 notes.append(f"key '{key}' (shape {a.shape}, dtype {a.dtype}) was skipped")
-    return _finish(src, cols, units, fmt="npz", channel=channel, opts=opts, fs_file=fs_file,
-                   time=time, meta=meta, notes=notes)
+    return _finish(
+        src,
+        cols,
+        units,
+        fmt="npz",
+        channel=channel,
+        opts=opts,
+        fs_file=fs_file,
+        time=time,
+        meta=meta,
+        notes=notes,
+    )
 
 
 # ----------------------------------------------------------------------------- hdf5
@@ -680,8 +787,10 @@ def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
-        raise LoadError(f"file '{src}' is not a readable HDF5 file ({exc}): check that it is "
-                        "complete and really HDF5 (or fix its extension)") from exc
+        raise LoadError(
+            f"file '{src}' is not a readable HDF5 file ({exc}): check that it is "
+            "complete and really HDF5 (or fix its extension)"
+        ) from exc
     with f:
         notes: list[str] = []
         attrs = {k: _attr(v) for k, v in f.attrs.items()}
@@ -690,8 +799,10 @@ def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
         fs_file = next(((attrs[k], f"attribute '{k}'") for k in _FS_KEYS if k in attrs), None)
         if str(attrs.get("kind", "")) in _SUMMARY_KINDS or isinstance(f.get("wv"), h5py.Group):
             if opts.scale is not None:
-                raise LoadError(f"file '{src}' is a wavelet-variance summary: scale= applies to "
-                                "raw samples (counts); load the raw log instead")
+                raise LoadError(
+                    f"file '{src}' is a wavelet-variance summary: scale= applies to "
+                    "raw samples (counts); load the raw log instead"
+                )
             return _read_summary(f, src, channel, opts.fs_user, fs_file, units, meta, notes)
         found: dict[str, tuple[int, Callable[[], np.ndarray], h5py.Dataset]] = {}
         times: list[tuple[str, h5py.Dataset, tuple[float, bool]]] = []
@@ -712,7 +823,9 @@ def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
                 for j in range(obj.shape[1 - int(rows_first)]):
                     found[f"{name}[{j}]"] = (
                         obj.shape[int(rows_first)],
-                        (lambda j=j: obj[j, :]) if rows_first else (lambda j=j: obj[:, j]), obj)
+                        (lambda j=j: obj[j, :]) if rows_first else (lambda j=j: obj[:, j]),
+                        obj,
+                    )
                     units[f"{name}[{j}]"] = unit or units.get(f"{name}[{j}]", "")
             elif obj.ndim == 0 and name.lower() in _FS_KEYS:
                 scalar_fs.append((_attr(obj[()]), f"dataset '{name}'"))
@@ -728,8 +841,10 @@ def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
             n_max = max(found[k][0] for k in names)
             other = [k for k in names if found[k][0] != n_max]
             if other:
-                notes.append(f"datasets of another length skipped (select them with channel=): "
-                             f"{', '.join(other)}")
+                notes.append(
+                    f"datasets of another length skipped (select them with channel=): "
+                    f"{', '.join(other)}"
+                )
             names = [k for k in names if found[k][0] == n_max]
         for k in names if fs_file is None else []:
             ds_attrs = found[k][2].attrs
@@ -744,15 +859,33 @@ def _read_h5(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
             try:
                 cols[k] = found[k][1]()
             except (OSError, ValueError) as exc:
-                raise LoadError(f"file '{src}', dataset '{k}' could not be read ({exc}): the file "
-                                "may be truncated or corrupt; re-export it") from exc
-    return _finish(src, cols, units, fmt="hdf5", channel=None, opts=opts, fs_file=fs_file,
-                   time=time, meta=meta, notes=notes)
+                raise LoadError(
+                    f"file '{src}', dataset '{k}' could not be read ({exc}): the file "
+                    "may be truncated or corrupt; re-export it"
+                ) from exc
+    return _finish(
+        src,
+        cols,
+        units,
+        fmt="hdf5",
+        channel=None,
+        opts=opts,
+        fs_file=fs_file,
+        time=time,
+        meta=meta,
+        notes=notes,
+    )
 
 
 def _read_summary(
-    f: h5py.File, src: str, channel: Any, fs_user: float | None, fs_file: tuple[Any, str] | None,
-    units: dict[str, str], meta: dict[str, Any], notes: list[str],
+    f: h5py.File,
+    src: str,
+    channel: Any,
+    fs_user: float | None,
+    fs_file: tuple[Any, str] | None,
+    units: dict[str, str],
+    meta: dict[str, Any],
+    notes: list[str],
 ) -> ImuLog:
     """WV summary (``derived/`` schema): one WaveletVariance per ``/wv/<channel>`` group."""
     import h5py
@@ -760,14 +893,18 @@ def _read_summary(
     g = f.get("wv")
     names = [k for k in g if isinstance(g[k], h5py.Group)] if isinstance(g, h5py.Group) else []
     if not names:
-        raise LoadError(f"file '{src}' is marked as a wavelet-variance summary but has no "
-                        "/wv/<channel> group: add them, or set the 'kind' attribute to 'raw'")
+        raise LoadError(
+            f"file '{src}' is marked as a wavelet-variance summary but has no "
+            "/wv/<channel> group: add them, or set the 'kind' attribute to 'raw'"
+        )
     names = _ordered(names, units)
     if channel is not None:
         names = [_pick(src, names, channel)]
     if "n_samples" not in meta:
-        raise LoadError(f"file '{src}': attribute 'n_samples' (length of the underlying raw log) "
-                        "is missing: add it to the file attributes")
+        raise LoadError(
+            f"file '{src}': attribute 'n_samples' (length of the underlying raw log) "
+            "is missing: add it to the file attributes"
+        )
     n = int(meta["n_samples"])
     if fs_user is not None:
         fs, fs_source = fs_user, "user"
@@ -781,31 +918,54 @@ def _read_summary(
     for ch in names:
         grp = g[ch]
         if not isinstance(grp.get("variance"), h5py.Dataset):
-            raise LoadError(f"file '{src}': dataset 'wv/{ch}/variance' is missing: each "
-                            "/wv/<channel> group needs the wavelet variance at levels 1..J")
+            raise LoadError(
+                f"file '{src}': dataset 'wv/{ch}/variance' is missing: each "
+                "/wv/<channel> group needs the wavelet variance at levels 1..J"
+            )
         v = np.asarray(grp["variance"][...], dtype=np.float64)
-        ci = [np.asarray(grp[c][...], dtype=np.float64) if c in grp else None
-              for c in ("ci_low", "ci_high")]
+        ci = [
+            np.asarray(grp[c][...], dtype=np.float64) if c in grp else None
+            for c in ("ci_low", "ci_high")
+        ]
         parts = {"ci_low": ci[0], "ci_high": ci[1], "tau_samples": grp.get("tau_samples")}
         for c, a in parts.items():
             if a is not None and a.shape != v.shape:
-                raise LoadError(f"file '{src}': dataset 'wv/{ch}/{c}' has shape {a.shape}, but "
-                                f"'wv/{ch}/variance' has {v.shape}: they must match level by level")
-        if "tau_samples" in grp and not np.array_equal(grp["tau_samples"][...],
-                                                       2 ** np.arange(1, v.size + 1)):
-            raise LoadError(f"file '{src}': dataset 'wv/{ch}/tau_samples' is not 2, 4, 8, ...: "
-                            "the variance must start at level 1 (tau = 2 samples), one per level")
+                raise LoadError(
+                    f"file '{src}': dataset 'wv/{ch}/{c}' has shape {a.shape}, but "
+                    f"'wv/{ch}/variance' has {v.shape}: they must match level by level"
+                )
+        if "tau_samples" in grp and not np.array_equal(
+            grp["tau_samples"][...], 2 ** np.arange(1, v.size + 1)
+        ):
+            raise LoadError(
+                f"file '{src}': dataset 'wv/{ch}/tau_samples' is not 2, 4, 8, ...: "
+                "the variance must start at level 1 (tau = 2 samples), one per level"
+            )
         try:
             wv[ch] = WaveletVariance.from_arrays(
-                v, n=n, fs=fs, ci_low=ci[0], ci_high=ci[1],
+                v,
+                n=n,
+                fs=fs,
+                ci_low=ci[0],
+                ci_high=ci[1],
                 alpha=float(_attr(grp.attrs.get("ci_alpha", 0.05))),
-                robust=bool(_attr(grp.attrs.get("robust", False))), unit=units.get(ch, ""))
+                robust=bool(_attr(grp.attrs.get("robust", False))),
+                unit=units.get(ch, ""),
+            )
         except ValueError as exc:
-            raise LoadError(f"file '{src}', dataset 'wv/{ch}/variance': {exc}: fix the stored "
-                            "values") from exc
+            raise LoadError(
+                f"file '{src}', dataset 'wv/{ch}/variance': {exc}: fix the stored values"
+            ) from exc
     meta = {"format": "hdf5-wv-summary", **meta, **({"notes": notes} if notes else {})}
-    return ImuLog(channels={}, fs=fs, fs_source=fs_source,
-                  units={k: units.get(k, "") for k in wv}, source=src, wv=wv, meta=meta)
+    return ImuLog(
+        channels={},
+        fs=fs,
+        fs_source=fs_source,
+        units={k: units.get(k, "") for k in wv},
+        source=src,
+        wv=wv,
+        meta=meta,
+    )
 
 
 # ----------------------------------------------------------------------------- public API
@@ -876,8 +1036,10 @@ def load_log(
     if p.is_dir():
         if (p / "metadata.yaml").is_file():
             return _guarded(_read_bag, p, src, channel, opts, "bag")
-        raise LoadError(f"'{src}' is a directory, not a log file: pass the path of a file "
-                        "(or of a ROS 2 bag directory with a metadata.yaml)")
+        raise LoadError(
+            f"'{src}' is a directory, not a log file: pass the path of a file "
+            "(or of a ROS 2 bag directory with a metadata.yaml)"
+        )
     try:
         with open(p, "rb") as fh:
             head = fh.read(16)
@@ -887,19 +1049,45 @@ def load_log(
         raise LoadError(f"file '{src}' is empty (0 bytes): check that the logger wrote data")
     fmt = next((v for k, v in _MAGIC.items() if head.startswith(k)), None)
     ext = p.suffix.lower()
-    fmt = fmt or ("hdf5" if ext in _H5_EXT else ext[1:] if ext in (".npy", ".npz") else
-                  "bag" if ext in (".bag", ".db3", ".mcap") else "text")
-    reader = {"hdf5": _read_h5, "npy": _read_npy, "npz": _read_npz, "text": _read_text,
-              "bag": _read_bag}[fmt]
+    fmt = fmt or (
+        "hdf5"
+        if ext in _H5_EXT
+        else ext[1:]
+        if ext in (".npy", ".npz")
+        else "bag"
+        if ext in (".bag", ".db3", ".mcap")
+        else "text"
+    )
+    reader = {
+        "hdf5": _read_h5,
+        "npy": _read_npy,
+        "npz": _read_npz,
+        "text": _read_text,
+        "bag": _read_bag,
+    }[fmt]
     return _guarded(reader, p, src, channel, opts, fmt)
 
 
-_CORRUPT = (OSError, RuntimeError, KeyError, IndexError, TypeError, ValueError, AttributeError,
-            EOFError, OverflowError, UnicodeError, zipfile.BadZipFile, zlib.error, struct.error)
+_CORRUPT = (
+    OSError,
+    RuntimeError,
+    KeyError,
+    IndexError,
+    TypeError,
+    ValueError,
+    AttributeError,
+    EOFError,
+    OverflowError,
+    UnicodeError,
+    zipfile.BadZipFile,
+    zlib.error,
+    struct.error,
+)
 
 
-def _guarded(reader: Callable[..., ImuLog], p: Path, src: str, channel: Any, opts: _Opts,
-             fmt: str) -> ImuLog:
+def _guarded(
+    reader: Callable[..., ImuLog], p: Path, src: str, channel: Any, opts: _Opts, fmt: str
+) -> ImuLog:
     """Run a reader; a library error on damaged content becomes a LoadError (with its type, so
     that the cause stays visible)."""
     try:
@@ -908,9 +1096,11 @@ def _guarded(reader: Callable[..., ImuLog], p: Path, src: str, channel: Any, opt
         raise
     except _CORRUPT as exc:
         what = {"text": "text", "npy": ".npy", "npz": ".npz", "hdf5": "HDF5", "bag": "ROS bag"}
-        raise LoadError(f"file '{src}' could not be read as {what.get(fmt, fmt)} "
-                        f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}): it may be "
-                        "truncated or corrupt; check it or export it again") from exc
+        raise LoadError(
+            f"file '{src}' could not be read as {what.get(fmt, fmt)} "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}): it may be "
+            "truncated or corrupt; check it or export it again"
+        ) from exc
 
 
 def _read_bag(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
@@ -918,14 +1108,25 @@ def _read_bag(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
     from .rosbag import read_imu_bag
 
     bag = read_imu_bag(path, topic=opts.topic, src=src)
-    return _finish(src, bag.channels, bag.units, fmt=bag.format, channel=channel, opts=opts,
-                   time=(bag.stamp_source, bag.stamps_ns, (1e9, True)), meta=bag.meta,
-                   notes=list(bag.notes))
+    return _finish(
+        src,
+        bag.channels,
+        bag.units,
+        fmt=bag.format,
+        channel=channel,
+        opts=opts,
+        time=(bag.stamp_source, bag.stamps_ns, (1e9, True)),
+        meta=bag.meta,
+        notes=list(bag.notes),
+    )
 
 
 def save_log(
-    path: str | os.PathLike[str], channels: Mapping[str, np.ndarray], fs: float,
-    units: Mapping[str, str] | None = None, attrs: Mapping[str, Any] | None = None,
+    path: str | os.PathLike[str],
+    channels: Mapping[str, np.ndarray],
+    fs: float,
+    units: Mapping[str, str] | None = None,
+    attrs: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write channels to HDF5 (raw layout of ``shared/data``), ``.npy`` or ``.csv``.
 
@@ -971,13 +1172,17 @@ def save_log(
     n = next(iter(arrs.values())).size
     for k, a in arrs.items():
         if a.ndim != 1 or a.dtype.kind not in "iuf" or a.size != n or not n or not k:
-            raise ValueError(f"cannot save '{p}': channel {k!r} must have a non-empty name and be "
-                             f"1-D numeric with {n} samples (got shape {a.shape}, {a.dtype})")
+            raise ValueError(
+                f"cannot save '{p}': channel {k!r} must have a non-empty name and be "
+                f"1-D numeric with {n} samples (got shape {a.shape}, {a.dtype})"
+            )
     unit = {k: _unit((units or {}).get(k, "")) for k in arrs}
     extra = dict(attrs or {})
     if ext != ".npy" and (timelike := [k for k in arrs if _time_div(k.rsplit("/")[-1])]):
-        raise ValueError(f"cannot save '{p}': channel names {timelike} would be read back as a "
-                         "time column; rename them")
+        raise ValueError(
+            f"cannot save '{p}': channel names {timelike} would be read back as a "
+            "time column; rename them"
+        )
     if clash := sorted(_RESERVED & set(extra)):
         raise ValueError(f"cannot save '{p}': attrs {clash} are written by save_log itself")
     if ext in _H5_EXT:
@@ -985,8 +1190,16 @@ def save_log(
             for k, a in arrs.items():
                 ds = f.create_dataset(k, data=a, compression="gzip", chunks=(min(n, 65536),))
                 ds.attrs["units"] = unit[k]
-            f.attrs.update({"fs_hz": fs, "n_samples": np.int64(n), "duration_s": n / fs,
-                            "units": json.dumps(unit), "kind": "raw", "schema_version": "1"})
+            f.attrs.update(
+                {
+                    "fs_hz": fs,
+                    "n_samples": np.int64(n),
+                    "duration_s": n / fs,
+                    "units": json.dumps(unit),
+                    "kind": "raw",
+                    "schema_version": "1",
+                }
+            )
             for k, v in extra.items():
                 ok = isinstance(v, (str, bytes, int, float, bool, np.generic, np.ndarray))
                 f.attrs[k] = v if ok else json.dumps(v)
@@ -995,8 +1208,10 @@ def save_log(
         np.save(p, a)
     else:
         if bad := [k for k in arrs if any(c in k for c in ',"#\n\r[(')]:
-            raise ValueError(f"cannot save '{p}': channel names {bad} contain characters that "
-                             "CSV headers cannot hold (, \" # [ ( or newlines)")
+            raise ValueError(
+                f"cannot save '{p}': channel names {bad} contain characters that "
+                'CSV headers cannot hold (, " # [ ( or newlines)'
+            )
         head = ",".join(["time"] + [f"{k} [{unit[k]}]" if unit[k] else k for k in arrs])
         data = np.column_stack([np.arange(n) / fs] + [a.astype(np.float64) for a in arrs.values()])
         np.savetxt(p, data, fmt="%.17g", delimiter=",", header=head, comments="")

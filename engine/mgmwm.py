@@ -79,9 +79,17 @@ from .wavelet import WaveletVariance, wavelet_variance
 from .wccv import WVMatrix, wv_matrix
 
 __all__ = [
-    "SHAREABLE", "SharedProcess", "MultiModel", "MGMWMResult", "SharedEstimate", "fit_mgmwm",
+    "SHAREABLE",
+    "SharedProcess",
+    "MultiModel",
+    "MGMWMResult",
+    "SharedEstimate",
+    "fit_mgmwm",
     "moment_covariance",
-    "DependenceTest", "dependence_test", "ReplicateResult", "fit_replicates",
+    "DependenceTest",
+    "dependence_test",
+    "ReplicateResult",
+    "fit_replicates",
 ]
 
 SHAREABLE = ("WN", "RW", "AR1", "GM")
@@ -123,25 +131,33 @@ def _check_cov(label: str, chans: tuple[str, ...], cov: Any) -> np.ndarray:
     if c.ndim == 0 and g == 1:
         c = c.reshape(1, 1)
     if c.shape != (g, g):
-        raise ModelError(f"the covariance of the shared {label} must be {g} x {g} (channels "
-                         f"{', '.join(chans)}), got shape {c.shape}")
+        raise ModelError(
+            f"the covariance of the shared {label} must be {g} x {g} (channels "
+            f"{', '.join(chans)}), got shape {c.shape}"
+        )
     if not np.all(np.isfinite(c)):
         raise ModelError(f"the covariance of the shared {label} has non-finite entries")
     scale = max(float(np.max(np.abs(c))), 1e-300)
     if not np.allclose(c, c.T, rtol=0, atol=1e-12 * scale):
         i, j = np.unravel_index(np.argmax(np.abs(c - c.T)), c.shape)
-        raise ModelError(f"the covariance of the shared {label} is not symmetric: entry "
-                         f"[{chans[i]}, {chans[j]}] = {c[i, j]:g} but [{chans[j]}, {chans[i]}] "
-                         f"= {c[j, i]:g}")
+        raise ModelError(
+            f"the covariance of the shared {label} is not symmetric: entry "
+            f"[{chans[i]}, {chans[j]}] = {c[i, j]:g} but [{chans[j]}, {chans[i]}] "
+            f"= {c[j, i]:g}"
+        )
     c = 0.5 * (c + c.T)
     lam = np.linalg.eigvalsh(c)
     if lam[0] <= 0:
         bad = int(np.argmin(np.diagonal(c)))
-        extra = (f"; the variance of {chans[bad]} is {c[bad, bad]:g}"
-                 if c[bad, bad] <= 0 else "; a correlation is beyond +-1 or the matrix is "
-                 "inconsistent")
-        raise ModelError(f"the covariance of the shared {label} is not positive definite "
-                         f"(smallest eigenvalue {lam[0]:.3g}){extra}")
+        extra = (
+            f"; the variance of {chans[bad]} is {c[bad, bad]:g}"
+            if c[bad, bad] <= 0
+            else "; a correlation is beyond +-1 or the matrix is inconsistent"
+        )
+        raise ModelError(
+            f"the covariance of the shared {label} is not positive definite "
+            f"(smallest eigenvalue {lam[0]:.3g}){extra}"
+        )
     return c
 
 
@@ -254,9 +270,11 @@ class MultiModel:
             channels = [c.strip() for c in channels.split(",") if c.strip()]
         chans = tuple(str(c) for c in channels)
         if len(chans) < 2:
-            raise ModelError(f"a multivariate model needs at least 2 channels, got "
-                             f"{len(chans)} ({', '.join(chans) or 'none'}); fit one channel "
-                             "with fit_gmwm")
+            raise ModelError(
+                f"a multivariate model needs at least 2 channels, got "
+                f"{len(chans)} ({', '.join(chans) or 'none'}); fit one channel "
+                "with fit_gmwm"
+            )
         if len(set(chans)) != len(chans):
             dup = sorted({c for c in chans if chans.count(c) > 1})
             raise ModelError(f"channel names repeat: {', '.join(dup)}")
@@ -264,8 +282,10 @@ class MultiModel:
         if isinstance(per_channel, Mapping):
             unknown = [c for c in per_channel if c not in chans]
             if unknown:
-                raise ModelError(f"per_channel names unknown channel(s) {', '.join(unknown)}; "
-                                 f"the channels are {', '.join(chans)}")
+                raise ModelError(
+                    f"per_channel names unknown channel(s) {', '.join(unknown)}; "
+                    f"the channels are {', '.join(chans)}"
+                )
             missing = [c for c in chans if c not in per_channel]
             if missing:
                 raise ModelError(f"no model for channel(s) {', '.join(missing)}")
@@ -282,23 +302,37 @@ class MultiModel:
         self.shared: tuple[SharedProcess, ...] = self._shared(shared, cov or {}, nl or {})
 
     # ---- construction helpers ----------------------------------------------------------
-    def _shared(self, shared: Any, cov: Mapping[str, Any], nl: Mapping[str, float]
-                ) -> tuple[SharedProcess, ...]:
+    def _shared(
+        self, shared: Any, cov: Mapping[str, Any], nl: Mapping[str, float]
+    ) -> tuple[SharedProcess, ...]:
         items: list[SharedProcess] = []
         if isinstance(shared, str):
             shared = [s.strip() for s in shared.split(",") if s.strip()]
         if isinstance(shared, Mapping):
-            seq = [SharedProcess(str(lab), tuple(
-                self.channels if g is None else
-                [c.strip() for c in g.split(",") if c.strip()] if isinstance(g, str) else g))
-                for lab, g in shared.items()]
+            seq = [
+                SharedProcess(
+                    str(lab),
+                    tuple(
+                        self.channels
+                        if g is None
+                        else [c.strip() for c in g.split(",") if c.strip()]
+                        if isinstance(g, str)
+                        else g
+                    ),
+                )
+                for lab, g in shared.items()
+            ]
         else:
-            seq = [s if isinstance(s, SharedProcess) else SharedProcess(str(s), self.channels)
-                   for s in shared]
+            seq = [
+                s if isinstance(s, SharedProcess) else SharedProcess(str(s), self.channels)
+                for s in shared
+            ]
         for lab in list(cov) + list(nl):
             if lab not in {s.label for s in seq}:
-                raise ModelError(f"a covariance or phi/beta is given for {lab}, which is not "
-                                 f"shared; shared: {', '.join(s.label for s in seq) or 'none'}")
+                raise ModelError(
+                    f"a covariance or phi/beta is given for {lab}, which is not "
+                    f"shared; shared: {', '.join(s.label for s in seq) or 'none'}"
+                )
         seen: set[str] = set()
         for sp in seq:
             lab = sp.label
@@ -308,26 +342,33 @@ class MultiModel:
             group = tuple(str(c) for c in sp.channels)
             for c in group:
                 if c not in self.channels:
-                    raise ModelError(f"the shared {lab} names unknown channel {c!r}; the "
-                                     f"channels are {', '.join(self.channels)}")
+                    raise ModelError(
+                        f"the shared {lab} names unknown channel {c!r}; the "
+                        f"channels are {', '.join(self.channels)}"
+                    )
             if len(set(group)) != len(group):
                 raise ModelError(f"the group of the shared {lab} repeats a channel")
             if len(group) < 2:
-                raise ModelError(f"the shared {lab} needs a group of at least 2 channels, "
-                                 f"got {', '.join(group)}")
+                raise ModelError(
+                    f"the shared {lab} needs a group of at least 2 channels, got {', '.join(group)}"
+                )
             procs = []
             for c in group:
                 m = self.models[c]
                 i = _find(m, lab)
                 if i is None:
-                    raise ModelError(f"channel {c} has no process {lab} to share (its model "
-                                     f"is {m.spec()}, labels {', '.join(m.labels)})")
+                    raise ModelError(
+                        f"channel {c} has no process {lab} to share (its model "
+                        f"is {m.spec()}, labels {', '.join(m.labels)})"
+                    )
                 procs.append(m.processes[i])
             code = procs[0].code
             if code not in SHAREABLE:
-                raise ModelError(f"{lab} cannot be shared: {code} is per channel only (the "
-                                 "multivariate paper, section II); shareable: "
-                                 f"{', '.join(SHAREABLE)}")
+                raise ModelError(
+                    f"{lab} cannot be shared: {code} is per channel only (the "
+                    "multivariate paper, section II); shareable: "
+                    f"{', '.join(SHAREABLE)}"
+                )
             c_given = cov.get(lab, sp.cov)
             c_arr = None if c_given is None else _check_cov(lab, group, c_given)
             if c_arr is not None and sp.diagonal:
@@ -337,17 +378,24 @@ class MultiModel:
             if c_arr is not None:
                 for c, v, d in zip(group, lin, np.diagonal(c_arr), strict=True):
                     if v is not None and not math.isclose(v, d, rel_tol=1e-9, abs_tol=0.0):
-                        raise ModelError(f"channel {c}: {lab} has variance {v:g} but the "
-                                         f"covariance of the shared {lab} has {d:g}")
+                        raise ModelError(
+                            f"channel {c}: {lab} has variance {v:g} but the "
+                            f"covariance of the shared {lab} has {d:g}"
+                        )
             nl_v = nl.get(lab, sp.nl)
             if procs[0].nonlinear is not None:
                 given = {getattr(p, p.nonlinear) for p in procs} - {None}
-                if nl_v is None and len(given) == 1 and all(
-                        getattr(p, p.nonlinear) is not None for p in procs):
+                if (
+                    nl_v is None
+                    and len(given) == 1
+                    and all(getattr(p, p.nonlinear) is not None for p in procs)
+                ):
                     nl_v = next(iter(given))
                 elif nl_v is None and len(given) > 1:
-                    raise ModelError(f"the shared {lab} has one {procs[0].nonlinear} for its "
-                                     f"group, but the channels give {sorted(given)}")
+                    raise ModelError(
+                        f"the shared {lab} has one {procs[0].nonlinear} for its "
+                        f"group, but the channels give {sorted(given)}"
+                    )
                 if nl_v is not None:
                     try:
                         procs[0].cleared().with_values(**{procs[0].nonlinear: float(nl_v)})
@@ -355,8 +403,11 @@ class MultiModel:
                         raise ModelError(f"shared {lab}: {e}") from None
             elif nl_v is not None:
                 raise ModelError(f"{lab} has no phi/beta ({code} is linear)")
-            items.append(SharedProcess(lab, group, c_arr, None if nl_v is None else float(nl_v),
-                                       bool(sp.diagonal)))
+            items.append(
+                SharedProcess(
+                    lab, group, c_arr, None if nl_v is None else float(nl_v), bool(sp.diagonal)
+                )
+            )
         return tuple(items)
 
     # ---- structure ------------------------------------------------------------------------
@@ -370,8 +421,9 @@ class MultiModel:
         for sp in self.shared:
             if sp.label == label:
                 return sp
-        raise KeyError(f"{label} is not shared; shared: "
-                       f"{', '.join(s.label for s in self.shared) or 'none'}")
+        raise KeyError(
+            f"{label} is not shared; shared: {', '.join(s.label for s in self.shared) or 'none'}"
+        )
 
     def index(self, label: str, channel: str) -> int:
         """Position of a (shared or own) process in a channel's model, by label."""
@@ -389,8 +441,15 @@ class MultiModel:
             c0 = sp.channels[0]
             m = self.models[c0]
             proto = m.processes[self.index(sp.label, c0)].cleared()
-            terms.append(_Term(sp.label, tuple(self.channels.index(c) for c in sp.channels),
-                               True, sp.diagonal, proto))
+            terms.append(
+                _Term(
+                    sp.label,
+                    tuple(self.channels.index(c) for c in sp.channels),
+                    True,
+                    sp.diagonal,
+                    proto,
+                )
+            )
         for p, c in enumerate(self.channels):
             m = self.models[c]
             sh = self._shared_index(c)
@@ -418,8 +477,9 @@ class MultiModel:
     def channel_model(self, channel: str) -> Model:
         """The marginal univariate model of one channel (shared processes at their diagonal)."""
         if channel not in self.channels:
-            raise KeyError(f"unknown channel {channel!r}; the channels are "
-                           f"{', '.join(self.channels)}")
+            raise KeyError(
+                f"unknown channel {channel!r}; the channels are {', '.join(self.channels)}"
+            )
         m = self.models[channel]
         sh = self._shared_index(channel)
         procs = []
@@ -429,8 +489,9 @@ class MultiModel:
                 procs.append(proc)
                 continue
             a = sp.channels.index(channel)
-            vals = {proc.param_names[-1] if proc.nonlinear else proc.param_names[0]:
-                    float(sp.cov[a, a])}
+            vals = {
+                proc.param_names[-1] if proc.nonlinear else proc.param_names[0]: float(sp.cov[a, a])
+            }
             if proc.nonlinear is not None and sp.nl is not None:
                 vals[proc.nonlinear] = sp.nl
             procs.append(proc.cleared().with_values(**vals))
@@ -438,9 +499,11 @@ class MultiModel:
 
     def cleared(self) -> MultiModel:
         """The same structure with every value unknown."""
-        return MultiModel(self.channels, {c: m.cleared() for c, m in self.models.items()},
-                          [SharedProcess(s.label, s.channels, diagonal=s.diagonal)
-                           for s in self.shared])
+        return MultiModel(
+            self.channels,
+            {c: m.cleared() for c, m in self.models.items()},
+            [SharedProcess(s.label, s.channels, diagonal=s.diagonal) for s in self.shared],
+        )
 
     def without_dependence(self, labels: Sequence[str] | None = None) -> MultiModel:
         """The nested structure with independent channels for the given shared processes.
@@ -469,8 +532,10 @@ class MultiModel:
         if t.shared:
             sp = self.shared_process(t.label)
             if sp.cov is None:
-                raise ModelError(f"no covariance for the shared {t.label}: give cov="
-                                 f"{{'{t.label}': ...}} or fit the model first")
+                raise ModelError(
+                    f"no covariance for the shared {t.label}: give cov="
+                    f"{{'{t.label}': ...}} or fit the model first"
+                )
             phi = _phi_of_nl(t.code, sp.nl, fs) if t.nonlinear else None
             if t.nonlinear and phi is None:
                 raise ModelError(f"no {t.proto.nonlinear} for the shared {t.label}")
@@ -478,8 +543,10 @@ class MultiModel:
         p = t.proto
         if not p.is_set:
             missing = [n for n, v in zip(p.param_names, p.values, strict=True) if v is None]
-            raise ModelError(f"channel {self.channels[t.chans[0]]}: {t.label} has no value for "
-                             f"{', '.join(missing)}")
+            raise ModelError(
+                f"channel {self.channels[t.chans[0]]}: {t.label} has no value for "
+                f"{', '.join(missing)}"
+            )
         return np.array([[p.linear_coef()]]), p.nl_value(fs)
 
     def components(self, tau: np.ndarray, fs: float = 1.0) -> dict[str, np.ndarray]:
@@ -504,8 +571,9 @@ class MultiModel:
         comps = self.components(tau, fs)
         return np.sum(np.array(list(comps.values())), axis=0)
 
-    def simulate(self, n: int, *, fs: float = 1.0,
-                 rng: np.random.Generator | int | None = None) -> np.ndarray:
+    def simulate(
+        self, n: int, *, fs: float = 1.0, rng: np.random.Generator | int | None = None
+    ) -> np.ndarray:
         """Simulate ``n`` samples of every channel, shape (n, k).
 
         Shared WN: iid N(0, Sigma) vectors; shared RW: their cumulative sum; shared AR1/GM:
@@ -517,8 +585,10 @@ class MultiModel:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n must be a positive integer, got {n!r}")
         if not self.is_set:
-            raise ModelError("cannot simulate: some values are unknown; give every channel "
-                             "model's values and cov= (and nl=) for the shared processes")
+            raise ModelError(
+                "cannot simulate: some values are unknown; give every channel "
+                "model's values and cov= (and nl=) for the shared processes"
+            )
         g = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         x = np.zeros((n, self.k))
         for t in self._terms():
@@ -567,9 +637,16 @@ class MultiModel:
         return {
             "channels": list(self.channels),
             "models": {c: m.spec(values=m.is_set) for c, m in self.models.items()},
-            "shared": [{"label": s.label, "channels": list(s.channels),
-                        "cov": None if s.cov is None else np.asarray(s.cov).tolist(),
-                        "nl": s.nl, "diagonal": s.diagonal} for s in self.shared],
+            "shared": [
+                {
+                    "label": s.label,
+                    "channels": list(s.channels),
+                    "cov": None if s.cov is None else np.asarray(s.cov).tolist(),
+                    "nl": s.nl,
+                    "diagonal": s.diagonal,
+                }
+                for s in self.shared
+            ],
         }
 
 
@@ -598,8 +675,13 @@ class _MProblem:
     ``A`` the diagonal square root of the weights, or a full square root of ``Omega``.
     """
 
-    def __init__(self, mm: MultiModel, wvm: WVMatrix, w: np.ndarray | None = None,
-                 omega: np.ndarray | None = None):
+    def __init__(
+        self,
+        mm: MultiModel,
+        wvm: WVMatrix,
+        w: np.ndarray | None = None,
+        omega: np.ndarray | None = None,
+    ):
         self.mm = mm
         self.k = mm.k
         self.fs = wvm.fs
@@ -610,8 +692,9 @@ class _MProblem:
         self.pairs = [(p, q) for p in range(self.k) for q in range(p, self.k)]
         self.y = np.concatenate([wvm.values[:, p, q] for p, q in self.pairs])
         if omega is None:
-            self.sw: np.ndarray | None = np.sqrt(np.concatenate([w[:, p, q]
-                                                                 for p, q in self.pairs]))
+            self.sw: np.ndarray | None = np.sqrt(
+                np.concatenate([w[:, p, q] for p, q in self.pairs])
+            )
             self.a_full: np.ndarray | None = None
             self.b = self.sw * self.y
         else:
@@ -629,10 +712,16 @@ class _MProblem:
                     idx.append(len(self.cols))
                     self.cols.append((ti, t.chans.index(p), t.chans.index(q), pi))
             self.pair_cols.append(idx)
-        self.lower = np.array([0.0 if self.pairs[pi][0] == self.pairs[pi][1] else -np.inf
-                               for _, _, _, pi in self.cols])
-        self.fixed = [None if t.nonlinear else t.proto.basis(self.tau, self.fs) *
-                      np.ones_like(self.tau) for t in self.terms]
+        self.lower = np.array(
+            [
+                0.0 if self.pairs[pi][0] == self.pairs[pi][1] else -np.inf
+                for _, _, _, pi in self.cols
+            ]
+        )
+        self.fixed = [
+            None if t.nonlinear else t.proto.basis(self.tau, self.fs) * np.ones_like(self.tau)
+            for t in self.terms
+        ]
         self.slots = [ti for ti, t in enumerate(self.terms) if t.nonlinear]
         self.tc_min = TC_MIN
         self.tc_max = TC_MAX_FACTOR * max(wvm.n, 2 ** (wvm.n_levels + 1))
@@ -665,13 +754,16 @@ class _MProblem:
         """Weighted design ``A X`` (R x C)."""
         x = np.zeros((self.y.size, len(self.cols)))
         for ci, (ti, _, _, pi) in enumerate(self.cols):
-            x[pi * self.nj:(pi + 1) * self.nj, ci] = bases[ti]
+            x[pi * self.nj : (pi + 1) * self.nj, ci] = bases[ti]
         return self.sw[:, None] * x if self.a_full is None else self.a_full @ x
 
     def _assemble(self, c: np.ndarray) -> tuple[dict[int, float], dict[int, np.ndarray]]:
         h: dict[int, float] = {}
-        s: dict[int, np.ndarray] = {ti: np.zeros((len(t.chans), len(t.chans)))
-                                    for ti, t in enumerate(self.terms) if t.shared}
+        s: dict[int, np.ndarray] = {
+            ti: np.zeros((len(t.chans), len(t.chans)))
+            for ti, t in enumerate(self.terms)
+            if t.shared
+        }
         for (ti, a, b, _), v in zip(self.cols, c, strict=True):
             if self.terms[ti].shared:
                 s[ti][a, b] = s[ti][b, a] = float(v)
@@ -708,8 +800,9 @@ class _MProblem:
         norms[norms == 0] = 1.0
         if np.all(np.isinf(lower)):
             return np.linalg.lstsq(ax / norms, self.b, rcond=None)[0] / norms
-        res = optimize.lsq_linear(ax / norms, self.b, bounds=(lower, np.inf),
-                                  method="bvls", tol=1e-14)
+        res = optimize.lsq_linear(
+            ax / norms, self.b, bounds=(lower, np.inf), method="bvls", tol=1e-14
+        )
         return res.x / norms
 
     def solve(self, u: np.ndarray) -> tuple[float, dict[int, float], dict[int, np.ndarray], bool]:
@@ -767,8 +860,9 @@ class _MProblem:
         if not self._uncertified(ax, c, r, dscale):
             return self._done(best, None)
 
-        def polish(c1: np.ndarray, face: tuple[np.ndarray, dict[int, int]]
-                   ) -> tuple[float, np.ndarray] | None:
+        def polish(
+            c1: np.ndarray, face: tuple[np.ndarray, dict[int, int]]
+        ) -> tuple[float, np.ndarray] | None:
             got = self._face_newton(ax, c1, face[0], face[1], dscale)
             if got is None or self._uncertified(ax, got[1], got[2], dscale):
                 return None
@@ -786,8 +880,7 @@ class _MProblem:
             if cp is None:
                 return None
             _, sp = self._assemble(cp)
-            face = (cp != 0, {ti: _rank(sp[ti] / np.outer(d, d), 1e-9)
-                              for ti, d in dscale.items()})
+            face = (cp != 0, {ti: _rank(sp[ti] / np.outer(d, d), 1e-9) for ti, d in dscale.items()})
             got = polish(cp, face)
             return None if got is None else (got, face)
 
@@ -800,8 +893,9 @@ class _MProblem:
                 best = min(best, (float(rc @ rc), cand), key=lambda v: v[0])
         return self._done(best, None)
 
-    def _done(self, best: tuple[float, np.ndarray], face: Any
-              ) -> tuple[float, dict[int, float], dict[int, np.ndarray]]:
+    def _done(
+        self, best: tuple[float, np.ndarray], face: Any
+    ) -> tuple[float, dict[int, float], dict[int, np.ndarray]]:
         self._face = None if face is None else (face, best[1])
         h, s = self._assemble(best[1])
         return best[0], h, s
@@ -810,11 +904,21 @@ class _MProblem:
         """Scaling D of a covariance: unit entries of ``D^-1 Sigma D^-1`` on the diagonal
         change the weighted residual by about one unit."""
         g = len(self.terms[ti].chans)
-        return np.array([1.0 / math.sqrt(max(float(np.linalg.norm(
-            ax[:, self.col_of[(ti, a, a)]])), 1e-300)) for a in range(g)])
+        return np.array(
+            [
+                1.0 / math.sqrt(max(float(np.linalg.norm(ax[:, self.col_of[(ti, a, a)]])), 1e-300))
+                for a in range(g)
+            ]
+        )
 
-    def _uncertified(self, ax: np.ndarray, c: np.ndarray, r: np.ndarray,
-                     dscale: dict[int, np.ndarray], tol: float = 1e-6) -> set[int]:
+    def _uncertified(
+        self,
+        ax: np.ndarray,
+        c: np.ndarray,
+        r: np.ndarray,
+        dscale: dict[int, np.ndarray],
+        tol: float = 1e-6,
+    ) -> set[int]:
         """Where the KKT conditions of the PSD-constrained problem fail at ``c``.
 
         Optimality (the problem is convex): the gradient ``G`` of the objective with respect
@@ -848,13 +952,20 @@ class _MProblem:
             for ci, (tj, a, b, _) in enumerate(self.cols):
                 if tj == ti:
                     sm[a, b] = sm[b, a] = c[ci] / (d[a] * d[b])
-            if (np.linalg.eigvalsh(gs)[0] < -lim
-                    or np.linalg.norm(gs @ sm) > lim * float(np.linalg.norm(sm))):
+            if np.linalg.eigvalsh(gs)[0] < -lim or np.linalg.norm(gs @ sm) > lim * float(
+                np.linalg.norm(sm)
+            ):
                 out.add(ti)
         return out
 
-    def _barrier(self, ax: np.ndarray, c0: np.ndarray, dscale: dict[int, np.ndarray],
-                 accept: Any = None, gap: float = 1e-12) -> tuple[np.ndarray, Any]:
+    def _barrier(
+        self,
+        ax: np.ndarray,
+        c0: np.ndarray,
+        dscale: dict[int, np.ndarray],
+        accept: Any = None,
+        gap: float = 1e-12,
+    ) -> tuple[np.ndarray, Any]:
         """The PSD-constrained inner problem by a log-barrier interior-point method.
 
         Minimises ``t ||b - ax c||^2 - sum log c_i - sum log det Sigma`` by damped Newton
@@ -915,9 +1026,14 @@ class _MProblem:
                 if deriv:
                     wi = np.linalg.inv(sm)
                     gr[idx] = -2.0 * sfac * wi[ia, ib]
-                    he[np.ix_(idx, idx)] = 2.0 * np.outer(sfac, sfac) * (
-                        wi[np.ix_(ia, ia)] * wi[np.ix_(ib, ib)]
-                        + wi[np.ix_(ia, ib)] * wi[np.ix_(ib, ia)])
+                    he[np.ix_(idx, idx)] = (
+                        2.0
+                        * np.outer(sfac, sfac)
+                        * (
+                            wi[np.ix_(ia, ia)] * wi[np.ix_(ib, ib)]
+                            + wi[np.ix_(ia, ib)] * wi[np.ix_(ib, ia)]
+                        )
+                    )
             return val, gr, he
 
         r = self.b - a @ v
@@ -957,8 +1073,9 @@ class _MProblem:
             v = v + s_ * step
         return v * scale, None
 
-    def _purify(self, ax: np.ndarray, c: np.ndarray, dscale: dict[int, np.ndarray],
-                rel: float = 1e-6) -> np.ndarray | None:
+    def _purify(
+        self, ax: np.ndarray, c: np.ndarray, dscale: dict[int, np.ndarray], rel: float = 1e-6
+    ) -> np.ndarray | None:
         """The face of an interior solution: coefficients below ``rel`` (scaled) at 0, and each
         covariance ``U M U'`` with U its eigenvectors above ``rel`` times the largest; M and
         the positive coefficients by least squares on that face. None if that leaves the
@@ -969,7 +1086,7 @@ class _MProblem:
         maps: list[tuple[Any, ...]] = []
         for ci, (ti, _, _, _) in enumerate(self.cols):
             if ti not in dscale and c[ci] * norms[ci] > rel * bnorm:
-                blocks.append(ax[:, ci:ci + 1])
+                blocks.append(ax[:, ci : ci + 1])
                 maps.append(("h", ci))
         for ti, d in dscale.items():
             idx = [ci for ci, col in enumerate(self.cols) if col[0] == ti]
@@ -989,8 +1106,9 @@ class _MProblem:
             for row, ci in enumerate(idx):
                 _, a, b, _ = self.cols[ci]
                 for j, (k, l) in enumerate(kl):
-                    tm[row, j] = d[a] * d[b] * (u[a, k] * u[b, l] + (u[a, l] * u[b, k]
-                                                                    if k != l else 0.0))
+                    tm[row, j] = (
+                        d[a] * d[b] * (u[a, k] * u[b, l] + (u[a, l] * u[b, k] if k != l else 0.0))
+                    )
             blocks.append(ax[:, idx] @ tm)
             maps.append(("s", ti, idx, tm, u, kl))
         out = np.zeros(len(self.cols))
@@ -1006,7 +1124,7 @@ class _MProblem:
                 pos += 1
                 continue
             _, ti, idx, tm, u, kl = mp
-            xm = x[pos:pos + len(kl)]
+            xm = x[pos : pos + len(kl)]
             pos += len(kl)
             mm = np.zeros((u.shape[1], u.shape[1]))
             for (k, l), val in zip(kl, xm, strict=True):
@@ -1017,7 +1135,11 @@ class _MProblem:
         return out
 
     def _face_newton(
-        self, ax: np.ndarray, c0: np.ndarray, free: np.ndarray, ranks: dict[int, int],
+        self,
+        ax: np.ndarray,
+        c0: np.ndarray,
+        free: np.ndarray,
+        ranks: dict[int, int],
         dscale: dict[int, np.ndarray],
     ) -> tuple[float, np.ndarray, np.ndarray] | None:
         """Minimum on a face: the non-negative coefficients in ``free`` (the others 0) and
@@ -1025,8 +1147,10 @@ class _MProblem:
         Hessian ``2 J'J + 2 (D G D kron I)`` (G the gradient with respect to Sigma), from
         ``c0``. None if a free coefficient ends negative (not the minimiser's face).
         Returns (objective, coefficients, residual)."""
-        lin = np.array([ci for ci, (ti, _, _, _) in enumerate(self.cols)
-                        if ti not in dscale and free[ci]], dtype=int)
+        lin = np.array(
+            [ci for ci, (ti, _, _, _) in enumerate(self.cols) if ti not in dscale and free[ci]],
+            dtype=int,
+        )
         _, s0 = self._assemble(c0)
         parts = [c0[lin]]
         cones = []
@@ -1049,17 +1173,17 @@ class _MProblem:
         def coef(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             c = np.zeros(ncol)
             dc = np.zeros((ncol, x.size))
-            c[lin] = x[:lin.size]
+            c[lin] = x[: lin.size]
             dc[lin, np.arange(lin.size)] = 1.0
             for _, idx, ia, ib, dd, g, rk, o in cones:
                 if rk:
-                    f_ = x[o:o + g * rk].reshape(g, rk)
+                    f_ = x[o : o + g * rk].reshape(g, rk)
                     c[idx] = dd * np.sum(f_[ia] * f_[ib], axis=1)
                     jb = np.zeros((idx.size, g, rk))
                     rows = np.arange(idx.size)
                     jb[rows, ia] += dd[:, None] * f_[ib]
                     jb[rows, ib] += dd[:, None] * f_[ia]
-                    dc[idx, o:o + g * rk] = jb.reshape(idx.size, g * rk)
+                    dc[idx, o : o + g * rk] = jb.reshape(idx.size, g * rk)
             return c, dc
 
         c, dc = coef(x)
@@ -1075,7 +1199,7 @@ class _MProblem:
                 if rk:
                     gt = np.zeros((g, g))
                     gt[ia, ib] = gt[ib, ia] = np.where(ia == ib, 1.0, 0.5) * gc[idx] * dd
-                    hm[o:o + g * rk, o:o + g * rk] += 2.0 * np.kron(gt, np.eye(rk))
+                    hm[o : o + g * rk, o : o + g * rk] += 2.0 * np.kron(gt, np.eye(rk))
             lam, vec = np.linalg.eigh(hm)
             mu = max(0.0, -float(lam[0])) + 1e-12 * max(float(lam[-1]), 1e-300)
             step = -(vec @ ((vec.T @ grad) / (lam + mu)))
@@ -1122,19 +1246,33 @@ def _project_psd(s: np.ndarray) -> np.ndarray:
     return (vec * np.clip(lam, 0.0, None)) @ vec.T
 
 
-def _local(fun, x0: np.ndarray, step: float, lo: float, hi: float
-           ) -> tuple[float, np.ndarray, bool]:
+def _local(
+    fun, x0: np.ndarray, step: float, lo: float, hi: float
+) -> tuple[float, np.ndarray, bool]:
     """Nelder-Mead with restarts on a shrinking simplex until a restart stops improving."""
     x = np.clip(np.asarray(x0, float), lo, hi)
     f = fun(x)
     converged = False
     d = x.size
     for _ in range(8):
-        simplex = np.vstack([x] + [np.clip(x + step * e, lo, hi) if x[i] + step <= hi else
-                                   x - step * e for i, e in enumerate(np.eye(d))])
-        res = optimize.minimize(fun, x, method="Nelder-Mead",
-                                options={"xatol": 1e-6, "fatol": 1e-10 * max(f, 1e-300),
-                                         "maxfev": 300 * d + 200, "initial_simplex": simplex})
+        simplex = np.vstack(
+            [x]
+            + [
+                np.clip(x + step * e, lo, hi) if x[i] + step <= hi else x - step * e
+                for i, e in enumerate(np.eye(d))
+            ]
+        )
+        res = optimize.minimize(
+            fun,
+            x,
+            method="Nelder-Mead",
+            options={
+                "xatol": 1e-6,
+                "fatol": 1e-10 * max(f, 1e-300),
+                "maxfev": 300 * d + 200,
+                "initial_simplex": simplex,
+            },
+        )
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.clip(np.asarray(res.x, float), lo, hi), fn
@@ -1189,10 +1327,16 @@ class SharedEstimate:
 
     def to_dict(self) -> dict[str, Any]:
         rho = self.corr
-        return {"label": self.label, "process": self.code, "channels": list(self.channels),
-                "cov": self.cov.tolist(),
-                "corr": [[None if not np.isfinite(v) else float(v) for v in row] for row in rho],
-                "nl": self.nl, "nl_name": self.nl_name, "unit": self.unit}
+        return {
+            "label": self.label,
+            "process": self.code,
+            "channels": list(self.channels),
+            "cov": self.cov.tolist(),
+            "corr": [[None if not np.isfinite(v) else float(v) for v in row] for row in rho],
+            "nl": self.nl,
+            "nl_name": self.nl_name,
+            "unit": self.unit,
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -1283,9 +1427,15 @@ class MGMWMResult:
             m = self.model.models[sp.channels[0]]
             proc = m.processes[self.model.index(sp.label, sp.channels[0])]
             u = self._unit(sp.channels[0])
-            out[sp.label] = SharedEstimate(sp.label, proc.code, sp.channels,
-                                           np.asarray(sp.cov, float), sp.nl, proc.nonlinear,
-                                           param_unit(proc.code, proc.param_names[-1], u))
+            out[sp.label] = SharedEstimate(
+                sp.label,
+                proc.code,
+                sp.channels,
+                np.asarray(sp.cov, float),
+                sp.nl,
+                proc.nonlinear,
+                param_unit(proc.code, proc.param_names[-1], u),
+            )
         return out
 
     def covariance(self, label: str) -> np.ndarray:
@@ -1305,19 +1455,36 @@ class MGMWMResult:
         for lab, est in self.shared.items():
             g = est.channels
             if est.nl is not None:
-                out.append({"name": f"{lab}.{est.nl_name}", "value": float(est.nl),
-                            "unit": param_unit(est.code, str(est.nl_name)),
-                            "channels": list(g)})
+                out.append(
+                    {
+                        "name": f"{lab}.{est.nl_name}",
+                        "value": float(est.nl),
+                        "unit": param_unit(est.code, str(est.nl_name)),
+                        "channels": list(g),
+                    }
+                )
             for a, b in itertools.combinations_with_replacement(range(len(g)), 2):
-                out.append({"name": f"{lab}.cov[{g[a]},{g[b]}]", "value": float(est.cov[a, b]),
-                            "unit": est.unit, "channels": [g[a], g[b]]})
+                out.append(
+                    {
+                        "name": f"{lab}.cov[{g[a]},{g[b]}]",
+                        "value": float(est.cov[a, b]),
+                        "unit": est.unit,
+                        "channels": [g[a], g[b]],
+                    }
+                )
         for t in self.model._terms():
             if t.shared:
                 continue
             c = self.channels[t.chans[0]]
             for name, v in zip(t.proto.param_names, t.proto.values, strict=True):
-                out.append({"name": f"{c}.{t.label}.{name}", "value": float(v),
-                            "unit": param_unit(t.code, name, self._unit(c)), "channels": [c]})
+                out.append(
+                    {
+                        "name": f"{c}.{t.label}.{name}",
+                        "value": float(v),
+                        "unit": param_unit(t.code, name, self._unit(c)),
+                        "channels": [c],
+                    }
+                )
         return out
 
     @property
@@ -1347,24 +1514,35 @@ class MGMWMResult:
             for i, (lab, p) in enumerate(zip(m.labels, m.processes, strict=True)):
                 tag = f" (shared {sh[i].label})" if i in sh else ""
                 for name, v in zip(p.param_names, p.values, strict=True):
-                    lines.append(f"    {lab + '.' + name:<16} {v:>14.6e}  "
-                                 f"{param_unit(p.code, name, u)}{tag}")
+                    lines.append(
+                        f"    {lab + '.' + name:<16} {v:>14.6e}  {param_unit(p.code, name, u)}{tag}"
+                    )
         for lab, est in self.shared.items():
             g = est.channels
             width = max(12, max(len(c) for c in g) + 2)
-            lines += ["", f"  shared {lab} ({est.code}) over {', '.join(g)}"
-                      + (f"; {est.nl_name} = {est.nl:.6g}"
-                         f"{' 1/s' if est.nl_name == 'beta' else ''}" if est.nl is not None
-                         else "") + f"; covariance [{est.unit}]:"]
+            lines += [
+                "",
+                f"  shared {lab} ({est.code}) over {', '.join(g)}"
+                + (
+                    f"; {est.nl_name} = {est.nl:.6g}{' 1/s' if est.nl_name == 'beta' else ''}"
+                    if est.nl is not None
+                    else ""
+                )
+                + f"; covariance [{est.unit}]:",
+            ]
             lines.append("    " + " " * width + "".join(f"{c:>{width}}" for c in g))
             for a, ca in enumerate(g):
-                lines.append(f"    {ca:<{width}}" + "".join(f"{est.cov[a, b]:>{width}.4e}"
-                                                          for b in range(len(g))))
+                lines.append(
+                    f"    {ca:<{width}}"
+                    + "".join(f"{est.cov[a, b]:>{width}.4e}" for b in range(len(g)))
+                )
             lines.append("    correlation:")
             rho = est.corr
             for a, ca in enumerate(g):
-                lines.append(f"    {ca:<{width}}" + "".join(f"{rho[a, b]:>{width}.4f}"
-                                                          for b in range(len(g))))
+                lines.append(
+                    f"    {ca:<{width}}"
+                    + "".join(f"{rho[a, b]:>{width}.4f}" for b in range(len(g)))
+                )
         lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
@@ -1377,7 +1555,8 @@ class MGMWMResult:
             "kind": "mgmwm",
             "model": self.model.spec(),
             "channels": list(self.channels),
-            "n": int(self.wvm.n), "fs": float(self.wvm.fs),
+            "n": int(self.wvm.n),
+            "fs": float(self.wvm.fs),
             "weights": self.weights_name,
             "objective": float(self.objective),
             "params": self.param_records,
@@ -1385,9 +1564,12 @@ class MGMWMResult:
             "shared": {k: v.to_dict() for k, v in self.shared.items()},
             "implied": self.implied.tolist(),
             "components": {k: v.tolist() for k, v in self.components.items()},
-            "converged": bool(self.converged), "at_bound": list(self.at_bound),
-            "psd_active": bool(self.psd_active), "method": self.method,
-            "n_evaluations": int(self.n_evaluations), "n_inner": int(self.n_inner),
+            "converged": bool(self.converged),
+            "at_bound": list(self.at_bound),
+            "psd_active": bool(self.psd_active),
+            "method": self.method,
+            "n_evaluations": int(self.n_evaluations),
+            "n_inner": int(self.n_inner),
             "wv_matrix": self.wvm.to_dict(),
         }
 
@@ -1399,27 +1581,38 @@ def _weights(wvm: WVMatrix, weights: str | np.ndarray) -> tuple[np.ndarray, str]
     j, k = wvm.n_levels, wvm.k
     for p, c in enumerate(wvm.channels):
         if not np.any(wvm.values[:, p, p] > 0):
-            raise FitError(f"channel {c} is constant (its WV is 0 at every level): there is "
-                           "no noise to model; drop it from the channels")
+            raise FitError(
+                f"channel {c} is constant (its WV is 0 at every level): there is "
+                "no noise to model; drop it from the channels"
+            )
     if isinstance(weights, str):
         if weights == "identity":
             return np.ones((j, k, k)), "identity"
         if weights != "ci":
-            raise FitError(f"unknown weights {weights!r}: use 'ci', 'identity', 'efficient' or a "
-                           f"({j}, {k}, {k}) array")
+            raise FitError(
+                f"unknown weights {weights!r}: use 'ci', 'identity', 'efficient' or a "
+                f"({j}, {k}, {k}) array"
+            )
         width = wvm.ci_high - wvm.ci_low
         ok = np.isfinite(width) & (width > 0)
         if not np.all(ok):
             lv, p, q = (int(v) for v in np.argwhere(~ok)[0])
-            what = (f"the WV of {wvm.channels[p]}" if p == q else
-                    f"the WCCV of {wvm.channels[p]} and {wvm.channels[q]}")
-            raise FitError(f"the interval of {what} at level {lv + 1} is empty or not finite, "
-                           "so weights='ci' is undefined; use weights='identity'")
+            what = (
+                f"the WV of {wvm.channels[p]}"
+                if p == q
+                else f"the WCCV of {wvm.channels[p]} and {wvm.channels[q]}"
+            )
+            raise FitError(
+                f"the interval of {what} at level {lv + 1} is empty or not finite, "
+                "so weights='ci' is undefined; use weights='identity'"
+            )
         return 1.0 / width**2, "ci"
     w = np.asarray(weights, dtype=float)
     if w.shape != (j, k, k):
-        raise FitError(f"the weights have shape {w.shape}; give a ({j}, {k}, {k}) array, one "
-                       "non-negative weight per moment")
+        raise FitError(
+            f"the weights have shape {w.shape}; give a ({j}, {k}, {k}) array, one "
+            "non-negative weight per moment"
+        )
     if not np.all(np.isfinite(w)) or np.any(w < 0):
         raise FitError("the weights must be finite and non-negative")
     if not np.allclose(w, np.transpose(w, (0, 2, 1))):
@@ -1427,21 +1620,24 @@ def _weights(wvm: WVMatrix, weights: str | np.ndarray) -> tuple[np.ndarray, str]
     return w, "user"
 
 
-def _as_wvm(data: Any, channels: Sequence[str], fs: float | None,
-            levels: int | None) -> WVMatrix:
+def _as_wvm(data: Any, channels: Sequence[str], fs: float | None, levels: int | None) -> WVMatrix:
     if isinstance(data, WVMatrix):
         missing = [c for c in channels if c not in data.channels]
         if missing:
-            raise FitError(f"the model's channel(s) {', '.join(missing)} are not in the WV "
-                           f"matrix (channels: {', '.join(data.channels)})")
+            raise FitError(
+                f"the model's channel(s) {', '.join(missing)} are not in the WV "
+                f"matrix (channels: {', '.join(data.channels)})"
+            )
         if fs is not None and not math.isclose(fs, data.fs, rel_tol=1e-9):
             raise FitError(f"fs={fs} Hz disagrees with the WV matrix's fs={data.fs} Hz")
         wvm = data.select(channels) if tuple(channels) != data.channels else data
     else:
         if isinstance(data, np.ndarray) and data.ndim == 2:
             if data.shape[1] != len(channels):
-                raise FitError(f"the data has {data.shape[1]} columns but the model has "
-                               f"{len(channels)} channels ({', '.join(channels)})")
+                raise FitError(
+                    f"the data has {data.shape[1]} columns but the model has "
+                    f"{len(channels)} channels ({', '.join(channels)})"
+                )
             data = dict(zip(channels, data.T, strict=True))
         try:
             wvm = wv_matrix(data, channels=list(channels), fs=fs)
@@ -1449,8 +1645,9 @@ def _as_wvm(data: Any, channels: Sequence[str], fs: float | None,
             raise FitError(str(e.args[0]) if e.args else str(e)) from None
     if levels is not None:
         if not 1 <= levels <= wvm.n_levels:
-            raise FitError(f"levels={levels} is out of range: the WV matrix has "
-                           f"{wvm.n_levels} levels")
+            raise FitError(
+                f"levels={levels} is out of range: the WV matrix has {wvm.n_levels} levels"
+            )
         wvm = wvm.truncate(levels)
     return wvm
 
@@ -1495,18 +1692,26 @@ def fit_mgmwm(
     """
     t0 = time.perf_counter()
     if not isinstance(model, MultiModel):
-        raise ModelError(f"model must be a MultiModel, got {type(model).__name__}; build one "
-                         "with MultiModel(channels, 'WN+RW', shared=['RW'])")
+        raise ModelError(
+            f"model must be a MultiModel, got {type(model).__name__}; build one "
+            "with MultiModel(channels, 'WN+RW', shared=['RW'])"
+        )
     wvm = _as_wvm(data, model.channels, fs, levels)
     efficient = isinstance(weights, str) and weights == "efficient"
     w, wname = _weights(wvm, "ci" if efficient else weights)
-    n_par = sum(len(t.proto.param_names) if not t.shared else
-                (len(t.chans) if t.diagonal else len(t.chans) * (len(t.chans) + 1) // 2)
-                + (1 if t.nonlinear else 0) for t in model._terms())
+    n_par = sum(
+        len(t.proto.param_names)
+        if not t.shared
+        else (len(t.chans) if t.diagonal else len(t.chans) * (len(t.chans) + 1) // 2)
+        + (1 if t.nonlinear else 0)
+        for t in model._terms()
+    )
     n_mom = wvm.n_levels * wvm.k * (wvm.k + 1) // 2
     if n_par > n_mom:
-        raise ModelError(f"the model has {n_par} parameters but there are only {n_mom} "
-                         "moments: use more levels or a smaller model")
+        raise ModelError(
+            f"the model has {n_par} parameters but there are only {n_mom} "
+            "moments: use more levels or a smaller model"
+        )
     for c in model.channels:
         try:
             model.models[c].validate(wvm.n_levels)
@@ -1521,8 +1726,9 @@ def fit_mgmwm(
     return _fit(wvm, first.model, w, omega, "efficient", t0)
 
 
-def _fit(wvm: WVMatrix, model: MultiModel, w: np.ndarray, omega: np.ndarray | None,
-         wname: str, t0: float) -> MGMWMResult:
+def _fit(
+    wvm: WVMatrix, model: MultiModel, w: np.ndarray, omega: np.ndarray | None, wname: str, t0: float
+) -> MGMWMResult:
     prob = _MProblem(model, wvm, w, omega)
     lo, hi = math.log(prob.tc_min), math.log(prob.tc_max)
     if not prob.slots:
@@ -1531,8 +1737,12 @@ def _fit(wvm: WVMatrix, model: MultiModel, w: np.ndarray, omega: np.ndarray | No
     else:
         u, converged = _search(prob, model, wvm, w, lo, hi)
         method = "profiled nelder-mead"
-        msg = ("converged" if converged else "the local search stopped before meeting its "
-               "tolerance; the estimate may be slightly above the minimum")
+        msg = (
+            "converged"
+            if converged
+            else "the local search stopped before meeting its "
+            "tolerance; the estimate may be slightly above the minimum"
+        )
     f, h, s, coupled = prob.solve(u)
     fitted = _fitted_model(model, prob, u, h, s)
     comps = fitted.components(wvm.tau_samples, wvm.fs)
@@ -1551,10 +1761,22 @@ def _fit(wvm: WVMatrix, model: MultiModel, w: np.ndarray, omega: np.ndarray | No
             weights[:, p, q] = weights[:, q, p] = dg[pi]
     at_bound = _at_bound(fitted, prob, u)
     return MGMWMResult(
-        model=fitted, wvm=wvm, weights=weights, weights_name=wname, objective=objective,
-        implied=implied, components=comps, converged=converged, at_bound=at_bound,
-        psd_active=coupled, n_evaluations=prob.n_eval, method=method, message=msg,
-        elapsed_s=time.perf_counter() - t0, omega=omega, n_inner=prob.n_inner,
+        model=fitted,
+        wvm=wvm,
+        weights=weights,
+        weights_name=wname,
+        objective=objective,
+        implied=implied,
+        components=comps,
+        converged=converged,
+        at_bound=at_bound,
+        psd_active=coupled,
+        n_evaluations=prob.n_eval,
+        method=method,
+        message=msg,
+        elapsed_s=time.perf_counter() - t0,
+        omega=omega,
+        n_inner=prob.n_inner,
     )
 
 
@@ -1607,7 +1829,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     inv_m2 = 1.0 / 4.0 ** np.arange(nj)
     chunk = 1 << 14
     for a0 in range(0, f.size, chunk):
-        fc, wc = f[a0:a0 + chunk], wts[a0:a0 + chunk]
+        fc, wc = f[a0 : a0 + chunk], wts[a0 : a0 + chunk]
         x = np.pi * fc
         sin_m, cos_m = np.sin(x), np.cos(x)
         base = 1.0 / (sin_m * sin_m)
@@ -1632,8 +1854,9 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     for a in range(ns):
         for b in range(ns):
             ca, cb = cmats[a], cmats[b]
-            t = np.array([[ca[p, r] * cb[q, s] + ca[p, s] * cb[q, r] for r, s in pairs]
-                          for p, q in pairs])
+            t = np.array(
+                [[ca[p, r] * cb[q, s] + ca[p, s] * cb[q, r] for r, s in pairs] for p, q in pairs]
+            )
             if np.any(t != 0):
                 v += np.kron(t, integ[a, b])
     m_j = wvm.n_coef.astype(float)
@@ -1641,8 +1864,9 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     return 0.5 * (v + v.T)
 
 
-def _fitted_model(model: MultiModel, prob: _MProblem, u: np.ndarray, h: dict[int, float],
-                  s: dict[int, np.ndarray]) -> MultiModel:
+def _fitted_model(
+    model: MultiModel, prob: _MProblem, u: np.ndarray, h: dict[int, float], s: dict[int, np.ndarray]
+) -> MultiModel:
     phis = {ti: prob.phi_of(ti, float(ui)) for ti, ui in zip(prob.slots, u, strict=True)}
     fs = prob.fs
     models = {c: list(m.processes) for c, m in model.models.items()}
@@ -1652,19 +1876,26 @@ def _fitted_model(model: MultiModel, prob: _MProblem, u: np.ndarray, h: dict[int
         if t.shared:
             cov = s[ti]
             nl = None if phi is None else _nl_of_phi(t.code, phi, fs)
-            shared.append(SharedProcess(t.label, tuple(model.channels[i] for i in t.chans),
-                                        None, nl, t.diagonal))
+            shared.append(
+                SharedProcess(
+                    t.label, tuple(model.channels[i] for i in t.chans), None, nl, t.diagonal
+                )
+            )
             for a, p in enumerate(t.chans):
                 c = model.channels[p]
                 i = model.index(t.label, c)
-                models[c][i] = t.proto.from_fit(float(cov[a, a]), phi, fs) if t.nonlinear \
+                models[c][i] = (
+                    t.proto.from_fit(float(cov[a, a]), phi, fs)
+                    if t.nonlinear
                     else t.proto.from_fit(float(cov[a, a]), None, fs)
+                )
         else:
             c = model.channels[t.chans[0]]
             i = model.models[c].labels.index(t.label)
             models[c][i] = t.proto.from_fit(float(h[ti]), phi, fs)
-    out = MultiModel(model.channels, {c: Model(tuple(v)) for c, v in models.items()},
-                     [sp for sp in shared])
+    out = MultiModel(
+        model.channels, {c: Model(tuple(v)) for c, v in models.items()}, [sp for sp in shared]
+    )
     # covariances are set directly: fitted ones may be singular (PSD, not PD)
     fixed = []
     shared_terms = [ti for ti, t in enumerate(prob.terms) if t.shared]
@@ -1700,8 +1931,9 @@ def _at_bound(fitted: MultiModel, prob: _MProblem, u: np.ndarray) -> list[str]:
     return out
 
 
-def _search(prob: _MProblem, model: MultiModel, wvm: WVMatrix, w: np.ndarray,
-            lo: float, hi: float) -> tuple[np.ndarray, bool]:
+def _search(
+    prob: _MProblem, model: MultiModel, wvm: WVMatrix, w: np.ndarray, lo: float, hi: float
+) -> tuple[np.ndarray, bool]:
     """Non-linear search: univariate starts, scans of shared phi/beta, Nelder-Mead, polish."""
     fs = wvm.fs
     # univariate fits of every channel give per-channel starting values
@@ -1745,8 +1977,7 @@ def _search(prob: _MProblem, model: MultiModel, wvm: WVMatrix, w: np.ndarray,
         if t.shared:
             phi = _phi_of_nl(t.code, model.shared_process(t.label).nl, fs)
         else:
-            phi = t.proto.nl_value(fs) if getattr(t.proto, t.proto.nonlinear) is not None \
-                else None
+            phi = t.proto.nl_value(fs) if getattr(t.proto, t.proto.nonlinear) is not None else None
         user.append(phi)
     if all(v is not None and 0 < v < 1 for v in user):
         starts.append(np.array([u_from(v) for v in user]))
@@ -1779,10 +2010,12 @@ def _search(prob: _MProblem, model: MultiModel, wvm: WVMatrix, w: np.ndarray,
         for _ in range(3):
             improved = False
             for idx in blocks.values():
+
                 def sub(v: np.ndarray, idx: list[int] = idx, base: np.ndarray = u) -> float:
                     uu = base.copy()
                     uu[idx] = v
                     return prob.profile(uu)
+
                 fb, vb, _ = _local(sub, u[idx], step / 4, lo, hi)
                 if fb < f * (1 - 1e-10):
                     u = u.copy()
@@ -1816,10 +2049,14 @@ class DependenceTest:
     bootstrap: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"statistic": self.statistic, "p_value": self.p_value,
-                "objective_independent": self.objective_independent,
-                "objective_shared": self.objective_shared, "labels": list(self.labels),
-                "B": self.B}
+        return {
+            "statistic": self.statistic,
+            "p_value": self.p_value,
+            "objective_independent": self.objective_independent,
+            "objective_shared": self.objective_shared,
+            "labels": list(self.labels),
+            "B": self.B,
+        }
 
 
 def _boot_dependence(args: tuple) -> float | None:
@@ -1900,15 +2137,22 @@ def dependence_test(
         out = []
         size = 1 if workers <= 1 else 4 * workers
         for i in range(0, len(items), size):
-            for d in _map(_boot_dependence, items[i:i + size], workers):
+            for d in _map(_boot_dependence, items[i : i + size], workers):
                 out.append(d)
                 progress(len(out), len(items))
     boot = [d for d in out if d is not None]
     if len(boot) < max(1, B // 2):
         raise FitError("too many bootstrap replicates failed; the model may be unidentifiable")
     p = (1 + sum(d >= stat for d in boot)) / (1 + len(boot))
-    return DependenceTest(float(stat), float(p), float(fit0.objective), float(fit1.objective),
-                          tested, len(boot), tuple(float(d) for d in boot))
+    return DependenceTest(
+        float(stat),
+        float(p),
+        float(fit0.objective),
+        float(fit1.objective),
+        tested,
+        len(boot),
+        tuple(float(d) for d in boot),
+    )
 
 
 # -------------------------------------------------------------------------------------------
@@ -1963,24 +2207,28 @@ class ReplicateResult:
     def params(self) -> dict[str, float]:
         """Estimated values by unique name (``WN.sigma2``, ``GM_1.beta`` ...)."""
         m = self.model
-        return {f"{lab}.{n}": float(v) for lab, p in zip(m.labels, m.processes, strict=True)
-                for n, v in zip(p.param_names, p.values, strict=True)}
+        return {
+            f"{lab}.{n}": float(v)
+            for lab, p in zip(m.labels, m.processes, strict=True)
+            for n, v in zip(p.param_names, p.values, strict=True)
+        }
 
     def summary(self) -> str:
         """Readable summary."""
         u = self.wvs[0].unit
-        lines = [f"GMWM replicate fit of {self.model.spec()} to {len(self.wvs)} recordings",
-                 f"  data: N = {', '.join(str(w.n) for w in self.wvs)} samples, "
-                 f"fs = {self.fs:g} Hz",
-                 f"  weights: {self.weights_name}; objective = {self.objective:.6g} (sum); "
-                 f"{self.method}, {self.n_evaluations} evaluations, "
-                 f"{1e3 * self.elapsed_s:.1f} ms", "",
-                 f"  {'parameter':<16} {'value':>14}  unit"]
+        lines = [
+            f"GMWM replicate fit of {self.model.spec()} to {len(self.wvs)} recordings",
+            f"  data: N = {', '.join(str(w.n) for w in self.wvs)} samples, fs = {self.fs:g} Hz",
+            f"  weights: {self.weights_name}; objective = {self.objective:.6g} (sum); "
+            f"{self.method}, {self.n_evaluations} evaluations, "
+            f"{1e3 * self.elapsed_s:.1f} ms",
+            "",
+            f"  {'parameter':<16} {'value':>14}  unit",
+        ]
         for lab, p in zip(self.model.labels, self.model.processes, strict=True):
             for name, v in zip(p.param_names, p.values, strict=True):
                 lines.append(f"  {lab + '.' + name:<16} {v:>14.6e}  {param_unit(p.code, name, u)}")
-        lines += ["", "  objective by replicate: "
-                  + ", ".join(f"{v:.4g}" for v in self.objectives)]
+        lines += ["", "  objective by replicate: " + ", ".join(f"{v:.4g}" for v in self.objectives)]
         lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
@@ -1991,18 +2239,31 @@ class ReplicateResult:
         """JSON-ready dictionary."""
         u = self.wvs[0].unit
         return {
-            "kind": "replicates", "model": self.model.spec(),
-            "model_values": self.model.spec(values=True), "fs": float(self.fs),
-            "n": [int(w.n) for w in self.wvs], "weights": self.weights_name,
-            "objective": float(self.objective), "objectives": list(self.objectives),
-            "params": [{"process": p.code, "label": lab, "name": n, "value": float(v),
-                        "unit": param_unit(p.code, n, u)}
-                       for lab, p in zip(self.model.labels, self.model.processes, strict=True)
-                       for n, v in zip(p.param_names, p.values, strict=True)],
+            "kind": "replicates",
+            "model": self.model.spec(),
+            "model_values": self.model.spec(values=True),
+            "fs": float(self.fs),
+            "n": [int(w.n) for w in self.wvs],
+            "weights": self.weights_name,
+            "objective": float(self.objective),
+            "objectives": list(self.objectives),
+            "params": [
+                {
+                    "process": p.code,
+                    "label": lab,
+                    "name": n,
+                    "value": float(v),
+                    "unit": param_unit(p.code, n, u),
+                }
+                for lab, p in zip(self.model.labels, self.model.processes, strict=True)
+                for n, v in zip(p.param_names, p.values, strict=True)
+            ],
             "implied": [v.tolist() for v in self.implied],
             "components": {k: v.tolist() for k, v in self.components.items()},
-            "converged": bool(self.converged), "at_bound": list(self.at_bound),
-            "method": self.method, "n_evaluations": int(self.n_evaluations),
+            "converged": bool(self.converged),
+            "at_bound": list(self.at_bound),
+            "method": self.method,
+            "n_evaluations": int(self.n_evaluations),
             "wv": [w.to_dict() for w in self.wvs],
         }
 
@@ -2019,11 +2280,14 @@ class _RProblem:
         self.b = sw * np.concatenate([w.variance for w in wvs])
         self.procs = model.processes
         self.slots = [i for i, p in enumerate(self.procs) if p.nonlinear is not None]
-        self.fixed = [None if p.nonlinear else p.basis(self.tau, self.fs) * np.ones_like(self.tau)
-                      for p in self.procs]
+        self.fixed = [
+            None if p.nonlinear else p.basis(self.tau, self.fs) * np.ones_like(self.tau)
+            for p in self.procs
+        ]
         self.tc_min = TC_MIN
-        self.tc_max = TC_MAX_FACTOR * max(max(w.n for w in wvs),
-                                          2 ** (max(w.n_levels for w in wvs) + 1))
+        self.tc_max = TC_MAX_FACTOR * max(
+            max(w.n for w in wvs), 2 ** (max(w.n_levels for w in wvs) + 1)
+        )
         self.n_eval = 0
 
     def phi_of(self, i: int, u: float) -> float:
@@ -2082,8 +2346,9 @@ def fit_replicates(
     m = parse_model(model)
     items = list(wvs)
     if len(items) < 2:
-        raise FitError(f"a replicate fit needs at least 2 recordings, got {len(items)}; "
-                       "use fit_gmwm for one")
+        raise FitError(
+            f"a replicate fit needs at least 2 recordings, got {len(items)}; use fit_gmwm for one"
+        )
     out: list[WaveletVariance] = []
     for r, it in enumerate(items):
         try:
@@ -2095,8 +2360,10 @@ def fit_replicates(
             raise FitError(f"replicate {r + 1}: {e}") from None
         if levels is not None:
             if not 1 <= levels <= wv.n_levels:
-                raise FitError(f"replicate {r + 1}: levels={levels} is out of range (it has "
-                               f"{wv.n_levels} levels)")
+                raise FitError(
+                    f"replicate {r + 1}: levels={levels} is out of range (it has "
+                    f"{wv.n_levels} levels)"
+                )
             wv = wv.truncate(levels)
         if not np.any(wv.variance > 0):
             raise FitError(f"replicate {r + 1}: the WV is 0 at every level (constant signal)")
@@ -2104,8 +2371,10 @@ def fit_replicates(
     fs0 = out[0].fs
     for r, wv in enumerate(out):
         if not math.isclose(wv.fs, fs0, rel_tol=1e-9):
-            raise FitError(f"replicate {r + 1} has fs = {wv.fs:g} Hz but replicate 1 has "
-                           f"{fs0:g} Hz: replicates of one sensor share fs")
+            raise FitError(
+                f"replicate {r + 1} has fs = {wv.fs:g} Hz but replicate 1 has "
+                f"{fs0:g} Hz: replicates of one sensor share fs"
+            )
     if fs is not None and not math.isclose(fs, fs0, rel_tol=1e-9):
         raise FitError(f"fs={fs} Hz disagrees with the replicates' fs={fs0} Hz")
     m.validate(sum(w.n_levels for w in out))
@@ -2119,8 +2388,9 @@ def fit_replicates(
         wname = weights
     else:
         ws = [np.asarray(v, float) for v in weights]
-        if len(ws) != len(out) or any(v.shape != (wv.n_levels,) for v, wv in
-                                      zip(ws, out, strict=False)):
+        if len(ws) != len(out) or any(
+            v.shape != (wv.n_levels,) for v, wv in zip(ws, out, strict=False)
+        ):
             raise FitError("give one (J_r,) weight vector per replicate")
         if any(np.any(~np.isfinite(v)) or np.any(v < 0) for v in ws):
             raise FitError("the weights must be finite and non-negative")
@@ -2141,8 +2411,11 @@ def fit_replicates(
                 fr: GMWMResult = fit_gmwm(wv, m.cleared(), weights=w)
             except (FitError, ModelError):  # pragma: no cover - a degenerate replicate
                 continue
-            tcs = [-1.0 / math.log(q.nl_value(fs0)) for q in fr.model.processes
-                   if q.nonlinear and 0 < q.nl_value(fs0) < 1]
+            tcs = [
+                -1.0 / math.log(q.nl_value(fs0))
+                for q in fr.model.processes
+                if q.nonlinear and 0 < q.nl_value(fs0) < 1
+            ]
             if len(tcs) == k:
                 cands.append(np.log(np.array(sorted(tcs, reverse=True))))
         if m.is_set:
@@ -2158,17 +2431,25 @@ def fit_replicates(
             results.append(_local(prob.profile, c, step / 2, lo, hi))
         _, u, converged = min(results, key=lambda r: r[0])
         method = "grid+nelder-mead"
-        msg = ("converged" if converged else "the local search stopped before meeting its "
-               "tolerance; the estimate may be slightly above the minimum")
+        msg = (
+            "converged"
+            if converged
+            else "the local search stopped before meeting its "
+            "tolerance; the estimate may be slightly above the minimum"
+        )
     _, h = prob.solve(u)
     nl_vals = {i: prob.phi_of(i, float(ui)) for i, ui in zip(prob.slots, u, strict=True)}
     procs = [p.from_fit(float(h[i]), nl_vals.get(i), fs0) for i, p in enumerate(prob.procs)]
-    nonlin = sorted((q for q in procs if q.nonlinear is not None),
-                    key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / fs0)))
+    nonlin = sorted(
+        (q for q in procs if q.nonlinear is not None),
+        key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / fs0)),
+    )
     fitted = Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
     implied = [fitted.wv(w.tau_samples, fs0) for w in out]
-    objs = [float(np.sum(wt * (w.variance - im) ** 2))
-            for w, wt, im in zip(out, ws, implied, strict=True)]
+    objs = [
+        float(np.sum(wt * (w.variance - im) ** 2))
+        for w, wt, im in zip(out, ws, implied, strict=True)
+    ]
     longest = max(out, key=lambda w: w.n_levels)
     at_bound = []
     for lab, q in zip(fitted.labels, fitted.processes, strict=True):
@@ -2181,10 +2462,19 @@ def fit_replicates(
                 if tc <= prob.tc_min * 1.0001 or tc >= prob.tc_max / 1.0001:
                     at_bound.append(f"{lab}.{q.nonlinear}")
     return ReplicateResult(
-        model=fitted, wvs=out, weights=ws, weights_name=wname, objective=float(sum(objs)),
-        objectives=objs, implied=implied,
-        components=fitted.components(longest.tau_samples, fs0), converged=converged,
-        at_bound=at_bound, n_evaluations=prob.n_eval, method=method, message=msg,
+        model=fitted,
+        wvs=out,
+        weights=ws,
+        weights_name=wname,
+        objective=float(sum(objs)),
+        objectives=objs,
+        implied=implied,
+        components=fitted.components(longest.tau_samples, fs0),
+        converged=converged,
+        at_bound=at_bound,
+        n_evaluations=prob.n_eval,
+        method=method,
+        message=msg,
         elapsed_s=time.perf_counter() - t0,
     )
 
@@ -2215,8 +2505,9 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
         if getattr(args, "dependence_test", False):
             raise FitError("--dependence-test needs --channels and --shared")
         if args.weights == "efficient":
-            raise FitError("--weights efficient is not available for replicate fits; use ci "
-                           "or identity")
+            raise FitError(
+                "--weights efficient is not available for replicate fits; use ci or identity"
+            )
         from .cli import _load_wv
 
         wvs, names = [], []
@@ -2233,8 +2524,10 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
         head = "\n".join(f"{f} [{n}]" for f, n in zip(files, names, strict=True))
         return f"{head}\n{res.summary()}"
     if len(files) > 1:
-        raise FitError("--channels takes one INPUT (channels recorded together); several "
-                       "INPUT files are replicates of one channel (use --channel)")
+        raise FitError(
+            "--channels takes one INPUT (channels recorded together); several "
+            "INPUT files are replicates of one channel (use --channel)"
+        )
     if getattr(args, "robust", False):
         raise FitError("--robust is not available with --channels (the WCCV is classical)")
     if getattr(args, "stream", False):
@@ -2248,19 +2541,22 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
         kw = {}
     log = load_log(args.input, fs=args.fs, **kw)
     if log.is_summary:
-        raise FitError(f"{args.input} is a WV summary file: --channels needs the raw channels "
-                       "(the WCCV is not stored)")
+        raise FitError(
+            f"{args.input} is a WV summary file: --channels needs the raw channels "
+            "(the WCCV is not stored)"
+        )
     unknown = [c for c in names if c not in log.channels]
     if unknown:
-        raise FitError(f"{args.input}: unknown channel(s) {', '.join(unknown)}; the channels "
-                       f"are {', '.join(log.channels)}")
+        raise FitError(
+            f"{args.input}: unknown channel(s) {', '.join(unknown)}; the channels "
+            f"are {', '.join(log.channels)}"
+        )
     model = MultiModel(names, args.model, shared=shared or ())
     wvm = wv_matrix(log, channels=names, levels=args.levels)
     res = fit_mgmwm(wvm, model, weights=args.weights)
     test = None
     if getattr(args, "dependence_test", False):
-        test = dependence_test(wvm, model, B=args.bootstrap, seed=args.seed,
-                               workers=args.workers)
+        test = dependence_test(wvm, model, B=args.bootstrap, seed=args.seed, workers=args.workers)
     if args.json:
         d = res.to_dict()
         d["input"] = args.input
@@ -2269,7 +2565,9 @@ def cli_fit(args: Any) -> dict[str, Any] | str:
         return json_ready(d)
     text = f"{args.input} [{', '.join(names)}]\n{res.summary()}"
     if test is not None:
-        text += (f"\n\n  test of dependence ({', '.join(test.labels)} shared vs independent): "
-                 f"D = {test.statistic:.4g}, p = {test.p_value:.3g} "
-                 f"(parametric bootstrap, B = {test.B})")
+        text += (
+            f"\n\n  test of dependence ({', '.join(test.labels)} shared vs independent): "
+            f"D = {test.statistic:.4g}, p = {test.p_value:.3g} "
+            f"(parametric bootstrap, B = {test.B})"
+        )
     return text

@@ -102,8 +102,11 @@ class Model:
     @property
     def param_names(self) -> list[str]:
         """Unique parameter names, ``label.name``."""
-        return [f"{lab}.{n}" for lab, p in zip(self.labels, self.processes, strict=True)
-                for n in p.param_names]
+        return [
+            f"{lab}.{n}"
+            for lab, p in zip(self.labels, self.processes, strict=True)
+            for n in p.param_names
+        ]
 
     @property
     def n_params(self) -> int:
@@ -121,8 +124,9 @@ class Model:
 
     def values(self) -> dict[str, float | None]:
         """Parameter values by unique name."""
-        return dict(zip(self.param_names,
-                        [v for p in self.processes for v in p.values], strict=True))
+        return dict(
+            zip(self.param_names, [v for p in self.processes for v in p.values], strict=True)
+        )
 
     def cleared(self) -> Model:
         """The same structure with every value unknown."""
@@ -159,8 +163,9 @@ class Model:
         different parametrisations); no more parameters than WV levels.
         """
         if not self.processes:
-            raise ModelError("the model is empty: add at least one process "
-                             "(WN, QN, RW, DR, AR1, GM)")
+            raise ModelError(
+                "the model is empty: add at least one process (WN, QN, RW, DR, AR1, GM)"
+            )
         counts = Counter(p.code for p in self.processes)
         for code in _UNIQUE:
             if counts.get(code, 0) > 1:
@@ -194,15 +199,18 @@ class Model:
             total = total + p.wv(tau, fs)
         return total
 
-    def simulate(self, n: int, *, fs: float = 1.0,
-                 rng: np.random.Generator | int | None = None) -> np.ndarray:
+    def simulate(
+        self, n: int, *, fs: float = 1.0, rng: np.random.Generator | int | None = None
+    ) -> np.ndarray:
         """Simulate ``n`` samples of the sum of the processes (independent draws each)."""
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
         missing = [name for name, v in self.values().items() if v is None]
         if missing:
-            raise ModelError(f"cannot simulate: no value for {', '.join(missing)}; "
-                             "write e.g. WN(sigma2=1e-4)+RW(gamma2=1e-8)")
+            raise ModelError(
+                f"cannot simulate: no value for {', '.join(missing)}; "
+                "write e.g. WN(sigma2=1e-4)+RW(gamma2=1e-8)"
+            )
         g = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         x = np.zeros(n)
         for p in self.processes:
@@ -211,16 +219,21 @@ class Model:
 
     def autocovariance(self, lags: np.ndarray, fs: float = 1.0) -> np.ndarray:
         """Autocovariance of a stationary model at integer lags."""
-        return sum((p.autocovariance(lags, fs) for p in self.processes),
-                   np.zeros(np.shape(lags)))
+        return sum((p.autocovariance(lags, fs) for p in self.processes), np.zeros(np.shape(lags)))
 
 
 _TERM = re.compile(
     r"^\s*(?:(?P<k>\d+)\s*\*\s*)?(?P<code>[A-Za-z][A-Za-z0-9]*)\s*(?:\((?P<args>[^()]*)\))?"
     r"\s*(?:\*\s*(?P<k2>\d+))?\s*$"
 )
-_ALIASES = {"AR": "AR1", "GAUSSMARKOV": "GM", "WHITE": "WN", "RANDOMWALK": "RW", "DRIFT": "DR",
-            "QUANTIZATION": "QN"}
+_ALIASES = {
+    "AR": "AR1",
+    "GAUSSMARKOV": "GM",
+    "WHITE": "WN",
+    "RANDOMWALK": "RW",
+    "DRIFT": "DR",
+    "QUANTIZATION": "QN",
+}
 
 
 def _split_top(spec: str) -> list[str]:
@@ -274,18 +287,23 @@ def parse_model(spec: str | Model | Process) -> Model:
             raise ModelError(f"empty term in model {spec!r} (a '+' too many?)")
         m = _TERM.match(term)
         if not m:
-            raise ModelError(f"cannot read the term {term.strip()!r} in model {spec!r}; "
-                             "write terms like WN, 2*GM or GM(beta=0.1, sigma2_gm=1e-4)")
+            raise ModelError(
+                f"cannot read the term {term.strip()!r} in model {spec!r}; "
+                "write terms like WN, 2*GM or GM(beta=0.1, sigma2_gm=1e-4)"
+            )
         code = m.group("code").upper()
         code = _ALIASES.get(code, code)
         if code not in PROCESS_TYPES:
-            raise ModelError(f"unknown process {m.group('code')!r} in model {spec!r}; "
-                             f"known processes: {', '.join(PROCESS_TYPES)}")
+            raise ModelError(
+                f"unknown process {m.group('code')!r} in model {spec!r}; "
+                f"known processes: {', '.join(PROCESS_TYPES)}"
+            )
         cls = PROCESS_TYPES[code]
         k = int(m.group("k") or 1) * int(m.group("k2") or 1)
         if not 1 <= k <= _MAX_REPEAT:
-            raise ModelError(f"the multiplier in {term.strip()!r} must be between 1 and "
-                             f"{_MAX_REPEAT}")
+            raise ModelError(
+                f"the multiplier in {term.strip()!r} must be between 1 and {_MAX_REPEAT}"
+            )
         p = cls()
         args = m.group("args")
         if args is not None and args.strip():
@@ -300,8 +318,9 @@ def parse_model(spec: str | Model | Process) -> Model:
                     named[name] = _parse_number(val, f"{code}.{name}")
                 else:
                     if named:
-                        raise ModelError(f"in {term.strip()!r} a positional value follows a "
-                                         "named one")
+                        raise ModelError(
+                            f"in {term.strip()!r} a positional value follows a named one"
+                        )
                     pos.append(_parse_number(a, code))
             try:
                 p = p.with_values(*pos, **named)

@@ -37,12 +37,14 @@ def _ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
     e_2 = math.expm1(-2 * x)
     e_1 = math.expm1(-x)
     out = (e_2 * t + 2 * phi * (np.expm1(-x * t) - 4 * np.expm1(-0.5 * x * t))) / (
-        e_1**3 * (phi + 1) * t * t)
+        e_1**3 * (phi + 1) * t * t
+    )
     if x * t[0] < 2e-3:
         small = x * t < 2e-3
         s = t[small]
         out[small] = (
-            s / 12 + 1 / (6 * s)
+            s / 12
+            + 1 / (6 * s)
             + x * (-(s**2) / 32 + s / 12 + 1 / (6 * s))
             + x**2 * (7 * s**3 / 960 - s**2 / 32 + s / 48 + 1 / (20 * s))
             + x**3 * (-(s**4) / 768 + 7 * s**3 / 960 - s**2 / 128 - s / 144 - 1 / (180 * s))
@@ -88,7 +90,8 @@ def ar1_wv(
         e_1 = np.where(pos, np.expm1(-x), ph - 1)
         closed = (e_2 * t + 2 * ph * (e_t - 4 * e_h)) / (e_1**3 * (ph + 1) * t**2)
         series = (
-            t / 12 + 1 / (6 * t)
+            t / 12
+            + 1 / (6 * t)
             + x * (-(t**2) / 32 + t / 12 + 1 / (6 * t))
             + x**2 * (7 * t**3 / 960 - t**2 / 32 + t / 48 + 1 / (20 * t))
             + x**3 * (-(t**4) / 768 + 7 * t**3 / 960 - t**2 / 128 - t / 144 - 1 / (180 * t))
@@ -124,14 +127,18 @@ class Process:
         """A copy with new parameter values (positional in ``param_names`` order, or named)."""
         vals = dict(zip(self.param_names, self.values, strict=True))
         if len(args) > len(self.param_names):
-            raise ValueError(f"{self.code} takes {len(self.param_names)} parameters: "
-                             f"{', '.join(self.param_names)}")
+            raise ValueError(
+                f"{self.code} takes {len(self.param_names)} parameters: "
+                f"{', '.join(self.param_names)}"
+            )
         for name, v in zip(self.param_names, args, strict=False):
             vals[name] = v
         for name, v in kwargs.items():
             if name not in vals:
-                raise ValueError(f"{self.code} has no parameter {name!r}; "
-                                 f"its parameters are {', '.join(self.param_names)}")
+                raise ValueError(
+                    f"{self.code} has no parameter {name!r}; "
+                    f"its parameters are {', '.join(self.param_names)}"
+                )
             vals[name] = v
         return type(self)(**vals)
 
@@ -142,8 +149,10 @@ class Process:
     def _require(self) -> tuple[float, ...]:
         if not self.is_set:
             missing = [n for n, v in zip(self.param_names, self.values, strict=True) if v is None]
-            raise ValueError(f"{self.code} has no value for {', '.join(missing)}; "
-                             f"give it, e.g. {self.code}({missing[0]}=...)")
+            raise ValueError(
+                f"{self.code} has no value for {', '.join(missing)}; "
+                f"give it, e.g. {self.code}({missing[0]}=...)"
+            )
         return tuple(float(v) for v in self.values)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
@@ -172,10 +181,13 @@ class Process:
         """Inverse of :meth:`to_unconstrained`: a process with the mapped-back values."""
         u = np.asarray(u, dtype=float)
         if u.shape != (len(self.param_names),):
-            raise ValueError(f"{self.code} takes {len(self.param_names)} unconstrained values, "
-                             f"got shape {u.shape}")
-        return type(self)(*(_BACKWARD[n](float(x)) for n, x in
-                            zip(self.param_names, u, strict=True)))
+            raise ValueError(
+                f"{self.code} takes {len(self.param_names)} unconstrained values, "
+                f"got shape {u.shape}"
+            )
+        return type(self)(
+            *(_BACKWARD[n](float(x)) for n, x in zip(self.param_names, u, strict=True))
+        )
 
     # ---- fitting interface ----------------------------------------------------------------
     def basis(self, tau: np.ndarray, fs: float, nl: float | None = None) -> np.ndarray:
@@ -200,8 +212,9 @@ class Process:
         self._require()
         return self.linear_coef() * self.basis(np.asarray(tau, float), fs, self.nl_value(fs))
 
-    def simulate(self, n: int, rng: np.random.Generator | int | None = None,
-                 fs: float = 1.0) -> np.ndarray:
+    def simulate(
+        self, n: int, rng: np.random.Generator | int | None = None, fs: float = 1.0
+    ) -> np.ndarray:
         """Simulate ``n`` samples (AR1/GM start from the stationary distribution)."""
         raise NotImplementedError
 
@@ -233,8 +246,11 @@ class Process:
         """``CODE`` or ``CODE(name=value, ...)``."""
         if all(v is None for v in self.values):
             return self.code
-        parts = [f"{n}={v!r}" for n, v in zip(self.param_names, self.values, strict=True)
-                 if v is not None]
+        parts = [
+            f"{n}={v!r}"
+            for n, v in zip(self.param_names, self.values, strict=True)
+            if v is not None
+        ]
         return f"{self.code}({', '.join(parts)})"
 
     def __repr__(self) -> str:
@@ -245,11 +261,24 @@ class Process:
 
 # Transforms to the unconstrained space, by parameter name: variances and rates by log, the AR1
 # coefficient by atanh (|phi| < 1), the drift slope (either sign) unchanged.
-_FORWARD = {"sigma2": math.log, "q2": math.log, "gamma2": math.log, "sigma2_gm": math.log,
-            "beta": math.log, "phi": math.atanh, "omega": float}
-_BACKWARD = {"sigma2": math.exp, "q2": math.exp, "gamma2": math.exp, "sigma2_gm": math.exp,
-             "beta": math.exp, "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
-             "omega": float}
+_FORWARD = {
+    "sigma2": math.log,
+    "q2": math.log,
+    "gamma2": math.log,
+    "sigma2_gm": math.log,
+    "beta": math.log,
+    "phi": math.atanh,
+    "omega": float,
+}
+_BACKWARD = {
+    "sigma2": math.exp,
+    "q2": math.exp,
+    "gamma2": math.exp,
+    "sigma2_gm": math.exp,
+    "beta": math.exp,
+    "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
+    "omega": float,
+}
 
 
 def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:

@@ -41,8 +41,10 @@ def _rosbags() -> Any:
     try:
         from rosbags import highlevel
     except ImportError:  # pragma: no cover - depends on the installation
-        raise LoadError("reading ROS bags needs the 'rosbags' package (pure Python, no ROS "
-                          "install): pip install rosbags") from None
+        raise LoadError(
+            "reading ROS bags needs the 'rosbags' package (pure Python, no ROS "
+            "install): pip install rosbags"
+        ) from None
     return highlevel
 
 
@@ -88,10 +90,17 @@ def _bag_paths(path: Path, src: str) -> tuple[list[Path], str]:
         return [path], "rosbag2-" + ("sqlite3" if ext == ".db3" else "mcap")
     with open(path, "rb") as fh:
         head = fh.read(16)
-    want = ".bag" if head.startswith(b"#ROSBAG") else ".mcap" if head.startswith(b"\x89MCAP") \
+    want = (
+        ".bag"
+        if head.startswith(b"#ROSBAG")
+        else ".mcap"
+        if head.startswith(b"\x89MCAP")
         else ".db3"
-    raise LoadError(f"file '{src}' looks like a ROS bag but its extension is {ext or 'none'}: "
-                      f"rename it to *{want} (the bag reader picks the format by extension)")
+    )
+    raise LoadError(
+        f"file '{src}' looks like a ROS bag but its extension is {ext or 'none'}: "
+        f"rename it to *{want} (the bag reader picks the format by extension)"
+    )
 
 
 def _open(paths: list[Path], src: str) -> Any:
@@ -100,10 +109,12 @@ def _open(paths: list[Path], src: str) -> Any:
         reader = hl.AnyReader(paths)
         reader.open()
     except Exception as exc:  # rosbags raises many types for corrupt input
-        raise LoadError(f"file '{src}' is not a readable ROS bag ({type(exc).__name__}: "
-                          f"{' '.join(str(exc).split())[:300]}): the bag is damaged or incomplete "
-                          "(a recording that was not closed cleanly can be repaired with "
-                          "'rosbag reindex' / 'ros2 bag reindex')") from exc
+        raise LoadError(
+            f"file '{src}' is not a readable ROS bag ({type(exc).__name__}: "
+            f"{' '.join(str(exc).split())[:300]}): the bag is damaged or incomplete "
+            "(a recording that was not closed cleanly can be repaired with "
+            "'rosbag reindex' / 'ros2 bag reindex')"
+        ) from exc
     return reader
 
 
@@ -127,11 +138,11 @@ def _layout(raw: bytes, ros2: bool) -> tuple[int, int, int, int, str] | None:
         if n < 12 or raw[0:2] != b"\x00\x01":  # little-endian CDR only
             return None
         p = 4
-        flen = int.from_bytes(raw[p + 8:p + 12], "little")
+        flen = int.from_bytes(raw[p + 8 : p + 12], "little")
         fstart = p + 12
         base = p + ((12 + flen + 7) // 8) * 8
         sec, nsec = p, p + 4
-        frame = bytes(raw[fstart:fstart + max(flen - 1, 0)])
+        frame = bytes(raw[fstart : fstart + max(flen - 1, 0)])
     else:
         if n < 16:
             return None
@@ -139,7 +150,7 @@ def _layout(raw: bytes, ros2: bool) -> tuple[int, int, int, int, str] | None:
         fstart = 16
         base = 16 + flen
         sec, nsec = 4, 8
-        frame = bytes(raw[fstart:fstart + flen])
+        frame = bytes(raw[fstart : fstart + flen])
     if base + 296 != n:
         return None
     return sec, nsec, base + 104, base + 200, frame.decode("utf-8", "replace")
@@ -155,16 +166,23 @@ def _decode_chunk(raws: list[bytes], ros2: bool, check: Any) -> tuple[np.ndarray
     buf = np.frombuffer(b"".join(raws), dtype=np.uint8).reshape(len(raws), size)
 
     def field(off: int, nbytes: int, dt: str) -> np.ndarray:
-        return np.ascontiguousarray(buf[:, off:off + nbytes]).view(dt)
+        return np.ascontiguousarray(buf[:, off : off + nbytes]).view(dt)
 
     sec = field(sec_o, 4, "<i4" if ros2 else "<u4")[:, 0].astype(np.int64)
     nsec = field(nsec_o, 4, "<u4")[:, 0].astype(np.int64)
     gyro = field(av_o, 24, "<f8")
     acc = field(la_o, 24, "<f8")
     m = check(raws[0])  # the reference deserializer must agree on the first message
-    ref = (m.header.stamp.sec, m.header.stamp.nanosec,
-           m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z,
-           m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z)
+    ref = (
+        m.header.stamp.sec,
+        m.header.stamp.nanosec,
+        m.angular_velocity.x,
+        m.angular_velocity.y,
+        m.angular_velocity.z,
+        m.linear_acceleration.x,
+        m.linear_acceleration.y,
+        m.linear_acceleration.z,
+    )
     got = (sec[0], nsec[0], *gyro[0], *acc[0])
     if not all(a == b or (a != a and b != b) for a, b in zip(ref, got, strict=True)):
         return None
@@ -178,8 +196,12 @@ def _decode_slow(raws: Iterable[bytes], deser: Any) -> tuple[np.ndarray, ...]:
         st, av, la = m.header.stamp, m.angular_velocity, m.linear_acceleration
         rows.append((st.sec, st.nanosec, av.x, av.y, av.z, la.x, la.y, la.z))
     a = np.array(rows, dtype=object).reshape(-1, 8)
-    return (a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a[:, 2:5].astype(np.float64),
-            a[:, 5:8].astype(np.float64))
+    return (
+        a[:, 0].astype(np.int64),
+        a[:, 1].astype(np.int64),
+        a[:, 2:5].astype(np.float64),
+        a[:, 5:8].astype(np.float64),
+    )
 
 
 def read_imu_bag(
@@ -216,16 +238,22 @@ def read_imu_bag(
         topics = sorted({c.topic for c in imu})
         if not topics:
             found = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
-            raise LoadError(f"bag '{src}' has no sensor_msgs/Imu topic; its topics: "
-                              f"{', '.join(found) or 'none'}")
+            raise LoadError(
+                f"bag '{src}' has no sensor_msgs/Imu topic; its topics: "
+                f"{', '.join(found) or 'none'}"
+            )
         if topic is None:
             if len(topics) > 1:
-                raise LoadError(f"bag '{src}' has {len(topics)} sensor_msgs/Imu topics "
-                                  f"({', '.join(topics)}): choose one with topic= (CLI: --topic)")
+                raise LoadError(
+                    f"bag '{src}' has {len(topics)} sensor_msgs/Imu topics "
+                    f"({', '.join(topics)}): choose one with topic= (CLI: --topic)"
+                )
             topic = topics[0]
         elif topic not in topics:
-            raise LoadError(f"bag '{src}' has no sensor_msgs/Imu topic {topic!r}; IMU topics: "
-                              f"{', '.join(topics)}")
+            raise LoadError(
+                f"bag '{src}' has no sensor_msgs/Imu topic {topic!r}; IMU topics: "
+                f"{', '.join(topics)}"
+            )
         conns = [c for c in imu if c.topic == topic]
         ros2 = reader.is2
         msgtype = conns[0].msgtype
@@ -261,15 +289,19 @@ def read_imu_bag(
         except LoadError:
             raise
         except Exception as exc:
-            raise LoadError(f"bag '{src}', topic {topic!r}: a message could not be read "
-                              f"({type(exc).__name__}: {' '.join(str(exc).split())[:300]}): the "
-                              "bag may be truncated; reindex it") from exc
+            raise LoadError(
+                f"bag '{src}', topic {topic!r}: a message could not be read "
+                f"({type(exc).__name__}: {' '.join(str(exc).split())[:300]}): the "
+                "bag may be truncated; reindex it"
+            ) from exc
     finally:
         reader.close()
     n = sum(len(pt[0]) for pt in parts)
     if n < 4:
-        raise LoadError(f"bag '{src}', topic {topic!r}: {n} message(s); a wavelet variance "
-                          "needs at least 4 (a static recording of minutes to hours is typical)")
+        raise LoadError(
+            f"bag '{src}', topic {topic!r}: {n} message(s); a wavelet variance "
+            "needs at least 4 (a static recording of minutes to hours is typical)"
+        )
     sec = np.concatenate([pt[0] for pt in parts])
     nsec = np.concatenate([pt[1] for pt in parts])
     gyro = np.concatenate([pt[2] for pt in parts])
@@ -280,15 +312,32 @@ def read_imu_bag(
     if not np.any(stamps):
         stamps = np.asarray(recv, dtype=np.int64)
         source = "receive time"
-        notes.append(f"topic {topic!r}: every header stamp is zero; the bag's receive times "
-                     "are used as the time column (they include transport jitter)")
-    channels = {name: np.ascontiguousarray(col) for name, col in
-                zip(IMU_CHANNELS, [*gyro.T, *acc.T], strict=True)}
-    meta = {"topic": topic, "frame_id": frame, "n_messages": int(n), "msgtype": msgtype,
-            "decoder": "+".join(sorted(decoders)), "bag_format": fmt,
-            "imu_topics": topics}
-    return ImuBag(channels=channels, stamps_ns=stamps, stamp_source=source, units=dict(_UNITS),
-                  format=fmt, meta=meta, notes=tuple(notes))
+        notes.append(
+            f"topic {topic!r}: every header stamp is zero; the bag's receive times "
+            "are used as the time column (they include transport jitter)"
+        )
+    channels = {
+        name: np.ascontiguousarray(col)
+        for name, col in zip(IMU_CHANNELS, [*gyro.T, *acc.T], strict=True)
+    }
+    meta = {
+        "topic": topic,
+        "frame_id": frame,
+        "n_messages": int(n),
+        "msgtype": msgtype,
+        "decoder": "+".join(sorted(decoders)),
+        "bag_format": fmt,
+        "imu_topics": topics,
+    }
+    return ImuBag(
+        channels=channels,
+        stamps_ns=stamps,
+        stamp_source=source,
+        units=dict(_UNITS),
+        format=fmt,
+        meta=meta,
+        notes=tuple(notes),
+    )
 
 
 def write_imu_bag(
@@ -332,8 +381,11 @@ def write_imu_bag(
         raise ValueError(f"ros must be 1 or 2, got {ros!r}")
     ts = get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
     T = ts.types
-    Imu, Header, Time = T["sensor_msgs/msg/Imu"], T["std_msgs/msg/Header"], \
-        T["builtin_interfaces/msg/Time"]
+    Imu, Header, Time = (
+        T["sensor_msgs/msg/Imu"],
+        T["std_msgs/msg/Header"],
+        T["builtin_interfaces/msg/Time"],
+    )
     Quat, Vec = T["geometry_msgs/msg/Quaternion"], T["geometry_msgs/msg/Vector3"]
     zeros = np.zeros(9)
     mtype = "sensor_msgs/msg/Imu"
@@ -341,13 +393,17 @@ def write_imu_bag(
     def message(i: int) -> Any:
         s = int(st[i])
         extra = {"seq": i} if ros == 1 else {}
-        return Imu(header=Header(**extra, stamp=Time(sec=s // 10**9, nanosec=s % 10**9),
-                                 frame_id=frame_id),
-                   orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=zeros,
-                   angular_velocity=Vec(x=g[i, 0], y=g[i, 1], z=g[i, 2]),
-                   angular_velocity_covariance=zeros,
-                   linear_acceleration=Vec(x=a[i, 0], y=a[i, 1], z=a[i, 2]),
-                   linear_acceleration_covariance=zeros)
+        return Imu(
+            header=Header(
+                **extra, stamp=Time(sec=s // 10**9, nanosec=s % 10**9), frame_id=frame_id
+            ),
+            orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=zeros,
+            angular_velocity=Vec(x=g[i, 0], y=g[i, 1], z=g[i, 2]),
+            angular_velocity_covariance=zeros,
+            linear_acceleration=Vec(x=a[i, 0], y=a[i, 1], z=a[i, 2]),
+            linear_acceleration_covariance=zeros,
+        )
 
     p = Path(path)
     if ros == 1:

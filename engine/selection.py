@@ -74,12 +74,25 @@ class Candidate:
     error: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        d = {k: getattr(self, k) for k in ("model", "n_params", "objective", "optimism",
-                                             "criterion", "j_stat", "j_df", "j_p_value", "error")}
+        d = {
+            k: getattr(self, k)
+            for k in (
+                "model",
+                "n_params",
+                "objective",
+                "optimism",
+                "criterion",
+                "j_stat",
+                "j_df",
+                "j_p_value",
+                "error",
+            )
+        }
         if self.result is not None:
             d["params"] = [r.to_dict() for r in self.result.param_records]
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                for k, v in d.items()}
+        return {
+            k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,23 +110,30 @@ class SelectionResult:
 
     def table(self) -> str:
         """Readable ranked table."""
-        lines = [f"WVIC ranking ({len(self.candidates)} candidates, {self.optimism} optimism, "
-                 f"weights {self.weights}, {self.elapsed_s:.2f} s)",
-                 f"{'rank':>4} {'model':<22} {'p':>3} {'objective':>12} {'optimism':>10} "
-                 f"{'WVIC':>12} {'J-test p':>9}"]
+        lines = [
+            f"WVIC ranking ({len(self.candidates)} candidates, {self.optimism} optimism, "
+            f"weights {self.weights}, {self.elapsed_s:.2f} s)",
+            f"{'rank':>4} {'model':<22} {'p':>3} {'objective':>12} {'optimism':>10} "
+            f"{'WVIC':>12} {'J-test p':>9}",
+        ]
         for i, c in enumerate(self.candidates, 1):
             if c.error:
                 lines.append(f"{i:>4} {c.model:<22} {c.n_params:>3}  not fitted: {c.error}")
                 continue
             jp = f"{c.j_p_value:9.3g}" if math.isfinite(c.j_p_value) else f"{'n/a':>9}"
-            lines.append(f"{i:>4} {c.model:<22} {c.n_params:>3} {c.objective:>12.5g} "
-                         f"{c.optimism:>10.4g} {c.criterion:>12.5g} {jp}")
+            lines.append(
+                f"{i:>4} {c.model:<22} {c.n_params:>3} {c.objective:>12.5g} "
+                f"{c.optimism:>10.4g} {c.criterion:>12.5g} {jp}"
+            )
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"optimism": self.optimism, "weights": self.weights,
-                "elapsed_s": self.elapsed_s,
-                "candidates": [c.to_dict() for c in self.candidates]}
+        return {
+            "optimism": self.optimism,
+            "weights": self.weights,
+            "elapsed_s": self.elapsed_s,
+            "candidates": [c.to_dict() for c in self.candidates],
+        }
 
 
 def _asymptotic_optimism(res: GMWMResult, v: np.ndarray) -> float:
@@ -210,13 +230,18 @@ def rank_models(
         specs = [r.model.cleared() for r in ok]
         seeds = np.random.SeedSequence(seed).spawn(B)
         omega = None if isinstance(weights, str) else weights
-        items = [(largest.model, specs, wv.n, wv.fs, wv.n_levels,
-                  weights if omega is None else omega, s) for s in seeds]
+        items = [
+            (largest.model, specs, wv.n, wv.fs, wv.n_levels, weights if omega is None else omega, s)
+            for s in seeds
+        ]
         pairs = _map(_boot_pair, items, workers)
         nus = np.array([p[0] for p in pairs])
         for k, r in enumerate(ok):
-            rows = [(nu, f[k]) for nu, f in zip(nus, (p[1] for p in pairs), strict=True)
-                    if f[k] is not None]
+            rows = [
+                (nu, f[k])
+                for nu, f in zip(nus, (p[1] for p in pairs), strict=True)
+                if f[k] is not None
+            ]
             a = np.array([x for x, _ in rows])
             b = np.array([y for _, y in rows])
             c = (a - a.mean(0)).T @ (b - b.mean(0)) / (len(rows) - 1)
@@ -227,23 +252,38 @@ def rank_models(
     cands = []
     for m, r, err in fitted:
         if r is None:
-            cands.append(Candidate(m.spec(), m.n_params, math.nan, math.nan, math.inf,
-                                   math.nan, 0, math.nan, None, err))
+            cands.append(
+                Candidate(
+                    m.spec(),
+                    m.n_params,
+                    math.nan,
+                    math.nan,
+                    math.inf,
+                    math.nan,
+                    0,
+                    math.nan,
+                    None,
+                    err,
+                )
+            )
             continue
         opt = boot_opt[m.spec()] if optimism == "bootstrap" else _asymptotic_optimism(r, vmat)
         resid = wv.variance - r.implied
         jstat = float(resid @ vinv @ resid)
         df = wv.n_levels - len(_free(r))
         jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
-        cands.append(Candidate(m.spec(), m.n_params, r.objective, opt, r.objective + opt,
-                               jstat, df, jp, r))
+        cands.append(
+            Candidate(m.spec(), m.n_params, r.objective, opt, r.objective + opt, jstat, df, jp, r)
+        )
+
     # candidates whose extra terms are fitted at zero tie with the smaller model: within a
     # relative 1e-6 of each other, the one with fewer parameters ranks first
     def order(a: Candidate, b: Candidate) -> int:
         if abs(a.criterion - b.criterion) > 1e-6 * max(abs(a.criterion), abs(b.criterion)):
             return -1 if a.criterion < b.criterion else 1
         return (a.n_params > b.n_params) - (a.n_params < b.n_params) or (
-            (a.model > b.model) - (a.model < b.model))
+            (a.model > b.model) - (a.model < b.model)
+        )
 
     cands.sort(key=functools.cmp_to_key(order))
     wname = weights if isinstance(weights, str) else "user"

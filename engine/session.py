@@ -34,9 +34,19 @@ from .fit import FitError, GMWMResult, weight_matrix
 from .model import parse_model
 from .wavelet import WaveletVariance
 
-__all__ = ["wv_to_dict", "wv_from_dict", "result_to_dict", "result_from_dict",
-           "file_fingerprint", "Session", "save_session", "load_session", "session_to_json",
-           "session_from_json", "SessionError"]
+__all__ = [
+    "wv_to_dict",
+    "wv_from_dict",
+    "result_to_dict",
+    "result_from_dict",
+    "file_fingerprint",
+    "Session",
+    "save_session",
+    "load_session",
+    "session_to_json",
+    "session_from_json",
+    "SessionError",
+]
 
 SCHEMA = "gmwm-session/1"
 _LOAD_KEYS = ("channel", "fs", "segment", "scale", "units", "topic")
@@ -44,7 +54,6 @@ _LOAD_KEYS = ("channel", "fs", "segment", "scale", "units", "topic")
 
 class SessionError(ValueError):
     """A session file cannot be read or does not match its data; the message says why."""
-
 
 
 def _arr(v: Any, dtype: Any = float) -> np.ndarray:
@@ -66,12 +75,19 @@ def wv_from_dict(d: Mapping[str, Any]) -> WaveletVariance:
         classical = wv_from_dict(d["classical"]) if d.get("classical") else None
         return WaveletVariance(
             levels=np.asarray(d.get("levels", np.arange(1, v.size + 1)), dtype=int),
-            tau_samples=np.asarray(d.get("tau_samples", 2 ** np.arange(1, v.size + 1)),
-                                   dtype=int),
-            variance=v, ci_low=_arr(d["ci_low"]), ci_high=_arr(d["ci_high"]),
-            n_coef=np.asarray(d["n_coef"], dtype=int), n=int(d["n"]), fs=float(d["fs"]),
-            robust=bool(d.get("robust", False)), eff=float(d.get("eff", 0.6)),
-            alpha=float(d.get("alpha", 0.05)), unit=str(d.get("unit", "")), classical=classical)
+            tau_samples=np.asarray(d.get("tau_samples", 2 ** np.arange(1, v.size + 1)), dtype=int),
+            variance=v,
+            ci_low=_arr(d["ci_low"]),
+            ci_high=_arr(d["ci_high"]),
+            n_coef=np.asarray(d["n_coef"], dtype=int),
+            n=int(d["n"]),
+            fs=float(d["fs"]),
+            robust=bool(d.get("robust", False)),
+            eff=float(d.get("eff", 0.6)),
+            alpha=float(d.get("alpha", 0.05)),
+            unit=str(d.get("unit", "")),
+            classical=classical,
+        )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise SessionError(f"invalid wavelet variance in the session ({exc!r})") from exc
 
@@ -104,11 +120,20 @@ def result_from_dict(d: Mapping[str, Any]) -> GMWMResult:
         comps = model.components(wv.tau_samples, wv.fs)
         implied = np.sum(np.array(list(comps.values())), axis=0)
         return GMWMResult(
-            model=model, wv=wv, omega=omega, weights=str(d.get("weights", "ci")),
-            objective=float(d["objective"]), implied=implied, components=comps,
-            converged=bool(d.get("converged", True)), at_bound=list(d.get("at_bound", [])),
-            n_evaluations=int(d.get("n_evaluations", 0)), method=str(d.get("method", "")),
-            message=str(d.get("message", "")), elapsed_s=float(d.get("elapsed_s", 0.0)))
+            model=model,
+            wv=wv,
+            omega=omega,
+            weights=str(d.get("weights", "ci")),
+            objective=float(d["objective"]),
+            implied=implied,
+            components=comps,
+            converged=bool(d.get("converged", True)),
+            at_bound=list(d.get("at_bound", [])),
+            n_evaluations=int(d.get("n_evaluations", 0)),
+            method=str(d.get("method", "")),
+            message=str(d.get("message", "")),
+            elapsed_s=float(d.get("elapsed_s", 0.0)),
+        )
     except SessionError:
         raise
     except (KeyError, TypeError, ValueError, AttributeError, FitError) as exc:
@@ -180,8 +205,10 @@ class Session:
             return f"the data file '{self.data_path}' no longer exists"
         now = file_fingerprint(p)
         if now["size"] != self.fingerprint.get("size"):
-            return (f"the data file '{self.data_path}' changed size "
-                    f"({self.fingerprint.get('size')} -> {now['size']} bytes)")
+            return (
+                f"the data file '{self.data_path}' changed size "
+                f"({self.fingerprint.get('size')} -> {now['size']} bytes)"
+            )
         if now["sha256_ends"] != self.fingerprint.get("sha256_ends"):
             return f"the content of the data file '{self.data_path}' changed"
         return None
@@ -191,8 +218,10 @@ class Session:
         from .io import load_log
 
         if check and (why := self.data_changed()):
-            raise SessionError(f"{why} since the session was saved: the saved fits may not "
-                               "describe it; reload without check=True to use it anyway")
+            raise SessionError(
+                f"{why} since the session was saved: the saved fits may not "
+                "describe it; reload without check=True to use it anyway"
+            )
         return load_log(self.data_path, **self.load)
 
 
@@ -235,13 +264,13 @@ def session_to_json(
     load = dict(load or {})
     bad = [k for k in load if k not in _LOAD_KEYS]
     if bad:
-        raise SessionError(f"load options {bad} are not load_log arguments "
-                           f"({', '.join(_LOAD_KEYS)})")
+        raise SessionError(
+            f"load options {bad} are not load_log arguments ({', '.join(_LOAD_KEYS)})"
+        )
     if isinstance(load.get("segment"), tuple):
         load["segment"] = list(load["segment"])
     chans: dict[str, dict[str, Any]] = {}
-    for name in dict.fromkeys([*(models or {}), *(wvs or {}), *(fits or {}),
-                               *(intervals or {})]):
+    for name in dict.fromkeys([*(models or {}), *(wvs or {}), *(fits or {}), *(intervals or {})]):
         c: dict[str, Any] = {}
         if models and name in models:
             spec = models[name]
@@ -255,17 +284,24 @@ def session_to_json(
         chans[str(name)] = c
     dp = Path(data_path)
     doc = {
-        "schema": SCHEMA, "engine_version": __version__,
+        "schema": SCHEMA,
+        "engine_version": __version__,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "data": {"path": str(data_path), "load": load,
-                 "fingerprint": file_fingerprint(dp) if fingerprint and dp.exists() else None},
-        "channels": chans, "app": dict(app or {}),
+        "data": {
+            "path": str(data_path),
+            "load": load,
+            "fingerprint": file_fingerprint(dp) if fingerprint and dp.exists() else None,
+        },
+        "channels": chans,
+        "app": dict(app or {}),
     }
     try:
         return json.dumps(json_ready(doc), indent=1, allow_nan=False) + "\n"
     except (TypeError, ValueError) as exc:
-        raise SessionError(f"the session cannot be written as JSON ({exc}): keep the app "
-                           "state to numbers, strings, lists and dicts") from exc
+        raise SessionError(
+            f"the session cannot be written as JSON ({exc}): keep the app "
+            "state to numbers, strings, lists and dicts"
+        ) from exc
 
 
 def save_session(path: str | os.PathLike[str], **kwargs: Any) -> Path:
@@ -309,11 +345,13 @@ def session_from_json(text: str | bytes, *, source: str = "<upload>") -> Session
         raise SessionError(f"cannot read session file '{path}': {exc}") from exc
     if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
         raise SessionError(f"'{path}' is not a GMWM session file (schema {SCHEMA!r} expected)")
+
     def part(d: Any, key: str) -> dict[str, Any]:
         v = d.get(key) or {}
         if not isinstance(v, dict):
-            raise SessionError(f"session '{path}': '{key}' must be an object, got "
-                               f"{type(v).__name__}")
+            raise SessionError(
+                f"session '{path}': '{key}' must be an object, got {type(v).__name__}"
+            )
         return v
 
     data = part(doc, "data")
@@ -324,9 +362,13 @@ def session_from_json(text: str | bytes, *, source: str = "<upload>") -> Session
     if isinstance(load.get("segment"), list):
         load["segment"] = tuple(load["segment"])
     fp = data.get("fingerprint")
-    s = Session(data_path=str(data.get("path", "")), load=load, app=part(doc, "app"),
-                fingerprint=fp if isinstance(fp, dict) else None,
-                created=str(doc.get("created", "")))
+    s = Session(
+        data_path=str(data.get("path", "")),
+        load=load,
+        app=part(doc, "app"),
+        fingerprint=fp if isinstance(fp, dict) else None,
+        created=str(doc.get("created", "")),
+    )
     for name, c in part(doc, "channels").items():
         if not isinstance(c, dict):
             raise SessionError(f"session '{path}', channel {name!r}: not an object")
@@ -339,15 +381,21 @@ def session_from_json(text: str | bytes, *, source: str = "<upload>") -> Session
                 s.fits[name] = result_from_dict(c["fit"])
             if "intervals" in c:
                 s.intervals[name] = [
-                    ParamInterval(name=iv["name"], value=float(iv["value"]),
-                                  low=math.nan if iv["low"] is None else float(iv["low"]),
-                                  high=math.nan if iv["high"] is None else float(iv["high"]),
-                                  unit=iv.get("unit", ""), method=iv.get("method", ""),
-                                  level=float(iv.get("level", 0.95)))
-                    for iv in c["intervals"]]
+                    ParamInterval(
+                        name=iv["name"],
+                        value=float(iv["value"]),
+                        low=math.nan if iv["low"] is None else float(iv["low"]),
+                        high=math.nan if iv["high"] is None else float(iv["high"]),
+                        unit=iv.get("unit", ""),
+                        method=iv.get("method", ""),
+                        level=float(iv.get("level", 0.95)),
+                    )
+                    for iv in c["intervals"]
+                ]
         except SessionError as exc:
             raise SessionError(f"session '{path}', channel {name!r}: {exc}") from exc
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise SessionError(f"session '{path}', channel {name!r}: invalid entry "
-                               f"({exc!r})") from exc
+            raise SessionError(
+                f"session '{path}', channel {name!r}: invalid entry ({exc!r})"
+            ) from exc
     return s

@@ -112,8 +112,10 @@ class _NpySource(SeriesSource):
             k = shape[1]
             if column is None:
                 if k != 1:
-                    raise ValueError(f"file '{path}' has shape {shape}: choose a column "
-                                     f"(0..{k - 1}) with column=")
+                    raise ValueError(
+                        f"file '{path}' has shape {shape}: choose a column "
+                        f"(0..{k - 1}) with column="
+                    )
                 column = 0
             if not -k <= column < k:
                 raise ValueError(f"file '{path}': column {column} is out of range 0..{k - 1}")
@@ -156,13 +158,12 @@ class _NpySource(SeriesSource):
             while got < nbytes:
                 r = self._fh.readinto(view[got:])
                 if not r:
-                    raise ValueError(f"file '{self.path}' is truncated: expected {self.n} "
-                                     "samples")
+                    raise ValueError(f"file '{self.path}' is truncated: expected {self.n} samples")
                 got += r
             vals = self._raw[:nbytes].view(self.dtype)
             if not contiguous:
                 vals = vals.reshape(cnt, self.k)[:, self.column]
-            out[a - start:b - start] = vals
+            out[a - start : b - start] = vals
         return out[: stop - start]
 
     def close(self) -> None:
@@ -174,8 +175,15 @@ class _NpySource(SeriesSource):
 class _ArraySource(SeriesSource):
     """Any sliceable array: ndarray, np.memmap, h5py.Dataset (1-D, or 2-D with a column)."""
 
-    def __init__(self, arr: Any, column: int | None, fs: float | None, unit: str = "",
-                 name: str = "x", owner: Any = None) -> None:
+    def __init__(
+        self,
+        arr: Any,
+        column: int | None,
+        fs: float | None,
+        unit: str = "",
+        name: str = "x",
+        owner: Any = None,
+    ) -> None:
         shape = tuple(getattr(arr, "shape", ()))
         dtype = np.dtype(getattr(arr, "dtype", np.float64))
         if dtype.kind not in "iuf" or dtype.names:
@@ -184,8 +192,9 @@ class _ArraySource(SeriesSource):
             column = 0
         if len(shape) == 2:
             if column is None or not -shape[1] <= column < shape[1]:
-                raise ValueError(f"'{name}' has shape {shape}: choose a column "
-                                 f"(0..{shape[1] - 1}) with column=")
+                raise ValueError(
+                    f"'{name}' has shape {shape}: choose a column (0..{shape[1] - 1}) with column="
+                )
             column %= shape[1]
         elif len(shape) != 1:
             raise ValueError(f"'{name}' of shape {shape} is not 1-D or 2-D (N, k)")
@@ -232,8 +241,9 @@ def _h5_attr(v: Any) -> Any:
     return v
 
 
-def _h5_source(path: Path, dataset: str | None, column: int | None,
-               fs: float | None) -> SeriesSource:
+def _h5_source(
+    path: Path, dataset: str | None, column: int | None, fs: float | None
+) -> SeriesSource:
     import h5py
 
     try:
@@ -243,24 +253,33 @@ def _h5_source(path: Path, dataset: str | None, column: int | None,
     try:
         if dataset is None:
             cands: list[tuple[str, Any]] = []
-            f.visititems(lambda nm, ob: cands.append((nm, ob)) if isinstance(ob, h5py.Dataset)
-                         and ob.dtype.kind in "iuf" and ob.ndim in (1, 2) and ob.size > 1
-                         else None)
+            f.visititems(
+                lambda nm, ob: (
+                    cands.append((nm, ob))
+                    if isinstance(ob, h5py.Dataset)
+                    and ob.dtype.kind in "iuf"
+                    and ob.ndim in (1, 2)
+                    and ob.size > 1
+                    else None
+                )
+            )
             if not cands:
                 raise ValueError(f"file '{path}' has no numeric dataset")
             longest = max(c[1].shape[0] for c in cands)
             names = [nm for nm, ob in cands if ob.shape[0] == longest]
             if len(names) > 1:
-                raise ValueError(f"file '{path}' has several datasets ({', '.join(names[:20])}): "
-                                 "choose one with dataset= (CLI: --channel)")
+                raise ValueError(
+                    f"file '{path}' has several datasets ({', '.join(names[:20])}): "
+                    "choose one with dataset= (CLI: --channel)"
+                )
             dataset = names[0]
         ds = f.get(dataset)
         if not isinstance(ds, h5py.Dataset):
             names = []
-            f.visititems(lambda nm, ob: names.append(nm) if isinstance(ob, h5py.Dataset)
-                         else None)
-            raise ValueError(f"file '{path}' has no dataset {dataset!r}; datasets: "
-                             f"{', '.join(names[:50])}")
+            f.visititems(lambda nm, ob: names.append(nm) if isinstance(ob, h5py.Dataset) else None)
+            raise ValueError(
+                f"file '{path}' has no dataset {dataset!r}; datasets: {', '.join(names[:50])}"
+            )
         if fs is None:
             for attrs in (ds.attrs, f.attrs):
                 key = next((k for k in _FS_KEYS if k in attrs), None)
@@ -280,7 +299,10 @@ def _h5_source(path: Path, dataset: str | None, column: int | None,
 
 
 def open_series(
-    source: Any, *, dataset: str | None = None, column: int | None = None,
+    source: Any,
+    *,
+    dataset: str | None = None,
+    column: int | None = None,
     fs: float | None = None,
 ) -> SeriesSource:
     """A :class:`SeriesSource` for a path (``.npy`` or HDF5) or an array-like.
@@ -310,16 +332,25 @@ def open_series(
             if dataset is not None:
                 raise ValueError(f"file '{p}' is a .npy array: dataset= applies to HDF5 files")
             return _NpySource(p, column, fs)
-        raise ValueError(f"file '{p}': streaming reads .npy and HDF5 files only; load other "
-                         "formats with load_log and use wavelet_variance")
+        raise ValueError(
+            f"file '{p}': streaming reads .npy and HDF5 files only; load other "
+            "formats with load_log and use wavelet_variance"
+        )
     return _ArraySource(source, column, fs)
 
 
 class _Stream:
     """Blocks of S = cumsum of the de-meaned series, in order, from its own reader."""
 
-    def __init__(self, src: SeriesSource, n: int, block: int, mean: float,
-                 scale: float | None, buf: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        src: SeriesSource,
+        n: int,
+        block: int,
+        mean: float,
+        scale: float | None,
+        buf: np.ndarray | None = None,
+    ) -> None:
         self.src, self.n, self.block, self.mean, self.scale = src, n, block, mean, scale
         self.s = np.empty(block + 1) if buf is None else buf
         self.k = -1  # index of the block held in self.s
@@ -333,14 +364,14 @@ class _Stream:
         s = self.s
         s[0] = self.carry
         if cnt:
-            d = s[1:cnt + 1]
+            d = s[1 : cnt + 1]
             self.src.read(a, a + cnt, d)
             if self.scale is not None:
                 np.multiply(d, self.scale, out=d)
             np.subtract(d, self.mean, out=d)
-            np.cumsum(s[:cnt + 1], out=s[:cnt + 1])
+            np.cumsum(s[: cnt + 1], out=s[: cnt + 1])
         self.carry = float(s[cnt])
-        return s[:cnt + 1]
+        return s[: cnt + 1]
 
     def get(self, k: int) -> np.ndarray:
         """Block k, advancing as needed (blocks are produced in order only)."""
@@ -356,8 +387,14 @@ class _Stream:
         return min((self.k + 1) * self.block, self.n)
 
 
-def _mean(src: SeriesSource, n: int, block: int, scale: float | None,
-          progress: Callable[[int, int], None] | None, total: int) -> float:
+def _mean(
+    src: SeriesSource,
+    n: int,
+    block: int,
+    scale: float | None,
+    progress: Callable[[int, int], None] | None,
+    total: int,
+) -> float:
     buf = np.empty(block)
     parts = []
     for a in range(0, n, block):
@@ -370,10 +407,14 @@ def _mean(src: SeriesSource, n: int, block: int, scale: float | None,
         if not math.isfinite(s):
             bad = np.flatnonzero(~np.isfinite(x))
             if bad.size:
-                raise ValueError(f"the series contains NaN/Inf value(s), first at sample "
-                                 f"{a + int(bad[0])}; remove or interpolate them first")
-            raise ValueError(f"the samples near sample {a} are too large: their sum overflows "
-                             "float64 (check the scale factor and the units)")
+                raise ValueError(
+                    f"the series contains NaN/Inf value(s), first at sample "
+                    f"{a + int(bad[0])}; remove or interpolate them first"
+                )
+            raise ValueError(
+                f"the samples near sample {a} are too large: their sum overflows "
+                "float64 (check the scale factor and the units)"
+            )
         parts.append(s)
         if progress is not None:
             progress(b, total)
@@ -383,8 +424,15 @@ def _mean(src: SeriesSource, n: int, block: int, scale: float | None,
     return mean
 
 
-def _small_sums(h: np.ndarray, base: int, t_lo: int, t_hi: int, levels: list[int],
-                sums: np.ndarray, tmp: np.ndarray) -> None:
+def _small_sums(
+    h: np.ndarray,
+    base: int,
+    t_lo: int,
+    t_hi: int,
+    levels: list[int],
+    sums: np.ndarray,
+    tmp: np.ndarray,
+) -> None:
     """Add sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2 over t in [t_lo, t_hi) for small levels;
     ``h[i]`` holds ``S_{base + i}``."""
     sumsq = sumsq_kernel()
@@ -398,9 +446,9 @@ def _small_sums(h: np.ndarray, base: int, t_lo: int, t_hi: int, levels: list[int
             k = b - lo
             d = tmp[:k]
             i0 = lo - base
-            np.multiply(h[i0 - m:i0 - m + k], -2.0, out=d)
-            d += h[i0:i0 + k]
-            d += h[i0 - 2 * m:i0 - 2 * m + k]
+            np.multiply(h[i0 - m : i0 - m + k], -2.0, out=d)
+            d += h[i0 : i0 + k]
+            d += h[i0 - 2 * m : i0 - 2 * m + k]
             sums[j - 1] += sumsq(d, d)
 
 
@@ -474,8 +522,10 @@ def wavelet_variance_stream(
         jmax = default_levels(n)
         levels = jmax if levels is None else int(levels)
         if not 1 <= levels <= jmax:
-            raise ValueError(f"levels={levels} is out of range: a series of {n} samples "
-                             f"supports 1 to {jmax} levels")
+            raise ValueError(
+                f"levels={levels} is out of range: a series of {n} samples "
+                f"supports 1 to {jmax} levels"
+            )
         lag_levels = [j for j in range(1, levels + 1) if (1 << (j - 1)) >= block]
         small = [j for j in range(1, levels + 1) if j not in lag_levels]
         offsets = sorted({o for j in lag_levels for o in (1 << (j - 1), 1 << j)})
@@ -511,7 +561,7 @@ def wavelet_variance_stream(
                 d += s2
                 sums[j - 1] += sumsq(d, d)
             if k < nblocks - 1:
-                hist[:block] = hist[block:2 * block]
+                hist[:block] = hist[block : 2 * block]
             if progress is not None:
                 done = n + main.samples_read + sum(st.samples_read for st in lags.values())
                 progress(min(done, total), total)
@@ -525,6 +575,15 @@ def wavelet_variance_stream(
     nu = sums / (tau.astype(float) ** 2 * m_j)
     lo, hi = eta3_interval(nu, m_j, tau, alpha)
     return WaveletVariance(
-        levels=lv, tau_samples=tau, variance=nu, ci_low=lo, ci_high=hi, n_coef=m_j, n=n,
-        fs=fs_v, robust=False, alpha=alpha, unit=src.unit if unit is None else unit,
+        levels=lv,
+        tau_samples=tau,
+        variance=nu,
+        ci_low=lo,
+        ci_high=hi,
+        n_coef=m_j,
+        n=n,
+        fs=fs_v,
+        robust=False,
+        alpha=alpha,
+        unit=src.unit if unit is None else unit,
     )

@@ -74,16 +74,17 @@ TABLE_I: dict[str, dict[str, Any]] = {
     "gyro": {
         "unit": "deg/s",
         "label": "Gyro",
-        "params": (("WN", "sigma", 1.57e-1, "deg/sqrt(h)"),
-                   ("RW", "gamma", 1.34, "deg/h/sqrt(h)")),
+        "params": (("WN", "sigma", 1.57e-1, "deg/sqrt(h)"), ("RW", "gamma", 1.34, "deg/h/sqrt(h)")),
     },
     "accel": {
         "unit": "m/s^2",
         "label": "Accel",
-        "params": (("QN", "Q", 1.79e-6, "m/s"),
-                   ("WN", "sigma", 4.70e-2, "m/s/sqrt(h)"),
-                   ("RW", "gamma", 4.35e1, "m/s/h/sqrt(h)"),
-                   ("DR", "omega", 4.14e1, "m/s/h/h")),
+        "params": (
+            ("QN", "Q", 1.79e-6, "m/s"),
+            ("WN", "sigma", 4.70e-2, "m/s/sqrt(h)"),
+            ("RW", "gamma", 4.35e1, "m/s/h/sqrt(h)"),
+            ("DR", "omega", 4.14e1, "m/s/h/h"),
+        ),
     },
 }
 _SHORT = {"ARMAV-unweighted": "ARMAV-unw"}  # plot labels
@@ -140,8 +141,9 @@ def table1_model(sensor: str, fs: float = STUDY_FS) -> Model:
     if sensor not in TABLE_I:
         raise ValueError(f"unknown sensor {sensor!r}: use 'gyro' or 'accel'")
     cls = {"WN": WN, "RW": RW, "QN": QN, "DR": DR}
-    return Model(tuple(cls[c](from_datasheet(c, v, fs)) for c, _, v, _ in
-                       TABLE_I[sensor]["params"]))
+    return Model(
+        tuple(cls[c](from_datasheet(c, v, fs)) for c, _, v, _ in TABLE_I[sensor]["params"])
+    )
 
 
 # -------------------------------------------------------------------------------------------
@@ -181,10 +183,12 @@ def typical_regions(sensor: str, n: int, fs: float = STUDY_FS) -> dict[str, tupl
         rw_pts = tau[(tau >= 30.0) & (tau <= 300.0) & (tau < dr[0])]
         if rw_pts.size == 0:
             rw_pts = tau[-3:-2]
-        return {"QN": (float(tau[0]), float(tau[1])),
-                "WN": (0.015, 1.1),
-                "RW": (float(rw_pts[0]), float(rw_pts[-1])),
-                "DR": dr}
+        return {
+            "QN": (float(tau[0]), float(tau[1])),
+            "WN": (0.015, 1.1),
+            "RW": (float(rw_pts[0]), float(rw_pts[-1])),
+            "DR": dr,
+        }
     raise ValueError(f"unknown sensor {sensor!r}: use 'gyro' or 'accel'")
 
 
@@ -224,8 +228,9 @@ def estimate_all(
     return {m: _estimate_one(m, wv, sensor, regions) for m in methods}
 
 
-def _estimate_one(meth: str, wv: WaveletVariance, sensor: str,
-                  regions: dict[str, tuple[float, float]] | None) -> MethodEstimate:
+def _estimate_one(
+    meth: str, wv: WaveletVariance, sensor: str, regions: dict[str, tuple[float, float]] | None
+) -> MethodEstimate:
     model = table1_model(sensor, wv.fs).cleared()
     if meth == "GMWM":
         return from_gmwm(fit_gmwm(wv, model))
@@ -240,8 +245,9 @@ def _estimate_one(meth: str, wv: WaveletVariance, sensor: str,
     return avsm_auto(av)
 
 
-def _replicate(task: tuple) -> tuple[tuple[int, str, int], dict[str, dict[str, float]],
-                                      dict[str, str]]:
+def _replicate(
+    task: tuple,
+) -> tuple[tuple[int, str, int], dict[str, dict[str, float]], dict[str, str]]:
     """Worker: simulate one replicate and return datasheet values per method and parameter."""
     sensor, n, seed, rep, methods, fs, regions = task
     rng = np.random.default_rng(np.random.SeedSequence([seed, _SENSOR_ID[sensor], n, rep]))
@@ -254,8 +260,14 @@ def _replicate(task: tuple) -> tuple[tuple[int, str, int], dict[str, dict[str, f
     for meth in methods:
         try:
             est = _estimate_one(meth, wv, sensor, regions)
-            vals[meth] = {c: (to_datasheet(c, est.params[_PARAM_OF[c]], fs)
-                              if _PARAM_OF[c] in est.params else math.nan) for c in codes}
+            vals[meth] = {
+                c: (
+                    to_datasheet(c, est.params[_PARAM_OF[c]], fs)
+                    if _PARAM_OF[c] in est.params
+                    else math.nan
+                )
+                for c in codes
+            }
         except Exception as e:  # noqa: BLE001 - a failed estimate is a result of the study
             errors[meth] = f"{type(e).__name__}: {e}"
             vals[meth] = {c: math.nan for c in codes}
@@ -285,16 +297,20 @@ class _Progress:
         if self.tty:
             w = 30
             fill = int(w * self.done / self.total)
-            self.stream.write(f"\r{self.label} [{'#' * fill}{'.' * (w - fill)}] "
-                              f"{self.done}/{self.total} {el:6.0f} s, ETA {eta:5.0f} s")
+            self.stream.write(
+                f"\r{self.label} [{'#' * fill}{'.' * (w - fill)}] "
+                f"{self.done}/{self.total} {el:6.0f} s, ETA {eta:5.0f} s"
+            )
             if self.done == self.total:
                 self.stream.write("\n")
             self.stream.flush()
         elif pct >= self._next_pct or self.done == self.total:
             while self._next_pct <= pct:
                 self._next_pct += 10
-            self.stream.write(f"{self.label}: {self.done}/{self.total} ({pct:.0f} %), "
-                              f"{el:.0f} s, ETA {eta:.0f} s\n")
+            self.stream.write(
+                f"{self.label}: {self.done}/{self.total} ({pct:.0f} %), "
+                f"{el:.0f} s, ETA {eta:.0f} s\n"
+            )
             self.stream.flush()
 
 
@@ -360,14 +376,26 @@ class StudyResult:
                         mean = float(np.mean(ok))
                         sd = float(np.std(ok, ddof=1)) if ok.size > 1 else math.nan
                         rmse = float(np.sqrt(np.mean((ok - truth) ** 2)))
-                        rows.append({
-                            "n": int(n), "sensor": sensor, "process": code, "symbol": sym,
-                            "unit": unit, "truth": truth, "method": meth, "mean": mean,
-                            "bias": mean - truth, "rel_bias": (mean - truth) / truth,
-                            "sd": sd, "rmse": rmse, "rel_rmse": rmse / truth,
-                            "n_ok": int(ok.size), "n_failed": int(v.size - ok.size),
-                            "zero_frac": float(np.mean(ok == 0.0)),
-                        })
+                        rows.append(
+                            {
+                                "n": int(n),
+                                "sensor": sensor,
+                                "process": code,
+                                "symbol": sym,
+                                "unit": unit,
+                                "truth": truth,
+                                "method": meth,
+                                "mean": mean,
+                                "bias": mean - truth,
+                                "rel_bias": (mean - truth) / truth,
+                                "sd": sd,
+                                "rmse": rmse,
+                                "rel_rmse": rmse / truth,
+                                "n_ok": int(ok.size),
+                                "n_failed": int(v.size - ok.size),
+                                "zero_frac": float(np.mean(ok == 0.0)),
+                            }
+                        )
         return rows
 
     @classmethod
@@ -376,11 +404,25 @@ class StudyResult:
         d = json.loads(Path(path).read_text())
         if "estimates" not in d:
             raise ValueError(f"{path} has no raw estimates (it is a summary)")
-        est = {int(n): {s: {m: {c: np.array([math.nan if x is None else x for x in v], float)
-                                for c, v in bm.items()} for m, bm in bs.items()}
-                        for s, bs in bn.items()} for n, bn in d["estimates"].items()}
-        return cls(estimates=est, errors=d.get("errors", []), settings=d["settings"],
-                   wall_time_s=float(d["wall_time_s"]))
+        est = {
+            int(n): {
+                s: {
+                    m: {
+                        c: np.array([math.nan if x is None else x for x in v], float)
+                        for c, v in bm.items()
+                    }
+                    for m, bm in bs.items()
+                }
+                for s, bs in bn.items()
+            }
+            for n, bn in d["estimates"].items()
+        }
+        return cls(
+            estimates=est,
+            errors=d.get("errors", []),
+            settings=d["settings"],
+            wall_time_s=float(d["wall_time_s"]),
+        )
 
     # ---- ranking -----------------------------------------------------------------------
     def _paired_z(self, n: int, sensor: str, code: str, method: str) -> float:
@@ -415,26 +457,41 @@ class StudyResult:
             if g and win["method"] != "GMWM":
                 z = self._paired_z(n, sensor, code, win["method"])
                 tie = bool(not z >= 2.0 or g[0]["rmse"] <= 1.01 * win["rmse"])
-                losses.append({"n": n, "sensor": sensor, "process": code,
-                               "best": win["method"], "best_rmse": win["rmse"],
-                               "best_zero_frac": win.get("zero_frac", 0.0),
-                               "gmwm_rmse": g[0]["rmse"],
-                               "gmwm_zero_frac": g[0].get("zero_frac", 0.0),
-                               "z": z, "tie": tie})
-        return {"best": best, "gmwm_lowest_everywhere": not losses,
-                "gmwm_lowest_or_tied_everywhere": all(e["tie"] for e in losses),
-                "exceptions": losses}
+                losses.append(
+                    {
+                        "n": n,
+                        "sensor": sensor,
+                        "process": code,
+                        "best": win["method"],
+                        "best_rmse": win["rmse"],
+                        "best_zero_frac": win.get("zero_frac", 0.0),
+                        "gmwm_rmse": g[0]["rmse"],
+                        "gmwm_zero_frac": g[0].get("zero_frac", 0.0),
+                        "z": z,
+                        "tie": tie,
+                    }
+                )
+        return {
+            "best": best,
+            "gmwm_lowest_everywhere": not losses,
+            "gmwm_lowest_or_tied_everywhere": all(e["tie"] for e in losses),
+            "exceptions": losses,
+        }
 
     def ranking_text(self) -> str:
         """A paragraph on the paper's ranking (GMWM lowest RMSE on every parameter)."""
         rk = self.ranking()
         if rk["gmwm_lowest_everywhere"]:
-            return ("The paper's ranking holds: GMWM has the lowest RMSE on every parameter, "
-                    "for every sensor and log length.")
+            return (
+                "The paper's ranking holds: GMWM has the lowest RMSE on every parameter, "
+                "for every sensor and log length."
+            )
 
         def item(e: dict[str, Any]) -> str:
-            t = (f"{e['sensor']} {e['process']} at T = {_sci(e['n'])} ({e['best']} "
-                 f"{_fmt(e['best_rmse'])} vs GMWM {_fmt(e['gmwm_rmse'])}, z = {e['z']:.1f}")
+            t = (
+                f"{e['sensor']} {e['process']} at T = {_sci(e['n'])} ({e['best']} "
+                f"{_fmt(e['best_rmse'])} vs GMWM {_fmt(e['gmwm_rmse'])}, z = {e['z']:.1f}"
+            )
             if e.get("gmwm_zero_frac", 0.0) >= 0.05:
                 t += f"; GMWM estimates 0 in {100 * e['gmwm_zero_frac']:.0f} % of the replicates"
             if e.get("best_zero_frac", 0.0) >= 0.05:
@@ -445,25 +502,35 @@ class StudyResult:
         losses = [item(e) for e in rk["exceptions"] if not e["tie"]]
         out = []
         if losses:
-            out.append("The paper's ranking does not hold everywhere: another method has a "
-                       "clearly lower RMSE than GMWM for " + "; ".join(losses) + ".")
+            out.append(
+                "The paper's ranking does not hold everywhere: another method has a "
+                "clearly lower RMSE than GMWM for " + "; ".join(losses) + "."
+            )
         else:
-            out.append("The paper's ranking holds within Monte Carlo error: GMWM has the "
-                       "lowest RMSE or is tied with the best on every parameter.")
+            out.append(
+                "The paper's ranking holds within Monte Carlo error: GMWM has the "
+                "lowest RMSE or is tied with the best on every parameter."
+            )
         if ties:
-            out.append("Ties (within 2 Monte Carlo standard errors of the paired difference, or "
-                       "within 1 %): " + "; ".join(ties) + ".")
+            out.append(
+                "Ties (within 2 Monte Carlo standard errors of the paired difference, or "
+                "within 1 %): " + "; ".join(ties) + "."
+            )
         return " ".join(out)
 
     # ---- tables ------------------------------------------------------------------------
     def table(self) -> str:
         """Plain-text table of bias, SD and RMSE per parameter and method."""
         s = self.settings
-        lines = [f"Slope-method study: {s['reps']} replicates, seed {s['seed']}, fs = "
-                 f"{s['fs']:g} Hz, wall time {self.wall_time_s:.0f} s"]
-        head = (f"{'T':>9} {'sensor':<6} {'param':<22} {'truth':>10} {'method':<16} "
-                f"{'mean':>10} {'bias':>10} {'bias %':>8} {'SD':>10} {'RMSE':>10} "
-                f"{'RMSE/truth':>10}")
+        lines = [
+            f"Slope-method study: {s['reps']} replicates, seed {s['seed']}, fs = "
+            f"{s['fs']:g} Hz, wall time {self.wall_time_s:.0f} s"
+        ]
+        head = (
+            f"{'T':>9} {'sensor':<6} {'param':<22} {'truth':>10} {'method':<16} "
+            f"{'mean':>10} {'bias':>10} {'bias %':>8} {'SD':>10} {'RMSE':>10} "
+            f"{'RMSE/truth':>10}"
+        )
         lines += [head, "-" * len(head)]
         for r in self.rows:
             p = f"{r['process']} {r['symbol']} [{r['unit']}]"
@@ -471,7 +538,8 @@ class StudyResult:
                 f"{r['n']:>9.3g} {r['sensor']:<6} {p:<22} {_fmt(r['truth']):>10} "
                 f"{r['method']:<16} {_fmt(r['mean']):>10} {_fmt(r['bias']):>10} "
                 f"{100 * r['rel_bias']:>8.1f} {_fmt(r['sd']):>10} {_fmt(r['rmse']):>10} "
-                f"{_fmt(r['rel_rmse']):>10}")
+                f"{_fmt(r['rel_rmse']):>10}"
+            )
         lines += ["", self.ranking_text()]
         if self.errors:
             lines.append(f"{len(self.errors)} estimate(s) failed (NaN), see the JSON")
@@ -480,16 +548,21 @@ class StudyResult:
     def markdown(self) -> str:
         """Markdown tables (one per log length), lowest RMSE per parameter in bold."""
         s = self.settings
-        out = [f"Monte Carlo with Table I's true values: {s['reps']} replicates per log length, "
-               f"seed {s['seed']}, fs = {s['fs']:g} Hz, methods {', '.join(s['methods'])}; "
-               f"wall time {self.wall_time_s:.0f} s on {s['workers']} worker(s). Bias and RMSE "
-               "in Table I's units (and relative to the truth)."]
+        out = [
+            f"Monte Carlo with Table I's true values: {s['reps']} replicates per log length, "
+            f"seed {s['seed']}, fs = {s['fs']:g} Hz, methods {', '.join(s['methods'])}; "
+            f"wall time {self.wall_time_s:.0f} s on {s['workers']} worker(s). Bias and RMSE "
+            "in Table I's units (and relative to the truth)."
+        ]
         for n in self.estimates:
             hours = n / s["fs"] / 3600.0
-            out += ["", f"**T = {_sci(n)} samples ({hours:.1f} h at {s['fs']:g} Hz)**", "",
-                    "| Sensor | Parameter | Truth | Method | Bias (%) | SD | RMSE | "
-                    "RMSE / truth |",
-                    "|---|---|---|---|---|---|---|---|"]
+            out += [
+                "",
+                f"**T = {_sci(n)} samples ({hours:.1f} h at {s['fs']:g} Hz)**",
+                "",
+                "| Sensor | Parameter | Truth | Method | Bias (%) | SD | RMSE | RMSE / truth |",
+                "|---|---|---|---|---|---|---|---|",
+            ]
             rows = [r for r in self.rows if r["n"] == n]
             groups: dict[tuple, list[dict[str, Any]]] = {}
             for r in rows:
@@ -502,14 +575,17 @@ class StudyResult:
                         f"| {TABLE_I[sensor]['label']} | {r['process']} {r['symbol']} "
                         f"[{r['unit']}] | {_fmt(r['truth'])} | {r['method']} | "
                         f"{_fmt(r['bias'])} ({100 * r['rel_bias']:+.1f} %) | {_fmt(r['sd'])} | "
-                        f"{b}{_fmt(r['rmse'])}{b} | {b}{_fmt(r['rel_rmse'])}{b} |")
+                        f"{b}{_fmt(r['rmse'])}{b} | {b}{_fmt(r['rel_rmse'])}{b} |"
+                    )
         regs = self.settings.get("regions") or {}
         if regs and "AVSM" in self.settings["methods"]:
             out += ["", "AVSM regions (averaging time, s), as a typical user picks them:"]
             for n, by_s in regs.items():
-                parts = [f"{TABLE_I[s]['label'].lower()} "
-                         + ", ".join(f"{c} {_fmt(lo)}-{_fmt(hi)}" for c, (lo, hi) in r.items())
-                         for s, r in by_s.items()]
+                parts = [
+                    f"{TABLE_I[s]['label'].lower()} "
+                    + ", ".join(f"{c} {_fmt(lo)}-{_fmt(hi)}" for c, (lo, hi) in r.items())
+                    for s, r in by_s.items()
+                ]
                 out.append(f"- T = {_sci(float(n))}: " + "; ".join(parts))
         out += ["", self.ranking_text()]
         return "\n".join(out)
@@ -519,28 +595,48 @@ class StudyResult:
         d: dict[str, Any] = {
             "study": "slope",
             "settings": self.settings,
-            "truth": {sensor: {c: {"symbol": sym, "value": v, "unit": u}
-                               for c, sym, v, u in TABLE_I[sensor]["params"]}
-                      for sensor in self.settings["sensors"]},
+            "truth": {
+                sensor: {
+                    c: {"symbol": sym, "value": v, "unit": u}
+                    for c, sym, v, u in TABLE_I[sensor]["params"]
+                }
+                for sensor in self.settings["sensors"]
+            },
             "summary": [{k: _json_num(v) for k, v in r.items()} for r in self.rows],
-            "ranking": {k: ([{kk: _json_num(vv) for kk, vv in e.items()} for e in v]
-                            if k == "exceptions" else v) for k, v in self.ranking().items()},
+            "ranking": {
+                k: (
+                    [{kk: _json_num(vv) for kk, vv in e.items()} for e in v]
+                    if k == "exceptions"
+                    else v
+                )
+                for k, v in self.ranking().items()
+            },
             "wall_time_s": float(self.wall_time_s),
             "errors": self.errors,
         }
         if raw:
             d["estimates"] = {
-                str(n): {sensor: {m: {c: [None if not math.isfinite(x) else float(x)
-                                          for x in v] for c, v in bm.items()}
-                                  for m, bm in bs.items()}
-                         for sensor, bs in bn.items()}
-                for n, bn in self.estimates.items()}
+                str(n): {
+                    sensor: {
+                        m: {
+                            c: [None if not math.isfinite(x) else float(x) for x in v]
+                            for c, v in bm.items()
+                        }
+                        for m, bm in bs.items()
+                    }
+                    for sensor, bs in bn.items()
+                }
+                for n, bn in self.estimates.items()
+            }
         return d
 
     # ---- figures -----------------------------------------------------------------------
     def _panels(self) -> list[tuple[str, str, str, float, str]]:
-        return [(sensor, c, sym, v, u) for sensor in self.settings["sensors"]
-                for c, sym, v, u in TABLE_I[sensor]["params"]]
+        return [
+            (sensor, c, sym, v, u)
+            for sensor in self.settings["sensors"]
+            for c, sym, v, u in TABLE_I[sensor]["params"]
+        ]
 
     def boxplot(self, path: str | os.PathLike) -> Path:
         """Box plots of estimate / truth per parameter and method (Fig. 1 of the paper)."""
@@ -551,26 +647,33 @@ class StudyResult:
 
         panels = self._panels()
         ns = list(self.estimates)
-        fig, axes = plt.subplots(len(ns), len(panels), figsize=(3.0 * len(panels), 3.2 * len(ns)),
-                                 squeeze=False)
+        fig, axes = plt.subplots(
+            len(ns), len(panels), figsize=(3.0 * len(panels), 3.2 * len(ns)), squeeze=False
+        )
         for i, n in enumerate(ns):
             for j, (sensor, code, sym, truth, _unit) in enumerate(panels):
                 ax = axes[i][j]
                 by_m = self.estimates[n][sensor]
                 meths = [m for m in by_m if np.any(np.isfinite(by_m[m][code]))]
-                data = [np.asarray(by_m[m][code])[np.isfinite(by_m[m][code])] / truth
-                        for m in meths]
+                data = [
+                    np.asarray(by_m[m][code])[np.isfinite(by_m[m][code])] / truth for m in meths
+                ]
                 ax.boxplot(data, showfliers=True, flierprops={"markersize": 2})
-                ax.set_xticks(range(1, len(meths) + 1), [_SHORT.get(m, m) for m in meths],
-                              rotation=30, fontsize=8)
+                ax.set_xticks(
+                    range(1, len(meths) + 1),
+                    [_SHORT.get(m, m) for m in meths],
+                    rotation=30,
+                    fontsize=8,
+                )
                 ax.axhline(1.0, color="k", ls="--", lw=0.8)
                 allv = np.concatenate(data) if data else np.ones(1)
                 if allv.size and (allv.min() < 0.5 or allv.max() > 2.0):
                     # wide spread: log scale, linear near 0 so that estimates at 0 show
                     ax.set_yscale("symlog", linthresh=0.1)
                     ax.set_ylim(bottom=0.0)
-                ax.set_title(f"{TABLE_I[sensor]['label']} {code} ({sym})\nT = {_sci(n)}",
-                             fontsize=9)
+                ax.set_title(
+                    f"{TABLE_I[sensor]['label']} {code} ({sym})\nT = {_sci(n)}", fontsize=9
+                )
                 if j == 0:
                     ax.set_ylabel("estimate / truth")
         fig.suptitle(f"Estimates over {self.settings['reps']} replicates (truth = 1)")
@@ -597,13 +700,26 @@ class StudyResult:
             for k, m in enumerate(meths):
                 vals = []
                 for sensor, code, *_ in panels:
-                    r = [r for r in self.rows if r["n"] == n and r["sensor"] == sensor
-                         and r["process"] == code and r["method"] == m]
+                    r = [
+                        r
+                        for r in self.rows
+                        if r["n"] == n
+                        and r["sensor"] == sensor
+                        and r["process"] == code
+                        and r["method"] == m
+                    ]
                     vals.append(r[0]["rel_rmse"] if r else np.nan)
-                ax.bar(np.arange(len(panels)) + (k - (len(meths) - 1) / 2) * width, vals,
-                       width, label=_SHORT.get(m, m))
-            ax.set_xticks(range(len(panels)),
-                          [f"{TABLE_I[s]['label']} {c}" for s, c, *_ in panels], fontsize=8)
+                ax.bar(
+                    np.arange(len(panels)) + (k - (len(meths) - 1) / 2) * width,
+                    vals,
+                    width,
+                    label=_SHORT.get(m, m),
+                )
+            ax.set_xticks(
+                range(len(panels)),
+                [f"{TABLE_I[s]['label']} {c}" for s, c, *_ in panels],
+                fontsize=8,
+            )
             ax.set_yscale("log")
             ax.set_ylabel("RMSE / truth")
             ax.set_title(f"T = {_sci(n)} samples")
@@ -688,20 +804,31 @@ def run_slope_study(
             raise ValueError(f"unknown sensor {sensor!r}: use 'gyro' or 'accel'")
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods:
-        raise ValueError(f"unknown method(s) {', '.join(bad) or '(none)'}: use "
-                         f"{', '.join(METHODS)}")
+        raise ValueError(
+            f"unknown method(s) {', '.join(bad) or '(none)'}: use {', '.join(METHODS)}"
+        )
     if workers is None:
         workers = os.cpu_count() or 1
     workers = max(1, int(workers))
-    used_regions = {str(n): {s: (regions or {}).get(s) or typical_regions(s, n, fs)
-                             for s in sensors} for n in ns}
-    tasks = [(s, n, int(seed), r, tuple(methods), float(fs), used_regions[str(n)][s])
-             for n in ns for s in sensors for r in range(reps)]
+    used_regions = {
+        str(n): {s: (regions or {}).get(s) or typical_regions(s, n, fs) for s in sensors}
+        for n in ns
+    }
+    tasks = [
+        (s, n, int(seed), r, tuple(methods), float(fs), used_regions[str(n)][s])
+        for n in ns
+        for s in sensors
+        for r in range(reps)
+    ]
     stream = sys.stderr if progress is True else (progress or None)
     bar = _Progress(len(tasks), stream, label="gmwm study slope")  # type: ignore[arg-type]
     est: dict[int, dict[str, dict[str, dict[str, np.ndarray]]]] = {
-        n: {s: {m: {c: np.full(reps, np.nan) for c, *_ in TABLE_I[s]["params"]}
-                for m in methods} for s in sensors} for n in ns}
+        n: {
+            s: {m: {c: np.full(reps, np.nan) for c, *_ in TABLE_I[s]["params"]} for m in methods}
+            for s in sensors
+        }
+        for n in ns
+    }
     errors: list[dict[str, Any]] = []
 
     def store(result: tuple) -> None:
@@ -729,8 +856,17 @@ def run_slope_study(
         ex.shutdown(wait=True)
     wall = time.perf_counter() - t0
     errors.sort(key=lambda e: (e["n"], e["sensor"], e["rep"], e["method"]))
-    settings = {"reps": reps, "seed": int(seed), "n_values": ns, "fs": float(fs),
-                "methods": list(methods), "sensors": list(sensors), "workers": workers,
-                "regions": {n: {s: {c: list(t) for c, t in r.items()} for s, r in by.items()}
-                            for n, by in used_regions.items()}}
+    settings = {
+        "reps": reps,
+        "seed": int(seed),
+        "n_values": ns,
+        "fs": float(fs),
+        "methods": list(methods),
+        "sensors": list(sensors),
+        "workers": workers,
+        "regions": {
+            n: {s: {c: list(t) for c, t in r.items()} for s, r in by.items()}
+            for n, by in used_regions.items()
+        },
+    }
     return StudyResult(estimates=est, errors=errors, settings=settings, wall_time_s=wall)

@@ -86,8 +86,7 @@ class Scenario:
 
     def simulate(self, seed: int | None = None) -> np.ndarray:
         """The simulated series (``seed`` overrides the scenario's own)."""
-        return self.model.simulate(self.n, fs=self.fs,
-                                   rng=self.seed if seed is None else seed)
+        return self.model.simulate(self.n, fs=self.fs, rng=self.seed if seed is None else seed)
 
 
 def gmwm_spec(codes: list[str] | tuple[str, ...]) -> str:
@@ -112,40 +111,64 @@ def gmwm_spec(codes: list[str] | tuple[str, ...]) -> str:
 
 _S = [
     Scenario(
-        key="wn_gm", title="White noise overlapped by a Gauss-Markov bump",
+        key="wn_gm",
+        title="White noise overlapped by a Gauss-Markov bump",
         model=parse_model("GM(beta=1, sigma2_gm=2e-4)+WN(sigma2=1e-3)"),
-        n=2**16, fs=100.0, seed=4101, unit="deg/s",
+        n=2**16,
+        fs=100.0,
+        seed=4101,
+        unit="deg/s",
         regions=(("WN", 0.01, 1.0), ("BI", 1.0, 20.0)),
-        why=("The Gauss-Markov bump already lifts the Allan deviation where the curve still "
-             "looks like a -1/2 slope, so the white-noise line drawn there is too high; the "
-             "flat 'bias instability' floor is a GM hump, not flicker noise."),
+        why=(
+            "The Gauss-Markov bump already lifts the Allan deviation where the curve still "
+            "looks like a -1/2 slope, so the white-noise line drawn there is too high; the "
+            "flat 'bias instability' floor is a GM hump, not flicker noise."
+        ),
     ),
     Scenario(
-        key="qn_wn", title="Quantization noise hiding under white noise",
+        key="qn_wn",
+        title="Quantization noise hiding under white noise",
         model=parse_model("QN(q2=4e-4)+WN(sigma2=1e-3)"),
-        n=2**15, fs=100.0, seed=4102, unit="deg/s",
+        n=2**15,
+        fs=100.0,
+        seed=4102,
+        unit="deg/s",
         regions=(("QN", 0.01, 0.02), ("WN", 0.01, 5.0)),
-        why=("Quantization noise only shows at the first one or two averaging times, where the "
-             "white noise is as strong, so the -1 line through them reads white noise as "
-             "quantization; the -1/2 line started at the shortest times is lifted by it."),
+        why=(
+            "Quantization noise only shows at the first one or two averaging times, where the "
+            "white noise is as strong, so the -1 line through them reads white noise as "
+            "quantization; the -1/2 line started at the shortest times is lifted by it."
+        ),
     ),
     Scenario(
-        key="rw_dr", title="Random walk bent by a drift (rate ramp)",
+        key="rw_dr",
+        title="Random walk bent by a drift (rate ramp)",
         model=parse_model("WN(sigma2=1e-3)+RW(gamma2=4e-9)+DR(omega=4e-7)"),
-        n=2**18, fs=100.0, seed=4103, unit="deg/s",
+        n=2**18,
+        fs=100.0,
+        seed=4103,
+        unit="deg/s",
         regions=(("WN", 0.01, 1.0), ("RW", 10.0, 400.0), ("DR", 300.0, 1e9)),
-        why=("Where the curve rises at +1/2 the drift already adds to it, so the random-walk "
-             "line is too high; the +1 line through the last points rests on a handful of "
-             "clusters (on a log this short the drift is uncertain for every method)."),
+        why=(
+            "Where the curve rises at +1/2 the drift already adds to it, so the random-walk "
+            "line is too high; the +1 line through the last points rests on a handful of "
+            "clusters (on a log this short the drift is uncertain for every method)."
+        ),
     ),
     Scenario(
-        key="short_log", title="A short log (five minutes)",
+        key="short_log",
+        title="A short log (five minutes)",
         model=parse_model("WN(sigma2=1e-3)+RW(gamma2=2e-8)"),
-        n=30_000, fs=100.0, seed=4104, unit="deg/s",
+        n=30_000,
+        fs=100.0,
+        seed=4104,
+        unit="deg/s",
         regions=(("WN", 0.01, 1.0), ("RW", 20.0, 1e9)),
-        why=("The random walk only dominates the last octaves, each averaged over a few "
-             "clusters: the +1/2 line read there scatters widely from log to log and the "
-             "log-average is biased low; GMWM weighs every octave by its precision."),
+        why=(
+            "The random walk only dominates the last octaves, each averaged over a few "
+            "clusters: the +1/2 line read there scatters widely from log to log and the "
+            "log-average is biased low; GMWM weighs every octave by its precision."
+        ),
     ),
 ]
 
@@ -158,8 +181,9 @@ def get_scenario(key: str) -> Scenario:
     try:
         return SCENARIOS[key]
     except KeyError:
-        raise KeyError(f"unknown teaching scenario {key!r}; available: "
-                       f"{', '.join(SCENARIOS)}") from None
+        raise KeyError(
+            f"unknown teaching scenario {key!r}; available: {', '.join(SCENARIOS)}"
+        ) from None
 
 
 def simulate_scenario(scenario: Scenario | str, seed: int | None = None) -> ImuLog:
@@ -183,9 +207,17 @@ def simulate_scenario(scenario: Scenario | str, seed: int | None = None) -> ImuL
     s = sc.seed if seed is None else int(seed)
     x = sc.simulate(s)
     return ImuLog(
-        channels={sc.channel: x}, fs=float(sc.fs), fs_source="file",
-        units={sc.channel: sc.unit}, source=f"scenario:{sc.key}",
-        meta={"format": "simulated", "scenario": sc.key, "seed": s,
-              "truth": {sc.channel: sc.model.spec(values=True)}, "description": sc.why,
-              "notes": []},
+        channels={sc.channel: x},
+        fs=float(sc.fs),
+        fs_source="file",
+        units={sc.channel: sc.unit},
+        source=f"scenario:{sc.key}",
+        meta={
+            "format": "simulated",
+            "scenario": sc.key,
+            "seed": s,
+            "truth": {sc.channel: sc.model.spec(values=True)},
+            "description": sc.why,
+            "notes": [],
+        },
     )

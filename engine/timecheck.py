@@ -75,8 +75,10 @@ class TimeEvent:
     def describe(self) -> str:
         """One phrase, e.g. ``gap of 0.25 s (24 missing samples) at sample 118 (t = 1.17 s)``."""
         if self.kind == "gap":
-            return (f"gap of {self.step:.6g} s (about {self.missing} missing sample(s)) "
-                    f"at {self.where()}")
+            return (
+                f"gap of {self.step:.6g} s (about {self.missing} missing sample(s)) "
+                f"at {self.where()}"
+            )
         if self.kind == "duplicate":
             return f"duplicate stamp at {self.where()}"
         if self.kind == "backward":
@@ -85,11 +87,18 @@ class TimeEvent:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (NaN as None)."""
+
         def num(v: float) -> float | None:
             return float(v) if math.isfinite(v) else None
 
-        return {"kind": self.kind, "index": int(self.index), "time_s": num(self.time),
-                "step_s": num(self.step), "missing": int(self.missing), "line": self.line}
+        return {
+            "kind": self.kind,
+            "index": int(self.index),
+            "time_s": num(self.time),
+            "step_s": num(self.step),
+            "missing": int(self.missing),
+            "line": self.line,
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,9 +157,11 @@ class TimeReport:
     def summary(self, *, max_events: int = _SHOW) -> str:
         """Several readable lines: fs, jitter, the events found (at most ``max_events`` per
         kind, gaps by decreasing length) and the clean segments."""
-        lines = [f"time column '{self.column}': {self.n} stamps, median step "
-                 f"{self.median_step:.6g} s ({_hz(self.median_step)}), jitter "
-                 f"{100 * self.jitter:.3g} % (std of the regular steps / median step)"]
+        lines = [
+            f"time column '{self.column}': {self.n} stamps, median step "
+            f"{self.median_step:.6g} s ({_hz(self.median_step)}), jitter "
+            f"{100 * self.jitter:.3g} % (std of the regular steps / median step)"
+        ]
         if self.ok:
             lines.append("no gap, duplicate or reversal: one clean segment")
             return "\n".join(lines)
@@ -165,9 +176,11 @@ class TimeReport:
             if more > 0:
                 lines.append(f"  - ... and {more} more {kind}(s)")
         a, b = self.longest
-        lines.append(f"{len(self.segments)} clean segment(s); the longest is samples {a} to "
-                     f"{b - 1} ({b - a} samples, {100 * (b - a) / max(self.n, 1):.3g} % of the "
-                     f"log, {self.fs:.6g} Hz)")
+        lines.append(
+            f"{len(self.segments)} clean segment(s); the longest is samples {a} to "
+            f"{b - 1} ({b - a} samples, {100 * (b - a) / max(self.n, 1):.3g} % of the "
+            f"log, {self.fs:.6g} Hz)"
+        )
         return "\n".join(lines)
 
     def _found(self) -> str:
@@ -175,8 +188,12 @@ class TimeReport:
         for kind in _KINDS:
             k = self.counts.get(kind, 0)
             if k:
-                what = {"gap": "gap(s)", "duplicate": "duplicate stamp(s)",
-                        "backward": "backward step(s)", "invalid": "NaN/Inf stamp(s)"}[kind]
+                what = {
+                    "gap": "gap(s)",
+                    "duplicate": "duplicate stamp(s)",
+                    "backward": "backward step(s)",
+                    "invalid": "NaN/Inf stamp(s)",
+                }[kind]
                 parts.append(f"{k} {what}")
         return "found " + ", ".join(parts)
 
@@ -192,20 +209,27 @@ class TimeReport:
                 if big is not ev[0]:
                     where.append(f"largest {big.describe()}")
         a, b = self.longest
-        return (f"time column '{self.column}' is not uniformly sampled: {self._found()} "
-                f"({'; '.join(where)}). The longest clean segment is samples {a} to {b - 1} "
-                f"({b - a} of {self.n} samples, {self.fs:.6g} Hz)")
+        return (
+            f"time column '{self.column}' is not uniformly sampled: {self._found()} "
+            f"({'; '.join(where)}). The longest clean segment is samples {a} to {b - 1} "
+            f"({b - a} of {self.n} samples, {self.fs:.6g} Hz)"
+        )
 
     def to_dict(self, *, max_events: int = 100) -> dict[str, Any]:
         """JSON-ready dictionary; lists at most ``max_events`` events (``events_truncated``)."""
+
         def num(v: float) -> float | None:
             return float(v) if math.isfinite(v) else None
 
         a, b = self.longest
         return {
-            "column": self.column, "n": int(self.n), "ok": self.ok,
-            "median_step_s": num(self.median_step), "fs": num(self.fs),
-            "jitter": num(self.jitter), "counts": dict(self.counts),
+            "column": self.column,
+            "n": int(self.n),
+            "ok": self.ok,
+            "median_step_s": num(self.median_step),
+            "fs": num(self.fs),
+            "jitter": num(self.jitter),
+            "counts": dict(self.counts),
             "events": [e.to_dict() for e in self.events[:max_events]],
             "events_truncated": sum(self.counts.values()) > min(len(self.events), max_events),
             "n_segments": int(len(self.segments)),
@@ -334,8 +358,9 @@ def check_time(
         for i in idx:
             step = float(d[i])
             missing = max(int(round(step / med)) - 1, 1) if kind == "gap" else 0
-            events.append(TimeEvent(kind, int(i) + 1, float(ts[i]), step, missing,
-                                    line(int(i) + 1)))
+            events.append(
+                TimeEvent(kind, int(i) + 1, float(ts[i]), step, missing, line(int(i) + 1))
+            )
     counts["invalid"] = int(bad_stamp.sum())
     events.sort(key=lambda e: (e.index, _KINDS.index(e.kind)))
     counts = {k: v for k, v in counts.items() if v}
@@ -345,12 +370,23 @@ def check_time(
     starts = np.concatenate([[0], cuts])
     stops = np.concatenate([cuts, [n]])
     keep = stops > starts
-    segs = np.stack([starts[keep], stops[keep]], axis=1).astype(np.int64) if n else \
-        np.zeros((0, 2), np.int64)
+    segs = (
+        np.stack([starts[keep], stops[keep]], axis=1).astype(np.int64)
+        if n
+        else np.zeros((0, 2), np.int64)
+    )
     if bad_stamp.any():
         segs = segs[~((segs[:, 1] - segs[:, 0] == 1) & bad_stamp[segs[:, 0]])]
-    rep = TimeReport(n=n, median_step=med, fs=math.nan, jitter=jitter, events=tuple(events),
-                     segments=segs, counts=counts, column=column)
+    rep = TimeReport(
+        n=n,
+        median_step=med,
+        fs=math.nan,
+        jitter=jitter,
+        events=tuple(events),
+        segments=segs,
+        counts=counts,
+        column=column,
+    )
     a, b = rep.longest
     object.__setattr__(rep, "fs", segment_fs(ts, a, b))
     return rep

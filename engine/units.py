@@ -87,8 +87,12 @@ def datasheet(model: Model, fs: float, unit: str = "") -> list[dict[str, Any]]:
         elif p.code == "GM":
             add(lab, "correlation time 1/beta", 1.0 / v["beta"], "s")
             add(lab, "stationary std sqrt(sigma2_gm)", math.sqrt(v["sigma2_gm"]), u)
-            add(lab, "driving-noise PSD q = 2 beta sigma2_gm", 2 * v["beta"] * v["sigma2_gm"],
-                f"{squared(u)}/s")
+            add(
+                lab,
+                "driving-noise PSD q = 2 beta sigma2_gm",
+                2 * v["beta"] * v["sigma2_gm"],
+                f"{squared(u)}/s",
+            )
         elif p.code == "AR1":
             phi, s2 = v["phi"], v["sigma2"]
             if 0 < phi < 1:

@@ -121,9 +121,18 @@ class WaveletVariance(LevelScales):
             raise ValueError(f"levels must be between 1 and {self.n_levels}, got {levels}")
         s = slice(0, levels)
         return WaveletVariance(
-            levels=self.levels[s], tau_samples=self.tau_samples[s], variance=self.variance[s],
-            ci_low=self.ci_low[s], ci_high=self.ci_high[s], n_coef=self.n_coef[s], n=self.n,
-            fs=self.fs, robust=self.robust, eff=self.eff, alpha=self.alpha, unit=self.unit,
+            levels=self.levels[s],
+            tau_samples=self.tau_samples[s],
+            variance=self.variance[s],
+            ci_low=self.ci_low[s],
+            ci_high=self.ci_high[s],
+            n_coef=self.n_coef[s],
+            n=self.n,
+            fs=self.fs,
+            robust=self.robust,
+            eff=self.eff,
+            alpha=self.alpha,
+            unit=self.unit,
             classical=None if self.classical is None else self.classical.truncate(levels),
         )
 
@@ -197,9 +206,18 @@ class WaveletVariance(LevelScales):
         if ci_low is None or ci_high is None:
             ci_low, ci_high = eta3_interval(v, m, tau, alpha)
         return cls(
-            levels=levels, tau_samples=tau, variance=v, ci_low=np.asarray(ci_low, float),
-            ci_high=np.asarray(ci_high, float), n_coef=m, n=int(n), fs=float(fs), robust=robust,
-            eff=eff, alpha=alpha, unit=unit,
+            levels=levels,
+            tau_samples=tau,
+            variance=v,
+            ci_low=np.asarray(ci_low, float),
+            ci_high=np.asarray(ci_high, float),
+            n_coef=m,
+            n=int(n),
+            fs=float(fs),
+            robust=robust,
+            eff=eff,
+            alpha=alpha,
+            unit=unit,
         )
 
 
@@ -323,6 +341,7 @@ def _biweight_moments(c: float) -> tuple[float, float, float]:
 
     def phi(z: float) -> float:
         return math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi)
+
     e_g = 2 * integrate.quad(lambda z: g(z) * phi(z), 0, c, epsabs=1e-13)[0]
     e_z2g = 2 * integrate.quad(lambda z: z * z * g(z) * phi(z), 0, c, epsabs=1e-13)[0]
     e_g2 = 2 * integrate.quad(lambda z: g(z) ** 2 * phi(z), 0, c, epsabs=1e-13)[0]
@@ -477,8 +496,18 @@ def wavelet_variance(
     nu = sums / (tau.astype(float) ** 2 * m_j)
     lo, hi = eta3_interval(nu, m_j, tau, alpha)
     classical = WaveletVariance(
-        levels=lv, tau_samples=tau, variance=nu, ci_low=lo, ci_high=hi, n_coef=m_j, n=n,
-        fs=float(fs), robust=False, eff=eff, alpha=alpha, unit=unit,
+        levels=lv,
+        tau_samples=tau,
+        variance=nu,
+        ci_low=lo,
+        ci_high=hi,
+        n_coef=m_j,
+        n=n,
+        fs=float(fs),
+        robust=False,
+        eff=eff,
+        alpha=alpha,
+        unit=unit,
     )
     if not robust:
         return classical
@@ -494,6 +523,17 @@ def wavelet_variance(
     lo_r = np.where(lo_r > 0, lo_r, nu_r * 1e-3)
     hi_r = nu_r * (1.0 + coef * rel_hi)
     return WaveletVariance(
-        levels=lv, tau_samples=tau, variance=nu_r, ci_low=lo_r, ci_high=hi_r, n_coef=m_j, n=n,
-        fs=float(fs), robust=True, eff=eff, alpha=alpha, unit=unit, classical=classical,
+        levels=lv,
+        tau_samples=tau,
+        variance=nu_r,
+        ci_low=lo_r,
+        ci_high=hi_r,
+        n_coef=m_j,
+        n=n,
+        fs=float(fs),
+        robust=True,
+        eff=eff,
+        alpha=alpha,
+        unit=unit,
+        classical=classical,
     )

@@ -159,30 +159,42 @@ class WaveletCrossCovariance(LevelScales):
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
         return {
-            "names": list(self.names), "n": int(self.n), "fs": float(self.fs),
-            "alpha": float(self.alpha), "unit": self.unit,
-            "levels": self.levels.tolist(), "tau_samples": self.tau_samples.tolist(),
-            "tau_s": self.tau_s.tolist(), "covariance": self.covariance.tolist(),
-            "ci_low": self.ci_low.tolist(), "ci_high": self.ci_high.tolist(),
+            "names": list(self.names),
+            "n": int(self.n),
+            "fs": float(self.fs),
+            "alpha": float(self.alpha),
+            "unit": self.unit,
+            "levels": self.levels.tolist(),
+            "tau_samples": self.tau_samples.tolist(),
+            "tau_s": self.tau_s.tolist(),
+            "covariance": self.covariance.tolist(),
+            "ci_low": self.ci_low.tolist(),
+            "ci_high": self.ci_high.tolist(),
             "std_error": self.std_error.tolist(),
             "correlation": [None if not np.isfinite(v) else float(v) for v in self.correlation],
-            "ci_method": list(self.ci_method), "bandwidth": self.bandwidth.tolist(),
-            "df": self.df.tolist(), "n_coef": self.n_coef.tolist(),
+            "ci_method": list(self.ci_method),
+            "bandwidth": self.bandwidth.tolist(),
+            "df": self.df.tolist(),
+            "n_coef": self.n_coef.tolist(),
         }
 
     def table(self) -> str:
         """Readable table."""
         ci = f"{100 * (1 - self.alpha):g}%"
         u = f" [{self.unit}]" if self.unit else ""
-        lines = [f"Haar wavelet cross-covariance of {self.names[0]} and {self.names[1]}{u}; "
-                 f"N = {self.n}, fs = {self.fs:g} Hz",
-                 f"{'level':>5} {'tau [s]':>11} {'WCCV':>13} {ci + ' low':>12} "
-                 f"{ci + ' high':>12} {'corr':>7}  interval"]
+        lines = [
+            f"Haar wavelet cross-covariance of {self.names[0]} and {self.names[1]}{u}; "
+            f"N = {self.n}, fs = {self.fs:g} Hz",
+            f"{'level':>5} {'tau [s]':>11} {'WCCV':>13} {ci + ' low':>12} "
+            f"{ci + ' high':>12} {'corr':>7}  interval",
+        ]
         rho = self.correlation
         for i in range(self.n_levels):
-            lines.append(f"{self.levels[i]:>5d} {self.tau_s[i]:>11.5g} {self.covariance[i]:>13.5e} "
-                         f"{self.ci_low[i]:>12.4e} {self.ci_high[i]:>12.4e} {rho[i]:>7.3f}  "
-                         f"{self.ci_method[i]}")
+            lines.append(
+                f"{self.levels[i]:>5d} {self.tau_s[i]:>11.5g} {self.covariance[i]:>13.5e} "
+                f"{self.ci_low[i]:>12.4e} {self.ci_high[i]:>12.4e} {rho[i]:>7.3f}  "
+                f"{self.ci_method[i]}"
+            )
         return "\n".join(lines)
 
 
@@ -254,8 +266,9 @@ class WVMatrix(LevelScales):
         try:
             return self.channels.index(channel)
         except ValueError:
-            raise KeyError(f"unknown channel {channel!r}; the channels are "
-                           f"{', '.join(self.channels)}") from None
+            raise KeyError(
+                f"unknown channel {channel!r}; the channels are {', '.join(self.channels)}"
+            ) from None
 
     def _unit(self, p: int) -> str:
         return self.units[p] if p < len(self.units) else ""
@@ -273,9 +286,16 @@ class WVMatrix(LevelScales):
         """The WV of one channel (equal to :func:`engine.wavelet_variance` of it)."""
         p = self.index(channel)
         return WaveletVariance(
-            levels=self.levels, tau_samples=self.tau_samples, variance=self.values[:, p, p],
-            ci_low=self.ci_low[:, p, p], ci_high=self.ci_high[:, p, p], n_coef=self.n_coef,
-            n=self.n, fs=self.fs, alpha=self.alpha, unit=self._unit(p),
+            levels=self.levels,
+            tau_samples=self.tau_samples,
+            variance=self.values[:, p, p],
+            ci_low=self.ci_low[:, p, p],
+            ci_high=self.ci_high[:, p, p],
+            n_coef=self.n_coef,
+            n=self.n,
+            fs=self.fs,
+            alpha=self.alpha,
+            unit=self._unit(p),
         )
 
     def pair(self, a: str | int, b: str | int) -> WaveletCrossCovariance:
@@ -284,12 +304,23 @@ class WVMatrix(LevelScales):
         up, uq = self._unit(p), self._unit(q)
         unit = (f"({up})^2" if up == uq else f"{up}*{uq}") if up and uq else ""
         return WaveletCrossCovariance(
-            levels=self.levels, tau_samples=self.tau_samples, covariance=self.values[:, p, q],
-            ci_low=self.ci_low[:, p, q], ci_high=self.ci_high[:, p, q],
-            std_error=self.std_error[:, p, q], variance_x=self.values[:, p, p],
-            variance_y=self.values[:, q, q], ci_method=self.ci_method,
-            bandwidth=self.bandwidth, df=self.df, n_coef=self.n_coef, n=self.n, fs=self.fs,
-            alpha=self.alpha, names=(self.channels[p], self.channels[q]), unit=unit,
+            levels=self.levels,
+            tau_samples=self.tau_samples,
+            covariance=self.values[:, p, q],
+            ci_low=self.ci_low[:, p, q],
+            ci_high=self.ci_high[:, p, q],
+            std_error=self.std_error[:, p, q],
+            variance_x=self.values[:, p, p],
+            variance_y=self.values[:, q, q],
+            ci_method=self.ci_method,
+            bandwidth=self.bandwidth,
+            df=self.df,
+            n_coef=self.n_coef,
+            n=self.n,
+            fs=self.fs,
+            alpha=self.alpha,
+            names=(self.channels[p], self.channels[q]),
+            unit=unit,
         )
 
     def select(self, channels: Sequence[str | int]) -> WVMatrix:
@@ -299,11 +330,21 @@ class WVMatrix(LevelScales):
             raise ValueError(f"channels repeat in {list(channels)}")
         ix = np.ix_(range(self.n_levels), idx, idx)
         return WVMatrix(
-            channels=tuple(self.channels[i] for i in idx), levels=self.levels,
-            tau_samples=self.tau_samples, values=self.values[ix], ci_low=self.ci_low[ix],
-            ci_high=self.ci_high[ix], std_error=self.std_error[ix], ci_method=self.ci_method,
-            bandwidth=self.bandwidth, df=self.df, n_coef=self.n_coef, n=self.n, fs=self.fs,
-            alpha=self.alpha, units=tuple(self._unit(i) for i in idx),
+            channels=tuple(self.channels[i] for i in idx),
+            levels=self.levels,
+            tau_samples=self.tau_samples,
+            values=self.values[ix],
+            ci_low=self.ci_low[ix],
+            ci_high=self.ci_high[ix],
+            std_error=self.std_error[ix],
+            ci_method=self.ci_method,
+            bandwidth=self.bandwidth,
+            df=self.df,
+            n_coef=self.n_coef,
+            n=self.n,
+            fs=self.fs,
+            alpha=self.alpha,
+            units=tuple(self._unit(i) for i in idx),
         )
 
     def truncate(self, levels: int) -> WVMatrix:
@@ -312,45 +353,73 @@ class WVMatrix(LevelScales):
             raise ValueError(f"levels must be between 1 and {self.n_levels}, got {levels}")
         s = slice(0, levels)
         return WVMatrix(
-            channels=self.channels, levels=self.levels[s], tau_samples=self.tau_samples[s],
-            values=self.values[s], ci_low=self.ci_low[s], ci_high=self.ci_high[s],
-            std_error=self.std_error[s], ci_method=self.ci_method[:levels],
-            bandwidth=self.bandwidth[s], df=self.df[s], n_coef=self.n_coef[s], n=self.n,
+            channels=self.channels,
+            levels=self.levels[s],
+            tau_samples=self.tau_samples[s],
+            values=self.values[s],
+            ci_low=self.ci_low[s],
+            ci_high=self.ci_high[s],
+            std_error=self.std_error[s],
+            ci_method=self.ci_method[:levels],
+            bandwidth=self.bandwidth[s],
+            df=self.df[s],
+            n_coef=self.n_coef[s],
+            n=self.n,
             fs=self.fs,
-            alpha=self.alpha, units=self.units,
+            alpha=self.alpha,
+            units=self.units,
         )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary; matrices as nested lists ``[level][p][q]``."""
         rho = self.correlation
         return {
-            "channels": list(self.channels), "units": list(self.units), "n": int(self.n),
-            "fs": float(self.fs), "alpha": float(self.alpha),
-            "levels": self.levels.tolist(), "tau_samples": self.tau_samples.tolist(),
-            "tau_s": self.tau_s.tolist(), "values": self.values.tolist(),
-            "ci_low": self.ci_low.tolist(), "ci_high": self.ci_high.tolist(),
+            "channels": list(self.channels),
+            "units": list(self.units),
+            "n": int(self.n),
+            "fs": float(self.fs),
+            "alpha": float(self.alpha),
+            "levels": self.levels.tolist(),
+            "tau_samples": self.tau_samples.tolist(),
+            "tau_s": self.tau_s.tolist(),
+            "values": self.values.tolist(),
+            "ci_low": self.ci_low.tolist(),
+            "ci_high": self.ci_high.tolist(),
             "std_error": self.std_error.tolist(),
-            "correlation": [[[float(v) if np.isfinite(v) else None for v in row]
-                             for row in lev] for lev in rho],
-            "ci_method": list(self.ci_method), "bandwidth": self.bandwidth.tolist(),
-            "df": self.df.tolist(), "n_coef": self.n_coef.tolist(),
+            "correlation": [
+                [[float(v) if np.isfinite(v) else None for v in row] for row in lev] for lev in rho
+            ],
+            "ci_method": list(self.ci_method),
+            "bandwidth": self.bandwidth.tolist(),
+            "df": self.df.tolist(),
+            "n_coef": self.n_coef.tolist(),
         }
 
     def table(self) -> str:
         """Readable summary: the WV of each channel and the wavelet correlation of each pair."""
         rho = self.correlation
         names = list(self.channels)
-        lines = [f"WV / WCCV matrix of {self.k} channels ({', '.join(names)}); N = {self.n}, "
-                 f"fs = {self.fs:g} Hz",
-                 f"{'level':>5} {'tau [s]':>10} " + " ".join(f"{'WV ' + c:>14}" for c in names)
-                 + " " + " ".join(f"{'r ' + names[p] + '/' + names[q]:>14}"
-                                  for p in range(self.k) for q in range(p + 1, self.k))]
+        lines = [
+            f"WV / WCCV matrix of {self.k} channels ({', '.join(names)}); N = {self.n}, "
+            f"fs = {self.fs:g} Hz",
+            f"{'level':>5} {'tau [s]':>10} "
+            + " ".join(f"{'WV ' + c:>14}" for c in names)
+            + " "
+            + " ".join(
+                f"{'r ' + names[p] + '/' + names[q]:>14}"
+                for p in range(self.k)
+                for q in range(p + 1, self.k)
+            ),
+        ]
         for i in range(self.n_levels):
             lines.append(
                 f"{self.levels[i]:>5d} {self.tau_s[i]:>10.4g} "
-                + " ".join(f"{self.values[i, p, p]:>14.5e}" for p in range(self.k)) + " "
-                + " ".join(f"{rho[i, p, q]:>14.3f}" for p in range(self.k)
-                           for q in range(p + 1, self.k)))
+                + " ".join(f"{self.values[i, p, p]:>14.5e}" for p in range(self.k))
+                + " "
+                + " ".join(
+                    f"{rho[i, p, q]:>14.3f}" for p in range(self.k) for q in range(p + 1, self.k)
+                )
+            )
         return "\n".join(lines)
 
 
@@ -388,8 +457,9 @@ def _window_norms(r: int, s: int, m_used: int) -> float:
     return g2 - g1 * g1 / m_used
 
 
-def _long_run_variances(s: np.ndarray, n: int, j: int, nu: np.ndarray,
-                        pairs: list[tuple[int, int]]) -> np.ndarray:
+def _long_run_variances(
+    s: np.ndarray, n: int, j: int, nu: np.ndarray, pairs: list[tuple[int, int]]
+) -> np.ndarray:
     """Lag-window long-run variance of ``W^p W^q`` at level j for each pair (p, q).
 
     Weighted overlapping batch means on bins of ``2^(j-1)`` coefficients (see the module
@@ -428,14 +498,13 @@ def _long_run_variances(s: np.ndarray, n: int, j: int, nu: np.ndarray,
             t = c2[:, _R:] - c2[:, :-_R]  # staircase-triangular sums over 2R - 1 bins
             acc += np.einsum("pi,pi->p", t, t)
             n_t += t.shape[1]
-            carry = y[:, -(2 * _R - 2):]
+            carry = y[:, -(2 * _R - 2) :]
         else:
             carry = y
     return acc / max(n_t, 1) / _window_norms(_R, sbin, m_used) / (scale * scale)
 
 
-def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool
-             ) -> dict[str, Any]:
+def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> dict[str, Any]:
     """Values, standard errors and intervals of all pairs of k series (shared code)."""
     n = series[0].size
     k = len(series)
@@ -475,13 +544,22 @@ def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool
     hi = vals + z * se
     for p in range(k):
         lo[:, p, p], hi[:, p, p] = eta3_interval(vals[:, p, p], m_j, tau, alpha)
-    return {"levels": lv, "tau": tau, "m_j": m_j, "values": vals, "se": se, "lo": lo,
-            "hi": hi, "method": tuple(method), "bandwidth": bandwidth, "df": df}
+    return {
+        "levels": lv,
+        "tau": tau,
+        "m_j": m_j,
+        "values": vals,
+        "se": se,
+        "lo": lo,
+        "hi": hi,
+        "method": tuple(method),
+        "bandwidth": bandwidth,
+        "df": df,
+    }
 
 
 def _check_common(fs: float, alpha: float) -> None:
-    if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs)
-            and fs > 0):
+    if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs) and fs > 0):
         raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
@@ -494,8 +572,9 @@ def _levels(n: int, levels: int | None) -> int:
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)):
         raise TypeError(f"levels must be an integer, got {levels!r}")
     if not 1 <= levels <= jmax:
-        raise ValueError(f"levels={levels} is out of range: series of {n} samples support "
-                         f"1 to {jmax} levels")
+        raise ValueError(
+            f"levels={levels} is out of range: series of {n} samples support 1 to {jmax} levels"
+        )
     return int(levels)
 
 
@@ -542,30 +621,48 @@ def wavelet_cross_covariance(
     a = _as_series(x)
     b = _as_series(y)
     if a.size != b.size:
-        raise ValueError(f"the two series have different lengths ({a.size} and {b.size} "
-                         "samples): a cross-covariance needs series sampled together")
+        raise ValueError(
+            f"the two series have different lengths ({a.size} and {b.size} "
+            "samples): a cross-covariance needs series sampled together"
+        )
     _check_common(fs, alpha)
     lv = _levels(a.size, levels)
     r = _compute([a, b], lv, alpha, ci=True)
     return WaveletCrossCovariance(
-        levels=r["levels"], tau_samples=r["tau"], covariance=r["values"][:, 0, 1],
-        ci_low=r["lo"][:, 0, 1], ci_high=r["hi"][:, 0, 1], std_error=r["se"][:, 0, 1],
-        variance_x=r["values"][:, 0, 0], variance_y=r["values"][:, 1, 1],
-        ci_method=r["method"], bandwidth=r["bandwidth"], df=r["df"], n_coef=r["m_j"],
+        levels=r["levels"],
+        tau_samples=r["tau"],
+        covariance=r["values"][:, 0, 1],
+        ci_low=r["lo"][:, 0, 1],
+        ci_high=r["hi"][:, 0, 1],
+        std_error=r["se"][:, 0, 1],
+        variance_x=r["values"][:, 0, 0],
+        variance_y=r["values"][:, 1, 1],
+        ci_method=r["method"],
+        bandwidth=r["bandwidth"],
+        df=r["df"],
+        n_coef=r["m_j"],
         n=int(a.size),
-        fs=float(fs), alpha=float(alpha), names=(str(names[0]), str(names[1])), unit=unit,
+        fs=float(fs),
+        alpha=float(alpha),
+        names=(str(names[0]), str(names[1])),
+        unit=unit,
     )
 
 
-def _gather(data: Any, channels: Sequence[str | int] | None, fs: float | None,
-            units: Sequence[str] | Mapping[str, str] | None
-            ) -> tuple[list[str], list[np.ndarray], float, list[str]]:
+def _gather(
+    data: Any,
+    channels: Sequence[str | int] | None,
+    fs: float | None,
+    units: Sequence[str] | Mapping[str, str] | None,
+) -> tuple[list[str], list[np.ndarray], float, list[str]]:
     """Channels, series, fs and units from an (N, k) array, a mapping or an ImuLog."""
     log_units: Mapping[str, str] = {}
     if isinstance(data, ImuLog):
         if not data.channels:
-            raise ValueError(f"{getattr(data, 'source', 'the log')} holds no raw samples "
-                             "(a WV summary file?): a cross-covariance needs the raw channels")
+            raise ValueError(
+                f"{getattr(data, 'source', 'the log')} holds no raw samples "
+                "(a WV summary file?): a cross-covariance needs the raw channels"
+            )
         mapping: Mapping[str, Any] = data.channels
         log_units = getattr(data, "units", {}) or {}
         fs = float(data.fs) if fs is None else fs
@@ -574,13 +671,16 @@ def _gather(data: Any, channels: Sequence[str | int] | None, fs: float | None,
     else:
         arr = np.asarray(data)
         if arr.ndim != 2:
-            raise ValueError(f"give an (N, k) array with one column per channel, a mapping "
-                             f"name -> series or an ImuLog; got an array of shape {arr.shape}")
+            raise ValueError(
+                f"give an (N, k) array with one column per channel, a mapping "
+                f"name -> series or an ImuLog; got an array of shape {arr.shape}"
+            )
         mapping = {f"x{i}": arr[:, i] for i in range(arr.shape[1])}
         if channels is not None and all(isinstance(c, str) for c in channels):
             if len(channels) != arr.shape[1]:
-                raise ValueError(f"{len(channels)} channel names for an array with "
-                                 f"{arr.shape[1]} columns")
+                raise ValueError(
+                    f"{len(channels)} channel names for an array with {arr.shape[1]} columns"
+                )
             mapping = dict(zip(channels, mapping.values(), strict=True))
     names = list(mapping)
     if channels is None:
@@ -590,8 +690,10 @@ def _gather(data: Any, channels: Sequence[str | int] | None, fs: float | None,
         for c in channels:
             if isinstance(c, (int, np.integer)) and not isinstance(c, bool):
                 if not -len(names) <= c < len(names):
-                    raise KeyError(f"channel index {c} is out of range: there are {len(names)} "
-                                   f"channels ({', '.join(names)})")
+                    raise KeyError(
+                        f"channel index {c} is out of range: there are {len(names)} "
+                        f"channels ({', '.join(names)})"
+                    )
                 chosen.append(names[int(c)])
             elif c in mapping:
                 chosen.append(str(c))
@@ -600,8 +702,10 @@ def _gather(data: Any, channels: Sequence[str | int] | None, fs: float | None,
     if len(set(chosen)) != len(chosen):
         raise ValueError(f"channels repeat in {chosen}")
     if len(chosen) < 2:
-        raise ValueError(f"a WV/WCCV matrix needs at least 2 channels, got {len(chosen)} "
-                         f"({', '.join(chosen) or 'none'}); use wavelet_variance for one")
+        raise ValueError(
+            f"a WV/WCCV matrix needs at least 2 channels, got {len(chosen)} "
+            f"({', '.join(chosen) or 'none'}); use wavelet_variance for one"
+        )
     series = []
     for c in chosen:
         try:
@@ -611,8 +715,10 @@ def _gather(data: Any, channels: Sequence[str | int] | None, fs: float | None,
     sizes = {c: a.size for c, a in zip(chosen, series, strict=True)}
     if len(set(sizes.values())) > 1:
         desc = ", ".join(f"{c}: {v}" for c, v in sizes.items())
-        raise ValueError(f"the channels have different lengths ({desc} samples): the WCCV "
-                         "needs channels sampled together; trim them to a common span")
+        raise ValueError(
+            f"the channels have different lengths ({desc} samples): the WCCV "
+            "needs channels sampled together; trim them to a common span"
+        )
     if isinstance(units, Mapping):
         unit_list = [str(units.get(c, "")) for c in chosen]
     elif units is not None:
@@ -678,9 +784,19 @@ def wv_matrix(
     lv = _levels(series[0].size, levels)
     r = _compute(series, lv, alpha, ci=ci)
     return WVMatrix(
-        channels=tuple(names), levels=r["levels"], tau_samples=r["tau"], values=r["values"],
-        ci_low=r["lo"], ci_high=r["hi"], std_error=r["se"], ci_method=r["method"],
-        bandwidth=r["bandwidth"], df=r["df"], n_coef=r["m_j"], n=int(series[0].size),
+        channels=tuple(names),
+        levels=r["levels"],
+        tau_samples=r["tau"],
+        values=r["values"],
+        ci_low=r["lo"],
+        ci_high=r["hi"],
+        std_error=r["se"],
+        ci_method=r["method"],
+        bandwidth=r["bandwidth"],
+        df=r["df"],
+        n_coef=r["m_j"],
+        n=int(series[0].size),
         fs=float(fs_v),
-        alpha=float(alpha), units=tuple(unit_list),
+        alpha=float(alpha),
+        units=tuple(unit_list),
     )

@@ -23,23 +23,47 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gmwm-app",
         description="Serve the GMWM browser app: load an IMU log, build a latent model "
-                    "live, read its parameters.")
-    p.add_argument("file", nargs="?", metavar="FILE",
-                   help="log to open (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5); "
-                        "default: the bundled demo log")
-    p.add_argument("--port", type=int, default=5006,
-                   help="port to serve on (default 5006; 0 picks a free one)")
-    p.add_argument("--address", default=None,
-                   help="address to listen on (default localhost; 0.0.0.0 for every interface)")
-    p.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
-                   help="extra origin allowed to connect (needed when serving beyond localhost)")
+        "live, read its parameters.",
+    )
+    p.add_argument(
+        "file",
+        nargs="?",
+        metavar="FILE",
+        help="log to open (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5); "
+        "default: the bundled demo log",
+    )
+    p.add_argument(
+        "--port", type=int, default=5006, help="port to serve on (default 5006; 0 picks a free one)"
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        help="address to listen on (default localhost; 0.0.0.0 for every interface)",
+    )
+    p.add_argument(
+        "--allow-websocket-origin",
+        action="append",
+        default=None,
+        metavar="HOST[:PORT]",
+        help="extra origin allowed to connect (needed when serving beyond localhost)",
+    )
     p.add_argument("--no-show", action="store_true", help="do not open a browser")
-    p.add_argument("--max-upload-mb", type=float, default=None, metavar="N",
-                   help="refuse uploads larger than N MB (default 200)")
-    p.add_argument("--data-dir", action="append", default=None, metavar="DIR",
-                   help="folder whose files may be loaded by server path (repeatable; default: "
-                        "the current directory, the repository's data/ folder and the shared "
-                        "data folder next to the repository); other paths are refused")
+    p.add_argument(
+        "--max-upload-mb",
+        type=float,
+        default=None,
+        metavar="N",
+        help="refuse uploads larger than N MB (default 200)",
+    )
+    p.add_argument(
+        "--data-dir",
+        action="append",
+        default=None,
+        metavar="DIR",
+        help="folder whose files may be loaded by server path (repeatable; default: "
+        "the current directory, the repository's data/ folder and the shared "
+        "data folder next to the repository); other paths are refused",
+    )
     return p
 
 
@@ -65,11 +89,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"gmwm-app: error: --data-dir is not a folder: {missing[0]}", file=sys.stderr)
         return 2
     if args.max_upload_mb is not None and not args.max_upload_mb > 0:
-        print(f"gmwm-app: error: --max-upload-mb must be positive, got {args.max_upload_mb}",
-              file=sys.stderr)
+        print(
+            f"gmwm-app: error: --max-upload-mb must be positive, got {args.max_upload_mb}",
+            file=sys.stderr,
+        )
         return 2
-    limits.configure(max_upload_mb=args.max_upload_mb, data_dirs=dirs,
-                     allowed_files=[path] if path else ())
+    limits.configure(
+        max_upload_mb=args.max_upload_mb, data_dirs=dirs, allowed_files=[path] if path else ()
+    )
 
     import panel as pn
 
@@ -79,13 +106,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     origins = list(args.allow_websocket_origin or [])
     if args.address and args.address not in _LOCAL and not origins:
         origins = ["*"]
-        print("gmwm-app: serving beyond localhost: any origin may connect; "
-              "restrict it with --allow-websocket-origin", file=sys.stderr)
+        print(
+            "gmwm-app: serving beyond localhost: any origin may connect; "
+            "restrict it with --allow-websocket-origin",
+            file=sys.stderr,
+        )
     if origins:
         kwargs["websocket_origin"] = origins
     pn.serve(
-        {"/": create_application(path)}, port=args.port, address=args.address,
-        show=not args.no_show, title="GMWM", websocket_max_message_size=64 * 1024 * 1024,
+        {"/": create_application(path)},
+        port=args.port,
+        address=args.address,
+        show=not args.no_show,
+        title="GMWM",
+        websocket_max_message_size=64 * 1024 * 1024,
         **kwargs,
     )
     return 0

@@ -122,7 +122,9 @@ def _limit_blas_once() -> None:
         _BLAS_LIMITED = True
         limit_blas_threads(1)
 
+
 _APPS: weakref.WeakSet[GMWMApp] = weakref.WeakSet()
+
 
 def _lower_priority() -> None:
     """Run this worker thread at a lower CPU priority (Linux: nice applies per thread), so
@@ -134,8 +136,9 @@ def _lower_priority() -> None:
 
 
 #: Worker threads for reading files and computing WVs (numpy releases the GIL there).
-_EXECUTOR = ThreadPoolExecutor(max_workers=4, thread_name_prefix="gmwm-app",
-                               initializer=_lower_priority)
+_EXECUTOR = ThreadPoolExecutor(
+    max_workers=4, thread_name_prefix="gmwm-app", initializer=_lower_priority
+)
 
 #: Process rows created up front (more are added if a model grows beyond).
 N_POOL = 8
@@ -167,8 +170,11 @@ def _lazy_view_factories() -> list[tuple[str, Callable[[GMWMApp], Any]]]:
     from gmwm_app.multi_view import MultiView
     from gmwm_app.slope_view import SlopeView
 
-    return [("Model selection", SelectionView), ("Slope method", SlopeView),
-            ("Multi-channel", MultiView)]
+    return [
+        ("Model selection", SelectionView),
+        ("Slope method", SlopeView),
+        ("Multi-channel", MultiView),
+    ]
 
 
 def live_apps() -> list[GMWMApp]:
@@ -189,8 +195,9 @@ class GMWMApp:
         Server path loaded when ``default_source == "path"`` (the ``gmwm-app FILE`` argument).
     """
 
-    def __init__(self, state: AppState | None = None, *, default_source: str = "demo",
-                 default_path: str = "") -> None:
+    def __init__(
+        self, state: AppState | None = None, *, default_source: str = "demo", default_path: str = ""
+    ) -> None:
         self.state = state or AppState()
         self.default_source = default_source
         self.default_path = default_path
@@ -221,115 +228,168 @@ class GMWMApp:
     # -------------------------------------------------------------------------------------
     def _build_widgets(self) -> None:
         s = self.state
-        self.demo_button = pn.widgets.Button(label="Load the demo log", color="default",
-                                             sizing_mode="stretch_width")
+        self.demo_button = pn.widgets.Button(
+            label="Load the demo log", color="default", sizing_mode="stretch_width"
+        )
         self.demo_button.on_click(self._on_demo)
         self.upload = pn.widgets.FileDropper(
-            multiple=False, max_file_size=f"{max(1, int(current_limits().max_upload_mb))}MB",
-            chunk_size=8_000_000, layout="compact",
-            sizing_mode="stretch_width", height=90,
+            multiple=False,
+            max_file_size=f"{max(1, int(current_limits().max_upload_mb))}MB",
+            chunk_size=8_000_000,
+            layout="compact",
+            sizing_mode="stretch_width",
+            height=90,
         )
         self.upload.param.watch(self._on_upload, "value")
         self.path_input = pn.widgets.TextInput(
-            label="Log file on the server", placeholder="/path/to/log.h5 (press Enter)",
-            sizing_mode="stretch_width")
+            label="Log file on the server",
+            placeholder="/path/to/log.h5 (press Enter)",
+            sizing_mode="stretch_width",
+        )
         self.path_input.param.watch(self._on_path, "enter_pressed")
-        self.path_button = pn.widgets.Button(label="Load path", color="default",
-                                             sizing_mode="stretch_width")
+        self.path_button = pn.widgets.Button(
+            label="Load path", color="default", sizing_mode="stretch_width"
+        )
         self.path_button.on_click(self._on_path)
-        self.channel_select = pn.widgets.Select(label="Channel", options=[],
-                                                sizing_mode="stretch_width")
+        self.channel_select = pn.widgets.Select(
+            label="Channel", options=[], sizing_mode="stretch_width"
+        )
         self.channel_select.param.watch(self._on_channel, "value")
-        self.fs_input = pn.widgets.FloatInput(label="Sampling frequency fs [Hz]", value=None,
-                                              start=0.0, sizing_mode="stretch_width",
-                                              format="0[.]########")
+        self.fs_input = pn.widgets.FloatInput(
+            label="Sampling frequency fs [Hz]",
+            value=None,
+            start=0.0,
+            sizing_mode="stretch_width",
+            format="0[.]########",
+        )
         self.fs_input.param.watch(self._on_fs, "value")
-        self.data_info = pn.pane.Markdown("", sizing_mode="stretch_width",
-                                          styles={"font-size": "13px"}, margin=(0, 10))
+        self.data_info = pn.pane.Markdown(
+            "", sizing_mode="stretch_width", styles={"font-size": "13px"}, margin=(0, 10)
+        )
         self.robust_check = pn.widgets.Checkbox(
             label="Robust WV (Tukey biweight, 60% efficiency), beside the classical one",
-            value=s.robust, css_classes=["gmwm-robust"])
+            value=s.robust,
+            css_classes=["gmwm-robust"],
+        )
         self.robust_check.param.watch(self._on_robust, "value")
 
         self.add_buttons = {}
         for code in PROCESS_CODES:
-            b = pn.widgets.Button(label=f"+ {code}", color="primary", variant="outline",
-                                  description=f"Add {_PROCESS_HELP[code]}", width=82,
-                                  margin=(3, 3))
+            b = pn.widgets.Button(
+                label=f"+ {code}",
+                color="primary",
+                variant="outline",
+                description=f"Add {_PROCESS_HELP[code]}",
+                width=82,
+                margin=(3, 3),
+            )
             b.on_click(lambda _e, c=code: self._add(c))
             self.add_buttons[code] = b
         self.spec_input = pn.widgets.TextInput(
-            label="Model (type a spec, press Enter)", placeholder="e.g. WN+RW+2*GM",
-            sizing_mode="stretch_width")
+            label="Model (type a spec, press Enter)",
+            placeholder="e.g. WN+RW+2*GM",
+            sizing_mode="stretch_width",
+        )
         self.spec_input.param.watch(self._on_spec, "enter_pressed")
         self.process_list = pn.Column(sizing_mode="stretch_width", margin=0)
         self.empty_model_note = pn.pane.Markdown(
-            "*Empty model: only the empirical WV is shown.*", margin=(0, 10),
-            styles={"font-size": "13px"})
+            "*Empty model: only the empirical WV is shown.*",
+            margin=(0, 10),
+            styles={"font-size": "13px"},
+        )
         self.process_list.append(self.empty_model_note)
         self._proc_rows: list[tuple[pn.Row, pn.pane.HTML, pn.widgets.Button]] = []
         for _ in range(N_POOL):
             self._new_process_row()
-        self.clear_button = pn.widgets.Button(label="Remove all", color="light",
-                                              width=100, margin=(3, 3))
+        self.clear_button = pn.widgets.Button(
+            label="Remove all", color="light", width=100, margin=(3, 3)
+        )
         self.clear_button.on_click(lambda _e: self.state.clear_model())
 
         self.whatif_toggle = pn.widgets.Checkbox(
-            label="What if: move the parameters by hand", value=False, css_classes=["gmwm-whatif"])
+            label="What if: move the parameters by hand", value=False, css_classes=["gmwm-whatif"]
+        )
         self.whatif_toggle.param.watch(self._on_whatif, "value")
         self.sliders = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
         self._slider_pool: list[pn.widgets.FloatSlider] = []
         self._slider_specs: list[SliderSpec] = []
-        self._log_format = CustomJSTickFormatter(
-            code="return Math.pow(10, tick).toExponential(3)")
+        self._log_format = CustomJSTickFormatter(code="return Math.pow(10, tick).toExponential(3)")
         self._phi_format = CustomJSTickFormatter(
-            code="return (1 - Math.pow(10, tick)).toPrecision(6)")
-        self.reset_button = pn.widgets.Button(label="Back to the fit", color="light",
-                                              width=130, margin=(3, 3))
+            code="return (1 - Math.pow(10, tick)).toPrecision(6)"
+        )
+        self.reset_button = pn.widgets.Button(
+            label="Back to the fit", color="light", width=130, margin=(3, 3)
+        )
         self.reset_button.on_click(lambda _e: self._reset_whatif())
-        self.fit_button = pn.widgets.Button(label="Fit from here", color="primary",
-                                            width=130, margin=(3, 3),
-                                            description="Refit using the slider values as a "
-                                                        "starting point")
+        self.fit_button = pn.widgets.Button(
+            label="Fit from here",
+            color="primary",
+            width=130,
+            margin=(3, 3),
+            description="Refit using the slider values as a starting point",
+        )
         self.fit_button.on_click(lambda _e: self._fit_from_whatif())
         self.whatif_buttons = pn.Row(self.reset_button, self.fit_button, visible=False)
 
         self.download = pn.widgets.FileDownload(
-            callback=self._export_json, filename="gmwm_fit.json", label="Download fit (JSON)",
-            color="primary", sizing_mode="stretch_width", embed=False)
+            callback=self._export_json,
+            filename="gmwm_fit.json",
+            label="Download fit (JSON)",
+            color="primary",
+            sizing_mode="stretch_width",
+            embed=False,
+        )
         # plot images are made in the browser by BokehJS (PlotView.export), like the toolbar's
         # save tool, but in either format whatever the plot's output backend
-        self.png_button = pn.widgets.Button(label="Plot as PNG", color="default", width=150,
-                                            margin=(3, 5))
-        self.svg_button = pn.widgets.Button(label="Plot as SVG", color="default", width=150,
-                                            margin=(3, 5))
+        self.png_button = pn.widgets.Button(
+            label="Plot as PNG", color="default", width=150, margin=(3, 5)
+        )
+        self.svg_button = pn.widgets.Button(
+            label="Plot as SVG", color="default", width=150, margin=(3, 5)
+        )
         for btn, kind in ((self.png_button, "png"), (self.svg_button, "svg")):
-            btn.js_on_click(args={"plot": self.views.figure, "save": self.views.save_tool},
-                            code=_EXPORT_JS.replace("KIND", kind))
+            btn.js_on_click(
+                args={"plot": self.views.figure, "save": self.views.save_tool},
+                code=_EXPORT_JS.replace("KIND", kind),
+            )
 
         # main area
-        self.alert = pn.pane.Alert("", alert_type="danger", visible=False,
-                                   sizing_mode="stretch_width", margin=(5, 10))
-        self.notice = pn.pane.Alert("", alert_type="info", visible=False,
-                                    sizing_mode="stretch_width", margin=(5, 10))
-        self.warning = pn.pane.Alert("", alert_type="warning", visible=False,
-                                     sizing_mode="stretch_width", margin=(5, 10))
-        self.status = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
-                                       styles={"color": "#555", "font-size": "13px"})
-        self.plot_pane = pn.pane.Bokeh(self.views.figure, sizing_mode="stretch_width",
-                                       margin=(5, 10))
-        self.resid_pane = pn.pane.Bokeh(self.views.residual, sizing_mode="stretch_width",
-                                        margin=(0, 10))
+        self.alert = pn.pane.Alert(
+            "", alert_type="danger", visible=False, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.notice = pn.pane.Alert(
+            "", alert_type="info", visible=False, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.warning = pn.pane.Alert(
+            "", alert_type="warning", visible=False, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.status = pn.pane.Markdown(
+            "",
+            sizing_mode="stretch_width",
+            margin=(0, 10),
+            styles={"color": "#555", "font-size": "13px"},
+        )
+        self.plot_pane = pn.pane.Bokeh(
+            self.views.figure, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.resid_pane = pn.pane.Bokeh(
+            self.views.residual, sizing_mode="stretch_width", margin=(0, 10)
+        )
         self.summary = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.tables = FitTables()
-        self.param_table = pn.pane.Bokeh(self.tables.params, sizing_mode="stretch_width",
-                                         margin=(5, 10))
-        self.datasheet_table = pn.pane.Bokeh(self.tables.datasheet, sizing_mode="stretch_width",
-                                             margin=(5, 10))
+        self.param_table = pn.pane.Bokeh(
+            self.tables.params, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.datasheet_table = pn.pane.Bokeh(
+            self.tables.datasheet, sizing_mode="stretch_width", margin=(5, 10)
+        )
         # 95% intervals in the parameter table and the J-test badge (computed off the loop)
         self.intervals_check = pn.widgets.Checkbox(
-            label="Intervals (95%, asymptotic) and goodness of fit", value=False,
-            css_classes=["gmwm-intervals"], margin=(0, 10))
+            label="Intervals (95%, asymptotic) and goodness of fit",
+            value=False,
+            css_classes=["gmwm-intervals"],
+            margin=(0, 10),
+        )
         self.intervals_check.param.watch(self._on_intervals, "value")
         self.jtest_pane = pn.pane.HTML("", margin=(0, 10), visible=False)
         # session download/restore, Kalibr and datasheet exports, time-gap box
@@ -340,11 +400,18 @@ class GMWMApp:
         sidebar = [
             h("### Data", margin=(0, 10)),
             self.demo_button,
-            h("Upload a log (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5):",
-              margin=(0, 10), styles={"font-size": "13px"}),
+            h(
+                "Upload a log (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5):",
+                margin=(0, 10),
+                styles={"font-size": "13px"},
+            ),
             self.upload,
-            self.path_input, self.path_button,
-            self.channel_select, self.fs_input, self.data_info, self.robust_check,
+            self.path_input,
+            self.path_button,
+            self.channel_select,
+            self.fs_input,
+            self.data_info,
+            self.robust_check,
             pn.layout.Divider(),
             h("### Model", margin=(0, 10)),
             pn.FlexBox(*self.add_buttons.values(), margin=(0, 5)),
@@ -354,32 +421,60 @@ class GMWMApp:
             pn.layout.Divider(),
             h("### What if", margin=(0, 10)),
             self.whatif_toggle,
-            h("Each parameter on a log scale, 3 decades either side; the curves follow as "
-              "you drag.", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}),
-            self.sliders, self.whatif_buttons,
+            h(
+                "Each parameter on a log scale, 3 decades either side; the curves follow as "
+                "you drag.",
+                margin=(0, 10),
+                styles={"font-size": "12px", "color": "#555"},
+            ),
+            self.sliders,
+            self.whatif_buttons,
             pn.layout.Divider(),
             h("### Export", margin=(0, 10)),
             self.download,
             pn.Row(self.png_button, self.svg_button, margin=(0, 5)),
-            h("The plot toolbar's save tool also saves a PNG; each plot's toolbar zooms "
-              "and pans.", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}),
+            h(
+                "The plot toolbar's save tool also saves a PNG; each plot's toolbar zooms "
+                "and pans.",
+                margin=(0, 10),
+                styles={"font-size": "12px", "color": "#555"},
+            ),
             *self.session_panel.sidebar(),
         ]
         tables = pn.Row(
-            pn.Column(h("#### Parameters", margin=(0, 10)), self.intervals_check,
-                      self.jtest_pane, self.param_table, width=540),
-            pn.Column(h("#### Datasheet values", margin=(0, 10)), self.datasheet_table,
-                      sizing_mode="stretch_width"),
+            pn.Column(
+                h("#### Parameters", margin=(0, 10)),
+                self.intervals_check,
+                self.jtest_pane,
+                self.param_table,
+                width=540,
+            ),
+            pn.Column(
+                h("#### Datasheet values", margin=(0, 10)),
+                self.datasheet_table,
+                sizing_mode="stretch_width",
+            ),
             sizing_mode="stretch_width",
         )
         # visibility and loading are set on layouts, not on the Bokeh panes (Panel 1.9.4
         # fails on Layoutable changes of a Bokeh pane: "Bokeh.stylesheets items must be str")
         self.resid_box = pn.Column(self.resid_pane, sizing_mode="stretch_width", margin=0)
-        self.plot_box = pn.Column(self.plot_pane, self.resid_box, sizing_mode="stretch_width",
-                                  margin=0)
-        main = [pn.Column(self.alert, *self.session_panel.main(), self.notice, self.warning,
-                          self.status, self.plot_box,
-                          self.summary, tables, sizing_mode="stretch_width")]
+        self.plot_box = pn.Column(
+            self.plot_pane, self.resid_box, sizing_mode="stretch_width", margin=0
+        )
+        main = [
+            pn.Column(
+                self.alert,
+                *self.session_panel.main(),
+                self.notice,
+                self.warning,
+                self.status,
+                self.plot_box,
+                self.summary,
+                tables,
+                sizing_mode="stretch_width",
+            )
+        ]
         self.tabs = pn.Tabs(("Fit", main[0]), dynamic=False, sizing_mode="stretch_width")
         # the other views are built on first opening of their tab (or first use): a page
         # opens with the Fit tab only, about half the models of a page with every tab built
@@ -387,9 +482,16 @@ class GMWMApp:
         self._lazy_factories: dict[str, Callable[[], Any]] = {}
         for title, factory in _lazy_view_factories():
             self._lazy_factories[title] = partial(factory, self)
-            self.tabs.append((title, pn.Column(
-                pn.pane.Markdown(f"Opening {title} ...", margin=(10, 10)),
-                sizing_mode="stretch_width", margin=0)))
+            self.tabs.append(
+                (
+                    title,
+                    pn.Column(
+                        pn.pane.Markdown(f"Opening {title} ...", margin=(10, 10)),
+                        sizing_mode="stretch_width",
+                        margin=0,
+                    ),
+                )
+            )
         self.tabs.param.watch(self._on_tab, "active")
         main = [self.tabs]
         # BootstrapTemplate: every resource is bundled with Panel (the Fast design pulls a web
@@ -398,7 +500,8 @@ class GMWMApp:
             title="GMWM: stochastic calibration of inertial sensors",
             # the sidebar as one root: the template adds each root with a walk of the whole
             # document, so 30 roots made opening a page take twice as long on the server loop
-            sidebar=[pn.Column(*sidebar, sizing_mode="stretch_width", margin=0)], main=main,
+            sidebar=[pn.Column(*sidebar, sizing_mode="stretch_width", margin=0)],
+            main=main,
             sidebar_width=360,
             header_background="#1F4E8C",
         )
@@ -449,8 +552,7 @@ class GMWMApp:
             self.refresh()
         except Exception as e:  # a display problem must not look like a state error
             log.exception("refresh failed")
-            self.alert.param.update(object=f"Display error: {type(e).__name__}: {e}",
-                                    visible=True)
+            self.alert.param.update(object=f"Display error: {type(e).__name__}: {e}", visible=True)
 
     def refresh(self) -> None:
         """Bring every view and widget in line with the state (in place, one batch)."""
@@ -511,7 +613,8 @@ class GMWMApp:
                 f"**{s.filename}** ({kind}, source: {s.source})  \n"
                 f"N = {s.n:,} samples, duration {format_value(s.duration_s)} s "
                 f"({s.duration_s / 3600:.2f} h)  \n"
-                f"fs = {s.fs:g} Hz ({s.fs_source}), unit: {u}, {len(s.wv)} WV levels")
+                f"fs = {s.fs:g} Hz ({s.fs_source}), unit: {u}, {len(s.wv)} WV levels"
+            )
 
     def _refresh_process_list(self) -> None:
         """One row per process from a fixed pool (no new Bokeh models on add/remove)."""
@@ -530,7 +633,8 @@ class GMWMApp:
                     f'<span style="font-size:13px;line-height:28px;white-space:nowrap">'
                     f'<span style="display:inline-block;width:18px;height:4px;'
                     f'margin:0 6px 3px 0;background:{component_color(lab)}"></span>'
-                    f'<b>{lab}</b> {PROCESS_NAMES[p.code]}</span>')
+                    f"<b>{lab}</b> {PROCESS_NAMES[p.code]}</span>"
+                )
                 row.visible = True
             else:
                 row.visible = False
@@ -539,8 +643,15 @@ class GMWMApp:
     def _new_process_row(self) -> None:
         i = len(self._proc_rows)
         label = pn.pane.HTML("", sizing_mode="stretch_width", margin=(0, 10))
-        btn = pn.widgets.Button(label="✕", color="light", width=34, height=28, margin=(0, 5),
-                                css_classes=["gmwm-remove"], description="Remove this process")
+        btn = pn.widgets.Button(
+            label="✕",
+            color="light",
+            width=34,
+            height=28,
+            margin=(0, 5),
+            css_classes=["gmwm-remove"],
+            description="Remove this process",
+        )
         btn.on_click(lambda _e, i=i: self._remove(i))
         row = pn.Row(label, btn, sizing_mode="stretch_width", margin=0, visible=False)
         self._proc_rows.append((row, label, btn))
@@ -562,9 +673,17 @@ class GMWMApp:
         specs = s.slider_specs()
         while len(self._slider_pool) < len(specs):
             i = len(self._slider_pool)
-            w = pn.widgets.FloatSlider(label="", start=0.0, end=1.0, value=0.5, step=0.01,
-                                       format=self._log_format, sizing_mode="stretch_width",
-                                       margin=(2, 10), visible=False)
+            w = pn.widgets.FloatSlider(
+                label="",
+                start=0.0,
+                end=1.0,
+                value=0.5,
+                step=0.01,
+                format=self._log_format,
+                sizing_mode="stretch_width",
+                margin=(2, 10),
+                visible=False,
+            )
             w.param.watch(lambda e, i=i: self._on_slider(i, e.new), "value")
             self._slider_pool.append(w)
             self.sliders.append(w)
@@ -574,10 +693,15 @@ class GMWMApp:
                 sp = specs[i]
                 phi = sp.transform == "log10(1-x)"
                 w.param.update(
-                    label=f"{sp.name} [{sp.unit.replace('^2', '²')}]", start=sp.lo, end=sp.hi,
-                    value=min(max(sp.x, sp.lo), sp.hi), step=(sp.hi - sp.lo) / 600,
+                    label=f"{sp.name} [{sp.unit.replace('^2', '²')}]",
+                    start=sp.lo,
+                    end=sp.hi,
+                    value=min(max(sp.x, sp.lo), sp.hi),
+                    step=(sp.hi - sp.lo) / 600,
                     format=self._phi_format if phi else self._log_format,
-                    bar_color=component_color(sp.label), visible=True)
+                    bar_color=component_color(sp.label),
+                    visible=True,
+                )
             elif w.visible:
                 w.visible = False
 
@@ -647,8 +771,9 @@ class GMWMApp:
         for w in (self.demo_button, self.path_button, self.upload, self.channel_select):
             w.disabled = on
 
-    async def _offload(self, message: str, work: Callable[[], Any] | Future,
-                       apply: Callable[[Any], Any]) -> None:
+    async def _offload(
+        self, message: str, work: Callable[[], Any] | Future, apply: Callable[[Any], Any]
+    ) -> None:
         """Run ``work`` in a worker thread (loading indicator on), then ``apply`` its result.
 
         ``apply`` runs under the document lock. A later job supersedes an earlier one (the
@@ -687,8 +812,9 @@ class GMWMApp:
         """Start reading the data the URL names in a worker thread, while the page loads."""
         query = dict(self._location.query_params) if self._location is not None else {}
         self._query = query
-        self._prefetched = _EXECUTOR.submit(self.state.prepare_query, query,
-                                            self.default_source, self.default_path)
+        self._prefetched = _EXECUTOR.submit(
+            self.state.prepare_query, query, self.default_source, self.default_path
+        )
 
     async def start(self) -> None:
         """Show the data named by the URL (or the default) once the page has opened."""
@@ -697,16 +823,22 @@ class GMWMApp:
         query = self._query
 
         def apply(prepared: Any) -> None:
-            self.state.from_query(query, prepared=prepared, default_source=self.default_source,
-                                  default_path=self.default_path)
+            self.state.from_query(
+                query,
+                prepared=prepared,
+                default_source=self.default_source,
+                default_path=self.default_path,
+            )
 
-        await self._offload("Loading the data and computing its wavelet variance",
-                            self._prefetched, apply)
+        await self._offload(
+            "Loading the data and computing its wavelet variance", self._prefetched, apply
+        )
 
     def start_sync(self) -> None:
         """Synchronous :meth:`start` (no server: tests, notebooks)."""
-        self.state.from_query({}, default_source=self.default_source,
-                              default_path=self.default_path)
+        self.state.from_query(
+            {}, default_source=self.default_source, default_path=self.default_path
+        )
         self._ready = True
 
     # -------------------------------------------------------------------------------------
@@ -722,8 +854,14 @@ class GMWMApp:
         return loaded
 
     def _on_demo(self, _event: Any = None) -> None:
-        self._spawn(partial(self._offload, "Loading the demo log",
-                            partial(self._read_and_warm, "demo"), self._install))
+        self._spawn(
+            partial(
+                self._offload,
+                "Loading the demo log",
+                partial(self._read_and_warm, "demo"),
+                self._install,
+            )
+        )
 
     def _on_upload(self, event: Any) -> None:
         files = event.new or {}
@@ -735,18 +873,28 @@ class GMWMApp:
             self._install(loaded)
             self.upload.value = {}  # the log is in the state now; free the upload's bytes
 
-        self._spawn(partial(self._offload, f"Reading {name}",
-                            partial(self._read_and_warm, "upload", data=data, filename=name),
-                            apply))
+        self._spawn(
+            partial(
+                self._offload,
+                f"Reading {name}",
+                partial(self._read_and_warm, "upload", data=data, filename=name),
+                apply,
+            )
+        )
 
     def _on_path(self, _event: Any = None) -> None:
         path = (self.path_input.value_input or self.path_input.value or "").strip()
         if not path:
             self.state.report_error("Type the path of a log file on the server first")
             return
-        self._spawn(partial(self._offload, f"Reading {path}",
-                            partial(self._read_and_warm, "path", path=path),
-                            self._install))
+        self._spawn(
+            partial(
+                self._offload,
+                f"Reading {path}",
+                partial(self._read_and_warm, "path", path=path),
+                self._install,
+            )
+        )
 
     def _install(self, loaded: Any) -> None:
         """Make newly read data the session's (and remember how they were read)."""
@@ -759,18 +907,28 @@ class GMWMApp:
         if self._syncing or not event.new or event.new == self.state.channel:
             return
         ch = event.new
-        self._spawn(partial(self._offload, f"Computing the wavelet variance of {ch}",
-                            partial(self.state.warm, ch),
-                            lambda _out: self.state.select_channel(ch)))
+        self._spawn(
+            partial(
+                self._offload,
+                f"Computing the wavelet variance of {ch}",
+                partial(self.state.warm, ch),
+                lambda _out: self.state.select_channel(ch),
+            )
+        )
 
     def _on_robust(self, event: Any) -> None:
         if self._syncing or bool(event.new) == self.state.robust:
             return
         rob = bool(event.new)
         what = "robust" if rob else "classical"
-        self._spawn(partial(self._offload, f"Computing the {what} wavelet variance",
-                            partial(self.state.warm, robust=rob),
-                            lambda _out: self._after_robust(rob)))
+        self._spawn(
+            partial(
+                self._offload,
+                f"Computing the {what} wavelet variance",
+                partial(self.state.warm, robust=rob),
+                lambda _out: self._after_robust(rob),
+            )
+        )
 
     def _after_robust(self, rob: bool) -> None:
         if not self.state.set_robust(rob):
@@ -789,8 +947,11 @@ class GMWMApp:
         self.state.remove_process(index)
 
     def _on_spec(self, _event: Any = None) -> None:
-        spec = self.spec_input.value_input if self.spec_input.value_input is not None \
+        spec = (
+            self.spec_input.value_input
+            if self.spec_input.value_input is not None
             else self.spec_input.value
+        )
         if not self.state.set_model(spec or ""):
             self.refresh()
 
@@ -853,6 +1014,7 @@ def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn
 
 def create_app_factory(path: str | None = None) -> Callable[[], pn.viewable.Viewable]:
     """A function that builds a fresh page per session (for ``pn.serve``), preloading ``path``."""
+
     def factory() -> pn.viewable.Viewable:
         if path:
             return create_app(source="path", path=str(path))
@@ -912,8 +1074,9 @@ def create_application(path: str | None = None) -> Any:
             try:
                 # in a context of its own: whatever the build leaves in context variables
                 # (Panel's current document) must not stay with the pool's thread
-                await loop.run_in_executor(_build_pool(), contextvars.Context().run,
-                                           self._build, doc)
+                await loop.run_in_executor(
+                    _build_pool(), contextvars.Context().run, self._build, doc
+                )
             except Exception:  # built again on the loop by modify_document
                 log.exception("building the page off the loop failed; building it on the loop")
 
@@ -933,8 +1096,11 @@ def create_application(path: str | None = None) -> Any:
                 raise
             finally:
                 pn_state._launching.discard(doc)
-            doc.config.update(reconnect_session=pn.config.reconnect is True,
-                              notifications=None, notify_connection_status=False)
+            doc.config.update(
+                reconnect_session=pn.config.reconnect is True,
+                notifications=None,
+                notify_connection_status=False,
+            )
             if not doc.roots:
                 raise RuntimeError("the page factory produced an empty document")
             # Bokeh validates the document after the handlers ran, on the loop (a walk of

@@ -13,8 +13,15 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["DEFAULT_MAX_UPLOAD_MB", "ServerLimits", "configure", "current", "default_data_dirs",
-           "check_path", "check_upload_size"]
+__all__ = [
+    "DEFAULT_MAX_UPLOAD_MB",
+    "ServerLimits",
+    "configure",
+    "current",
+    "default_data_dirs",
+    "check_path",
+    "check_upload_size",
+]
 
 #: Upload limit (MB) when none is configured.
 DEFAULT_MAX_UPLOAD_MB = 200.0
@@ -46,9 +53,12 @@ def default_data_dirs() -> list[Path]:
     return [p.resolve() for p in out if p.is_dir()]
 
 
-def configure(*, max_upload_mb: float | None = None,
-              data_dirs: Iterable[str | os.PathLike[str]] | None = None,
-              allowed_files: Iterable[str | os.PathLike[str]] = ()) -> ServerLimits:
+def configure(
+    *,
+    max_upload_mb: float | None = None,
+    data_dirs: Iterable[str | os.PathLike[str]] | None = None,
+    allowed_files: Iterable[str | os.PathLike[str]] = (),
+) -> ServerLimits:
     """Set the limits of this process (every session); returns them.
 
     ``data_dirs=None`` lifts the folder restriction; ``max_upload_mb=None`` keeps the default.
@@ -78,8 +88,10 @@ def check_path(path: str | os.PathLike[str]) -> Path:
     if r in lim.allowed_files or any(r.is_relative_to(d) for d in lim.data_dirs):
         return p
     dirs = ", ".join(str(d) for d in lim.data_dirs) or "none"
-    raise ValueError(f"{p} is outside the folders this server may read ({dirs}): copy the file "
-                     "into one of them, upload it, or start gmwm-app with --data-dir FOLDER")
+    raise ValueError(
+        f"{p} is outside the folders this server may read ({dirs}): copy the file "
+        "into one of them, upload it, or start gmwm-app with --data-dir FOLDER"
+    )
 
 
 def check_upload_size(n_bytes: int, name: str = "") -> None:
@@ -87,6 +99,8 @@ def check_upload_size(n_bytes: int, name: str = "") -> None:
     lim = _LIMITS
     if n_bytes > lim.max_upload_bytes:
         what = f"the uploaded file {name}" if name else "the uploaded file"
-        raise ValueError(f"{what} is {n_bytes / 1e6:.1f} MB, more than this server accepts "
-                         f"({lim.max_upload_mb:g} MB): put it in a data folder of the server "
-                         "and load it by path, or start gmwm-app with a larger --max-upload-mb")
+        raise ValueError(
+            f"{what} is {n_bytes / 1e6:.1f} MB, more than this server accepts "
+            f"({lim.max_upload_mb:g} MB): put it in a data folder of the server "
+            "and load it by path, or start gmwm-app with a larger --max-upload-mb"
+        )

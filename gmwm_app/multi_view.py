@@ -142,12 +142,16 @@ def parse_overrides(text: str, channels: Sequence[str]) -> dict[str, str]:
             continue
         name, sep, spec = line.partition(":")
         if not sep or not name.strip() or not spec.strip():
-            raise ModelError(f"cannot read the per-channel line {raw.strip()!r}: write "
-                             "'channel: spec', e.g. 'gyro_z: GM+WN+RW'")
+            raise ModelError(
+                f"cannot read the per-channel line {raw.strip()!r}: write "
+                "'channel: spec', e.g. 'gyro_z: GM+WN+RW'"
+            )
         name = name.strip()
         if name not in channels:
-            raise ModelError(f"the per-channel line names {name!r}, which is not among the "
-                             f"chosen channels ({', '.join(channels)})")
+            raise ModelError(
+                f"the per-channel line names {name!r}, which is not among the "
+                f"chosen channels ({', '.join(channels)})"
+            )
         out[name] = spec.strip()
     return out
 
@@ -168,8 +172,12 @@ def shareable_labels(models: Mapping[str, eg.Model]) -> list[tuple[str, list[str
     return [(lab, has[lab]) for lab in order]
 
 
-def build_model(channels: Sequence[str], spec: str, overrides: str = "",
-                shared: Mapping[str, Sequence[str]] | None = None) -> MultiModel:
+def build_model(
+    channels: Sequence[str],
+    spec: str,
+    overrides: str = "",
+    shared: Mapping[str, Sequence[str]] | None = None,
+) -> MultiModel:
     """The multivariate model of the view's controls.
 
     Parameters
@@ -195,8 +203,9 @@ def build_model(channels: Sequence[str], spec: str, overrides: str = "",
     """
     chans = list(channels)
     if len(chans) < MIN_CHANNELS:
-        raise ModelError(f"choose at least {MIN_CHANNELS} channels (chosen: "
-                         f"{', '.join(chans) or 'none'})")
+        raise ModelError(
+            f"choose at least {MIN_CHANNELS} channels (chosen: {', '.join(chans) or 'none'})"
+        )
     if not (spec or "").strip():
         raise ModelError("the model is empty: type a per-channel model, e.g. WN+RW")
     base = parse_model(spec)
@@ -228,27 +237,45 @@ def _empirical(wvm: eg.WVMatrix, p: int, q: int) -> dict[str, Any]:
     lo = np.asarray(wvm.ci_low[:, p, q], float)
     hi = np.asarray(wvm.ci_high[:, p, q], float)
     tau_s = np.asarray(wvm.tau_s, float)
-    base = {"tau_s": tau_s, "level": np.asarray(wvm.levels), "value": v, "ci_low": lo,
-            "ci_high": hi}
+    base = {
+        "tau_s": tau_s,
+        "level": np.asarray(wvm.levels),
+        "value": v,
+        "ci_low": lo,
+        "ci_high": hi,
+    }
     if p == q:
-        return {**base, "y": _nan_unless(v > 0, v), "y_low": _nan_unless(lo > 0, lo),
-                "y_high": _nan_unless(hi > 0, hi), "fill": [EMPIRICAL_COLOR] * v.size,
-                "sign": ["+" if x >= 0 else "-" for x in v]}
+        return {
+            **base,
+            "y": _nan_unless(v > 0, v),
+            "y_low": _nan_unless(lo > 0, lo),
+            "y_high": _nan_unless(hi > 0, hi),
+            "fill": [EMPIRICAL_COLOR] * v.size,
+            "sign": ["+" if x >= 0 else "-" for x in v],
+        }
     a = np.abs(v)
     straddle = (lo <= 0) & (hi >= 0)
-    ends = np.concatenate([a[a > 0], np.abs(lo)[~straddle & (lo != 0)],
-                           np.abs(hi)[~straddle & (hi != 0)]])
+    ends = np.concatenate(
+        [a[a > 0], np.abs(lo)[~straddle & (lo != 0)], np.abs(hi)[~straddle & (hi != 0)]]
+    )
     floor = 0.5 * float(ends.min()) if ends.size else 1e-300
     y_low = np.where(straddle, floor, np.minimum(np.abs(lo), np.abs(hi)))
     y_high = np.maximum(np.abs(lo), np.abs(hi))
-    return {**base, "y": _nan_unless(a > 0, a), "y_low": y_low, "y_high": y_high,
-            "fill": [EMPIRICAL_COLOR if x >= 0 else _HOLLOW for x in v],
-            "sign": ["+" if x >= 0 else "-" for x in v]}
+    return {
+        **base,
+        "y": _nan_unless(a > 0, a),
+        "y_low": y_low,
+        "y_high": y_high,
+        "fill": [EMPIRICAL_COLOR if x >= 0 else _HOLLOW for x in v],
+        "sign": ["+" if x >= 0 else "-" for x in v],
+    }
 
 
 def _empty_emp() -> dict[str, Any]:
-    return {k: np.zeros(0) for k in ("tau_s", "level", "value", "ci_low", "ci_high", "y",
-                                     "y_low", "y_high")} | {"fill": [], "sign": []}
+    return {
+        k: np.zeros(0)
+        for k in ("tau_s", "level", "value", "ci_low", "ci_high", "y", "y_low", "y_high")
+    } | {"fill": [], "sign": []}
 
 
 def _empty_total() -> dict[str, Any]:
@@ -264,8 +291,9 @@ def _color_label(key: str) -> str:
     return key.rpartition(":")[2]
 
 
-def grid_data(wvm: eg.WVMatrix, result: Any = None, per_octave: int = PER_OCTAVE
-              ) -> dict[tuple[int, int], dict[str, Any]]:
+def grid_data(
+    wvm: eg.WVMatrix, result: Any = None, per_octave: int = PER_OCTAVE
+) -> dict[tuple[int, int], dict[str, Any]]:
     """The data of every cell of the grid (row p, column q, q <= p).
 
     Parameters
@@ -299,20 +327,32 @@ def grid_data(wvm: eg.WVMatrix, result: Any = None, per_octave: int = PER_OCTAVE
         total = np.sum(np.array(list(comps.values())), axis=0)
     for p in range(k):
         for q in range(p + 1):
-            cell: dict[str, Any] = {"emp": _empirical(wvm, p, q), "total": _empty_total(),
-                                    "components": []}
+            cell: dict[str, Any] = {
+                "emp": _empirical(wvm, p, q),
+                "total": _empty_total(),
+                "components": [],
+            }
             if result is not None:
                 t = total[:, p, q]
-                cell["total"] = {"tau_s": tau_s, "value": t,
-                                 "pos": _nan_unless(t > 0, t), "neg": _nan_unless(t < 0, -t)}
+                cell["total"] = {
+                    "tau_s": tau_s,
+                    "value": t,
+                    "pos": _nan_unless(t > 0, t),
+                    "neg": _nan_unless(t < 0, -t),
+                }
                 for key, arr in comps.items():
                     y = arr[:, p, q]
                     if not np.any(y != 0):
                         continue
                     neg = bool(np.sum(y) < 0)
                     cell["components"].append(
-                        (key, _color_label(key), neg,
-                         {"tau_s": tau_s, "wv": _nan_unless(y != 0, np.abs(y))}))
+                        (
+                            key,
+                            _color_label(key),
+                            neg,
+                            {"tau_s": tau_s, "wv": _nan_unless(y != 0, np.abs(y))},
+                        )
+                    )
             out[(p, q)] = cell
     return out
 
@@ -348,7 +388,7 @@ def covariance_rows(result: Any) -> dict[str, list[Any]]:
         for a in range(len(g)):
             for b in range(a, len(g)):
                 ua, ub = units[a], units[b]
-                unit = (squared(ua or "u") if ua == ub else f"{ua or 'u'}·{ub or 'u'}")
+                unit = squared(ua or "u") if ua == ub else f"{ua or 'u'}·{ub or 'u'}"
                 rows["process"].append(name)
                 rows["channel_a"].append(g[a])
                 rows["channel_b"].append(g[b])
@@ -370,7 +410,7 @@ def parameter_rows(result: Any) -> dict[str, list[Any]]:
             continue
         chans = r["channels"]
         if len(chans) == 1 and name.startswith(chans[0] + "."):
-            lab, _, pname = name[len(chans[0]) + 1:].partition(".")
+            lab, _, pname = name[len(chans[0]) + 1 :].partition(".")
             ch = chans[0]
         else:
             lab, _, pname = name.partition(".")
@@ -388,10 +428,12 @@ def fit_text(result: Any) -> str:
     if result is None:
         return ""
     w = result.wvm
-    parts = [f"**Objective** {format_value(result.objective)} [1] ({result.weights_name} "
-             f"weights) for **{html.escape(result.model.spec())}**: {w.k} channels, "
-             f"N = {w.n:,}, fs = {w.fs:g} Hz, {w.n_levels} levels; {result.method}, "
-             f"{result.n_evaluations} evaluations, {1e3 * result.elapsed_s:.0f} ms."]
+    parts = [
+        f"**Objective** {format_value(result.objective)} [1] ({result.weights_name} "
+        f"weights) for **{html.escape(result.model.spec())}**: {w.k} channels, "
+        f"N = {w.n:,}, fs = {w.fs:g} Hz, {w.n_levels} levels; {result.method}, "
+        f"{result.n_evaluations} evaluations, {1e3 * result.elapsed_s:.0f} ms."
+    ]
     if result.psd_active:
         parts.append("A covariance is on the edge of positive semi-definiteness.")
     if result.at_bound:
@@ -405,8 +447,14 @@ class Cancelled(Exception):
     """Raised by the progress callback when the user cancels the dependence test."""
 
 
-def run_dependence_test(wvm: eg.WVMatrix, model: MultiModel, *, B: int = 100, seed: int = 0,
-                        progress: Callable[[int, int], None] | None = None) -> DependenceTest:
+def run_dependence_test(
+    wvm: eg.WVMatrix,
+    model: MultiModel,
+    *,
+    B: int = 100,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+) -> DependenceTest:
     """:func:`engine.dependence_test` of every shared process (``weights="ci"``, one worker).
 
     ``progress(done, B)`` is called first with ``done = 0`` and then after every replicate;
@@ -422,23 +470,29 @@ def run_dependence_test(wvm: eg.WVMatrix, model: MultiModel, *, B: int = 100, se
     if B < 1:
         raise ValueError(f"B must be at least 1, got {B}")
     if not model.shared:
-        raise ModelError("the model shares no process: mark the channels that share one "
-                         "first (nothing to test)")
+        raise ModelError(
+            "the model shares no process: mark the channels that share one first (nothing to test)"
+        )
     if progress is not None:
         progress(0, B)  # the two observed fits come first
-    return eg.dependence_test(wvm, model, B=B, seed=seed, workers=1, weights="ci",
-                              progress=progress)
+    return eg.dependence_test(
+        wvm, model, B=B, seed=seed, workers=1, weights="ci", progress=progress
+    )
 
 
 def dependence_text(t: DependenceTest, spec: str) -> str:
     """The test's outcome in words (Markdown)."""
-    verdict = ("the channels are dependent (the shared covariances improve the fit more "
-               "than chance)" if t.p_value < 0.05 else
-               "no evidence of dependence at the 5% level")
-    return (f"**Dependence test** of {', '.join(t.labels)} in *{html.escape(spec)}*: "
-            f"D = Q(independent) - Q(shared) = {format_value(t.statistic)} [1], "
-            f"p = {format_value(t.p_value, 3)} from {t.B} parametric-bootstrap replicates: "
-            f"{verdict}.")
+    verdict = (
+        "the channels are dependent (the shared covariances improve the fit more than chance)"
+        if t.p_value < 0.05
+        else "no evidence of dependence at the 5% level"
+    )
+    return (
+        f"**Dependence test** of {', '.join(t.labels)} in *{html.escape(spec)}*: "
+        f"D = Q(independent) - Q(shared) = {format_value(t.statistic)} [1], "
+        f"p = {format_value(t.p_value, 3)} from {t.B} parametric-bootstrap replicates: "
+        f"{verdict}."
+    )
 
 
 # -----------------------------------------------------------------------------------------
@@ -448,35 +502,74 @@ class _Cell:
     """One small log-log figure of the grid."""
 
     def __init__(self, diag: bool, x_range: Any, size: int, name: str) -> None:
-        p = figure(x_axis_type="log", y_axis_type="log", width=size, height=int(0.8 * size),
-                   x_range=x_range, tools="pan,wheel_zoom,box_zoom,reset,save",
-                   name=name, title="", min_border_left=5, min_border_right=5)
+        p = figure(
+            x_axis_type="log",
+            y_axis_type="log",
+            width=size,
+            height=int(0.8 * size),
+            x_range=x_range,
+            tools="pan,wheel_zoom,box_zoom,reset,save",
+            name=name,
+            title="",
+            min_border_left=5,
+            min_border_right=5,
+        )
         p.title.text_font_size = "12px"
         p.grid.grid_line_alpha = 0.35
         p.axis.major_label_text_font_size = "10px"
         self.diag = diag
         self.emp = ColumnDataSource(_empty_emp())
         if diag:
-            p.varea(x="tau_s", y1="y_low", y2="y_high", source=self.emp,
-                    fill_color=BAND_COLOR, fill_alpha=0.25)
+            p.varea(
+                x="tau_s",
+                y1="y_low",
+                y2="y_high",
+                source=self.emp,
+                fill_color=BAND_COLOR,
+                fill_alpha=0.25,
+            )
             p.line("tau_s", "y", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.2)
         else:
-            p.segment(x0="tau_s", y0="y_low", x1="tau_s", y1="y_high", source=self.emp,
-                      line_color=BAND_COLOR, line_width=2, line_alpha=0.7)
-        dots = p.scatter("tau_s", "y", source=self.emp, size=5, fill_color="fill",
-                         line_color=EMPIRICAL_COLOR)
-        p.add_tools(HoverTool(renderers=[dots], tooltips=[
-            ("level", "@level"), ("τ [s]", "@tau_s{0.[000]e}"),
-            ("estimate", "@value{0.000e}"), ("95% interval", "@ci_low{0.00e} .. @ci_high{0.00e}"),
-        ]))
+            p.segment(
+                x0="tau_s",
+                y0="y_low",
+                x1="tau_s",
+                y1="y_high",
+                source=self.emp,
+                line_color=BAND_COLOR,
+                line_width=2,
+                line_alpha=0.7,
+            )
+        dots = p.scatter(
+            "tau_s", "y", source=self.emp, size=5, fill_color="fill", line_color=EMPIRICAL_COLOR
+        )
+        p.add_tools(
+            HoverTool(
+                renderers=[dots],
+                tooltips=[
+                    ("level", "@level"),
+                    ("τ [s]", "@tau_s{0.[000]e}"),
+                    ("estimate", "@value{0.000e}"),
+                    ("95% interval", "@ci_low{0.00e} .. @ci_high{0.00e}"),
+                ],
+            )
+        )
         self.comps = [ColumnDataSource(_empty_comp()) for _ in range(N_CELL_COMPONENTS)]
-        self.comp_renderers = [p.line("tau_s", "wv", source=s, line_width=1.6,
-                                      line_dash="dashed", visible=False) for s in self.comps]
+        self.comp_renderers = [
+            p.line("tau_s", "wv", source=s, line_width=1.6, line_dash="dashed", visible=False)
+            for s in self.comps
+        ]
         self.total = ColumnDataSource(_empty_total())
         p.line("tau_s", "pos", source=self.total, line_color=TOTAL_COLOR, line_width=2.2)
         if not diag:
-            p.line("tau_s", "neg", source=self.total, line_color=TOTAL_COLOR, line_width=2.2,
-                   line_dash="dotted")
+            p.line(
+                "tau_s",
+                "neg",
+                source=self.total,
+                line_color=TOTAL_COLOR,
+                line_width=2.2,
+                line_dash="dotted",
+            )
         self.figure = p
 
     def update(self, data: dict[str, Any] | None, title: str, ylabel: str) -> None:
@@ -543,14 +636,27 @@ class _Grid:
             cell.update(data[(p, q)], title, ylab if q == 0 else "")
 
 
-def _table(columns: Sequence[tuple[str, str, int, Any]], name: str, css: str, height: int
-           ) -> tuple[ColumnDataSource, DataTable]:
+def _table(
+    columns: Sequence[tuple[str, str, int, Any]], name: str, css: str, height: int
+) -> tuple[ColumnDataSource, DataTable]:
     src = ColumnDataSource({c: [] for c, *_ in columns}, name=f"{name}_rows")
-    cols = [TableColumn(field=c, title=t, width=w, formatter=f or StringFormatter(),
-                        sortable=False) for c, t, w, f in columns]
-    table = DataTable(source=src, columns=cols, index_position=None, sortable=False,
-                      selectable=False, autosize_mode="force_fit", height=height,
-                      row_height=26, sizing_mode="stretch_width", name=name, css_classes=[css])
+    cols = [
+        TableColumn(field=c, title=t, width=w, formatter=f or StringFormatter(), sortable=False)
+        for c, t, w, f in columns
+    ]
+    table = DataTable(
+        source=src,
+        columns=cols,
+        index_position=None,
+        sortable=False,
+        selectable=False,
+        autosize_mode="force_fit",
+        height=height,
+        row_height=26,
+        sizing_mode="stretch_width",
+        name=name,
+        css_classes=[css],
+    )
     return src, table
 
 
@@ -606,69 +712,116 @@ class MultiView:
         self.grid: _Grid | None = None
 
         self.channel_choice = pn.widgets.MultiChoice(
-            label=f"Channels ({MIN_CHANNELS} to {MAX_CHANNELS}, in grid order)", options=[],
-            value=[], max_items=MAX_CHANNELS, sizing_mode="stretch_width",
-            css_classes=["gmwm-mchannels"])
+            label=f"Channels ({MIN_CHANNELS} to {MAX_CHANNELS}, in grid order)",
+            options=[],
+            value=[],
+            max_items=MAX_CHANNELS,
+            sizing_mode="stretch_width",
+            css_classes=["gmwm-mchannels"],
+        )
         self.channel_choice.param.watch(self._on_channels, "value")
         self.spec_input = pn.widgets.TextInput(
-            label="Model of every channel (press Enter)", value=DEFAULT_SPEC,
-            placeholder="e.g. WN+RW or GM+WN+RW", width=260, css_classes=["gmwm-mspec"])
+            label="Model of every channel (press Enter)",
+            value=DEFAULT_SPEC,
+            placeholder="e.g. WN+RW or GM+WN+RW",
+            width=260,
+            css_classes=["gmwm-mspec"],
+        )
         self.spec_input.param.watch(self._on_control, "value")
         self.override_input = pn.widgets.TextAreaInput(
             label="Other models for some channels (optional, one 'channel: spec' per line)",
-            value="", placeholder="gyro_z: 2*GM+WN+RW", height=62, sizing_mode="stretch_width")
+            value="",
+            placeholder="gyro_z: 2*GM+WN+RW",
+            height=62,
+            sizing_mode="stretch_width",
+        )
         self.override_input.param.watch(self._on_control, "value")
         self.share_widgets: list[pn.widgets.MultiChoice] = []
         self.share_box = pn.FlexBox(margin=0, sizing_mode="stretch_width")
         for i in range(N_SHARE_POOL):
             self._new_share_widget(i)
-        self.share_note = pn.pane.Markdown("", margin=(0, 10),
-                                           styles={"font-size": "12px", "color": "#555"})
+        self.share_note = pn.pane.Markdown(
+            "", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}
+        )
 
-        self.alert = pn.pane.Alert("", alert_type="danger", visible=False,
-                                   sizing_mode="stretch_width", margin=(5, 10))
-        self.notice = pn.pane.Alert("", alert_type="info", visible=False,
-                                    sizing_mode="stretch_width", margin=(5, 10))
-        self.spinner = pn.indicators.LoadingSpinner(value=True, size=18, visible=False,
-                                                    margin=(8, 0, 0, 10))
-        self.status = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
-                                       styles={"color": "#555", "font-size": "13px"})
+        self.alert = pn.pane.Alert(
+            "", alert_type="danger", visible=False, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.notice = pn.pane.Alert(
+            "", alert_type="info", visible=False, sizing_mode="stretch_width", margin=(5, 10)
+        )
+        self.spinner = pn.indicators.LoadingSpinner(
+            value=True, size=18, visible=False, margin=(8, 0, 0, 10)
+        )
+        self.status = pn.pane.Markdown(
+            "",
+            sizing_mode="stretch_width",
+            margin=(0, 10),
+            styles={"color": "#555", "font-size": "13px"},
+        )
         self.legend = pn.pane.HTML("", sizing_mode="stretch_width", margin=(0, 10))
         self.grid_box = pn.Column(margin=0, sizing_mode="stretch_width")
-        self.fit_info = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
-                                         css_classes=["gmwm-mobjective"])
+        self.fit_info = pn.pane.Markdown(
+            "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mobjective"]
+        )
         sci = ScientificFormatter(precision=4)
         self.cov_source, self.cov_table = _table(
-            [("process", "shared process", 150, None), ("channel_a", "channel", 80, None),
-             ("channel_b", "with", 80, None), ("covariance", "covariance", 95, sci),
-             ("unit", "unit", 80, None),
-             ("correlation", "correlation [1]", 110, NumberFormatter(format="0.0000"))],
-            "mgmwm_cov", "gmwm-mcov", 300)
+            [
+                ("process", "shared process", 150, None),
+                ("channel_a", "channel", 80, None),
+                ("channel_b", "with", 80, None),
+                ("covariance", "covariance", 95, sci),
+                ("unit", "unit", 80, None),
+                ("correlation", "correlation [1]", 110, NumberFormatter(format="0.0000")),
+            ],
+            "mgmwm_cov",
+            "gmwm-mcov",
+            300,
+        )
         self.param_source, self.param_table = _table(
-            [("channel", "channel", 110, None), ("process", "process", 60, None),
-             ("parameter", "parameter", 75, None), ("value", "value", 95, sci),
-             ("unit", "unit", 80, None)],
-            "mgmwm_params", "gmwm-mparams", 300)
+            [
+                ("channel", "channel", 110, None),
+                ("process", "process", 60, None),
+                ("parameter", "parameter", 75, None),
+                ("value", "value", 95, sci),
+                ("unit", "unit", 80, None),
+            ],
+            "mgmwm_params",
+            "gmwm-mparams",
+            300,
+        )
 
         self.dep_running = False
         self.dependence: DependenceTest | None = None
         self._dep_cancel = threading.Event()
         self._dep_last = 0.0
-        self.dep_b = pn.widgets.IntInput(label="Bootstrap replicates B", value=100, start=10,
-                                         end=2000, step=10, width=170)
-        self.dep_button = pn.widgets.Button(label="Test dependence", color="primary",
-                                            width=150, margin=(22, 5, 5, 10),
-                                            description="Parametric bootstrap of the objective "
-                                                        "difference (shared vs independent)")
+        self.dep_b = pn.widgets.IntInput(
+            label="Bootstrap replicates B", value=100, start=10, end=2000, step=10, width=170
+        )
+        self.dep_button = pn.widgets.Button(
+            label="Test dependence",
+            color="primary",
+            width=150,
+            margin=(22, 5, 5, 10),
+            description="Parametric bootstrap of the objective difference (shared vs independent)",
+        )
         self.dep_button.on_click(lambda _e: self.start_dependence_test())
-        self.dep_cancel = pn.widgets.Button(label="Cancel", color="light", width=90,
-                                            margin=(22, 5, 5, 5), disabled=True)
+        self.dep_cancel = pn.widgets.Button(
+            label="Cancel", color="light", width=90, margin=(22, 5, 5, 5), disabled=True
+        )
         self.dep_cancel.on_click(lambda _e: self.cancel_dependence_test())
-        self.dep_progress = pn.indicators.Progress(value=0, max=100, bar_color="primary",
-                                                   height=14, visible=False,
-                                                   sizing_mode="stretch_width", margin=(0, 10))
-        self.dep_text = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
-                                         css_classes=["gmwm-mdependence"])
+        self.dep_progress = pn.indicators.Progress(
+            value=0,
+            max=100,
+            bar_color="primary",
+            height=14,
+            visible=False,
+            sizing_mode="stretch_width",
+            margin=(0, 10),
+        )
+        self.dep_text = pn.pane.Markdown(
+            "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mdependence"]
+        )
 
         h = pn.pane.Markdown
         small = {"font-size": "12px", "color": "#555"}
@@ -680,32 +833,48 @@ class MultiView:
             "Red: the fitted model's total; coloured dashed: one process each; dotted: "
             "where a curve is negative. Above the diagonal: the same as below (symmetric), "
             "left empty. The WCCV is classical (no robust WCCV yet).",
-            margin=(0, 10), styles=small)
+            margin=(0, 10),
+            styles=small,
+        )
         self.panel = pn.Column(
-            h("#### Several channels: wavelet cross-covariance and the multivariate GMWM",
-              margin=(0, 10)),
-            self.alert, self.notice,
+            h(
+                "#### Several channels: wavelet cross-covariance and the multivariate GMWM",
+                margin=(0, 10),
+            ),
+            self.alert,
+            self.notice,
             pn.Row(self.channel_choice, self.spec_input, sizing_mode="stretch_width"),
             self.override_input,
-            h("**Shared processes**: pick the channels that share each process (a shared "
-              "WN, RW, AR1 or GM has a covariance matrix over its channels; QN and DR are "
-              "per channel only; fewer than 2 channels = independent).", margin=(0, 10),
-              styles=small),
-            self.share_box, self.share_note,
+            h(
+                "**Shared processes**: pick the channels that share each process (a shared "
+                "WN, RW, AR1 or GM has a covariance matrix over its channels; QN and DR are "
+                "per channel only; fewer than 2 channels = independent).",
+                margin=(0, 10),
+                styles=small,
+            ),
+            self.share_box,
+            self.share_note,
             pn.Row(self.spinner, self.status, sizing_mode="stretch_width"),
-            self.caption, self.legend, self.grid_box, self.fit_info,
-            pn.Row(pn.Column(h("##### Shared processes: covariance and correlation",
-                               margin=(0, 10)),
-                             pn.pane.Bokeh(self.cov_table, sizing_mode="stretch_width",
-                                           margin=(5, 10)),
-                             sizing_mode="stretch_width"),
-                   pn.Column(h("##### Per-channel parameters", margin=(0, 10)),
-                             pn.pane.Bokeh(self.param_table, sizing_mode="stretch_width",
-                                           margin=(5, 10)),
-                             sizing_mode="stretch_width"),
-                   sizing_mode="stretch_width"),
+            self.caption,
+            self.legend,
+            self.grid_box,
+            self.fit_info,
+            pn.Row(
+                pn.Column(
+                    h("##### Shared processes: covariance and correlation", margin=(0, 10)),
+                    pn.pane.Bokeh(self.cov_table, sizing_mode="stretch_width", margin=(5, 10)),
+                    sizing_mode="stretch_width",
+                ),
+                pn.Column(
+                    h("##### Per-channel parameters", margin=(0, 10)),
+                    pn.pane.Bokeh(self.param_table, sizing_mode="stretch_width", margin=(5, 10)),
+                    sizing_mode="stretch_width",
+                ),
+                sizing_mode="stretch_width",
+            ),
             pn.Row(self.dep_button, self.dep_b, self.dep_cancel, sizing_mode="stretch_width"),
-            self.dep_progress, self.dep_text,
+            self.dep_progress,
+            self.dep_text,
             sizing_mode="stretch_width",
         )
         self.state.param.watch(self._on_state, "revision")
@@ -718,9 +887,15 @@ class MultiView:
     # controls
     # ------------------------------------------------------------------------------------
     def _new_share_widget(self, i: int) -> None:
-        w = pn.widgets.MultiChoice(label="", options=[], value=[], visible=False,
-                                   width=330, margin=(2, 10),
-                                   css_classes=[f"gmwm-mshare-{i}"])
+        w = pn.widgets.MultiChoice(
+            label="",
+            options=[],
+            value=[],
+            visible=False,
+            width=330,
+            margin=(2, 10),
+            css_classes=[f"gmwm-mshare-{i}"],
+        )
         w.param.watch(lambda e, i=i: self._on_share(i, e.new), "value")
         self.share_widgets.append(w)
         self.share_box.append(w)
@@ -730,8 +905,10 @@ class MultiView:
         try:
             return self.share_widgets[self._share_labels.index(label)]
         except ValueError:
-            raise KeyError(f"no shareable process {label!r} in the model; shareable: "
-                           f"{', '.join(self._share_labels) or 'none'}") from None
+            raise KeyError(
+                f"no shareable process {label!r} in the model; shareable: "
+                f"{', '.join(self._share_labels) or 'none'}"
+            ) from None
 
     @property
     def shared_groups(self) -> dict[str, list[str]]:
@@ -766,14 +943,16 @@ class MultiView:
                 if i < len(labels):
                     lab, has = labels[i]
                     val = [c for c in groups.get(lab, []) if c in has]
-                    w.param.update(label=f"{lab} shared by", options=list(has), value=val,
-                                   visible=True)
+                    w.param.update(
+                        label=f"{lab} shared by", options=list(has), value=val, visible=True
+                    )
                 elif w.visible:
                     w.param.update(options=[], value=[], visible=False)
         finally:
             self._syncing = False
-        own = sorted({p.code for m in models.values() for p in m.processes
-                      if p.code not in SHAREABLE})
+        own = sorted(
+            {p.code for m in models.values() for p in m.processes if p.code not in SHAREABLE}
+        )
         self.share_note.object = f"{', '.join(own)}: per channel only." if own else ""
 
     def _on_share(self, i: int, value: list[str]) -> None:
@@ -798,8 +977,9 @@ class MultiView:
 
     def set_shared(self, label: str, channels: Sequence[str]) -> None:
         """Mark the channels that share ``label`` (fewer than 2: not shared) and refit."""
-        self.share_control(label).value = [c for c in self.channel_choice.value
-                                           if c in set(channels)]
+        self.share_control(label).value = [
+            c for c in self.channel_choice.value if c in set(channels)
+        ]
 
     # ------------------------------------------------------------------------------------
     # following the session's data
@@ -857,8 +1037,7 @@ class MultiView:
     # ------------------------------------------------------------------------------------
     # the WV/WCCV matrix (worker thread, cached)
     # ------------------------------------------------------------------------------------
-    def wv_matrix_for(self, lg: Any, channels: Sequence[str], fs: float
-                      ) -> tuple[eg.WVMatrix, str]:
+    def wv_matrix_for(self, lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
         """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
 
         Computed once per (log, channels, fs) and cached (worker-thread safe).
@@ -871,9 +1050,11 @@ class MultiView:
         if lg is None:
             raise ValueError("load a log first")
         if lg.is_summary:
-            raise ValueError(f"{getattr(lg, 'source', '') or 'this file'} is a wavelet-variance "
-                             "summary without raw samples: the wavelet cross-covariance needs "
-                             "the raw channels of a log (CSV, NPY/NPZ or HDF5)")
+            raise ValueError(
+                f"{getattr(lg, 'source', '') or 'this file'} is a wavelet-variance "
+                "summary without raw samples: the wavelet cross-covariance needs "
+                "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
+            )
         chans = tuple(channels)
         key = (chans, float(fs))
         with self._cache_lock:
@@ -888,8 +1069,10 @@ class MultiView:
         note = ""
         if len(set(sizes.values())) > 1:
             desc = ", ".join(f"{c}: {v:,}" for c, v in sizes.items())
-            note = (f"The channels have different lengths ({desc} samples); all are "
-                    f"truncated to the shortest, {n:,} samples.")
+            note = (
+                f"The channels have different lengths ({desc} samples); all are "
+                f"truncated to the shortest, {n:,} samples."
+            )
             series = {c: a[:n] for c, a in series.items()}
         units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
         wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
@@ -907,9 +1090,14 @@ class MultiView:
     def _settings(self) -> tuple:
         s = self.state
         groups = self.shared_groups
-        return (id(s.log), s.fs, tuple(self.channel_choice.value), self.spec_input.value,
-                self.override_input.value, tuple(sorted((k, tuple(v))
-                                                        for k, v in groups.items())))
+        return (
+            id(s.log),
+            s.fs,
+            tuple(self.channel_choice.value),
+            self.spec_input.value,
+            self.override_input.value,
+            tuple(sorted((k, tuple(v)) for k, v in groups.items())),
+        )
 
     @property
     def busy(self) -> bool:
@@ -951,14 +1139,22 @@ class MultiView:
             self._idle.set()
             return
         if lg.is_summary:
-            self._show(None, None, (f"{s.filename} holds wavelet-variance summaries only (no raw "
-                                    "samples): the multi-channel view needs the raw channels of "
-                                    "a log. Load a raw log (CSV/text, NPY/NPZ or HDF5)."), "")
+            self._show(
+                None,
+                None,
+                (
+                    f"{s.filename} holds wavelet-variance summaries only (no raw "
+                    "samples): the multi-channel view needs the raw channels of "
+                    "a log. Load a raw log (CSV/text, NPY/NPZ or HDF5)."
+                ),
+                "",
+            )
             self._idle.set()
             return
         if len(chans) < MIN_CHANNELS:
-            self._show(None, None, f"Choose at least {MIN_CHANNELS} channels (at most "
-                                   f"{MAX_CHANNELS}).", "")
+            self._show(
+                None, None, f"Choose at least {MIN_CHANNELS} channels (at most {MAX_CHANNELS}).", ""
+            )
             self._idle.set()
             return
         spec, over, groups = self.spec_input.value, self.override_input.value, self.shared_groups
@@ -999,8 +1195,13 @@ class MultiView:
 
         self.app._spawn(partial(self._background, work, apply, fail, done))
 
-    async def _background(self, work: Callable[[], Any], apply: Callable[[Any], Any],
-                          fail: Callable[[BaseException], Any], done: Callable[[], Any]) -> None:
+    async def _background(
+        self,
+        work: Callable[[], Any],
+        apply: Callable[[Any], Any],
+        fail: Callable[[BaseException], Any],
+        done: Callable[[], Any],
+    ) -> None:
         """Run ``work`` in the app's worker pool; the rest under the document lock."""
         from .app import _EXECUTOR
 
@@ -1039,8 +1240,9 @@ class MultiView:
         self.dep_cancel.disabled = not on
         self.dep_progress.param.update(visible=on, value=0)
 
-    def _dep_progress(self, done: int, total: int,
-                      observer: Callable[[int, int], None] | None) -> None:
+    def _dep_progress(
+        self, done: int, total: int, observer: Callable[[int, int], None] | None
+    ) -> None:
         """Progress callback (worker thread): bar, text, cancel point."""
         if observer is not None:
             observer(done, total)
@@ -1051,11 +1253,20 @@ class MultiView:
             self._dep_last = now
             value = int(100 * done / max(total, 1))
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
-            self.app._locked(lambda: (self.dep_progress.param.update(value=value),
-                                      setattr(self.dep_text, "object", text)))
+            self.app._locked(
+                lambda: (
+                    self.dep_progress.param.update(value=value),
+                    setattr(self.dep_text, "object", text),
+                )
+            )
 
-    def start_dependence_test(self, B: int | None = None, *, seed: int = 0,
-                              observer: Callable[[int, int], None] | None = None) -> bool:
+    def start_dependence_test(
+        self,
+        B: int | None = None,
+        *,
+        seed: int = 0,
+        observer: Callable[[int, int], None] | None = None,
+    ) -> bool:
         """Test the dependence of the shown fit's shared processes in a worker thread.
 
         ``observer(done, total)`` sees every progress step (tests). Returns False (with a
@@ -1068,8 +1279,10 @@ class MultiView:
             self.dep_text.object = "Fit a model first."
             return False
         if not res.model.shared:
-            self.dep_text.object = ("The model shares no process: mark the channels that "
-                                    "share one first (nothing to test).")
+            self.dep_text.object = (
+                "The model shares no process: mark the channels that "
+                "share one first (nothing to test)."
+            )
             return False
         b = int(B if B is not None else self.dep_b.value or 100)
         model, spec = res.model, res.model.spec()
@@ -1078,8 +1291,9 @@ class MultiView:
         self.dep_text.object = f"⏳ Fitting the independent model of {html.escape(spec)} ..."
 
         def work() -> DependenceTest:
-            return run_dependence_test(wvm, model, B=b, seed=seed,
-                                       progress=lambda d, t: self._dep_progress(d, t, observer))
+            return run_dependence_test(
+                wvm, model, B=b, seed=seed, progress=lambda d, t: self._dep_progress(d, t, observer)
+            )
 
         def apply(t: DependenceTest) -> None:
             self.dependence = t
@@ -1091,8 +1305,9 @@ class MultiView:
             else:
                 self.dep_text.object = f"**Dependence test failed:** {html.escape(_message(e))}"
 
-        self.app._spawn(partial(self._background, work, apply, fail,
-                                lambda: self._dep_running(False)))
+        self.app._spawn(
+            partial(self._background, work, apply, fail, lambda: self._dep_running(False))
+        )
         return True
 
     def cancel_dependence_test(self) -> None:
@@ -1123,9 +1338,12 @@ class MultiView:
         text = html.escape(message)
         self.status.object = f"⏳ {text} ..."
         if doc is not None:
+
             def tick() -> None:
-                self.status.object = (f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
-                                      "grid shows the previous fit until this one ends)")
+                self.status.object = (
+                    f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
+                    "grid shows the previous fit until this one ends)"
+                )
 
             self._ticker = doc.add_periodic_callback(tick, 1000)
 
@@ -1145,8 +1363,12 @@ class MultiView:
     def _show(self, wvm: eg.WVMatrix | None, result: Any, error: str, note: str) -> None:
         """Draw a matrix and a fit (either may be None) with a message."""
         self.wvm, self.result = wvm, result
-        rob = ("The robust WV of the sidebar does not apply here: the grid and the fit use the "
-               "classical WV/WCCV." if self.state.robust and wvm is not None else "")
+        rob = (
+            "The robust WV of the sidebar does not apply here: the grid and the fit use the "
+            "classical WV/WCCV."
+            if self.state.robust and wvm is not None
+            else ""
+        )
         notes = " ".join(t for t in (note, rob) if t)
         with pn.io.hold():
             self._message(error)
@@ -1160,9 +1382,10 @@ class MultiView:
                 self.grid_box.visible = True
                 self.legend.object = self._legend(result)
             self.fit_info.object = fit_text(result)
-            for src, table, rows in ((self.cov_source, self.cov_table, covariance_rows(result)),
-                                     (self.param_source, self.param_table,
-                                      parameter_rows(result))):
+            for src, table, rows in (
+                (self.cov_source, self.cov_table, covariance_rows(result)),
+                (self.param_source, self.param_table, parameter_rows(result)),
+            ):
                 same = len(next(iter(rows.values()))) == len(next(iter(src.data.values())))
                 src.data = rows
                 if same:
@@ -1178,12 +1401,13 @@ class MultiView:
                 lab = _color_label(key)
                 if lab in seen:
                     continue
-                seen[lab] = (f"{lab} (shared by {', '.join(shared[lab])})" if lab in shared
-                             else lab)
+                seen[lab] = f"{lab} (shared by {', '.join(shared[lab])})" if lab in shared else lab
             items += [(component_color(lab), text, "dashed") for lab, text in seen.items()]
         out = []
         for color, text, dash in items:
-            out.append(f'<span style="white-space:nowrap;margin-right:14px;font-size:12px">'
-                       f'<span style="display:inline-block;width:20px;border-top:3px {dash} '
-                       f'{color};margin:0 5px 3px 0"></span>{html.escape(text)}</span>')
+            out.append(
+                f'<span style="white-space:nowrap;margin-right:14px;font-size:12px">'
+                f'<span style="display:inline-block;width:20px;border-top:3px {dash} '
+                f'{color};margin:0 5px 3px 0"></span>{html.escape(text)}</span>'
+            )
         return "".join(out)

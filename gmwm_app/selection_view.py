@@ -55,8 +55,16 @@ DEFAULT_MAX_MODEL = "3*GM+WN+QN+RW+DR"
 #: Component renderers per comparison figure.
 N_COMPARE_COMPONENTS = 8
 
-RANK_COLUMNS = ("rank", "model", "n_params", "objective", "optimism", "criterion", "j_p_value",
-                "note")
+RANK_COLUMNS = (
+    "rank",
+    "model",
+    "n_params",
+    "objective",
+    "optimism",
+    "criterion",
+    "j_p_value",
+    "note",
+)
 
 
 class _Cancelled(Exception):
@@ -77,32 +85,40 @@ def ranking_data(sel: Any) -> dict[str, Any]:
     def num(attr: str) -> np.ndarray:
         return np.array([float(getattr(c, attr)) for c in cands], dtype=float)
 
-    return {"rank": np.arange(1, len(cands) + 1), "model": [c.model for c in cands],
-            "n_params": np.array([c.n_params for c in cands], dtype=int),
-            "objective": num("objective"), "optimism": num("optimism"),
-            "criterion": num("criterion"), "j_p_value": num("j_p_value"),
-            "note": [f"not fitted: {c.error}" if c.error else "" for c in cands]}
+    return {
+        "rank": np.arange(1, len(cands) + 1),
+        "model": [c.model for c in cands],
+        "n_params": np.array([c.n_params for c in cands], dtype=int),
+        "objective": num("objective"),
+        "optimism": num("optimism"),
+        "criterion": num("criterion"),
+        "j_p_value": num("j_p_value"),
+        "note": [f"not fitted: {c.error}" if c.error else "" for c in cands],
+    }
 
 
 def jtest_badge(inf: Inference | None, pending: bool = False) -> str:
     """HTML badge of the J-test: green p >= 0.05, amber 0.01-0.05, red < 0.01."""
-    style = ("display:inline-block;padding:2px 10px;border-radius:10px;font-size:13px;"
-             "color:white;background:{}")
+    style = (
+        "display:inline-block;padding:2px 10px;border-radius:10px;font-size:13px;"
+        "color:white;background:{}"
+    )
     if inf is None:
         if not pending:
             return ""
         return f'<span style="{style.format("#888")}">J-test: computing ...</span>'
     jt = inf.j_test
     if jt is None:
-        return (f'<span style="{style.format("#888")}">J-test n/a: '
-                f"{html.escape(inf.j_error)}</span>")
+        return f'<span style="{style.format("#888")}">J-test n/a: {html.escape(inf.j_error)}</span>'
     p = jt.p_value
     color = "#2E7D32" if p >= 0.05 else "#E69F00" if p >= 0.01 else "#C62828"
     verdict = "fits" if p >= 0.05 else "doubtful fit" if p >= 0.01 else "rejected"
-    return (f'<span class="gmwm-jtest" style="{style.format(color)}" title="Goodness of fit: '
-            f'J-test of the fitted WV against chi-square(J - p)">'
-            f"J-test: p = {format_value(p, 3)} ({verdict}), T = {format_value(jt.statistic)} "
-            f"[1], df = {jt.df}</span>")
+    return (
+        f'<span class="gmwm-jtest" style="{style.format(color)}" title="Goodness of fit: '
+        f'J-test of the fitted WV against chi-square(J - p)">'
+        f"J-test: p = {format_value(p, 3)} ({verdict}), T = {format_value(jt.statistic)} "
+        f"[1], df = {jt.df}</span>"
+    )
 
 
 class _DecompFigure:
@@ -110,25 +126,43 @@ class _DecompFigure:
 
     def __init__(self, name: str, x_range: Any = None, y_range: Any = None) -> None:
         kw = {} if x_range is None else {"x_range": x_range, "y_range": y_range}
-        p = figure(x_axis_type="log", y_axis_type="log", height=300, sizing_mode="stretch_width",
-                   tools="pan,wheel_zoom,box_zoom,reset,save", toolbar_location="above",
-                   name=name, title="", **kw)
+        p = figure(
+            x_axis_type="log",
+            y_axis_type="log",
+            height=300,
+            sizing_mode="stretch_width",
+            tools="pan,wheel_zoom,box_zoom,reset,save",
+            toolbar_location="above",
+            name=name,
+            title="",
+            **kw,
+        )
         p.title.text_font_size = "13px"
         p.xaxis.axis_label = "scale τ [s]"
         p.axis.axis_label_text_font_style = "normal"
         p.grid.grid_line_alpha = 0.35
         self.emp = ColumnDataSource(_wv_data(None))
-        p.varea(x="tau_s", y1="ci_low", y2="ci_high", source=self.emp, fill_color=BAND_COLOR,
-                fill_alpha=0.25)
+        p.varea(
+            x="tau_s",
+            y1="ci_low",
+            y2="ci_high",
+            source=self.emp,
+            fill_color=BAND_COLOR,
+            fill_alpha=0.25,
+        )
         p.line("tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5)
         p.scatter("tau_s", "variance", source=self.emp, size=5, color=EMPIRICAL_COLOR)
-        self.comps = [ColumnDataSource({"tau_s": [], "wv": []})
-                      for _ in range(N_COMPARE_COMPONENTS)]
-        self.comp_renderers = [p.line("tau_s", "wv", source=s, line_width=2, line_dash="dashed",
-                                      visible=False) for s in self.comps]
+        self.comps = [
+            ColumnDataSource({"tau_s": [], "wv": []}) for _ in range(N_COMPARE_COMPONENTS)
+        ]
+        self.comp_renderers = [
+            p.line("tau_s", "wv", source=s, line_width=2, line_dash="dashed", visible=False)
+            for s in self.comps
+        ]
         self.total = ColumnDataSource({"tau_s": [], "wv": []})
-        p.line("tau_s", "wv", source=self.total, line_color=TOTAL_COLOR, line_width=2.5,
-               line_alpha=0.9)
+        p.line(
+            "tau_s", "wv", source=self.total, line_color=TOTAL_COLOR, line_width=2.5, line_alpha=0.9
+        )
         self.figure = p
 
     def update(self, wv: Any, model: Any, title: str, unit: str) -> None:
@@ -177,37 +211,79 @@ class SelectionView:
 
         self.max_input = pn.widgets.TextInput(
             label="Maximal model (every sub-model), or candidates separated by commas",
-            value=DEFAULT_MAX_MODEL, sizing_mode="stretch_width", css_classes=["gmwm-max-model"])
-        self.rank_button = pn.widgets.Button(label="Rank", color="primary", width=100,
-                                             margin=(22, 5, 5, 5))
+            value=DEFAULT_MAX_MODEL,
+            sizing_mode="stretch_width",
+            css_classes=["gmwm-max-model"],
+        )
+        self.rank_button = pn.widgets.Button(
+            label="Rank", color="primary", width=100, margin=(22, 5, 5, 5)
+        )
         self.rank_button.on_click(lambda _e: self.start_ranking())
-        self.cancel_button = pn.widgets.Button(label="Cancel", color="light", width=100,
-                                               margin=(22, 5, 5, 5), disabled=True)
+        self.cancel_button = pn.widgets.Button(
+            label="Cancel", color="light", width=100, margin=(22, 5, 5, 5), disabled=True
+        )
         self.cancel_button.on_click(lambda _e: self.cancel())
-        self.progress = pn.indicators.Progress(value=0, max=100, bar_color="primary",
-                                               sizing_mode="stretch_width", height=14,
-                                               visible=False, margin=(0, 10))
-        self.status = pn.pane.Markdown("Rank the candidate models of the selected channel by "
-                                       "WVIC = objective + optimism (smallest first).",
-                                       sizing_mode="stretch_width", margin=(0, 10),
-                                       styles={"color": "#555", "font-size": "13px"})
+        self.progress = pn.indicators.Progress(
+            value=0,
+            max=100,
+            bar_color="primary",
+            sizing_mode="stretch_width",
+            height=14,
+            visible=False,
+            margin=(0, 10),
+        )
+        self.status = pn.pane.Markdown(
+            "Rank the candidate models of the selected channel by "
+            "WVIC = objective + optimism (smallest first).",
+            sizing_mode="stretch_width",
+            margin=(0, 10),
+            styles={"color": "#555", "font-size": "13px"},
+        )
 
         self.source = ColumnDataSource(ranking_data(None), name="ranking_rows")
         sci = ScientificFormatter(precision=4)
-        fmt = {"rank": NumberFormatter(format="0"), "n_params": NumberFormatter(format="0"),
-               "objective": sci, "optimism": sci, "criterion": sci,
-               "j_p_value": ScientificFormatter(precision=3)}
-        titles = {"rank": "rank", "model": "model", "n_params": "p", "objective": "objective [1]",
-                  "optimism": "optimism [1]", "criterion": "WVIC [1]",
-                  "j_p_value": "J-test p", "note": "note"}
+        fmt = {
+            "rank": NumberFormatter(format="0"),
+            "n_params": NumberFormatter(format="0"),
+            "objective": sci,
+            "optimism": sci,
+            "criterion": sci,
+            "j_p_value": ScientificFormatter(precision=3),
+        }
+        titles = {
+            "rank": "rank",
+            "model": "model",
+            "n_params": "p",
+            "objective": "objective [1]",
+            "optimism": "optimism [1]",
+            "criterion": "WVIC [1]",
+            "j_p_value": "J-test p",
+            "note": "note",
+        }
         widths = {"rank": 45, "model": 170, "n_params": 35, "note": 160}
-        cols = [TableColumn(field=c, title=titles[c], width=widths.get(c, 95),
-                            formatter=fmt.get(c, StringFormatter())) for c in RANK_COLUMNS]
-        self.table = DataTable(source=self.source, columns=cols, index_position=None,
-                               sortable=True, reorderable=False, selectable=True,
-                               autosize_mode="force_fit", height=330, row_height=26,
-                               sizing_mode="stretch_width", name="ranking",
-                               css_classes=["gmwm-ranking"])
+        cols = [
+            TableColumn(
+                field=c,
+                title=titles[c],
+                width=widths.get(c, 95),
+                formatter=fmt.get(c, StringFormatter()),
+            )
+            for c in RANK_COLUMNS
+        ]
+        self.table = DataTable(
+            source=self.source,
+            columns=cols,
+            index_position=None,
+            sortable=True,
+            reorderable=False,
+            selectable=True,
+            autosize_mode="force_fit",
+            height=330,
+            row_height=26,
+            sizing_mode="stretch_width",
+            name="ranking",
+            css_classes=["gmwm-ranking"],
+        )
         self.source.selected.on_change("indices", self._on_row)
 
         self.compare_a = pn.widgets.Select(label="Compare A", options=[], width=230)
@@ -215,36 +291,60 @@ class SelectionView:
         for w in (self.compare_a, self.compare_b):
             w.param.watch(lambda _e: self.refresh_compare(), "value")
         self.fig_a = _DecompFigure("compare_a")
-        self.fig_b = _DecompFigure("compare_b", self.fig_a.figure.x_range,
-                                   self.fig_a.figure.y_range)
+        self.fig_b = _DecompFigure(
+            "compare_b", self.fig_a.figure.x_range, self.fig_a.figure.y_range
+        )
         self.compare_source = ColumnDataSource(
             {c: [] for c in ("candidate", "parameter", "value", "low", "high", "unit")},
-            name="compare_rows")
-        ccols = [TableColumn(field=c, title=t, width=w, sortable=False) for c, t, w in (
-            ("candidate", "candidate", 140), ("parameter", "parameter", 110),
-            ("value", "value", 85), ("low", "low (95%)", 85), ("high", "high (95%)", 85),
-            ("unit", "unit", 85))]
-        self.compare_table = DataTable(source=self.compare_source, columns=ccols,
-                                       index_position=None, sortable=False, selectable=False,
-                                       autosize_mode="force_fit", height=240, row_height=26,
-                                       sizing_mode="stretch_width", name="compare_params",
-                                       css_classes=["gmwm-compare"])
+            name="compare_rows",
+        )
+        ccols = [
+            TableColumn(field=c, title=t, width=w, sortable=False)
+            for c, t, w in (
+                ("candidate", "candidate", 140),
+                ("parameter", "parameter", 110),
+                ("value", "value", 85),
+                ("low", "low (95%)", 85),
+                ("high", "high (95%)", 85),
+                ("unit", "unit", 85),
+            )
+        ]
+        self.compare_table = DataTable(
+            source=self.compare_source,
+            columns=ccols,
+            index_position=None,
+            sortable=False,
+            selectable=False,
+            autosize_mode="force_fit",
+            height=240,
+            row_height=26,
+            sizing_mode="stretch_width",
+            name="compare_params",
+            css_classes=["gmwm-compare"],
+        )
 
         h = pn.pane.Markdown
         self.panel = pn.Column(
-            pn.Row(self.max_input, self.rank_button, self.cancel_button,
-                   sizing_mode="stretch_width"),
-            self.progress, self.status,
+            pn.Row(
+                self.max_input, self.rank_button, self.cancel_button, sizing_mode="stretch_width"
+            ),
+            self.progress,
+            self.status,
             pn.pane.Bokeh(self.table, sizing_mode="stretch_width", margin=(5, 10)),
-            h("Click a row to load that model into the builder (Fit tab) and refit. Click a "
-              "column title to sort.", margin=(0, 10),
-              styles={"font-size": "12px", "color": "#555"}),
+            h(
+                "Click a row to load that model into the builder (Fit tab) and refit. Click a "
+                "column title to sort.",
+                margin=(0, 10),
+                styles={"font-size": "12px", "color": "#555"},
+            ),
             pn.layout.Divider(),
             h("#### Compare two candidates", margin=(0, 10)),
             pn.Row(self.compare_a, self.compare_b),
-            pn.Row(pn.pane.Bokeh(self.fig_a.figure, sizing_mode="stretch_width"),
-                   pn.pane.Bokeh(self.fig_b.figure, sizing_mode="stretch_width"),
-                   sizing_mode="stretch_width"),
+            pn.Row(
+                pn.pane.Bokeh(self.fig_a.figure, sizing_mode="stretch_width"),
+                pn.pane.Bokeh(self.fig_b.figure, sizing_mode="stretch_width"),
+                sizing_mode="stretch_width",
+            ),
             pn.pane.Bokeh(self.compare_table, sizing_mode="stretch_width", margin=(5, 10)),
             sizing_mode="stretch_width",
         )
@@ -261,8 +361,7 @@ class SelectionView:
         if on:
             self.progress.value = 0
 
-    def _progress(self, done: int, total: int,
-                  observer: Callable[[int, int], None] | None) -> None:
+    def _progress(self, done: int, total: int, observer: Callable[[int, int], None] | None) -> None:
         """Progress callback of ``rank_models`` (worker thread): bar update, cancel point."""
         if observer is not None:
             observer(done, total)
@@ -273,38 +372,46 @@ class SelectionView:
             self._last_progress = now
             value = int(100 * done / max(total, 1))
             self.app._locked(lambda: self.progress.param.update(value=value))
-            what = (f"Fitted {total} candidates; computing the WV covariance and the WVIC"
-                    if done == total else f"Fitting candidate {done} of {total}")
+            what = (
+                f"Fitted {total} candidates; computing the WV covariance and the WVIC"
+                if done == total
+                else f"Fitting candidate {done} of {total}"
+            )
             self.app._locked(lambda: setattr(self.status, "object", f"⏳ {what} ..."))
 
-    def start_ranking(self, spec: str | None = None, *,
-                      observer: Callable[[int, int], None] | None = None) -> None:
+    def start_ranking(
+        self, spec: str | None = None, *, observer: Callable[[int, int], None] | None = None
+    ) -> None:
         """Rank the models of ``spec`` (default: the text input) in a worker thread.
 
         ``observer(done, total)`` is called with every progress step (tests).
         """
         if self.running:
             return
-        spec = self.max_input.value_input if spec is None and self.max_input.value_input \
+        spec = (
+            self.max_input.value_input
+            if spec is None and self.max_input.value_input
             else (spec if spec is not None else self.max_input.value)
+        )
         self._cancel.clear()
         self._set_running(True)
         self.status.object = f"⏳ Ranking the sub-models of {spec} ..."
         state = self.state
 
         def work() -> Any:
-            return state.compute_ranking(spec, progress=lambda d, t: self._progress(d, t,
-                                                                                   observer))
+            return state.compute_ranking(spec, progress=lambda d, t: self._progress(d, t, observer))
 
         def apply(out: Any) -> None:
             if self._cancel.is_set():  # cancelled after the last candidate: drop it
                 fail(_Cancelled())
             elif state.install_ranking(out):
                 sel = out[1]
-                self.status.object = (f"Ranked {len(sel.candidates)} candidates in "
-                                      f"{sel.elapsed_s:.2f} s ({sel.optimism} optimism, "
-                                      f"weights {sel.weights}) on {state.channel}; "
-                                      f"best: **{sel.best.model}**.")
+                self.status.object = (
+                    f"Ranked {len(sel.candidates)} candidates in "
+                    f"{sel.elapsed_s:.2f} s ({sel.optimism} optimism, "
+                    f"weights {sel.weights}) on {state.channel}; "
+                    f"best: **{sel.best.model}**."
+                )
 
         def fail(e: BaseException) -> None:
             if isinstance(e, _Cancelled):
@@ -313,8 +420,9 @@ class SelectionView:
                 self.status.object = f"**Ranking failed:** {_message(e)}"
                 state.report_error(f"Could not rank the models: {_message(e)}")
 
-        self.app._spawn(partial(self._background, work, apply, fail,
-                                lambda: self._set_running(False)))
+        self.app._spawn(
+            partial(self._background, work, apply, fail, lambda: self._set_running(False))
+        )
 
     def cancel(self) -> None:
         """Ask the running ranking to stop (at its next candidate)."""
@@ -322,9 +430,13 @@ class SelectionView:
             self._cancel.set()
             self.status.object = "Cancelling ..."
 
-    async def _background(self, work: Callable[[], Any], apply: Callable[[Any], Any],
-                          fail: Callable[[BaseException], Any],
-                          done: Callable[[], Any] | None = None) -> None:
+    async def _background(
+        self,
+        work: Callable[[], Any],
+        apply: Callable[[Any], Any],
+        fail: Callable[[BaseException], Any],
+        done: Callable[[], Any] | None = None,
+    ) -> None:
         """Run ``work`` in the app's worker pool; ``apply``/``fail`` under the document lock."""
         from .app import _EXECUTOR
 
@@ -376,9 +488,15 @@ class SelectionView:
                 return False
         self._pending.add(id(result))
 
-        self.app._spawn(partial(self._background, lambda: state.compute_inference(result),
-                                state.install_inference, fail,
-                                lambda: self._pending.discard(id(result))))
+        self.app._spawn(
+            partial(
+                self._background,
+                lambda: state.compute_inference(result),
+                state.install_inference,
+                fail,
+                lambda: self._pending.discard(id(result)),
+            )
+        )
         return False
 
     # ------------------------------------------------------------------------------------
@@ -400,8 +518,7 @@ class SelectionView:
                 self.compare_a.options = names
                 self.compare_b.options = names
                 self.compare_a.value = names[0] if names else None
-                self.compare_b.value = names[1] if len(names) > 1 else (names[0] if names
-                                                                        else None)
+                self.compare_b.value = names[1] if len(names) > 1 else (names[0] if names else None)
             finally:
                 self._syncing = False
         self.refresh_compare()
@@ -421,24 +538,32 @@ class SelectionView:
         s = self.state
         picks = [self._candidate(self.compare_a.value), self._candidate(self.compare_b.value)]
         infs = [s.inference(p[1].result) if p else None for p in picks]
-        key = (id(s.selection), tuple(id(p[1]) if p else None for p in picks),
-               tuple(i is not None for i in infs), s.unit)
+        key = (
+            id(s.selection),
+            tuple(id(p[1]) if p else None for p in picks),
+            tuple(i is not None for i in infs),
+            s.unit,
+        )
         if key == self._compare_key:
             return
         self._compare_key = key
-        sel_wv = picks[0][1].result.wv if picks[0] else (picks[1][1].result.wv if picks[1]
-                                                         else None)
+        sel_wv = (
+            picks[0][1].result.wv if picks[0] else (picks[1][1].result.wv if picks[1] else None)
+        )
         rows: dict[str, list[str]] = {c: [] for c in self.compare_source.data}
         missing = []
-        for tag, fig, pick, inf in zip("AB", (self.fig_a, self.fig_b), picks, infs,
-                                       strict=True):
+        for tag, fig, pick, inf in zip("AB", (self.fig_a, self.fig_b), picks, infs, strict=True):
             if pick is None:
                 fig.update(sel_wv, None, f"{tag}: pick a candidate", s.unit)
                 continue
             rank, c = pick
             jp = "n/a" if not math.isfinite(c.j_p_value) else format_value(c.j_p_value, 3)
-            fig.update(c.result.wv, c.result.model, f"{tag}: {c.model} (rank {rank}, WVIC "
-                       f"{format_value(c.criterion)}, J-test p {jp})", s.unit)
+            fig.update(
+                c.result.wv,
+                c.result.model,
+                f"{tag}: {c.model} (rank {rank}, WVIC {format_value(c.criterion)}, J-test p {jp})",
+                s.unit,
+            )
             if inf is None:
                 missing.append(c.result)
             ci = {i.name: i for i in inf.intervals} if inf is not None else {}
@@ -470,6 +595,9 @@ class SelectionView:
         """Load the candidate in row ``index`` (data order = rank - 1) into the builder."""
         model = self.source.data["model"][index]
         ok = self.state.set_model(model)
-        self.status.object = (f"Loaded **{model}** into the builder (Fit tab) and refitted."
-                              if ok else f"**Could not load {model}:** {self.state.error}")
+        self.status.object = (
+            f"Loaded **{model}** into the builder (Fit tab) and refitted."
+            if ok
+            else f"**Could not load {model}:** {self.state.error}"
+        )
         return ok

@@ -29,8 +29,16 @@ from gmwm_app.state import AppState, LoadedData, demo_path
 if TYPE_CHECKING:
     from gmwm_app.app import GMWMApp
 
-__all__ = ["session_json", "session_filename", "prepare_restore", "apply_restore",
-           "RestorePlan", "export_text", "is_gap_error", "SessionPanel"]
+__all__ = [
+    "session_json",
+    "session_filename",
+    "prepare_restore",
+    "apply_restore",
+    "RestorePlan",
+    "export_text",
+    "is_gap_error",
+    "SessionPanel",
+]
 
 #: Text of the engine's time-gap error that says the longest clean segment can be analysed.
 _GAP_MARK = "segment='longest'"
@@ -59,14 +67,27 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
     models = {ch: state.model.spec()} if ch and len(state.model) else {}
     wvs = {ch: state.wv} if ch and state.wv is not None else {}
     fits = {ch: state.result} if ch and state.result is not None else {}
-    app = {"source": state.source, "filename": state.filename, "channel": ch,
-           "fs": state.fs, "fs_source": state.fs_source, "robust": bool(state.robust),
-           "model": state.model.spec(), "query": state.to_query()}
+    app = {
+        "source": state.source,
+        "filename": state.filename,
+        "channel": ch,
+        "fs": state.fs,
+        "fs_source": state.fs_source,
+        "robust": bool(state.robust),
+        "model": state.model.spec(),
+        "query": state.to_query(),
+    }
     if state.source == "scenario":
         app["scenario"] = state.path
-    return session_to_json(data_path=_data_path(state), load=dict(load or {}), models=models,
-                           wvs=wvs, fits=fits, app=app,
-                           fingerprint=state.source in ("path", "demo"))
+    return session_to_json(
+        data_path=_data_path(state),
+        load=dict(load or {}),
+        models=models,
+        wvs=wvs,
+        fits=fits,
+        app=app,
+        fingerprint=state.source in ("path", "demo"),
+    )
 
 
 def session_filename(state: AppState) -> str:
@@ -107,30 +128,35 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
     if source == "upload":
         plan.problems.append(
             f"the session's data were the uploaded file {fname}, which the server does not "
-            f"keep: upload {fname} again, then restore the session")
+            f"keep: upload {fname} again, then restore the session"
+        )
         return plan
     if source == "scenario":  # a teaching scenario: deterministic, simulated again
         key = str(app.get("scenario") or sess.data_path.removeprefix("scenario:"))
         try:
             loaded = AppState.read("scenario", path=key)
         except ValueError as e:
-            plan.problems.append(f"the session's teaching scenario {key!r} could not be "
-                                 f"simulated: {e}")
+            plan.problems.append(
+                f"the session's teaching scenario {key!r} could not be simulated: {e}"
+            )
             return plan
         AppState.precompute(loaded, channel, fs, robust)
         plan.loaded = loaded
         return plan
     path = sess.data_path
     if not path or not Path(path).is_file():
-        plan.problems.append(f"the session's data file {path or fname} is not on this server: "
-                             "copy it back to that path (or upload it) and restore again")
+        plan.problems.append(
+            f"the session's data file {path or fname} is not on this server: "
+            "copy it back to that path (or upload it) and restore again"
+        )
         return plan
     try:
         check_path(path)
         why = sess.data_changed()
         if why:
-            plan.notes.append(f"{why} since the session was saved: the model was fitted again "
-                              "on the current data")
+            plan.notes.append(
+                f"{why} since the session was saved: the model was fitted again on the current data"
+            )
         if source == "demo" and Path(path).resolve() == demo_path().resolve():
             loaded = AppState.read("demo", segment=segment)
         else:
@@ -151,17 +177,28 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
     """
     app = plan.session.app or {}
     problems = list(plan.problems)
-    if (plan.loaded is None and app.get("source") == "upload" and state.source == "upload"
-            and state.log is not None and state.filename == app.get("filename")):
+    if (
+        plan.loaded is None
+        and app.get("source") == "upload"
+        and state.source == "upload"
+        and state.log is not None
+        and state.filename == app.get("filename")
+    ):
         # the uploaded file is loaded in this session again: restore the session on it
-        plan = RestorePlan(plan.session, LoadedData(state.log, "upload", state.filename, "",
-                                                    wv_cache=dict(state._wv_cache)))
+        plan = RestorePlan(
+            plan.session,
+            LoadedData(state.log, "upload", state.filename, "", wv_cache=dict(state._wv_cache)),
+        )
         problems = []
     if plan.loaded is not None:
         fs = app.get("fs")
         user_fs = fs if app.get("fs_source") == "user" else None
-        state.install(plan.loaded, channel=app.get("channel") or None, fs=user_fs,
-                      robust=bool(app.get("robust", False)))
+        state.install(
+            plan.loaded,
+            channel=app.get("channel") or None,
+            fs=user_fs,
+            robust=bool(app.get("robust", False)),
+        )
         if state.error:
             problems.append(state.error)
         model = app.get("model")
@@ -217,27 +254,48 @@ class SessionPanel:
         self._retry: tuple[str, dict[str, Any]] | None = None
         self._load: dict[str, Any] = {}  # load options of the data shown (for the session)
         self.session_download = pn.widgets.FileDownload(
-            callback=self._session_file, filename="gmwm_session.json",
-            label="Download session", color="primary", sizing_mode="stretch_width",
-            embed=False)
-        self.restore_input = pn.widgets.FileInput(accept=".json", multiple=False,
-                                                  sizing_mode="stretch_width")
+            callback=self._session_file,
+            filename="gmwm_session.json",
+            label="Download session",
+            color="primary",
+            sizing_mode="stretch_width",
+            embed=False,
+        )
+        self.restore_input = pn.widgets.FileInput(
+            accept=".json", multiple=False, sizing_mode="stretch_width"
+        )
         self.restore_input.param.watch(self._on_restore, "value")
         self.kalibr_download = pn.widgets.FileDownload(
-            callback=partial(self._export, "kalibr"), filename="imu.yaml",
-            label="Kalibr imu.yaml", color="default", sizing_mode="stretch_width", embed=False)
+            callback=partial(self._export, "kalibr"),
+            filename="imu.yaml",
+            label="Kalibr imu.yaml",
+            color="default",
+            sizing_mode="stretch_width",
+            embed=False,
+        )
         self.datasheet_download = pn.widgets.FileDownload(
-            callback=partial(self._export, "datasheet"), filename="gmwm_datasheet.txt",
-            label="Datasheet (text)", color="default", sizing_mode="stretch_width", embed=False)
+            callback=partial(self._export, "datasheet"),
+            filename="gmwm_datasheet.txt",
+            label="Datasheet (text)",
+            color="default",
+            sizing_mode="stretch_width",
+            embed=False,
+        )
         self.export_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
         self.gap_report = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.longest_button = pn.widgets.Button(
-            label="Analyse the longest clean segment", color="warning", margin=(3, 10))
+            label="Analyse the longest clean segment", color="warning", margin=(3, 10)
+        )
         self.longest_button.on_click(self._on_longest)
         self.gap_box = pn.Column(
-            pn.pane.Markdown("#### Time gaps in the log", margin=(0, 10)), self.gap_report,
-            self.longest_button, visible=False, sizing_mode="stretch_width",
-            styles={"border": "1px solid #e0a800", "border-radius": "4px"}, margin=(5, 10))
+            pn.pane.Markdown("#### Time gaps in the log", margin=(0, 10)),
+            self.gap_report,
+            self.longest_button,
+            visible=False,
+            sizing_mode="stretch_width",
+            styles={"border": "1px solid #e0a800", "border-radius": "4px"},
+            margin=(5, 10),
+        )
         s.param.watch(self._on_state, "revision")
         self.refresh()
 
@@ -245,15 +303,23 @@ class SessionPanel:
     def sidebar(self) -> list[Any]:
         """Export and session widgets for the sidebar."""
         h = pn.pane.Markdown
-        return [pn.Column(  # one Bokeh root (each template root costs a document walk)
-            pn.Row(self.kalibr_download, self.datasheet_download, margin=0),
-            self.export_note,
-            pn.layout.Divider(),
-            h("### Session", margin=(0, 10)),
-            self.session_download,
-            h("Restore a session file (the data are read again from their server path):",
-              margin=(0, 10), styles=_SMALL),
-            self.restore_input, sizing_mode="stretch_width", margin=0)]
+        return [
+            pn.Column(  # one Bokeh root (each template root costs a document walk)
+                pn.Row(self.kalibr_download, self.datasheet_download, margin=0),
+                self.export_note,
+                pn.layout.Divider(),
+                h("### Session", margin=(0, 10)),
+                self.session_download,
+                h(
+                    "Restore a session file (the data are read again from their server path):",
+                    margin=(0, 10),
+                    styles=_SMALL,
+                ),
+                self.restore_input,
+                sizing_mode="stretch_width",
+                margin=0,
+            )
+        ]
 
     def main(self) -> list[Any]:
         """The time-gap box for the main area."""
@@ -276,8 +342,10 @@ class SessionPanel:
         self.kalibr_download.disabled = self.datasheet_download.disabled = not fit
         self.export_note.object = (
             f"Exports of the fit of **{s.channel}** only (one axis; the Kalibr file is "
-            "partial: fit and export the other axes with the `gmwm` CLI)." if fit else
-            "Kalibr and datasheet exports need a fit: add processes to the model.")
+            "partial: fit and export the other axes with the `gmwm` CLI)."
+            if fit
+            else "Kalibr and datasheet exports need a fit: add processes to the model."
+        )
         if self.gap_box.visible and not is_gap_error(s.error):
             self.gap_box.visible = False
 
@@ -310,8 +378,14 @@ class SessionPanel:
             apply_restore(self.app.state, plan)
             self.restore_input.value = None  # the same file can be restored again
 
-        self.app._spawn(partial(self.app._offload, f"Restoring the session {name}",
-                                partial(prepare_restore, data, name), apply))
+        self.app._spawn(
+            partial(
+                self.app._offload,
+                f"Restoring the session {name}",
+                partial(prepare_restore, data, name),
+                apply,
+            )
+        )
 
     def loaded(self, loaded: LoadedData) -> None:
         """Remember the load options of newly installed data (for the session file)."""
@@ -327,7 +401,8 @@ class SessionPanel:
         text = str(err).split(". To go on,")[0]
         self.gap_report.object = (
             f"{text}.\n\nThe samples are not joined across the breaks. Analyse the longest "
-            "clean segment, or fix the log and load it again.")
+            "clean segment, or fix the log and load it again."
+        )
         self.gap_box.visible = True
 
     def _on_longest(self, _event: Any = None) -> None:
@@ -338,6 +413,11 @@ class SessionPanel:
         self.gap_box.visible = False
         kw = {**kw, "segment": "longest"}
         what = kw.get("filename") or kw.get("path") or source
-        self.app._spawn(partial(self.app._offload, f"Reading the longest clean segment of {what}",
-                                partial(self.app._read_and_warm, source, **kw),
-                                self.app._install))
+        self.app._spawn(
+            partial(
+                self.app._offload,
+                f"Reading the longest clean segment of {what}",
+                partial(self.app._read_and_warm, source, **kw),
+                self.app._install,
+            )
+        )

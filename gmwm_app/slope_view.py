@@ -79,12 +79,20 @@ TITLE = "Slope method"
 
 #: The processes of the slope method: label of the chooser -> code.
 PROCESS_CHOICES: dict[str, str] = {
-    "WN  slope −½": "WN", "QN  slope −1": "QN", "bias instability  floor": "BI",
-    "RW  slope +½": "RW", "DR  slope +1": "DR",
+    "WN  slope −½": "WN",
+    "QN  slope −1": "QN",
+    "bias instability  floor": "BI",
+    "RW  slope +½": "RW",
+    "DR  slope +1": "DR",
 }
 CODE_ORDER = ("QN", "WN", "BI", "GM", "AR1", "RW", "DR")
-REGION_COLORS = {"QN": "#9467BD", "WN": "#1F77B4", "BI": "#FF7F0E", "RW": "#2CA02C",
-                 "DR": "#8C564B"}
+REGION_COLORS = {
+    "QN": "#9467BD",
+    "WN": "#1F77B4",
+    "BI": "#FF7F0E",
+    "RW": "#2CA02C",
+    "DR": "#8C564B",
+}
 
 #: Methods in the table and on the plot: column name -> (MethodEstimate.method, colour, dash).
 METHODS: dict[str, tuple[str, str, str]] = {
@@ -132,9 +140,9 @@ class SlopeResult:
     messages: list[str] = field(default_factory=list)
 
 
-def check_regions(av: AllanVariance, regions: Mapping[str, tuple[float, float]],
-                  min_points: int = MIN_POINTS) -> tuple[dict[str, tuple[float, float]],
-                                                         list[str]]:
+def check_regions(
+    av: AllanVariance, regions: Mapping[str, tuple[float, float]], min_points: int = MIN_POINTS
+) -> tuple[dict[str, tuple[float, float]], list[str]]:
     """Split the regions into usable ones and messages about the others.
 
     Parameters
@@ -161,26 +169,35 @@ def check_regions(av: AllanVariance, regions: Mapping[str, tuple[float, float]],
             msgs.append(f"unknown process {code!r} (use QN, WN, BI, RW or DR)")
             continue
         if not (math.isfinite(lo) and lo >= 0 and hi >= lo):
-            msgs.append(f"the {code} region ({lo:g} to {hi:g} s) is not an interval of "
-                        "averaging times")
+            msgs.append(
+                f"the {code} region ({lo:g} to {hi:g} s) is not an interval of averaging times"
+            )
             continue
         k = int(np.sum((tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))))
         if k == 0:
-            msgs.append(f"the {code} region ({lo:.3g} to {hi:.3g} s) holds no averaging time "
-                        f"of this log (it has {tau[0]:.3g} to {tau[-1]:.3g} s): drag it over "
-                        "the points")
+            msgs.append(
+                f"the {code} region ({lo:.3g} to {hi:.3g} s) holds no averaging time "
+                f"of this log (it has {tau[0]:.3g} to {tau[-1]:.3g} s): drag it over "
+                "the points"
+            )
         elif k < min_points:
-            msgs.append(f"the {code} region ({lo:.3g} to {hi:.3g} s) holds {k} averaging "
-                        f"time; drag over at least {min_points} points to see a slope")
+            msgs.append(
+                f"the {code} region ({lo:.3g} to {hi:.3g} s) holds {k} averaging "
+                f"time; drag over at least {min_points} points to see a slope"
+            )
         else:
             good[code] = (float(lo), float(hi))
     return good, msgs
 
 
-def compute_slope(wv: eg.WaveletVariance | None, regions: Mapping[str, tuple[float, float]],
-                  truth: eg.Model | None = None, *,
-                  gmwm: Callable[[eg.WaveletVariance, str], MethodEstimate] | None = None,
-                  min_points: int = MIN_POINTS) -> SlopeResult:
+def compute_slope(
+    wv: eg.WaveletVariance | None,
+    regions: Mapping[str, tuple[float, float]],
+    truth: eg.Model | None = None,
+    *,
+    gmwm: Callable[[eg.WaveletVariance, str], MethodEstimate] | None = None,
+    min_points: int = MIN_POINTS,
+) -> SlopeResult:
     """The slope method, its automatic read-off and GMWM on one WV (pure; worker-thread safe).
 
     Parameters
@@ -206,12 +223,20 @@ def compute_slope(wv: eg.WaveletVariance | None, regions: Mapping[str, tuple[flo
         return SlopeResult(None, truth=truth, messages=["load a log first"])
     if wv.robust:
         if wv.classical is None:
-            return SlopeResult(None, truth=truth, messages=[
-                "this channel has a robust WV only; the Allan variance needs the classical one"])
+            return SlopeResult(
+                None,
+                truth=truth,
+                messages=[
+                    "this channel has a robust WV only; the Allan variance needs the classical one"
+                ],
+            )
         wv = wv.classical
     if wv.n_levels < 2:
-        return SlopeResult(None, truth=truth, messages=["the log is too short for an Allan "
-                                                        "deviation plot (fewer than 2 levels)"])
+        return SlopeResult(
+            None,
+            truth=truth,
+            messages=["the log is too short for an Allan deviation plot (fewer than 2 levels)"],
+        )
     av = AllanVariance.from_wv(wv)
     out = SlopeResult(av, truth=truth)
     good, msgs = check_regions(av, regions, min_points)
@@ -223,8 +248,9 @@ def compute_slope(wv: eg.WaveletVariance | None, regions: Mapping[str, tuple[flo
         except ValueError as e:
             out.messages.append(f"slope method: {e}")
     elif not regions:
-        out.messages.append("choose a process and drag over the points of the plot to set its "
-                            "region")
+        out.messages.append(
+            "choose a process and drag over the points of the plot to set its region"
+        )
     try:
         out.estimates["ROS auto"] = avsm_auto(av)
     except ValueError as e:
@@ -244,9 +270,12 @@ def _sort_key(label: str) -> int:
     return CODE_ORDER.index(code) if code in CODE_ORDER else len(CODE_ORDER)
 
 
-def comparison_values(estimates: Mapping[str, MethodEstimate | None],
-                      truth: eg.Model | None, fs: float,
-                      unit: str = "") -> list[dict[str, Any]]:
+def comparison_values(
+    estimates: Mapping[str, MethodEstimate | None],
+    truth: eg.Model | None,
+    fs: float,
+    unit: str = "",
+) -> list[dict[str, Any]]:
     """Datasheet quantities of each method and of the truth, side by side (numbers).
 
     Parameters
@@ -278,9 +307,16 @@ def comparison_values(estimates: Mapping[str, MethodEstimate | None],
     for col, ds in sources:
         for r in ds:
             key = (r["label"], r["quantity"])
-            row = rows.setdefault(key, {"process": r["label"], "quantity": r["quantity"],
-                                        "unit": r["unit"], **{c: None for c in METHODS},
-                                        "truth": None})
+            row = rows.setdefault(
+                key,
+                {
+                    "process": r["label"],
+                    "quantity": r["quantity"],
+                    "unit": r["unit"],
+                    **{c: None for c in METHODS},
+                    "truth": None,
+                },
+            )
             row[col] = float(r["value"])
     order = sorted(rows, key=lambda k: _sort_key(k[0]))  # stable: datasheet order within
     return [rows[k] for k in order]
@@ -288,6 +324,7 @@ def comparison_values(estimates: Mapping[str, MethodEstimate | None],
 
 def comparison_rows(values: list[dict[str, Any]]) -> dict[str, list[str]]:
     """The table's columns (strings) from :func:`comparison_values`."""
+
     def fmt(v: Any) -> str:
         return "" if v is None else format_value(float(v))
 
@@ -360,8 +397,14 @@ def slope_line_data(result: SlopeResult) -> dict[str, list[Any]]:
         ``xs``, ``ys`` (lists of 2-point lists), ``color``, ``code``, and ``read_tau``,
         ``read_adev`` (the reading point; NaN for the bias-instability floor).
     """
-    out: dict[str, list[Any]] = {"xs": [], "ys": [], "color": [], "code": [], "read_tau": [],
-                                 "read_adev": []}
+    out: dict[str, list[Any]] = {
+        "xs": [],
+        "ys": [],
+        "color": [],
+        "code": [],
+        "read_tau": [],
+        "read_adev": [],
+    }
     e = result.estimates.get("AVSM")
     if e is None:
         return out
@@ -378,8 +421,9 @@ def slope_line_data(result: SlopeResult) -> dict[str, list[Any]]:
         out["color"].append(REGION_COLORS.get(code, "#555555"))
         out["code"].append(code)
         out["read_tau"].append(float(rt) if rt is not None else math.nan)
-        out["read_adev"].append(10.0 ** (ln["intercept"] + ln["slope"] * math.log10(rt))
-                                if rt is not None else math.nan)
+        out["read_adev"].append(
+            10.0 ** (ln["intercept"] + ln["slope"] * math.log10(rt)) if rt is not None else math.nan
+        )
     return out
 
 
@@ -476,101 +520,205 @@ class SlopeView:
     def _build_widgets(self) -> None:
         opts = {"(your data: choose a teaching scenario to load one)": ""}
         opts.update({sc.title: key for key, sc in SCENARIOS.items()})
-        self.scenario_select = pn.widgets.Select(label="Teaching scenario", options=opts,
-                                                 value="", width=420,
-                                                 css_classes=["gmwm-scenario"])
+        self.scenario_select = pn.widgets.Select(
+            label="Teaching scenario",
+            options=opts,
+            value="",
+            width=420,
+            css_classes=["gmwm-scenario"],
+        )
         self.scenario_select.param.watch(self._on_scenario, "value")
         self.process = pn.widgets.RadioButtonGroup(
-            label="Process", options=PROCESS_CHOICES, value="WN", color="default",
-            variant="outline", margin=(22, 10, 5, 10), css_classes=["gmwm-slope-process"])
-        self.clear_button = pn.widgets.Button(label="Clear regions", color="light",
-                                              width=130, margin=(22, 5, 5, 5))
+            label="Process",
+            options=PROCESS_CHOICES,
+            value="WN",
+            color="default",
+            variant="outline",
+            margin=(22, 10, 5, 10),
+            css_classes=["gmwm-slope-process"],
+        )
+        self.clear_button = pn.widgets.Button(
+            label="Clear regions", color="light", width=130, margin=(22, 5, 5, 5)
+        )
         self.clear_button.on_click(lambda _e: self.clear_regions())
-        self.explain = pn.pane.Alert("", alert_type="info", visible=False,
-                                     sizing_mode="stretch_width", margin=(5, 10),
-                                     css_classes=["gmwm-scenario-why"])
-        self.message = pn.pane.Alert("", alert_type="warning", visible=False,
-                                     sizing_mode="stretch_width", margin=(5, 10),
-                                     css_classes=["gmwm-slope-message"])
-        self.status = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10),
-                                       styles={"font-size": "13px", "color": "#555"})
+        self.explain = pn.pane.Alert(
+            "",
+            alert_type="info",
+            visible=False,
+            sizing_mode="stretch_width",
+            margin=(5, 10),
+            css_classes=["gmwm-scenario-why"],
+        )
+        self.message = pn.pane.Alert(
+            "",
+            alert_type="warning",
+            visible=False,
+            sizing_mode="stretch_width",
+            margin=(5, 10),
+            css_classes=["gmwm-slope-message"],
+        )
+        self.status = pn.pane.Markdown(
+            "",
+            sizing_mode="stretch_width",
+            margin=(0, 10),
+            styles={"font-size": "13px", "color": "#555"},
+        )
 
     def _build_figure(self) -> None:
-        p = figure(x_axis_type="log", y_axis_type="log", height=460,
-                   sizing_mode="stretch_width", tools="pan,wheel_zoom,reset,save",
-                   toolbar_location="above", name="slope_adev",
-                   title="Overlapping Allan deviation")
+        p = figure(
+            x_axis_type="log",
+            y_axis_type="log",
+            height=460,
+            sizing_mode="stretch_width",
+            tools="pan,wheel_zoom,reset,save",
+            toolbar_location="above",
+            name="slope_adev",
+            title="Overlapping Allan deviation",
+        )
         p.xaxis.axis_label = "averaging time τ [s]"
         p.yaxis.axis_label = "Allan deviation"
         p.axis.axis_label_text_font_style = "normal"
         p.grid.grid_line_alpha = 0.35
-        self.adev_src = ColumnDataSource({"tau_s": [], "adev": [], "lo": [], "hi": []},
-                                         name="slope_adev_points")
-        band = p.varea(x="tau_s", y1="lo", y2="hi", source=self.adev_src,
-                       fill_color=BAND_COLOR, fill_alpha=0.25)
-        line = p.line("tau_s", "adev", source=self.adev_src, line_color=EMPIRICAL_COLOR,
-                      line_width=1.5)
-        pts = p.scatter("tau_s", "adev", source=self.adev_src, size=7, color=EMPIRICAL_COLOR,
-                        selection_color="#D62728", nonselection_alpha=1.0)
+        self.adev_src = ColumnDataSource(
+            {"tau_s": [], "adev": [], "lo": [], "hi": []}, name="slope_adev_points"
+        )
+        band = p.varea(
+            x="tau_s",
+            y1="lo",
+            y2="hi",
+            source=self.adev_src,
+            fill_color=BAND_COLOR,
+            fill_alpha=0.25,
+        )
+        line = p.line(
+            "tau_s", "adev", source=self.adev_src, line_color=EMPIRICAL_COLOR, line_width=1.5
+        )
+        pts = p.scatter(
+            "tau_s",
+            "adev",
+            source=self.adev_src,
+            size=7,
+            color=EMPIRICAL_COLOR,
+            selection_color="#D62728",
+            nonselection_alpha=1.0,
+        )
         self.box_select = BoxSelectTool(dimensions="width", renderers=[pts], persistent=False)
         p.add_tools(self.box_select)
         p.toolbar.active_drag = self.box_select
         self.adev_src.selected.on_change("indices", self._on_select)
-        self.boxes = {c: BoxAnnotation(left=1.0, right=1.0, fill_color=col, fill_alpha=0.12,
-                                       line_color=col, line_alpha=0.5, visible=False)
-                      for c, col in REGION_COLORS.items()}
+        self.boxes = {
+            c: BoxAnnotation(
+                left=1.0,
+                right=1.0,
+                fill_color=col,
+                fill_alpha=0.12,
+                line_color=col,
+                line_alpha=0.5,
+                visible=False,
+            )
+            for c, col in REGION_COLORS.items()
+        }
         for b in self.boxes.values():
             p.add_layout(b)
         self.lines_src = ColumnDataSource(slope_line_data(SlopeResult(None)), name="slope_lines")
-        lines = p.multi_line("xs", "ys", source=self.lines_src, line_color="color",
-                             line_width=3, line_alpha=0.85)
-        reads = p.scatter("read_tau", "read_adev", source=self.lines_src, marker="diamond",
-                          size=11, color="color", line_color="white")
+        lines = p.multi_line(
+            "xs", "ys", source=self.lines_src, line_color="color", line_width=3, line_alpha=0.85
+        )
+        reads = p.scatter(
+            "read_tau",
+            "read_adev",
+            source=self.lines_src,
+            marker="diamond",
+            size=11,
+            color="color",
+            line_color="white",
+        )
         self.curve_srcs: dict[str, ColumnDataSource] = {}
-        items = [LegendItem(label="Allan deviation (95% band)", renderers=[line, pts, band]),
-                 LegendItem(label="slope lines (◆ read-off point)", renderers=[lines, reads])]
-        styles = {**{c: (col, dash) for c, (_m, col, dash) in METHODS.items()},
-                  "truth": (TRUTH_COLOR, "dashdot")}
+        items = [
+            LegendItem(label="Allan deviation (95% band)", renderers=[line, pts, band]),
+            LegendItem(label="slope lines (◆ read-off point)", renderers=[lines, reads]),
+        ]
+        styles = {
+            **{c: (col, dash) for c, (_m, col, dash) in METHODS.items()},
+            "truth": (TRUTH_COLOR, "dashdot"),
+        }
         for col, (color, dash) in styles.items():
             src = ColumnDataSource({"tau_s": [], "adev": []}, name=f"slope_curve_{col}")
-            r = p.line("tau_s", "adev", source=src, line_color=color, line_dash=dash,
-                       line_width=2.5 if col == "GMWM" else 2)
+            r = p.line(
+                "tau_s",
+                "adev",
+                source=src,
+                line_color=color,
+                line_dash=dash,
+                line_width=2.5 if col == "GMWM" else 2,
+            )
             self.curve_srcs[col] = src
-            items.append(LegendItem(label=f"{col} implied" if col != "truth" else "truth",
-                                    renderers=[r]))
-        legend = Legend(items=items, location="top_right", click_policy="hide",
-                        label_text_font_size="11px", background_fill_alpha=0.7)
+            items.append(
+                LegendItem(label=f"{col} implied" if col != "truth" else "truth", renderers=[r])
+            )
+        legend = Legend(
+            items=items,
+            location="top_right",
+            click_policy="hide",
+            label_text_font_size="11px",
+            background_fill_alpha=0.7,
+        )
         p.add_layout(legend, "right")
         self.figure = p
 
     def _build_table(self) -> None:
-        widths = {"process": 60, "quantity": 230, "AVSM": 90, "ROS auto": 90, "GMWM": 90,
-                  "truth": 90, "unit": 120}
+        widths = {
+            "process": 60,
+            "quantity": 230,
+            "AVSM": 90,
+            "ROS auto": 90,
+            "GMWM": 90,
+            "truth": 90,
+            "unit": 120,
+        }
         self.table_src = ColumnDataSource({c: [] for c in TABLE_COLUMNS}, name="slope_rows")
-        cols = [TableColumn(field=c, title=c, width=widths[c], sortable=False,
-                            formatter=StringFormatter()) for c in TABLE_COLUMNS]
+        cols = [
+            TableColumn(
+                field=c, title=c, width=widths[c], sortable=False, formatter=StringFormatter()
+            )
+            for c in TABLE_COLUMNS
+        ]
         # autosize_mode "fit_columns" fails on data updates in BokehJS 3.9.2 (see views.py)
-        self.table = DataTable(source=self.table_src, columns=cols, index_position=None,
-                               sortable=False, reorderable=False, selectable=False,
-                               autosize_mode="force_fit", height=260, row_height=26,
-                               sizing_mode="stretch_width", name="slope_table",
-                               css_classes=["gmwm-slope-table"])
+        self.table = DataTable(
+            source=self.table_src,
+            columns=cols,
+            index_position=None,
+            sortable=False,
+            reorderable=False,
+            selectable=False,
+            autosize_mode="force_fit",
+            height=260,
+            row_height=26,
+            sizing_mode="stretch_width",
+            name="slope_table",
+            css_classes=["gmwm-slope-table"],
+        )
 
     def _build_layout(self) -> None:
         h = pn.pane.Markdown
-        note = h("Pick a process, then drag over the points where its slope shows (box select): "
-                 "the slope method (IEEE Std 952) reads its datasheet value off a line of fixed "
-                 "slope. **ROS auto** is the automatic read-off of the ROS calibration tools. "
-                 "**GMWM** fits the same processes to the whole wavelet variance; the "
-                 "bias-instability floor has no process of its own there, a Gauss-Markov (GM) "
-                 "term plays its part.", sizing_mode="stretch_width", margin=(0, 10),
-                 styles={"font-size": "13px", "color": "#444"})
+        note = h(
+            "Pick a process, then drag over the points where its slope shows (box select): "
+            "the slope method (IEEE Std 952) reads its datasheet value off a line of fixed "
+            "slope. **ROS auto** is the automatic read-off of the ROS calibration tools. "
+            "**GMWM** fits the same processes to the whole wavelet variance; the "
+            "bias-instability floor has no process of its own there, a Gauss-Markov (GM) "
+            "term plays its part.",
+            sizing_mode="stretch_width",
+            margin=(0, 10),
+            styles={"font-size": "13px", "color": "#444"},
+        )
         self.panel = pn.Column(
             pn.Row(self.scenario_select, sizing_mode="stretch_width"),
             self.explain,
             note,
             pn.Row(self.process, self.clear_button, sizing_mode="stretch_width"),
-            self.message, self.status,
+            self.message,
+            self.status,
             pn.pane.Bokeh(self.figure, sizing_mode="stretch_width"),
             h("#### Datasheet values by method", margin=(0, 10)),
             pn.pane.Bokeh(self.table, sizing_mode="stretch_width", margin=(5, 10)),
@@ -616,8 +764,9 @@ class SlopeView:
                 self.state.set_model(sc.model.cleared())  # the Fit tab fits the true form
 
         self.status.object = f"⏳ Simulating the scenario '{sc.title}' ..."
-        self.app._spawn(partial(self.app._offload, f"Simulating the scenario '{sc.title}'",
-                                work, apply))
+        self.app._spawn(
+            partial(self.app._offload, f"Simulating the scenario '{sc.title}'", work, apply)
+        )
 
     # ------------------------------------------------------------------------------------
     # callbacks (thin)
@@ -670,8 +819,7 @@ class SlopeView:
         s = self.state
         self._sync_scenario()
         # the WV object itself (identity), not its id(): an id can be reused after collection
-        key = (s.wv, s.unit, s.source, s.path, s.channel, s.fs,
-               tuple(sorted(self.regions.items())))
+        key = (s.wv, s.unit, s.source, s.path, s.channel, s.fs, tuple(sorted(self.regions.items())))
         if key == self._key and not force:
             return
         if not self._visible():
@@ -742,15 +890,20 @@ class SlopeView:
         if av is None:
             self.adev_src.data = {"tau_s": [], "adev": [], "lo": [], "hi": []}
         else:
-            self.adev_src.data = {"tau_s": np.asarray(av.tau_s, float),
-                                  "adev": np.asarray(av.adev, float),
-                                  "lo": np.asarray(av.adev_low, float),
-                                  "hi": np.asarray(av.adev_high, float)}
+            self.adev_src.data = {
+                "tau_s": np.asarray(av.tau_s, float),
+                "adev": np.asarray(av.adev, float),
+                "lo": np.asarray(av.adev_low, float),
+                "hi": np.asarray(av.adev_high, float),
+            }
         label = f"Allan deviation [{unit}]"
         if self.figure.yaxis[0].axis_label != label:
             self.figure.yaxis.axis_label = label
-        self.figure.title.text = (f"Overlapping Allan deviation of {self.state.channel}"
-                                  if self.state.channel else "Overlapping Allan deviation")
+        self.figure.title.text = (
+            f"Overlapping Allan deviation of {self.state.channel}"
+            if self.state.channel
+            else "Overlapping Allan deviation"
+        )
         for code, box in self.boxes.items():
             reg = self.regions.get(code)
             if reg is None:
@@ -761,8 +914,9 @@ class SlopeView:
         for col, data in implied_adev_curves(result).items():
             self.curve_srcs[col].data = data
         fs = float(av.fs) if av is not None else float(self.state.fs or 1.0)
-        data = comparison_rows(comparison_values(result.estimates, result.truth, fs,
-                                                 self.state.unit))
+        data = comparison_rows(
+            comparison_values(result.estimates, result.truth, fs, self.state.unit)
+        )
         if data != self.table_src.data:
             same = len(data["process"]) == len(self.table_src.data.get("process", []))
             self.table_src.data = data
@@ -779,8 +933,9 @@ class SlopeView:
     def _show_messages(self, msgs: list[str]) -> None:
         text = "  \n".join(f"• {m}" for m in msgs)
         hint = len(msgs) == 1 and msgs[0].startswith("choose a process")  # guidance, no fault
-        self.message.param.update(object=text, visible=bool(msgs),
-                                  alert_type="info" if hint else "warning")
+        self.message.param.update(
+            object=text, visible=bool(msgs), alert_type="info" if hint else "warning"
+        )
 
     def _sync_scenario(self) -> None:
         """The scenario menu and the explanation follow the session's data."""
@@ -802,8 +957,9 @@ class SlopeView:
             sc = SCENARIOS[key]
             self.explain.param.update(
                 object=f"**{sc.title}** ({sc.n} samples at {sc.fs:g} Hz, "
-                       f"{sc.duration_s:g} s; truth `{sc.model.spec(values=True)}`).  \n"
-                       f"Why the slope method goes wrong here: {sc.why}",
-                visible=True)
+                f"{sc.duration_s:g} s; truth `{sc.model.spec(values=True)}`).  \n"
+                f"Why the slope method goes wrong here: {sc.why}",
+                visible=True,
+            )
         elif self.explain.visible:
             self.explain.param.update(object="", visible=False)

@@ -54,8 +54,12 @@ PROCESS_CODES: tuple[str, ...] = ("WN", "QN", "RW", "DR", "AR1", "GM")
 
 #: Readable names of the processes (for the process list).
 PROCESS_NAMES: dict[str, str] = {
-    "WN": "white noise", "QN": "quantization noise", "RW": "random walk",
-    "DR": "drift", "AR1": "AR(1)", "GM": "Gauss-Markov",
+    "WN": "white noise",
+    "QN": "quantization noise",
+    "RW": "random walk",
+    "DR": "drift",
+    "AR1": "AR(1)",
+    "GM": "Gauss-Markov",
 }
 
 #: Sources a session can load from.
@@ -88,8 +92,9 @@ def format_value(v: float, digits: int = 4) -> str:
 # ---------------------------------------------------------------------------------------------
 # reading files
 # ---------------------------------------------------------------------------------------------
-def read_log(path: str | os.PathLike[str], *, fs: float | None = None,
-             segment: str | None = None) -> Any:
+def read_log(
+    path: str | os.PathLike[str], *, fs: float | None = None, segment: str | None = None
+) -> Any:
     """Read an IMU log with the engine's loader (``engine.load_log``).
 
     Parameters
@@ -197,8 +202,12 @@ def _retag_fs(wv: eg.WaveletVariance, fs: float) -> eg.WaveletVariance:
     return dataclasses.replace(wv, fs=fs, classical=classical)
 
 
-def _wv_from_cache(cache: Mapping[tuple[str, float, bool], eg.WaveletVariance], channel: str,
-                   fs: float, robust: bool) -> eg.WaveletVariance | None:
+def _wv_from_cache(
+    cache: Mapping[tuple[str, float, bool], eg.WaveletVariance],
+    channel: str,
+    fs: float,
+    robust: bool,
+) -> eg.WaveletVariance | None:
     """A cached WV for (channel, fs, robust), derived without recomputation when possible."""
     hit = cache.get((channel, fs, robust))
     if hit is not None:
@@ -226,8 +235,11 @@ class AppState(param.Parameterized):
 
     # data
     source = param.Selector(default="demo", objects=list(SOURCES), doc="Where the data came from.")
-    path = param.String(default="", doc="Server path of the loaded file (source 'path'); "
-                       "the scenario key for source 'scenario'.")
+    path = param.String(
+        default="",
+        doc="Server path of the loaded file (source 'path'); "
+        "the scenario key for source 'scenario'.",
+    )
     filename = param.String(default="", doc="Name of the loaded file.")
     channels = param.List(default=[], item_type=str, doc="Channel names of the loaded log.")
     channel = param.String(default="", doc="Selected channel.")
@@ -238,12 +250,20 @@ class AppState(param.Parameterized):
     unit = param.String(default="", doc="Unit of the selected channel.")
     is_summary = param.Boolean(default=False, doc="The file holds WV summaries, no raw data.")
     robust = param.Boolean(default=False, doc="Robust (Tukey biweight) WV.")
-    wv = param.ClassSelector(class_=eg.WaveletVariance, default=None, allow_None=True,
-                             doc="Empirical WV of the selected channel (from the cache).")
+    wv = param.ClassSelector(
+        class_=eg.WaveletVariance,
+        default=None,
+        allow_None=True,
+        doc="Empirical WV of the selected channel (from the cache).",
+    )
     # model and fit
     model = param.ClassSelector(class_=eg.Model, default=eg.Model(), doc="Current model.")
-    result = param.ClassSelector(class_=eg.GMWMResult, default=None, allow_None=True,
-                                 doc="Fit of the current model, None for an empty model.")
+    result = param.ClassSelector(
+        class_=eg.GMWMResult,
+        default=None,
+        allow_None=True,
+        doc="Fit of the current model, None for an empty model.",
+    )
     whatif = param.Boolean(default=False, doc="Draw the what-if values instead of the fit.")
     whatif_values = param.Dict(default={}, doc="What-if values by unique parameter name.")
     weights = param.String(default="ci", doc="GMWM weighting ('ci' or 'identity').")
@@ -292,9 +312,14 @@ class AppState(param.Parameterized):
     # reading (thread-safe: no parameter changes)
     # ---------------------------------------------------------------------------------
     @staticmethod
-    def read(source: str, *, path: str | os.PathLike[str] | None = None,
-             data: bytes | str | None = None, filename: str = "",
-             segment: str | None = None) -> LoadedData:
+    def read(
+        source: str,
+        *,
+        path: str | os.PathLike[str] | None = None,
+        data: bytes | str | None = None,
+        filename: str = "",
+        segment: str | None = None,
+    ) -> LoadedData:
         """Read a log from a source. Heavy; touches no state, safe in a worker thread.
 
         Parameters
@@ -311,8 +336,10 @@ class AppState(param.Parameterized):
         if source == "demo":
             p = demo_path()
             if not p.exists():
-                raise ValueError(f"the demo log {p} is missing: run `python data/make_demo.py` "
-                                 "in the repository, or load a file")
+                raise ValueError(
+                    f"the demo log {p} is missing: run `python data/make_demo.py` "
+                    "in the repository, or load a file"
+                )
             lg = read_log(p)
             out = LoadedData(lg, "demo", p.name, str(p))
         elif source == "path":
@@ -340,8 +367,9 @@ class AppState(param.Parameterized):
                 try:
                     lg = read_log(tmp, segment=segment)
                 except ValueError as e:  # name the user's file, not the temporary one
-                    raise ValueError(str(e).replace(tmp, name)
-                                     .replace(Path(tmp).name, name)) from None
+                    raise ValueError(
+                        str(e).replace(tmp, name).replace(Path(tmp).name, name)
+                    ) from None
             finally:
                 try:
                     os.unlink(tmp)
@@ -366,8 +394,12 @@ class AppState(param.Parameterized):
         return out
 
     @staticmethod
-    def precompute(loaded: LoadedData, channel: str | None = None, fs: float | None = None,
-                   robust: bool = False) -> None:
+    def precompute(
+        loaded: LoadedData,
+        channel: str | None = None,
+        fs: float | None = None,
+        robust: bool = False,
+    ) -> None:
         """Compute the WV of one channel of ``loaded`` into its cache (worker-thread safe).
 
         Errors are not raised here; :meth:`install` reports them.
@@ -385,8 +417,9 @@ class AppState(param.Parameterized):
         except Exception:  # reported when installed
             pass
 
-    def warm(self, channel: str | None = None, fs: float | None = None,
-             robust: bool | None = None) -> None:
+    def warm(
+        self, channel: str | None = None, fs: float | None = None, robust: bool | None = None
+    ) -> None:
         """Compute a WV of the current log into the cache (worker-thread safe, no state change).
 
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
@@ -447,16 +480,25 @@ class AppState(param.Parameterized):
 
     def load_path(self, path: str | os.PathLike[str]) -> bool:
         """Load a log from a path on the server."""
-        return self._guard(f"Could not load {path}",
-                           lambda: self.install(self.read("path", path=path)))
+        return self._guard(
+            f"Could not load {path}", lambda: self.install(self.read("path", path=path))
+        )
 
     def load_upload(self, data: bytes | str | None, filename: str) -> bool:
         """Load an uploaded file (its bytes and its name; the suffix picks the format)."""
-        return self._guard(f"Could not load the uploaded file {filename}",
-                           lambda: self.install(self.read("upload", data=data, filename=filename)))
+        return self._guard(
+            f"Could not load the uploaded file {filename}",
+            lambda: self.install(self.read("upload", data=data, filename=filename)),
+        )
 
-    def install(self, loaded: LoadedData, *, channel: str | None = None,
-                fs: float | None = None, robust: bool | None = None) -> bool:
+    def install(
+        self,
+        loaded: LoadedData,
+        *,
+        channel: str | None = None,
+        fs: float | None = None,
+        robust: bool | None = None,
+    ) -> bool:
         """Make a read log the session's data; select a channel, compute (or reuse) its WV.
 
         The channel is ``channel`` if given, else the current one if the new log has it, else
@@ -464,6 +506,7 @@ class AppState(param.Parameterized):
         scenario's true model); if it does not fit the new data it is cleared (with a
         message). Nothing changes if the new data cannot be used.
         """
+
         def run() -> bool:
             lg = loaded.log
             names = _channel_names(lg)
@@ -473,15 +516,19 @@ class AppState(param.Parameterized):
             ch = channel if channel is not None else self.channel
             if ch not in names:
                 if channel is not None:
-                    msgs.append(f"channel {channel!r} is not in {loaded.name}; "
-                                f"showing {names[0]} (channels: {', '.join(names)})")
+                    msgs.append(
+                        f"channel {channel!r} is not in {loaded.name}; "
+                        f"showing {names[0]} (channels: {', '.join(names)})"
+                    )
                 ch = names[0]
             f_file = float(lg.fs)
             f = f_file if fs is None else _check_fs(fs)
             rob = self.robust if robust is None else bool(robust)
             if lg.is_summary and rob and not _summary_has_robust(lg, ch):
-                msgs.append(f"{loaded.name} holds a classical WV summary only; "
-                            "the robust WV needs the raw log")
+                msgs.append(
+                    f"{loaded.name} holds a classical WV summary only; "
+                    "the robust WV needs the raw log"
+                )
                 rob = False
             cache = dict(loaded.wv_cache)
             wv = _wv_from_cache(cache, ch, f, rob)
@@ -498,8 +545,9 @@ class AppState(param.Parameterized):
                 if loaded.path in SCENARIOS:
                     model = SCENARIOS[loaded.path].model.cleared()
             fit = self._fit_or_none(wv, model)
-            new_model, result = (model, fit) if isinstance(fit, eg.GMWMResult) else (
-                eg.Model(), None)
+            new_model, result = (
+                (model, fit) if isinstance(fit, eg.GMWMResult) else (eg.Model(), None)
+            )
             if fit is not None and not isinstance(fit, eg.GMWMResult):
                 msgs.append(f"the model {model.spec()} was cleared: {fit}")
             with self._lock:
@@ -510,11 +558,18 @@ class AppState(param.Parameterized):
             self.param.update(
                 source=loaded.source,
                 path=loaded.path if loaded.source in ("path", "scenario") else "",
-                filename=loaded.name, channels=list(names), channel=ch, fs=f, fs_source=fs_src,
-                robust=rob, is_summary=bool(lg.is_summary), wv=wv,
+                filename=loaded.name,
+                channels=list(names),
+                channel=ch,
+                fs=f,
+                fs_source=fs_src,
+                robust=rob,
+                is_summary=bool(lg.is_summary),
+                wv=wv,
                 **self._data_info(lg, ch, wv),
                 **self._model_update(new_model, result),
-                error="; ".join(msgs), notice="; ".join(lg.meta.get("notes", []) or []),
+                error="; ".join(msgs),
+                notice="; ".join(lg.meta.get("notes", []) or []),
                 revision=self.revision + 1,
             )
             return not msgs
@@ -527,12 +582,14 @@ class AppState(param.Parameterized):
 
     def select_channel(self, channel: str) -> bool:
         """Show another channel: its cached WV (computed on first use) and a refit."""
+
         def run() -> bool:
             if self._log is None:
                 raise ValueError("load a log first")
             if channel not in self.channels:
-                raise ValueError(f"there is no channel {channel!r}; channels: "
-                                 f"{', '.join(self.channels)}")
+                raise ValueError(
+                    f"there is no channel {channel!r}; channels: {', '.join(self.channels)}"
+                )
             rob = self.robust
             msgs = []
             if self.is_summary and rob and not _summary_has_robust(self._log, channel):
@@ -545,32 +602,37 @@ class AppState(param.Parameterized):
 
     def set_fs(self, fs: float) -> bool:
         """Use another sampling frequency (Hz); the WV is re-labelled, not recomputed."""
+
         def run() -> bool:
             f = _check_fs(fs)
             if self._log is None:
                 raise ValueError("load a log first")
             wv = self.get_wv(self.channel, f, self.robust)
-            return self._switch_wv(wv, fs=f, fs_source="user" if f != float(self._log.fs)
-                                   else _fs_source(self._log))
+            return self._switch_wv(
+                wv, fs=f, fs_source="user" if f != float(self._log.fs) else _fs_source(self._log)
+            )
 
         return self._guard("Could not set the sampling frequency", run)
 
     def set_robust(self, robust: bool) -> bool:
         """Switch between the classical and the robust (biweight) WV."""
+
         def run() -> bool:
             if self._log is None:
                 self.param.update(robust=bool(robust))
                 return True
             if self.is_summary and robust and not _summary_has_robust(self._log, self.channel):
-                raise ValueError("this file holds a classical WV summary only; the robust WV "
-                                 "needs the raw log")
+                raise ValueError(
+                    "this file holds a classical WV summary only; the robust WV needs the raw log"
+                )
             wv = self.get_wv(self.channel, float(self.fs), bool(robust))
             return self._switch_wv(wv, robust=bool(robust))
 
         return self._guard("Could not switch the robust WV", run)
 
-    def _switch_wv(self, wv: eg.WaveletVariance, msgs: list[str] | None = None,
-                   **changes: Any) -> bool:
+    def _switch_wv(
+        self, wv: eg.WaveletVariance, msgs: list[str] | None = None, **changes: Any
+    ) -> bool:
         """Install a new WV (channel/fs/robust change) and refit the model on it."""
         msgs = list(msgs or [])
         fit = self._fit_or_none(wv, self.model)
@@ -580,22 +642,29 @@ class AppState(param.Parameterized):
             msgs.append(f"the model {self.model.spec()} was cleared: {fit}")
             model, result = eg.Model(), None
         ch = changes.get("channel", self.channel)
-        self.param.update(wv=wv, **changes, **self._data_info(self._log, ch, wv),
-                          **self._model_update(model, result), error="; ".join(msgs),
-                          revision=self.revision + 1)
+        self.param.update(
+            wv=wv,
+            **changes,
+            **self._data_info(self._log, ch, wv),
+            **self._model_update(model, result),
+            error="; ".join(msgs),
+            revision=self.revision + 1,
+        )
         return not msgs
 
     # ---------------------------------------------------------------------------------
     # model actions
     # ---------------------------------------------------------------------------------
-    def _fit_or_none(self, wv: eg.WaveletVariance, model: eg.Model,
-                     start: eg.Model | None = None) -> eg.GMWMResult | str | None:
+    def _fit_or_none(
+        self, wv: eg.WaveletVariance, model: eg.Model, start: eg.Model | None = None
+    ) -> eg.GMWMResult | str | None:
         """Fit ``model`` (structure only, so a spec always gives the same fit) or say why not."""
         if len(model) == 0:
             return None
         try:
-            return eg.fit_gmwm(wv, start if start is not None else model.cleared(),
-                               weights=self.weights)
+            return eg.fit_gmwm(
+                wv, start if start is not None else model.cleared(), weights=self.weights
+            )
         except (eg.ModelError, eg.FitError, ValueError) as e:
             return _message(e)
 
@@ -610,9 +679,13 @@ class AppState(param.Parameterized):
         An empty spec clears the model. An unidentifiable model leaves everything as it was
         and sets :attr:`error`.
         """
+
         def run() -> bool:
-            m = eg.Model() if isinstance(model, str) and not model.strip() else \
-                eg.parse_model(model)
+            m = (
+                eg.Model()
+                if isinstance(model, str) and not model.strip()
+                else eg.parse_model(model)
+            )
             return self._apply_model(m)
 
         return self._guard("Could not set the model", run)
@@ -634,6 +707,7 @@ class AppState(param.Parameterized):
         Refits on the cached WV. A model that cannot be identified (a second WN, AR1 mixed
         with GM, more parameters than WV levels) is refused with a message.
         """
+
         def run() -> bool:
             c = str(code).strip().upper()
             if c not in PROCESS_CODES:
@@ -649,11 +723,13 @@ class AppState(param.Parameterized):
 
     def remove_process(self, index: int) -> bool:
         """Remove the process at ``index`` (position in :attr:`model`, i.e. in the labels)."""
+
         def run() -> bool:
             procs = list(self.model.processes)
             if not 0 <= index < len(procs):
-                raise IndexError(f"there is no process number {index + 1} "
-                                 f"(the model has {len(procs)})")
+                raise IndexError(
+                    f"there is no process number {index + 1} (the model has {len(procs)})"
+                )
             del procs[index]
             return self._apply_model(eg.Model(tuple(procs)))
 
@@ -676,6 +752,7 @@ class AppState(param.Parameterized):
 
     def set_whatif_value(self, name: str, value: float) -> bool:
         """Set one what-if parameter (unique name like ``GM_1.beta``); curves move, no fit."""
+
         def run() -> bool:
             if name not in self.model.param_names:
                 raise ValueError(f"the model has no parameter {name!r}")
@@ -683,23 +760,29 @@ class AppState(param.Parameterized):
             if not math.isfinite(v):
                 raise ValueError(f"{name} must be a finite number, got {value}")
             self.whatif_model({name: v})  # validates the value (e.g. beta > 0)
-            self.param.update(whatif_values={**self.whatif_values, name: v}, error="",
-                              revision=self.revision + 1)
+            self.param.update(
+                whatif_values={**self.whatif_values, name: v}, error="", revision=self.revision + 1
+            )
             return True
 
         return self._guard("Could not set the what-if value", run)
 
     def reset_whatif(self) -> bool:
         """What-if values back to the fitted ones."""
-        self.param.update(whatif_values=self._model_update(self.model, self.result)
-                          ["whatif_values"] or self._default_values(), error="",
-                          revision=self.revision + 1)
+        self.param.update(
+            whatif_values=self._model_update(self.model, self.result)["whatif_values"]
+            or self._default_values(),
+            error="",
+            revision=self.revision + 1,
+        )
         return True
 
     def fit_from_whatif(self) -> bool:
         """Refit, using the what-if values as extra starting values."""
-        return self._guard("Could not fit", lambda: self._apply_model(
-            self.model.cleared(), start=self.whatif_model()))
+        return self._guard(
+            "Could not fit",
+            lambda: self._apply_model(self.model.cleared(), start=self.whatif_model()),
+        )
 
     def _default_values(self) -> dict[str, float]:
         """Fitted values where known, else rough guesses read off the WV."""
@@ -737,8 +820,18 @@ class AppState(param.Parameterized):
                 if transform == "log10(1-x)":
                     hi = min(hi, 0.0)  # phi >= 0
                     lo = min(lo, hi - 3.0)
-                out.append(SliderSpec(full, lab, name, eg.param_unit(p.code, name, self.unit),
-                                      transform, lo, hi, x))
+                out.append(
+                    SliderSpec(
+                        full,
+                        lab,
+                        name,
+                        eg.param_unit(p.code, name, self.unit),
+                        transform,
+                        lo,
+                        hi,
+                        x,
+                    )
+                )
         return out
 
     # ---------------------------------------------------------------------------------
@@ -773,8 +866,10 @@ class AppState(param.Parameterized):
             return []
         out = []
         if res.at_bound:
-            out.append(f"at a bound: {', '.join(res.at_bound)} (the model may be larger than "
-                       "the data support; try removing that process)")
+            out.append(
+                f"at a bound: {', '.join(res.at_bound)} (the model may be larger than "
+                "the data support; try removing that process)"
+            )
         if not res.converged:
             out.append(f"not converged: {res.message}")
         return out
@@ -782,8 +877,9 @@ class AppState(param.Parameterized):
     # ---------------------------------------------------------------------------------
     # model selection and inference (compute_* are worker-thread safe: no parameter change)
     # ---------------------------------------------------------------------------------
-    def compute_ranking(self, spec: str, *, progress: Callable[[int, int], None] | None = None
-                        ) -> tuple[eg.WaveletVariance, Any]:
+    def compute_ranking(
+        self, spec: str, *, progress: Callable[[int, int], None] | None = None
+    ) -> tuple[eg.WaveletVariance, Any]:
         """Rank models by WVIC on the current WV: every sub-model of a maximal model
         (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
         from engine.selection import rank_models
@@ -793,12 +889,13 @@ class AppState(param.Parameterized):
             raise ValueError("load data before ranking models")
         parts = [p.strip() for p in (spec or "").split(",") if p.strip()]
         if not parts:
-            raise ValueError("type a maximal model (e.g. 3*GM+WN+QN+RW+DR) or candidate "
-                             "models separated by commas")
+            raise ValueError(
+                "type a maximal model (e.g. 3*GM+WN+QN+RW+DR) or candidate "
+                "models separated by commas"
+            )
         try:
             if len(parts) == 1:
-                sel = rank_models(wv, max_model=parts[0], weights=self.weights,
-                                  progress=progress)
+                sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
             else:
                 sel = rank_models(wv, parts, weights=self.weights, progress=progress)
         except (eg.ModelError, eg.FitError) as e:
@@ -815,8 +912,10 @@ class AppState(param.Parameterized):
 
     def rank(self, spec: str, *, progress: Callable[[int, int], None] | None = None) -> bool:
         """:meth:`compute_ranking` then :meth:`install_ranking` (synchronous)."""
-        return self._guard("Could not rank the models", lambda: self.install_ranking(
-            self.compute_ranking(spec, progress=progress)))
+        return self._guard(
+            "Could not rank the models",
+            lambda: self.install_ranking(self.compute_ranking(spec, progress=progress)),
+        )
 
     def compute_inference(self, result: eg.GMWMResult) -> Inference:
         """95% asymptotic intervals and the J-test of a fit (worker-thread safe)."""
@@ -889,8 +988,10 @@ class AppState(param.Parameterized):
             out["source"], out["path"] = "scenario", q.get("scenario", "")
         elif src == "upload":
             out["source"] = None  # an upload cannot be replayed from a link
-            out["problems"].append("the link refers to an uploaded file, which is not part of "
-                                   "the link: upload it again")
+            out["problems"].append(
+                "the link refers to an uploaded file, which is not part of "
+                "the link: upload it again"
+            )
         elif src in ("", "demo"):
             out["source"] = "demo" if src == "demo" else None
         else:
@@ -915,8 +1016,9 @@ class AppState(param.Parameterized):
             out["model"] = q["model"].strip()
         return out
 
-    def prepare_query(self, query: Mapping[str, Any], default_source: str = "demo",
-                      default_path: str = "") -> PreparedQuery:
+    def prepare_query(
+        self, query: Mapping[str, Any], default_source: str = "demo", default_path: str = ""
+    ) -> PreparedQuery:
         """Read the data a URL query asks for and precompute its WV (worker-thread safe).
 
         A server path that cannot be read falls back to the demo (with a message).
@@ -940,8 +1042,13 @@ class AppState(param.Parameterized):
             self.precompute(loaded, s.get("channel"), s.get("fs"), bool(s.get("robust", False)))
         return PreparedQuery(s, loaded, problems)
 
-    def from_query(self, query: Mapping[str, Any], prepared: PreparedQuery | None = None,
-                   default_source: str = "demo", default_path: str = "") -> bool:
+    def from_query(
+        self,
+        query: Mapping[str, Any],
+        prepared: PreparedQuery | None = None,
+        default_source: str = "demo",
+        default_path: str = "",
+    ) -> bool:
         """Restore a session from URL query parameters (see :meth:`to_query`).
 
         Parameters
@@ -964,8 +1071,9 @@ class AppState(param.Parameterized):
         s = prepared.settings
         problems = list(prepared.problems)
         if prepared.loaded is not None:
-            self.install(prepared.loaded, channel=s.get("channel"), fs=s.get("fs"),
-                         robust=s.get("robust"))
+            self.install(
+                prepared.loaded, channel=s.get("channel"), fs=s.get("fs"), robust=s.get("robust")
+            )
             if self.error:
                 problems.append(self.error)
         elif s.get("robust") is not None:
@@ -974,18 +1082,25 @@ class AppState(param.Parameterized):
             if not self.set_model(s["model"]):
                 problems.append(self.error)
         if problems:
-            self.param.update(error="; ".join(dict.fromkeys(problems)),
-                              revision=self.revision + 1)
+            self.param.update(error="; ".join(dict.fromkeys(problems)), revision=self.revision + 1)
             return False
         return True
 
     def data_info(self) -> dict[str, Any]:
         """Description of the data (for exports and the info panel)."""
         return {
-            "source": self.source, "file": self.filename, "path": self.path,
-            "channel": self.channel, "channels": list(self.channels), "fs_hz": self.fs,
-            "fs_source": self.fs_source, "n_samples": self.n, "duration_s": self.duration_s,
-            "unit": self.unit, "robust_wv": self.robust, "wv_summary_file": self.is_summary,
+            "source": self.source,
+            "file": self.filename,
+            "path": self.path,
+            "channel": self.channel,
+            "channels": list(self.channels),
+            "fs_hz": self.fs,
+            "fs_source": self.fs_source,
+            "n_samples": self.n,
+            "duration_s": self.duration_s,
+            "unit": self.unit,
+            "robust_wv": self.robust,
+            "wv_summary_file": self.is_summary,
         }
 
     def export_dict(self) -> dict[str, Any]:
@@ -993,8 +1108,11 @@ class AppState(param.Parameterized):
 
         Without a fit, the empirical WV alone (``"fit": null``).
         """
-        out: dict[str, Any] = {"app": "gmwm-app", "query": self.to_query(),
-                               "data": self.data_info()}
+        out: dict[str, Any] = {
+            "app": "gmwm-app",
+            "query": self.to_query(),
+            "data": self.data_info(),
+        }
         if self.result is not None:
             out["fit"] = self.result.to_dict()
             out["datasheet"] = eg.datasheet(self.result.model, float(self.fs), self.unit)
@@ -1004,8 +1122,10 @@ class AppState(param.Parameterized):
             out["wv"] = None if self.wv is None else self.wv.to_dict()
         if self.whatif and len(self.model):
             m = self.whatif_model()
-            out["whatif"] = {"model_values": m.spec(values=True),
-                             "objective": self.display_objective()}
+            out["whatif"] = {
+                "model_values": m.spec(values=True),
+                "objective": self.display_objective(),
+            }
         return out
 
     def export_json(self) -> str:
@@ -1077,8 +1197,9 @@ def _compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance
             raise ValueError(f"there is no channel {ch!r} in the summary file")
         wv = lg.wv[ch]
         if robust and not wv.robust:
-            raise ValueError("this file holds a classical WV summary only; the robust WV "
-                             "needs the raw log")
+            raise ValueError(
+                "this file holds a classical WV summary only; the robust WV needs the raw log"
+            )
         if not robust and wv.robust:
             if wv.classical is None:
                 raise ValueError("this summary file holds a robust WV only")

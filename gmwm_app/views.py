@@ -63,8 +63,16 @@ BAND_COLOR = "#6C8EBF"
 CLASSICAL_COLOR = "#8C8C8C"
 TOTAL_COLOR = "#D62728"
 _FIXED_COLORS = {"WN": "#1F77B4", "QN": "#9467BD", "RW": "#2CA02C", "DR": "#8C564B"}
-_CORRELATED_COLORS = ("#FF7F0E", "#E377C2", "#17BECF", "#BCBD22", "#7F3C8D", "#11A579",
-                      "#F2B701", "#E73F74")
+_CORRELATED_COLORS = (
+    "#FF7F0E",
+    "#E377C2",
+    "#17BECF",
+    "#BCBD22",
+    "#7F3C8D",
+    "#11A579",
+    "#F2B701",
+    "#E73F74",
+)
 
 
 def component_color(label: str) -> str:
@@ -96,17 +104,24 @@ def _positive(a: np.ndarray) -> np.ndarray:
 
 
 def _empty_wv() -> dict[str, Any]:
-    return {k: np.zeros(0) for k in ("tau_s", "tau_samples", "level", "variance", "ci_low",
-                                     "ci_high", "n_coef")}
+    return {
+        k: np.zeros(0)
+        for k in ("tau_s", "tau_samples", "level", "variance", "ci_low", "ci_high", "n_coef")
+    }
 
 
 def _wv_data(wv: eg.WaveletVariance | None) -> dict[str, Any]:
     if wv is None:
         return _empty_wv()
-    return {"tau_s": np.asarray(wv.tau_s, float), "tau_samples": np.asarray(wv.tau_samples),
-            "level": np.asarray(wv.levels), "variance": np.asarray(wv.variance, float),
-            "ci_low": np.asarray(wv.ci_low, float), "ci_high": np.asarray(wv.ci_high, float),
-            "n_coef": np.asarray(wv.n_coef)}
+    return {
+        "tau_s": np.asarray(wv.tau_s, float),
+        "tau_samples": np.asarray(wv.tau_samples),
+        "level": np.asarray(wv.levels),
+        "variance": np.asarray(wv.variance, float),
+        "ci_low": np.asarray(wv.ci_low, float),
+        "ci_high": np.asarray(wv.ci_high, float),
+        "n_coef": np.asarray(wv.n_coef),
+    }
 
 
 def _curve(tau_s: np.ndarray, y: np.ndarray, label: str) -> dict[str, Any]:
@@ -137,19 +152,34 @@ class WVFigures:
         self.emp = ColumnDataSource(_empty_wv(), name="empirical")
         self.alt = ColumnDataSource(_empty_wv(), name="classical")
         self.total = ColumnDataSource(dict(_EMPTY_CURVE), name="model_total")
-        self.comps = [ColumnDataSource(dict(_EMPTY_CURVE), name=f"component_{i}")
-                      for i in range(n_components)]
-        self.resid = ColumnDataSource({"tau_s": np.zeros(0), "ratio": np.zeros(0),
-                                       "lo": np.zeros(0), "hi": np.zeros(0),
-                                       "level": np.zeros(0)}, name="residual")
+        self.comps = [
+            ColumnDataSource(dict(_EMPTY_CURVE), name=f"component_{i}") for i in range(n_components)
+        ]
+        self.resid = ColumnDataSource(
+            {
+                "tau_s": np.zeros(0),
+                "ratio": np.zeros(0),
+                "lo": np.zeros(0),
+                "hi": np.zeros(0),
+                "level": np.zeros(0),
+            },
+            name="residual",
+        )
         self._shown_wv: Any = None
         self._unit: str | None = None
 
         p = figure(
-            x_axis_type="log", y_axis_type="log", sizing_mode="stretch_width", height=480,
-            tools="pan,wheel_zoom,box_zoom,reset,save", toolbar_location="above",
-            x_range=DataRange1d(range_padding=0.08), y_range=DataRange1d(range_padding=0.08),
-            title="Load a log to see its wavelet variance", name="wv_plot", min_border_left=80,
+            x_axis_type="log",
+            y_axis_type="log",
+            sizing_mode="stretch_width",
+            height=480,
+            tools="pan,wheel_zoom,box_zoom,reset,save",
+            toolbar_location="above",
+            x_range=DataRange1d(range_padding=0.08),
+            y_range=DataRange1d(range_padding=0.08),
+            title="Load a log to see its wavelet variance",
+            name="wv_plot",
+            min_border_left=80,
         )
         p.xaxis.axis_label = "scale τ [s]"
         p.yaxis.axis_label = f"wavelet variance ν² [{unit_squared('')}]"
@@ -164,19 +194,51 @@ class WVFigures:
         p.xgrid.minor_grid_line_alpha = 0.6
 
         # classical WV drawn beside the robust one (robust mode only)
-        alt_band = p.varea(x="tau_s", y1="ci_low", y2="ci_high", source=self.alt,
-                           fill_color=CLASSICAL_COLOR, fill_alpha=0.12)
-        alt_line = p.line("tau_s", "variance", source=self.alt, line_color=CLASSICAL_COLOR,
-                          line_width=1.5, line_dash="dashed")
-        alt_pts = p.scatter("tau_s", "variance", source=self.alt, marker="square", size=6,
-                            line_color=CLASSICAL_COLOR, fill_color="white")
+        alt_band = p.varea(
+            x="tau_s",
+            y1="ci_low",
+            y2="ci_high",
+            source=self.alt,
+            fill_color=CLASSICAL_COLOR,
+            fill_alpha=0.12,
+        )
+        alt_line = p.line(
+            "tau_s",
+            "variance",
+            source=self.alt,
+            line_color=CLASSICAL_COLOR,
+            line_width=1.5,
+            line_dash="dashed",
+        )
+        alt_pts = p.scatter(
+            "tau_s",
+            "variance",
+            source=self.alt,
+            marker="square",
+            size=6,
+            line_color=CLASSICAL_COLOR,
+            fill_color="white",
+        )
         # empirical WV and its interval
-        band = p.varea(x="tau_s", y1="ci_low", y2="ci_high", source=self.emp,
-                       fill_color=BAND_COLOR, fill_alpha=0.25)
-        emp_line = p.line("tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR,
-                          line_width=1.5)
-        emp_pts = p.scatter("tau_s", "variance", source=self.emp, size=7,
-                            line_color=EMPIRICAL_COLOR, fill_color=EMPIRICAL_COLOR)
+        band = p.varea(
+            x="tau_s",
+            y1="ci_low",
+            y2="ci_high",
+            source=self.emp,
+            fill_color=BAND_COLOR,
+            fill_alpha=0.25,
+        )
+        emp_line = p.line(
+            "tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5
+        )
+        emp_pts = p.scatter(
+            "tau_s",
+            "variance",
+            source=self.emp,
+            size=7,
+            line_color=EMPIRICAL_COLOR,
+            fill_color=EMPIRICAL_COLOR,
+        )
         # the axes follow the data, not the model curves (a tiny RW at short scales would
         # otherwise squash the plot, and dragging a what-if slider would make it jump)
         p.x_range.renderers = [emp_line, alt_line]
@@ -185,46 +247,71 @@ class WVFigures:
         # model: one pooled renderer per component, then the total on top
         self.comp_renderers = []
         for src in self.comps:
-            r = p.line("tau_s", "wv", source=src, line_width=2.2, line_dash="dashed",
-                       line_alpha=0.95, visible=False)
+            r = p.line(
+                "tau_s",
+                "wv",
+                source=src,
+                line_width=2.2,
+                line_dash="dashed",
+                line_alpha=0.95,
+                visible=False,
+            )
             self.comp_renderers.append(r)
-        total = p.line("tau_s", "wv", source=self.total, line_color=TOTAL_COLOR, line_width=3,
-                       line_alpha=0.9)
+        total = p.line(
+            "tau_s", "wv", source=self.total, line_color=TOTAL_COLOR, line_width=3, line_alpha=0.9
+        )
         self.total_renderer = total
 
         self.emp_item = LegendItem(label=value("empirical WV"), renderers=[emp_line, emp_pts])
         self.band_item = LegendItem(label=value("95% interval"), renderers=[band])
-        self.alt_item = LegendItem(label=value("classical WV"),
-                                   renderers=[alt_line, alt_pts, alt_band], visible=False)
-        self.total_item = LegendItem(label=value("model (total)"), renderers=[total],
-                                     visible=False)
-        self.comp_items = [LegendItem(label=value(f"component {i + 1}"), renderers=[r],
-                                      visible=False)
-                           for i, r in enumerate(self.comp_renderers)]
+        self.alt_item = LegendItem(
+            label=value("classical WV"), renderers=[alt_line, alt_pts, alt_band], visible=False
+        )
+        self.total_item = LegendItem(label=value("model (total)"), renderers=[total], visible=False)
+        self.comp_items = [
+            LegendItem(label=value(f"component {i + 1}"), renderers=[r], visible=False)
+            for i, r in enumerate(self.comp_renderers)
+        ]
         self.legend = Legend(
-            items=[self.emp_item, self.band_item, self.alt_item, self.total_item,
-                   *self.comp_items],
-            location="top_left", click_policy="hide", label_text_font_size="12px",
-            spacing=1, padding=6, border_line_alpha=0.3, background_fill_alpha=0.85,
+            items=[self.emp_item, self.band_item, self.alt_item, self.total_item, *self.comp_items],
+            location="top_left",
+            click_policy="hide",
+            label_text_font_size="12px",
+            spacing=1,
+            padding=6,
+            border_line_alpha=0.3,
+            background_fill_alpha=0.85,
             label_width=LEGEND_LABEL_WIDTH,
         )
         p.add_layout(self.legend, "right")
 
-        self.emp_hover = HoverTool(renderers=[emp_pts, alt_pts], tooltips=self._emp_tips(""),
-                                   formatters=self._formatters(), mode="mouse")
-        self.model_hover = HoverTool(renderers=[total, *self.comp_renderers],
-                                     tooltips=self._model_tips(""),
-                                     formatters={"@tau_s": "printf", "@wv": "printf"},
-                                     mode="mouse", line_policy="nearest")
+        self.emp_hover = HoverTool(
+            renderers=[emp_pts, alt_pts],
+            tooltips=self._emp_tips(""),
+            formatters=self._formatters(),
+            mode="mouse",
+        )
+        self.model_hover = HoverTool(
+            renderers=[total, *self.comp_renderers],
+            tooltips=self._model_tips(""),
+            formatters={"@tau_s": "printf", "@wv": "printf"},
+            mode="mouse",
+            line_policy="nearest",
+        )
         p.add_tools(self.emp_hover, self.model_hover)
         self.figure = p
         self.save_tool = p.select_one(SaveTool)
 
         r = figure(
-            x_axis_type="log", x_range=p.x_range, height=180,
-            y_range=DataRange1d(range_padding=0.6, start=0.0), min_border_left=80,
-            sizing_mode="stretch_width", tools="pan,wheel_zoom,reset,save",
-            toolbar_location="above", name="residual_plot",
+            x_axis_type="log",
+            x_range=p.x_range,
+            height=180,
+            y_range=DataRange1d(range_padding=0.6, start=0.0),
+            min_border_left=80,
+            sizing_mode="stretch_width",
+            tools="pan,wheel_zoom,reset,save",
+            toolbar_location="above",
+            name="residual_plot",
             title="Residuals: empirical / model, with the 95% interval",
         )
         r.title.text_font_size = "13px"
@@ -232,27 +319,64 @@ class WVFigures:
         r.yaxis.axis_label = "empirical / model [1]"
         r.axis.axis_label_text_font_style = "normal"
         r.grid.grid_line_alpha = 0.35
-        rband = r.varea(x="tau_s", y1="lo", y2="hi", source=self.resid, fill_color=BAND_COLOR,
-                        fill_alpha=0.25)
-        rline = r.line("tau_s", "ratio", source=self.resid, line_color=EMPIRICAL_COLOR,
-                       line_width=1)
-        ratio_pts = r.scatter("tau_s", "ratio", source=self.resid, size=6,
-                              line_color=EMPIRICAL_COLOR, fill_color=EMPIRICAL_COLOR)
+        rband = r.varea(
+            x="tau_s", y1="lo", y2="hi", source=self.resid, fill_color=BAND_COLOR, fill_alpha=0.25
+        )
+        rline = r.line(
+            "tau_s", "ratio", source=self.resid, line_color=EMPIRICAL_COLOR, line_width=1
+        )
+        ratio_pts = r.scatter(
+            "tau_s",
+            "ratio",
+            source=self.resid,
+            size=6,
+            line_color=EMPIRICAL_COLOR,
+            fill_color=EMPIRICAL_COLOR,
+        )
         # linear ratio axis that follows the points (the interval at the longest scales is
         # orders of magnitude wide and would flatten them)
         r.y_range.renderers = [ratio_pts]
-        r.add_layout(Span(location=1.0, dimension="width", line_color=TOTAL_COLOR,
-                          line_dash="dashed", line_width=1.5))
-        r.add_layout(Legend(
-            items=[LegendItem(label=value("empirical / model"), renderers=[rline, ratio_pts]),
-                   LegendItem(label=value("95% interval / model"), renderers=[rband])],
-            location="top_left", label_text_font_size="12px", spacing=1, padding=6,
-            border_line_alpha=0.3, label_width=LEGEND_LABEL_WIDTH), "right")
-        r.add_tools(HoverTool(renderers=[ratio_pts], tooltips=[
-            ("level", "@level"), ("τ", "@tau_s{%.4g} s"), ("empirical / model", "@ratio{%.3f}"),
-            ("95% interval / model", "@lo{%.3f} to @hi{%.3f}")],
-            formatters={"@tau_s": "printf", "@ratio": "printf", "@lo": "printf",
-                        "@hi": "printf"}))
+        r.add_layout(
+            Span(
+                location=1.0,
+                dimension="width",
+                line_color=TOTAL_COLOR,
+                line_dash="dashed",
+                line_width=1.5,
+            )
+        )
+        r.add_layout(
+            Legend(
+                items=[
+                    LegendItem(label=value("empirical / model"), renderers=[rline, ratio_pts]),
+                    LegendItem(label=value("95% interval / model"), renderers=[rband]),
+                ],
+                location="top_left",
+                label_text_font_size="12px",
+                spacing=1,
+                padding=6,
+                border_line_alpha=0.3,
+                label_width=LEGEND_LABEL_WIDTH,
+            ),
+            "right",
+        )
+        r.add_tools(
+            HoverTool(
+                renderers=[ratio_pts],
+                tooltips=[
+                    ("level", "@level"),
+                    ("τ", "@tau_s{%.4g} s"),
+                    ("empirical / model", "@ratio{%.3f}"),
+                    ("95% interval / model", "@lo{%.3f} to @hi{%.3f}"),
+                ],
+                formatters={
+                    "@tau_s": "printf",
+                    "@ratio": "printf",
+                    "@lo": "printf",
+                    "@hi": "printf",
+                },
+            )
+        )
         self.residual = r
 
     # ------------------------------------------------------------------------------------
@@ -263,15 +387,21 @@ class WVFigures:
     @staticmethod
     def _emp_tips(unit: str) -> list[tuple[str, str]]:
         u2 = unit_squared(unit)
-        return [("level j", "@level"), ("scale τ", "@tau_s{%.4g} s (@tau_samples samples)"),
-                ("WV ν²", f"@variance{{%.4g}} {u2}"),
-                ("95% interval", f"@ci_low{{%.3g}} to @ci_high{{%.3g}} {u2}"),
-                ("coefficients", "@n_coef")]
+        return [
+            ("level j", "@level"),
+            ("scale τ", "@tau_s{%.4g} s (@tau_samples samples)"),
+            ("WV ν²", f"@variance{{%.4g}} {u2}"),
+            ("95% interval", f"@ci_low{{%.3g}} to @ci_high{{%.3g}} {u2}"),
+            ("coefficients", "@n_coef"),
+        ]
 
     @staticmethod
     def _model_tips(unit: str) -> list[tuple[str, str]]:
-        return [("curve", "@label"), ("scale τ", "@tau_s{%.4g} s"),
-                ("WV ν²", f"@wv{{%.4g}} {unit_squared(unit)}")]
+        return [
+            ("curve", "@label"),
+            ("scale τ", "@tau_s{%.4g} s"),
+            ("WV ν²", f"@wv{{%.4g}} {unit_squared(unit)}"),
+        ]
 
     # ------------------------------------------------------------------------------------
     def update(self, state: AppState) -> None:
@@ -288,14 +418,17 @@ class WVFigures:
             robust_pair = wv is not None and wv.robust and wv.classical is not None
             self.alt.data = _wv_data(wv.classical if robust_pair else None)
             self.alt_item.visible = bool(robust_pair)
-            self.emp_item.label = value("robust WV (biweight)" if wv is not None and wv.robust
-                                        else "empirical WV")
+            self.emp_item.label = value(
+                "robust WV (biweight)" if wv is not None and wv.robust else "empirical WV"
+            )
             if wv is None:
                 self.figure.title.text = "Load a log to see its wavelet variance"
             else:
                 kind = "robust Haar WV" if wv.robust else "Haar WV"
-                self.figure.title.text = (f"{kind} of {state.channel} ({state.filename}), "
-                                          f"N = {wv.n:,} samples at {wv.fs:g} Hz")
+                self.figure.title.text = (
+                    f"{kind} of {state.channel} ({state.filename}), "
+                    f"N = {wv.n:,} samples at {wv.fs:g} Hz"
+                )
         self._update_model(state)
 
     def _update_model(self, state: AppState) -> None:
@@ -304,8 +437,7 @@ class WVFigures:
         if wv is None or model is None:
             self.total.data = dict(_EMPTY_CURVE)
             self.total_item.visible = False
-            for src, r, item in zip(self.comps, self.comp_renderers, self.comp_items,
-                                    strict=True):
+            for src, r, item in zip(self.comps, self.comp_renderers, self.comp_items, strict=True):
                 if r.visible:
                     src.data = dict(_EMPTY_CURVE)
                     r.visible = False
@@ -322,8 +454,9 @@ class WVFigures:
         self.total_item.visible = True
         names = dict(zip(model.labels, model.processes, strict=True))
         items = list(comps.items())
-        for i, (src, r, item) in enumerate(zip(self.comps, self.comp_renderers, self.comp_items,
-                                               strict=True)):
+        for i, (src, r, item) in enumerate(
+            zip(self.comps, self.comp_renderers, self.comp_items, strict=True)
+        ):
             if i < len(items):
                 lab, y = items[i]
                 src.data = _curve(tau_s, y, lab)
@@ -331,8 +464,9 @@ class WVFigures:
                 if r.glyph.line_color != color:
                     r.glyph.line_color = color
                 zero = not np.any(np.asarray(y) > 0)
-                item.label = value(f"{lab} {PROCESS_NAMES[names[lab].code]}"
-                                   + (" (zero)" if zero else ""))
+                item.label = value(
+                    f"{lab} {PROCESS_NAMES[names[lab].code]}" + (" (zero)" if zero else "")
+                )
                 r.visible = True
                 item.visible = True
             elif r.visible:
@@ -345,10 +479,13 @@ class WVFigures:
         with np.errstate(divide="ignore", invalid="ignore"):
             ok = implied > 0
             d = np.where(ok, implied, np.nan)
-            self.resid.data = {"tau_s": np.asarray(wv.tau_s, float),
-                               "ratio": _positive(wv.variance / d),
-                               "lo": _positive(wv.ci_low / d), "hi": _positive(wv.ci_high / d),
-                               "level": np.asarray(wv.levels)}
+            self.resid.data = {
+                "tau_s": np.asarray(wv.tau_s, float),
+                "ratio": _positive(wv.variance / d),
+                "lo": _positive(wv.ci_low / d),
+                "hi": _positive(wv.ci_high / d),
+                "level": np.asarray(wv.levels),
+            }
 
 
 # -----------------------------------------------------------------------------------------
@@ -358,16 +495,26 @@ PARAM_COLUMNS = ("process", "parameter", "value", "low", "high", "unit")
 DATASHEET_COLUMNS = ("process", "quantity", "value", "unit")
 
 
-def _table(columns: tuple[str, ...], widths: dict[str, int], name: str,
-           height: int, css: str) -> tuple[DataTable, ColumnDataSource]:
+def _table(
+    columns: tuple[str, ...], widths: dict[str, int], name: str, height: int, css: str
+) -> tuple[DataTable, ColumnDataSource]:
     src = ColumnDataSource({c: [] for c in columns}, name=f"{name}_rows")
-    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False)
-            for c in columns]
+    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False) for c in columns]
     # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
-    table = DataTable(source=src, columns=cols, index_position=None, sortable=False,
-                      reorderable=False, selectable=False, autosize_mode="force_fit",
-                      height=height, row_height=26, sizing_mode="stretch_width", name=name,
-                      css_classes=[css])
+    table = DataTable(
+        source=src,
+        columns=cols,
+        index_position=None,
+        sortable=False,
+        reorderable=False,
+        selectable=False,
+        autosize_mode="force_fit",
+        height=height,
+        row_height=26,
+        sizing_mode="stretch_width",
+        name=name,
+        css_classes=[css],
+    )
     return table, src
 
 
@@ -394,8 +541,12 @@ class FitTables:
 
     def __init__(self) -> None:
         self.params, self.param_source = _table(
-            PARAM_COLUMNS, {"process": 60, "parameter": 90, "value": 90, "low": 90,
-                            "high": 90, "unit": 90}, "parameters", 300, "gmwm-params")
+            PARAM_COLUMNS,
+            {"process": 60, "parameter": 90, "value": 90, "low": 90, "high": 90, "unit": 90},
+            "parameters",
+            300,
+            "gmwm-params",
+        )
         # the 95% interval columns, shown on request (the column list is swapped: BokehJS
         # 3.9 draws a column made visible later without its cells)
         self._all_columns = list(self.params.columns)
@@ -405,22 +556,26 @@ class FitTables:
         self._base_columns = [c for c in self._all_columns if c.field not in ("low", "high")]
         self.params.columns = list(self._base_columns)
         self.datasheet, self.datasheet_source = _table(
-            DATASHEET_COLUMNS, {"process": 60, "quantity": 250, "value": 80, "unit": 110},
-            "datasheet", 300, "gmwm-datasheet")
+            DATASHEET_COLUMNS,
+            {"process": 60, "quantity": 250, "value": 80, "unit": 110},
+            "datasheet",
+            300,
+            "gmwm-datasheet",
+        )
 
     def update(self, state: AppState) -> None:
         """Refresh both tables from the drawn model (fit or what-if)."""
-        for src, rows, cols in ((self.param_source, parameter_rows(state), PARAM_COLUMNS),
-                                (self.datasheet_source, datasheet_rows(state),
-                                 DATASHEET_COLUMNS)):
+        for src, rows, cols in (
+            (self.param_source, parameter_rows(state), PARAM_COLUMNS),
+            (self.datasheet_source, datasheet_rows(state), DATASHEET_COLUMNS),
+        ):
             data = {c: [r[c] for r in rows] for c in cols}
             if data != src.data:
                 same = len(rows) == len(next(iter(src.data.values()), []))
                 src.data = data
                 if same:
                     redraw_table(self.params if src is self.param_source else self.datasheet)
-        cols_shown = self._all_columns if any(self.param_source.data["low"]) \
-            else self._base_columns
+        cols_shown = self._all_columns if any(self.param_source.data["low"]) else self._base_columns
         if list(self.params.columns) != cols_shown:
             self.params.columns = list(cols_shown)
 
@@ -440,10 +595,16 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
     for lab, p in zip(m.labels, m.processes, strict=True):
         for name, v in zip(p.param_names, p.values, strict=True):
             i = ci.get(f"{lab}.{name}")
-            rows.append({"process": lab, "parameter": name, "value": format_value(float(v)),
-                         "low": format_value(i.low) if i else "",
-                         "high": format_value(i.high) if i else "",
-                         "unit": _pretty(eg.param_unit(p.code, name, state.unit))})
+            rows.append(
+                {
+                    "process": lab,
+                    "parameter": name,
+                    "value": format_value(float(v)),
+                    "low": format_value(i.low) if i else "",
+                    "high": format_value(i.high) if i else "",
+                    "unit": _pretty(eg.param_unit(p.code, name, state.unit)),
+                }
+            )
     return rows
 
 
@@ -452,9 +613,15 @@ def datasheet_rows(state: AppState) -> list[dict[str, str]]:
     m = state.display_model()
     if m is None or not state.fs:
         return []
-    return [{"process": r["label"], "quantity": r["quantity"],
-             "value": format_value(float(r["value"])), "unit": _pretty(r["unit"])}
-            for r in eg.datasheet(m, float(state.fs), state.unit)]
+    return [
+        {
+            "process": r["label"],
+            "quantity": r["quantity"],
+            "value": format_value(float(r["value"])),
+            "unit": _pretty(r["unit"]),
+        }
+        for r in eg.datasheet(m, float(state.fs), state.unit)
+    ]
 
 
 def fit_summary(state: AppState) -> str:
@@ -462,16 +629,19 @@ def fit_summary(state: AppState) -> str:
     if state.wv is None:
         return "No data loaded."
     if not len(state.model):
-        return ("Empty model: only the empirical WV is shown. Add processes with the "
-                "**+** buttons.")
+        return "Empty model: only the empirical WV is shown. Add processes with the **+** buttons."
     obj = state.display_objective()
     obj_s = "n/a" if obj is None else format_value(obj)
     if state.whatif:
-        return (f"**What-if** `{state.model.spec()}`: objective {obj_s} (weighted, "
-                "dimensionless); curves follow the sliders, not a fit.")
+        return (
+            f"**What-if** `{state.model.spec()}`: objective {obj_s} (weighted, "
+            "dimensionless); curves follow the sliders, not a fit."
+        )
     res = state.result
     if res is None:
         return f"`{state.model.spec()}`: not fitted."
     status = "converged" if res.converged else "**not converged**"
-    return (f"**Fit** `{res.model.spec()}`: objective {obj_s} (weighted, dimensionless), "
-            f"{len(state.wv)} levels, {1e3 * res.elapsed_s:.1f} ms ({res.method}), {status}.")
+    return (
+        f"**Fit** `{res.model.spec()}`: objective {obj_s} (weighted, dimensionless), "
+        f"{len(state.wv)} levels, {1e3 * res.elapsed_s:.1f} ms ({res.method}), {status}."
+    )

@@ -75,9 +75,17 @@ def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    thread = pn.serve({"/": create_application()}, port=port, address="127.0.0.1", show=False,
-                      threaded=True, start=True, verbose=False,
-                      websocket_origin=[f"127.0.0.1:{port}"], **serve_kw)
+    thread = pn.serve(
+        {"/": create_application()},
+        port=port,
+        address="127.0.0.1",
+        show=False,
+        threaded=True,
+        start=True,
+        verbose=False,
+        websocket_origin=[f"127.0.0.1:{port}"],
+        **serve_kw,
+    )
     try:
         deadline = time.time() + 20
         while time.time() < deadline:

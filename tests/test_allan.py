@@ -36,8 +36,15 @@ def exact_av(model: eg.Model, fs: float, n: int = 2**20) -> AllanVariance:
     """The model-implied octave Allan variance (no noise), as an AllanVariance."""
     ms = 2 ** np.arange(eg.default_levels(n), dtype=np.int64)
     av = 2.0 * model.wv(2 * ms, fs)
-    return AllanVariance(tau_samples=ms, avar=av, ci_low=av * 0.9, ci_high=av * 1.1,
-                         n_terms=n - 2 * ms + 1, n=n, fs=fs)
+    return AllanVariance(
+        tau_samples=ms,
+        avar=av,
+        ci_low=av * 0.9,
+        ci_high=av * 1.1,
+        n_terms=n - 2 * ms + 1,
+        n=n,
+        fs=fs,
+    )
 
 
 def rel(est: MethodEstimate, truth: eg.Model) -> np.ndarray:
@@ -50,8 +57,12 @@ def rel(est: MethodEstimate, truth: eg.Model) -> np.ndarray:
 # -------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def series() -> np.ndarray:
-    return eg.parse_model("WN(sigma2=1.0)+RW(gamma2=1e-4)+DR(omega=1e-3)").simulate(
-        20001, fs=10.0, rng=1) + 3.0
+    return (
+        eg.parse_model("WN(sigma2=1.0)+RW(gamma2=1e-4)+DR(omega=1e-3)").simulate(
+            20001, fs=10.0, rng=1
+        )
+        + 3.0
+    )
 
 
 @pytest.mark.parametrize("taus", ["octave", "decade", [1, 3, 5, 7, 100, 1234, 9999]])
@@ -104,20 +115,22 @@ def test_intervals():
     z = 1.959963984540054
     relerr = 1 / np.sqrt(2 * (4096 / r.tau_samples - 1))
     np.testing.assert_allclose(r.adev_high, r.adev * (1 + z * relerr), rtol=1e-12)
-    np.testing.assert_allclose(r.adev_low, r.adev * np.maximum(1 - z * relerr, 1e-3),
-                               rtol=1e-12)
+    np.testing.assert_allclose(r.adev_low, r.adev * np.maximum(1 - z * relerr, 1e-3), rtol=1e-12)
     assert r.interval == "rel"
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"taus": [0, 2]}, "out of range"),
-    ({"taus": [1, 5000]}, "out of range"),
-    ({"taus": [1.5]}, "integers"),
-    ({"taus": "weekly"}, "octave"),
-    ({"interval": "wide"}, "interval"),
-    ({"alpha": 1.5}, "alpha"),
-    ({"fs": 0.0}, "fs"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"taus": [0, 2]}, "out of range"),
+        ({"taus": [1, 5000]}, "out of range"),
+        ({"taus": [1.5]}, "integers"),
+        ({"taus": "weekly"}, "octave"),
+        ({"interval": "wide"}, "interval"),
+        ({"alpha": 1.5}, "alpha"),
+        ({"fs": 0.0}, "fs"),
+    ],
+)
 def test_bad_input_messages(kwargs, match):
     with pytest.raises(ValueError, match=match):
         allan_variance(np.arange(8000.0) % 7, **kwargs)
@@ -137,13 +150,16 @@ def test_to_dict_and_table_are_ready(series):
 FS = 100.0
 
 
-@pytest.mark.parametrize("truth, region, rtol", [
-    (eg.WN(sigma2=2.5e-3), (0.01, 100.0), 1e-12),
-    (eg.QN(q2=3e-4), (0.01, 100.0), 1e-12),
-    (eg.DR(omega=4e-7), (0.01, 100.0), 1e-12),
-    # exact RW AVAR is gamma2 (m/3 + 1/(6m)): the +1/2 line is exact to 1/(2 m^2)
-    (eg.RW(gamma2=1e-8), (0.64, 5000.0), 2e-4),
-])
+@pytest.mark.parametrize(
+    "truth, region, rtol",
+    [
+        (eg.WN(sigma2=2.5e-3), (0.01, 100.0), 1e-12),
+        (eg.QN(q2=3e-4), (0.01, 100.0), 1e-12),
+        (eg.DR(omega=4e-7), (0.01, 100.0), 1e-12),
+        # exact RW AVAR is gamma2 (m/3 + 1/(6m)): the +1/2 line is exact to 1/(2 m^2)
+        (eg.RW(gamma2=1e-8), (0.64, 5000.0), 2e-4),
+    ],
+)
 def test_avsm_reads_the_ieee_coefficients_on_exact_curves(truth, region, rtol):
     model = eg.Model((truth,))
     est = avsm(exact_av(model, FS), {truth.code: region})
@@ -152,8 +168,12 @@ def test_avsm_reads_the_ieee_coefficients_on_exact_curves(truth, region, rtol):
     # the line's reading is the datasheet coefficient (CONVENTIONS, units)
     ds = {r["quantity"]: r["value"] for r in eg.datasheet(model, FS)}
     reading = est.details["lines"][truth.code]["reading"]["value"]
-    key = {"WN": "white noise density N", "QN": "quantization Q", "DR": "rate ramp R",
-           "RW": "rate random walk K"}[truth.code]
+    key = {
+        "WN": "white noise density N",
+        "QN": "quantization Q",
+        "DR": "rate ramp R",
+        "RW": "rate random walk K",
+    }[truth.code]
     assert reading == pytest.approx(ds[key], rel=rtol)
     np.testing.assert_allclose(est.implied, model.wv(est.tau_samples, FS), rtol=rtol * 10)
 
@@ -161,8 +181,15 @@ def test_avsm_reads_the_ieee_coefficients_on_exact_curves(truth, region, rtol):
 def test_avsm_bias_instability_floor():
     floor = 4e-6  # AVAR of a flat region
     av = exact_av(eg.parse_model("WN(sigma2=1e-9)"), FS)
-    av = AllanVariance(tau_samples=av.tau_samples, avar=av.avar + floor, ci_low=av.ci_low,
-                       ci_high=av.ci_high, n_terms=av.n_terms, n=av.n, fs=FS)
+    av = AllanVariance(
+        tau_samples=av.tau_samples,
+        avar=av.avar + floor,
+        ci_low=av.ci_low,
+        ci_high=av.ci_high,
+        n_terms=av.n_terms,
+        n=av.n,
+        fs=FS,
+    )
     est = avsm(av, {"BI": (100.0, 1000.0)})
     assert est.extras["BI.B"] == pytest.approx(math.sqrt(floor) / BI_FACTOR, rel=1e-3)
     assert BI_FACTOR == pytest.approx(0.664, abs=5e-4)
@@ -219,11 +246,14 @@ def test_avsm_auto_reading_the_curve_at_three_seconds_reads_white_noise():
 # -------------------------------------------------------------------------------------------
 # slope method on pure simulated processes (Monte Carlo tolerances)
 # -------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("truth, region_samples, tol", [
-    (eg.WN(sigma2=4.0), (1, 512), 0.03),
-    (eg.QN(q2=1.0), (1, 512), 0.03),
-    (eg.RW(gamma2=1e-4), (8, 1024), 0.10),
-])
+@pytest.mark.parametrize(
+    "truth, region_samples, tol",
+    [
+        (eg.WN(sigma2=4.0), (1, 512), 0.03),
+        (eg.QN(q2=1.0), (1, 512), 0.03),
+        (eg.RW(gamma2=1e-4), (8, 1024), 0.10),
+    ],
+)
 def test_avsm_recovers_a_pure_process(truth, region_samples, tol):
     reps, n = 16, 2**15
     model = eg.Model((truth,))
@@ -269,8 +299,12 @@ def brute_log10_min(wv: eg.WaveletVariance, model: eg.Model, w: np.ndarray) -> f
     best = math.inf
     scale = np.log(np.min(wv.variance[:, None] / x, axis=0))
     for _ in range(12):
-        r = optimize.minimize(obj, scale + rng.uniform(-20, 0, x.shape[1]), method="Nelder-Mead",
-                              options={"xatol": 1e-10, "fatol": 1e-15, "maxfev": 20000})
+        r = optimize.minimize(
+            obj,
+            scale + rng.uniform(-20, 0, x.shape[1]),
+            method="Nelder-Mead",
+            options={"xatol": 1e-10, "fatol": 1e-15, "maxfev": 20000},
+        )
         r = optimize.minimize(obj, r.x, method="BFGS")
         best = min(best, r.fun)
     return best
@@ -282,8 +316,7 @@ def test_armav_reaches_the_minimum_of_its_objective(accel_like):
     w = 1 / (np.log10(wv.ci_high) - np.log10(wv.ci_low)) ** 2
     assert est.objective <= brute_log10_min(wv, truth.cleared(), w) * (1 + 1e-7)
     unw = fit_armav(wv, truth.cleared(), weights="identity")
-    assert unw.objective <= brute_log10_min(wv, truth.cleared(), np.ones(wv.n_levels)) * (
-        1 + 1e-7)
+    assert unw.objective <= brute_log10_min(wv, truth.cleared(), np.ones(wv.n_levels)) * (1 + 1e-7)
     assert est.method == "ARMAV" and "f = log10" in est.notes[0]
     r = np.log10(wv.variance) - np.log10(est.implied)
     assert est.objective == pytest.approx(float(np.sum(w * r * r)), rel=1e-12)
@@ -325,12 +358,16 @@ def test_jensen_the_log_of_an_unbiased_wv_is_biased_low():
     """The mechanism of the ARMAV bias (the GMWM paper, eq. 9): E[log10 nu_hat] < log10 nu."""
     truth = eg.parse_model("WN(sigma2=1.0)")
     reps, n = 300, 1024
-    v = np.array([eg.wavelet_variance(truth.simulate(n, rng=np.random.default_rng([3, r])))
-                  .variance for r in range(reps)])
+    v = np.array(
+        [
+            eg.wavelet_variance(truth.simulate(n, rng=np.random.default_rng([3, r]))).variance
+            for r in range(reps)
+        ]
+    )
     nu = truth.wv(2.0 ** np.arange(1, v.shape[1] + 1))
-    ratio = v[:, -1] / nu[-1]            # the last level: few coefficients (eta3 = 1)
+    ratio = v[:, -1] / nu[-1]  # the last level: few coefficients (eta3 = 1)
     se = ratio.std(ddof=1) / math.sqrt(reps)
-    assert abs(ratio.mean() - 1) < 3.5 * se          # unbiased WV
+    assert abs(ratio.mean() - 1) < 3.5 * se  # unbiased WV
     lg = np.log10(ratio)
     assert lg.mean() < -0.05 and lg.mean() + 4 * lg.std(ddof=1) / math.sqrt(reps) < 0
 
@@ -350,13 +387,19 @@ def composite_mc() -> dict[str, np.ndarray]:
     truth = eg.parse_model("QN(q2=0.02)+WN(sigma2=1.0)")
     model = truth.cleared()
     regions = {"QN": (1.0, 2.0), "WN": (4.0, 256.0)}  # the first two points, then the -1/2 part
-    return mc(truth, 4096, 240, {
-        "GMWM-id": lambda wv: from_gmwm(eg.fit_gmwm(wv, model, weights="identity")),
-        "GMWM": lambda wv: from_gmwm(eg.fit_gmwm(wv, model)),
-        "ARMAV-id": lambda wv: fit_armav(wv, model, weights="identity"),
-        "ARMAV": lambda wv: fit_armav(wv, model),
-        "AVSM": lambda wv: avsm(AllanVariance.from_wv(wv), regions),
-    }, seed=8)
+    return mc(
+        truth,
+        4096,
+        240,
+        {
+            "GMWM-id": lambda wv: from_gmwm(eg.fit_gmwm(wv, model, weights="identity")),
+            "GMWM": lambda wv: from_gmwm(eg.fit_gmwm(wv, model)),
+            "ARMAV-id": lambda wv: fit_armav(wv, model, weights="identity"),
+            "ARMAV": lambda wv: fit_armav(wv, model),
+            "AVSM": lambda wv: avsm(AllanVariance.from_wv(wv), regions),
+        },
+        seed=8,
+    )
 
 
 def test_armav_is_biased_gmwm_is_not_with_the_same_fixed_weights(composite_mc):
@@ -364,10 +407,10 @@ def test_armav_is_biased_gmwm_is_not_with_the_same_fixed_weights(composite_mc):
     g, a = composite_mc["GMWM-id"], composite_mc["ARMAV-id"]
     reps = g.shape[0]
     se_g = g.std(axis=0, ddof=1) / math.sqrt(reps)
-    assert np.all(np.abs(g.mean(axis=0) - 1) < 3 * se_g)           # unbiased: QN and WN
+    assert np.all(np.abs(g.mean(axis=0) - 1) < 3 * se_g)  # unbiased: QN and WN
     se_a = a.std(axis=0, ddof=1) / math.sqrt(reps)
-    assert a.mean(axis=0)[1] < 1 - 3 * se_a[1]                       # WN: biased low
-    assert a.mean(axis=0)[0] > 1 + 3 * se_a[0]                       # QN: biased high
+    assert a.mean(axis=0)[1] < 1 - 3 * se_a[1]  # WN: biased low
+    assert a.mean(axis=0)[0] > 1 + 3 * se_a[0]  # QN: biased high
 
 
 def test_avsm_reads_quantization_off_the_white_noise(composite_mc):
@@ -396,9 +439,12 @@ def test_gmwm_rmse_beats_the_slope_method_and_the_log_regression(composite_mc):
 def test_common_form_side_by_side(accel_like):
     truth, wv = accel_like
     g = eg.fit_gmwm(wv, truth.cleared())
-    ests = [from_gmwm(g), fit_armav(wv, truth.cleared()),
-            avsm(wv, {"QN": (1, 2), "WN": (4, 64), "RW": (4096, 16384), "DR": (32768, 1e9)}),
-            avsm_auto(wv)]
+    ests = [
+        from_gmwm(g),
+        fit_armav(wv, truth.cleared()),
+        avsm(wv, {"QN": (1, 2), "WN": (4, 64), "RW": (4096, 16384), "DR": (32768, 1e9)}),
+        avsm_auto(wv),
+    ]
     for e in ests:
         assert isinstance(e, MethodEstimate)
         np.testing.assert_array_equal(e.tau_samples, wv.tau_samples)

@@ -19,9 +19,15 @@ from conftest import served_app
 pytestmark = pytest.mark.browser
 
 CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync"]
+CHROMIUM_ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 TIMEOUT_MS = 20_000
 
 
@@ -80,8 +86,9 @@ class Tab:
         """Text of the table's cells (Playwright's CSS pierces the shadow roots)."""
         return " ".join(self.page.locator(f"{css} .slick-cell").all_inner_texts())
 
-    def wait_for(self, predicate: Callable[[], bool], what: str,
-                 timeout_s: float = TIMEOUT_MS / 1000) -> None:
+    def wait_for(
+        self, predicate: Callable[[], bool], what: str, timeout_s: float = TIMEOUT_MS / 1000
+    ) -> None:
         deadline = time.time() + timeout_s
         while time.time() < deadline:
             if predicate():
@@ -130,14 +137,18 @@ def test_url_state_is_honoured(server: str, new_tab: Callable[[], Tab]) -> None:
     t = new_tab().open(server + "?channel=gyro_y&model=WN%2BRW")
     page = t.page
     assert page.locator("select").first.input_value() == "gyro_y"
-    t.wait_for(lambda: "sigma2" in t.table_text() and "gamma2" in t.table_text(),
-               "the WN+RW parameters in the table")
+    t.wait_for(
+        lambda: "sigma2" in t.table_text() and "gamma2" in t.table_text(),
+        "the WN+RW parameters in the table",
+    )
     text = t.table_text()
     assert "WN" in text and "RW" in text and "GM" not in text
     app = _app_for(lambda a: a.state.channel == "gyro_y" and a.state.model.spec() == "WN+RW")
     assert app is not None and app.state.result is not None
-    t.wait_for(lambda: "model=WN%2BRW" in page.url and "channel=gyro_y" in page.url,
-               "the URL to keep the state")
+    t.wait_for(
+        lambda: "model=WN%2BRW" in page.url and "channel=gyro_y" in page.url,
+        "the URL to keep the state",
+    )
     assert t.errors == []
 
 
@@ -153,8 +164,11 @@ def test_gm_button_adds_a_row_and_a_curve(server: str, new_tab: Callable[[], Tab
     assert "GM" in t.table_text() and "sigma2_gm" in t.table_text()
     assert app.state.model.spec() == "GM+WN"
     # a curve per process, labelled with the process names
-    shown = [(r, i) for r, i in zip(app.views.comp_renderers, app.views.comp_items, strict=True)
-             if r.visible]
+    shown = [
+        (r, i)
+        for r, i in zip(app.views.comp_renderers, app.views.comp_items, strict=True)
+        if r.visible
+    ]
     assert [i.label.value.split()[0] for _, i in shown] == ["GM", "WN"]
     assert len(app.views.total.data["wv"]) > 0
     t.wait_for(lambda: "model=GM%2BWN" in t.page.url, "the URL to follow the model")
@@ -166,7 +180,8 @@ def test_gm_button_adds_a_row_and_a_curve(server: str, new_tab: Callable[[], Tab
 
 
 def test_bad_upload_shows_a_message_and_the_app_keeps_working(
-        server: str, new_tab: Callable[[], Tab], tmp_path: Path) -> None:
+    server: str, new_tab: Callable[[], Tab], tmp_path: Path
+) -> None:
     t = new_tab().open(server + "?channel=gyro_x")
     bad = tmp_path / "bad_log.csv"
     bad.write_text("time,gyro_x\n0,0.1\n0.01,oops\n0.02,0.3\n0.03,0.2\n0.04,0.1\n")
@@ -178,13 +193,13 @@ def test_bad_upload_shows_a_message_and_the_app_keeps_working(
     # the session goes on: the demo is still loaded and WN can be added
     t.click_button("+ WN")
     t.wait_for(lambda: "sigma2" in t.table_text(), "the WN row after a bad upload")
-    t.wait_for(lambda: not t.page.get_by_text("is not a number").first.is_visible(),
-               "the error to clear")
+    t.wait_for(
+        lambda: not t.page.get_by_text("is not a number").first.is_visible(), "the error to clear"
+    )
     assert t.errors == []
 
 
-def test_two_tabs_do_not_share_state(browser: Any, server: str,
-                                     new_tab: Callable[[], Tab]) -> None:
+def test_two_tabs_do_not_share_state(browser: Any, server: str, new_tab: Callable[[], Tab]) -> None:
     context = browser.new_context(viewport={"width": 1400, "height": 1000})
     try:
         a = new_tab(context).open(server + "?channel=accel_x&model=WN")
@@ -204,11 +219,15 @@ def test_two_tabs_do_not_share_state(browser: Any, server: str,
         context.close()
 
 
-def test_whatif_slider_moves_the_curves_while_dragging(server: str,
-                                                       new_tab: Callable[[], Tab]) -> None:
+def test_whatif_slider_moves_the_curves_while_dragging(
+    server: str, new_tab: Callable[[], Tab]
+) -> None:
     t = new_tab().open(server + "?channel=gyro_x&model=GM%2BWN")
-    app = _app_for(lambda a: a.state.channel == "gyro_x" and a.state.model.spec() == "GM+WN"
-                   and not a.state.whatif)
+    app = _app_for(
+        lambda a: (
+            a.state.channel == "gyro_x" and a.state.model.spec() == "GM+WN" and not a.state.whatif
+        )
+    )
     assert app is not None
     t.page.locator(".gmwm-whatif input").first.check()
     handle = t.page.locator(".noUi-handle").first
@@ -222,10 +241,14 @@ def test_whatif_slider_moves_the_curves_while_dragging(server: str,
     t.page.mouse.down()
     t.page.mouse.move(x + 40, y, steps=8)
     # still holding the mouse button: the curves have already moved
-    t.wait_for(lambda: app.state.whatif_values["GM.beta"] != fitted["GM.beta"],
-               "the what-if value to follow the drag")
-    t.wait_for(lambda: not (app.views.total.data["wv"] == before).all(),
-               "the model curve to move during the drag")
+    t.wait_for(
+        lambda: app.state.whatif_values["GM.beta"] != fitted["GM.beta"],
+        "the what-if value to follow the drag",
+    )
+    t.wait_for(
+        lambda: not (app.views.total.data["wv"] == before).all(),
+        "the model curve to move during the drag",
+    )
     t.page.mouse.up()
     assert app.state.result.params == fitted  # dragging does not refit
     assert "What-if" in t.page.get_by_text("curves follow the sliders").first.inner_text()
@@ -250,13 +273,17 @@ def test_exports(server: str, new_tab: Callable[[], Tab]) -> None:
     assert t.errors == []
 
 
-def test_model_selection_tab_ranks_and_loads_a_row(server: str,
-                                                   new_tab: Callable[[], Tab]) -> None:
+def test_model_selection_tab_ranks_and_loads_a_row(server: str, new_tab: Callable[[], Tab]) -> None:
     t = new_tab().open(server + "?channel=gyro_y&model=WN")
     page = t.page
     t.wait_for(lambda: "sigma2" in t.table_text(), "the WN fit")
-    app = _app_for(lambda a: a.state.channel == "gyro_y" and a.state.model.spec() == "WN"
-                   and a.state.selection is None)
+    app = _app_for(
+        lambda a: (
+            a.state.channel == "gyro_y"
+            and a.state.model.spec() == "WN"
+            and a.state.selection is None
+        )
+    )
     assert app is not None
     page.locator(".bk-tab", has_text="Model selection").first.click()
     box = page.locator(".gmwm-max-model input").first

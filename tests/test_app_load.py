@@ -98,9 +98,13 @@ def test_eight_threads_no_cross_talk_no_blocking(logs: dict[str, Any]) -> None:
         worst = 0.0
         rounds = 0
         while rounds < 3 or not heavy_done.is_set():  # keep working while the heavy job runs
-            for op in (lambda: s.load_path(files[i]), lambda: s.select_channel("gyro_y"),
-                       lambda: s.set_model(MODEL), lambda: s.add_process("GM"),
-                       lambda: s.set_model(MODEL)):
+            for op in (
+                lambda: s.load_path(files[i]),
+                lambda: s.select_channel("gyro_y"),
+                lambda: s.set_model(MODEL),
+                lambda: s.add_process("GM"),
+                lambda: s.set_model(MODEL),
+            ):
                 t = time.perf_counter()
                 assert op(), s.error
                 worst = max(worst, time.perf_counter() - t)
@@ -126,8 +130,10 @@ def test_eight_threads_no_cross_talk_no_blocking(logs: dict[str, Any]) -> None:
         assert (name, ch, spec) == (f.name, "gyro_y", MODEL)
         assert params == pytest.approx(ref[str(f)], rel=1e-9)  # its own data, its own fit
     worst = max(slowest.values())
-    print(f"\n8 threads: heavy robust WV {heavy_s[0]:.2f} s; slowest action of the others "
-          f"{worst * 1000:.0f} ms")
+    print(
+        f"\n8 threads: heavy robust WV {heavy_s[0]:.2f} s; slowest action of the others "
+        f"{worst * 1000:.0f} ms"
+    )
     assert worst < MAX_BLOCK_S
 
 
@@ -139,11 +145,10 @@ def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
     """The app on 127.0.0.1 in a background thread; yields its URL and its Bokeh server."""
     import panel as pn
 
-    with served_app(app_demo_file, unused_session_lifetime_milliseconds=120_000) as (port,
-                                                                                     thread):
+    with served_app(app_demo_file, unused_session_lifetime_milliseconds=120_000) as (port, thread):
+
         def find() -> Any:  # registered by Panel just after the server started listening
-            return next((s for s, *_ in list(pn.state._servers.values()) if s.port == port),
-                        None)
+            return next((s for s, *_ in list(pn.state._servers.values()) if s.port == port), None)
 
         _wait(lambda: find() is not None, "the server to register", 20)
         server = find()
@@ -170,8 +175,7 @@ def _wait(pred: Any, what: str, timeout: float = 30) -> None:
 
 
 def _on_loop(server: Any, coro_fn: Any, timeout: float = 30) -> Any:
-    return asyncio.run_coroutine_threadsafe(coro_fn(), server.io_loop.asyncio_loop).result(
-        timeout)
+    return asyncio.run_coroutine_threadsafe(coro_fn(), server.io_loop.asyncio_loop).result(timeout)
 
 
 def _close_sessions(server: Any) -> None:
@@ -247,15 +251,19 @@ def _open(served: dict[str, Any], queries: list[dict[str, str]]) -> tuple[list[A
 def _close_and_check(served: dict[str, Any]) -> None:
     """Discard the sessions; their apps must leave ``live_apps()`` (a weak registry)."""
     _close_sessions(served["server"])
-    _wait(lambda: (gc.collect(), all(r() is None for r in _MINE))[1],
-          "the sessions to be released", 20)
+    _wait(
+        lambda: (gc.collect(), all(r() is None for r in _MINE))[1],
+        "the sessions to be released",
+        20,
+    )
     _MINE.clear()
 
 
 def _work(served: dict[str, Any], logs: dict[str, Any]) -> dict[str, Any]:
     files, ref = logs["files"], logs["ref"]
-    queries = [{"source": "path", "path": str(f), "channel": "gyro_y", "model": MODEL}
-               for f in files]
+    queries = [
+        {"source": "path", "path": str(f), "channel": "gyro_y", "model": MODEL} for f in files
+    ]
     heavy_q = {"source": "path", "path": str(logs["heavy"]), "model": MODEL}
     with _Probe(served["url"]) as opening:
         apps, t_open = _open(served, [heavy_q, *queries])
@@ -284,21 +292,30 @@ def _work(served: dict[str, Any], logs: dict[str, Any]) -> dict[str, Any]:
         assert (s.filename, s.channel, s.model.spec()) == (f.name, "gyro_y", MODEL)
         assert not s.robust
         assert dict(s.result.params) == pytest.approx(ref[str(f)], rel=1e-9)
-    return {"open_s": t_open, "open_probe": opening.worst, "work_probe": working.worst,
-            "probes": len(working.times), "refit_max": max(lags), "overlap": overlap}
+    return {
+        "open_s": t_open,
+        "open_probe": opening.worst,
+        "work_probe": working.worst,
+        "probes": len(working.times),
+        "refit_max": max(lags),
+        "overlap": overlap,
+    }
 
 
-def test_served_sessions_isolated_and_responsive(served: dict[str, Any],
-                                                 logs: dict[str, Any]) -> None:
+def test_served_sessions_isolated_and_responsive(
+    served: dict[str, Any], logs: dict[str, Any]
+) -> None:
     t0 = time.perf_counter()
     st = _work(served, logs)
     _close_and_check(served)
     elapsed = time.perf_counter() - t0
-    print(f"\n9 pages opened and started at once in {st['open_s']:.1f} s (server loop answered "
-          f"within {st['open_probe']:.2f} s meanwhile); during the heavy robust WV (still "
-          f"running at the end: {st['overlap']}): loop probe max {st['work_probe'] * 1000:.0f} "
-          f"ms over {st['probes']} probes, slowest refit of another session "
-          f"{st['refit_max'] * 1000:.0f} ms; total {elapsed:.1f} s")
+    print(
+        f"\n9 pages opened and started at once in {st['open_s']:.1f} s (server loop answered "
+        f"within {st['open_probe']:.2f} s meanwhile); during the heavy robust WV (still "
+        f"running at the end: {st['overlap']}): loop probe max {st['work_probe'] * 1000:.0f} "
+        f"ms over {st['probes']} probes, slowest refit of another session "
+        f"{st['refit_max'] * 1000:.0f} ms; total {elapsed:.1f} s"
+    )
     assert st["open_probe"] < MAX_BLOCK_S  # page builds run off the loop
     assert elapsed < 60
     assert st["work_probe"] < MAX_BLOCK_S and st["refit_max"] < MAX_BLOCK_S
@@ -308,12 +325,19 @@ def test_served_sessions_memory_returned(served: dict[str, Any], logs: dict[str,
     t0 = time.perf_counter()
     rss = []
     for k in range(3):  # 4 sessions a cycle (opening a page costs ~1.5 s of the server loop)
-        _open(served, [{"source": "path", "path": str(f), "channel": "gyro_y", "model": MODEL}
-                       for f in logs["files"][4 * (k % 2):4 * (k % 2) + 4]])
+        _open(
+            served,
+            [
+                {"source": "path", "path": str(f), "channel": "gyro_y", "model": MODEL}
+                for f in logs["files"][4 * (k % 2) : 4 * (k % 2) + 4]
+            ],
+        )
         _close_and_check(served)
         rss.append(_rss_mb())
     elapsed = time.perf_counter() - t0
-    print("\nRSS after each of 3 open/close cycles of 4 sessions: "
-          f"{[round(r) for r in rss]} MB; {elapsed:.1f} s")
+    print(
+        "\nRSS after each of 3 open/close cycles of 4 sessions: "
+        f"{[round(r) for r in rss]} MB; {elapsed:.1f} s"
+    )
     assert elapsed < 60
     assert rss[-1] - rss[0] < 40, rss

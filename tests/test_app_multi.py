@@ -86,8 +86,9 @@ def test_grid_shows_the_engine_wv_and_wccv_and_the_fitted_model(app: Any) -> Non
             assert [f == "white" for f in d["fill"]] == list(c.covariance < 0)
             assert np.any(c.covariance < 0)  # independent demo gyros: both signs occur
             straddle = (c.ci_low <= 0) & (c.ci_high >= 0)
-            np.testing.assert_allclose(d["y_high"], np.maximum(abs(c.ci_low), abs(c.ci_high)),
-                                       rtol=1e-9)
+            np.testing.assert_allclose(
+                d["y_high"], np.maximum(abs(c.ci_low), abs(c.ci_high)), rtol=1e-9
+            )
             assert np.all(d["y_low"][straddle] < np.nanmin(np.abs(c.covariance)))
     # model curves: the direct fit's implied WV/WCCV at every dyadic scale (every 8th point)
     ref = direct_fit(lg, GYROS, "GM+WN+RW", {"RW": GYROS})
@@ -99,8 +100,9 @@ def test_grid_shows_the_engine_wv_and_wccv_and_the_fitted_model(app: Any) -> Non
         shown = [r.visible for r in cell.comp_renderers]
         assert sum(shown) == (3 if p == q else 1)
         if p != q:
-            np.testing.assert_allclose(cell.comps[0].data["wv"][::8],
-                                       np.abs(ref.components["RW"][:, p, q]), rtol=1e-6)
+            np.testing.assert_allclose(
+                cell.comps[0].data["wv"][::8], np.abs(ref.components["RW"][:, p, q]), rtol=1e-6
+            )
     # one shared x range for every cell
     assert len({id(c.figure.x_range) for c in v.grid.cells.values()}) == 1
 
@@ -112,8 +114,11 @@ def test_changing_channels_resizes_the_grid_and_reuses_figures(app: Any) -> None
     assert v.grid.k == 2 and len(v.grid.cells) == 3 and v.error == ""
     assert v.grid_box.objects == [v.grid.pane]
     # order follows the choice: row 0 is gyro_z
-    np.testing.assert_allclose(v.grid.cells[(0, 0)].emp.data["value"],
-                               eg.wavelet_variance(app.state.log["gyro_z"]).variance, rtol=1e-10)
+    np.testing.assert_allclose(
+        v.grid.cells[(0, 0)].emp.data["value"],
+        eg.wavelet_variance(app.state.log["gyro_z"]).variance,
+        rtol=1e-10,
+    )
     assert v.result.channels == ("gyro_z", "accel_x")
     # RW shared by every channel by default, also the new ones; units of the pair
     rows = v.cov_source.data
@@ -132,8 +137,13 @@ def test_data_changes_follow_cheaply_while_hidden(app: Any, tmp_path: Path) -> N
     v = open_view(app, show=False)
     v.spec_input.value = "WN"
     fits, wvms = v.n_fits, v.n_wvm
-    path = write_log(tmp_path / "two.h5", {"u": np.random.default_rng(1).standard_normal(4096),
-                                           "w": np.random.default_rng(2).standard_normal(4096)})
+    path = write_log(
+        tmp_path / "two.h5",
+        {
+            "u": np.random.default_rng(1).standard_normal(4096),
+            "w": np.random.default_rng(2).standard_normal(4096),
+        },
+    )
     assert app.state.load_path(path), app.state.error
     assert v.n_fits == fits and v.n_wvm == wvms  # hidden: nothing computed
     app.tabs.active = list(app.tabs._names).index(TITLE)
@@ -174,17 +184,25 @@ def test_tables_equal_fit_mgmwm_run_directly(app: Any) -> None:
     expect = [("WN", "gyro_x", "gyro_x"), ("WN", "gyro_x", "gyro_z"), ("WN", "gyro_z", "gyro_z")]
     expect += [("RW", a, b) for i, a in enumerate(GYROS) for b in GYROS[i:]]
     assert list(zip(rows["process"], rows["channel_a"], rows["channel_b"], strict=True)) == expect
-    for lab, a, b, cov, rho in zip(rows["process"], rows["channel_a"], rows["channel_b"],
-                                   rows["covariance"], rows["correlation"], strict=True):
+    for lab, a, b, cov, rho in zip(
+        rows["process"],
+        rows["channel_a"],
+        rows["channel_b"],
+        rows["covariance"],
+        rows["correlation"],
+        strict=True,
+    ):
         est = ref.shared[lab]
         i, j = est.channels.index(a), est.channels.index(b)
         assert cov == pytest.approx(est.cov[i, j], rel=1e-9)
-        assert rho == pytest.approx(est.cov[i, j] / np.sqrt(est.cov[i, i] * est.cov[j, j]),
-                                    rel=1e-9)
+        assert rho == pytest.approx(
+            est.cov[i, j] / np.sqrt(est.cov[i, i] * est.cov[j, j]), rel=1e-9
+        )
     # per-channel parameters: gyro_y's own WN; every shared value in the covariance table
     prm = v.param_source.data
     assert list(zip(prm["channel"], prm["process"], prm["parameter"], strict=True)) == [
-        ("gyro_y", "WN", "sigma2")]
+        ("gyro_y", "WN", "sigma2")
+    ]
     assert prm["value"][0] == pytest.approx(ref.params["gyro_y.WN.sigma2"], rel=1e-9)
     assert prm["unit"] == ["(deg/s)²"]
     assert f"**Objective** {format_value(ref.objective)} [1]" in v.fit_info.object
@@ -198,12 +216,12 @@ def test_tables_equal_fit_mgmwm_run_directly(app: Any) -> None:
     k = prm["parameter"].index("beta")
     assert prm["channel"][k] == "shared (gyro_x, gyro_y, gyro_z)"
     assert prm["value"][k] == pytest.approx(ref.params["GM.beta"], rel=1e-6)
-    assert v.cov_source.data["covariance"][0] == pytest.approx(ref.shared["GM"].cov[0, 0],
-                                                               rel=1e-6)
+    assert v.cov_source.data["covariance"][0] == pytest.approx(ref.shared["GM"].cov[0, 0], rel=1e-6)
 
 
-def write_log(path: Path, channels: dict[str, np.ndarray], fs: float = 100.0,
-              unit: str = "deg/s") -> Path:
+def write_log(
+    path: Path, channels: dict[str, np.ndarray], fs: float = 100.0, unit: str = "deg/s"
+) -> Path:
     with h5py.File(path, "w") as f:
         for name, x in channels.items():
             f.create_dataset(name, data=x).attrs["units"] = unit
@@ -244,8 +262,9 @@ def test_table_recovers_a_known_shared_random_walk_covariance(app: Any, tmp_path
     assert list(v.channel_choice.value) == names and v.error == ""
     assert v.result.model.spec() == "imu_a,imu_b,imu_c: WN+RW | shared: RW"
     rows = v.cov_source.data
-    for a, b, cov, rho in zip(rows["channel_a"], rows["channel_b"], rows["covariance"],
-                              rows["correlation"], strict=True):
+    for a, b, cov, rho in zip(
+        rows["channel_a"], rows["channel_b"], rows["covariance"], rows["correlation"], strict=True
+    ):
         i, j = names.index(a), names.index(b)
         assert abs(cov - SIM_COV[i, j]) < 4 * MC_REL_SD[i, j] * abs(SIM_COV[i, j]), (a, b, cov)
         if i != j:
@@ -262,8 +281,12 @@ def test_table_recovers_a_known_shared_random_walk_covariance(app: Any, tmp_path
 # -------------------------------------------------------------------------------------------
 def test_bad_specs_are_messages_and_the_session_keeps_working(app: Any) -> None:
     v = open_view(app)
-    for spec, words in (("WN+FOO", "unknown process 'FOO'"), ("2*WN", "only their sum"),
-                        ("GM+AR1", "mixes AR1 and GM"), ("", "model is empty")):
+    for spec, words in (
+        ("WN+FOO", "unknown process 'FOO'"),
+        ("2*WN", "only their sum"),
+        ("GM+AR1", "mixes AR1 and GM"),
+        ("", "model is empty"),
+    ):
         v.spec_input.value = spec
         assert v.error.startswith("Could not fit the model") and words in v.error, v.error
         assert v.alert.visible and "Traceback" not in v.alert.object
@@ -291,8 +314,7 @@ def test_too_short_log_and_summary_file_are_messages(app: Any) -> None:
     # 1 level: 3 moments (2 WV, 1 WCCV) for 5 parameters (2 WN, 3 of the shared RW)
     assert "5 parameters but there are only 3 moments" in v.error, v.error
     # channels of different lengths: truncated to the shortest, with a notice
-    lg = ImuLog(channels={"a": rng.standard_normal(5000), "b": rng.standard_normal(3000)},
-                fs=10.0)
+    lg = ImuLog(channels={"a": rng.standard_normal(5000), "b": rng.standard_normal(3000)}, fs=10.0)
     assert app.state.install(LoadedData(lg, "path", "uneven.h5"))
     assert v.notice.visible and "truncated to the shortest, 3,000 samples" in v.notice.object
     ref = eg.wv_matrix({"a": lg.channels["a"][:3000], "b": lg.channels["b"]}, fs=10.0)
@@ -322,8 +344,9 @@ def test_pure_helpers() -> None:
     lo, hi = wvm.ci_low[:, 1, 0], wvm.ci_high[:, 1, 0]
     s = (lo <= 0) & (hi >= 0)
     assert s.any()
-    floor = 0.5 * np.min(np.concatenate([np.abs(wvm.values[:, 1, 0]),
-                                         np.abs(lo[~s]), np.abs(hi[~s])]))
+    floor = 0.5 * np.min(
+        np.concatenate([np.abs(wvm.values[:, 1, 0]), np.abs(lo[~s]), np.abs(hi[~s])])
+    )
     np.testing.assert_allclose(off["y_low"][s], floor)
     np.testing.assert_allclose(off["y_low"][~s], np.minimum(abs(lo), abs(hi))[~s])
 
@@ -331,8 +354,9 @@ def test_pure_helpers() -> None:
 # -------------------------------------------------------------------------------------------
 # coalescing: one fit at a time, the latest settings win, stale results are dropped
 # -------------------------------------------------------------------------------------------
-def test_changes_during_a_fit_coalesce_into_one_more_fit(app: Any,
-                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+def test_changes_during_a_fit_coalesce_into_one_more_fit(
+    app: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
     v = open_view(app)
     held: list[Any] = []
     monkeypatch.setattr(app, "_spawn", lambda coro_fn: held.append(coro_fn))
@@ -347,8 +371,7 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(app: Any,
     assert v.result.model.spec() != "gyro_x,gyro_y,gyro_z: WN+RW | shared: RW"
     asyncio.run(held.pop()())
     assert not held and not v.busy and not v.spinner.visible
-    assert v.result.model.spec() == build_model(GYROS, "GM+WN+RW+QN", shared={"RW": GYROS}
-                                                ).spec()
+    assert v.result.model.spec() == build_model(GYROS, "GM+WN+RW+QN", shared={"RW": GYROS}).spec()
     ref = direct_fit(app.state.log, GYROS, "GM+WN+RW+QN", {"RW": GYROS})
     assert v.result.objective == pytest.approx(ref.objective, rel=1e-9)
 
@@ -378,6 +401,7 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
     boot = np.asarray(t.bootstrap)
     assert t.p_value == pytest.approx((1 + np.sum(boot >= t.statistic)) / (1 + boot.size))
     assert f"p = {format_value(ref.p_value, 3)}" in v.dep_text.object
+
     # cancel after the second replicate: the previous outcome is kept
     def observer(done: int, total: int) -> None:
         if done == 2:
@@ -429,8 +453,9 @@ def test_browser_tab_renders_the_grid_and_the_table(app_demo_file: Path) -> None
             for a in GYROS:
                 assert a in text
             assert "RW" in text and "(deg/s)²" in text
-            assert f"{est.cov[0, 1]:.4e}" in text or f"{est.cov[0, 1]:.4e}".replace(
-                "e-", "e−") in text, text
+            assert (
+                f"{est.cov[0, 1]:.4e}" in text or f"{est.cov[0, 1]:.4e}".replace("e-", "e−") in text
+            ), text
             assert f"{est.corr[0, 1]:.4f}" in text
             # the grid: a canvas per figure (6 for 3 channels), the objective in words
             assert page.locator("canvas").count() >= n_canvas + 6
@@ -443,7 +468,8 @@ def test_browser_tab_renders_the_grid_and_the_table(app_demo_file: Path) -> None
             box.press("Enter")
             want = "gyro_x,gyro_y,gyro_z: WN+RW | shared: RW"
             while time.time() < deadline + 20 and (
-                    v.result is None or v.result.model.spec() != want or v.busy):
+                v.result is None or v.result.model.spec() != want or v.busy
+            ):
                 page.wait_for_timeout(100)
             assert v.result.model.spec() == want and v.n_fits == fits + 1
             ref = v.result.shared["RW"].corr[0, 1]

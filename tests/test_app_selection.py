@@ -62,8 +62,9 @@ def test_view_table_and_row_click_loads_the_candidate(app: Any) -> None:
     assert not v.running and s.error == ""
     ref = rank_models(s.wv, max_model=SMALL, weights=s.weights)
     assert list(v.source.data["model"]) == [c.model for c in ref.candidates]
-    np.testing.assert_allclose(v.source.data["criterion"], [c.criterion for c in ref.candidates],
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        v.source.data["criterion"], [c.criterion for c in ref.candidates], rtol=1e-12
+    )
     assert "Ranked 7 candidates" in v.status.object
     # the comparison: two candidates, their curves and parameters with intervals
     assert v.compare_a.value == ref.candidates[0].model
@@ -105,13 +106,13 @@ def test_interval_columns_equal_param_intervals(app: Any) -> None:
     assert s.set_model("GM+WN+RW")
     data = app.tables.param_source.data
     assert set(data["low"]) == {""}
+
     def shown() -> list[str]:
         return [c.field for c in app.tables.params.columns]
 
     assert "low" not in shown()
     app.intervals_check.value = True
-    assert s.show_intervals and shown() == ["process", "parameter", "value", "low", "high",
-                                            "unit"]
+    assert s.show_intervals and shown() == ["process", "parameter", "value", "low", "high", "unit"]
     ref = param_intervals(s.result, method="asymptotic", level=0.95)
     data = app.tables.param_source.data
     assert list(data["low"]) == [format_value(i.low) for i in ref]

@@ -113,8 +113,9 @@ def test_restore_refuses_bad_files(app_state: AppState) -> None:
             sv.prepare_restore(text, "bad.json")
 
 
-def test_restore_respects_data_folders(app_state: AppState, tmp_path: Path,
-                                       no_limits: None) -> None:
+def test_restore_respects_data_folders(
+    app_state: AppState, tmp_path: Path, no_limits: None
+) -> None:
     from gmwm_app.state import demo_path
 
     log = tmp_path / "outside" / "log.h5"
@@ -143,7 +144,8 @@ def test_exports_of_the_fit(app_state: AppState) -> None:
     doc = yaml.safe_load(y)
     # deg/s -> rad/s, density = sqrt(sigma2 / fs)
     assert doc["gyroscope_noise_density"] == pytest.approx(
-        np.sqrt(wn / s.fs) * np.pi / 180, rel=1e-9)
+        np.sqrt(wn / s.fs) * np.pi / 180, rel=1e-9
+    )
     ds = sv.export_text(s, "datasheet")
     assert "gyro_x" in ds and "correlation time" in ds
 

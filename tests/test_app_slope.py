@@ -83,8 +83,7 @@ def test_allan_deviation_is_the_channels_and_follows_the_channel(app: Any, view:
     assert other in view.figure.title.text
 
 
-def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any,
-                                                                        view: Any) -> None:
+def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any, view: Any) -> None:
     view.clear_regions()
     assert view.message.visible and "drag" in view.message.object
     view.set_region("WN", 0.01, 1.0)
@@ -99,8 +98,7 @@ def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any,
     # engine AVSM on the raw series agrees with these formulas and with the view
     direct = avsm(av, {"WN": (0.01, 1.0), "BI": (0.5, 5.0)})
     assert direct.params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs, rel=1e-9)
-    assert res.estimates["AVSM"].params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs,
-                                                                       rel=1e-9)
+    assert res.estimates["AVSM"].params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs, rel=1e-9)
     assert res.estimates["AVSM"].extras["BI.B"] == pytest.approx(b, rel=1e-9)
     assert _row(view, "WN", "white noise density N")["AVSM"] == format_value(n)
     assert _row(view, "BI", "bias instability B")["AVSM"] == format_value(b)
@@ -110,9 +108,11 @@ def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any,
     assert res.gmwm_spec == "GM+WN"
     g = eg.fit_gmwm(app.state.wv, "GM+WN")
     assert res.estimates["GMWM"].params["WN.sigma2"] == pytest.approx(
-        g.params["WN.sigma2"], rel=1e-6)
+        g.params["WN.sigma2"], rel=1e-6
+    )
     assert _row(view, "WN", "white noise density N")["GMWM"] == format_value(
-        math.sqrt(g.params["WN.sigma2"] / app.state.fs))
+        math.sqrt(g.params["WN.sigma2"] / app.state.fs)
+    )
     # the slope line passes through its reading point (N at 1 s)
     lines = view.lines_src.data
     i = lines["code"].index("WN")
@@ -121,8 +121,9 @@ def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any,
     assert not view.boxes["RW"].visible
 
 
-def test_demo_truth_is_shown_when_the_demo_is_the_bundled_one(app: Any, view: Any,
-                                                              app_demo: Path) -> None:
+def test_demo_truth_is_shown_when_the_demo_is_the_bundled_one(
+    app: Any, view: Any, app_demo: Path
+) -> None:
     p = app_demo
     truth_file = p.with_name(f"{p.stem}_truth.json")
     if not truth_file.exists():
@@ -134,11 +135,11 @@ def test_demo_truth_is_shown_when_the_demo_is_the_bundled_one(app: Any, view: An
     assert truth_model(app.state).values() == m.values()
     wn = m.values()["WN.sigma2"]
     assert _row(view, "WN", "white noise density N")["truth"] == format_value(
-        math.sqrt(wn / app.state.fs))
+        math.sqrt(wn / app.state.fs)
+    )
 
 
-def test_scenario_loads_into_the_session_with_its_regions_and_truth(app: Any,
-                                                                     view: Any) -> None:
+def test_scenario_loads_into_the_session_with_its_regions_and_truth(app: Any, view: Any) -> None:
     sc = SCENARIOS["qn_wn"]
     view.scenario_select.value = "qn_wn"  # as the menu does
     s = app.state
@@ -162,8 +163,7 @@ def test_scenario_loads_into_the_session_with_its_regions_and_truth(app: Any,
     # the implied truth curve is the analytic ADEV: 3 Q^2 / T^2 + N^2 / T
     c = view.curve_srcs["truth"].data
     t = np.asarray(c["tau_s"])
-    np.testing.assert_allclose(c["adev"], np.sqrt(3 * q_true**2 / t**2 + n_true**2 / t),
-                               rtol=1e-9)
+    np.testing.assert_allclose(c["adev"], np.sqrt(3 * q_true**2 / t**2 + n_true**2 / t), rtol=1e-9)
     # loading other data hides the explanation and resets the menu
     assert s.load_demo(), s.error
     assert not view.explain.visible and view.scenario_select.value == ""
@@ -204,8 +204,9 @@ def test_a_stale_result_does_not_overwrite_a_newer_one(app: Any, view: Any) -> N
     assert view.result is shown and "stale" not in view.message.object
 
 
-def test_hidden_tab_waits_and_robust_wv_still_shows_the_allan_deviation(app: Any,
-                                                                       view: Any) -> None:
+def test_hidden_tab_waits_and_robust_wv_still_shows_the_allan_deviation(
+    app: Any, view: Any
+) -> None:
     shown = view.result
     view._visible = lambda: False  # as when another tab is open in the browser
     other = [c for c in app.state.channels if c != app.state.channel][0]
@@ -262,8 +263,9 @@ def test_pure_helpers_curves_and_table_rows() -> None:
     curves = implied_adev_curves(res)
     t = curves["truth"]["tau_s"]
     nn, rr = math.sqrt(s2 / fs), om * fs
-    np.testing.assert_allclose(curves["truth"]["adev"], np.sqrt(nn**2 / t + rr**2 * t**2 / 2),
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        curves["truth"]["adev"], np.sqrt(nn**2 / t + rr**2 * t**2 / 2), rtol=1e-9
+    )
     assert t[0] == pytest.approx(1 / fs) and t[-1] == pytest.approx(2**10 / fs)
     # AVSM on the exact WV: the WN line is exact where DR is negligible; the BI floor adds
     # (0.664 B)^2 to the implied AVAR
@@ -272,8 +274,8 @@ def test_pure_helpers_curves_and_table_rows() -> None:
     avsm_m = e.model
     m = t * fs
     np.testing.assert_allclose(
-        curves["AVSM"]["adev"] ** 2,
-        2 * avsm_m.wv(2 * m, fs) + (BI_FACTOR * b) ** 2, rtol=1e-9)
+        curves["AVSM"]["adev"] ** 2, 2 * avsm_m.wv(2 * m, fs) + (BI_FACTOR * b) ** 2, rtol=1e-9
+    )
     vals = comparison_values(res.estimates, truth, fs, "deg/s")
     row = next(r for r in vals if r["quantity"] == "white noise density N")
     assert row["truth"] == pytest.approx(nn, rel=1e-12)
@@ -314,15 +316,21 @@ def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
             sel = page.locator(".gmwm-scenario select").first
             sel.wait_for(timeout=TIMEOUT_MS)
             sel.select_option(label=SCENARIOS["wn_gm"].title)
-            t.wait_for(lambda: _app_for(lambda a: a._served and a.state.source == "scenario")
-                       is not None, "the scenario in the session")
+            t.wait_for(
+                lambda: _app_for(lambda a: a._served and a.state.source == "scenario") is not None,
+                "the scenario in the session",
+            )
             app = _app_for(lambda a: a._served and a.state.source == "scenario")
             view = app.lazy_views["Slope method"]
-            t.wait_for(lambda: view.result is not None and "GMWM" in view.result.estimates,
-                       "the GMWM column")
+            t.wait_for(
+                lambda: view.result is not None and "GMWM" in view.result.estimates,
+                "the GMWM column",
+            )
             n_avsm = math.sqrt(view.result.estimates["AVSM"].params["WN.sigma2"] / 100.0)
-            t.wait_for(lambda: format_value(n_avsm) in t.table_text(".gmwm-slope-table"),
-                       "the AVSM white-noise reading in the page")
+            t.wait_for(
+                lambda: format_value(n_avsm) in t.table_text(".gmwm-slope-table"),
+                "the AVSM white-noise reading in the page",
+            )
             text = t.table_text(".gmwm-slope-table")
             assert format_value(math.sqrt(1e-3 / 100.0)) in text  # the truth's N
             assert page.get_by_text("Why the slope method goes wrong").first.is_visible()

@@ -73,8 +73,13 @@ def test_channel_switch_keeps_model_and_refits(app_state: AppState, app_demo: Pa
 
 def test_add_remove_match_the_engine(app_state: AppState) -> None:
     s = app_state
-    for code, spec in [("GM", "GM"), ("WN", "GM+WN"), ("RW", "GM+WN+RW"), ("GM", "2*GM+WN+RW"),
-                       ("QN", "2*GM+QN+WN+RW")]:
+    for code, spec in [
+        ("GM", "GM"),
+        ("WN", "GM+WN"),
+        ("RW", "GM+WN+RW"),
+        ("GM", "2*GM+WN+RW"),
+        ("QN", "2*GM+QN+WN+RW"),
+    ]:
         assert s.add_process(code), s.error
         assert s.model.spec() == spec
         ref = eg.fit_gmwm(s.wv, spec)
@@ -138,16 +143,20 @@ def test_fs_change(app_state: AppState) -> None:
 # ---------------------------------------------------------------------------------------------
 # errors: messages, previous state kept, session usable
 # ---------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name, data, words", [
-    ("empty.csv", b"", "empty"),
-    ("blank.csv", b"\n\n# only a comment\n", "empty"),
-    ("text.csv", b"time,gyro\n0,0.1\n0.01,abc\n0.02,0.3\n0.03,0.2\n", "not a number"),
-    ("nan.csv", b"gyro\n0.1\nnan\n0.3\n0.2\n0.5\n", "NaN"),
-    ("short.csv", b"gyro\n0.1\n0.2\n", "at least 4"),
-    ("binary.h5", b"\x00\x01garbage" * 10, "HDF5"),
-])
-def test_bad_files_give_messages_and_keep_the_session(app_state: AppState, name: str,
-                                                      data: bytes, words: str) -> None:
+@pytest.mark.parametrize(
+    "name, data, words",
+    [
+        ("empty.csv", b"", "empty"),
+        ("blank.csv", b"\n\n# only a comment\n", "empty"),
+        ("text.csv", b"time,gyro\n0,0.1\n0.01,abc\n0.02,0.3\n0.03,0.2\n", "not a number"),
+        ("nan.csv", b"gyro\n0.1\nnan\n0.3\n0.2\n0.5\n", "NaN"),
+        ("short.csv", b"gyro\n0.1\n0.2\n", "at least 4"),
+        ("binary.h5", b"\x00\x01garbage" * 10, "HDF5"),
+    ],
+)
+def test_bad_files_give_messages_and_keep_the_session(
+    app_state: AppState, name: str, data: bytes, words: str
+) -> None:
     s = app_state
     assert s.set_model("GM+WN")
     before = snapshot(s)
@@ -279,8 +288,13 @@ def test_url_round_trip(app_state: AppState) -> None:
     s = app_state
     assert s.select_channel("gyro_y") and s.set_model("WN+RW+2*GM") and s.set_robust(False)
     q = s.to_query()
-    assert q == {"source": "demo", "channel": "gyro_y", "fs": "100", "robust": "0",
-                 "model": "2*GM+WN+RW"}
+    assert q == {
+        "source": "demo",
+        "channel": "gyro_y",
+        "fs": "100",
+        "robust": "0",
+        "model": "2*GM+WN+RW",
+    }
     # through a real query string, as the browser sends it (values arrive as lists)
     qs = urlencode(q, safe="*")
     assert "model=2*GM%2BWN%2BRW" in qs
@@ -324,8 +338,10 @@ def test_export_json(app_state: AppState) -> None:
     assert d["fit"] == json.loads(json.dumps(s.result.to_dict()))
     assert d["data"]["channel"] == "gyro_x" and d["data"]["fs_hz"] == 100.0
     assert d["data"]["unit"] == "deg/s" and d["data"]["n_samples"] == s.n
-    assert {r["quantity"] for r in d["datasheet"]} >= {"angle random walk",
-                                                       "correlation time 1/beta"}
+    assert {r["quantity"] for r in d["datasheet"]} >= {
+        "angle random walk",
+        "correlation time 1/beta",
+    }
     assert d["query"]["model"] == "GM+WN+RW"
     assert s.export_filename().endswith("_gyro_x_GM+WN+RW.json")
     assert s.clear_model()
@@ -344,7 +360,8 @@ def test_whatif(app_state: AppState) -> None:
     assert set(specs) == {"GM.beta", "GM.sigma2_gm", "WN.sigma2"}
     sp = specs["GM.beta"]
     assert sp.hi - sp.lo == pytest.approx(6.0) and sp.value_of(sp.x) == pytest.approx(
-        fitted["GM.beta"])
+        fitted["GM.beta"]
+    )
     assert s.set_whatif(True)
     m = s.display_model()
     assert m.values() == pytest.approx(fitted)
@@ -356,8 +373,7 @@ def test_whatif(app_state: AppState) -> None:
     v = WVFigures()
     v.update(s)
     tau = model_grid(s.wv)
-    np.testing.assert_allclose(v.total.data["wv"], s.display_model().wv(tau, s.wv.fs),
-                               rtol=1e-12)
+    np.testing.assert_allclose(v.total.data["wv"], s.display_model().wv(tau, s.wv.fs), rtol=1e-12)
     assert not s.set_whatif_value("GM.beta", -1.0) and "beta" in s.error
     assert not s.set_whatif_value("XX.y", 1.0) and "no parameter" in s.error
     assert s.fit_from_whatif()
@@ -402,8 +418,11 @@ def test_plotted_data_equal_the_engine(app_state: AppState) -> None:
     ok = total > 0
     np.testing.assert_allclose(got[ok], total[ok], rtol=1e-12)
     comps = res.model.components(tau, 100.0)
-    shown = [(r, it, src) for r, it, src in zip(v.comp_renderers, v.comp_items, v.comps,
-                                                 strict=True) if r.visible]
+    shown = [
+        (r, it, src)
+        for r, it, src in zip(v.comp_renderers, v.comp_items, v.comps, strict=True)
+        if r.visible
+    ]
     assert len(shown) == 4
     for (_r, item, src), (lab, y) in zip(shown, comps.items(), strict=True):
         assert item.label.value.startswith(lab) and item.visible
@@ -434,7 +453,11 @@ def test_tables(app_state: AppState) -> None:
     assert s.set_model("GM+WN+RW")
     rows = parameter_rows(s)
     assert [(r["process"], r["parameter"]) for r in rows] == [
-        ("GM", "beta"), ("GM", "sigma2_gm"), ("WN", "sigma2"), ("RW", "gamma2")]
+        ("GM", "beta"),
+        ("GM", "sigma2_gm"),
+        ("WN", "sigma2"),
+        ("RW", "gamma2"),
+    ]
     assert [r["unit"] for r in rows] == ["1/s", "(deg/s)²", "(deg/s)²", "(deg/s)²"]
     ds = datasheet_rows(s)
     q = {r["quantity"]: r["unit"] for r in ds}
@@ -480,7 +503,8 @@ def test_page_without_server(app_demo: Path) -> None:
     assert s.model.spec() == "GM+WN"
     assert list(app.tables.param_source.data["process"]) == ["GM", "GM", "WN"]
     assert app.views.comp_renderers[0].visible and app.views.comp_items[0].label.value.startswith(
-        "GM")
+        "GM"
+    )
     rows = [r for r in app.process_list.objects[1:] if r.visible]
     assert len(rows) == 2 and "GM" in rows[0].objects[0].object
     app.add_buttons["WN"].clicks += 1  # unidentifiable
@@ -497,7 +521,8 @@ def test_page_without_server(app_demo: Path) -> None:
     slider = app.sliders.objects[0]
     slider.value = slider.value + 1.0  # one decade up for WN.sigma2
     assert s.display_model().values()["WN.sigma2"] == pytest.approx(
-        10 * s.result.params["WN.sigma2"], rel=1e-9)
+        10 * s.result.params["WN.sigma2"], rel=1e-9
+    )
     data = json.loads(app._export_json().getvalue())
     assert data["fit"]["model"] == "WN+RW" and "whatif" in data
     app.fs_input.value = 50.0

@@ -14,8 +14,20 @@ import engine as eg
 from engine.cli import main
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
-WV_KEYS = {"n", "fs", "levels", "tau_samples", "tau_s", "variance", "ci_low", "ci_high",
-           "n_coef", "robust", "eff", "alpha"}
+WV_KEYS = {
+    "n",
+    "fs",
+    "levels",
+    "tau_samples",
+    "tau_s",
+    "variance",
+    "ci_low",
+    "ci_high",
+    "n_coef",
+    "robust",
+    "eff",
+    "alpha",
+}
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:
@@ -27,8 +39,24 @@ def run(capsys, *argv: str) -> tuple[int, str, str]:
 @pytest.fixture(scope="module")
 def sim_h5(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("cli") / "sim.h5"
-    assert main(["simulate", "--model", "GM(beta=0.5, sigma2_gm=1e-3)+WN(sigma2=1e-2)",
-                 "-n", "60000", "--fs", "50", "--seed", "3", "-o", str(path)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--model",
+                "GM(beta=0.5, sigma2_gm=1e-3)+WN(sigma2=1e-2)",
+                "-n",
+                "60000",
+                "--fs",
+                "50",
+                "--seed",
+                "3",
+                "-o",
+                str(path),
+            ]
+        )
+        == 0
+    )
     return path
 
 
@@ -44,16 +72,28 @@ def test_wv_json_contract(capsys, sim_h5):
 
 
 def test_wv_options(capsys, sim_h5):
-    code, out, _ = run(capsys, "wv", str(sim_h5), "--levels", "6", "--robust", "--eff", "0.8",
-                       "--alpha", "0.1", "--json")
+    code, out, _ = run(
+        capsys,
+        "wv",
+        str(sim_h5),
+        "--levels",
+        "6",
+        "--robust",
+        "--eff",
+        "0.8",
+        "--alpha",
+        "0.1",
+        "--json",
+    )
     d = json.loads(out)
     assert code == 0 and len(d["variance"]) == 6 and d["robust"] is True
     assert d["eff"] == 0.8 and d["alpha"] == 0.1
 
 
 def test_wv_table_has_units(capsys):
-    code, out, _ = run(capsys, "wv", str(SHARED / "adis16405_imu1.h5"), "--channel", "gyro_y",
-                       "--levels", "4")
+    code, out, _ = run(
+        capsys, "wv", str(SHARED / "adis16405_imu1.h5"), "--channel", "gyro_y", "--levels", "4"
+    )
     assert code == 0
     assert "gyro_y" in out and "(deg/s)^2" in out and "tau [s]" in out and "fs = 100 Hz" in out
 
@@ -64,14 +104,18 @@ def test_fit_json_contract(capsys, sim_h5):
     d = json.loads(out)
     assert d["model"] == "GM+WN" and d["n"] == 60000 and d["fs"] == 50.0 and d["weights"] == "ci"
     assert [(p["process"], p["index"], p["name"]) for p in d["params"]] == [
-        ("GM", 1, "beta"), ("GM", 1, "sigma2_gm"), ("WN", 1, "sigma2")]
+        ("GM", 1, "beta"),
+        ("GM", 1, "sigma2_gm"),
+        ("WN", 1, "sigma2"),
+    ]
     assert all({"value", "unit"} <= set(p) for p in d["params"])
     beta = d["params"][0]["value"]
     assert beta == pytest.approx(0.5, rel=0.3)
     assert set(d["components"]) == {"GM", "WN"}
     assert WV_KEYS <= set(d["wv"])
-    np.testing.assert_allclose(np.sum([d["components"][k] for k in d["components"]], axis=0),
-                               d["implied"], rtol=1e-12)
+    np.testing.assert_allclose(
+        np.sum([d["components"][k] for k in d["components"]], axis=0), d["implied"], rtol=1e-12
+    )
 
 
 def test_fit_table_readable(capsys, sim_h5):
@@ -80,8 +124,16 @@ def test_fit_table_readable(capsys, sim_h5):
 
 
 def test_fit_from_wv_summary(capsys):
-    code, out, err = run(capsys, "fit", str(SHARED / "derived" / "navchip_wv_av.h5"),
-                         "--channel", "gyro_z", "--model", "GM+QN+WN+RW", "--json")
+    code, out, err = run(
+        capsys,
+        "fit",
+        str(SHARED / "derived" / "navchip_wv_av.h5"),
+        "--channel",
+        "gyro_z",
+        "--model",
+        "GM+QN+WN+RW",
+        "--json",
+    )
     assert code == 0, err
     d = json.loads(out)
     assert d["fs"] == 250.0 and d["n"] == 3105250 and len(d["wv"]["variance"]) == 20
@@ -90,8 +142,20 @@ def test_fit_from_wv_summary(capsys):
 @pytest.mark.parametrize("ext", ["h5", "npy", "csv"])
 def test_simulate_then_fit_round_trip(capsys, tmp_path, ext):
     out_file = tmp_path / f"s.{ext}"
-    code, out, _ = run(capsys, "simulate", "--model", "WN(sigma2=4)+RW(gamma2=1e-4)", "-n",
-                       "40000", "--fs", "20", "--seed", "1", "-o", str(out_file))
+    code, out, _ = run(
+        capsys,
+        "simulate",
+        "--model",
+        "WN(sigma2=4)+RW(gamma2=1e-4)",
+        "-n",
+        "40000",
+        "--fs",
+        "20",
+        "--seed",
+        "1",
+        "-o",
+        str(out_file),
+    )
     assert code == 0 and out_file.exists() and "40000 samples" in out
     fs = ["--fs", "20"] if ext == "npy" else []  # a bare .npy holds no sampling rate
     code, out, err = run(capsys, "fit", str(out_file), "--model", "WN+RW", "--json", *fs)
@@ -106,8 +170,22 @@ def test_simulate_then_fit_round_trip(capsys, tmp_path, ext):
 def test_simulate_is_reproducible(tmp_path):
     a, b = tmp_path / "a.npy", tmp_path / "b.npy"
     for p in (a, b):
-        assert main(["simulate", "--model", "AR1(phi=0.9, sigma2=1)", "-n", "500", "--seed",
-                     "7", "-o", str(p)]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--model",
+                    "AR1(phi=0.9, sigma2=1)",
+                    "-n",
+                    "500",
+                    "--seed",
+                    "7",
+                    "-o",
+                    str(p),
+                ]
+            )
+            == 0
+        )
     np.testing.assert_array_equal(np.load(a), np.load(b))
 
 
@@ -162,11 +240,16 @@ def test_bad_input_exits_nonzero_with_one_line(capsys, tmp_path, sim_h5, case, e
 def test_command_line_entry_point_has_no_traceback(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("x\nfoo\nbar\nbaz\nqux\n")
-    r = subprocess.run([sys.executable, "-m", "engine.cli", "wv", str(bad)],
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "engine.cli", "wv", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.startswith("gmwm:")
-    r = subprocess.run([sys.executable, "-m", "engine.cli"], capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "engine.cli"], capture_output=True, text=True, timeout=60
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr
 
 

@@ -29,7 +29,8 @@ def test_committed_demo_is_reproduced_by_its_generator(tmp_path):
     for ch in shipped.names:
         np.testing.assert_array_equal(fresh[ch], shipped[ch])
     assert json.loads((tmp_path / "demo_imu_truth.json").read_text()) == json.loads(
-        (DATA / "demo_imu_truth.json").read_text())
+        (DATA / "demo_imu_truth.json").read_text()
+    )
 
 
 def test_demo_metadata_and_size():

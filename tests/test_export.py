@@ -46,35 +46,58 @@ FS = 100.0
 N = 200_000
 DEG = math.pi / 180
 # per axis: unit, WN sigma2, RW gamma2 (per sample, in the log's unit)
-TRUTH = {"gyro_x": ("deg/s", 1e-4, 1e-9), "gyro_y": ("deg/s", 2e-4, 4e-9),
-         "gyro_z": ("deg/s", 1.5e-4, 2e-9), "accel_x": ("g", 1e-6, 1e-12),
-         "accel_y": ("g", 2e-6, 3e-12), "accel_z": ("g", 1.5e-6, 2e-12)}
+TRUTH = {
+    "gyro_x": ("deg/s", 1e-4, 1e-9),
+    "gyro_y": ("deg/s", 2e-4, 4e-9),
+    "gyro_z": ("deg/s", 1.5e-4, 2e-9),
+    "accel_x": ("g", 1e-6, 1e-12),
+    "accel_y": ("g", 2e-6, 3e-12),
+    "accel_z": ("g", 1.5e-6, 2e-12),
+}
 
 
 @pytest.fixture(scope="module")
 def six(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A six-axis log (deg/s, g) of WN + RW per axis."""
-    chans = {c: (eg.WN(sigma2=s2) + eg.RW(gamma2=g2)).simulate(N, fs=FS, rng=i)
-             for i, (c, (_, s2, g2)) in enumerate(TRUTH.items())}
-    return eg.save_log(tmp_path_factory.mktemp("exp") / "six.h5", chans, FS,
-                       units={c: u for c, (u, _, _) in TRUTH.items()})
+    chans = {
+        c: (eg.WN(sigma2=s2) + eg.RW(gamma2=g2)).simulate(N, fs=FS, rng=i)
+        for i, (c, (_, s2, g2)) in enumerate(TRUTH.items())
+    }
+    return eg.save_log(
+        tmp_path_factory.mktemp("exp") / "six.h5",
+        chans,
+        FS,
+        units={c: u for c, (u, _, _) in TRUTH.items()},
+    )
 
 
 @pytest.fixture(scope="module")
 def fits(six: Path) -> dict[str, eg.GMWMResult]:
     log = eg.load_log(six)
-    return {c: eg.fit_gmwm(eg.wavelet_variance(log[c], fs=log.fs, unit=log.units[c]), "WN+RW")
-            for c in log.names}
+    return {
+        c: eg.fit_gmwm(eg.wavelet_variance(log[c], fs=log.fs, unit=log.units[c]), "WN+RW")
+        for c in log.names
+    }
 
 
 # ----------------------------------------------------------------------------- units
-@pytest.mark.parametrize(("unit", "kind", "factor"), [
-    ("deg/s", "gyroscope", DEG), ("°/s", "gyroscope", DEG), ("rad/s", "gyroscope", 1.0),
-    ("rad / s", "gyroscope", 1.0), ("deg/h", "gyroscope", DEG / 3600), ("dps", "gyroscope", DEG),
-    ("g", "accelerometer", 9.80665), ("mg", "accelerometer", 9.80665e-3),
-    ("m/s^2", "accelerometer", 1.0), ("m/s²", "accelerometer", 1.0),
-    ("m/s2", "accelerometer", 1.0), ("m s^-2", "accelerometer", 1.0),
-])
+@pytest.mark.parametrize(
+    ("unit", "kind", "factor"),
+    [
+        ("deg/s", "gyroscope", DEG),
+        ("°/s", "gyroscope", DEG),
+        ("rad/s", "gyroscope", 1.0),
+        ("rad / s", "gyroscope", 1.0),
+        ("deg/h", "gyroscope", DEG / 3600),
+        ("dps", "gyroscope", DEG),
+        ("g", "accelerometer", 9.80665),
+        ("mg", "accelerometer", 9.80665e-3),
+        ("m/s^2", "accelerometer", 1.0),
+        ("m/s²", "accelerometer", 1.0),
+        ("m/s2", "accelerometer", 1.0),
+        ("m s^-2", "accelerometer", 1.0),
+    ],
+)
 def test_si_factor(unit: str, kind: str, factor: float) -> None:
     k, f = si_factor(unit)
     assert k == kind and f == pytest.approx(factor, rel=1e-15)
@@ -88,8 +111,13 @@ def test_unknown_units_are_clear_errors() -> None:
 
 
 def test_channel_axis() -> None:
-    assert [channel_axis(c) for c in ("gyro_x", "accel_Z", "imu/acc[1]", "gx", "temp")] == \
-        ["x", "z", "y", "x", "temp"]
+    assert [channel_axis(c) for c in ("gyro_x", "accel_Z", "imu/acc[1]", "gx", "temp")] == [
+        "x",
+        "z",
+        "y",
+        "x",
+        "temp",
+    ]
 
 
 # ----------------------------------------------------------------------------- datasheet
@@ -105,23 +133,29 @@ def test_datasheet_formulas(fits) -> None:
     g, a = fits["gyro_x"], fits["accel_y"]
     s2, g2 = g.params["WN.sigma2"], g.params["RW.gamma2"]
     n_deg = math.sqrt(s2 / FS)
-    assert _row(rows, "gyro_x", "white noise density", "deg/s/sqrt(Hz)").value == \
-        pytest.approx(n_deg, rel=1e-14)
+    assert _row(rows, "gyro_x", "white noise density", "deg/s/sqrt(Hz)").value == pytest.approx(
+        n_deg, rel=1e-14
+    )
     arw = _row(rows, "gyro_x", "angle random walk", "deg/sqrt(h)")
     assert arw.value == pytest.approx(60 * n_deg, rel=1e-14)
     lo, hi = next((iv.low, iv.high) for iv in ivs["gyro_x"] if iv.name == "WN.sigma2")
-    assert (arw.low, arw.high) == pytest.approx((60 * math.sqrt(lo / FS),
-                                                 60 * math.sqrt(hi / FS)), rel=1e-12)
+    assert (arw.low, arw.high) == pytest.approx(
+        (60 * math.sqrt(lo / FS), 60 * math.sqrt(hi / FS)), rel=1e-12
+    )
     k_deg = math.sqrt(g2 * FS)
-    assert _row(rows, "gyro_x", "rate random walk", "deg/h/sqrt(h)").value == \
-        pytest.approx(216000 * k_deg, rel=1e-14)
-    assert _row(rows, "gyro_x", "random walk (SI)", "rad/s^2/sqrt(Hz)").value == \
-        pytest.approx(k_deg * DEG, rel=1e-14)
+    assert _row(rows, "gyro_x", "rate random walk", "deg/h/sqrt(h)").value == pytest.approx(
+        216000 * k_deg, rel=1e-14
+    )
+    assert _row(rows, "gyro_x", "random walk (SI)", "rad/s^2/sqrt(Hz)").value == pytest.approx(
+        k_deg * DEG, rel=1e-14
+    )
     n_g = math.sqrt(a.params["WN.sigma2"] / FS)
-    assert _row(rows, "accel_y", "velocity random walk", "m/s/sqrt(h)").value == \
-        pytest.approx(60 * 9.80665 * n_g, rel=1e-14)
-    assert _row(rows, "accel_y", "acceleration random walk", "m/s/h/sqrt(h)").value == \
-        pytest.approx(216000 * 9.80665 * math.sqrt(a.params["RW.gamma2"] * FS), rel=1e-14)
+    assert _row(rows, "accel_y", "velocity random walk", "m/s/sqrt(h)").value == pytest.approx(
+        60 * 9.80665 * n_g, rel=1e-14
+    )
+    assert _row(
+        rows, "accel_y", "acceleration random walk", "m/s/h/sqrt(h)"
+    ).value == pytest.approx(216000 * 9.80665 * math.sqrt(a.params["RW.gamma2"] * FS), rel=1e-14)
     text = datasheet_text(rows)
     assert "angle random walk" in text and "deg/h/sqrt(h)" in text
     back = list(csv.DictReader(io.StringIO(datasheet_csv(rows))))
@@ -140,8 +174,9 @@ def test_bias_instability_floor_of_wn_rw() -> None:
     assert fl["T_s"] == pytest.approx(math.sqrt(3) * n / k, rel=0.05)
     assert fl["bias_instability"] == pytest.approx(fl["adev_min"] / 0.6643, rel=1e-4)
     assert BI_FACTOR == pytest.approx(0.664, abs=5e-4) and not fl["at_edge"]
-    wn_only = eg.fit_gmwm(eg.WaveletVariance.from_arrays(
-        eg.WN(sigma2=1.0).wv(2.0 ** np.arange(1, 12)), n=4096), "WN")
+    wn_only = eg.fit_gmwm(
+        eg.WaveletVariance.from_arrays(eg.WN(sigma2=1.0).wv(2.0 ** np.arange(1, 12)), n=4096), "WN"
+    )
     assert allan_floor(wn_only)["at_edge"]
     rows = datasheet_table(wn_only)
     assert "upper bound" in rows[-1].note or "upper bound" in rows[-2].note
@@ -149,8 +184,9 @@ def test_bias_instability_floor_of_wn_rw() -> None:
 
 def test_datasheet_gm_qn_dr_ar1_rows() -> None:
     m = eg.parse_model("GM(beta=0.1, sigma2_gm=4e-4)+QN(q2=1e-6)+WN(sigma2=1e-4)+DR(omega=1e-7)")
-    wv = eg.WaveletVariance.from_arrays(m.wv(2.0 ** np.arange(1, 18), 50.0), n=2**18, fs=50.0,
-                                        unit="rad/s")
+    wv = eg.WaveletVariance.from_arrays(
+        m.wv(2.0 ** np.arange(1, 18), 50.0), n=2**18, fs=50.0, unit="rad/s"
+    )
     res = eg.fit_gmwm(wv, m)  # starts at the truth; values need not be exact here
     rows = datasheet_table({"gyro_z": res})
     gm = res.model.processes[0]
@@ -158,15 +194,21 @@ def test_datasheet_gm_qn_dr_ar1_rows() -> None:
     assert tc.value == pytest.approx(1 / gm.beta)
     q = _row(rows, "gyro_z", "driving-noise PSD", "(rad/s)^2/s")
     assert q.value == pytest.approx(2 * gm.beta * gm.sigma2_gm)
-    assert _row(rows, "gyro_z", "driving-noise density (SI)", "rad/s^2/sqrt(Hz)").value == \
-        pytest.approx(math.sqrt(q.value))
+    assert _row(
+        rows, "gyro_z", "driving-noise density (SI)", "rad/s^2/sqrt(Hz)"
+    ).value == pytest.approx(math.sqrt(q.value))
     qn = res.model.processes[1]
-    assert _row(rows, "gyro_z", "quantization", "rad").value == \
-        pytest.approx(math.sqrt(qn.q2) / 50.0)
+    assert _row(rows, "gyro_z", "quantization", "rad").value == pytest.approx(
+        math.sqrt(qn.q2) / 50.0
+    )
     dr = res.model.processes[3]
     assert _row(rows, "gyro_z", "rate ramp", "rad/s^2").value == pytest.approx(abs(dr.omega) * 50)
-    ar = eg.fit_gmwm(eg.WaveletVariance.from_arrays(
-        eg.AR1(phi=0.99, sigma2=1e-4).wv(2.0 ** np.arange(1, 14)), n=2**14, fs=10.0), "AR1")
+    ar = eg.fit_gmwm(
+        eg.WaveletVariance.from_arrays(
+            eg.AR1(phi=0.99, sigma2=1e-4).wv(2.0 ** np.arange(1, 14)), n=2**14, fs=10.0
+        ),
+        "AR1",
+    )
     rows = datasheet_table(ar)
     phi = ar.model.processes[0].phi
     assert _row(rows, "x", "correlation time", "s").value == pytest.approx(-0.1 / math.log(phi))
@@ -176,25 +218,36 @@ def test_datasheet_gm_qn_dr_ar1_rows() -> None:
 # ----------------------------------------------------------------------------- Kalibr
 def test_kalibr_values_and_yaml(fits) -> None:
     k = kalibr_imu(fits, source="six.h5", rostopic="/imu0")
-    n = {c: math.sqrt(r.params["WN.sigma2"] / FS) * (DEG if c.startswith("g") else 9.80665)
-         for c, r in fits.items()}
+    n = {
+        c: math.sqrt(r.params["WN.sigma2"] / FS) * (DEG if c.startswith("g") else 9.80665)
+        for c, r in fits.items()
+    }
     assert k.update_rate == FS
     assert k.per_axis["gyroscope_noise_density"] == {
-        "x": pytest.approx(n["gyro_x"], rel=1e-15), "y": pytest.approx(n["gyro_y"], rel=1e-15),
-        "z": pytest.approx(n["gyro_z"], rel=1e-15)}
+        "x": pytest.approx(n["gyro_x"], rel=1e-15),
+        "y": pytest.approx(n["gyro_y"], rel=1e-15),
+        "z": pytest.approx(n["gyro_z"], rel=1e-15),
+    }
     worst = max(("gyro_x", "gyro_y", "gyro_z"), key=n.get)
     assert k.values["gyroscope_noise_density"] == n[worst]
     assert k.chosen["gyroscope_noise_density"] == worst
-    kr = {c: math.sqrt(fits[c].params["RW.gamma2"] * FS) * 9.80665 for c in
-          ("accel_x", "accel_y", "accel_z")}
+    kr = {
+        c: math.sqrt(fits[c].params["RW.gamma2"] * FS) * 9.80665
+        for c in ("accel_x", "accel_y", "accel_z")
+    }
     assert k.values["accelerometer_random_walk"] == pytest.approx(max(kr.values()), rel=1e-15)
     text = k.to_yaml()
     assert f"# from {worst}" in text and "max over axes" in text and "update_rate: 100.0" in text
     assert "e-" in text and not any(tok.startswith("1e") for tok in text.split())
     yaml = pytest.importorskip("yaml")  # Kalibr reads the file with PyYAML (YAML 1.1)
     y = yaml.safe_load(text)
-    for key in ("gyroscope_noise_density", "gyroscope_random_walk",
-                "accelerometer_noise_density", "accelerometer_random_walk", "update_rate"):
+    for key in (
+        "gyroscope_noise_density",
+        "gyroscope_random_walk",
+        "accelerometer_noise_density",
+        "accelerometer_random_walk",
+        "update_rate",
+    ):
         assert isinstance(y[key], float)
     assert y == read_kalibr(text)
 
@@ -223,7 +276,8 @@ def test_kalibr_round_trip_simulate_refit(fits, tmp_path: Path) -> None:
         assert k_hat == pytest.approx(d[f"{sensor}_random_walk_per_axis"][ax], rel=0.3)
     cons = kalibr_models(path)
     assert cons["gyroscope"].values()["WN.sigma2"] == pytest.approx(
-        d["gyroscope_noise_density"] ** 2 * FS, rel=1e-15)
+        d["gyroscope_noise_density"] ** 2 * FS, rel=1e-15
+    )
 
 
 def test_kalibr_errors_and_fallbacks(fits) -> None:
@@ -243,24 +297,28 @@ def test_kalibr_errors_and_fallbacks(fits) -> None:
     assert gm.warnings and "driving noise" in gm.sources["gyroscope_random_walk[x]"]
     with pytest.raises(ExportError, match="two gyroscope channels map to axis 'x'"):
         kalibr_imu({"gyro_x": fits["gyro_x"], "gx": fits["gyro_x"], **fits})
-    slow = eg.fit_gmwm(eg.WaveletVariance.from_arrays(wv.variance, n=wv.n, fs=50.0,
-                                                      unit="deg/s"), "WN+RW")
+    slow = eg.fit_gmwm(
+        eg.WaveletVariance.from_arrays(wv.variance, n=wv.n, fs=50.0, unit="deg/s"), "WN+RW"
+    )
     with pytest.raises(ExportError, match="different sampling frequencies"):
         kalibr_imu({**fits, "gyro_x": slow})
     with pytest.raises(ExportError, match="update_rate"):
         kalibr_models("gyroscope_noise_density: 1.0e-3\n")
     with pytest.raises(ExportError, match="not a non-negative number"):
-        kalibr_models("update_rate: 100\ngyroscope_noise_density: abc\n"
-                      "gyroscope_random_walk: 1.0\n")
+        kalibr_models(
+            "update_rate: 100\ngyroscope_noise_density: abc\ngyroscope_random_walk: 1.0\n"
+        )
     with pytest.raises(ExportError, match="not 'key: value'"):
         read_kalibr("update_rate 100\n")
 
 
 def test_read_kalibr_original_layout() -> None:
-    text = ("#Accelerometers\naccelerometer_noise_density: 1.86e-03   #Noise density\n"
-            "accelerometer_random_walk: 4.33e-04\n\n#Gyroscopes\n"
-            "gyroscope_noise_density: 1.87e-04\ngyroscope_random_walk: 2.66e-05\n"
-            "rostopic: /imu0\nupdate_rate: 200.0\nT_i_b:\n  - [1.0, 0.0]\n  - [0.0, 1.0]\n")
+    text = (
+        "#Accelerometers\naccelerometer_noise_density: 1.86e-03   #Noise density\n"
+        "accelerometer_random_walk: 4.33e-04\n\n#Gyroscopes\n"
+        "gyroscope_noise_density: 1.87e-04\ngyroscope_random_walk: 2.66e-05\n"
+        "rostopic: /imu0\nupdate_rate: 200.0\nT_i_b:\n  - [1.0, 0.0]\n  - [0.0, 1.0]\n"
+    )
     d = read_kalibr(text)
     assert d["gyroscope_random_walk"] == 2.66e-05 and d["rostopic"] == "/imu0"
     m = kalibr_models(d)
@@ -286,14 +344,26 @@ def test_json_report(fits, six: Path) -> None:
 def test_curves_csv(fits) -> None:
     text = curves_csv(fits)
     rows = list(csv.DictReader(io.StringIO(text)))
-    assert list(rows[0]) == ["channel", "level", "tau_samples", "tau_s", "wv", "ci_low",
-                             "ci_high", "implied", "WN", "RW", "wv_unit"]
+    assert list(rows[0]) == [
+        "channel",
+        "level",
+        "tau_samples",
+        "tau_s",
+        "wv",
+        "ci_low",
+        "ci_high",
+        "implied",
+        "WN",
+        "RW",
+        "wv_unit",
+    ]
     assert len(rows) == sum(r.wv.n_levels for r in fits.values())
     r0 = fits["gyro_x"]
     first = rows[0]
     assert float(first["wv"]) == r0.wv.variance[0]  # 17 digits: exact
-    assert float(first["implied"]) == pytest.approx(float(first["WN"]) + float(first["RW"]),
-                                                    rel=1e-14)
+    assert float(first["implied"]) == pytest.approx(
+        float(first["WN"]) + float(first["RW"]), rel=1e-14
+    )
     assert first["wv_unit"] == "(deg/s)^2"
     mixed = {"a": r0, "b": eg.fit_gmwm(r0.wv, "QN+WN")}
     rows = list(csv.DictReader(io.StringIO(curves_csv(mixed))))
@@ -311,25 +381,74 @@ def test_export_dispatch(fits, tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- CLI
 def test_cli_export(six: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "imu.yaml"
-    assert main(["export", str(six), "--model", "WN+RW", "--format", "kalibr", "-o", str(out),
-                 "--rostopic", "/imu/data"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(six),
+                "--model",
+                "WN+RW",
+                "--format",
+                "kalibr",
+                "-o",
+                str(out),
+                "--rostopic",
+                "/imu/data",
+            ]
+        )
+        == 0
+    )
     assert "wrote kalibr export of 6 channel(s)" in capsys.readouterr().out
     d = read_kalibr(out)
     assert d["rostopic"] == "/imu/data" and d["update_rate"] == FS
-    assert main(["export", str(six), "--model", "WN+RW", "--model-for", "gyro_x=GM+WN+RW",
-                 "--channels", "gyro_x,accel_x", "--format", "json", "-o", "-", "--ci",
-                 "asymptotic"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(six),
+                "--model",
+                "WN+RW",
+                "--model-for",
+                "gyro_x=GM+WN+RW",
+                "--channels",
+                "gyro_x,accel_x",
+                "--format",
+                "json",
+                "-o",
+                "-",
+                "--ci",
+                "asymptotic",
+            ]
+        )
+        == 0
+    )
     rep = json.loads(capsys.readouterr().out)
     assert rep["channels"]["gyro_x"]["fit"]["model"] == "GM+WN+RW"
     assert rep["channels"]["accel_x"]["intervals"]
-    assert main(["export", str(six), "--model", "WN+RW", "--format", "csv", "-o",
-                 str(tmp_path / "c.csv"), "--json"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(six),
+                "--model",
+                "WN+RW",
+                "--format",
+                "csv",
+                "-o",
+                str(tmp_path / "c.csv"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     assert json.loads(capsys.readouterr().out)["format"] == "csv"
-    bad = [(["--channels", "gyro_x"], "only gyroscope"),
-           (["--model-for", "mag=WN"], "unknown channel"),
-           (["--model-for", "nonsense"], "CH=SPEC"),
-           (["--units", "gyro_x=furlong"], "furlong"),
-           (["--model", "WN+XX"], "unknown process")]
+    bad = [
+        (["--channels", "gyro_x"], "only gyroscope"),
+        (["--model-for", "mag=WN"], "unknown channel"),
+        (["--model-for", "nonsense"], "CH=SPEC"),
+        (["--units", "gyro_x=furlong"], "furlong"),
+        (["--model", "WN+XX"], "unknown process"),
+    ]
     for extra, frag in bad:
         argv = ["export", str(six), "--model", "WN+RW", "-o", "-", *extra]
         assert main(argv) == 2, extra
@@ -339,13 +458,23 @@ def test_cli_export(six: Path, tmp_path: Path, capsys) -> None:
 
 def test_cli_export_counts_with_scale(tmp_path: Path, capsys) -> None:
     rng = np.random.default_rng(3)
-    counts = {c: np.round(rng.normal(0, 40, 50_000)).astype(np.int16) for c in
-              ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")}
+    counts = {
+        c: np.round(rng.normal(0, 40, 50_000)).astype(np.int16)
+        for c in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
+    }
     p = eg.save_log(tmp_path / "counts.h5", counts, 100.0)
-    argv = ["export", str(p), "--model", "WN+RW", "-o", "-", "--scale",
-            "gyro_x=0.05,gyro_y=0.05,gyro_z=0.05,accel_x=0.00333,accel_y=0.00333,"
-            "accel_z=0.00333", "--units", "gyro_x=deg/s,gyro_y=deg/s,gyro_z=deg/s,accel_x=g,"
-            "accel_y=g,accel_z=g"]
+    argv = [
+        "export",
+        str(p),
+        "--model",
+        "WN+RW",
+        "-o",
+        "-",
+        "--scale",
+        "gyro_x=0.05,gyro_y=0.05,gyro_z=0.05,accel_x=0.00333,accel_y=0.00333,accel_z=0.00333",
+        "--units",
+        "gyro_x=deg/s,gyro_y=deg/s,gyro_z=deg/s,accel_x=g,accel_y=g,accel_z=g",
+    ]
     assert main(argv) == 0
     d = read_kalibr(capsys.readouterr().out)
     n = math.sqrt(np.var(counts["gyro_x"] * 0.05) / 100.0) * DEG
@@ -356,10 +485,16 @@ def test_cli_export_counts_with_scale(tmp_path: Path, capsys) -> None:
 def test_session_round_trip(fits, six: Path, tmp_path: Path) -> None:
     ivs = {"gyro_x": param_intervals(fits["gyro_x"])}
     robust = eg.wavelet_variance(eg.load_log(six)["gyro_y"], fs=FS, robust=True, unit="deg/s")
-    p = save_session(tmp_path / "s.json", data_path=six, load={"segment": (0, 5000)},
-                     models={"gyro_x": "WN+RW", "gyro_y": eg.parse_model("GM+WN")},
-                     wvs={"gyro_y": robust}, fits=fits, intervals=ivs,
-                     app={"channel": "gyro_x", "log_axes": True})
+    p = save_session(
+        tmp_path / "s.json",
+        data_path=six,
+        load={"segment": (0, 5000)},
+        models={"gyro_x": "WN+RW", "gyro_y": eg.parse_model("GM+WN")},
+        wvs={"gyro_y": robust},
+        fits=fits,
+        intervals=ivs,
+        app={"channel": "gyro_x", "log_axes": True},
+    )
     s = load_session(p)
     assert s.data_path == str(six) and s.load == {"segment": (0, 5000)}
     assert s.models == {"gyro_x": "WN+RW", "gyro_y": "GM+WN"} and s.app["log_axes"] is True
@@ -369,12 +504,12 @@ def test_session_round_trip(fits, six: Path, tmp_path: Path) -> None:
         np.testing.assert_array_equal(got.implied, r.implied)
         np.testing.assert_array_equal(got.wv.variance, r.wv.variance)
         np.testing.assert_array_equal(got.omega, r.omega)
-        assert got.summary() == r.summary().replace(f"{1e3 * r.elapsed_s:.1f} ms",
-                                                    f"{1e3 * got.elapsed_s:.1f} ms")
+        assert got.summary() == r.summary().replace(
+            f"{1e3 * r.elapsed_s:.1f} ms", f"{1e3 * got.elapsed_s:.1f} ms"
+        )
     np.testing.assert_array_equal(s.wvs["gyro_y"].variance, robust.variance)
     np.testing.assert_array_equal(s.wvs["gyro_y"].classical.variance, robust.classical.variance)
-    assert [iv.to_dict() for iv in s.intervals["gyro_x"]] == [iv.to_dict() for iv in
-                                                               ivs["gyro_x"]]
+    assert [iv.to_dict() for iv in s.intervals["gyro_x"]] == [iv.to_dict() for iv in ivs["gyro_x"]]
     assert s.data_changed() is None and s.reload_log().n == 5000
     text = session_to_json(data_path=six, fits={"gyro_z": fits["gyro_z"]}, fingerprint=False)
     up = session_from_json(text.encode())  # an uploaded file, no path on the server

@@ -34,7 +34,8 @@ def test_closed_form_equals_unconstrained_wls_when_interior(linear_wv):
     h = np.linalg.solve(x.T @ w @ x, x.T @ w @ linear_wv.variance)
     got = res.params
     np.testing.assert_allclose(
-        [got["QN.q2"], got["WN.sigma2"], got["RW.gamma2"], got["DR.omega"] ** 2], h, rtol=1e-6)
+        [got["QN.q2"], got["WN.sigma2"], got["RW.gamma2"], got["DR.omega"] ** 2], h, rtol=1e-6
+    )
 
 
 def test_closed_form_equals_numerical_minimum(linear_wv):
@@ -44,14 +45,24 @@ def test_closed_form_equals_numerical_minimum(linear_wv):
     def f(logp):
         m = eg.parse_model("QN+WN+RW+DR").processes
         vals = np.exp(logp)
-        model = eg.Model((m[0].with_values(vals[0]), m[1].with_values(vals[1]),
-                          m[2].with_values(vals[2]), m[3].with_values(math.sqrt(vals[3]))))
+        model = eg.Model(
+            (
+                m[0].with_values(vals[0]),
+                m[1].with_values(vals[1]),
+                m[2].with_values(vals[2]),
+                m[3].with_values(math.sqrt(vals[3])),
+            )
+        )
         return objective(linear_wv, omega, model)
 
     best = math.inf
     for start in ([-5, -4, -18, -30], [-8, -2, -22, -33], [-3, -6, -15, -28]):
-        r = optimize.minimize(f, start, method="Nelder-Mead",
-                              options={"xatol": 1e-10, "fatol": 1e-14, "maxfev": 40000})
+        r = optimize.minimize(
+            f,
+            start,
+            method="Nelder-Mead",
+            options={"xatol": 1e-10, "fatol": 1e-14, "maxfev": 40000},
+        )
         best = min(best, r.fun)
     assert res.objective <= best * (1 + 1e-9)
     assert res.objective == pytest.approx(best, rel=1e-4)
@@ -91,8 +102,10 @@ def test_ar1_wn_reaches_global_minimum_near_unit_root():
 
 
 def test_two_gm_fit_reaches_global_minimum_and_recovers_truth():
-    truth = eg.parse_model("GM(beta=0.5, sigma2_gm=4e-4)+GM(beta=0.01, sigma2_gm=1e-4)"
-                           "+WN(sigma2=1e-2)+RW(gamma2=1e-10)")
+    truth = eg.parse_model(
+        "GM(beta=0.5, sigma2_gm=4e-4)+GM(beta=0.01, sigma2_gm=1e-4)"
+        "+WN(sigma2=1e-2)+RW(gamma2=1e-10)"
+    )
     fs = 100.0
     wv = eg.wavelet_variance(truth.simulate(10**6, fs=fs, rng=1), fs=fs)
     res = eg.fit_gmwm(wv, "2*GM+WN+RW")
@@ -114,8 +127,12 @@ def test_monte_carlo_recovery_of_wn_rw():
     truth = {"WN.sigma2": 2.0, "RW.gamma2": 1e-5}
     m = eg.parse_model("WN(sigma2=2)+RW(gamma2=1e-5)")
     rng = np.random.default_rng(21)
-    est = np.array([[eg.fit_gmwm(m.simulate(2**15, rng=rng), "WN+RW").params[k] for k in truth]
-                    for _ in range(30)])
+    est = np.array(
+        [
+            [eg.fit_gmwm(m.simulate(2**15, rng=rng), "WN+RW").params[k] for k in truth]
+            for _ in range(30)
+        ]
+    )
     rel = est / np.array(list(truth.values())) - 1
     assert abs(rel[:, 0].mean()) < 0.01 and rel[:, 0].std() < 0.03
     assert abs(rel[:, 1].mean()) < 0.15 and rel[:, 1].std() < 0.5
@@ -125,8 +142,10 @@ def test_gm_wn_recovery_in_continuous_time_units():
     fs = 200.0
     m = eg.parse_model("GM(beta=2.0, sigma2_gm=1e-3)+WN(sigma2=1e-3)")
     rng = np.random.default_rng(5)
-    betas = [eg.fit_gmwm(m.simulate(2**16, fs=fs, rng=rng), "GM+WN", fs=fs).params["GM.beta"]
-             for _ in range(12)]
+    betas = [
+        eg.fit_gmwm(m.simulate(2**16, fs=fs, rng=rng), "GM+WN", fs=fs).params["GM.beta"]
+        for _ in range(12)
+    ]
     assert np.median(betas) == pytest.approx(2.0, rel=0.15)
 
 
@@ -178,11 +197,19 @@ def test_result_object():
     d = json.loads(json.dumps(res.to_dict()))
     assert d["model"] == "GM+WN+RW" and d["weights"] == "ci" and d["n"] == 2**16
     names = [(p["process"], p["index"], p["name"]) for p in d["params"]]
-    assert names == [("GM", 1, "beta"), ("GM", 1, "sigma2_gm"), ("WN", 1, "sigma2"),
-                     ("RW", 1, "gamma2")]
+    assert names == [
+        ("GM", 1, "beta"),
+        ("GM", 1, "sigma2_gm"),
+        ("WN", 1, "sigma2"),
+        ("RW", 1, "gamma2"),
+    ]
     units = {p["name"]: p["unit"] for p in d["params"]}
-    assert units == {"beta": "1/s", "sigma2_gm": "(deg/s)^2", "sigma2": "(deg/s)^2",
-                     "gamma2": "(deg/s)^2"}
+    assert units == {
+        "beta": "1/s",
+        "sigma2_gm": "(deg/s)^2",
+        "sigma2": "(deg/s)^2",
+        "gamma2": "(deg/s)^2",
+    }
     assert set(d["components"]) == {"GM", "WN", "RW"}
     text = res.summary()
     assert "GM.beta" in text and "1/s" in text and "angle random walk" in text
@@ -193,8 +220,12 @@ def test_result_object():
     ("signal", "spec", "exc", "match"),
     [
         (np.ones(1000), "WN", eg.FitError, "constant signal"),
-        (np.random.default_rng(0).standard_normal(40), "3*GM+WN+RW", eg.ModelError,
-         "8 parameters but the WV has only 5 levels"),
+        (
+            np.random.default_rng(0).standard_normal(40),
+            "3*GM+WN+RW",
+            eg.ModelError,
+            "8 parameters but the WV has only 5 levels",
+        ),
         (np.random.default_rng(0).standard_normal(400), "WN+WN", eg.ModelError, "2 WN terms"),
         (np.random.default_rng(0).standard_normal(400), "AR1+GM", eg.ModelError, "mixes"),
         (np.random.default_rng(0).standard_normal(400), "FOO", eg.ModelError, "unknown process"),

@@ -36,17 +36,28 @@ from engine.timecheck import check_time
 def cfg(examples: int, deadline_ms: int = 10_000) -> settings:
     """Bounded runs: ``examples`` cases, each under ``deadline_ms`` (no hang; generous, so that
     a loaded CI machine does not flake: typical examples take a few ms)."""
-    return settings(max_examples=examples, deadline=deadline_ms, database=None,
-                    suppress_health_check=[HealthCheck.too_slow,
-                                           HealthCheck.function_scoped_fixture])
+    return settings(
+        max_examples=examples,
+        deadline=deadline_ms,
+        database=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+    )
 
 
 CLEAR = (LoadError, ModelError, FitError, ExportError, SessionError, ValueError)
 
-MAGICS = [b"", b"\x89HDF\r\n\x1a\n", b"\x93NUMPY", b"\x93NUMPY\x01\x00v\x00", b"PK\x03\x04",
-          b"#ROSBAG V2.0\n", b"\x89MCAP0\r\n", b"SQLite format 3\x00", b"time,gyro_x\n"]
-EXTS = ["", ".csv", ".txt", ".tsv", ".dat", ".npy", ".npz", ".h5", ".bag", ".mcap", ".db3",
-        ".bin"]
+MAGICS = [
+    b"",
+    b"\x89HDF\r\n\x1a\n",
+    b"\x93NUMPY",
+    b"\x93NUMPY\x01\x00v\x00",
+    b"PK\x03\x04",
+    b"#ROSBAG V2.0\n",
+    b"\x89MCAP0\r\n",
+    b"SQLite format 3\x00",
+    b"time,gyro_x\n",
+]
+EXTS = ["", ".csv", ".txt", ".tsv", ".dat", ".npy", ".npz", ".h5", ".bag", ".mcap", ".db3", ".bin"]
 
 
 class Hang(BaseException):
@@ -58,6 +69,7 @@ class Hang(BaseException):
 def no_hang(seconds: float = 60.0) -> Iterator[None]:
     """Fail (instead of hanging forever) if the body runs longer than ``seconds``: hypothesis'
     deadline only measures examples that finish."""
+
     def alarm(signum: int, frame: object) -> None:
         raise Hang(f"hang: no result after {seconds} s")
 
@@ -135,14 +147,51 @@ def test_random_bytes(magic: bytes, body: bytes, ext: str) -> None:
 
 _FIELD = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True, width=64).map(repr),
-    st.integers(-10**20, 10**20).map(str),
-    st.sampled_from(["", "nan", "NaN", "inf", "-inf", "1e308", "-1e308", "1e-320", "abc",
-                     "0x1F", "1,5", "\"3\"", " 7 ", "1e400", "--1", "+.5"]),
+    st.integers(-(10**20), 10**20).map(str),
+    st.sampled_from(
+        [
+            "",
+            "nan",
+            "NaN",
+            "inf",
+            "-inf",
+            "1e308",
+            "-1e308",
+            "1e-320",
+            "abc",
+            "0x1F",
+            "1,5",
+            '"3"',
+            " 7 ",
+            "1e400",
+            "--1",
+            "+.5",
+        ]
+    ),
     st.from_regex(r"[-+]?[0-9]{1,4}(\.[0-9]{0,6})?([eE][-+]?[0-9]{1,3})?", fullmatch=True),
 )
-_HEADER = st.lists(st.sampled_from(["time", "t", "timestamp", "time_ms", "gyro_x [deg/s]",
-                                    "accel_z (g)", "x", "x", "", "a b", "#c", "seconds",
-                                    "time [ns]", "temp [°C]"]), min_size=1, max_size=5)
+_HEADER = st.lists(
+    st.sampled_from(
+        [
+            "time",
+            "t",
+            "timestamp",
+            "time_ms",
+            "gyro_x [deg/s]",
+            "accel_z (g)",
+            "x",
+            "x",
+            "",
+            "a b",
+            "#c",
+            "seconds",
+            "time [ns]",
+            "temp [°C]",
+        ]
+    ),
+    min_size=1,
+    max_size=5,
+)
 
 
 _GOOD = st.floats(-1e6, 1e6, allow_nan=False, allow_subnormal=False).map(repr)
@@ -165,8 +214,7 @@ def csv_text(draw: st.DrawFn) -> str:
     t = 0.0
     for _ in range(nrow):
         k = draw(st.integers(max(ncol - 1, 0), ncol + 1)) if ragged else ncol
-        row = [draw(_FIELD) if draw(st.floats(0, 1)) < bad_rate else draw(_GOOD)
-               for _ in range(k)]
+        row = [draw(_FIELD) if draw(st.floats(0, 1)) < bad_rate else draw(_GOOD) for _ in range(k)]
         if time_kind != "none" and row:
             step = 0.01
             if time_kind == "gaps":
@@ -182,9 +230,12 @@ def csv_text(draw: st.DrawFn) -> str:
 
 
 @cfg(150)
-@given(text=csv_text(), ext=st.sampled_from([".csv", ".txt", ""]),
-       segment=st.sampled_from([None, "stop", "longest", "report"]),
-       fs=st.sampled_from([None, None, 100.0]))
+@given(
+    text=csv_text(),
+    ext=st.sampled_from([".csv", ".txt", ""]),
+    segment=st.sampled_from([None, "stop", "longest", "report"]),
+    fs=st.sampled_from([None, None, 100.0]),
+)
 def test_random_csv_text(text: str, ext: str, segment: str | None, fs: float | None) -> None:
     log = _load(_tmpfile(text.encode("utf-8", "surrogatepass"), ext), segment=segment, fs=fs)
     if log is not None and log.meta.get("time_report") and not log.meta["time_report"]["ok"]:
@@ -216,13 +267,15 @@ def valid_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
 
 @cfg(100, 20_000)
 @example(fmt=".h5", cut=1.0, flips=[(0.6328125, 0)], tail=b"")  # h5py RuntimeError, fixed
-@given(fmt=st.sampled_from([".h5", ".csv", ".npy", ".npz", ".bag", ".mcap", ".db3"]),
-       cut=st.one_of(st.just(1.0), st.floats(0, 1)),
-       flips=st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)),
-                                            max_size=6),
-       tail=st.binary(max_size=40))
-def test_corrupted_valid_files(valid_files: dict[str, bytes], fmt: str, cut: float, flips,
-                               tail: bytes) -> None:
+@given(
+    fmt=st.sampled_from([".h5", ".csv", ".npy", ".npz", ".bag", ".mcap", ".db3"]),
+    cut=st.one_of(st.just(1.0), st.floats(0, 1)),
+    flips=st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), max_size=6),
+    tail=st.binary(max_size=40),
+)
+def test_corrupted_valid_files(
+    valid_files: dict[str, bytes], fmt: str, cut: float, flips, tail: bytes
+) -> None:
     data = bytearray(valid_files[fmt])
     for pos, val in flips:
         data[min(int(pos * len(data)), len(data) - 1)] = val
@@ -231,11 +284,25 @@ def test_corrupted_valid_files(valid_files: dict[str, bytes], fmt: str, cut: flo
 
 
 @cfg(60)
-@given(arr=hnp.arrays(dtype=st.sampled_from([np.float64, np.float32, np.int16, np.int64,
-                                               np.uint8, np.float16, np.complex64, np.bool_]),
-                      shape=hnp.array_shapes(min_dims=1, max_dims=3, max_side=12)),
-       scale=st.sampled_from([None, 0.05, 1e300, 0.0, float("nan"), {"x": 2.0}, {"nope": 1.0}]),
-       fmt=st.sampled_from([".npy", ".npz", ".h5"]))
+@given(
+    arr=hnp.arrays(
+        dtype=st.sampled_from(
+            [
+                np.float64,
+                np.float32,
+                np.int16,
+                np.int64,
+                np.uint8,
+                np.float16,
+                np.complex64,
+                np.bool_,
+            ]
+        ),
+        shape=hnp.array_shapes(min_dims=1, max_dims=3, max_side=12),
+    ),
+    scale=st.sampled_from([None, 0.05, 1e300, 0.0, float("nan"), {"x": 2.0}, {"nope": 1.0}]),
+    fmt=st.sampled_from([".npy", ".npz", ".h5"]),
+)
 def test_random_arrays(arr: np.ndarray, scale, fmt: str) -> None:
     p = _new_dir() / f"a{fmt}"
     if fmt == ".npy":
@@ -254,10 +321,14 @@ def test_random_arrays(arr: np.ndarray, scale, fmt: str) -> None:
 
 
 @cfg(80)
-@given(t=hnp.arrays(np.float64, st.integers(0, 60),
-                    elements=st.one_of(st.floats(-1e3, 1e3), st.just(np.nan),
-                                       st.just(np.inf))),
-       sort=st.booleans())
+@given(
+    t=hnp.arrays(
+        np.float64,
+        st.integers(0, 60),
+        elements=st.one_of(st.floats(-1e3, 1e3), st.just(np.nan), st.just(np.inf)),
+    ),
+    sort=st.booleans(),
+)
 def test_time_check_invariants(t: np.ndarray, sort: bool) -> None:
     if sort:
         t = np.sort(t)
@@ -284,15 +355,48 @@ def test_time_check_invariants(t: np.ndarray, sort: bool) -> None:
 
 
 # ----------------------------------------------------------------------------- models
-_TOKENS = ["WN", "RW", "QN", "DR", "GM", "AR1", "AR", "2*", "*2", "0*", "+", "(", ")", "=",
-           "beta", "sigma2", "1e-3", "-1", "nan", "inf", ",", " ", "gm", "foo", "3*GM",
-           "GM(0.1,1e-4)", "WN(sigma2=1)", "AR1(phi=1.5)", "WN(x=1)", "1e999", "999*"]
+_TOKENS = [
+    "WN",
+    "RW",
+    "QN",
+    "DR",
+    "GM",
+    "AR1",
+    "AR",
+    "2*",
+    "*2",
+    "0*",
+    "+",
+    "(",
+    ")",
+    "=",
+    "beta",
+    "sigma2",
+    "1e-3",
+    "-1",
+    "nan",
+    "inf",
+    ",",
+    " ",
+    "gm",
+    "foo",
+    "3*GM",
+    "GM(0.1,1e-4)",
+    "WN(sigma2=1)",
+    "AR1(phi=1.5)",
+    "WN(x=1)",
+    "1e999",
+    "999*",
+]
 # Multipliers of 1e10 and more are left to test_huge_multiplier (a known defect, see there).
 
 
 @cfg(200)
-@given(spec=st.one_of(st.lists(st.sampled_from(_TOKENS), max_size=8).map("".join),
-                      st.text(max_size=30)))
+@given(
+    spec=st.one_of(
+        st.lists(st.sampled_from(_TOKENS), max_size=8).map("".join), st.text(max_size=30)
+    )
+)
 def test_random_model_strings(spec: str) -> None:
     try:
         m = parse_model(spec)
@@ -324,14 +428,34 @@ def test_random_units_and_kalibr_text(unit: str, text: str) -> None:
 
 
 @cfg(60)
-@given(doc=st.recursive(st.one_of(st.none(), st.booleans(), st.floats(allow_nan=False),
-                                  st.text(max_size=8)),
-                        lambda c: st.one_of(st.lists(c, max_size=3),
-                                            st.dictionaries(st.sampled_from(
-                                                ["schema", "data", "channels", "fit", "wv",
-                                                 "model", "load", "path", "intervals", "app"]),
-                                                c, max_size=4)), max_leaves=12),
-       schema=st.booleans())
+@given(
+    doc=st.recursive(
+        st.one_of(st.none(), st.booleans(), st.floats(allow_nan=False), st.text(max_size=8)),
+        lambda c: st.one_of(
+            st.lists(c, max_size=3),
+            st.dictionaries(
+                st.sampled_from(
+                    [
+                        "schema",
+                        "data",
+                        "channels",
+                        "fit",
+                        "wv",
+                        "model",
+                        "load",
+                        "path",
+                        "intervals",
+                        "app",
+                    ]
+                ),
+                c,
+                max_size=4,
+            ),
+        ),
+        max_leaves=12,
+    ),
+    schema=st.booleans(),
+)
 def test_random_session_files(doc, schema: bool) -> None:
     if schema and isinstance(doc, dict):
         doc["schema"] = "gmwm-session/1"
@@ -344,9 +468,13 @@ def test_random_session_files(doc, schema: bool) -> None:
 
 # ----------------------------------------------------------------------------- streaming
 @cfg(40)
-@given(x=hnp.arrays(np.float64, st.integers(4, 3000),
-                    elements=st.floats(-1e6, 1e6, allow_subnormal=False)),
-       block=st.sampled_from([1024, 2048]), f32=st.booleans())
+@given(
+    x=hnp.arrays(
+        np.float64, st.integers(4, 3000), elements=st.floats(-1e6, 1e6, allow_subnormal=False)
+    ),
+    block=st.sampled_from([1024, 2048]),
+    f32=st.booleans(),
+)
 def test_stream_matches_memory(x: np.ndarray, block: int, f32: bool) -> None:
     if f32:
         x = x.astype(np.float32)
@@ -361,8 +489,10 @@ def test_stream_matches_memory(x: np.ndarray, block: int, f32: bool) -> None:
 def small_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rng = np.random.default_rng(5)
     p = tmp_path_factory.mktemp("hyp_cli") / "six.h5"
-    chans = {c: rng.normal(0, 0.01, 3000) + np.cumsum(rng.normal(0, 1e-4, 3000))
-             for c in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")}
+    chans = {
+        c: rng.normal(0, 0.01, 3000) + np.cumsum(rng.normal(0, 1e-4, 3000))
+        for c in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
+    }
     units = {c: "deg/s" if c.startswith("gyro") else "g" for c in chans}
     return eg.save_log(p, chans, 100.0, units=units)
 
@@ -386,25 +516,75 @@ def _run(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
         assert out
 
 
-_VALUES = ["0", "-1", "2", "5", "1e3", "nan", "inf", "abc", "", "0.5", "99", "WN+RW", "GM+WN",
-           "2*GM+WN+RW", "WN(", "gyro_x", "accel_z", "7", "longest", "stop", "report",
-           "gyro_x=0.1", "deg/s", "x=deg/s", "kalibr", "json", "csv", "datasheet", "-"]
-_OPTS = ["--channel", "--fs", "--levels", "--eff", "--alpha", "--model", "--segment", "--scale",
-         "--units", "--topic", "--channels", "--format", "-o", "--weights", "--level",
-         "--model-for", "-n", "--seed", "--ci"]
+_VALUES = [
+    "0",
+    "-1",
+    "2",
+    "5",
+    "1e3",
+    "nan",
+    "inf",
+    "abc",
+    "",
+    "0.5",
+    "99",
+    "WN+RW",
+    "GM+WN",
+    "2*GM+WN+RW",
+    "WN(",
+    "gyro_x",
+    "accel_z",
+    "7",
+    "longest",
+    "stop",
+    "report",
+    "gyro_x=0.1",
+    "deg/s",
+    "x=deg/s",
+    "kalibr",
+    "json",
+    "csv",
+    "datasheet",
+    "-",
+]
+_OPTS = [
+    "--channel",
+    "--fs",
+    "--levels",
+    "--eff",
+    "--alpha",
+    "--model",
+    "--segment",
+    "--scale",
+    "--units",
+    "--topic",
+    "--channels",
+    "--format",
+    "-o",
+    "--weights",
+    "--level",
+    "--model-for",
+    "-n",
+    "--seed",
+    "--ci",
+]
 _FLAGS = ["--json", "--robust", "--stream", "--partial"]
 
 
 @cfg(120, 30_000)
-@given(cmd=st.sampled_from(["wv", "fit", "export", "simulate", "nope", ""]),
-       opts=st.lists(st.tuples(st.sampled_from(_OPTS), st.sampled_from(_VALUES)), max_size=4),
-       flags=st.lists(st.sampled_from(_FLAGS), max_size=2, unique=True),
-       which=st.sampled_from(["log", "missing", "garbage"]))
-def test_cli_random_arguments(capsys, small_log: Path, cmd: str, opts, flags,
-                              which: str) -> None:
+@given(
+    cmd=st.sampled_from(["wv", "fit", "export", "simulate", "nope", ""]),
+    opts=st.lists(st.tuples(st.sampled_from(_OPTS), st.sampled_from(_VALUES)), max_size=4),
+    flags=st.lists(st.sampled_from(_FLAGS), max_size=2, unique=True),
+    which=st.sampled_from(["log", "missing", "garbage"]),
+)
+def test_cli_random_arguments(capsys, small_log: Path, cmd: str, opts, flags, which: str) -> None:
     # no simulate with huge -n: the vocabulary keeps every number small
-    target = {"log": str(small_log), "missing": str(small_log) + ".nope",
-              "garbage": str(_tmpfile(b"\x00\x01garbage", ".csv"))}[which]
+    target = {
+        "log": str(small_log),
+        "missing": str(small_log) + ".nope",
+        "garbage": str(_tmpfile(b"\x00\x01garbage", ".csv")),
+    }[which]
     argv = [cmd, target] if cmd not in ("simulate", "") else ([cmd] if cmd else [])
     for o, v in opts:
         if o == "-o" and v not in ("-", ""):
@@ -418,9 +598,25 @@ def test_cli_random_arguments(capsys, small_log: Path, cmd: str, opts, flags,
 
 
 @cfg(40, 30_000)
-@given(spec=st.lists(st.sampled_from(_TOKENS), min_size=1, max_size=6).map("".join),
-       fmt=st.sampled_from(["kalibr", "json", "csv", "datasheet"]))
+@given(
+    spec=st.lists(st.sampled_from(_TOKENS), min_size=1, max_size=6).map("".join),
+    fmt=st.sampled_from(["kalibr", "json", "csv", "datasheet"]),
+)
 def test_cli_fit_and_export_random_models(capsys, small_log: Path, spec: str, fmt: str) -> None:
     _run(capsys, ["fit", str(small_log), "--model", spec, "--channel", "gyro_y"])
-    _run(capsys, ["export", str(small_log), "--model", spec, "--format", fmt, "-o", "-",
-                  "--channels", "gyro_x,accel_x", "--partial"])
+    _run(
+        capsys,
+        [
+            "export",
+            str(small_log),
+            "--model",
+            spec,
+            "--format",
+            fmt,
+            "-o",
+            "-",
+            "--channels",
+            "gyro_x,accel_x",
+            "--partial",
+        ],
+    )

@@ -27,8 +27,11 @@ def corr(a: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize(
     ("spec", "fs"),
-    [("WN(sigma2=1)+RW(gamma2=1e-4)", 1.0), ("GM(beta=2, sigma2_gm=1)+WN(sigma2=0.5)", 100.0),
-     ("AR1(phi=0.999, sigma2=1)+WN(sigma2=1)", 1.0)],
+    [
+        ("WN(sigma2=1)+RW(gamma2=1e-4)", 1.0),
+        ("GM(beta=2, sigma2_gm=1)+WN(sigma2=0.5)", 100.0),
+        ("AR1(phi=0.999, sigma2=1)+WN(sigma2=1)", 1.0),
+    ],
 )
 def test_model_covariance_matches_monte_carlo(spec, fs):
     model = eg.parse_model(spec)
@@ -56,8 +59,9 @@ def test_data_covariance_diagonal_matches_monte_carlo():
     xs = [model.simulate(2**13, fs=100.0, rng=rng) for _ in range(200)]
     wvs = [eg.wavelet_variance(x, fs=100.0) for x in xs]
     mc = np.var([w.variance for w in wvs], axis=0, ddof=1)
-    est = np.mean([np.diagonal(wv_cov_data(x, w)) for x, w in zip(xs[:20], wvs, strict=False)],
-                  axis=0)
+    est = np.mean(
+        [np.diagonal(wv_cov_data(x, w)) for x, w in zip(xs[:20], wvs, strict=False)], axis=0
+    )
     ratio = est[:7] / mc[:7]
     assert np.all(np.abs(ratio - 1) < 0.3), ratio
 
@@ -74,8 +78,9 @@ def coverage(spec: str, n: int, reps: int, fs: float, seed: int) -> dict[str, fl
     rng = np.random.default_rng(seed)
     hits = dict.fromkeys(truth, 0)
     for _ in range(reps):
-        res = eg.fit_gmwm(eg.wavelet_variance(model.simulate(n, fs=fs, rng=rng), fs=fs),
-                          model.cleared())
+        res = eg.fit_gmwm(
+            eg.wavelet_variance(model.simulate(n, fs=fs, rng=rng), fs=fs), model.cleared()
+        )
         for iv in param_intervals(res, level=0.95):
             hits[iv.name] += iv.low <= truth[iv.name] <= iv.high
     return {k: v / reps for k, v in hits.items()}
@@ -84,8 +89,10 @@ def coverage(spec: str, n: int, reps: int, fs: float, seed: int) -> dict[str, fl
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("spec", "n", "fs"),
-    [("WN(sigma2=1)+RW(gamma2=1e-4)", 2**14, 1.0),
-     ("GM(beta=1, sigma2_gm=1)+WN(sigma2=1)", 2**15, 100.0)],
+    [
+        ("WN(sigma2=1)+RW(gamma2=1e-4)", 2**14, 1.0),
+        ("GM(beta=1, sigma2_gm=1)+WN(sigma2=1)", 2**15, 100.0),
+    ],
 )
 def test_asymptotic_interval_coverage_near_nominal(spec, n, fs):
     """Two-sided 95 % intervals: coverage within 2 points of nominal, plus the binomial
@@ -132,8 +139,7 @@ def test_efficient_weights_lower_rmse_than_ci_weights():
     for _ in range(150):
         wv = eg.wavelet_variance(model.simulate(2**13, fs=100.0, rng=rng), fs=100.0)
         err_ci.append(np.array(list(eg.fit_gmwm(wv, model.cleared()).params.values())) / truth)
-        err_eff.append(np.array(list(fit_efficient(wv, model.cleared()).params.values()))
-                       / truth)
+        err_eff.append(np.array(list(fit_efficient(wv, model.cleared()).params.values())) / truth)
     rmse_ci = np.sqrt(np.mean((np.array(err_ci) - 1) ** 2, axis=0))
     rmse_eff = np.sqrt(np.mean((np.array(err_eff) - 1) ** 2, axis=0))
     assert rmse_eff[0] < 0.95 * rmse_ci[0], (rmse_ci, rmse_eff)  # beta: clearly better
@@ -156,8 +162,7 @@ def test_j_test_size_under_a_correct_model():
 
 
 def test_j_test_rejects_a_wrong_model():
-    x = eg.parse_model("GM(beta=2, sigma2_gm=1)+WN(sigma2=0.2)").simulate(2**15, fs=100.0,
-                                                                          rng=5)
+    x = eg.parse_model("GM(beta=2, sigma2_gm=1)+WN(sigma2=0.2)").simulate(2**15, fs=100.0, rng=5)
     wv = eg.wavelet_variance(x, fs=100.0)
     assert j_test(fit_efficient(wv, "WN+RW")).p_value < 1e-6
     jt = j_test(fit_efficient(wv, "GM+WN"))
@@ -166,8 +171,22 @@ def test_j_test_rejects_a_wrong_model():
 
 def test_cli_fit_with_intervals(capsys, tmp_path):
     path = tmp_path / "s.h5"
-    assert main(["simulate", "--model", "WN(sigma2=4)+RW(gamma2=1e-4)", "-n", "30000",
-                 "--seed", "2", "-o", str(path)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--model",
+                "WN(sigma2=4)+RW(gamma2=1e-4)",
+                "-n",
+                "30000",
+                "--seed",
+                "2",
+                "-o",
+                str(path),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     assert main(["fit", str(path), "--model", "WN+RW", "--ci", "asymptotic", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)

@@ -72,8 +72,9 @@ def test_real_channel_selection_and_fs_override(data: Path) -> None:
     assert log.fs == 50.0 and log.fs_source == "user" and log.duration_s == 20_000.0
     assert load_log(data / "adis16405_imu2.h5", channel=1).names == ["gyro_y"]
     assert load_log(data / "adis16405_imu2.h5", channel=-1).names == ["accel_z"]
-    msg = raises(data / "adis16405_imu2.h5", "no channel 'mag_x'", "gyro_x", "accel_z",
-                 channel="mag_x")
+    msg = raises(
+        data / "adis16405_imu2.h5", "no channel 'mag_x'", "gyro_x", "accel_z", channel="mag_x"
+    )
     assert "index" in msg
     raises(data / "adis16405_imu2.h5", "out of range", "0..5", channel=6)
 
@@ -107,9 +108,13 @@ def test_navchip_summary(data: Path) -> None:
 
 @pytest.mark.parametrize(
     ("name", "levels", "fs", "n", "unit"),
-    [("navchip_wv_av.h5", 20, 250, 3_105_250, "rad/s"), ("ln200_wv_av.h5", 22, 400, 8_640_000,
-     "rad/s"), ("imar_wv_av.h5", 21, 400, 5_760_000, "rad/s"),
-     ("kvh1750_wv_av.h5", 18, 1000, 1_000_000, ""), ("mtig_imu6_wv.h5", 18, 100, 873_684, "rad/s")],
+    [
+        ("navchip_wv_av.h5", 20, 250, 3_105_250, "rad/s"),
+        ("ln200_wv_av.h5", 22, 400, 8_640_000, "rad/s"),
+        ("imar_wv_av.h5", 21, 400, 5_760_000, "rad/s"),
+        ("kvh1750_wv_av.h5", 18, 1000, 1_000_000, ""),
+        ("mtig_imu6_wv.h5", 18, 100, 873_684, "rad/s"),
+    ],
 )
 def test_all_summaries(data: Path, name: str, levels: int, fs: float, n: int, unit: str) -> None:
     log = load_log(data / "derived" / name)
@@ -124,8 +129,9 @@ def test_roundtrip_h5(tmp_path: Path) -> None:
     ch["f32"] = ch["gyro_x"].astype(np.float32)
     ch["counts"] = np.arange(5000, dtype=np.int16) % 7
     units = {"gyro_x": "deg/s", "accel_z": "g"}
-    out = save_log(tmp_path / "sim.h5", ch, 200.0, units,
-                   attrs={"sensor": "simulated", "model": {"WN": 1e-4}})
+    out = save_log(
+        tmp_path / "sim.h5", ch, 200.0, units, attrs={"sensor": "simulated", "model": {"WN": 1e-4}}
+    )
     log = load_log(out)
     assert log.names == list(ch) and log.fs == 200.0 and log.fs_source == "file"
     assert log.units == {"gyro_x": "deg/s", "accel_z": "g", "f32": "", "counts": ""}
@@ -201,8 +207,14 @@ def test_csv_header_time_column_infers_fs(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("col", "step", "fs"),
-    [("time_ms", 10, 100.0), ("time [ms]", 5, 200.0), ("time_ns", 2_500_000, 400.0),
-     ("t (us)", 1000, 1000.0), ("timestamp", 10_000_000, 100.0), ("seconds", 0.25, 4.0)],
+    [
+        ("time_ms", 10, 100.0),
+        ("time [ms]", 5, 200.0),
+        ("time_ns", 2_500_000, 400.0),
+        ("t (us)", 1000, 1000.0),
+        ("timestamp", 10_000_000, 100.0),
+        ("seconds", 0.25, 4.0),
+    ],
 )
 def test_time_units(tmp_path: Path, col: str, step: float, fs: float) -> None:
     rows = [f"{1e3 + i * step!r},{(-1) ** i * 0.1}" for i in range(50)]
@@ -231,8 +243,11 @@ def test_tsv_whitespace_units_and_comments(tmp_path: Path) -> None:
     tsv = load_log(write(tmp_path / "x.tsv", "t\tgyro_z [deg/s]\taccel_x (g)\n" + body))
     assert tsv.names == ["gyro_z", "accel_x"] and tsv.fs == 50.0
     assert tsv.units == {"gyro_z": "deg/s", "accel_x": "g"}
-    text = ("# comment line\n  time   gyro_x [rad / s]   accel_y (m/s^2)  # inline comment\n\n"
-            + "\n".join(f"  {i / 10}   {0.5 * i:e}    {i}  " for i in range(8)) + "\n# end\n")
+    text = (
+        "# comment line\n  time   gyro_x [rad / s]   accel_y (m/s^2)  # inline comment\n\n"
+        + "\n".join(f"  {i / 10}   {0.5 * i:e}    {i}  " for i in range(8))
+        + "\n# end\n"
+    )
     ws = load_log(write(tmp_path / "x.dat", text))
     assert ws.names == ["gyro_x", "accel_y"] and ws.fs == 10.0
     assert ws.units == {"gyro_x": "rad / s", "accel_y": "m/s^2"} and ws["gyro_x"][2] == 1.0
@@ -257,8 +272,9 @@ def test_text_dialects(tmp_path: Path) -> None:
 
 
 def test_channel_selection_and_constant_signal(tmp_path: Path) -> None:
-    path = write(tmp_path / "c.csv", "t,a,b,c\n" + "\n".join(f"{i},1.5,{i % 2},{i}" for i in
-                                                              range(10)))
+    path = write(
+        tmp_path / "c.csv", "t,a,b,c\n" + "\n".join(f"{i},1.5,{i % 2},{i}" for i in range(10))
+    )
     log = load_log(path, channel="b")
     assert log.names == ["b"] and log.units == {"b": ""} and log.n == 10
     assert load_log(path, channel=0).names == ["a"]
@@ -271,8 +287,14 @@ def test_channel_selection_and_constant_signal(tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- npy / npz / h5
 def test_npz_and_structured_npy(tmp_path: Path) -> None:
     x = np.random.default_rng(5).normal(size=(100, 3))
-    np.savez(tmp_path / "a.npz", gyro_x=x[:, 0], acc=x, fs=np.float64(400.0),
-             units=json.dumps({"gyro_x": "rad/s"}), sensor="sim")
+    np.savez(
+        tmp_path / "a.npz",
+        gyro_x=x[:, 0],
+        acc=x,
+        fs=np.float64(400.0),
+        units=json.dumps({"gyro_x": "rad/s"}),
+        sensor="sim",
+    )
     log = load_log(tmp_path / "a.npz")
     assert log.names == ["gyro_x", "acc[0]", "acc[1]", "acc[2]"] and log.fs == 400.0
     assert log.fs_source == "file" and log.units["gyro_x"] == "rad/s"
@@ -360,26 +382,45 @@ def test_bad_values(tmp_path: Path) -> None:
     rows = [f"{i / 100},{i * 0.1},{i}" for i in range(30)]
     bad = rows.copy()
     bad[15] = "0.15,abc,15"  # header at line 1: row 15 is line 17
-    raises(write(tmp_path / "abc.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-           "column 'gyro_x'", "line 17", "'abc' is not a number")
+    raises(
+        write(tmp_path / "abc.csv", "time,gyro_x,n\n" + "\n".join(bad)),
+        "column 'gyro_x'",
+        "line 17",
+        "'abc' is not a number",
+    )
     bad = rows.copy()
     bad[3] = "0.03,,3"
-    raises(write(tmp_path / "gap.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-           "column 'gyro_x'", "line 5", "empty field")
+    raises(
+        write(tmp_path / "gap.csv", "time,gyro_x,n\n" + "\n".join(bad)),
+        "column 'gyro_x'",
+        "line 5",
+        "empty field",
+    )
     bad = rows.copy()
     bad[7] = "0.07,0.7"
-    raises(write(tmp_path / "ragged.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-           "line 9", "2 value(s) where 3")
+    raises(
+        write(tmp_path / "ragged.csv", "time,gyro_x,n\n" + "\n".join(bad)),
+        "line 9",
+        "2 value(s) where 3",
+    )
     bad = rows.copy()
     for i in (10, 12, 20):
         bad[i] = f"{i / 100},{'nan' if i < 20 else 'inf'},{i}"
-    raises(write(tmp_path / "nan.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-           "column 'gyro_x' has 3 NaN/Inf", "first at line 12 (sample 10)", "interpolate")
+    raises(
+        write(tmp_path / "nan.csv", "time,gyro_x,n\n" + "\n".join(bad)),
+        "column 'gyro_x' has 3 NaN/Inf",
+        "first at line 12 (sample 10)",
+        "interpolate",
+    )
     raises(write(tmp_path / "short.csv", "t,x\n0,1\n1,2\n2,3\n"), "only 3 sample", "at least 4")
     bad = rows.copy()
     bad[4], bad[5] = bad[5], bad[4]
-    raises(write(tmp_path / "order.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-           "time column 'time'", "line 7", "fs=")
+    raises(
+        write(tmp_path / "order.csv", "time,gyro_x,n\n" + "\n".join(bad)),
+        "time column 'time'",
+        "line 7",
+        "fs=",
+    )
     assert load_log(tmp_path / "order.csv", fs=100).fs == 100.0  # user fs ignores the time
     x = np.ones(20)
     x[5] = np.inf

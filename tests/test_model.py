@@ -16,8 +16,14 @@ def test_algebra_builds_a_flat_canonical_model():
     assert m.spec() == "2*GM+WN+RW"
     assert m == GM() * 2 + RW() + WN()
     assert m.labels == ["GM_1", "GM_2", "WN", "RW"]
-    assert m.param_names == ["GM_1.beta", "GM_1.sigma2_gm", "GM_2.beta", "GM_2.sigma2_gm",
-                             "WN.sigma2", "RW.gamma2"]
+    assert m.param_names == [
+        "GM_1.beta",
+        "GM_1.sigma2_gm",
+        "GM_2.beta",
+        "GM_2.sigma2_gm",
+        "WN.sigma2",
+        "RW.gamma2",
+    ]
     assert m.n_params == 6 and not m.is_linear
     assert (QN() + WN() + RW() + DR()).is_linear
 
@@ -38,14 +44,18 @@ def test_parse_with_values():
 
 
 def test_repr_evaluates_back():
-    for m in (WN() + RW() + 2 * GM(), GM(beta=0.1, sigma2_gm=1e-4) + WN(sigma2=2.0),
-              AR1(phi=0.5, sigma2=1.0) + QN(q2=1e-3) + DR(omega=-2e-5)):
+    for m in (
+        WN() + RW() + 2 * GM(),
+        GM(beta=0.1, sigma2_gm=1e-4) + WN(sigma2=2.0),
+        AR1(phi=0.5, sigma2=1.0) + QN(q2=1e-3) + DR(omega=-2e-5),
+    ):
         assert eval(repr(m)) == m
 
 
 def test_implied_wv_is_sum_of_components():
-    m = eg.parse_model("GM(beta=1, sigma2_gm=1)+QN(q2=0.1)+WN(sigma2=1)+RW(gamma2=1e-6)"
-                       "+DR(omega=1e-4)")
+    m = eg.parse_model(
+        "GM(beta=1, sigma2_gm=1)+QN(q2=0.1)+WN(sigma2=1)+RW(gamma2=1e-6)+DR(omega=1e-4)"
+    )
     tau = 2.0 ** np.arange(1, 15)
     comps = m.components(tau, fs=10.0)
     assert list(comps) == ["GM", "QN", "WN", "RW", "DR"]
@@ -97,5 +107,6 @@ def test_simulate_is_reproducible_and_additive():
     m = eg.parse_model("WN(sigma2=1)+DR(omega=0.5)")
     a = m.simulate(100, rng=7)
     np.testing.assert_array_equal(a, m.simulate(100, rng=7))
-    np.testing.assert_allclose(a - 0.5 * np.arange(1, 101),
-                               eg.WN(sigma2=1.0).simulate(100, np.random.default_rng(7)))
+    np.testing.assert_allclose(
+        a - 0.5 * np.arange(1, 101), eg.WN(sigma2=1.0).simulate(100, np.random.default_rng(7))
+    )

@@ -49,8 +49,7 @@ def test_wccv_equals_direct_convolution(n):
     y = 0.5 * x + rng.standard_normal(n) + 3.0
     c = eg.wavelet_cross_covariance(x, y)
     assert c.n_levels == int(np.floor(np.log2(n - 1)))
-    np.testing.assert_allclose(c.covariance, direct_wccv(x, y, c.n_levels), rtol=1e-10,
-                               atol=1e-14)
+    np.testing.assert_allclose(c.covariance, direct_wccv(x, y, c.n_levels), rtol=1e-10, atol=1e-14)
     np.testing.assert_array_equal(c.n_coef, n - 2**c.levels + 1)
 
 
@@ -83,8 +82,9 @@ def test_wv_matrix_is_symmetric_bilinear_and_consistent_with_pairs():
     np.testing.assert_allclose(m.pair("x", "y").covariance, pair.covariance, rtol=1e-12)
     np.testing.assert_allclose(m.pair("y", "x").ci_low, pair.ci_low, rtol=1e-10)
     lin = eg.wavelet_cross_covariance(2 * x - 3 * z, y).covariance
-    np.testing.assert_allclose(lin, 2 * m.values[:, 0, 1] - 3 * m.values[:, 2, 1], rtol=1e-9,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        lin, 2 * m.values[:, 0, 1] - 3 * m.values[:, 2, 1], rtol=1e-9, atol=1e-15
+    )
     sub = m.select(["z", "x"])
     np.testing.assert_array_equal(sub.values[:, 1, 0], m.values[:, 0, 2])
     assert m.truncate(4).n_levels == 4
@@ -134,8 +134,11 @@ def shared_truth() -> MultiModel:
         ["a", "b"],
         {"a": "GM(beta=2.0)+QN(q2=0.02)+WN+RW", "b": "GM(beta=2.0)+QN(q2=0.05)+WN+RW"},
         shared=["WN", "RW", "GM"],
-        cov={"WN": [[1.0, 0.4], [0.4, 2.0]], "RW": rw_cov([0.02, 0.03], [[1, -0.6], [-0.6, 1]]),
-             "GM": [[0.5, 0.3], [0.3, 0.4]]},
+        cov={
+            "WN": [[1.0, 0.4], [0.4, 2.0]],
+            "RW": rw_cov([0.02, 0.03], [[1, -0.6], [-0.6, 1]]),
+            "GM": [[0.5, 0.3], [0.3, 0.4]],
+        },
     )
 
 
@@ -185,9 +188,12 @@ CORR = np.array([[1.0, 0.6, 0.3], [0.6, 1.0, 0.5], [0.3, 0.5, 1.0]])
 
 
 def three_gyros() -> MultiModel:
-    return MultiModel(["g1", "g2", "g3"], {"g1": "WN(sigma2=1.0)+RW", "g2": "WN(sigma2=1.5)+RW",
-                                           "g3": "WN(sigma2=2.0)+RW"},
-                      shared=["RW"], cov={"RW": rw_cov(SD, CORR)})
+    return MultiModel(
+        ["g1", "g2", "g3"],
+        {"g1": "WN(sigma2=1.0)+RW", "g2": "WN(sigma2=1.5)+RW", "g3": "WN(sigma2=2.0)+RW"},
+        shared=["RW"],
+        cov={"RW": rw_cov(SD, CORR)},
+    )
 
 
 def test_mgmwm_recovers_a_known_rw_covariance_matrix():
@@ -214,9 +220,13 @@ def test_mgmwm_recovers_a_known_rw_covariance_matrix():
 def test_mgmwm_with_a_shared_gm_recovers_beta_and_covariance():
     truth = MultiModel(
         ["a", "b"],
-        {"a": "GM(beta=0.05, sigma2_gm=2e-3)+WN(sigma2=1e-2)",
-         "b": "GM+GM(beta=2, sigma2_gm=5e-3)+WN(sigma2=2e-2)"},
-        shared={"GM_1": None}, cov={"GM_1": [[2e-3, 1.5e-3], [1.5e-3, 3e-3]]}, nl={"GM_1": 0.05},
+        {
+            "a": "GM(beta=0.05, sigma2_gm=2e-3)+WN(sigma2=1e-2)",
+            "b": "GM+GM(beta=2, sigma2_gm=5e-3)+WN(sigma2=2e-2)",
+        },
+        shared={"GM_1": None},
+        cov={"GM_1": [[2e-3, 1.5e-3], [1.5e-3, 3e-3]]},
+        nl={"GM_1": 0.05},
     )
     x = truth.simulate(200_000, fs=10.0, rng=3)
     res = eg.fit_mgmwm(x, truth.cleared(), fs=10.0)
@@ -227,8 +237,9 @@ def test_mgmwm_with_a_shared_gm_recovers_beta_and_covariance():
     assert abs(res.params["b.GM_2.beta"] / 2 - 1) < 0.2
     # the marginal models carry the shared values (what the app's diagonal panels draw)
     ma = res.channel_models["a"]
-    assert ma.processes[0].beta == pytest.approx(gm.nl) and ma.processes[0].sigma2_gm == \
-        pytest.approx(gm.cov[0, 0])
+    assert ma.processes[0].beta == pytest.approx(gm.nl) and ma.processes[
+        0
+    ].sigma2_gm == pytest.approx(gm.cov[0, 0])
     np.testing.assert_allclose(res.implied, res.model.implied(res.wvm.tau_samples, 10.0))
     text = res.summary()
     assert "shared GM_1" in text and "correlation" in text
@@ -241,8 +252,13 @@ def test_mgmwm_with_a_shared_gm_recovers_beta_and_covariance():
 def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
     """The profiled objective over a fine grid of the shared beta (the channel's own GM
     re-optimised by the fit itself at each value) is never below the fit's objective."""
-    truth = MultiModel(["a", "b"], "GM(beta=0.5, sigma2_gm=1e-2)+WN(sigma2=1e-1)+RW(gamma2=1e-7)",
-                       shared=["GM"], cov={"GM": [[1e-2, 4e-3], [4e-3, 1e-2]]}, nl={"GM": 0.5})
+    truth = MultiModel(
+        ["a", "b"],
+        "GM(beta=0.5, sigma2_gm=1e-2)+WN(sigma2=1e-1)+RW(gamma2=1e-7)",
+        shared=["GM"],
+        cov={"GM": [[1e-2, 4e-3], [4e-3, 1e-2]]},
+        nl={"GM": 0.5},
+    )
     x = truth.simulate(50_000, fs=5.0, rng=8)
     wvm = eg.wv_matrix(x, channels=["a", "b"], fs=5.0)
     res = eg.fit_mgmwm(wvm, truth.cleared())
@@ -272,9 +288,12 @@ def kkt(res: eg.MGMWMResult, label: str) -> tuple[float, float, float]:
 def test_psd_constraint_active_gives_a_psd_optimum():
     """Near-perfectly correlated drifts: the per-pair solution is not PSD; the constrained
     optimum satisfies the KKT conditions, and beats the projected per-pair solution."""
-    truth = MultiModel(["a", "b", "c"], "WN(sigma2=1)+RW", shared=["RW"],
-                       cov={"RW": rw_cov([1e-2] * 3, [[1, .999, .99], [.999, 1, .995],
-                                                      [.99, .995, 1]])})
+    truth = MultiModel(
+        ["a", "b", "c"],
+        "WN(sigma2=1)+RW",
+        shared=["RW"],
+        cov={"RW": rw_cov([1e-2] * 3, [[1, 0.999, 0.99], [0.999, 1, 0.995], [0.99, 0.995, 1]])},
+    )
     wvm = eg.wv_matrix(truth.simulate(20_000, rng=1), channels=["a", "b", "c"])
     res = eg.fit_mgmwm(wvm, truth.cleared())
     assert res.psd_active and "RW.cov (singular)" in res.at_bound
@@ -319,16 +338,33 @@ def shared_kkt(res: eg.MGMWMResult, label: str, basis) -> tuple[float, float, fl
     is the Cauchy-Schwarz bound of the gradient's entries (G may be 0 up to rounding)."""
     w, r = res.weights, res.wvm.values - res.implied
     b = basis(res.wvm.tau_samples.astype(float))
-    g = np.array([[-2.0 * np.sum(w[:, p, q] * r[:, p, q] * b) * (1.0 if p == q else 0.5)
-                   for q in range(res.wvm.k)] for p in range(res.wvm.k)])
+    g = np.array(
+        [
+            [
+                -2.0 * np.sum(w[:, p, q] * r[:, p, q] * b) * (1.0 if p == q else 0.5)
+                for q in range(res.wvm.k)
+            ]
+            for p in range(res.wvm.k)
+        ]
+    )
     bound = 2.0 * np.sqrt(res.objective * np.max(np.sum(w * b[:, None, None] ** 2, axis=0)))
-    return float(np.linalg.eigvalsh(g)[0]), float(np.sum(g * res.covariance(label))), \
-        float(max(np.max(np.abs(g)), bound))
+    return (
+        float(np.linalg.eigvalsh(g)[0]),
+        float(np.sum(g * res.covariance(label))),
+        float(max(np.max(np.abs(g)), bound)),
+    )
 
 
-@pytest.mark.parametrize("name,weights", [("report", "ci"), ("report", "efficient"),
-                                          ("WN and RW", "ci"), ("3 channels RW", "ci"),
-                                          ("identical", "ci")])
+@pytest.mark.parametrize(
+    "name,weights",
+    [
+        ("report", "ci"),
+        ("report", "efficient"),
+        ("WN and RW", "ci"),
+        ("3 channels RW", "ci"),
+        ("identical", "ci"),
+    ],
+)
 def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weights):
     """Regression: two independent N(0, 1) channels with a shared RW took ~120 s (the
     square-factor inner solve crept to the singular minimiser, up to 500 least-squares
@@ -338,8 +374,10 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
     wvm, mm = boundary_case(name)
     res = eg.fit_mgmwm(wvm, mm, weights=weights)
     assert res.converged
-    assert res.n_evaluations <= 4000 and res.n_inner <= 15 * res.n_evaluations, \
-        (res.n_evaluations, res.n_inner)
+    assert res.n_evaluations <= 4000 and res.n_inner <= 15 * res.n_evaluations, (
+        res.n_evaluations,
+        res.n_inner,
+    )
     if weights == "efficient":
         return
     # nested: the independent model is the shared one with diagonal covariances
@@ -358,12 +396,20 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
 
     prob = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
     axis = np.linspace(np.log(0.5), np.log(2.0 * prob.tau[-1]), 6)
-    grid = [np.array(u) for u in np.array(np.meshgrid(*[axis] * len(prob.slots)))
-            .reshape(len(prob.slots), -1).T]
+    grid = [
+        np.array(u)
+        for u in np.array(np.meshgrid(*[axis] * len(prob.slots))).reshape(len(prob.slots), -1).T
+    ]
     starts = sorted(grid, key=prob.profile)[:3]
-    ref = min(optimize.minimize(prob.profile, u0, method="Nelder-Mead",
-                                options={"xatol": 1e-8, "fatol": 1e-14, "maxfev": 3000}).fun
-              for u0 in starts)
+    ref = min(
+        optimize.minimize(
+            prob.profile,
+            u0,
+            method="Nelder-Mead",
+            options={"xatol": 1e-8, "fatol": 1e-14, "maxfev": 3000},
+        ).fun
+        for u0 in starts
+    )
     assert res.objective <= ref * (1 + 1e-9), (res.objective, ref)
 
 
@@ -373,8 +419,7 @@ def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
     wvm, mm = boundary_case("3 channels RW")
     res = eg.fit_mgmwm(wvm, mm)
     prob = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
-    u = np.array([prob.u_of_phi(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs))
-                  for c in mm.channels])
+    u = np.array([prob.u_of_phi(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs)) for c in mm.channels])
     f, _, s, coupled = prob.solve(u)
     assert coupled and f == pytest.approx(res.objective, rel=1e-12)
     monkeypatch.setattr(eg.mgmwm._MProblem, "_uncertified", lambda self, *a, **k: {-1})
@@ -411,11 +456,14 @@ def test_efficient_weights_and_the_moment_covariance():
     # the WV block is the univariate model covariance of the channel
     from engine.inference import wv_cov_model
 
-    np.testing.assert_allclose(v[:8, :8], wv_cov_model(mm.channel_model("g1"), m.wv(0)),
-                               rtol=1e-9)
+    np.testing.assert_allclose(v[:8, :8], wv_cov_model(mm.channel_model("g1"), m.wv(0)), rtol=1e-9)
     # Monte Carlo check of one WCCV variance and its covariance with a WV
-    sims = np.array([eg.wv_matrix(mm.simulate(2**13, rng=50 + r), levels=8, ci=False).values
-                     for r in range(150)])
+    sims = np.array(
+        [
+            eg.wv_matrix(mm.simulate(2**13, rng=50 + r), levels=8, ci=False).values
+            for r in range(150)
+        ]
+    )
     emp = np.var(sims[:, 5, 0, 1], ddof=1)
     assert emp / v[8 + 5, 8 + 5] == pytest.approx(1.0, abs=0.3)
     res = eg.fit_mgmwm(m, mm.cleared(), weights="efficient")
@@ -425,10 +473,18 @@ def test_efficient_weights_and_the_moment_covariance():
 
 def test_dependence_test_detects_shared_drift_and_not_independent_channels():
     kw = dict(B=19, seed=1)
-    dep = MultiModel(["a", "b"], "WN(sigma2=1)+RW", shared=["RW"],
-                     cov={"RW": rw_cov([1e-2, 1e-2], [[1, .8], [.8, 1]])})
-    ind = MultiModel(["a", "b"], "WN(sigma2=1)+RW", shared=["RW"],
-                     cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0], [0, 1]])})
+    dep = MultiModel(
+        ["a", "b"],
+        "WN(sigma2=1)+RW",
+        shared=["RW"],
+        cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0.8], [0.8, 1]])},
+    )
+    ind = MultiModel(
+        ["a", "b"],
+        "WN(sigma2=1)+RW",
+        shared=["RW"],
+        cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0], [0, 1]])},
+    )
     t_dep = eg.dependence_test(dep.simulate(2**13, rng=1), dep.cleared(), **kw)
     t_ind = eg.dependence_test(ind.simulate(2**13, rng=2), ind.cleared(), **kw)
     assert t_dep.p_value == pytest.approx(1 / 20) and t_dep.statistic > 0
@@ -444,13 +500,18 @@ def test_dependence_test_detects_shared_drift_and_not_independent_channels():
 
 
 def test_dependence_test_reports_progress_and_can_be_aborted():
-    dep = MultiModel(["a", "b"], "WN(sigma2=1)+RW", shared=["RW"],
-                     cov={"RW": rw_cov([1e-2, 1e-2], [[1, .5], [.5, 1]])})
+    dep = MultiModel(
+        ["a", "b"],
+        "WN(sigma2=1)+RW",
+        shared=["RW"],
+        cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0.5], [0.5, 1]])},
+    )
     x = dep.simulate(2**11, rng=4)
     plain = eg.dependence_test(x, dep.cleared(), B=5, seed=3)
     calls = []
-    seen = eg.dependence_test(x, dep.cleared(), B=5, seed=3,
-                              progress=lambda done, total: calls.append((done, total)))
+    seen = eg.dependence_test(
+        x, dep.cleared(), B=5, seed=3, progress=lambda done, total: calls.append((done, total))
+    )
     assert calls == [(i, 5) for i in range(1, 6)]
     assert seen == plain  # identical results (frozen dataclass equality, bootstrap included)
 
@@ -502,16 +563,19 @@ def test_replicate_fit_of_the_six_adis_logs_lies_between_the_individual_fits(adi
     assert 30 < 1 / joint.params["GM_1.beta"] < 300  # the slow GM of about 100 s
     # no replicate's own estimate does better on the summed objective
     for f in singles:
-        total = sum(float(np.sum(w * (wv.variance - f.model.wv(wv.tau_samples, wv.fs)) ** 2))
-                    for wv, w in zip(adis_wvs, joint.weights, strict=True))
+        total = sum(
+            float(np.sum(w * (wv.variance - f.model.wv(wv.tau_samples, wv.fs)) ** 2))
+            for wv, w in zip(adis_wvs, joint.weights, strict=True)
+        )
         assert total >= joint.objective * (1 - 1e-9)
     assert "6 recordings" in joint.summary()
     json.dumps(joint.to_dict(), allow_nan=False)
 
 
 def test_replicates_of_one_series_give_its_fit_and_accept_raw_series():
-    x = eg.parse_model("GM(beta=1, sigma2_gm=1e-2)+WN(sigma2=1e-1)").simulate(20_000, fs=10.0,
-                                                                               rng=4)
+    x = eg.parse_model("GM(beta=1, sigma2_gm=1e-2)+WN(sigma2=1e-1)").simulate(
+        20_000, fs=10.0, rng=4
+    )
     wv = eg.wavelet_variance(x, fs=10.0)
     one = eg.fit_gmwm(wv, "GM+WN")
     both = eg.fit_replicates([wv, wv], "GM+WN")
@@ -544,7 +608,7 @@ def test_bad_inputs_give_clear_errors():
     with pytest.raises(ModelError, match="variance of b is -1"):
         MultiModel(["a", "b"], "WN+RW", shared=["RW"], cov={"RW": [[1, 0], [0, -1]]})
     with pytest.raises(ModelError, match=r"not symmetric: entry \[a, b\] = 0.5"):
-        MultiModel(["a", "b"], "WN+RW", shared=["RW"], cov={"RW": [[1, .5], [.2, 1]]})
+        MultiModel(["a", "b"], "WN+RW", shared=["RW"], cov={"RW": [[1, 0.5], [0.2, 1]]})
     with pytest.raises(ModelError, match="must be 2 x 2"):
         MultiModel(["a", "b"], "WN+RW", shared=["RW"], cov={"RW": np.eye(3)})
     with pytest.raises(ModelError, match="unknown channel 'z'"):
@@ -583,14 +647,31 @@ def test_bad_inputs_give_clear_errors():
 # command line
 # -------------------------------------------------------------------------------------------
 def test_cli_fit_channels_and_replicates(tmp_path, capsys):
-    mm = MultiModel(["gx", "gy"], "WN(sigma2=1)+RW", shared=["RW"],
-                    cov={"RW": rw_cov([3e-2, 3e-2], [[1, .7], [.7, 1]])})
+    mm = MultiModel(
+        ["gx", "gy"],
+        "WN(sigma2=1)+RW",
+        shared=["RW"],
+        cov={"RW": rw_cov([3e-2, 3e-2], [[1, 0.7], [0.7, 1]])},
+    )
     x = mm.simulate(2**14, rng=1)
     path = tmp_path / "imu.h5"
-    eg.save_log(path, {"gx": x[:, 0], "gy": x[:, 1]}, 100.0, units={"gx": "deg/s",
-                                                                    "gy": "deg/s"})
-    assert cli_main(["fit", str(path), "--model", "WN+RW", "--channels", "gx,gy",
-                     "--shared", "RW", "--json"]) == 0
+    eg.save_log(path, {"gx": x[:, 0], "gy": x[:, 1]}, 100.0, units={"gx": "deg/s", "gy": "deg/s"})
+    assert (
+        cli_main(
+            [
+                "fit",
+                str(path),
+                "--model",
+                "WN+RW",
+                "--channels",
+                "gx,gy",
+                "--shared",
+                "RW",
+                "--json",
+            ]
+        )
+        == 0
+    )
     d = json.loads(capsys.readouterr().out)
     assert d["kind"] == "mgmwm" and d["shared"]["RW"]["channels"] == ["gx", "gy"]
     assert 0.4 < d["shared"]["RW"]["corr"][0][1] < 0.95

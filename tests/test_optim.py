@@ -10,8 +10,24 @@ from scipy import optimize, special
 
 from engine._optim import chi2_isf, gamma_p, nelder_mead, nnls
 
-DFS = [0.3, 1.0, 1.3, 2.0, 3.7, 10.0, 19.9, 20.1, 55.5, 150.0, 199.0, 201.0, 1e3, 3.2e4, 1e5,
-       3.15e6]
+DFS = [
+    0.3,
+    1.0,
+    1.3,
+    2.0,
+    3.7,
+    10.0,
+    19.9,
+    20.1,
+    55.5,
+    150.0,
+    199.0,
+    201.0,
+    1e3,
+    3.2e4,
+    1e5,
+    3.15e6,
+]
 
 
 @pytest.mark.parametrize("p", [0.025, 0.975, 0.005, 0.995, 0.5, 0.3, 1e-6, 1e-12])
@@ -26,8 +42,12 @@ def test_chi2_isf_far_lower_tail_of_huge_df_matches_cornish_fisher() -> None:
     for df in (1e8, 1e10):
         for p_low in (1e-6, 1e-12):
             z = -float(special.ndtri(1 - p_low))  # the lower p_low quantile of N(0, 1)
-            cf = (df + z * math.sqrt(2 * df) + 2 / 3 * (z * z - 1)
-                  + (z**3 - 7 * z) / (9 * math.sqrt(2 * df)))
+            cf = (
+                df
+                + z * math.sqrt(2 * df)
+                + 2 / 3 * (z * z - 1)
+                + (z**3 - 7 * z) / (9 * math.sqrt(2 * df))
+            )
             assert chi2_isf(df, 1 - p_low) == pytest.approx(cf, rel=0, abs=1e-2)
 
 
@@ -42,9 +62,21 @@ def test_chi2_isf_analytic_cases() -> None:
         chi2_isf(0.0, 0.5)
 
 
-@pytest.mark.parametrize("a,x", [(0.5, 0.01), (1.0, 3.0), (100.0, 90.0), (1e6, 1.003e6),
-                                 (5.0, 40.0), (150.0, 300.0), (50.0, 80.0), (20.0, 21.5),
-                                 (3.0, 0.5), (99.0, 150.0)])
+@pytest.mark.parametrize(
+    "a,x",
+    [
+        (0.5, 0.01),
+        (1.0, 3.0),
+        (100.0, 90.0),
+        (1e6, 1.003e6),
+        (5.0, 40.0),
+        (150.0, 300.0),
+        (50.0, 80.0),
+        (20.0, 21.5),
+        (3.0, 0.5),
+        (99.0, 150.0),
+    ],
+)
 def test_gamma_p_equals_scipy(a: float, x: float) -> None:
     assert gamma_p(a, x) == pytest.approx(special.gammainc(a, x), rel=1e-13, abs=1e-300)
     # a = 1: P = 1 - exp(-x)
@@ -83,15 +115,19 @@ def test_nelder_mead_iterates_as_scipy() -> None:
     for s0 in ([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]], [[2.0, -1.0], [2.5, -1.0], [2.0, 0.0]]):
         s0 = np.array(s0)
         ours = nelder_mead(f, s0, xatol=1e-8, fatol=1e-12, maxfev=2000)
-        ref = optimize.minimize(f, s0[0], method="Nelder-Mead",
-                                options={"initial_simplex": s0, "xatol": 1e-8, "fatol": 1e-12,
-                                         "maxfev": 2000})
+        ref = optimize.minimize(
+            f,
+            s0[0],
+            method="Nelder-Mead",
+            options={"initial_simplex": s0, "xatol": 1e-8, "fatol": 1e-12, "maxfev": 2000},
+        )
         assert ours.nfev == ref.nfev
         np.testing.assert_array_equal(ours.x, ref.x)
         assert ours.success and ref.success
     # budget exhausted: success is False
-    assert not nelder_mead(f, np.array([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]]),
-                           xatol=1e-12, fatol=0.0, maxfev=20).success
+    assert not nelder_mead(
+        f, np.array([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]]), xatol=1e-12, fatol=0.0, maxfev=20
+    ).success
 
 
 def test_second_difference_sums_same_with_any_blas_pool(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -103,7 +139,7 @@ def test_second_difference_sums_same_with_any_blas_pool(monkeypatch: pytest.Monk
     x = rng.normal(size=100_003).cumsum() * 1e-3 + rng.normal(size=100_003)
     s = W._cumsum_demeaned(x)
     ms = np.array([1, 2, 3, 8, 100, 4096, 30_000])
-    direct = np.array([np.sum((s[2 * m:] - 2 * s[m:-m] + s[: s.size - 2 * m]) ** 2) for m in ms])
+    direct = np.array([np.sum((s[2 * m :] - 2 * s[m:-m] + s[: s.size - 2 * m]) ** 2) for m in ms])
     for threads in (1, 4, None):
         monkeypatch.setattr(W, "blas_threads", lambda t=threads: t)
         np.testing.assert_allclose(W.second_difference_sums(s, x.size, ms), direct, rtol=1e-11)
@@ -129,8 +165,12 @@ from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=150, deadline=None)
-@given(m=st.integers(1, 30), n=st.integers(1, 8), seed=st.integers(0, 2**32 - 1),
-       scale=st.floats(-8, 8))
+@given(
+    m=st.integers(1, 30),
+    n=st.integers(1, 8),
+    seed=st.integers(0, 2**32 - 1),
+    scale=st.floats(-8, 8),
+)
 def test_nnls_kkt_on_random_problems(m: int, n: int, seed: int, scale: float) -> None:
     rng = np.random.default_rng(seed)
     a = rng.normal(size=(m, n)) * 10.0**scale

@@ -30,8 +30,14 @@ def stationary_cov(process, tau: int, fs: float) -> np.ndarray:
 
 @pytest.mark.parametrize(
     "process",
-    [eg.WN(sigma2=2.5), eg.QN(q2=0.7), eg.AR1(phi=0.8, sigma2=1.3), eg.AR1(phi=-0.6, sigma2=0.4),
-     eg.AR1(phi=0.999, sigma2=1e-3), eg.GM(beta=2.0, sigma2_gm=4.0)],
+    [
+        eg.WN(sigma2=2.5),
+        eg.QN(q2=0.7),
+        eg.AR1(phi=0.8, sigma2=1.3),
+        eg.AR1(phi=-0.6, sigma2=0.4),
+        eg.AR1(phi=0.999, sigma2=1e-3),
+        eg.GM(beta=2.0, sigma2_gm=4.0),
+    ],
     ids=repr,
 )
 def test_implied_wv_equals_quadratic_form_of_autocovariance(process):
@@ -46,7 +52,8 @@ def test_random_walk_wv_equals_quadratic_form_of_its_covariance():
         idx = np.arange(1, t + 1) + 17  # any start: increments are stationary
         cov = g2 * np.minimum.outer(idx, idx)
         assert eg.RW(gamma2=g2).wv(np.array([t]))[0] == pytest.approx(
-            wv_from_covariance(cov, t), rel=1e-9)
+            wv_from_covariance(cov, t), rel=1e-9
+        )
 
 
 def test_drift_wv_is_its_squared_haar_coefficient():
@@ -88,7 +95,8 @@ def test_ar1_wv_against_high_precision():
     def ref(t, phi):
         phi, t = mp.mpf(phi), mp.mpf(t)
         return ((phi**2 - 1) * t + 2 * phi * (phi**t - 4 * phi ** (t / 2) + 3)) / (
-            (phi - 1) ** 3 * (phi + 1) * t**2)
+            (phi - 1) ** 3 * (phi + 1) * t**2
+        )
 
     tau = 2.0 ** np.arange(1, 24)
     for phi in (-0.9, 0.3, 0.9, 0.99, 0.9999, 1 - 1e-6, 1 - 1e-9):
@@ -121,8 +129,12 @@ def test_simulation_agrees_with_implied_wv(spec, fs):
     model = eg.parse_model(spec)
     rng = np.random.default_rng(abs(hash(spec)) % 2**32)
     n, reps, levels = 2**13, 60, 8
-    est = np.array([eg.wavelet_variance(model.simulate(n, fs=fs, rng=rng), levels=levels,
-                                        fs=fs).variance for _ in range(reps)])
+    est = np.array(
+        [
+            eg.wavelet_variance(model.simulate(n, fs=fs, rng=rng), levels=levels, fs=fs).variance
+            for _ in range(reps)
+        ]
+    )
     truth = model.wv(2.0 ** np.arange(1, levels + 1), fs)
     if spec.startswith("DR"):
         # deterministic: every replicate equals the truth, up to the de-meaning

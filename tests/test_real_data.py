@@ -50,8 +50,9 @@ def test_adis_wv_matches_allan_identity_on_real_data(shared, adis_gyro_x_wv):
     for j in range(1, 7):
         m = 2 ** (j - 1)
         avg = (c[m:] - c[:-m]) / m
-        assert wv.variance[j - 1] == pytest.approx(0.25 * np.mean((avg[m:] - avg[:-m]) ** 2),
-                                                   rel=1e-9)
+        assert wv.variance[j - 1] == pytest.approx(
+            0.25 * np.mean((avg[m:] - avg[:-m]) ** 2), rel=1e-9
+        )
 
 
 def test_every_adis_replicate_and_channel_loads(shared):
@@ -72,8 +73,10 @@ def test_robust_wv_tames_the_contaminated_mtig_gyro(shared):
     assert res.converged and np.isfinite(res.objective)
 
 
-@pytest.mark.parametrize("name", ["navchip_wv_av.h5", "ln200_wv_av.h5", "imar_wv_av.h5",
-                                  "kvh1750_wv_av.h5", "mtig_imu6_wv.h5"])
+@pytest.mark.parametrize(
+    "name",
+    ["navchip_wv_av.h5", "ln200_wv_av.h5", "imar_wv_av.h5", "kvh1750_wv_av.h5", "mtig_imu6_wv.h5"],
+)
 def test_wv_summaries_load_and_fit(shared, name):
     log = eg.load_log(shared / "derived" / name)
     assert log.is_summary and not log.channels

@@ -31,23 +31,31 @@ def imu() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _kinds() -> list[tuple[int, str, str]]:
-    return [(1, "", ".bag"), (2, "sqlite3", ""), (2, "mcap", ""), (2, "sqlite3", ".db3"),
-            (2, "mcap", ".mcap")]
+    return [
+        (1, "", ".bag"),
+        (2, "sqlite3", ""),
+        (2, "mcap", ""),
+        (2, "sqlite3", ".db3"),
+        (2, "mcap", ".mcap"),
+    ]
 
 
 @pytest.mark.parametrize(("ros", "storage", "form"), _kinds())
 def test_round_trip(tmp_path: Path, imu, ros: int, storage: str, form: str) -> None:
     gyro, acc, stamps = imu
     path = tmp_path / ("imu.bag" if ros == 1 else "imu2")
-    write_imu_bag(path, gyro, acc, stamps, ros=ros, storage=storage or "sqlite3",
-                  frame_id="imu_link")
+    write_imu_bag(
+        path, gyro, acc, stamps, ros=ros, storage=storage or "sqlite3", frame_id="imu_link"
+    )
     if form in (".db3", ".mcap"):  # a bare storage file, without metadata.yaml
         path = next(path.glob(f"*{form}"))
     log = load_log(path)
     assert log.names == list(IMU_CHANNELS) and log.n == N
     assert log.fs == FS and log.fs_source == "time column"
-    assert log.units == {**dict.fromkeys(IMU_CHANNELS[:3], "rad/s"),
-                         **dict.fromkeys(IMU_CHANNELS[3:], "m/s^2")}
+    assert log.units == {
+        **dict.fromkeys(IMU_CHANNELS[:3], "rad/s"),
+        **dict.fromkeys(IMU_CHANNELS[3:], "m/s^2"),
+    }
     for j, name in enumerate(IMU_CHANNELS):
         ref = gyro[:, j] if j < 3 else acc[:, j - 3]
         np.testing.assert_array_equal(log[name], ref)  # exact float64
@@ -87,8 +95,7 @@ def test_gaps_in_stamps_follow_the_segment_policy(tmp_path: Path, imu) -> None:
 
 def test_zero_header_stamps_fall_back_to_receive_time(tmp_path: Path, imu) -> None:
     gyro, acc, stamps = imu
-    path = write_imu_bag(tmp_path / "z.bag", gyro, acc, np.zeros(N, np.int64),
-                         receive_ns=stamps)
+    path = write_imu_bag(tmp_path / "z.bag", gyro, acc, np.zeros(N, np.int64), receive_ns=stamps)
     log = load_log(path)
     assert log.fs == FS and log.meta["time_column"] == "receive time"
     assert any("receive times" in n for n in log.meta["notes"])
@@ -117,8 +124,11 @@ def test_topics(tmp_path: Path, imu) -> None:
             for _, t, raw in r.messages():
                 for conn in conns:
                     w.write(conn, t, raw)
-        w.write(strc, int(stamps[0]), ts.serialize_ros1(
-            ts.types["std_msgs/msg/String"](data="hello"), "std_msgs/msg/String"))
+        w.write(
+            strc,
+            int(stamps[0]),
+            ts.serialize_ros1(ts.types["std_msgs/msg/String"](data="hello"), "std_msgs/msg/String"),
+        )
     with pytest.raises(LoadError, match=r"2 sensor_msgs/Imu topics \(/a, /b\).*topic="):
         load_log(two)
     assert load_log(two, topic="/b").n == N
@@ -126,8 +136,11 @@ def test_topics(tmp_path: Path, imu) -> None:
     nothing = tmp_path / "none.bag"
     with Writer(nothing) as w:
         c = w.add_connection("/note", "std_msgs/msg/String", typestore=ts)
-        w.write(c, 1, ts.serialize_ros1(ts.types["std_msgs/msg/String"](data="x"),
-                                        "std_msgs/msg/String"))
+        w.write(
+            c,
+            1,
+            ts.serialize_ros1(ts.types["std_msgs/msg/String"](data="x"), "std_msgs/msg/String"),
+        )
     with pytest.raises(LoadError, match="no sensor_msgs/Imu topic; its topics: /note"):
         load_log(nothing)
 
@@ -160,8 +173,7 @@ def test_fit_and_cli(tmp_path: Path, imu, capsys) -> None:
     assert main(["wv", str(path), "--channel", "accel_z", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["channel"] == "accel_z" and d["fs"] == FS and d["n"] == N
-    np.testing.assert_allclose(d["variance"], eg.wavelet_variance(acc[:, 2]).variance,
-                               rtol=1e-12)
+    np.testing.assert_allclose(d["variance"], eg.wavelet_variance(acc[:, 2]).variance, rtol=1e-12)
     assert main(["wv", str(path), "--topic", "/nope"]) == 2
     assert "/nope" in capsys.readouterr().err
     shutil.rmtree(path)

@@ -46,8 +46,16 @@ def test_ranking_table_has_every_column_and_is_sorted():
         assert c.criterion == pytest.approx(c.objective + c.optimism)
         assert c.optimism >= 0 and 0 <= c.j_p_value <= 1
     d = json.loads(json.dumps(sel.to_dict()))
-    assert set(d["candidates"][0]) >= {"model", "n_params", "objective", "optimism",
-                                       "criterion", "j_stat", "j_df", "j_p_value"}
+    assert set(d["candidates"][0]) >= {
+        "model",
+        "n_params",
+        "objective",
+        "optimism",
+        "criterion",
+        "j_stat",
+        "j_df",
+        "j_p_value",
+    }
     assert "WVIC" in sel.table()
 
 
@@ -77,8 +85,17 @@ def test_adis_gyro_prefers_models_with_gm_terms():
 
 
 def test_cli_select(capsys):
-    code = main(["select", str(SHARED / "adis16405_imu2.h5"), "--channel", "gyro_y",
-                 "--models", "WN+QN+RW+DR,2*GM+WN+RW", "--json"])
+    code = main(
+        [
+            "select",
+            str(SHARED / "adis16405_imu2.h5"),
+            "--channel",
+            "gyro_y",
+            "--models",
+            "WN+QN+RW+DR,2*GM+WN+RW",
+            "--json",
+        ]
+    )
     assert code == 0
     d = json.loads(capsys.readouterr().out)
     assert [c["model"] for c in d["candidates"]][0] == "2*GM+WN+RW"

@@ -53,8 +53,11 @@ def test_float32_int_counts_and_scale(tmp_path: Path) -> None:
     np.testing.assert_allclose(got.variance, ref.variance, rtol=1e-12)
     x32 = rng.normal(size=40_000).astype(np.float32)
     np.save(tmp_path / "f.npy", x32)
-    np.testing.assert_allclose(wavelet_variance_stream(tmp_path / "f.npy", block=1024).variance,
-                               eg.wavelet_variance(x32).variance, rtol=1e-12)
+    np.testing.assert_allclose(
+        wavelet_variance_stream(tmp_path / "f.npy", block=1024).variance,
+        eg.wavelet_variance(x32).variance,
+        rtol=1e-12,
+    )
 
 
 @pytest.mark.parametrize("order", ["C", "F"])
@@ -66,8 +69,7 @@ def test_two_dimensional_npy_columns(tmp_path: Path, order: str, monkeypatch) ->
     np.save(tmp_path / "a.npy", a)
     for j in range(3):
         got = wavelet_variance_stream(tmp_path / "a.npy", column=j, block=1024)
-        np.testing.assert_allclose(got.variance, eg.wavelet_variance(a[:, j]).variance,
-                                   rtol=1e-12)
+        np.testing.assert_allclose(got.variance, eg.wavelet_variance(a[:, j]).variance, rtol=1e-12)
     with pytest.raises(ValueError, match="choose a column"):
         wavelet_variance_stream(tmp_path / "a.npy")
     with pytest.raises(ValueError, match="out of range"):
@@ -75,8 +77,9 @@ def test_two_dimensional_npy_columns(tmp_path: Path, order: str, monkeypatch) ->
 
 
 def test_hdf5_dataset_attributes_and_objects(tmp_path: Path, signal: np.ndarray) -> None:
-    p = eg.save_log(tmp_path / "s.h5", {"gyro_x": signal, "gyro_y": -signal}, 100.0,
-                    units={"gyro_x": "deg/s"})
+    p = eg.save_log(
+        tmp_path / "s.h5", {"gyro_x": signal, "gyro_y": -signal}, 100.0, units={"gyro_x": "deg/s"}
+    )
     got = wavelet_variance_stream(p, dataset="gyro_x", block=1 << 14)
     ref = eg.wavelet_variance(signal, fs=100.0)
     assert got.fs == 100.0 and got.unit == "deg/s"  # fs_hz and units from the file
@@ -141,8 +144,11 @@ def test_memory_is_bounded_by_the_block(tmp_path: Path) -> None:
 
 def test_progress_callback(tmp_path: Path) -> None:
     calls: list[tuple[int, int]] = []
-    wavelet_variance_stream(np.random.default_rng(0).normal(size=10_000), block=1024,
-                            progress=lambda d, t: calls.append((d, t)))
+    wavelet_variance_stream(
+        np.random.default_rng(0).normal(size=10_000),
+        block=1024,
+        progress=lambda d, t: calls.append((d, t)),
+    )
     assert calls and all(d <= t for d, t in calls) and calls[-1][0] == calls[-1][1]
     assert [d for d, _ in calls] == sorted(d for d, _ in calls)
 
@@ -160,8 +166,10 @@ def test_cli_stream(tmp_path: Path, signal: np.ndarray, capsys) -> None:
     assert main(["wv", str(p), "--stream", "--robust"]) == 2
     assert "classical" in capsys.readouterr().err
     np.save(tmp_path / "a.npy", np.column_stack([signal, signal]))
-    assert main(["wv", str(tmp_path / "a.npy"), "--stream", "--channel", "1", "--fs", "100",
-                 "--json"]) == 0
+    assert (
+        main(["wv", str(tmp_path / "a.npy"), "--stream", "--channel", "1", "--fs", "100", "--json"])
+        == 0
+    )
     got = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(got["variance"], ref["variance"], rtol=1e-12)
 
@@ -174,14 +182,17 @@ def test_float32_logs_stay_float32(tmp_path: Path) -> None:
     assert log["x"].dtype == np.float32
     np.testing.assert_array_equal(log["x"], x)
     # the WV is computed in float64 from the float32 samples: the same as from a float64 copy
-    np.testing.assert_array_equal(eg.wavelet_variance(log["x"]).variance,
-                                  eg.wavelet_variance(x.astype(np.float64)).variance)
+    np.testing.assert_array_equal(
+        eg.wavelet_variance(log["x"]).variance, eg.wavelet_variance(x.astype(np.float64)).variance
+    )
 
 
 def test_integer_counts_with_scale_are_exact(tmp_path: Path) -> None:
     rng = np.random.default_rng(4)
-    counts = {"gyro_x": rng.integers(-32768, 32767, 4000).astype(np.int16),
-              "accel_z": rng.integers(-2**31, 2**31 - 1, 4000).astype(np.int32)}
+    counts = {
+        "gyro_x": rng.integers(-32768, 32767, 4000).astype(np.int16),
+        "accel_z": rng.integers(-(2**31), 2**31 - 1, 4000).astype(np.int32),
+    }
     p = eg.save_log(tmp_path / "c.h5", counts, 200.0)
     log = eg.load_log(p, scale=0.05)
     for k, c in counts.items():
@@ -194,10 +205,15 @@ def test_integer_counts_with_scale_are_exact(tmp_path: Path) -> None:
     assert eg.load_log(p, units="g").units == {"gyro_x": "g", "accel_z": "g"}
     csvp = tmp_path / "c.csv"
     csvp.write_text("gyro_x\n" + "\n".join(str(int(v)) for v in counts["gyro_x"]))
-    np.testing.assert_array_equal(eg.load_log(csvp, scale=0.05)["gyro_x"],
-                                  counts["gyro_x"].astype(np.float64) * 0.05)
-    for bad, frag in ((0, "not a valid scale"), (float("nan"), "not a valid scale"),
-                      ("x", "not a valid scale"), ({"mag": 1.0}, "unknown channel")):
+    np.testing.assert_array_equal(
+        eg.load_log(csvp, scale=0.05)["gyro_x"], counts["gyro_x"].astype(np.float64) * 0.05
+    )
+    for bad, frag in (
+        (0, "not a valid scale"),
+        (float("nan"), "not a valid scale"),
+        ("x", "not a valid scale"),
+        ({"mag": 1.0}, "unknown channel"),
+    ):
         with pytest.raises(eg.LoadError, match=frag):
             eg.load_log(p, scale=bad)
     with pytest.raises(eg.LoadError, match="unknown channel"):

@@ -35,7 +35,7 @@ def test_table1_per_sample_values_from_first_principles():
     # RRW 1.34 deg/h/sqrt(h) = 1.34/3600/60 deg/s/sqrt(s) = K; gamma2 = K^2 / fs
     assert gyro["RW.gamma2"] == pytest.approx((1.34 / 3600 / 60) ** 2 / 250, rel=1e-12)
     acc = table1_model("accel", fs).values()
-    assert acc["QN.q2"] == pytest.approx((1.79e-6 * 250) ** 2, rel=1e-12)      # Q = sqrt(q2)/fs
+    assert acc["QN.q2"] == pytest.approx((1.79e-6 * 250) ** 2, rel=1e-12)  # Q = sqrt(q2)/fs
     assert acc["WN.sigma2"] == pytest.approx((4.70e-2 / 60) ** 2 * 250, rel=1e-12)
     assert acc["RW.gamma2"] == pytest.approx((43.5 / 216000) ** 2 / 250, rel=1e-12)
     assert acc["DR.omega"] == pytest.approx(41.4 / 3600**2 / 250, rel=1e-12)  # R = omega fs
@@ -46,31 +46,35 @@ def test_table1_allan_shapes_give_back_the_datasheet_values(sensor):
     """The implied AVAR has the IEEE shapes N^2/T, K^2 T/3, 3Q^2/T^2, R^2 T^2/2 (T in s)."""
     fs = STUDY_FS
     model = table1_model(sensor, fs)
-    t = np.array([0.004, 1.0, 100.0, 4000.0])          # averaging times (s)
+    t = np.array([0.004, 1.0, 100.0, 4000.0])  # averaging times (s)
     m = np.round(t * fs)
-    comps = model.components(2 * m, fs)                  # WV at tau = 2m
+    comps = model.components(2 * m, fs)  # WV at tau = 2m
     vals = {c: v for c, _, v, _ in TABLE_I[sensor]["params"]}
     if "WN" in vals:
-        n = vals["WN"] / 60.0                              # u/sqrt(Hz)
+        n = vals["WN"] / 60.0  # u/sqrt(Hz)
         np.testing.assert_allclose(2 * comps["WN"], n**2 / t, rtol=1e-12)
     if "RW" in vals:
-        k = vals["RW"] / 216000.0                          # u/sqrt(s)
+        k = vals["RW"] / 216000.0  # u/sqrt(s)
         np.testing.assert_allclose(2 * comps["RW"][1:], k**2 * t[1:] / 3, rtol=1e-5)
     if "QN" in vals:
         np.testing.assert_allclose(2 * comps["QN"], 3 * vals["QN"] ** 2 / t**2, rtol=1e-12)
     if "DR" in vals:
-        r = vals["DR"] / 3600.0**2                         # u/s
+        r = vals["DR"] / 3600.0**2  # u/s
         np.testing.assert_allclose(2 * comps["DR"], r**2 * t**2 / 2, rtol=1e-12)
 
 
 @pytest.mark.parametrize("sensor", ["gyro", "accel"])
 def test_conversions_agree_with_the_engine_datasheet(sensor):
     model = table1_model(sensor)
-    rows = {r["quantity"]: r["value"] for r in eg.datasheet(model, STUDY_FS,
-                                                             TABLE_I[sensor]["unit"])}
-    key = {"WN": "angle random walk" if sensor == "gyro" else "velocity random walk",
-           "RW": "rate random walk" if sensor == "gyro" else "acceleration random walk",
-           "QN": "quantization Q", "DR": "rate ramp R"}
+    rows = {
+        r["quantity"]: r["value"] for r in eg.datasheet(model, STUDY_FS, TABLE_I[sensor]["unit"])
+    }
+    key = {
+        "WN": "angle random walk" if sensor == "gyro" else "velocity random walk",
+        "RW": "rate random walk" if sensor == "gyro" else "acceleration random walk",
+        "QN": "quantization Q",
+        "DR": "rate ramp R",
+    }
     for code, _, value, _ in TABLE_I[sensor]["params"]:
         ds = rows[key[code]] * (3600.0**2 if code == "DR" else 1.0)
         assert ds == pytest.approx(value, rel=1e-12)
@@ -86,12 +90,12 @@ def test_conversions_agree_with_the_engine_datasheet(sensor):
 def test_typical_regions_at_the_paper_lengths():
     g = typical_regions("gyro", 2_500_000)
     assert g["WN"] == (0.004, 10.0)
-    assert g["RW"] == pytest.approx((2**18 / 250, 2**20 / 250))           # the last 3 points
+    assert g["RW"] == pytest.approx((2**18 / 250, 2**20 / 250))  # the last 3 points
     a = typical_regions("accel", 6_300_000)
     assert a["QN"] == (0.004, 0.008)
     assert a["WN"] == (0.015, 1.1)
-    assert a["RW"] == pytest.approx((2**13 / 250, 2**16 / 250))           # 33 to 262 s
-    assert a["DR"] == pytest.approx((2**20 / 250, 2**21 / 250))           # the last 2 points
+    assert a["RW"] == pytest.approx((2**13 / 250, 2**16 / 250))  # 33 to 262 s
+    assert a["DR"] == pytest.approx((2**20 / 250, 2**21 / 250))  # the last 2 points
     short = typical_regions("accel", 200_000)
     assert short["RW"][1] < short["DR"][0]
     with pytest.raises(ValueError, match="too short"):
@@ -100,8 +104,9 @@ def test_typical_regions_at_the_paper_lengths():
 
 def test_estimate_all_returns_every_method():
     x = table1_model("accel").simulate(2**18, fs=STUDY_FS, rng=5)
-    ests = estimate_all(x, "accel", methods=("GMWM", "ARMAV", "ARMAV-unweighted", "AVSM",
-                                               "AVSM-auto"))
+    ests = estimate_all(
+        x, "accel", methods=("GMWM", "ARMAV", "ARMAV-unweighted", "AVSM", "AVSM-auto")
+    )
     assert [e.method for e in ests.values()] == list(ests)
     truth = table1_model("accel").values()
     for m in ("GMWM", "ARMAV", "AVSM"):
@@ -117,8 +122,14 @@ def test_estimate_all_returns_every_method():
 @pytest.fixture(scope="module")
 def small_study() -> StudyResult:
     stream = io.StringIO()
-    res = run_slope_study(3, seed=4, n_values=(2e5,), workers=2, progress=stream,
-                          methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"))
+    res = run_slope_study(
+        3,
+        seed=4,
+        n_values=(2e5,),
+        workers=2,
+        progress=stream,
+        methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"),
+    )
     object.__setattr__(res, "_progress_text", stream.getvalue())
     return res
 
@@ -150,8 +161,14 @@ def test_study_runs_end_to_end_and_writes_its_outputs(small_study, tmp_path):
 
 def test_study_does_not_depend_on_the_number_of_workers_or_replicates(small_study):
     # replicate r has its own seed: 2 replicates in process equal the first 2 of 3 on 2 workers
-    one = run_slope_study(2, seed=4, n_values=(2e5,), workers=1, progress=False,
-                          methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"))
+    one = run_slope_study(
+        2,
+        seed=4,
+        n_values=(2e5,),
+        workers=1,
+        progress=False,
+        methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"),
+    )
     for n, by_s in small_study.estimates.items():
         for s, by_m in by_s.items():
             for m, by_c in by_m.items():
@@ -160,11 +177,28 @@ def test_study_does_not_depend_on_the_number_of_workers_or_replicates(small_stud
 
 
 def test_ranking_logic():
-    est = {100: {"gyro": {"GMWM": {"WN": np.array([0.157, 0.157]), "RW": np.array([1.3, 1.4])},
-                          "AVSM": {"WN": np.array([0.16, 0.15]), "RW": np.array([1.34, 1.34])}}}}
-    res = StudyResult(estimates=est, errors=[], wall_time_s=1.0,
-                      settings={"reps": 2, "seed": 0, "n_values": [100], "fs": 250.0,
-                                "methods": ["GMWM", "AVSM"], "sensors": ["gyro"], "workers": 1})
+    est = {
+        100: {
+            "gyro": {
+                "GMWM": {"WN": np.array([0.157, 0.157]), "RW": np.array([1.3, 1.4])},
+                "AVSM": {"WN": np.array([0.16, 0.15]), "RW": np.array([1.34, 1.34])},
+            }
+        }
+    }
+    res = StudyResult(
+        estimates=est,
+        errors=[],
+        wall_time_s=1.0,
+        settings={
+            "reps": 2,
+            "seed": 0,
+            "n_values": [100],
+            "fs": 250.0,
+            "methods": ["GMWM", "AVSM"],
+            "sensors": ["gyro"],
+            "workers": 1,
+        },
+    )
     rk = res.ranking()
     assert rk["best"] == {"100/gyro/WN": "GMWM", "100/gyro/RW": "AVSM"}
     assert not rk["gmwm_lowest_everywhere"] and rk["exceptions"][0]["process"] == "RW"
@@ -191,8 +225,23 @@ def test_bad_settings():
 
 
 def test_cli_study(tmp_path, capsys):
-    rc = main(["study", "slope", "--reps", "2", "--seed", "3", "--n", "1e5", "--workers", "1",
-               "--out", str(tmp_path), "--json"])
+    rc = main(
+        [
+            "study",
+            "slope",
+            "--reps",
+            "2",
+            "--seed",
+            "3",
+            "--n",
+            "1e5",
+            "--workers",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--json",
+        ]
+    )
     cap = capsys.readouterr()
     assert rc == 0
     d = json.loads(cap.out)

@@ -36,8 +36,7 @@ def _ratios(sc: Scenario) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]
         for k, v in g.params.items():
             if k in truth:
                 g_out.setdefault(k, []).append(v / truth[k])
-    return ({k: np.array(v) for k, v in a_out.items()},
-            {k: np.array(v) for k, v in g_out.items()})
+    return ({k: np.array(v) for k, v in a_out.items()}, {k: np.array(v) for k, v in g_out.items()})
 
 
 def _rmse(x: np.ndarray) -> float:
@@ -92,8 +91,9 @@ def test_simulation_is_deterministic_and_carries_the_truth() -> None:
     assert abs(np.var(x) - v) < 4 * v * math.sqrt(2 / sc.n) * 2
 
 
-@pytest.mark.parametrize("key,code", [("wn_gm", "WN"), ("qn_wn", "QN"), ("qn_wn", "WN"),
-                                      ("rw_dr", "RW")])
+@pytest.mark.parametrize(
+    "key,code", [("wn_gm", "WN"), ("qn_wn", "QN"), ("qn_wn", "WN"), ("rw_dr", "RW")]
+)
 def test_slope_method_is_biased_even_without_noise(key: str, code: str) -> None:
     """On the exact Allan variance of the true model the naive lines are still too high."""
     sc = SCENARIOS[key]
@@ -107,9 +107,14 @@ def test_slope_method_is_biased_even_without_noise(key: str, code: str) -> None:
     assert ratio > 1.1, (key, code, ratio)
     # while a region where the process alone matters reads it right (the method itself is exact)
     if code == "WN" and key == "wn_gm":
-        only = avsm(AllanVariance.from_wv(eg.WaveletVariance.from_arrays(
-            eg.parse_model("WN(sigma2=1e-3)").wv(tau, sc.fs), n=sc.n, fs=sc.fs)),
-            {"WN": (0.01, 1.0)})
+        only = avsm(
+            AllanVariance.from_wv(
+                eg.WaveletVariance.from_arrays(
+                    eg.parse_model("WN(sigma2=1e-3)").wv(tau, sc.fs), n=sc.n, fs=sc.fs
+                )
+            ),
+            {"WN": (0.01, 1.0)},
+        )
         assert only.params["WN.sigma2"] == pytest.approx(1e-3, rel=1e-9)
 
 

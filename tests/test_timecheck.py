@@ -17,8 +17,10 @@ from engine.timecheck import as_seconds, check_time, segment_fs
 
 def csv(path: Path, t: np.ndarray, x: np.ndarray | None = None, col: str = "time") -> Path:
     x = np.sin(np.arange(t.size)) if x is None else x
-    path.write_text(f"{col},gyro_x [deg/s]\n" + "\n".join(f"{a!r},{b!r}" for a, b in
-                                                        zip(t.tolist(), x.tolist(), strict=True)))
+    path.write_text(
+        f"{col},gyro_x [deg/s]\n"
+        + "\n".join(f"{a!r},{b!r}" for a, b in zip(t.tolist(), x.tolist(), strict=True))
+    )
     return path
 
 
@@ -70,8 +72,15 @@ def test_duplicates_reversals_and_invalid_stamps() -> None:
         assert not a <= 80 < b or b - a == 0
         assert np.all(np.diff(t[a:b]) > 0)
     assert rep.counts["gap"] == 3  # after the duplicate, and around the swapped pair
-    assert rep.segments.tolist() == [[0, 10], [10, 11], [11, 50], [50, 51], [51, 52], [52, 80],
-                                     [81, 100]]
+    assert rep.segments.tolist() == [
+        [0, 10],
+        [10, 11],
+        [11, 50],
+        [50, 51],
+        [51, 52],
+        [52, 80],
+        [81, 100],
+    ]
     assert rep.longest == (11, 50)
     text = rep.summary()
     assert "duplicate stamp at sample 10" in text and "NaN/Inf stamp at sample 80" in text
@@ -127,9 +136,18 @@ def test_default_stops_with_report(gappy: Path) -> None:
     with pytest.raises(LoadError) as exc:
         load_log(gappy)
     msg = str(exc.value)
-    for frag in ("gappy.csv", "time column 'time'", "1 gap(s)", "1 duplicate stamp(s)",
-                 "line 403 (sample 401", "line 102 (sample 100", "segment='longest'",
-                 "--segment longest", "samples 100 to 400", "joined"):
+    for frag in (
+        "gappy.csv",
+        "time column 'time'",
+        "1 gap(s)",
+        "1 duplicate stamp(s)",
+        "line 403 (sample 401",
+        "line 102 (sample 100",
+        "segment='longest'",
+        "--segment longest",
+        "samples 100 to 400",
+        "joined",
+    ):
         assert frag in msg, (frag, msg)
     with pytest.raises(LoadError):
         load_log(gappy, segment="stop")

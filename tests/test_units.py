@@ -11,8 +11,10 @@ import engine as eg
 
 
 def rows(model, fs, unit):
-    return {(r["label"], r["quantity"]): (r["value"], r["unit"])
-            for r in eg.datasheet(eg.parse_model(model), fs, unit)}
+    return {
+        (r["label"], r["quantity"]): (r["value"], r["unit"])
+        for r in eg.datasheet(eg.parse_model(model), fs, unit)
+    }
 
 
 def test_gyro_white_noise_and_random_walk_in_datasheet_units():
@@ -37,8 +39,10 @@ def test_accelerometer_quantization_drift_and_vrw():
     d = rows("QN(q2=1e-6)+WN(sigma2=1e-4)+DR(omega=-2e-7)", fs, "m/s^2")
     assert d[("QN", "quantization Q")] == (pytest.approx(1e-3 / fs), "m/s^2*s")
     assert d[("DR", "rate ramp R")] == (pytest.approx(2e-7 * fs), "m/s^2/s")
-    assert d[("WN", "velocity random walk")] == (pytest.approx(60 * math.sqrt(1e-4 / fs)),
-                                                 "m/s/sqrt(h)")
+    assert d[("WN", "velocity random walk")] == (
+        pytest.approx(60 * math.sqrt(1e-4 / fs)),
+        "m/s/sqrt(h)",
+    )
 
 
 def test_gm_correlation_time_and_psd():
@@ -67,9 +71,15 @@ def test_param_units():
 
 @pytest.mark.parametrize(
     "proc",
-    [eg.WN(sigma2=2e-3), eg.QN(q2=1e-7), eg.RW(gamma2=1e-12), eg.DR(omega=-3e-6),
-     eg.AR1(phi=-0.3, sigma2=0.5), eg.AR1(phi=0.999, sigma2=1e-4),
-     eg.GM(beta=0.02, sigma2_gm=4e-5)],
+    [
+        eg.WN(sigma2=2e-3),
+        eg.QN(q2=1e-7),
+        eg.RW(gamma2=1e-12),
+        eg.DR(omega=-3e-6),
+        eg.AR1(phi=-0.3, sigma2=0.5),
+        eg.AR1(phi=0.999, sigma2=1e-4),
+        eg.GM(beta=0.02, sigma2_gm=4e-5),
+    ],
     ids=repr,
 )
 def test_unconstrained_round_trip_and_bounds(proc):

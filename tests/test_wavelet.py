@@ -26,14 +26,15 @@ def overlapping_avar(x: np.ndarray, m: int) -> float:
     x = np.asarray(x, float)
     c = np.concatenate([[0.0], np.cumsum(x)])
     avg = (c[m:] - c[:-m]) / m  # running means, length N - m + 1
-    d = avg[m:] - avg[:-m]      # N - 2m + 1 differences
+    d = avg[m:] - avg[:-m]  # N - 2m + 1 differences
     return 0.5 * np.mean(d**2)
 
 
 @pytest.mark.parametrize("n", [4, 5, 7, 64, 1000, 1024, 1025, 4099])
 def test_equals_direct_convolution(n):
     x = np.random.default_rng(n).standard_normal(n).cumsum() * 0.1 + np.random.default_rng(
-        n + 1).standard_normal(n)
+        n + 1
+    ).standard_normal(n)
     wv = eg.wavelet_variance(x)
     assert wv.n_levels == int(np.floor(np.log2(n - 1)))
     np.testing.assert_allclose(wv.variance, direct_wv(x, wv.n_levels), rtol=1e-10)
@@ -81,8 +82,11 @@ def test_mean_removed_before_summing_keeps_digits_with_large_offset():
 def test_float32_input_matches_float64():
     x = np.random.default_rng(6).standard_normal(10000)
     x32 = x.astype(np.float32)
-    np.testing.assert_allclose(eg.wavelet_variance(x32).variance,
-                               eg.wavelet_variance(x32.astype(np.float64)).variance, rtol=1e-12)
+    np.testing.assert_allclose(
+        eg.wavelet_variance(x32).variance,
+        eg.wavelet_variance(x32.astype(np.float64)).variance,
+        rtol=1e-12,
+    )
 
 
 def test_explicit_levels_and_truncate():
@@ -196,6 +200,18 @@ def test_to_dict_is_json_ready():
 
     wv = eg.wavelet_variance(np.random.default_rng(1).standard_normal(100), fs=2.0)
     d = json.loads(json.dumps(wv.to_dict()))
-    assert set(d) >= {"n", "fs", "levels", "tau_samples", "tau_s", "variance", "ci_low",
-                      "ci_high", "n_coef", "robust", "eff", "alpha"}
+    assert set(d) >= {
+        "n",
+        "fs",
+        "levels",
+        "tau_samples",
+        "tau_s",
+        "variance",
+        "ci_low",
+        "ci_high",
+        "n_coef",
+        "robust",
+        "eff",
+        "alpha",
+    }
     assert d["n"] == 100 and d["fs"] == 2.0 and len(d["variance"]) == 6

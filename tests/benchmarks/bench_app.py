@@ -36,8 +36,15 @@ sys.path.insert(0, str(REPO))
 import engine as eg  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 # JS helpers: find a data source by name in the page's Bokeh document
 _JS_SOURCE = """
@@ -92,8 +99,9 @@ def _demo(tmp: Path) -> Path:
 def _big_log(tmp: Path, n: int = 1_000_000) -> Path:
     from engine.io import save_log
 
-    x = eg.parse_model("GM(beta=0.05, sigma2_gm=1e-5)+WN(sigma2=2e-3)+RW(gamma2=1e-11)") \
-        .simulate(n, fs=100.0, rng=7)
+    x = eg.parse_model("GM(beta=0.05, sigma2_gm=1e-5)+WN(sigma2=2e-3)+RW(gamma2=1e-11)").simulate(
+        n, fs=100.0, rng=7
+    )
     return save_log(tmp / "big_1e6.h5", {"gyro_x": x}, 100.0, units={"gyro_x": "deg/s"})
 
 
@@ -108,8 +116,7 @@ class Page:
         """Milliseconds from ``action()`` to two frames after ``source`` shows ``want``."""
         self.page.evaluate(_JS_ARM, [source, col, idx, want])
         action()
-        self.page.wait_for_function("() => window.__gmwm_done !== null", timeout=30_000,
-                                    polling=5)
+        self.page.wait_for_function("() => window.__gmwm_done !== null", timeout=30_000, polling=5)
         return float(self.page.evaluate("() => window.__gmwm_done"))
 
 
@@ -136,7 +143,7 @@ def _reference_app() -> Any:
     def go(_event: Any) -> None:
         count[0] += 1
         x = np.geomspace(1, 1e3, 130)
-        src.data = {"x": x, "y": x ** -0.5 * count[0], "label": [f"k{count[0]}"] * x.size}
+        src.data = {"x": x, "y": x**-0.5 * count[0], "label": [f"k{count[0]}"] * x.size}
 
     button.on_click(go)
     return pn.Column(button, pn.pane.Bokeh(fig))
@@ -161,10 +168,15 @@ def main(argv: list[str] | None = None) -> int:
         os.environ["GMWM_APP_DEMO"] = str(demo)
         big = _big_log(tmp)
         port = _free_port()
-        server = pn.serve({"/": create_application(), "/ref": _reference_app}, port=port,
-                          address="127.0.0.1",
-                          show=False, threaded=True, verbose=False,
-                          websocket_origin=[f"127.0.0.1:{port}"])
+        server = pn.serve(
+            {"/": create_application(), "/ref": _reference_app},
+            port=port,
+            address="127.0.0.1",
+            show=False,
+            threaded=True,
+            verbose=False,
+            websocket_origin=[f"127.0.0.1:{port}"],
+        )
         time.sleep(1.0)
         url = f"http://127.0.0.1:{port}/"
         try:
@@ -184,9 +196,14 @@ def main(argv: list[str] | None = None) -> int:
                     ref_ms.append(refp.timed(go.click, "ref", "label", 0, f"k{i}"))
                 ref.close()
                 ref_med = statistics.median(ref_ms)
-                rows.append(("reference: click -> one line's data replaced -> redrawn",
-                             f"{ref_med:.0f} ms", f"{min(ref_ms):.0f} to {max(ref_ms):.0f} ms",
-                             ""))
+                rows.append(
+                    (
+                        "reference: click -> one line's data replaced -> redrawn",
+                        f"{ref_med:.0f} ms",
+                        f"{min(ref_ms):.0f} to {max(ref_ms):.0f} ms",
+                        "",
+                    )
+                )
 
                 # (a) add / remove a GM on the demo log, WN+RW already there
                 pg = Page(browser, url + "?channel=gyro_x&model=WN%2BRW")
@@ -198,16 +215,38 @@ def main(argv: list[str] | None = None) -> int:
                     server_add.append(app.last_refresh_s * 1e3)
                     rm = pg.page.locator(".gmwm-remove button").first
                     rem_ms.append(pg.timed(rm.click, "component_0", "label", 0, "WN"))
-                rows.append(("(a) click + GM -> decomposition redrawn (Chromium)",
-                             f"{statistics.median(add_ms):.0f} ms",
-                             f"{min(add_ms):.0f} to {max(add_ms):.0f} ms", "< 250 ms"))
-                rows.append(("(a)   ratio to the reference round trip",
-                             f"{statistics.median(add_ms) / ref_med:.2f}", "", ""))
-                rows.append(("(a) click remove GM -> redrawn (Chromium)",
-                             f"{statistics.median(rem_ms):.0f} ms",
-                             f"{min(rem_ms):.0f} to {max(rem_ms):.0f} ms", ""))
-                rows.append(("(a) server side of one add: fit + views + tables",
-                             f"{statistics.median(server_add):.1f} ms", "", ""))
+                rows.append(
+                    (
+                        "(a) click + GM -> decomposition redrawn (Chromium)",
+                        f"{statistics.median(add_ms):.0f} ms",
+                        f"{min(add_ms):.0f} to {max(add_ms):.0f} ms",
+                        "< 250 ms",
+                    )
+                )
+                rows.append(
+                    (
+                        "(a)   ratio to the reference round trip",
+                        f"{statistics.median(add_ms) / ref_med:.2f}",
+                        "",
+                        "",
+                    )
+                )
+                rows.append(
+                    (
+                        "(a) click remove GM -> redrawn (Chromium)",
+                        f"{statistics.median(rem_ms):.0f} ms",
+                        f"{min(rem_ms):.0f} to {max(rem_ms):.0f} ms",
+                        "",
+                    )
+                )
+                rows.append(
+                    (
+                        "(a) server side of one add: fit + views + tables",
+                        f"{statistics.median(server_add):.1f} ms",
+                        "",
+                        "",
+                    )
+                )
 
                 # (b) the fit alone, on the same cached WV
                 wv = app.state.wv
@@ -217,9 +256,14 @@ def main(argv: list[str] | None = None) -> int:
                         t0 = time.perf_counter()
                         eg.fit_gmwm(wv, spec)
                         ts.append((time.perf_counter() - t0) * 1e3)
-                    rows.append((f"(b) fit_gmwm {spec} ({len(wv)} levels)",
-                                 f"{statistics.median(ts):.1f} ms",
-                                 f"{min(ts):.1f} to {max(ts):.1f} ms", "< 30 ms"))
+                    rows.append(
+                        (
+                            f"(b) fit_gmwm {spec} ({len(wv)} levels)",
+                            f"{statistics.median(ts):.1f} ms",
+                            f"{min(ts):.1f} to {max(ts):.1f} ms",
+                            "< 30 ms",
+                        )
+                    )
 
                 # (c) a 1e6-sample channel from a server path, until its WV is drawn
                 n_levels = eg.default_levels(1_000_000)
@@ -236,9 +280,14 @@ def main(argv: list[str] | None = None) -> int:
                     pg.page.get_by_role("button", name="Load the demo log", exact=True).click()
                     pg.page.wait_for_timeout(300)
                     _idle(app, pg)
-                rows.append(("(c) load 1e6-sample channel (path) -> WV drawn",
-                             f"{statistics.median(loads):.0f} ms",
-                             f"{min(loads):.0f} to {max(loads):.0f} ms", "< 1000 ms"))
+                rows.append(
+                    (
+                        "(c) load 1e6-sample channel (path) -> WV drawn",
+                        f"{statistics.median(loads):.0f} ms",
+                        f"{min(loads):.0f} to {max(loads):.0f} ms",
+                        "< 1000 ms",
+                    )
+                )
                 t_read, t_wv = [], []
                 for _ in range(3):
                     t0 = time.perf_counter()
@@ -247,9 +296,14 @@ def main(argv: list[str] | None = None) -> int:
                     eg.wavelet_variance(lg["gyro_x"], fs=lg.fs)
                     t_read.append((t1 - t0) * 1e3)
                     t_wv.append((time.perf_counter() - t1) * 1e3)
-                rows.append(("(c) of which: read HDF5 / compute WV (server)",
-                             f"{statistics.median(t_read):.0f} / {statistics.median(t_wv):.0f} ms",
-                             "", ""))
+                rows.append(
+                    (
+                        "(c) of which: read HDF5 / compute WV (server)",
+                        f"{statistics.median(t_read):.0f} / {statistics.median(t_wv):.0f} ms",
+                        "",
+                        "",
+                    )
+                )
 
                 # (d) one tab stays responsive while another computes a robust WV of 1e6
                 heavy = Page(browser, url + f"?source=path&path={big}&model=WN")
@@ -270,14 +324,31 @@ def main(argv: list[str] | None = None) -> int:
                 busy_left = heavy_app.busy
                 _idle(heavy_app, heavy)
                 if during:
-                    rows.append(("(d) add/remove in one tab while another computes a robust "
-                                 "WV (1e6)", f"{statistics.median(during):.0f} ms",
-                                 f"{min(during):.0f} to {max(during):.0f} ms", "< 250 ms"))
+                    rows.append(
+                        (
+                            "(d) add/remove in one tab while another computes a robust WV (1e6)",
+                            f"{statistics.median(during):.0f} ms",
+                            f"{min(during):.0f} to {max(during):.0f} ms",
+                            "< 250 ms",
+                        )
+                    )
                 if server_during:
-                    rows.append(("(d)   of which server side of one add (fit + views + tables)",
-                                 f"{statistics.median(server_during):.1f} ms", "", ""))
-                rows.append(("(d)   clicks measured during the heavy job",
-                             f"{len(during)}", "all" if busy_left else "job ended", ""))
+                    rows.append(
+                        (
+                            "(d)   of which server side of one add (fit + views + tables)",
+                            f"{statistics.median(server_during):.1f} ms",
+                            "",
+                            "",
+                        )
+                    )
+                rows.append(
+                    (
+                        "(d)   clicks measured during the heavy job",
+                        f"{len(during)}",
+                        "all" if busy_left else "job ended",
+                        "",
+                    )
+                )
                 browser.close()
         finally:
             server.stop()
@@ -288,8 +359,10 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         print(f"{r[0]:<{w}}  {r[1]:>12}  {r[2]:>20}  {r[3]:>10}")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"\n{args.clicks} add/remove pairs; demo: {demo.name}; {os.cpu_count()} CPUs, "
-          f"load average {load:.1f} at the end")
+    print(
+        f"\n{args.clicks} add/remove pairs; demo: {demo.name}; {os.cpu_count()} CPUs, "
+        f"load average {load:.1f} at the end"
+    )
     return 0
 
 

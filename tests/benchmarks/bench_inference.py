@@ -17,8 +17,9 @@ import engine as eg
 from engine.inference import param_intervals, wv_cov_model
 from engine.selection import rank_models
 
-TRUTH = ("GM(beta=0.5, sigma2_gm=4e-4)+GM(beta=0.01, sigma2_gm=1e-4)"
-         "+WN(sigma2=1e-2)+RW(gamma2=1e-10)")
+TRUTH = (
+    "GM(beta=0.5, sigma2_gm=4e-4)+GM(beta=0.01, sigma2_gm=1e-4)+WN(sigma2=1e-2)+RW(gamma2=1e-10)"
+)
 
 
 def timed(fn):
@@ -42,15 +43,16 @@ def main() -> None:
     sel, t_sel = timed(lambda: rank_models(wv, max_model="3*GM+WN+QN+RW+DR"))
     res = eg.fit_gmwm(wv, "2*GM+WN+RW")
     _, t_asym = timed(lambda: param_intervals(res))
-    ivs, t_boot = timed(lambda: param_intervals(res, method="bootstrap", B=args.B,
-                                                workers=args.workers))
+    ivs, t_boot = timed(
+        lambda: param_intervals(res, method="bootstrap", B=args.B, workers=args.workers)
+    )
     print(f"  one fit of 3*GM+WN+QN+RW+DR         {t_fit * 1e3:8.1f} ms")
     print(f"  analytic V ({wv.n_levels} x {wv.n_levels})               {t_v * 1e3:8.1f} ms")
-    print(f"  WVIC ranking of {len(sel.candidates)} sub-models       {t_sel:8.2f} s   "
-          "target 10 s")
+    print(f"  WVIC ranking of {len(sel.candidates)} sub-models       {t_sel:8.2f} s   target 10 s")
     print(f"  asymptotic intervals                {t_asym * 1e3:8.1f} ms")
-    print(f"  bootstrap intervals, B = {args.B}, {args.workers} workers {t_boot:8.2f} s   "
-          "target 30 s")
+    print(
+        f"  bootstrap intervals, B = {args.B}, {args.workers} workers {t_boot:8.2f} s   target 30 s"
+    )
     print("\nbest five by WVIC:")
     print("\n".join(sel.table().splitlines()[1:7]))
     print("\nbootstrap 95 % intervals of 2*GM+WN+RW:")

@@ -59,9 +59,12 @@ KEYS = ("mgmwm", "mgmwm_eff", "baseline", "baseline_eff")
 
 def truth() -> MultiModel:
     """The simulated model (WN independent across channels, RW shared)."""
-    return MultiModel(CHANNELS, {c: f"WN(sigma2={v})+RW" for c, v in zip(CHANNELS, WN_VAR,
-                                                                          strict=True)},
-                      shared=["RW"], cov={"RW": RW_COV})
+    return MultiModel(
+        CHANNELS,
+        {c: f"WN(sigma2={v})+RW" for c, v in zip(CHANNELS, WN_VAR, strict=True)},
+        shared=["RW"],
+        cov={"RW": RW_COV},
+    )
 
 
 def param_names() -> list[str]:
@@ -87,8 +90,13 @@ def one_replicate(args: tuple) -> dict:
     t3 = time.perf_counter()
     eff = fit_mgmwm(wvm, mm, weights="efficient")
     t4 = time.perf_counter()
-    out: dict = {"psd_active": bool(res.psd_active), "t_sim": t1 - t0, "t_wvm": t2 - t1,
-                 "t_mgmwm": t3 - t2, "t_mgmwm_eff": t4 - t3}
+    out: dict = {
+        "psd_active": bool(res.psd_active),
+        "t_sim": t1 - t0,
+        "t_wvm": t2 - t1,
+        "t_mgmwm": t3 - t2,
+        "t_mgmwm_eff": t4 - t3,
+    }
     for key, r in (("mgmwm", res), ("mgmwm_eff", eff)):
         cov = r.covariance("RW")
         out[key] = [r.params[f"{c}.WN.sigma2"] for c in CHANNELS] + [cov[p, q] for p, q in PAIRS]
@@ -99,8 +107,9 @@ def one_replicate(args: tuple) -> dict:
     t5 = time.perf_counter()
     for key, fit in (("baseline", fit_gmwm), ("baseline_eff", fit_efficient)):
         uni = [fit(wvm.wv(p), "WN+RW") for p in range(3)]
-        out[key] = ([u.params["WN.sigma2"] for u in uni]
-                    + [u.params["RW.gamma2"] for u in uni] + cross)
+        out[key] = (
+            [u.params["WN.sigma2"] for u in uni] + [u.params["RW.gamma2"] for u in uni] + cross
+        )
     out["t_uni"] = time.perf_counter() - t5
     return out
 
@@ -112,8 +121,12 @@ def summarise(rows: list[dict]) -> dict:
         est = np.array([r[key] for r in rows])
         err = est - tv
         sq = err**2
-        out[key] = {"bias": err.mean(axis=0), "sd": est.std(axis=0, ddof=1),
-                    "mse": sq.mean(axis=0), "mse_se": sq.std(axis=0, ddof=1) / np.sqrt(len(rows))}
+        out[key] = {
+            "bias": err.mean(axis=0),
+            "sd": est.std(axis=0, ddof=1),
+            "mse": sq.mean(axis=0),
+            "mse_se": sq.std(axis=0, ddof=1) / np.sqrt(len(rows)),
+        }
     return out
 
 
@@ -133,36 +146,44 @@ def markdown(stats: dict, rows: list[dict], n: int, reps: int) -> str:
     names = param_names()
     tv = true_values()
     m, me, b, be = (stats[k] for k in KEYS)
-    lines = [f"3 gyros, WN (diagonal covariance) + RW (full covariance), T = {n:.3g} samples, "
-             f"{reps} replicates. Relative RMSE (RMSE / true value). Baseline: univariate GMWM "
-             "for the variances, the sample cross-covariance of the differenced signals for "
-             "the RW covariances. MSE ratio > 1: the MGMWM is better (95 % paired bootstrap "
-             "interval over the replicates).",
-             "",
-             "| parameter | true | MGMWM | MGMWM, efficient | baseline | baseline, efficient "
-             "| MSE ratio baseline / MGMWM | MSE ratio, efficient |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"3 gyros, WN (diagonal covariance) + RW (full covariance), T = {n:.3g} samples, "
+        f"{reps} replicates. Relative RMSE (RMSE / true value). Baseline: univariate GMWM "
+        "for the variances, the sample cross-covariance of the differenced signals for "
+        "the RW covariances. MSE ratio > 1: the MGMWM is better (95 % paired bootstrap "
+        "interval over the replicates).",
+        "",
+        "| parameter | true | MGMWM | MGMWM, efficient | baseline | baseline, efficient "
+        "| MSE ratio baseline / MGMWM | MSE ratio, efficient |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for i, name in enumerate(names):
         rel = [np.sqrt(d["mse"][i]) / abs(tv[i]) for d in (m, me, b, be)]
         cells = [f"{v:.3%}" if v < 10 else f"{v:.3g}x" for v in rel]
         same = np.allclose(m["mse"][i], b["mse"][i], rtol=1e-12)
-        lines.append(f"| {name} | {tv[i]:.3g} | {' | '.join(cells)} | "
-                     f"{'1 (identical)' if same else _ratio(rows, 'baseline', 'mgmwm', i)} | "
-                     f"{_ratio(rows, 'baseline_eff', 'mgmwm_eff', i)} |")
+        lines.append(
+            f"| {name} | {tv[i]:.3g} | {' | '.join(cells)} | "
+            f"{'1 (identical)' if same else _ratio(rows, 'baseline', 'mgmwm', i)} | "
+            f"{_ratio(rows, 'baseline_eff', 'mgmwm_eff', i)} |"
+        )
     return "\n".join(lines)
 
 
 def table(stats: dict) -> str:
     names = param_names()
     tv = true_values()
-    lines = [f"{'parameter':<16} {'true':>10} | " + " | ".join(
-        f"{k + ' bias':>17} {'sd':>9} {'rel.RMSE':>9}" for k in KEYS)]
+    lines = [
+        f"{'parameter':<16} {'true':>10} | "
+        + " | ".join(f"{k + ' bias':>17} {'sd':>9} {'rel.RMSE':>9}" for k in KEYS)
+    ]
     for i, name in enumerate(names):
         cells = []
         for k in KEYS:
             d = stats[k]
-            cells.append(f"{d['bias'][i]:>17.3e} {d['sd'][i]:>9.3e} "
-                         f"{np.sqrt(d['mse'][i]) / abs(tv[i]):>9.3%}")
+            cells.append(
+                f"{d['bias'][i]:>17.3e} {d['sd'][i]:>9.3e} "
+                f"{np.sqrt(d['mse'][i]) / abs(tv[i]):>9.3%}"
+            )
         lines.append(f"{name:<16} {tv[i]:>10.3e} | " + " | ".join(cells))
     return "\n".join(lines)
 
@@ -176,21 +197,26 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="output directory")
     args = ap.parse_args()
     n = int(args.n)
-    print(f"truth: {truth().spec()}, T = {n:.3g}, {args.reps} replicates, "
-          f"{args.workers} worker(s)")
+    print(f"truth: {truth().spec()}, T = {n:.3g}, {args.reps} replicates, {args.workers} worker(s)")
     print("RW covariance:\n" + np.array2string(RW_COV, precision=4))
     one = one_replicate((n, 0))
-    print(f"one replicate (s): simulate {one['t_sim']:.3f}, WV/WCCV matrix {one['t_wvm']:.3f}, "
-          f"MGMWM fit {one['t_mgmwm']:.4f}, efficient MGMWM {one['t_mgmwm_eff']:.3f}, "
-          f"univariate fits (ci + efficient) {one['t_uni']:.3f}")
+    print(
+        f"one replicate (s): simulate {one['t_sim']:.3f}, WV/WCCV matrix {one['t_wvm']:.3f}, "
+        f"MGMWM fit {one['t_mgmwm']:.4f}, efficient MGMWM {one['t_mgmwm_eff']:.3f}, "
+        f"univariate fits (ci + efficient) {one['t_uni']:.3f}"
+    )
     seeds = np.random.SeedSequence(args.seed).spawn(args.reps)
     t0 = time.perf_counter()
     rows = []
     chunk = max(2 * args.workers, 50)
     for a in range(0, args.reps, chunk):
-        rows += _map(one_replicate, [(n, s) for s in seeds[a:a + chunk]], args.workers)
-        print(f"\r{len(rows)}/{args.reps} replicates, {time.perf_counter() - t0:.0f} s",
-              end="", file=sys.stderr, flush=True)
+        rows += _map(one_replicate, [(n, s) for s in seeds[a : a + chunk]], args.workers)
+        print(
+            f"\r{len(rows)}/{args.reps} replicates, {time.perf_counter() - t0:.0f} s",
+            end="",
+            file=sys.stderr,
+            flush=True,
+        )
     print(file=sys.stderr)
     wall = time.perf_counter() - t0
     stats = summarise(rows)
@@ -201,18 +227,28 @@ def main() -> None:
     print(md)
     n_psd = sum(r["psd_active"] for r in rows)
     print(f"\nPSD constraint active in {n_psd} of {len(rows)} MGMWM fits")
-    print(f"wall time {wall:.1f} s for {len(rows)} replicates on {args.workers} worker(s) "
-          f"({wall / len(rows) * args.workers:.2f} s per replicate and worker)")
+    print(
+        f"wall time {wall:.1f} s for {len(rows)} replicates on {args.workers} worker(s) "
+        f"({wall / len(rows) * args.workers:.2f} s per replicate and worker)"
+    )
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "study.md").write_text(md + "\n")
-        (out / "study.json").write_text(json.dumps({
-            "n": n, "reps": len(rows), "seed": args.seed, "wall_s": wall,
-            "params": param_names(), "true": true_values().tolist(),
-            **{k: [r[k] for r in rows] for k in KEYS},
-            "stats": {k: {s: v.tolist() for s, v in d.items()} for k, d in stats.items()},
-        }))
+        (out / "study.json").write_text(
+            json.dumps(
+                {
+                    "n": n,
+                    "reps": len(rows),
+                    "seed": args.seed,
+                    "wall_s": wall,
+                    "params": param_names(),
+                    "true": true_values().tolist(),
+                    **{k: [r[k] for r in rows] for k in KEYS},
+                    "stats": {k: {s: v.tolist() for s, v in d.items()} for k, d in stats.items()},
+                }
+            )
+        )
         print(f"wrote {out / 'study.md'}, {out / 'study.json'}")
 
 

@@ -75,8 +75,13 @@ def write_log(path: Path, n: int, dtype: str, fmt: str, chunk: int = 1 << 20) ->
     if fmt == "npy":
         with open(path, "wb") as fh:
             np.lib.format.write_array_header_2_0(
-                fh, {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
-                     "fortran_order": False, "shape": (n,)})
+                fh,
+                {
+                    "descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+                    "fortran_order": False,
+                    "shape": (n,),
+                },
+            )
             for _, x in chunks():
                 fh.write(x.tobytes())
     else:
@@ -86,13 +91,17 @@ def write_log(path: Path, n: int, dtype: str, fmt: str, chunk: int = 1 << 20) ->
             ds = f.create_dataset("gyro_x", shape=(n,), dtype=dtype, chunks=(1 << 16,))
             f.attrs["fs_hz"] = 100.0
             for a, x in chunks():
-                ds[a:a + x.size] = x
+                ds[a : a + x.size] = x
 
 
 def run(mode: str, path: Path, dataset: str, block: int) -> dict:
     code = CHILD.format(root=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", code, mode, str(path), dataset, str(block)],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code, mode, str(path), dataset, str(block)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(out.stdout)
 
 
@@ -102,8 +111,9 @@ def main() -> None:
     ap.add_argument("--dtype", default="float64", choices=["float64", "float32"])
     ap.add_argument("--format", default="npy", choices=["npy", "h5"])
     ap.add_argument("--block", type=int, default=1 << 19, help="block length (2^19)")
-    ap.add_argument("--check", action="store_true",
-                    help="also compute the in-memory WV and compare (needs RAM)")
+    ap.add_argument(
+        "--check", action="store_true", help="also compute the in-memory WV and compare (needs RAM)"
+    )
     ap.add_argument("--dir", default=tempfile.gettempdir(), help="where to write the log")
     args = ap.parse_args()
     n = int(args.n)
@@ -113,22 +123,28 @@ def main() -> None:
         t = time.perf_counter()
         write_log(path, n, args.dtype, args.format)
         size = path.stat().st_size
-        print(f"log: {n:,} samples of {args.dtype} in {args.format} ({size / 1e6:,.0f} MB), "
-              f"written in {time.perf_counter() - t:.1f} s")
+        print(
+            f"log: {n:,} samples of {args.dtype} in {args.format} ({size / 1e6:,.0f} MB), "
+            f"written in {time.perf_counter() - t:.1f} s"
+        )
         s = run("stream", path, dataset, args.block)
-        print(f"streamed WV: {s['levels']} levels in {s['seconds']:.1f} s wall, "
-              f"{s['cpu_seconds']:.1f} s CPU ({n / s['seconds'] / 1e6:.1f} M samples/s); "
-              f"peak RSS {s['peak_rss_mb']:.0f} MB "
-              f"(ru_maxrss; at start, after the imports: {s['base_rss_mb']:.0f} MB), "
-              f"VmHWM {s['vmhwm_mb']:.0f} MB; block {args.block}")
+        print(
+            f"streamed WV: {s['levels']} levels in {s['seconds']:.1f} s wall, "
+            f"{s['cpu_seconds']:.1f} s CPU ({n / s['seconds'] / 1e6:.1f} M samples/s); "
+            f"peak RSS {s['peak_rss_mb']:.0f} MB "
+            f"(ru_maxrss; at start, after the imports: {s['base_rss_mb']:.0f} MB), "
+            f"VmHWM {s['vmhwm_mb']:.0f} MB; block {args.block}"
+        )
         verdict = "OK" if s["peak_rss_mb"] < 500 else "OVER"
         print(f"target peak RSS < 500 MB: {verdict}")
         if args.check:
             m = run("memory", path, dataset, args.block)
             rel = np.max(np.abs(np.array(s["variance"]) / np.array(m["variance"]) - 1))
-            print(f"in-memory WV: {m['seconds']:.1f} s wall, {m['cpu_seconds']:.1f} s CPU, "
-                  f"peak RSS {m['peak_rss_mb']:.0f} MB; "
-                  f"largest relative difference {rel:.2e} (target < 1e-9)")
+            print(
+                f"in-memory WV: {m['seconds']:.1f} s wall, {m['cpu_seconds']:.1f} s CPU, "
+                f"peak RSS {m['peak_rss_mb']:.0f} MB; "
+                f"largest relative difference {rel:.2e} (target < 1e-9)"
+            )
     finally:
         path.unlink(missing_ok=True)
 

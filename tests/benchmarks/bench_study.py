@@ -25,8 +25,10 @@ from engine.wavelet import wavelet_variance
 def step_costs(n: int, fs: float = 250.0) -> None:
     """Time each step of one replicate per sensor."""
     print(f"one replicate at T = {n:.3g} samples (s):")
-    print(f"  {'sensor':<7} {'simulate':>9} {'WV':>9} {'GMWM':>9} {'ARMAV':>9} {'AVSM':>9} "
-          f"{'AVSM-auto':>9}")
+    print(
+        f"  {'sensor':<7} {'simulate':>9} {'WV':>9} {'GMWM':>9} {'ARMAV':>9} {'AVSM':>9} "
+        f"{'AVSM-auto':>9}"
+    )
     for sensor in ("gyro", "accel"):
         truth = table1_model(sensor, fs)
         t = [time.perf_counter()]
@@ -53,8 +55,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--n", default="2.5e6,6.3e6", help="log lengths, comma-separated")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--methods", default="GMWM,ARMAV,AVSM",
-                    help=f"comma-separated among {','.join(METHODS)}")
+    ap.add_argument(
+        "--methods", default="GMWM,ARMAV,AVSM", help=f"comma-separated among {','.join(METHODS)}"
+    )
     ap.add_argument("--out", default=None, help="output directory")
     ap.add_argument("--no-steps", action="store_true", help="skip the per-step timing")
     args = ap.parse_args()
@@ -63,8 +66,9 @@ def main() -> None:
     if not args.no_steps:
         step_costs(int(max(ns)))
     t0 = time.perf_counter()
-    res = run_slope_study(args.reps, seed=args.seed, n_values=ns, methods=methods,
-                          workers=args.workers, progress=True)
+    res = run_slope_study(
+        args.reps, seed=args.seed, n_values=ns, methods=methods, workers=args.workers, progress=True
+    )
     wall = time.perf_counter() - t0
     print()
     print(res.table())
@@ -73,8 +77,10 @@ def main() -> None:
     if args.out:
         paths = res.save(args.out)
         print("\nwrote " + ", ".join(paths.values()))
-    print(f"\nwall time {wall:.1f} s for {args.reps} replicates x {len(ns)} lengths x 2 sensors "
-          f"on {args.workers} worker(s)")
+    print(
+        f"\nwall time {wall:.1f} s for {args.reps} replicates x {len(ns)} lengths x 2 sensors "
+        f"on {args.workers} worker(s)"
+    )
 
 
 if __name__ == "__main__":
