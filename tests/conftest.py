@@ -1,4 +1,10 @@
-"""Shared pytest fixtures.
+"""Shared pytest fixtures and the real-data switch.
+
+Real data: the static IMU logs of ``../shared/data`` (next to the repository; the environment
+variable ``GMWM_REAL_DATA`` names another folder). Every test that reads them takes the
+``real_data`` fixture (or carries the ``real_data`` marker): when the folder is absent such
+tests are skipped with one reason, and they fail instead when ``GMWM_REQUIRE_REAL_DATA=1``
+(set by ``.ci/run``, so CI never passes without the real logs).
 
 App fixtures: a demo log for the app tests (the bundled ``data/demo_imu.h5`` when it exists,
 else a small simulated one in the same layout) and ``app_demo``, which points the app at it.
@@ -18,6 +24,54 @@ import h5py
 import pytest
 
 import engine as eg
+
+REAL_DATA_ENV = "GMWM_REAL_DATA"
+REQUIRE_REAL_DATA_ENV = "GMWM_REQUIRE_REAL_DATA"
+
+
+def real_data_dir() -> Path:
+    """The folder of the real IMU logs: ``$GMWM_REAL_DATA`` or ``<repo>/../shared/data``."""
+    env = os.environ.get(REAL_DATA_ENV)
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def _real_data_missing() -> str | None:
+    """None when the real logs are there, else the one reason every real-data test gives."""
+    d = real_data_dir()
+    if d.is_dir():
+        return None
+    shown = os.environ.get(REAL_DATA_ENV) or "../shared/data"
+    return f"real IMU logs not found at {shown}: optional for users; see README (Data)"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test that uses the ``real_data`` fixture with the ``real_data`` marker."""
+    for item in items:
+        if "real_data" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.real_data)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Skip (or, with ``GMWM_REQUIRE_REAL_DATA=1``, fail) real-data tests without the data."""
+    if item.get_closest_marker("real_data") is None:
+        return
+    reason = _real_data_missing()
+    if reason is None:
+        return
+    if os.environ.get(REQUIRE_REAL_DATA_ENV, "") not in ("", "0"):
+        pytest.fail(f"{REQUIRE_REAL_DATA_ENV}=1 but the {reason}", pytrace=False)
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="session")
+def real_data() -> Path:
+    """The folder of the real IMU logs (tests using it are skipped or failed without it)."""
+    reason = _real_data_missing()
+    if reason is not None:  # reached only when the hook above was bypassed
+        pytest.skip(reason)
+    return real_data_dir()
+
 
 APP_DEMO_CHANNELS = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
 APP_DEMO_MODEL = "GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)+RW(gamma2=1e-9)"

@@ -304,7 +304,7 @@ def test_bad_specs_are_messages_and_the_session_keeps_working(app: Any) -> None:
     assert app.state.error == ""  # the Fit tab is untouched
 
 
-def test_too_short_log_and_summary_file_are_messages(app: Any) -> None:
+def test_too_short_and_uneven_logs_are_messages(app: Any) -> None:
     v = open_view(app)
     v.spec_input.value = "WN+RW"
     rng = np.random.default_rng(5)
@@ -319,10 +319,12 @@ def test_too_short_log_and_summary_file_are_messages(app: Any) -> None:
     assert v.notice.visible and "truncated to the shortest, 3,000 samples" in v.notice.object
     ref = eg.wv_matrix({"a": lg.channels["a"][:3000], "b": lg.channels["b"]}, fs=10.0)
     np.testing.assert_allclose(v.wvm.values, ref.values, rtol=1e-12)
-    summary = Path(__file__).resolve().parents[2] / "shared/data/derived/navchip_wv_av.h5"
-    if not summary.exists():
-        pytest.skip("shared/data/derived is not available")
-    assert app.state.load_path(summary), app.state.error
+
+
+def test_summary_file_is_a_message(app: Any, real_data: Path) -> None:
+    v = open_view(app)
+    v.spec_input.value = "WN+RW"
+    assert app.state.load_path(real_data / "derived" / "navchip_wv_av.h5"), app.state.error
     assert "summaries only" in v.error and "raw" in v.error and not v.grid_box.visible
 
 

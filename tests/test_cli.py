@@ -13,7 +13,6 @@ import pytest
 import engine as eg
 from engine.cli import main
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 WV_KEYS = {
     "n",
     "fs",
@@ -90,9 +89,9 @@ def test_wv_options(capsys, sim_h5):
     assert d["eff"] == 0.8 and d["alpha"] == 0.1
 
 
-def test_wv_table_has_units(capsys):
+def test_wv_table_has_units(capsys, real_data):
     code, out, _ = run(
-        capsys, "wv", str(SHARED / "adis16405_imu1.h5"), "--channel", "gyro_y", "--levels", "4"
+        capsys, "wv", str(real_data / "adis16405_imu1.h5"), "--channel", "gyro_y", "--levels", "4"
     )
     assert code == 0
     assert "gyro_y" in out and "(deg/s)^2" in out and "tau [s]" in out and "fs = 100 Hz" in out
@@ -123,11 +122,11 @@ def test_fit_table_readable(capsys, sim_h5):
     assert code == 0 and "GM.beta" in out and "1/s" in out and "objective" in out
 
 
-def test_fit_from_wv_summary(capsys):
+def test_fit_from_wv_summary(capsys, real_data):
     code, out, err = run(
         capsys,
         "fit",
-        str(SHARED / "derived" / "navchip_wv_av.h5"),
+        str(real_data / "derived" / "navchip_wv_av.h5"),
         "--channel",
         "gyro_z",
         "--model",

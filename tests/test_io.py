@@ -12,15 +12,13 @@ import pytest
 from engine.io import ImuLog, LoadError, load_log, save_log
 from engine.wavelet import WaveletVariance
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 ADIS = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
 
 
 @pytest.fixture(scope="module")
-def data() -> Path:
-    """The shared real-data directory; its absence is a failure, never a skip."""
-    assert DATA.is_dir(), f"shared IMU data directory {DATA} is missing (see shared/data/README)"
-    return DATA
+def data(real_data: Path) -> Path:
+    """The real-data folder (conftest: skipped without it, a failure when CI requires it)."""
+    return real_data
 
 
 def raises(path: Path | str, *fragments: str, **kw: object) -> str:

@@ -19,7 +19,6 @@ from engine.fit import FitError
 from engine.mgmwm import MultiModel
 from engine.model import ModelError
 
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 RW_BASIS = staticmethod(lambda tau: (tau**2 + 2.0) / (12.0 * tau))
 
 
@@ -541,12 +540,10 @@ def test_dependence_test_reports_progress_and_can_be_aborted():
 # replicates
 # -------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def adis_wvs() -> list[eg.WaveletVariance]:
-    if not SHARED_DATA.is_dir():
-        pytest.fail(f"the shared real-data folder is missing: expected {SHARED_DATA}")
+def adis_wvs(real_data: Path) -> list[eg.WaveletVariance]:
     out = []
     for k in range(1, 7):
-        log = eg.load_log(SHARED_DATA / f"adis16405_imu{k}.h5", channel="gyro_x")
+        log = eg.load_log(real_data / f"adis16405_imu{k}.h5", channel="gyro_x")
         out.append(eg.wavelet_variance(log["gyro_x"], fs=log.fs, unit="deg/s"))
     return out
 

@@ -10,14 +10,12 @@ import pytest
 
 import engine as eg
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+pytestmark = pytest.mark.real_data
 
 
 @pytest.fixture(scope="module")
-def shared() -> Path:
-    if not SHARED.is_dir():
-        pytest.fail(f"the shared real-data folder is missing: expected {SHARED}")
-    return SHARED
+def shared(real_data: Path) -> Path:
+    return real_data
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,8 +10,6 @@ import pytest
 import engine as eg
 from engine.cli import main
 from engine.selection import rank_models, submodels
-
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def test_submodels_of_the_maximal_model():
@@ -75,8 +72,8 @@ def test_unfittable_candidates_are_reported_not_raised():
     assert sel.best.model == "WN"
 
 
-def test_adis_gyro_prefers_models_with_gm_terms():
-    log = eg.load_log(SHARED / "adis16405_imu1.h5", channel="gyro_x")
+def test_adis_gyro_prefers_models_with_gm_terms(real_data):
+    log = eg.load_log(real_data / "adis16405_imu1.h5", channel="gyro_x")
     wv = eg.wavelet_variance(log["gyro_x"], fs=log.fs)
     sel = rank_models(wv, ["WN+QN+RW+DR", "GM+WN+RW", "2*GM+WN+RW", "2*GM+QN+WN+RW"])
     assert "GM" in sel.best.model
@@ -84,11 +81,11 @@ def test_adis_gyro_prefers_models_with_gm_terms():
     assert by["QN+WN+RW+DR"] > 10 * by[sel.best.model]
 
 
-def test_cli_select(capsys):
+def test_cli_select(capsys, real_data):
     code = main(
         [
             "select",
-            str(SHARED / "adis16405_imu2.h5"),
+            str(real_data / "adis16405_imu2.h5"),
             "--channel",
             "gyro_y",
             "--models",
@@ -99,5 +96,5 @@ def test_cli_select(capsys):
     assert code == 0
     d = json.loads(capsys.readouterr().out)
     assert [c["model"] for c in d["candidates"]][0] == "2*GM+WN+RW"
-    assert main(["select", str(SHARED / "adis16405_imu2.h5")]) == 2
+    assert main(["select", str(real_data / "adis16405_imu2.h5")]) == 2
     assert "--max-model" in capsys.readouterr().err
