@@ -1,4 +1,7 @@
-"""Generate the bundled demo log ``data/demo_imu.h5`` and its truth ``data/demo_imu_truth.json``.
+"""Generate the bundled demo log ``engine/demo/demo_imu.h5`` and its truth ``demo_imu_truth.json``.
+
+Both are package data of ``engine`` (shipped in the wheel; ``engine.demo.demo_path()`` finds
+them), written into ``engine/demo/`` of this checkout.
 
 A realistic six-axis MEMS IMU at 100 Hz for about 33 minutes (200,000 samples per channel,
 stored as float32 like most IMU outputs):
@@ -7,7 +10,7 @@ stored as float32 like most IMU outputs):
 * accelerometers (m/s^2): quantization + white noise + random walk + drift, gravity on z.
 
 Deterministic: a fixed seed per channel. Run ``python data/make_demo.py`` from the repository
-root; the tests check that the committed file is what this script makes.
+root; the tests check that the committed files are what this script makes.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ FS = 100.0
 N = 200_000
 SEED = 20261121
 HERE = Path(__file__).resolve().parent
+#: Where the demo is written: the package data folder of ``engine.demo``.
+OUT_DIR = HERE.parent / "engine" / "demo"
 
 # Per-sample parameters (CONVENTIONS): gyro ARW about 0.3 deg/sqrt(h), RRW about 10 deg/h/sqrt(h)
 TRUTH = {
@@ -48,7 +53,7 @@ OFFSET = {
 UNITS = {c: ("deg/s" if c.startswith("gyro") else "m/s^2") for c in TRUTH}
 
 
-def make(out_dir: Path = HERE) -> Path:
+def make(out_dir: Path = OUT_DIR) -> Path:
     """Simulate the six channels and write the HDF5 log and the JSON truth; returns the log path."""
     channels = {}
     for i, (name, spec) in enumerate(TRUTH.items()):

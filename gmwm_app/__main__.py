@@ -61,8 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="DIR",
         help="folder whose files may be loaded by server path (repeatable; default: "
-        "the current directory, the repository's data/ folder and the shared "
-        "data folder next to the repository); other paths are refused",
+        "the current directory, the bundled demo's folder and, in a checkout, the "
+        "shared data folder next to the repository); other paths are refused",
     )
     return p
 

@@ -1,9 +1,9 @@
 """Server limits of the app: the largest accepted upload and the folders server paths may name.
 
 ``gmwm-app`` configures them from ``--max-upload-mb`` and ``--data-dir`` (default folders: the
-current directory, the repository's ``data/`` folder and the shared ``data`` folder next to the
-repository when it exists). Without :func:`configure` (scripts, tests) uploads are limited to
-:data:`DEFAULT_MAX_UPLOAD_MB` and any server path may be read.
+current directory, the folder of the bundled demo log and, in a checkout, the shared ``data``
+folder next to the repository when it exists). Without :func:`configure` (scripts, tests)
+uploads are limited to :data:`DEFAULT_MAX_UPLOAD_MB` and any server path may be read.
 """
 
 from __future__ import annotations
@@ -48,8 +48,11 @@ _LIMITS = ServerLimits()
 
 
 def default_data_dirs() -> list[Path]:
-    """The current directory, ``<repo>/data`` and ``<repo>/../shared/data`` (when they exist)."""
-    out = [Path.cwd(), _REPO / "data", _REPO.parent / "shared" / "data"]
+    """The current directory, the bundled demo's folder and ``<repo>/../shared/data`` (the
+    real logs next to a checkout), those that exist."""
+    from engine.demo import demo_dir
+
+    out = [Path.cwd(), demo_dir(), _REPO.parent / "shared" / "data"]
     return [p.resolve() for p in out if p.is_dir()]
 
 

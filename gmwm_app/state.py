@@ -65,16 +65,18 @@ PROCESS_NAMES: dict[str, str] = {
 #: Sources a session can load from.
 SOURCES: tuple[str, ...] = ("demo", "upload", "path", "scenario")
 
-_REPO = Path(__file__).resolve().parents[1]
-
 
 def demo_path() -> Path:
-    """Path of the bundled demo log, ``<repo>/data/demo_imu.h5``.
+    """Path of the bundled demo log (package data: :func:`engine.demo.demo_path`).
 
     The environment variable ``GMWM_APP_DEMO`` overrides it (tests, benchmarks).
     """
     env = os.environ.get("GMWM_APP_DEMO")
-    return Path(env) if env else _REPO / "data" / "demo_imu.h5"
+    if env:
+        return Path(env)
+    from engine.demo import demo_path as bundled
+
+    return bundled()
 
 
 def format_value(v: float, digits: int = 4) -> str:

@@ -6,7 +6,7 @@ variable ``GMWM_REAL_DATA`` names another folder). Every test that reads them ta
 tests are skipped with one reason, and they fail instead when ``GMWM_REQUIRE_REAL_DATA=1``
 (set by ``.ci/run``, so CI never passes without the real logs).
 
-App fixtures: a demo log for the app tests (the bundled ``data/demo_imu.h5`` when it exists,
+App fixtures: a demo log for the app tests (the bundled ``engine/demo/demo_imu.h5`` when it exists,
 else a small simulated one in the same layout) and ``app_demo``, which points the app at it.
 """
 

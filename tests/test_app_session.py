@@ -188,7 +188,7 @@ def test_default_data_dirs() -> None:
     dirs = limits.default_data_dirs()
     assert Path.cwd().resolve() in dirs
     repo = Path(limits.__file__).resolve().parents[1]
-    assert (repo / "data").resolve() in dirs
+    assert (repo / "engine" / "demo").resolve() in dirs  # the bundled demo's folder
 
 
 def test_cli_limits(tmp_path: Path, no_limits: None) -> None:

@@ -542,4 +542,5 @@ def test_cli_arguments(tmp_path: Path) -> None:
 def test_demo_path_default(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("GMWM_APP_DEMO", raising=False)
     p = state_mod.demo_path()
-    assert p.name == "demo_imu.h5" and p.parent.name == "data"
+    assert p.name == "demo_imu.h5" and p.parent.name == "demo" and p.is_file()
+    assert p == Path(eg.__file__).resolve().parent / "demo" / "demo_imu.h5"  # package data
