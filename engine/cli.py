@@ -16,8 +16,10 @@ object. Bad input exits with status 2 and a one-line message on stderr, never a 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -133,17 +135,29 @@ def _build_parser() -> argparse.ArgumentParser:
         "--max-model", help="rank every sub-model of this model, e.g. '3*GM+WN+QN+RW+DR'"
     )
     sel.add_argument("--models", help="candidate models separated by commas")
-    sel.add_argument("--optimism", choices=["asymptotic", "bootstrap"], default="asymptotic")
+    sel.add_argument(
+        "--optimism",
+        choices=["asymptotic", "bootstrap"],
+        default="asymptotic",
+        help="optimism term of the WVIC: asymptotic formula (default) or parametric bootstrap",
+    )
     sel.add_argument(
         "-B",
         "--bootstrap",
         type=_positive(int, "-B"),
         default=100,
-        help="bootstrap replicates (100)",
+        help="bootstrap replicates for --optimism bootstrap (100)",
     )
-    sel.add_argument("--seed", type=int, default=0)
-    sel.add_argument("--workers", type=_positive(int, "--workers"), default=2)
-    sel.add_argument("--top", type=_positive(int, "--top"), help="print only the best N")
+    sel.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
+    sel.add_argument(
+        "--workers",
+        type=_positive(int, "--workers"),
+        default=2,
+        help="processes fitting the candidates (2)",
+    )
+    sel.add_argument(
+        "--top", type=_positive(int, "--top"), help="show only the best N (all are ranked)"
+    )
 
     sim = sub.add_parser("simulate", help="simulate a model with given values")
     sim.add_argument(
@@ -154,7 +168,13 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, default=None, help="random seed")
     sim.add_argument("--channel", default="x", help="channel name in the output (default x)")
     sim.add_argument("--unit", default="", help="signal unit stored in the output")
-    sim.add_argument("-o", "--output", required=True, help="output file (.h5, .npy or .csv)")
+    sim.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output file (.h5, .npy or .csv); fs, channel name and unit are kept: in the "
+        "file (.h5, .csv) or in the sidecar OUT.npy.json (.npy)",
+    )
     st = sub.add_parser(
         "study",
         help="Monte Carlo studies: slope = AVSM vs ARMAV vs GMWM (the GMWM paper, Fig. 1-2)",
@@ -218,6 +238,10 @@ def _load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVari
             f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
             f"{x[0]:g}): there is no noise to analyse"
         )
+    if log.fs_source == "default":
+        from .cli_export import warn_fs_unknown
+
+        warn_fs_unknown(args, args.input)
     wv = wavelet_variance(
         x,
         fs=log.fs,
@@ -308,14 +332,25 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
     )
     if sys.stderr.isatty():
         print(file=sys.stderr)
-    if args.top:
-        object.__setattr__(sel, "candidates", sel.candidates[: args.top])
+    n_ranked = len(sel.candidates)
+    shown = sel.candidates[: args.top] if args.top else sel.candidates
     if args.json:
         d = sel.to_dict()
+        d["candidates"] = d["candidates"][: len(shown)]
+        d["n_ranked"], d["n_shown"] = n_ranked, len(shown)
         d["channel"] = name
         d["wv"] = wv.to_dict()
         return d
-    return f"{args.input} [{name}]\n{sel.table()}"
+    table = dataclasses.replace(sel, candidates=shown).table()
+    if len(shown) < n_ranked:  # say how many were ranked, not only how many are shown
+        head, _, rest = table.partition("\n")
+        head = head.replace(
+            f"({len(shown)} candidates,",
+            f"({n_ranked} candidates ranked, best {len(shown)} shown,",
+            1,
+        )
+        table = f"{head}\n{rest}"
+    return f"{args.input} [{name}]\n{table}"
 
 
 def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
@@ -327,17 +362,15 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     out = args.output
     if not out.lower().endswith((".h5", ".hdf5", ".npy", ".csv")):
         raise CliError(f"output {out!r}: use a .h5, .npy or .csv file name")
-    save_log(
-        out,
-        {args.channel: x},
-        args.fs,
-        units={args.channel: args.unit},
-        attrs={
-            "model": model.spec(values=True),
-            "seed": "" if args.seed is None else str(args.seed),
-        },
-    )
-    return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}"
+    attrs = {"model": model.spec(values=True), "seed": "" if args.seed is None else str(args.seed)}
+    save_log(out, {args.channel: x}, args.fs, units={args.channel: args.unit}, attrs=attrs)
+    also = ""
+    if out.lower().endswith(".npy"):  # the array holds samples only: fs, name, unit beside it
+        from .io import write_npy_sidecar
+
+        side = write_npy_sidecar(out, args.fs, [args.channel], {args.channel: args.unit}, **attrs)
+        also = f" (fs, channel and unit in {side})"
+    return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}{also}"
 
 
 def _one_line(e: BaseException) -> str:
@@ -401,10 +434,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:  # pragma: no cover
         print("gmwm: interrupted", file=sys.stderr)
         return 130
-    if isinstance(out, dict):
-        print(json.dumps(out, allow_nan=False))
-    else:
-        print(out)
+    for warning in getattr(args, "warnings", ()):  # e.g. fs unknown: 1 Hz assumed
+        print(warning, file=sys.stderr)
+    text = json.dumps(out, allow_nan=False) if isinstance(out, dict) else out
+    try:
+        print(text)
+        sys.stdout.flush()  # here, not at exit, so that a closed pipe is caught
+    except BrokenPipeError:  # `gmwm wv ... | head -3`: the reader left; no traceback
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # the exit-time flush writes nowhere
+        return 141  # 128 + SIGPIPE, what a shell tool killed by the closed pipe reports
     return 0
 
 

@@ -147,18 +147,56 @@ def stream_wv(
     scale = getattr(args, "scale", None)
     if isinstance(scale, dict):
         scale = scale.get(str(ch))
-    src = open_series(args.input, fs=args.fs, **kw)
-    name = src.name
+    fs, side = args.fs, None
+    if str(args.input).lower().endswith(".npy"):
+        from .io import read_npy_sidecar
+
+        side = read_npy_sidecar(args.input)  # `gmwm simulate -o x.npy` keeps fs and unit there
+        if fs is None and side is not None and "fs_hz" in side:
+            fs = float(side["fs_hz"])
+    src = open_series(args.input, fs=fs, **kw)
+    name = _loaded_name(args.input, src, side)
+    if fs is None and src.fs is None:
+        warn_fs_unknown(args, str(args.input))
     units = getattr(args, "units", None)
     unit = units.get(name, None) if isinstance(units, dict) else units
+    if unit is None and side is not None and isinstance(side.get("units"), dict):
+        unit = side["units"].get(name)
     wv = wavelet_variance_stream(
-        src, fs=args.fs, levels=args.levels, scale=scale, alpha=alpha, unit=unit
+        src, fs=fs, levels=args.levels, scale=scale, alpha=alpha, unit=unit
     )
     if not np.any(wv.variance > 0):
         raise _cli_error(
             f"{args.input}: channel {name!r} is constant: there is no noise to analyse"
         )
     return wv, name
+
+
+def warn_fs_unknown(args: argparse.Namespace, path: str) -> None:
+    """Queue the loud stderr warning that the sampling frequency of ``path`` is unknown (1 Hz
+    assumed); ``gmwm`` prints queued warnings with the result (an error stays one line)."""
+    msg = (
+        f"gmwm: warning: {path} does not say its sampling frequency: fs = 1 Hz ASSUMED, so "
+        "every time in seconds and every datasheet value is per sample; pass --fs HZ"
+    )
+    queued = getattr(args, "warnings", None)
+    if queued is None:
+        queued = args.warnings = []
+    if msg not in queued:
+        queued.append(msg)
+
+
+def _loaded_name(path: Any, src: Any, side: dict[str, Any] | None) -> str:
+    """The name :func:`engine.io.load_log` gives the streamed channel, so that ``--stream``
+    and the in-memory WV label it alike: for ``.npy`` the sidecar's channel name, else ``x``
+    (1-D) or ``col<j>`` (2-D); for HDF5 the dataset name."""
+    if not str(path).lower().endswith(".npy"):
+        return src.name
+    column = int(getattr(src, "column", 0) or 0)
+    names = side.get("channels") if side is not None else None
+    if isinstance(names, list) and len(names) == getattr(src, "k", 1) and column < len(names):
+        return str(names[column])
+    return "x" if np.load(path, mmap_mode="r").ndim == 1 else f"col{column}"
 
 
 def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
@@ -205,12 +243,28 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument("--levels", type=_positive(int, "--levels"), help="number of WV levels J")
     ex.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
     ex.add_argument("--eff", type=float, default=0.6, help="robust WV efficiency (0.6)")
-    ex.add_argument("--weights", default="ci", choices=["ci", "identity", "efficient"])
+    ex.add_argument(
+        "--weights",
+        default="ci",
+        choices=["ci", "identity", "efficient"],
+        help="weighting matrix: ci (default), identity, or efficient (two-step, V^-1)",
+    )
     ex.add_argument("--ci", choices=["asymptotic", "bootstrap"], help="parameter intervals")
     ex.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
-    ex.add_argument("-B", "--bootstrap", type=_positive(int, "-B"), default=100)
-    ex.add_argument("--seed", type=int, default=0)
-    ex.add_argument("--workers", type=_positive(int, "--workers"), default=2)
+    ex.add_argument(
+        "-B",
+        "--bootstrap",
+        type=_positive(int, "-B"),
+        default=100,
+        help="bootstrap replicates for --ci bootstrap (100)",
+    )
+    ex.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
+    ex.add_argument(
+        "--workers",
+        type=_positive(int, "--workers"),
+        default=2,
+        help="processes for the bootstrap (2)",
+    )
     ex.add_argument("--rostopic", default="/imu0", help="Kalibr rostopic entry (/imu0)")
     ex.add_argument(
         "--partial",
@@ -253,6 +307,8 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
             wvs[ch] = wv
     else:
         log = load_log(args.input, fs=args.fs, **log_kwargs(args))
+        if log.fs_source == "default":
+            warn_fs_unknown(args, str(args.input))
         names = [_pick(str(args.input), log.names, c) for c in wanted] if wanted else log.names
         for ch in names:
             if log.is_summary:

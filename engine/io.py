@@ -39,7 +39,15 @@ from .wavelet import WaveletVariance
 if TYPE_CHECKING:  # pragma: no cover
     import h5py
 
-__all__ = ["LoadError", "ImuLog", "load_log", "save_log"]
+__all__ = [
+    "LoadError",
+    "ImuLog",
+    "load_log",
+    "save_log",
+    "npy_sidecar_path",
+    "read_npy_sidecar",
+    "write_npy_sidecar",
+]
 
 _H5_EXT = {".h5", ".hdf5", ".hdf", ".he5"}
 _MAGIC = {
@@ -731,7 +739,74 @@ def _read_npy(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
             f"file '{src}': array of shape {a.shape} is not 1-D (N,) or 2-D (N, k): "
             "save one column per channel"
         )
-    return _finish(src, cols, {}, fmt="npy", channel=channel, opts=opts, time=time, notes=notes)
+    units: dict[str, str] = {}
+    fs_file = None
+    side = read_npy_sidecar(path)
+    if side is not None:  # written by `gmwm simulate -o x.npy`: fs, channel names, units
+        names = side.get("channels")
+        if isinstance(names, list) and len(names) == len(cols) and len(set(names)) == len(names):
+            cols = dict(zip(map(str, names), cols.values(), strict=True))
+        if isinstance(side.get("units"), dict):
+            units = {str(k): str(v) for k, v in side["units"].items()}
+        if "fs_hz" in side:
+            fs_file = (side["fs_hz"], f"sidecar '{npy_sidecar_path(src).name}'")
+        meta = {k: v for k, v in side.items() if k not in ("channels", "units", "fs_hz")}
+    else:
+        meta = {}
+    return _finish(
+        src,
+        cols,
+        units,
+        fmt="npy",
+        channel=channel,
+        opts=opts,
+        fs_file=fs_file,
+        time=time,
+        meta=meta,
+        notes=notes,
+    )
+
+
+def npy_sidecar_path(path: str | os.PathLike[str]) -> Path:
+    """The JSON sidecar of a ``.npy`` log: ``x.npy`` -> ``x.npy.json``."""
+    p = Path(path)
+    return p.with_name(p.name + ".json")
+
+
+def read_npy_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The sidecar of a ``.npy`` log as a dict (None when there is none).
+
+    A ``.npy`` array holds samples only; its sidecar ``x.npy.json`` keeps what the array cannot:
+    ``{"fs_hz": 200.0, "channels": ["x"], "units": {"x": "deg/s"}, ...}`` (other keys, e.g.
+    ``model`` and ``seed``, end up in ``ImuLog.meta``). Raises LoadError when the sidecar exists
+    but is not such an object.
+    """
+    side = npy_sidecar_path(path)
+    if not side.is_file():
+        return None
+    try:
+        d = json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, UnicodeError, ValueError) as exc:
+        raise LoadError(
+            f"sidecar '{side}' of '{path}' is not readable JSON ({exc}): fix or delete it"
+        ) from exc
+    if not isinstance(d, dict):
+        raise LoadError(f"sidecar '{side}' of '{path}' is not a JSON object: fix or delete it")
+    return d
+
+
+def write_npy_sidecar(
+    path: str | os.PathLike[str],
+    fs: float,
+    channels: list[str],
+    units: Mapping[str, str] | None = None,
+    **extra: Any,
+) -> Path:
+    """Write the sidecar of a ``.npy`` log (see :func:`read_npy_sidecar`); returns its path."""
+    d = {"fs_hz": float(fs), "channels": list(channels), "units": dict(units or {}), **extra}
+    side = npy_sidecar_path(path)
+    side.write_text(json.dumps(d, indent=2) + "\n", encoding="utf-8")
+    return side
 
 
 def _read_npz(path: Path, src: str, channel: Any, opts: _Opts) -> ImuLog:
