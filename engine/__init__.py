@@ -18,20 +18,18 @@ from .fit import (
     fit_gmwm,
     weight_matrix,
 )
-from .model import (
-    Model,
-    ModelError,
-    parse_model,
-)
-from .processes import (
+from .models import (
     AR1,
     DR,
     GM,
     QN,
     RW,
     WN,
+    Model,
+    ModelError,
     Process,
     ar1_wv,
+    parse_model,
 )
 from .units import (
     datasheet,

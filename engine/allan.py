@@ -34,8 +34,7 @@ import numpy as np
 from scipy import optimize, special
 
 from .fit import FitError, GMWMResult, _Problem, _sqrt_weight, fit_gmwm, weight_matrix
-from .model import Model, parse_model
-from .processes import AR1, DR, QN, RW, WN, Process
+from .models import AR1, DR, QN, RW, WN, Model, Process, parse_model
 from .units import datasheet, param_unit
 from .wavelet import (
     WaveletVariance,

@@ -228,7 +228,7 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
     from .fit import fit_gmwm
     from .inference import fit_efficient, param_intervals
     from .io import _pick, load_log
-    from .model import parse_model
+    from .models import parse_model
     from .wavelet import wavelet_variance
 
     if not 0 < args.level < 1:

@@ -50,8 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .fit import GMWMResult
-from .model import Model
-from .processes import RW, WN
+from .models import RW, WN, Model
 
 if TYPE_CHECKING:  # pragma: no cover
     from .inference import ParamInterval

@@ -31,7 +31,7 @@ import numpy as np
 
 from ._jsonutil import json_ready
 from .fit import FitError, GMWMResult, weight_matrix
-from .model import parse_model
+from .models import parse_model
 from .wavelet import WaveletVariance
 
 __all__ = [

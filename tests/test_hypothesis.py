@@ -27,7 +27,7 @@ from engine.cli import main
 from engine.export import ExportError, read_kalibr, si_factor
 from engine.fit import FitError
 from engine.io import ImuLog, LoadError, load_log
-from engine.model import ModelError, parse_model
+from engine.models import ModelError, parse_model
 from engine.session import SessionError, load_session
 from engine.stream import wavelet_variance_stream
 from engine.timecheck import check_time
