@@ -35,7 +35,7 @@ from .units import (
     datasheet,
     param_unit,
 )
-from .wavelet import (
+from .wv import (
     WaveletVariance,
     biweight_constant,
     default_levels,
@@ -82,17 +82,17 @@ _LAZY: dict[str, str] = {
     "SessionError": "session",
     "load_session": "session",
     "save_session": "session",
-    "wavelet_variance_stream": "stream",
+    "wavelet_variance_stream": "wv",
     "run_slope_study": "study",
     "TimeReport": "timecheck",
     "Scenario": "teaching",
     "SCENARIOS": "teaching",
     "simulate_scenario": "teaching",
     "check_time": "timecheck",
-    "WaveletCrossCovariance": "wccv",
-    "WVMatrix": "wccv",
-    "wavelet_cross_covariance": "wccv",
-    "wv_matrix": "wccv",
+    "WaveletCrossCovariance": "wv",
+    "WVMatrix": "wv",
+    "wavelet_cross_covariance": "wv",
+    "wv_matrix": "wv",
 }
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
@@ -141,9 +141,6 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         load_session,
         save_session,
     )
-    from .stream import (
-        wavelet_variance_stream,
-    )
     from .study import (
         run_slope_study,
     )
@@ -152,10 +149,11 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         TimeReport,
         check_time,
     )
-    from .wccv import (
+    from .wv import (
         WaveletCrossCovariance,
         WVMatrix,
         wavelet_cross_covariance,
+        wavelet_variance_stream,
         wv_matrix,
     )
 

@@ -27,7 +27,7 @@ import numpy as np
 from ._jsonutil import json_ready
 from .fit import FitError, fit_gmwm
 from .models import ModelError, parse_model
-from .wavelet import WaveletVariance, wavelet_variance
+from .wv import WaveletVariance, wavelet_variance
 
 __all__ = ["main"]
 

@@ -125,7 +125,7 @@ def stream_wv(
     args: argparse.Namespace, alpha: float = 0.05, channel: str | None = None
 ) -> tuple[Any, str]:
     """``(WaveletVariance, channel name)`` of ``--stream``."""
-    from .stream import open_series, wavelet_variance_stream
+    from .wv import open_series, wavelet_variance_stream
 
     if getattr(args, "robust", False):
         raise _cli_error(
@@ -229,7 +229,7 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
     from .inference import fit_efficient, param_intervals
     from .io import _pick, load_log
     from .models import parse_model
-    from .wavelet import wavelet_variance
+    from .wv import wavelet_variance
 
     if not 0 < args.level < 1:
         raise _cli_error(f"--level must be in (0, 1), got {args.level}")

@@ -29,7 +29,7 @@ import numpy as np
 from ._optim import nelder_mead, nnls
 from .models import AR1, GM, TC_MAX_FACTOR, TC_MIN, Model, Process, ar1_wv_pos, parse_model
 from .units import param_unit
-from .wavelet import WaveletVariance, wavelet_variance
+from .wv import WaveletVariance, wavelet_variance
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix", "FitError"]
 

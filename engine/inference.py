@@ -37,7 +37,7 @@ import numpy as np
 
 from .fit import FitError, GMWMResult, fit_gmwm
 from .models import AR1, DR, FROM_UNCONSTRAINED, GM, QN, RW, TO_UNCONSTRAINED, WN, Model, Process
-from .wavelet import WaveletVariance, _as_series, _cumsum_demeaned, wavelet_variance
+from .wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
 
 __all__ = [
     "wv_cov_data",
@@ -68,10 +68,10 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
     wv : WaveletVariance
         Its WV (gives the levels).
     """
-    a = _as_series(x)
+    a = as_series(x)
     if a.size != wv.n:
         raise ValueError(f"the series has {a.size} samples but the WV was computed from {wv.n}")
-    s = _cumsum_demeaned(a)
+    s = cumsum_demeaned(a)
     out = np.empty(wv.n_levels)
     for i, j in enumerate(wv.levels):
         m = 1 << (int(j) - 1)

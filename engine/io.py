@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .wavelet import WaveletVariance
+from .wv import WaveletVariance
 
 if TYPE_CHECKING:  # pragma: no cover
     import h5py

@@ -32,7 +32,7 @@ import numpy as np
 from ._jsonutil import json_ready
 from .fit import FitError, GMWMResult, weight_matrix
 from .models import parse_model
-from .wavelet import WaveletVariance
+from .wv import WaveletVariance
 
 __all__ = [
     "wv_to_dict",

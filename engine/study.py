@@ -46,7 +46,7 @@ import numpy as np
 from .allan import AllanVariance, MethodEstimate, avsm, avsm_auto, fit_armav, from_gmwm
 from .fit import fit_gmwm
 from .models import DR, QN, RW, WN, Model
-from .wavelet import WaveletVariance, default_levels, wavelet_variance
+from .wv import WaveletVariance, default_levels, wavelet_variance
 
 __all__ = [
     "TABLE_I",

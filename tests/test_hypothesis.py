@@ -29,8 +29,8 @@ from engine.fit import FitError
 from engine.io import ImuLog, LoadError, load_log
 from engine.models import ModelError, parse_model
 from engine.session import SessionError, load_session
-from engine.stream import wavelet_variance_stream
 from engine.timecheck import check_time
+from engine.wv import wavelet_variance_stream
 
 
 def cfg(examples: int, deadline_ms: int = 10_000) -> settings:

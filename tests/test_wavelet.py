@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.wavelet import eta3_interval
+from engine.wv import eta3_interval
 
 
 def direct_wv(x: np.ndarray, levels: int) -> np.ndarray:
@@ -215,3 +215,27 @@ def test_to_dict_is_json_ready():
         "alpha",
     }
     assert d["n"] == 100 and d["fs"] == 2.0 and len(d["variance"]) == 6
+
+
+def test_wv_matrix_reads_an_imulog_or_any_log_like_object_by_duck_typing():
+    """engine.wv.wccv does not import engine.io: an ImuLog, or any object with a ``channels``
+    mapping and ``fs``, gives the same matrix as the plain mapping with that fs."""
+    from types import SimpleNamespace
+
+    from engine.io import ImuLog
+    from engine.wv import wv_matrix
+
+    rng = np.random.default_rng(3)
+    ch = {"a": rng.normal(size=4096), "b": rng.normal(size=4096).cumsum() * 0.01}
+    ref = wv_matrix(ch, fs=50.0, units={"a": "deg/s", "b": "g"})
+    log = ImuLog(channels=ch, fs=50.0, units={"a": "deg/s", "b": "g"})
+    alike = SimpleNamespace(channels=ch, fs=50.0, units={"a": "deg/s", "b": "g"})
+    for got in (wv_matrix(log), wv_matrix(alike)):
+        assert got.fs == 50.0 and got.units == ("deg/s", "g") and got.channels == ("a", "b")
+        np.testing.assert_array_equal(got.values, ref.values)
+    # the diagonal is the WV of each channel
+    np.testing.assert_allclose(
+        ref.values[:, 1, 1], eg.wavelet_variance(ch["b"]).variance, rtol=1e-13
+    )
+    with pytest.raises(ValueError, match="no raw samples"):
+        wv_matrix(SimpleNamespace(channels={}, fs=1.0, source="summary.h5"))
