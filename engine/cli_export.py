@@ -3,7 +3,7 @@
 * :func:`add_log_options` / :func:`log_kwargs`: ``--segment``, ``--scale``, ``--units``,
   ``--topic`` (passed to :func:`engine.io.load_log`) and ``--stream`` for ``gmwm wv``,
   ``fit`` and ``select``;
-* :func:`stream_wv`: the WV of ``--stream`` (:func:`engine.stream.wavelet_variance_stream`);
+* :func:`stream_wv`: the WV of ``--stream`` (:func:`engine.wv.stream.wavelet_variance_stream`);
 * :func:`add_export_parser` / :func:`cmd_export`: ``gmwm export``::
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
@@ -227,7 +227,7 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
     from .export import export
     from .fit import fit_gmwm
     from .inference import fit_efficient, param_intervals
-    from .io import _pick, load_log
+    from .io import load_log, pick_channel
     from .models import parse_model
     from .wv import wavelet_variance
 
@@ -253,7 +253,9 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
             wvs[ch] = wv
     else:
         log = load_log(args.input, fs=args.fs, **log_kwargs(args))
-        names = [_pick(str(args.input), log.names, c) for c in wanted] if wanted else log.names
+        names = (
+            [pick_channel(str(args.input), log.names, c) for c in wanted] if wanted else log.names
+        )
         for ch in names:
             if log.is_summary:
                 if ch not in log.wv:

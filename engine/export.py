@@ -979,7 +979,7 @@ def fit_report(
         datasheet rows and the Allan floor; ``kalibr`` (or the reason it is missing).
         NaN values are ``null``.
     """
-    from . import __version__
+    from ._version import __version__
 
     units = dict(units or {})
     chans: dict[str, Any] = {}
