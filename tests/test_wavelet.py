@@ -239,3 +239,21 @@ def test_wv_matrix_reads_an_imulog_or_any_log_like_object_by_duck_typing():
     )
     with pytest.raises(ValueError, match="no raw samples"):
         wv_matrix(SimpleNamespace(channels={}, fs=1.0, source="summary.h5"))
+
+
+def test_import_engine_leaves_the_wccv_and_stream_modules_to_first_use():
+    """``engine.wv`` exports the WCCV and the streamed WV lazily (they need SciPy's special
+    functions); first use imports them and caches the attribute."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, engine, engine.wv as w\n"
+        "assert 'engine.wv.wccv' not in sys.modules and 'engine.wv.stream' not in sys.modules\n"
+        "f = w.wv_matrix\n"
+        "assert 'engine.wv.wccv' in sys.modules and w.__dict__['wv_matrix'] is f\n"
+        "assert engine.wv_matrix is f and 'wavelet_variance_stream' in dir(w)\n"
+        "try:\n    w.nope\nexcept AttributeError as e:\n    assert 'nope' in str(e)\n"
+        "else:\n    raise SystemExit('no AttributeError')\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

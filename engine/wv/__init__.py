@@ -13,9 +13,9 @@ The streamed WV and the WCCV are imported on first use (PEP 562): the WCCV needs
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from .._lazy import lazy_attributes
 from ._kernel import as_series, cumsum_demeaned, second_difference_sums, sumsq_kernel
 from .classical import (
     LevelScales,
@@ -41,18 +41,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .stream import SeriesSource, open_series, wavelet_variance_stream
     from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix
 
-
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'engine.wv' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 
 __all__ = [
