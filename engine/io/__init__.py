@@ -31,7 +31,6 @@ from .session import (
     wv_from_dict,
     wv_to_dict,
 )
-from .summary import read_wv_summary
 from .timecheck import GAP_FACTOR, TimeEvent, TimeReport, as_seconds, check_time, segment_fs
 
 __all__ = [
@@ -40,7 +39,6 @@ __all__ = [
     "load_log",
     "save_log",
     "pick_channel",
-    "read_wv_summary",
     "ImuBag",
     "IMU_CHANNELS",
     "read_imu_bag",
