@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from ._version import __version__ as __version__
 from .fit import (
     FitError,
     GMWMResult,
@@ -18,26 +19,24 @@ from .fit import (
     fit_gmwm,
     weight_matrix,
 )
-from .model import (
-    Model,
-    ModelError,
-    parse_model,
-)
-from .processes import (
+from .models import (
     AR1,
     DR,
     GM,
     QN,
     RW,
     WN,
+    Model,
+    ModelError,
     Process,
     ar1_wv,
+    parse_model,
 )
 from .units import (
     datasheet,
     param_unit,
 )
-from .wavelet import (
+from .wv import (
     WaveletVariance,
     biweight_constant,
     default_levels,
@@ -80,21 +79,21 @@ _LAZY: dict[str, str] = {
     "fit_mgmwm": "mgmwm",
     "fit_replicates": "mgmwm",
     "moment_covariance": "mgmwm",
-    "Session": "session",
-    "SessionError": "session",
-    "load_session": "session",
-    "save_session": "session",
-    "wavelet_variance_stream": "stream",
+    "Session": "io",
+    "SessionError": "io",
+    "load_session": "io",
+    "save_session": "io",
+    "wavelet_variance_stream": "wv",
     "run_slope_study": "study",
-    "TimeReport": "timecheck",
+    "TimeReport": "io",
     "Scenario": "teaching",
     "SCENARIOS": "teaching",
     "simulate_scenario": "teaching",
-    "check_time": "timecheck",
-    "WaveletCrossCovariance": "wccv",
-    "WVMatrix": "wccv",
-    "wavelet_cross_covariance": "wccv",
-    "wv_matrix": "wccv",
+    "check_time": "io",
+    "WaveletCrossCovariance": "wv",
+    "WVMatrix": "wv",
+    "wavelet_cross_covariance": "wv",
+    "wv_matrix": "wv",
 }
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
@@ -122,8 +121,14 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from .io import (
         ImuLog,
         LoadError,
+        Session,
+        SessionError,
+        TimeReport,
+        check_time,
         load_log,
+        load_session,
         save_log,
+        save_session,
     )
     from .mgmwm import (
         DependenceTest,
@@ -137,27 +142,15 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         fit_replicates,
         moment_covariance,
     )
-    from .session import (
-        Session,
-        SessionError,
-        load_session,
-        save_session,
-    )
-    from .stream import (
-        wavelet_variance_stream,
-    )
     from .study import (
         run_slope_study,
     )
     from .teaching import SCENARIOS, Scenario, simulate_scenario
-    from .timecheck import (
-        TimeReport,
-        check_time,
-    )
-    from .wccv import (
+    from .wv import (
         WaveletCrossCovariance,
         WVMatrix,
         wavelet_cross_covariance,
+        wavelet_variance_stream,
         wv_matrix,
     )
 
@@ -248,5 +241,4 @@ __all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
     "fit_replicates",
     "ReplicateResult",
 ]
-__version__ = "0.1.0"
 __all__ += ["Scenario", "SCENARIOS", "simulate_scenario"]  # teaching (issue 4)

@@ -34,13 +34,12 @@ import numpy as np
 from scipy import optimize, special
 
 from .fit import FitError, GMWMResult, _Problem, _sqrt_weight, fit_gmwm, weight_matrix
-from .model import Model, parse_model
-from .processes import AR1, DR, QN, RW, WN, Process
+from .models import AR1, DR, QN, RW, WN, Model, Process, parse_model
 from .units import datasheet, param_unit
-from .wavelet import (
+from .wv import (
     WaveletVariance,
-    _as_series,
-    _cumsum_demeaned,
+    as_series,
+    cumsum_demeaned,
     default_levels,
     eta3_interval,
     second_difference_sums,
@@ -279,7 +278,7 @@ def allan_variance(
     copy of the series as extra memory. At octave averaging times it equals ``2 x`` the Haar
     WV of :func:`engine.wavelet_variance` (to rounding; the sums are the same).
     """
-    a = _as_series(x)
+    a = as_series(x)
     n = a.size
     if not (np.isfinite(fs) and fs > 0):
         raise ValueError(f"fs must be a positive number of Hz, got {fs}")
@@ -316,7 +315,7 @@ def allan_variance(
                 f"averaging time {bad} samples is out of range: a series of {n} "
                 f"samples supports 1 to {mmax}"
             )
-    s = _cumsum_demeaned(a)
+    s = cumsum_demeaned(a)
     sums = second_difference_sums(s, n, ms)
     terms = n - 2 * ms + 1
     m_f = ms.astype(float)

@@ -28,8 +28,8 @@ import numpy as np
 
 from ._jsonutil import json_ready
 from .fit import FitError, fit_gmwm
-from .model import ModelError, parse_model
-from .wavelet import WaveletVariance, wavelet_variance
+from .models import ModelError, parse_model
+from .wv import WaveletVariance, wavelet_variance
 
 __all__ = ["main"]
 

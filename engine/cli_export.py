@@ -3,7 +3,7 @@
 * :func:`add_log_options` / :func:`log_kwargs`: ``--segment``, ``--scale``, ``--units``,
   ``--topic`` (passed to :func:`engine.io.load_log`) and ``--stream`` for ``gmwm wv``,
   ``fit`` and ``select``;
-* :func:`stream_wv`: the WV of ``--stream`` (:func:`engine.stream.wavelet_variance_stream`);
+* :func:`stream_wv`: the WV of ``--stream`` (:func:`engine.wv.stream.wavelet_variance_stream`);
 * :func:`add_export_parser` / :func:`cmd_export`: ``gmwm export``::
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
@@ -125,7 +125,7 @@ def stream_wv(
     args: argparse.Namespace, alpha: float = 0.05, channel: str | None = None
 ) -> tuple[Any, str]:
     """``(WaveletVariance, channel name)`` of ``--stream``."""
-    from .stream import open_series, wavelet_variance_stream
+    from .wv import open_series, wavelet_variance_stream
 
     if getattr(args, "robust", False):
         raise _cli_error(
@@ -281,9 +281,9 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
     from .export import export
     from .fit import fit_gmwm
     from .inference import fit_efficient, param_intervals
-    from .io import _pick, load_log
-    from .model import parse_model
-    from .wavelet import wavelet_variance
+    from .io import load_log, pick_channel
+    from .models import parse_model
+    from .wv import wavelet_variance
 
     if not 0 < args.level < 1:
         raise _cli_error(f"--level must be in (0, 1), got {args.level}")
@@ -309,7 +309,9 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
         log = load_log(args.input, fs=args.fs, **log_kwargs(args))
         if log.fs_source == "default":
             warn_fs_unknown(args, str(args.input))
-        names = [_pick(str(args.input), log.names, c) for c in wanted] if wanted else log.names
+        names = (
+            [pick_channel(str(args.input), log.names, c) for c in wanted] if wanted else log.names
+        )
         for ch in names:
             if log.is_summary:
                 if ch not in log.wv:

@@ -50,8 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .fit import GMWMResult
-from .model import Model
-from .processes import RW, WN
+from .models import RW, WN, Model
 
 if TYPE_CHECKING:  # pragma: no cover
     from .inference import ParamInterval
@@ -980,7 +979,7 @@ def fit_report(
         datasheet rows and the Allan floor; ``kalibr`` (or the reason it is missing).
         NaN values are ``null``.
     """
-    from . import __version__
+    from ._version import __version__
 
     units = dict(units or {})
     chans: dict[str, Any] = {}

@@ -27,10 +27,9 @@ from typing import Any
 import numpy as np
 
 from ._optim import nelder_mead, nnls
-from .model import Model, parse_model
-from .processes import AR1, GM, TC_MAX_FACTOR, TC_MIN, Process, _ar1_wv_pos
+from .models import AR1, GM, TC_MAX_FACTOR, TC_MIN, Model, Process, ar1_wv_pos, parse_model
 from .units import param_unit
-from .wavelet import WaveletVariance, wavelet_variance
+from .wv import WaveletVariance, wavelet_variance
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix", "FitError"]
 
@@ -281,7 +280,7 @@ class _Problem:
         x = self.x_fixed.copy()
         for i, phi in zip(self.nl_idx, phis, strict=True):
             if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
-                col = _ar1_wv_pos(self.tau, phi)
+                col = ar1_wv_pos(self.tau, phi)
                 x[:, i] = col * (1.0 - phi * phi) if self.is_gm[i] else col
             else:
                 x[:, i] = self.model.processes[i].basis(self.tau, self.fs, phi)

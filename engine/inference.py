@@ -36,9 +36,8 @@ from typing import Any
 import numpy as np
 
 from .fit import FitError, GMWMResult, fit_gmwm
-from .model import Model
-from .processes import _BACKWARD, _FORWARD, AR1, DR, GM, QN, RW, WN, Process
-from .wavelet import WaveletVariance, _as_series, _cumsum_demeaned, wavelet_variance
+from .models import AR1, DR, FROM_UNCONSTRAINED, GM, QN, RW, TO_UNCONSTRAINED, WN, Model, Process
+from .wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
 
 __all__ = [
     "wv_cov_data",
@@ -69,10 +68,10 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
     wv : WaveletVariance
         Its WV (gives the levels).
     """
-    a = _as_series(x)
+    a = as_series(x)
     if a.size != wv.n:
         raise ValueError(f"the series has {a.size} samples but the WV was computed from {wv.n}")
-    s = _cumsum_demeaned(a)
+    s = cumsum_demeaned(a)
     out = np.empty(wv.n_levels)
     for i, j in enumerate(wv.levels):
         m = 1 << (int(j) - 1)
@@ -298,13 +297,13 @@ def _set(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
     """The model with the free parameters set from unconstrained coordinates ``u``."""
     procs = list(model.processes)
     for (i, name), ui in zip(free, u, strict=True):
-        procs[i] = procs[i].with_values(**{name: _BACKWARD[name](float(ui))})
+        procs[i] = procs[i].with_values(**{name: FROM_UNCONSTRAINED[name](float(ui))})
     return Model(tuple(procs))
 
 
 def _u0(model: Model, free: list[tuple[int, str]]) -> np.ndarray:
     """Unconstrained coordinates of the free parameters."""
-    return np.array([_FORWARD[n](float(getattr(model.processes[i], n))) for i, n in free])
+    return np.array([TO_UNCONSTRAINED[n](float(getattr(model.processes[i], n))) for i, n in free])
 
 
 def jacobian(res: GMWMResult, free: list[tuple[int, str]] | None = None) -> np.ndarray:
@@ -402,8 +401,8 @@ def param_intervals(
         u0 = _u0(res.model, free)
         bounds = {}
         for k, (i, name) in enumerate(free):
-            lo = _BACKWARD[name](u0[k] - z * se[k])
-            hi = _BACKWARD[name](u0[k] + z * se[k])
+            lo = FROM_UNCONSTRAINED[name](u0[k] - z * se[k])
+            hi = FROM_UNCONSTRAINED[name](u0[k] + z * se[k])
             bounds[(res.model.labels[i], name)] = (min(lo, hi), max(lo, hi))
         out = []
         for r in recs:

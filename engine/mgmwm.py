@@ -72,11 +72,9 @@ from scipy import optimize
 
 from ._jsonutil import json_ready
 from .fit import FitError, GMWMResult, _warning_lines, fit_gmwm, weight_matrix
-from .model import Model, ModelError, parse_model
-from .processes import AR1, TC_MAX_FACTOR, TC_MIN, Process
+from .models import AR1, TC_MAX_FACTOR, TC_MIN, Model, ModelError, Process, parse_model
 from .units import param_unit
-from .wavelet import WaveletVariance, wavelet_variance
-from .wccv import WVMatrix, wv_matrix
+from .wv import WaveletVariance, WVMatrix, wavelet_variance, wv_matrix
 
 __all__ = [
     "SHAREABLE",

@@ -31,8 +31,8 @@ import numpy as np
 
 from .fit import FitError, GMWMResult, fit_gmwm
 from .inference import _covariance, _free, _inverse, _map, jacobian
-from .model import Model, ModelError, parse_model
-from .wavelet import WaveletVariance, wavelet_variance
+from .models import Model, ModelError, parse_model
+from .wv import WaveletVariance, wavelet_variance
 
 __all__ = ["submodels", "rank_models", "SelectionResult", "Candidate"]
 

@@ -45,9 +45,8 @@ import numpy as np
 
 from .allan import AllanVariance, MethodEstimate, avsm, avsm_auto, fit_armav, from_gmwm
 from .fit import fit_gmwm
-from .model import Model
-from .processes import DR, QN, RW, WN
-from .wavelet import WaveletVariance, default_levels, wavelet_variance
+from .models import DR, QN, RW, WN, Model
+from .wv import WaveletVariance, default_levels, wavelet_variance
 
 __all__ = [
     "TABLE_I",

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .io import ImuLog
-from .model import Model, parse_model
+from .models import Model, parse_model
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "simulate_scenario", "gmwm_spec"]
 

@@ -17,7 +17,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .model import Model
+    from .models import Model
 
 __all__ = ["param_unit", "datasheet", "squared"]
 

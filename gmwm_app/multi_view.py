@@ -59,7 +59,7 @@ from bokeh.plotting import figure
 
 import engine as eg
 from engine.mgmwm import SHAREABLE, DependenceTest, MultiModel
-from engine.model import ModelError, parse_model
+from engine.models import ModelError, parse_model
 from engine.units import squared
 
 from .state import format_value

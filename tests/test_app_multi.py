@@ -21,7 +21,7 @@ import pytest
 import engine as eg
 from engine.io import ImuLog
 from engine.mgmwm import MultiModel
-from engine.model import ModelError
+from engine.models import ModelError
 from gmwm_app.multi_view import (
     MultiView,
     build_model,

@@ -31,7 +31,7 @@ from engine.export import (
     write_kalibr,
 )
 from engine.inference import param_intervals
-from engine.session import (
+from engine.io import (
     SessionError,
     file_fingerprint,
     load_session,

@@ -26,11 +26,9 @@ import engine as eg
 from engine.cli import main
 from engine.export import ExportError, read_kalibr, si_factor
 from engine.fit import FitError
-from engine.io import ImuLog, LoadError, load_log
-from engine.model import ModelError, parse_model
-from engine.session import SessionError, load_session
-from engine.stream import wavelet_variance_stream
-from engine.timecheck import check_time
+from engine.io import ImuLog, LoadError, SessionError, check_time, load_log, load_session
+from engine.models import ModelError, parse_model
+from engine.wv import wavelet_variance_stream
 
 
 def cfg(examples: int, deadline_ms: int = 10_000) -> settings:
@@ -246,7 +244,7 @@ def test_random_csv_text(text: str, ext: str, segment: str | None, fs: float | N
 @pytest.fixture(scope="module")
 def valid_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
     """Small valid logs of every format, as bytes (to be truncated or corrupted)."""
-    from engine.rosbag import write_imu_bag
+    from engine.io import write_imu_bag
 
     d = tmp_path_factory.mktemp("hyp_valid")
     rng = np.random.default_rng(2)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from engine.io import ImuLog, LoadError, load_log, save_log
-from engine.wavelet import WaveletVariance
+from engine.wv import WaveletVariance
 
 ADIS = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
 

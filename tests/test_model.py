@@ -110,3 +110,12 @@ def test_simulate_is_reproducible_and_additive():
     np.testing.assert_allclose(
         a - 0.5 * np.arange(1, 101), eg.WN(sigma2=1.0).simulate(100, np.random.default_rng(7))
     )
+
+
+def test_processes_register_in_canonical_order():
+    """Each concrete process registers itself; the registry drives parsing and spec order."""
+    from engine.models import PROCESS_TYPES
+
+    assert list(PROCESS_TYPES) == ["GM", "AR1", "QN", "WN", "RW", "DR"]
+    assert all(PROCESS_TYPES[c].code == c for c in PROCESS_TYPES)
+    assert eg.parse_model("DR+RW+WN+QN+AR1").spec() == "AR1+QN+WN+RW+DR"

@@ -17,7 +17,7 @@ import engine as eg
 from engine.cli import main as cli_main
 from engine.fit import FitError
 from engine.mgmwm import MultiModel
-from engine.model import ModelError
+from engine.models import ModelError
 
 RW_BASIS = staticmethod(lambda tau: (tau**2 + 2.0) / (12.0 * tau))
 

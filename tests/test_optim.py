@@ -133,11 +133,11 @@ def test_nelder_mead_iterates_as_scipy() -> None:
 def test_second_difference_sums_same_with_any_blas_pool(monkeypatch: pytest.MonkeyPatch) -> None:
     """Whole BLAS dot (one-thread pool) and chunked dot (threaded pool) give the same sums,
     equal to the direct definition."""
-    import engine.wavelet as W
+    import engine.wv._kernel as W
 
     rng = np.random.default_rng(5)
     x = rng.normal(size=100_003).cumsum() * 1e-3 + rng.normal(size=100_003)
-    s = W._cumsum_demeaned(x)
+    s = W.cumsum_demeaned(x)
     ms = np.array([1, 2, 3, 8, 100, 4096, 30_000])
     direct = np.array([np.sum((s[2 * m :] - 2 * s[m:-m] + s[: s.size - 2 * m]) ** 2) for m in ms])
     for threads in (1, 4, None):

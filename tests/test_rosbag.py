@@ -12,10 +12,16 @@ import pytest
 pytest.importorskip("rosbags", reason="the 'rosbags' package reads ROS bags (pip install rosbags)")
 
 import engine as eg  # noqa: E402
-from engine import rosbag  # noqa: E402
 from engine.cli import main  # noqa: E402
-from engine.io import LoadError, load_log  # noqa: E402
-from engine.rosbag import IMU_CHANNELS, imu_topics, read_imu_bag, write_imu_bag  # noqa: E402
+from engine.io import (  # noqa: E402
+    IMU_CHANNELS,
+    LoadError,
+    imu_topics,
+    load_log,
+    read_imu_bag,
+    rosbag,
+    write_imu_bag,
+)
 
 N = 1500
 FS = 200.0

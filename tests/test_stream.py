@@ -12,7 +12,7 @@ import pytest
 
 import engine as eg
 from engine.cli import main
-from engine.stream import open_series, wavelet_variance_stream
+from engine.wv import open_series, wavelet_variance_stream
 
 TRUTH = "GM(beta=0.2, sigma2_gm=1e-4)+WN(sigma2=1e-2)+RW(gamma2=1e-9)"
 
@@ -62,7 +62,7 @@ def test_float32_int_counts_and_scale(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("order", ["C", "F"])
 def test_two_dimensional_npy_columns(tmp_path: Path, order: str, monkeypatch) -> None:
-    from engine.stream import _NpySource
+    from engine.wv.stream import _NpySource
 
     monkeypatch.setattr(_NpySource, "piece", 1000)  # rows read in many small pieces
     a = np.asarray(np.random.default_rng(1).normal(size=(20_000, 3)), order=order)

@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.io import LoadError, load_log
-from engine.timecheck import as_seconds, check_time, segment_fs
+from engine.io import LoadError, as_seconds, check_time, load_log, segment_fs
 
 
 def csv(path: Path, t: np.ndarray, x: np.ndarray | None = None, col: str = "time") -> Path:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.wavelet import eta3_interval
+from engine.wv import eta3_interval
 
 
 def direct_wv(x: np.ndarray, levels: int) -> np.ndarray:
@@ -215,3 +215,45 @@ def test_to_dict_is_json_ready():
         "alpha",
     }
     assert d["n"] == 100 and d["fs"] == 2.0 and len(d["variance"]) == 6
+
+
+def test_wv_matrix_reads_an_imulog_or_any_log_like_object_by_duck_typing():
+    """engine.wv.wccv does not import engine.io: an ImuLog, or any object with a ``channels``
+    mapping and ``fs``, gives the same matrix as the plain mapping with that fs."""
+    from types import SimpleNamespace
+
+    from engine.io import ImuLog
+    from engine.wv import wv_matrix
+
+    rng = np.random.default_rng(3)
+    ch = {"a": rng.normal(size=4096), "b": rng.normal(size=4096).cumsum() * 0.01}
+    ref = wv_matrix(ch, fs=50.0, units={"a": "deg/s", "b": "g"})
+    log = ImuLog(channels=ch, fs=50.0, units={"a": "deg/s", "b": "g"})
+    alike = SimpleNamespace(channels=ch, fs=50.0, units={"a": "deg/s", "b": "g"})
+    for got in (wv_matrix(log), wv_matrix(alike)):
+        assert got.fs == 50.0 and got.units == ("deg/s", "g") and got.channels == ("a", "b")
+        np.testing.assert_array_equal(got.values, ref.values)
+    # the diagonal is the WV of each channel
+    np.testing.assert_allclose(
+        ref.values[:, 1, 1], eg.wavelet_variance(ch["b"]).variance, rtol=1e-13
+    )
+    with pytest.raises(ValueError, match="no raw samples"):
+        wv_matrix(SimpleNamespace(channels={}, fs=1.0, source="summary.h5"))
+
+
+def test_import_engine_leaves_the_wccv_and_stream_modules_to_first_use():
+    """``engine.wv`` exports the WCCV and the streamed WV lazily (they need SciPy's special
+    functions); first use imports them and caches the attribute."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, engine, engine.wv as w\n"
+        "assert 'engine.wv.wccv' not in sys.modules and 'engine.wv.stream' not in sys.modules\n"
+        "f = w.wv_matrix\n"
+        "assert 'engine.wv.wccv' in sys.modules and w.__dict__['wv_matrix'] is f\n"
+        "assert engine.wv_matrix is f and 'wavelet_variance_stream' in dir(w)\n"
+        "try:\n    w.nope\nexcept AttributeError as e:\n    assert 'nope' in str(e)\n"
+        "else:\n    raise SystemExit('no AttributeError')\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

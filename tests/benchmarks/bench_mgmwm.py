@@ -46,7 +46,7 @@ import numpy as np
 from engine.fit import fit_gmwm
 from engine.inference import _map, fit_efficient
 from engine.mgmwm import MultiModel, fit_mgmwm
-from engine.wccv import wv_matrix
+from engine.wv import wv_matrix
 
 CHANNELS = ("gyro_1", "gyro_2", "gyro_3")
 WN_VAR = np.array([1.0, 1.5, 2.0])

@@ -34,7 +34,7 @@ import json, resource, sys, time
 sys.path.insert(0, {root!r})
 import numpy as np
 import engine as eg
-from engine.stream import wavelet_variance_stream
+from engine.wv import wavelet_variance_stream
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 mode, path, dataset, block = sys.argv[1], sys.argv[2], sys.argv[3] or None, int(sys.argv[4])
 t = time.perf_counter()

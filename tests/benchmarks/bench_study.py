@@ -19,7 +19,7 @@ import numpy as np
 from engine.allan import AllanVariance, avsm, avsm_auto, fit_armav, from_gmwm
 from engine.fit import fit_gmwm
 from engine.study import METHODS, run_slope_study, table1_model, typical_regions
-from engine.wavelet import wavelet_variance
+from engine.wv import wavelet_variance
 
 
 def step_costs(n: int, fs: float = 250.0) -> None:

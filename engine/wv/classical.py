@@ -1,4 +1,7 @@
-"""Haar MODWT wavelet variance (WV): classical and robust, with intervals.
+"""Haar MODWT wavelet variance (WV) with intervals: classical, or robust (biweight per level).
+
+The kernel (checks, cumulative sum, block sums) is :mod:`engine.wv._kernel`; the biweight
+scale estimator of the robust WV is :mod:`engine.wv.robust`.
 
 Conventions (see ``CONVENTIONS.md``): level ``j = 1..J``, scale ``tau_j = 2^j`` samples,
 ``M_j = N - 2^j + 1`` boundary-free coefficients,
@@ -14,30 +17,23 @@ Guerrier et al. (2020), the GMWM paper, section II.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-from ._blas import blas_threads
-from ._optim import chi2_isf
+from .._optim import chi2_isf
+from ._kernel import as_series, cumsum_demeaned, second_difference_sums
+from .robust import robust_scale_biweight
 
 __all__ = [
     "WaveletVariance",
     "wavelet_variance",
     "default_levels",
     "haar_coefficients",
-    "biweight_constant",
-    "robust_scale_biweight",
+    "eta3_interval",
+    "LevelScales",
 ]
-
-# Block length (samples) of the cache-blocked classical WV.  Every level of a block reads the
-# regions S[a-2^k : b-2^k], k = 0..J, which are shared between consecutive levels, so a block
-# of this size keeps all of them in the CPU cache.
-_BLOCK = 1 << 15
 
 
 def default_levels(n: int) -> int:
@@ -236,86 +232,9 @@ def eta3_interval(
     return lo, hi
 
 
-def _as_series(x: Any) -> np.ndarray:
-    a = np.asarray(x)
-    if a.dtype.kind not in "fiu" and a.dtype != bool:
-        raise TypeError(f"the series must be numeric, got dtype {a.dtype}")
-    a = np.ravel(a) if a.ndim > 1 and 1 in a.shape else a
-    if a.ndim != 1:
-        raise ValueError(f"the series must be one-dimensional, got shape {a.shape}")
-    if a.size < 4:
-        raise ValueError(f"the series has {a.size} samples; a wavelet variance needs at least 4")
-    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-        bad = np.flatnonzero(~np.isfinite(a))
-        raise ValueError(
-            f"the series contains {bad.size} NaN/Inf value(s), first at sample {bad[0]}; "
-            "remove or interpolate them first"
-        )
-    return a
-
-
-def _cumsum_demeaned(x: np.ndarray) -> np.ndarray:
-    """Cumulative sum of ``x - mean(x)`` in float64, with a leading 0 (length N + 1).
-
-    The mean is removed before summing (CONVENTIONS: a cumulative sum of a series with an
-    offset loses digits on long logs).  Two passes, one float64 array of extra memory.
-    """
-    s = np.empty(x.size + 1, dtype=np.float64)
-    s[0] = 0.0
-    np.subtract(x, np.mean(x, dtype=np.float64), out=s[1:], dtype=np.float64)
-    np.cumsum(s[1:], out=s[1:])
-    return s
-
-
-_DOT_CHUNK = 8192  # OpenBLAS computes a dot product of <= 10,000 elements in the caller
-
-
-def _chunked_sumsq(a: np.ndarray, b: np.ndarray) -> float:
-    """``a @ b`` in chunks small enough that a multi-threaded BLAS keeps them in this thread."""
-    total = 0.0
-    for i in range(0, a.size, _DOT_CHUNK):
-        total += float(np.dot(a[i : i + _DOT_CHUNK], b[i : i + _DOT_CHUNK]))
-    return total
-
-
-def sumsq_kernel() -> Callable[[np.ndarray, np.ndarray], float]:
-    """The dot product for sums of squares of long vectors: BLAS dot, whole when the BLAS pool
-    has one thread, otherwise in chunks that a multi-threaded OpenBLAS keeps in the calling
-    thread (split over its threads, this small product is slower, and 4-30x slower as soon as
-    anything else keeps a core busy; see engine._blas)."""
-    return np.dot if blas_threads() == 1 else _chunked_sumsq
-
-
 def _classical_sums(s: np.ndarray, n: int, levels: int) -> np.ndarray:
     """Sum over t of (S_t - 2 S_{t-m} + S_{t-2m})^2 for every level (m = 2^(j-1))."""
     return second_difference_sums(s, n, 1 << np.arange(levels))
-
-
-def second_difference_sums(s: np.ndarray, n: int, ms: np.ndarray) -> np.ndarray:
-    """``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2`` over ``t = 2m..n`` for increasing ``ms``.
-
-    ``s`` is the cumulative sum with a leading 0 (:func:`_cumsum_demeaned`). Loops over
-    cache-sized blocks of t with every m inside a block, so that the regions of ``s`` that
-    consecutive m share stay in cache; the WV's level sums (m = 2^(j-1)) and the Allan
-    variance's (any m) both use it.
-    """
-    sums = np.zeros(len(ms))
-    buf = np.empty(_BLOCK)
-    # the per-block sum of squares by BLAS dot (3x faster than einsum), see sumsq_kernel
-    sumsq = sumsq_kernel()
-    for a in range(2, n + 1, _BLOCK):
-        b = min(a + _BLOCK, n + 1)
-        for i, m in enumerate(ms):
-            m = int(m)
-            lo = max(a, 2 * m)
-            if lo >= b:
-                break  # larger m start even later
-            d = buf[: b - lo]
-            np.multiply(s[lo - m : b - m], -2.0, out=d)
-            d += s[lo:b]
-            d += s[lo - 2 * m : b - 2 * m]
-            sums[i] += sumsq(d, d)
-    return sums
 
 
 def haar_coefficients(x: Any, level: int) -> np.ndarray:
@@ -323,113 +242,12 @@ def haar_coefficients(x: Any, level: int) -> np.ndarray:
 
     The mean is removed first; the coefficients do not depend on it.
     """
-    a = _as_series(x)
+    a = as_series(x)
     m = 1 << (level - 1)
     if 2 * m > a.size:
         raise ValueError(f"level {level} needs at least {2 * m} samples, the series has {a.size}")
-    s = _cumsum_demeaned(a)
+    s = cumsum_demeaned(a)
     return (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
-
-
-@lru_cache(maxsize=64)
-def _biweight_moments(c: float) -> tuple[float, float, float]:
-    """E[g], E[z^2 g], E[g^2] for g(z) = psi(z)^2 = z^2 (1 - z^2/c^2)^4 1{|z|<=c}, Z ~ N(0,1)."""
-    from scipy import integrate
-
-    def g(z: float) -> float:
-        return z * z * (1 - z * z / (c * c)) ** 4
-
-    def phi(z: float) -> float:
-        return math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi)
-
-    e_g = 2 * integrate.quad(lambda z: g(z) * phi(z), 0, c, epsabs=1e-13)[0]
-    e_z2g = 2 * integrate.quad(lambda z: z * z * g(z) * phi(z), 0, c, epsabs=1e-13)[0]
-    e_g2 = 2 * integrate.quad(lambda z: g(z) ** 2 * phi(z), 0, c, epsabs=1e-13)[0]
-    return e_g, e_z2g, e_g2
-
-
-def _biweight_efficiency(c: float) -> float:
-    a, z2g, g2 = _biweight_moments(c)
-    m = z2g - a
-    q = g2 - a * a
-    return 0.5 * m * m / q
-
-
-@lru_cache(maxsize=64)
-def biweight_constant(eff: float = 0.6) -> float:
-    """Tukey biweight constant c whose scale M-estimator has Gaussian efficiency ``eff``.
-
-    The estimator solves ``mean(psi(W / sigma)^2) = E[psi(Z)^2]`` with the biweight
-    ``psi(r) = r (1 - r^2/c^2)^2`` on ``|r| <= c``; its efficiency relative to the sample
-    variance is ``0.5 M^2 / Q`` (Guerrier, Molinari & Victoria-Feser 2014, robust WV).
-    eff = 0.6 gives c of about 4.40.
-    """
-    from scipy import optimize
-
-    if not 0.0 < eff < 0.99:
-        raise ValueError(f"eff must be in (0, 0.99), got {eff}")
-    return float(optimize.brentq(lambda c: _biweight_efficiency(c) - eff, 0.5, 60.0, xtol=1e-10))
-
-
-def robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
-    """Robust (Tukey biweight M-estimator) variance of zero-mean coefficients ``w``.
-
-    Solves ``mean(psi(w / sigma)^2) = E[psi(Z)^2]`` for ``sigma^2``; Gaussian efficiency
-    ``eff`` relative to ``mean(w^2)``.
-    """
-    from scipy import optimize
-
-    c = biweight_constant(eff)
-    a_c = _biweight_moments(c)[0]
-    w = np.asarray(w, dtype=np.float64)
-    # start from the MAD (robust) and bracket the root on a log scale
-    mad = np.median(np.abs(w)) * 1.482602218505602
-    if mad <= 0:
-        mad = float(np.sqrt(np.mean(w * w)))
-    if mad <= 0:
-        return 0.0
-    w2 = w / mad
-    np.square(w2, out=w2)
-    c2 = c * c
-    r2 = np.empty_like(w2)
-    u = np.empty_like(w2)
-    sumsq = sumsq_kernel()
-
-    def f(log_s2: float) -> float:
-        # mean of r2 (1 - r2/c^2)^4 over r2 = w2 / s2 <= c^2, in preallocated buffers
-        # (squares instead of a power: this runs ~8 times per level on every coefficient)
-        np.multiply(w2, math.exp(-log_s2), out=r2)
-        r2i = r2[r2 <= c2]
-        ui = u[: r2i.size]
-        np.multiply(r2i, -1.0 / c2, out=ui)
-        ui += 1.0
-        np.square(ui, out=ui)
-        np.square(ui, out=ui)
-        return float(sumsq(r2i, ui)) / w.size - a_c
-
-    # f is negative for sigma -> 0 (every point outside c) and for sigma -> inf (psi -> 0) and
-    # positive in between; the consistent estimate is the upper root, where f decreases.
-    step = 0.5
-    f0 = f(0.0)
-    if f0 > 0:
-        lo, hi = 0.0, step
-        while f(hi) > 0:
-            lo, hi = hi, hi + step
-            if hi > 80:  # pragma: no cover - cannot happen for finite data
-                return float(np.mean(w * w))
-    else:
-        hi, lo, f_prev = 0.0, -step, f0
-        while True:
-            f_lo = f(lo)
-            if f_lo > 0:
-                break
-            if f_lo < f_prev or lo < -80:
-                # past the peak without a root (contamination beyond the breakdown point):
-                # take the closest value, as minimising (f)^2 would
-                return float(np.exp(lo + step) * mad * mad)
-            hi, lo, f_prev = lo, lo - step, f_lo
-    root = optimize.brentq(f, lo, hi, xtol=1e-12)
-    return float(np.exp(root) * mad * mad)
 
 
 def wavelet_variance(
@@ -472,7 +290,7 @@ def wavelet_variance(
     ``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2 / (4^j M_j)``, computed in cache-sized blocks:
     O(N J) flops, one float64 copy of the series as extra memory.
     """
-    a = _as_series(x)
+    a = as_series(x)
     n = a.size
     if not (np.isfinite(fs) and fs > 0):
         raise ValueError(f"fs must be a positive number of Hz, got {fs}")
@@ -488,7 +306,7 @@ def wavelet_variance(
         )
     if robust and not 0 < eff < 0.99:
         raise ValueError(f"eff must be in (0, 0.99), got {eff}")
-    s = _cumsum_demeaned(a)
+    s = cumsum_demeaned(a)
     lv = np.arange(1, levels + 1)
     tau = 2**lv
     m_j = n - tau + 1

@@ -1,7 +1,7 @@
 """Saving and restoring an analysis session: data reference, channels, models, WVs and fits.
 
 The app (or a script) calls :func:`save_session` with what it holds and gets one JSON file;
-:func:`load_session` gives it back as objects (:class:`~engine.wavelet.WaveletVariance`,
+:func:`load_session` gives it back as objects (:class:`~engine.wv.WaveletVariance`,
 :class:`~engine.fit.GMWMResult`, :class:`~engine.inference.ParamInterval`) without
 recomputing anything, plus a check that the data file has not changed since
 (:func:`file_fingerprint`). Floats are written with ``repr`` (exact round trip); NaN is
@@ -29,10 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from ._jsonutil import json_ready
-from .fit import FitError, GMWMResult, weight_matrix
-from .model import parse_model
-from .wavelet import WaveletVariance
+from .._jsonutil import json_ready
+from .._version import __version__
+from ..fit import FitError, GMWMResult, weight_matrix
+from ..models import parse_model
+from ..wv import WaveletVariance
 
 __all__ = [
     "wv_to_dict",
@@ -215,7 +216,7 @@ class Session:
 
     def reload_log(self, *, check: bool = True) -> Any:
         """``load_log(data_path, **load)``; with ``check``, refuse a changed file."""
-        from .io import load_log
+        from .load import load_log
 
         if check and (why := self.data_changed()):
             raise SessionError(
@@ -259,8 +260,6 @@ def session_to_json(
     SessionError
         Unknown ``load`` keys, or ``app`` state that is not JSON-serialisable.
     """
-    from . import __version__
-
     load = dict(load or {})
     bad = [k for k in load if k not in _LOAD_KEYS]
     if bad:
@@ -336,7 +335,7 @@ def load_session(path: str | os.PathLike[str]) -> Session:
 
 def session_from_json(text: str | bytes, *, source: str = "<upload>") -> Session:
     """A :class:`Session` from JSON text (e.g. an uploaded file); see :func:`load_session`."""
-    from .inference import ParamInterval
+    from ..inference import ParamInterval
 
     path = source
     try:

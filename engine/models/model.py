@@ -1,4 +1,9 @@
-"""Composite latent models: ``WN() + RW() + 2 * GM()``, parsing ``"2*GM+WN+RW"``, validation.
+"""Latent processes and their sums: the :class:`Process` base class, :class:`Model`, parsing.
+
+:class:`Process` is the interface of one latent process (values, bounds, the unconstrained
+space, the fitting basis, WV, simulation) and its algebra: ``WN() + RW() + 2 * GM()`` builds a
+:class:`Model`. The concrete processes (:mod:`engine.models.processes`) register themselves
+in :data:`PROCESS_TYPES`, which :func:`parse_model` reads for ``"2*GM+WN+RW"``.
 
 A :class:`Model` is an immutable, flat tuple of processes kept in a canonical order
 (GM, AR1, QN, WN, RW, DR), so that ``"WN+RW+2*GM"`` and ``"2*GM+RW+WN"`` are the same model.
@@ -8,20 +13,219 @@ processes of one kind, from 1, and appears only when there are several).
 
 from __future__ import annotations
 
+import math
 import re
 from collections import Counter
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
 
 import numpy as np
 
-from .processes import AR1, DR, GM, PROCESS_TYPES, QN, RW, WN, Process
+__all__ = [
+    "Process",
+    "Model",
+    "parse_model",
+    "ModelError",
+    "PROCESS_TYPES",
+    "TO_UNCONSTRAINED",
+    "FROM_UNCONSTRAINED",
+]
 
-__all__ = ["Model", "parse_model", "ModelError"]
-
-_ORDER = {code: i for i, code in enumerate(PROCESS_TYPES)}  # GM, AR1, QN, WN, RW, DR
+# code -> process class, in the canonical order (GM, AR1, QN, WN, RW, DR); every concrete
+# process registers itself here when its class is created (engine.models.processes)
+PROCESS_TYPES: dict[str, type[Process]] = {}
 _UNIQUE = ("WN", "QN", "RW", "DR")
 _MAX_REPEAT = 20  # more AR1/GM terms than this cannot be identified from any real log
+
+
+@dataclass(frozen=True)
+class Process:
+    """Base class of a latent process. Subclasses set ``code``, ``param_names``, ``order``.
+
+    A subclass with a ``code`` registers itself in :data:`PROCESS_TYPES`, which is how
+    :func:`parse_model` finds it.
+    """
+
+    code: ClassVar[str] = ""
+    param_names: ClassVar[tuple[str, ...]] = ()
+    # the non-linear parameter's name (AR1/GM), else None
+    nonlinear: ClassVar[str | None] = None
+    description: ClassVar[str] = ""
+    # rank in the canonical order of a model's processes (GM, AR1, QN, WN, RW, DR)
+    order: ClassVar[int] = 0
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Register a concrete process (one with a ``code``) in :data:`PROCESS_TYPES`."""
+        super().__init_subclass__(**kwargs)
+        if cls.code:
+            PROCESS_TYPES[cls.code] = cls
+            ranked = sorted(PROCESS_TYPES.values(), key=lambda c: c.order)
+            PROCESS_TYPES.clear()
+            PROCESS_TYPES.update((c.code, c) for c in ranked)
+
+    # ---- values -------------------------------------------------------------------------
+    @property
+    def values(self) -> tuple[float | None, ...]:
+        """Parameter values in ``param_names`` order (None where unknown)."""
+        return tuple(getattr(self, f.name) for f in fields(self))
+
+    @property
+    def is_set(self) -> bool:
+        """True when every parameter has a value."""
+        return all(v is not None for v in self.values)
+
+    def with_values(self, *args: float | None, **kwargs: float | None) -> Process:
+        """A copy with new parameter values (positional in ``param_names`` order, or named)."""
+        vals = dict(zip(self.param_names, self.values, strict=True))
+        if len(args) > len(self.param_names):
+            raise ValueError(
+                f"{self.code} takes {len(self.param_names)} parameters: "
+                f"{', '.join(self.param_names)}"
+            )
+        for name, v in zip(self.param_names, args, strict=False):
+            vals[name] = v
+        for name, v in kwargs.items():
+            if name not in vals:
+                raise ValueError(
+                    f"{self.code} has no parameter {name!r}; "
+                    f"its parameters are {', '.join(self.param_names)}"
+                )
+            vals[name] = v
+        return type(self)(**vals)
+
+    def cleared(self) -> Process:
+        """The same process with every value unknown."""
+        return type(self)()
+
+    def _require(self) -> tuple[float, ...]:
+        if not self.is_set:
+            missing = [n for n, v in zip(self.param_names, self.values, strict=True) if v is None]
+            raise ValueError(
+                f"{self.code} has no value for {', '.join(missing)}; "
+                f"give it, e.g. {self.code}({missing[0]}=...)"
+            )
+        return tuple(float(v) for v in self.values)  # type: ignore[arg-type]
+
+    def __post_init__(self) -> None:
+        for name, v in zip(self.param_names, self.values, strict=True):
+            if v is None:
+                continue
+            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+                raise ValueError(f"{self.code}.{name} must be a finite number, got {v!r}")
+            self._check_value(name, float(v))
+
+    def _check_value(self, name: str, v: float) -> None:
+        if v < 0:
+            raise ValueError(f"{self.code}.{name} must be >= 0, got {v}")
+
+    # ---- bounds and the unconstrained space ------------------------------------------------
+    def bounds(self, fs: float = 1.0) -> dict[str, tuple[float, float]]:
+        """Admissible range of each parameter (open where the transform is)."""
+        return {n: (0.0, math.inf) for n in self.param_names}
+
+    def to_unconstrained(self, fs: float = 1.0) -> np.ndarray:
+        """Values mapped to R^k: log of variances and rates, atanh of phi, omega as is."""
+        vals = self._require()
+        return np.array(
+            [TO_UNCONSTRAINED[n](v) for n, v in zip(self.param_names, vals, strict=True)]
+        )
+
+    def from_unconstrained(self, u: np.ndarray, fs: float = 1.0) -> Process:
+        """Inverse of :meth:`to_unconstrained`: a process with the mapped-back values."""
+        u = np.asarray(u, dtype=float)
+        if u.shape != (len(self.param_names),):
+            raise ValueError(
+                f"{self.code} takes {len(self.param_names)} unconstrained values, "
+                f"got shape {u.shape}"
+            )
+        return type(self)(
+            *(FROM_UNCONSTRAINED[n](float(x)) for n, x in zip(self.param_names, u, strict=True))
+        )
+
+    # ---- fitting interface ----------------------------------------------------------------
+    def basis(self, tau: np.ndarray, fs: float, nl: float | None = None) -> np.ndarray:
+        """WV per unit of the linear coefficient, at scales ``tau`` (samples)."""
+        raise NotImplementedError
+
+    def linear_coef(self) -> float:
+        """The linear coefficient ``h`` of the current values (``basis * h`` is the WV)."""
+        raise NotImplementedError
+
+    def from_fit(self, h: float, nl: float | None, fs: float) -> Process:
+        """Process with values from a linear coefficient and a non-linear value."""
+        raise NotImplementedError
+
+    def nl_value(self, fs: float) -> float | None:
+        """The non-linear value in the fitter's space (correlation time in samples)."""
+        return None
+
+    # ---- model-implied WV and simulation ------------------------------------------------------
+    def wv(self, tau: np.ndarray, fs: float = 1.0) -> np.ndarray:
+        """Implied Haar WV at scales ``tau`` (samples)."""
+        self._require()
+        return self.linear_coef() * self.basis(np.asarray(tau, float), fs, self.nl_value(fs))
+
+    def simulate(
+        self, n: int, rng: np.random.Generator | int | None = None, fs: float = 1.0
+    ) -> np.ndarray:
+        """Simulate ``n`` samples (AR1/GM start from the stationary distribution)."""
+        raise NotImplementedError
+
+    def autocovariance(self, lags: np.ndarray, fs: float = 1.0) -> np.ndarray:
+        """Autocovariance at integer lags (stationary processes only)."""
+        raise TypeError(f"{self.code} is not stationary: it has no autocovariance function")
+
+    # ---- algebra --------------------------------------------------------------------------
+    def __add__(self, other: Any) -> Model:
+        return Model((self,)) + other
+
+    def __radd__(self, other: Any) -> Model:
+        if other == 0:
+            return Model((self,))
+        return Model.coerce(other) + Model((self,))
+
+    def __mul__(self, k: int) -> Model:
+        return Model((self,)) * k
+
+    __rmul__ = __mul__
+
+    def spec(self) -> str:
+        """``CODE`` or ``CODE(name=value, ...)``."""
+        if all(v is None for v in self.values):
+            return self.code
+        parts = [
+            f"{n}={v!r}"
+            for n, v in zip(self.param_names, self.values, strict=True)
+            if v is not None
+        ]
+        return f"{self.code}({', '.join(parts)})"
+
+    def __repr__(self) -> str:
+        if all(v is None for v in self.values):
+            return f"{self.code}()"
+        return self.spec()
+
+
+# Transforms to the unconstrained space, by parameter name: variances and rates by log, the AR1
+# coefficient by atanh (|phi| < 1), the drift slope (either sign) unchanged.
+TO_UNCONSTRAINED = {
+    "sigma2": math.log,
+    "q2": math.log,
+    "gamma2": math.log,
+    "sigma2_gm": math.log,
+    "beta": math.log,
+    "phi": math.atanh,
+    "omega": float,
+}
+FROM_UNCONSTRAINED = {
+    "sigma2": math.exp,
+    "q2": math.exp,
+    "gamma2": math.exp,
+    "sigma2_gm": math.exp,
+    "beta": math.exp,
+    "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
+    "omega": float,
+}
 
 
 class ModelError(ValueError):
@@ -39,7 +243,7 @@ class Model:
     processes: tuple[Process, ...] = ()
 
     def __post_init__(self) -> None:
-        procs = tuple(sorted(self.processes, key=lambda p: _ORDER[p.code]))
+        procs = tuple(sorted(self.processes, key=lambda p: p.order))
         object.__setattr__(self, "processes", procs)
 
     # ---- algebra ----------------------------------------------------------------------
@@ -328,7 +532,3 @@ def parse_model(spec: str | Model | Process) -> Model:
                 raise ModelError(str(e)) from None
         procs.extend([p] * k)
     return Model(tuple(procs))
-
-
-# Names exported so that repr(model) evaluates back with ``from engine import *``.
-_REPR_NAMESPACE = {"WN": WN, "QN": QN, "RW": RW, "DR": DR, "AR1": AR1, "GM": GM, "Model": Model}

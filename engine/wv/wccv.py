@@ -60,15 +60,8 @@ from typing import Any
 import numpy as np
 from scipy import special
 
-from .io import ImuLog
-from .wavelet import (
-    LevelScales,
-    WaveletVariance,
-    _as_series,
-    _cumsum_demeaned,
-    default_levels,
-    eta3_interval,
-)
+from ._kernel import as_series, cumsum_demeaned
+from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval
 
 __all__ = [
     "WaveletCrossCovariance",
@@ -510,7 +503,7 @@ def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> d
     k = len(series)
     s = np.empty((k, n + 1))
     for p, x in enumerate(series):
-        s[p] = _cumsum_demeaned(x)
+        s[p] = cumsum_demeaned(x)
     lv = np.arange(1, levels + 1)
     tau = 2**lv
     m_j = n - tau + 1
@@ -618,8 +611,8 @@ def wavelet_cross_covariance(
     ValueError
         Series of different lengths, too short, non-finite, or bad settings.
     """
-    a = _as_series(x)
-    b = _as_series(y)
+    a = as_series(x)
+    b = as_series(y)
     if a.size != b.size:
         raise ValueError(
             f"the two series have different lengths ({a.size} and {b.size} "
@@ -649,6 +642,11 @@ def wavelet_cross_covariance(
     )
 
 
+def _is_log(data: Any) -> bool:
+    """An ImuLog or alike (a ``channels`` mapping and ``fs``): numerics never import io."""
+    return isinstance(getattr(data, "channels", None), Mapping) and hasattr(data, "fs")
+
+
 def _gather(
     data: Any,
     channels: Sequence[str | int] | None,
@@ -657,7 +655,7 @@ def _gather(
 ) -> tuple[list[str], list[np.ndarray], float, list[str]]:
     """Channels, series, fs and units from an (N, k) array, a mapping or an ImuLog."""
     log_units: Mapping[str, str] = {}
-    if isinstance(data, ImuLog):
+    if _is_log(data):
         if not data.channels:
             raise ValueError(
                 f"{getattr(data, 'source', 'the log')} holds no raw samples "
@@ -709,7 +707,7 @@ def _gather(
     series = []
     for c in chosen:
         try:
-            series.append(_as_series(mapping[c]))
+            series.append(as_series(mapping[c]))
         except (ValueError, TypeError) as e:
             raise type(e)(f"channel {c!r}: {e}") from None
     sizes = {c: a.size for c, a in zip(chosen, series, strict=True)}

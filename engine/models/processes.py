@@ -16,23 +16,35 @@ stochastic processes", JASA; CONVENTIONS.md, "Latent processes and their Haar WV
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any, ClassVar
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .model import Model
+from .model import Process
 
-__all__ = ["Process", "WN", "QN", "RW", "DR", "AR1", "GM", "PROCESS_TYPES", "ar1_wv"]
+__all__ = ["WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv", "ar1_wv_pos", "TC_MIN", "TC_MAX_FACTOR"]
 
 # Range of the correlation time (in samples) of AR1/GM processes that the fitter explores.
 TC_MIN = 1e-2
 TC_MAX_FACTOR = 1e4  # times the series length
 
 
-def _ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
-    """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path)."""
+def ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
+    """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path).
+
+    Parameters
+    ----------
+    t : ndarray of float, shape (J,)
+        Scales in samples, increasing (the series branch is tested on ``t[0]``).
+    phi : float
+        Autoregressive coefficient, ``0 < phi < 1``.
+
+    Returns
+    -------
+    ndarray, shape (J,)
+        The WV per unit innovation variance (a new array).
+    """
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
     e_1 = math.expm1(-x)
@@ -77,7 +89,7 @@ def ar1_wv(
         raise ValueError(f"AR1 needs |phi| < 1, got phi={phi}")
     scalar = ph.ndim == 0
     if scalar and ph > 0:
-        return _ar1_wv_pos(tau, float(ph)) * float(sigma2)
+        return ar1_wv_pos(tau, float(ph)) * float(sigma2)
     ph = np.atleast_1d(ph)[:, None]
     t = tau[None, :]
     pos = ph > 0
@@ -102,185 +114,6 @@ def ar1_wv(
     return out[0] if scalar else out
 
 
-@dataclass(frozen=True)
-class Process:
-    """Base class of a latent process. Subclasses set ``code``, ``param_names``, ``units``."""
-
-    code: ClassVar[str] = ""
-    param_names: ClassVar[tuple[str, ...]] = ()
-    # the non-linear parameter's name (AR1/GM), else None
-    nonlinear: ClassVar[str | None] = None
-    description: ClassVar[str] = ""
-
-    # ---- values -------------------------------------------------------------------------
-    @property
-    def values(self) -> tuple[float | None, ...]:
-        """Parameter values in ``param_names`` order (None where unknown)."""
-        return tuple(getattr(self, f.name) for f in fields(self))
-
-    @property
-    def is_set(self) -> bool:
-        """True when every parameter has a value."""
-        return all(v is not None for v in self.values)
-
-    def with_values(self, *args: float | None, **kwargs: float | None) -> Process:
-        """A copy with new parameter values (positional in ``param_names`` order, or named)."""
-        vals = dict(zip(self.param_names, self.values, strict=True))
-        if len(args) > len(self.param_names):
-            raise ValueError(
-                f"{self.code} takes {len(self.param_names)} parameters: "
-                f"{', '.join(self.param_names)}"
-            )
-        for name, v in zip(self.param_names, args, strict=False):
-            vals[name] = v
-        for name, v in kwargs.items():
-            if name not in vals:
-                raise ValueError(
-                    f"{self.code} has no parameter {name!r}; "
-                    f"its parameters are {', '.join(self.param_names)}"
-                )
-            vals[name] = v
-        return type(self)(**vals)
-
-    def cleared(self) -> Process:
-        """The same process with every value unknown."""
-        return type(self)()
-
-    def _require(self) -> tuple[float, ...]:
-        if not self.is_set:
-            missing = [n for n, v in zip(self.param_names, self.values, strict=True) if v is None]
-            raise ValueError(
-                f"{self.code} has no value for {', '.join(missing)}; "
-                f"give it, e.g. {self.code}({missing[0]}=...)"
-            )
-        return tuple(float(v) for v in self.values)  # type: ignore[arg-type]
-
-    def __post_init__(self) -> None:
-        for name, v in zip(self.param_names, self.values, strict=True):
-            if v is None:
-                continue
-            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
-                raise ValueError(f"{self.code}.{name} must be a finite number, got {v!r}")
-            self._check_value(name, float(v))
-
-    def _check_value(self, name: str, v: float) -> None:
-        if v < 0:
-            raise ValueError(f"{self.code}.{name} must be >= 0, got {v}")
-
-    # ---- bounds and the unconstrained space ------------------------------------------------
-    def bounds(self, fs: float = 1.0) -> dict[str, tuple[float, float]]:
-        """Admissible range of each parameter (open where the transform is)."""
-        return {n: (0.0, math.inf) for n in self.param_names}
-
-    def to_unconstrained(self, fs: float = 1.0) -> np.ndarray:
-        """Values mapped to R^k: log of variances and rates, atanh of phi, omega as is."""
-        vals = self._require()
-        return np.array([_FORWARD[n](v) for n, v in zip(self.param_names, vals, strict=True)])
-
-    def from_unconstrained(self, u: np.ndarray, fs: float = 1.0) -> Process:
-        """Inverse of :meth:`to_unconstrained`: a process with the mapped-back values."""
-        u = np.asarray(u, dtype=float)
-        if u.shape != (len(self.param_names),):
-            raise ValueError(
-                f"{self.code} takes {len(self.param_names)} unconstrained values, "
-                f"got shape {u.shape}"
-            )
-        return type(self)(
-            *(_BACKWARD[n](float(x)) for n, x in zip(self.param_names, u, strict=True))
-        )
-
-    # ---- fitting interface ----------------------------------------------------------------
-    def basis(self, tau: np.ndarray, fs: float, nl: float | None = None) -> np.ndarray:
-        """WV per unit of the linear coefficient, at scales ``tau`` (samples)."""
-        raise NotImplementedError
-
-    def linear_coef(self) -> float:
-        """The linear coefficient ``h`` of the current values (``basis * h`` is the WV)."""
-        raise NotImplementedError
-
-    def from_fit(self, h: float, nl: float | None, fs: float) -> Process:
-        """Process with values from a linear coefficient and a non-linear value."""
-        raise NotImplementedError
-
-    def nl_value(self, fs: float) -> float | None:
-        """The non-linear value in the fitter's space (correlation time in samples)."""
-        return None
-
-    # ---- model-implied WV and simulation ------------------------------------------------------
-    def wv(self, tau: np.ndarray, fs: float = 1.0) -> np.ndarray:
-        """Implied Haar WV at scales ``tau`` (samples)."""
-        self._require()
-        return self.linear_coef() * self.basis(np.asarray(tau, float), fs, self.nl_value(fs))
-
-    def simulate(
-        self, n: int, rng: np.random.Generator | int | None = None, fs: float = 1.0
-    ) -> np.ndarray:
-        """Simulate ``n`` samples (AR1/GM start from the stationary distribution)."""
-        raise NotImplementedError
-
-    def autocovariance(self, lags: np.ndarray, fs: float = 1.0) -> np.ndarray:
-        """Autocovariance at integer lags (stationary processes only)."""
-        raise TypeError(f"{self.code} is not stationary: it has no autocovariance function")
-
-    # ---- algebra --------------------------------------------------------------------------
-    def __add__(self, other: Any) -> Model:
-        from .model import Model
-
-        return Model((self,)) + other
-
-    def __radd__(self, other: Any) -> Model:
-        from .model import Model
-
-        if other == 0:
-            return Model((self,))
-        return Model.coerce(other) + Model((self,))
-
-    def __mul__(self, k: int) -> Model:
-        from .model import Model
-
-        return Model((self,)) * k
-
-    __rmul__ = __mul__
-
-    def spec(self) -> str:
-        """``CODE`` or ``CODE(name=value, ...)``."""
-        if all(v is None for v in self.values):
-            return self.code
-        parts = [
-            f"{n}={v!r}"
-            for n, v in zip(self.param_names, self.values, strict=True)
-            if v is not None
-        ]
-        return f"{self.code}({', '.join(parts)})"
-
-    def __repr__(self) -> str:
-        if all(v is None for v in self.values):
-            return f"{self.code}()"
-        return self.spec()
-
-
-# Transforms to the unconstrained space, by parameter name: variances and rates by log, the AR1
-# coefficient by atanh (|phi| < 1), the drift slope (either sign) unchanged.
-_FORWARD = {
-    "sigma2": math.log,
-    "q2": math.log,
-    "gamma2": math.log,
-    "sigma2_gm": math.log,
-    "beta": math.log,
-    "phi": math.atanh,
-    "omega": float,
-}
-_BACKWARD = {
-    "sigma2": math.exp,
-    "q2": math.exp,
-    "gamma2": math.exp,
-    "sigma2_gm": math.exp,
-    "beta": math.exp,
-    "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
-    "omega": float,
-}
-
-
 def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
 
@@ -291,6 +124,7 @@ class WN(Process):
 
     sigma2: float | None = None
     code: ClassVar[str] = "WN"
+    order: ClassVar[int] = 3
     param_names: ClassVar[tuple[str, ...]] = ("sigma2",)
     description: ClassVar[str] = "white noise"
 
@@ -318,6 +152,7 @@ class QN(Process):
 
     q2: float | None = None
     code: ClassVar[str] = "QN"
+    order: ClassVar[int] = 2
     param_names: ClassVar[tuple[str, ...]] = ("q2",)
     description: ClassVar[str] = "quantization noise"
 
@@ -347,6 +182,7 @@ class RW(Process):
 
     gamma2: float | None = None
     code: ClassVar[str] = "RW"
+    order: ClassVar[int] = 4
     param_names: ClassVar[tuple[str, ...]] = ("gamma2",)
     description: ClassVar[str] = "random walk"
 
@@ -370,6 +206,7 @@ class DR(Process):
 
     omega: float | None = None
     code: ClassVar[str] = "DR"
+    order: ClassVar[int] = 5
     param_names: ClassVar[tuple[str, ...]] = ("omega",)
     description: ClassVar[str] = "drift (rate ramp)"
 
@@ -410,6 +247,7 @@ class AR1(Process):
     phi: float | None = None
     sigma2: float | None = None
     code: ClassVar[str] = "AR1"
+    order: ClassVar[int] = 1
     param_names: ClassVar[tuple[str, ...]] = ("phi", "sigma2")
     nonlinear: ClassVar[str | None] = "phi"
     description: ClassVar[str] = "first-order autoregression"
@@ -456,6 +294,7 @@ class GM(Process):
     beta: float | None = None
     sigma2_gm: float | None = None
     code: ClassVar[str] = "GM"
+    order: ClassVar[int] = 0
     param_names: ClassVar[tuple[str, ...]] = ("beta", "sigma2_gm")
     nonlinear: ClassVar[str | None] = "beta"
     description: ClassVar[str] = "Gauss-Markov"
@@ -491,6 +330,3 @@ class GM(Process):
 
     def autocovariance(self, lags, fs=1.0):
         return self.as_ar1(fs).autocovariance(lags)
-
-
-PROCESS_TYPES: dict[str, type[Process]] = {p.code: p for p in (GM, AR1, QN, WN, RW, DR)}

@@ -1,7 +1,7 @@
 """Wavelet variance of logs larger than memory: NPY and HDF5 streamed in blocks.
 
 :func:`wavelet_variance_stream` gives the classical Haar WV of
-:func:`engine.wavelet.wavelet_variance` (same numbers to about 1e-14 relative; the cumulative
+:func:`engine.wv.wavelet_variance` (same numbers to about 1e-14 relative; the cumulative
 sum is bitwise the same up to the last digits of the mean) while holding only a few blocks in
 memory, whatever the length of the log.
 
@@ -52,12 +52,13 @@ from typing import Any
 
 import numpy as np
 
-from .wavelet import WaveletVariance, default_levels, eta3_interval, sumsq_kernel
+from ._kernel import sumsq_kernel
+from .classical import WaveletVariance, default_levels, eta3_interval
 
 __all__ = ["wavelet_variance_stream", "open_series", "SeriesSource"]
 
 DEFAULT_BLOCK = 1 << 19
-_SUB = 1 << 15  # cache-sized sub-block for the small levels (as in engine.wavelet)
+_SUB = 1 << 15  # cache-sized sub-block for the small levels (as in engine.wv._kernel)
 _FS_KEYS = ("fs_hz", "fs", "sample_rate", "sampling_rate")
 
 

@@ -6,7 +6,7 @@ channels: ``gyro_x, gyro_y, gyro_z`` from ``angular_velocity`` (rad/s, REP 103/1
 ``accel_x, accel_y, accel_z`` from ``linear_acceleration`` (m/s^2), with the message header
 stamps (sensor time) as the time column; when every header stamp is zero (drivers that do not
 fill it) the bag's receive times are used instead, with a note. :func:`engine.io.load_log`
-then checks the stamps for gaps, duplicates and jitter (:mod:`engine.timecheck`) like any
+then checks the stamps for gaps, duplicates and jitter (:mod:`engine.io.timecheck`) like any
 time column.
 
 Decoding: messages are decoded in chunks straight from their serialized bytes with NumPy
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .io import LoadError
+from .log import LoadError
 
 __all__ = ["ImuBag", "read_imu_bag", "imu_topics", "write_imu_bag", "IMU_CHANNELS"]
 

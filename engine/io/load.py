@@ -1,0 +1,200 @@
+"""Loading static IMU logs: text (CSV/TSV/whitespace), NPY/NPZ, HDF5, ROS bags.
+
+:func:`load_log` returns an :class:`ImuLog`: raw channels (1-D arrays) with their sampling
+frequency and units, or, for the wavelet-variance summary files of ``shared/data/derived``,
+one precomputed :class:`~engine.wv.WaveletVariance` per channel. Every failure raises
+:class:`LoadError`, whose message names the file, the column or dataset, what is wrong and
+how to fix it (library errors on damaged files are converted too).
+
+Time columns (and ROS message stamps) are checked for gaps, duplicates and jitter
+(:mod:`engine.io.timecheck`); ``segment=`` chooses between stopping with a report (default),
+the longest clean segment, or keeping every sample with a note. ``scale=`` turns raw integer
+counts into units; float32 samples stay float32. ROS 1/2 bags with ``sensor_msgs/Imu`` are
+read through :mod:`engine.io.rosbag` (the pure-Python ``rosbags`` package).
+
+:func:`load_log` sniffs the format and calls one reader (:mod:`engine.io.text`,
+:mod:`engine.io.npy`, :mod:`engine.io.hdf5`, :mod:`engine.io.rosbag`); the readers share
+the column checks of :mod:`engine.io._assemble`. :func:`~engine.io.save_log` is in
+:mod:`engine.io.save`.
+
+Sample indices in messages are 0-based; line numbers are 1-based, as in an editor.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zipfile
+import zlib
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from ._assemble import LoadOptions, check_fs, finish_log
+from .hdf5 import H5_EXT, read_h5
+from .log import ImuLog, LoadError
+from .npy import read_npy, read_npz
+from .text import read_text
+
+__all__ = ["load_log"]
+
+_MAGIC = {
+    b"\x89HDF\r\n\x1a\n": "hdf5",
+    b"\x93NUMPY": "npy",
+    b"PK\x03\x04": "npz",
+    b"#ROSBAG V2.0": "bag",
+    b"\x89MCAP0\r\n": "bag",
+    b"SQLite format 3\x00": "bag",
+}
+
+
+def load_log(
+    path: str | os.PathLike[str],
+    *,
+    channel: str | int | None = None,
+    fs: float | None = None,
+    segment: str | tuple[int, int] | None = None,
+    scale: float | Mapping[str, float] | None = None,
+    units: str | Mapping[str, str] | None = None,
+    topic: str | None = None,
+) -> ImuLog:
+    """Load a static IMU log (or a wavelet-variance summary file).
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV/TSV/whitespace text (``.csv .tsv .txt .dat`` or any unknown extension), ``.npy``,
+        ``.npz``, HDF5 (``.h5 .hdf5``), or a ROS bag with ``sensor_msgs/Imu`` messages: ROS 1
+        ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``. The
+        content's magic bytes win over the extension.
+    channel : str or int, optional
+        Keep only this channel (name, or index into :attr:`ImuLog.names`).
+    fs : float, optional
+        Sampling frequency in Hz; overrides the file (``fs_source == "user"``). The time
+        column, if any, is still checked and its report kept (``segment`` then defaults to
+        ``"report"``).
+    segment : {"stop", "longest", "report"} or (start, stop), optional
+        What to do when the time column has gaps, duplicate or backward stamps (see
+        :mod:`engine.io.timecheck`): ``"stop"`` (the default without ``fs``) raises a
+        :class:`LoadError` saying what was found, where, and how to choose; ``"longest"``
+        keeps the longest clean segment; ``"report"`` keeps every sample as if uniformly
+        spaced; ``(start, stop)`` keeps those samples (0-based, stop excluded), which must be
+        clean (without a time column it simply selects a sample range). Samples are never
+        joined across a break without a note in ``meta["notes"]``.
+        The report is in ``meta["time_report"]`` (a dict, see ``TimeReport.to_dict``), the
+        kept range in ``meta["segment"]``.
+    scale : float or mapping of str to float, optional
+        Scale factor (units per count) for raw integer counts or scaled floats, for every
+        channel or per channel (``{"gyro_x": 0.05}``): samples become ``float64(x) * scale``
+        (exact for integer counts: one correctly rounded product). ``meta["scale"]`` records it.
+    units : str or mapping of str to str, optional
+        Signal unit of every channel, or per channel; overrides the file (e.g. after scaling
+        counts: ``scale=0.05, units="deg/s"``).
+    topic : str, optional
+        ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several.
+
+    Returns
+    -------
+    ImuLog
+        Raw channels with ``fs`` and units (float64; float32 files stay float32 unless
+        scaled), or ``wv`` for summary files.
+
+    Raises
+    ------
+    LoadError
+        Missing/empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
+        fewer than 4 samples, unknown channel, invalid ``fs`` or ``scale``, a time column
+        with gaps under ``segment="stop"``.
+    """
+    src = str(path)
+    p = Path(path)
+    fs_user = None if fs is None else check_fs(fs, src, "fs", "pass fs in Hz, e.g. fs=100")
+    opts = LoadOptions(fs_user=fs_user, segment=segment, scale=scale, units=units, topic=topic)
+    if not p.exists():
+        raise LoadError(f"no such file: '{src}' (check the path)")
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file():
+            return _guarded(_read_bag, p, src, channel, opts, "bag")
+        raise LoadError(
+            f"'{src}' is a directory, not a log file: pass the path of a file "
+            "(or of a ROS 2 bag directory with a metadata.yaml)"
+        )
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(16)
+    except OSError as exc:
+        raise LoadError(f"cannot read file '{src}' ({exc.strerror}): check permissions") from exc
+    if not head:
+        raise LoadError(f"file '{src}' is empty (0 bytes): check that the logger wrote data")
+    fmt = next((v for k, v in _MAGIC.items() if head.startswith(k)), None)
+    ext = p.suffix.lower()
+    fmt = fmt or (
+        "hdf5"
+        if ext in H5_EXT
+        else ext[1:]
+        if ext in (".npy", ".npz")
+        else "bag"
+        if ext in (".bag", ".db3", ".mcap")
+        else "text"
+    )
+    reader = {
+        "hdf5": read_h5,
+        "npy": read_npy,
+        "npz": read_npz,
+        "text": read_text,
+        "bag": _read_bag,
+    }[fmt]
+    return _guarded(reader, p, src, channel, opts, fmt)
+
+
+_CORRUPT = (
+    OSError,
+    RuntimeError,
+    KeyError,
+    IndexError,
+    TypeError,
+    ValueError,
+    AttributeError,
+    EOFError,
+    OverflowError,
+    UnicodeError,
+    zipfile.BadZipFile,
+    zlib.error,
+    struct.error,
+)
+
+
+def _guarded(
+    reader: Callable[..., ImuLog], p: Path, src: str, channel: Any, opts: LoadOptions, fmt: str
+) -> ImuLog:
+    """Run a reader; a library error on damaged content becomes a LoadError (with its type, so
+    that the cause stays visible)."""
+    try:
+        return reader(p, src, channel, opts)
+    except LoadError:
+        raise
+    except _CORRUPT as exc:
+        what = {"text": "text", "npy": ".npy", "npz": ".npz", "hdf5": "HDF5", "bag": "ROS bag"}
+        raise LoadError(
+            f"file '{src}' could not be read as {what.get(fmt, fmt)} "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}): it may be "
+            "truncated or corrupt; check it or export it again"
+        ) from exc
+
+
+def _read_bag(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+    """ROS 1/2 bag with sensor_msgs/Imu messages (see :mod:`engine.io.rosbag`)."""
+    from .rosbag import read_imu_bag
+
+    bag = read_imu_bag(path, topic=opts.topic, src=src)
+    return finish_log(
+        src,
+        bag.channels,
+        bag.units,
+        fmt=bag.format,
+        channel=channel,
+        opts=opts,
+        time=(bag.stamp_source, bag.stamps_ns, (1e9, True)),
+        meta=bag.meta,
+        notes=list(bag.notes),
+    )

@@ -1,0 +1,109 @@
+"""The loaded log: :class:`ImuLog`, :class:`LoadError` and channel selection.
+
+Every reader of :mod:`engine.io` (the ROS-bag reader included) builds an :class:`ImuLog` and
+raises :class:`LoadError`; they live here, apart from the readers, so that no reader imports
+another. :func:`pick_channel` resolves a channel given by name, index or digit string.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..wv.classical import WaveletVariance
+
+__all__ = ["LoadError", "ImuLog", "pick_channel"]
+
+
+class LoadError(ValueError):
+    """A log could not be loaded (or saved); the message says which file, where, and the fix."""
+
+
+@dataclass(frozen=True, eq=False)
+class ImuLog:
+    """A loaded IMU log: raw channels, or precomputed wavelet variances for summary files.
+
+    Attributes
+    ----------
+    channels : dict of str to ndarray
+        Channel name to 1-D float64 (or float32) samples; empty for summary files.
+    fs : float
+        Sampling frequency (Hz).
+    fs_source : str
+        Where ``fs`` came from: ``"file"``, ``"time column"``, ``"user"`` or ``"default"``.
+    units : dict of str to str
+        Channel name to signal unit (``"deg/s"``, ``"g"``, ...), ``""`` when unknown.
+    source : str
+        The path as given to :func:`load_log`.
+    wv : dict of str to WaveletVariance
+        Precomputed WV per channel (summary files only).
+    meta : dict
+        Format, file attributes (sensor, description, n_samples, ...) and ``notes``.
+    """
+
+    channels: dict[str, np.ndarray]
+    fs: float
+    fs_source: str = "default"
+    units: dict[str, str] = field(default_factory=dict)
+    source: str = ""
+    wv: dict[str, WaveletVariance] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_summary(self) -> bool:
+        """True for a wavelet-variance summary file (``wv`` set, no raw samples)."""
+        return bool(self.wv) and not self.channels
+
+    @property
+    def names(self) -> list[str]:
+        """Channel names: raw channels, or the WV channels of a summary file."""
+        return list(self.wv) if self.is_summary else list(self.channels)
+
+    @property
+    def n(self) -> int:
+        """Samples per channel (for summaries: length of the underlying raw log)."""
+        if self.is_summary:
+            return int(next(iter(self.wv.values())).n)
+        return int(next(iter(self.channels.values())).size) if self.channels else 0
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the log in seconds, ``n / fs``."""
+        return self.n / self.fs
+
+    def __getitem__(self, name: str | int) -> np.ndarray:
+        if self.is_summary:
+            raise LoadError(
+                f"file '{self.source}' is a wavelet-variance summary without raw samples: "
+                f"use log.wv[name] (channels: {', '.join(self.names)})"
+            )
+        return self.channels[pick_channel(self.source, self.names, name)]
+
+    def __repr__(self) -> str:
+        what = "WV summary" if self.is_summary else "log"
+        return (
+            f"ImuLog({what} '{self.source}': {len(self.names)} channel(s) "
+            f"[{', '.join(self.names)}] x {self.n} samples at {self.fs:g} Hz ({self.fs_source}))"
+        )
+
+
+def pick_channel(src: str, names: list[str], channel: str | int) -> str:
+    """Resolve ``channel`` (name, index, or digit string) against ``names``."""
+    shown = ", ".join(names[:50]) + (", ..." if len(names) > 50 else "")
+    if isinstance(channel, str) and channel in names:
+        return channel
+    if isinstance(channel, str) and channel.strip().lstrip("-").isdigit():
+        channel = int(channel)
+    if isinstance(channel, (int, np.integer)) and not isinstance(channel, bool):
+        if -len(names) <= int(channel) < len(names):
+            return names[int(channel)]
+        raise LoadError(
+            f"file '{src}': channel index {int(channel)} is out of range; the file has "
+            f"{len(names)} channel(s) (indices 0..{len(names) - 1}): {shown}"
+        )
+    raise LoadError(
+        f"file '{src}' has no channel {channel!r}; available channels: {shown}. "
+        "Pass one of these names or an integer index"
+    )

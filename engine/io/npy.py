@@ -1,0 +1,174 @@
+"""NumPy logs: ``.npy`` arrays (1-D, (N, k) or structured) and ``.npz`` archives.
+
+A structured array gives one channel per field (a time-named field is the time column); an
+``.npz`` archive one channel per numeric key, with optional ``fs`` and ``units`` keys.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._assemble import LoadOptions, attr_value, finish_log, time_divisor, units_map
+from .log import ImuLog, LoadError
+
+__all__ = ["read_npy", "read_npz", "npy_sidecar_path", "read_npy_sidecar", "write_npy_sidecar"]
+
+
+def _columns(
+    key: str, a: np.ndarray, notes: list[str], fmt: str = "{key}[{j}]"
+) -> dict[str, np.ndarray]:
+    """Channels of a 1-D (one channel) or 2-D (N, k) array; a (k, N) array with k < N is
+    read as k rows of samples."""
+    if a.ndim == 1:
+        return {key: a}
+    if a.shape[0] < a.shape[1]:
+        notes.append(f"'{key}' has shape {a.shape}: read as {a.shape[0]} channels in rows")
+        a = a.T
+    return {fmt.format(key=key, j=j): a[:, j] for j in range(a.shape[1])}
+
+
+def read_npy(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+    try:
+        a = np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise LoadError(
+            f"file '{src}' is not a readable .npy array of numbers ({exc}): "
+            "re-save it with numpy.save(path, array)"
+        ) from exc
+    notes: list[str] = []
+    time = None
+    if a.dtype.names and a.ndim == 1:  # structured array: one channel per field
+        cols = {}
+        for name in a.dtype.names:
+            div = time_divisor(name)
+            if div is not None and a[name].ndim == 1:
+                time = time or (name, a[name], div)
+            else:
+                cols.update(_columns(name, a[name], notes))
+    elif a.ndim in (1, 2) and not a.dtype.names:
+        cols = {"x": a} if a.ndim == 1 else _columns("array", a, notes, "col{j}")
+    else:
+        raise LoadError(
+            f"file '{src}': array of shape {a.shape} is not 1-D (N,) or 2-D (N, k): "
+            "save one column per channel"
+        )
+    units: dict[str, str] = {}
+    fs_file = None
+    side = read_npy_sidecar(path)
+    if side is not None:  # written by `gmwm simulate -o x.npy`: fs, channel names, units
+        names = side.get("channels")
+        if isinstance(names, list) and len(names) == len(cols) and len(set(names)) == len(names):
+            cols = dict(zip(map(str, names), cols.values(), strict=True))
+        if isinstance(side.get("units"), dict):
+            units = {str(k): str(v) for k, v in side["units"].items()}
+        if "fs_hz" in side:
+            fs_file = (side["fs_hz"], f"sidecar '{npy_sidecar_path(src).name}'")
+        meta = {k: v for k, v in side.items() if k not in ("channels", "units", "fs_hz")}
+    else:
+        meta = {}
+    return finish_log(
+        src,
+        cols,
+        units,
+        fmt="npy",
+        channel=channel,
+        opts=opts,
+        fs_file=fs_file,
+        time=time,
+        meta=meta,
+        notes=notes,
+    )
+
+
+def npy_sidecar_path(path: str | os.PathLike[str]) -> Path:
+    """The JSON sidecar of a ``.npy`` log: ``x.npy`` -> ``x.npy.json``."""
+    p = Path(path)
+    return p.with_name(p.name + ".json")
+
+
+def read_npy_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The sidecar of a ``.npy`` log as a dict (None when there is none).
+
+    A ``.npy`` array holds samples only; its sidecar ``x.npy.json`` keeps what the array cannot:
+    ``{"fs_hz": 200.0, "channels": ["x"], "units": {"x": "deg/s"}, ...}`` (other keys, e.g.
+    ``model`` and ``seed``, end up in ``ImuLog.meta``). Raises LoadError when the sidecar exists
+    but is not such an object.
+    """
+    side = npy_sidecar_path(path)
+    if not side.is_file():
+        return None
+    try:
+        d = json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, UnicodeError, ValueError) as exc:
+        raise LoadError(
+            f"sidecar '{side}' of '{path}' is not readable JSON ({exc}): fix or delete it"
+        ) from exc
+    if not isinstance(d, dict):
+        raise LoadError(f"sidecar '{side}' of '{path}' is not a JSON object: fix or delete it")
+    return d
+
+
+def write_npy_sidecar(
+    path: str | os.PathLike[str],
+    fs: float,
+    channels: list[str],
+    units: Mapping[str, str] | None = None,
+    **extra: Any,
+) -> Path:
+    """Write the sidecar of a ``.npy`` log (see :func:`read_npy_sidecar`); returns its path."""
+    d = {"fs_hz": float(fs), "channels": list(channels), "units": dict(units or {}), **extra}
+    side = npy_sidecar_path(path)
+    side.write_text(json.dumps(d, indent=2) + "\n", encoding="utf-8")
+    return side
+
+
+def read_npz(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+    cols: dict[str, np.ndarray] = {}
+    notes: list[str] = []
+    meta: dict[str, Any] = {}
+    units: dict[str, str] = {}
+    fs_file = time = None
+    try:
+        z = np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise LoadError(
+            f"file '{src}' is not a readable .npz archive ({exc}): re-save it with "
+            "numpy.savez(path, gyro_x=..., fs=100.0)"
+        ) from exc
+    with z:
+        for key in z.files:
+            try:
+                a = z[key]
+            except ValueError:
+                notes.append(f"key '{key}' holds Python objects and was skipped")
+                continue
+            if key.lower() in ("fs", "fs_hz", "sample_rate") and a.size == 1:
+                fs_file = (a.item(), f"key '{key}'")
+            elif key == "units" and a.dtype.kind in "US" and a.size == 1:
+                units = units_map(str(a.item()), src, notes)
+            elif a.dtype.kind in "iufb" and a.ndim == 1 and time_divisor(key) is not None:
+                time = time or (key, a, time_divisor(key))
+            elif a.dtype.kind in "iufb" and a.ndim in (1, 2) and a.size > 1:
+                cols.update(_columns(key, a, notes))
+            elif a.ndim == 0:
+                meta[key] = attr_value(a.item())
+            else:
+                notes.append(f"key '{key}' (shape {a.shape}, dtype {a.dtype}) was skipped")
+    return finish_log(
+        src,
+        cols,
+        units,
+        fmt="npz",
+        channel=channel,
+        opts=opts,
+        fs_file=fs_file,
+        time=time,
+        meta=meta,
+        notes=notes,
+    )

@@ -1,0 +1,49 @@
+"""Latent-process models: the processes (WN, QN, RW, DR, AR1, GM) and their sums (``Model``).
+
+``engine.models.model`` holds the :class:`Process` interface, :class:`Model` and the parser;
+``engine.models.processes`` the concrete processes, which register themselves on import.
+"""
+
+from __future__ import annotations
+
+from .model import (
+    FROM_UNCONSTRAINED,
+    PROCESS_TYPES,
+    TO_UNCONSTRAINED,
+    Model,
+    ModelError,
+    Process,
+    parse_model,
+)
+from .processes import (
+    AR1,
+    DR,
+    GM,
+    QN,
+    RW,
+    TC_MAX_FACTOR,
+    TC_MIN,
+    WN,
+    ar1_wv,
+    ar1_wv_pos,
+)
+
+__all__ = [
+    "Process",
+    "WN",
+    "QN",
+    "RW",
+    "DR",
+    "AR1",
+    "GM",
+    "Model",
+    "ModelError",
+    "parse_model",
+    "ar1_wv",
+    "ar1_wv_pos",
+    "PROCESS_TYPES",
+    "TO_UNCONSTRAINED",
+    "FROM_UNCONSTRAINED",
+    "TC_MIN",
+    "TC_MAX_FACTOR",
+]

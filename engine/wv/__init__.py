@@ -1,0 +1,67 @@
+"""Wavelet variances: classical and robust Haar WV, streamed WV, cross-covariance (WCCV).
+
+* :mod:`engine.wv.classical`: :class:`WaveletVariance`, :func:`wavelet_variance` (classical,
+  or robust through :mod:`engine.wv.robust`), intervals, the :class:`LevelScales` mixin.
+* :mod:`engine.wv._kernel`: the shared kernel (series checks, de-meaned cumulative sum,
+  blocked sums of squared second differences), also used by the Allan variance.
+* :mod:`engine.wv.stream`: the WV of logs larger than memory, read in blocks.
+* :mod:`engine.wv.wccv`: the WCCV of two channels and the k x k WV/WCCV matrix.
+
+The streamed WV and the WCCV are imported on first use (PEP 562): the WCCV needs
+``scipy.special`` (about 0.1 s), which ``import engine`` does not pay for.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_attributes
+from ._kernel import as_series, cumsum_demeaned, second_difference_sums, sumsq_kernel
+from .classical import (
+    LevelScales,
+    WaveletVariance,
+    default_levels,
+    eta3_interval,
+    haar_coefficients,
+    wavelet_variance,
+)
+from .robust import biweight_constant, robust_scale_biweight
+
+_LAZY: dict[str, str] = {
+    "SeriesSource": "stream",
+    "open_series": "stream",
+    "wavelet_variance_stream": "stream",
+    "WaveletCrossCovariance": "wccv",
+    "WVMatrix": "wccv",
+    "wavelet_cross_covariance": "wccv",
+    "wv_matrix": "wccv",
+}
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from .stream import SeriesSource, open_series, wavelet_variance_stream
+    from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
+
+
+__all__ = [
+    "WaveletVariance",
+    "wavelet_variance",
+    "default_levels",
+    "haar_coefficients",
+    "eta3_interval",
+    "LevelScales",
+    "biweight_constant",
+    "robust_scale_biweight",
+    "as_series",
+    "cumsum_demeaned",
+    "second_difference_sums",
+    "sumsq_kernel",
+    "SeriesSource",
+    "open_series",
+    "wavelet_variance_stream",
+    "WaveletCrossCovariance",
+    "WVMatrix",
+    "wavelet_cross_covariance",
+    "wv_matrix",
+]
