@@ -73,12 +73,12 @@ _LAZY: dict[str, str] = {
     "DependenceTest": "mgmwm",
     "MGMWMResult": "mgmwm",
     "MultiModel": "mgmwm",
-    "ReplicateResult": "mgmwm",
+    "ReplicateResult": "fit.replicates",
     "SharedEstimate": "mgmwm",
     "SharedProcess": "mgmwm",
     "dependence_test": "mgmwm",
     "fit_mgmwm": "mgmwm",
-    "fit_replicates": "mgmwm",
+    "fit_replicates": "fit.replicates",
     "moment_covariance": "mgmwm",
     "Session": "session",
     "SessionError": "session",
@@ -119,6 +119,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         read_kalibr,
         write_kalibr,
     )
+    from .fit.replicates import ReplicateResult, fit_replicates
     from .io import (
         ImuLog,
         LoadError,
@@ -129,12 +130,10 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         DependenceTest,
         MGMWMResult,
         MultiModel,
-        ReplicateResult,
         SharedEstimate,
         SharedProcess,
         dependence_test,
         fit_mgmwm,
-        fit_replicates,
         moment_covariance,
     )
     from .session import (

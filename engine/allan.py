@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize, special
 
-from .fit import FitError, GMWMResult, _Problem, _sqrt_weight, fit_gmwm, weight_matrix
+from .fit.gmwm import FitError, GMWMResult, _Problem, _sqrt_weight, fit_gmwm, weight_matrix
 from .model import Model, parse_model
 from .processes import AR1, DR, QN, RW, WN, Process
 from .units import datasheet, param_unit

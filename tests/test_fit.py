@@ -10,7 +10,7 @@ import pytest
 from scipy import optimize
 
 import engine as eg
-from engine.fit import _Problem, _sqrt_weight
+from engine.fit.gmwm import _Problem, _sqrt_weight
 
 
 def objective(wv, omega, model) -> float:

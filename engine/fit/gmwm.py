@@ -26,11 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from ._optim import nelder_mead, nnls
-from .model import Model, parse_model
-from .processes import AR1, GM, TC_MAX_FACTOR, TC_MIN, Process, _ar1_wv_pos
-from .units import param_unit
-from .wavelet import WaveletVariance, wavelet_variance
+from .._optim import nelder_mead, nnls
+from ..model import Model, parse_model
+from ..processes import AR1, GM, TC_MAX_FACTOR, TC_MIN, Process, _ar1_wv_pos
+from ..units import param_unit
+from ..wavelet import WaveletVariance, wavelet_variance
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix", "FitError"]
 
@@ -142,7 +142,7 @@ class GMWMResult:
 
     def summary(self) -> str:
         """Readable summary: model, data, parameters with units and datasheet values, fit."""
-        from .units import datasheet
+        from ..units import datasheet
 
         w = self.wv
         lines = [
