@@ -58,8 +58,8 @@ from bokeh.models import (
 from bokeh.plotting import figure
 
 import engine as eg
-from engine.mgmwm import SHAREABLE, DependenceTest, MultiModel
 from engine.model import ModelError, parse_model
+from engine.multivariate import SHAREABLE, DependenceTest, MultiModel
 from engine.units import squared
 
 from .state import format_value

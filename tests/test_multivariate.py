@@ -16,8 +16,10 @@ import pytest
 import engine as eg
 from engine.cli import main as cli_main
 from engine.fit import FitError
-from engine.mgmwm import MultiModel
 from engine.model import ModelError
+from engine.multivariate import MultiModel, dependence
+from engine.multivariate._cone import ConeLSQ
+from engine.multivariate.problem import MProblem
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 RW_BASIS = staticmethod(lambda tau: (tau**2 + 2.0) / (12.0 * tau))
@@ -264,7 +266,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
     res = eg.fit_mgmwm(wvm, truth.cleared())
     for beta in np.geomspace(0.01, 20, 60):
         fixed = MultiModel(["a", "b"], "GM+WN+RW", shared=["GM"], nl={"GM": float(beta)})
-        prob = eg.mgmwm._MProblem(fixed.cleared(), wvm, res.weights)
+        prob = MProblem(fixed.cleared(), wvm, res.weights)
         u = np.array([prob.u_of_phi(np.exp(-beta / 5.0))])
         assert prob.profile(u) >= res.objective * (1 - 1e-9)
 
@@ -394,7 +396,7 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
     # Nelder-Mead from the three best points), on a fresh problem
     from scipy import optimize
 
-    prob = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
+    prob = MProblem(mm.cleared(), wvm, res.weights)
     axis = np.linspace(np.log(0.5), np.log(2.0 * prob.tau[-1]), 6)
     grid = [
         np.array(u)
@@ -418,12 +420,12 @@ def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
     face): the same objective as the certified candidates, to rounding."""
     wvm, mm = boundary_case("3 channels RW")
     res = eg.fit_mgmwm(wvm, mm)
-    prob = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
+    prob = MProblem(mm.cleared(), wvm, res.weights)
     u = np.array([prob.u_of_phi(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs)) for c in mm.channels])
     f, _, s, coupled = prob.solve(u)
     assert coupled and f == pytest.approx(res.objective, rel=1e-12)
-    monkeypatch.setattr(eg.mgmwm._MProblem, "_uncertified", lambda self, *a, **k: {-1})
-    slow = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
+    monkeypatch.setattr(ConeLSQ, "_uncertified", lambda self, *a, **k: {-1})
+    slow = MProblem(mm.cleared(), wvm, res.weights)
     f2, _, s2, _ = slow.solve(u)
     assert f2 == pytest.approx(f, rel=1e-10)
     ti = slow.full[0]
@@ -533,7 +535,7 @@ def test_dependence_test_reports_progress_and_can_be_aborted():
     h0 = h1.without_dependence().cleared()
     fit0 = eg.fit_mgmwm(wvm, h0)
     sd = np.random.SeedSequence(3).spawn(5)[0]
-    d = eg.mgmwm._boot_dependence((fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, "ci", sd))
+    d = dependence._boot_dependence((fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, "ci", sd))
     assert d == plain.bootstrap[0]
 
 

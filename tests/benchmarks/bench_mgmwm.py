@@ -25,8 +25,8 @@ Estimators of the 9 covariance parameters (3 WN variances, 6 RW covariance entri
 
 With diagonal ``"ci"`` weights the MGMWM's variance estimates equal the univariate ones
 whenever the fitted covariance is positive semi-definite without constraint (the stacked
-problem separates by moment pair, see ``engine/mgmwm.py``), so the comparison that matters for
-the variances is the efficient column.
+problem separates by moment pair, see ``engine/multivariate/_cone.py``), so the comparison
+that matters for the variances is the efficient column.
 
 Prints the per-parameter bias, SD and MSE, MSE ratios with Monte Carlo standard errors, a
 markdown table ready for the README, and the wall time; ``--out`` keeps study.json (every
@@ -45,7 +45,7 @@ import numpy as np
 
 from engine.fit import fit_gmwm
 from engine.inference import _map, fit_efficient
-from engine.mgmwm import MultiModel, fit_mgmwm
+from engine.multivariate import MultiModel, fit_mgmwm
 from engine.wccv import wv_matrix
 
 CHANNELS = ("gyro_1", "gyro_2", "gyro_3")
