@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 from scipy import optimize, special
 
-from .fit.gmwm import FitError, GMWMResult, _Problem, _sqrt_weight, fit_gmwm, weight_matrix
+from .fit import FitError, GMWMResult, fit_gmwm, weight_matrix
+from .fit._varpro import NNLSProblem, sqrt_weight
 from .model import Model, parse_model
 from .processes import AR1, DR, QN, RW, WN, Process
 from .units import datasheet, param_unit
@@ -887,8 +888,8 @@ def fit_gmwfm(
     if fy.shape != wv.variance.shape or not np.all(np.isfinite(fy)):
         raise FitError(f"{fname}(WV) is not finite at every level")
     omega, wname = _f_weights(wv, fun, weights, fname)
-    a = _sqrt_weight(omega)
-    prob = _Problem(m, wv, np.eye(wv.n_levels))
+    a = sqrt_weight(omega)
+    prob = NNLSProblem.from_wv(m, wv, np.eye(wv.n_levels))
     p, k = prob.p, prob.k
     lo_tc, hi_tc = math.log(prob.tc_min), math.log(prob.tc_max)
 
