@@ -55,8 +55,8 @@ _LAZY: dict[str, str] = {
     "avsm": "allan",
     "avsm_auto": "allan",
     "compare_table": "allan",
-    "fit_armav": "allan",
-    "fit_gmwfm": "allan",
+    "fit_armav": "fit.gmwfm",
+    "fit_gmwfm": "fit.gmwfm",
     "from_gmwm": "allan",
     "ExportError": "export",
     "datasheet_table": "export",
@@ -105,8 +105,6 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         avsm,
         avsm_auto,
         compare_table,
-        fit_armav,
-        fit_gmwfm,
         from_gmwm,
     )
     from .export import (
@@ -119,6 +117,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         read_kalibr,
         write_kalibr,
     )
+    from .fit.gmwfm import fit_armav, fit_gmwfm
     from .fit.replicates import ReplicateResult, fit_replicates
     from .io import (
         ImuLog,

@@ -31,7 +31,7 @@ TC_MIN = 1e-2
 TC_MAX_FACTOR = 1e4  # times the series length
 
 
-def _ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
+def ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
     """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path)."""
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
@@ -77,7 +77,7 @@ def ar1_wv(
         raise ValueError(f"AR1 needs |phi| < 1, got phi={phi}")
     scalar = ph.ndim == 0
     if scalar and ph > 0:
-        return _ar1_wv_pos(tau, float(ph)) * float(sigma2)
+        return ar1_wv_pos(tau, float(ph)) * float(sigma2)
     ph = np.atleast_1d(ph)[:, None]
     t = tau[None, :]
     pos = ph > 0

@@ -10,7 +10,7 @@ import pytest
 from scipy import optimize
 
 import engine as eg
-from engine.fit.gmwm import _Problem, _sqrt_weight
+from engine.fit._varpro import NNLSProblem, sqrt_weight
 
 
 def objective(wv, omega, model) -> float:
@@ -81,7 +81,7 @@ def profile_min_brute(wv, spec, axes) -> float:
     """Brute-force minimum of the profiled objective over a grid of correlation times."""
     model = eg.parse_model(spec)
     omega = np.diag(1 / (wv.ci_high - wv.ci_low) ** 2)
-    prob = _Problem(model, wv, _sqrt_weight(omega))
+    prob = NNLSProblem.from_wv(model, wv, sqrt_weight(omega))
     best = math.inf
     for u in axes:
         best = min(best, prob.profile(np.asarray(u, float)))
@@ -97,7 +97,7 @@ def test_ar1_wn_reaches_global_minimum_near_unit_root():
     grid = [(u,) for u in np.linspace(math.log(0.2), math.log(4 * 2**15), 4000)]
     assert res.objective <= profile_min_brute(wv, "AR1+WN", grid) * (1 + 1e-9)
     # objective at the R-like local answer phi = 0.1 is far worse
-    prob = _Problem(eg.parse_model("AR1+WN"), wv, _sqrt_weight(res.omega))
+    prob = NNLSProblem.from_wv(eg.parse_model("AR1+WN"), wv, sqrt_weight(res.omega))
     assert prob.solve((0.1,))[0] > 10 * res.objective
 
 

@@ -6,7 +6,6 @@ projection as :func:`engine.fit.fit_gmwm` with the stacked moments.
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections.abc import Sequence
@@ -14,66 +13,18 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 
 from ..model import Model, ModelError, parse_model
-from ..processes import AR1, TC_MAX_FACTOR, TC_MIN, Process
+from ..processes import Process
 from ..units import param_unit
 from ..wavelet import WaveletVariance, wavelet_variance
-from .gmwm import FitError, GMWMResult, _warning_lines, fit_gmwm, weight_matrix
+from ._varpro import NNLSProblem, at_bound, persistent_first, search
+from .gmwm import GMWMResult, fit_gmwm, weight_matrix
+from .result import FitError, warning_lines
 
 __all__ = ["ReplicateResult", "fit_replicates"]
 
 
-def _nnls(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    norms = np.sqrt(np.sum(a * a, axis=0))
-    norms[norms == 0] = 1.0
-    g, _ = optimize.nnls(a / norms, b, maxiter=50 * a.shape[1] + 50)
-    return g / norms
-
-
-def _local(
-    fun, x0: np.ndarray, step: float, lo: float, hi: float
-) -> tuple[float, np.ndarray, bool]:
-    """Nelder-Mead with restarts on a shrinking simplex until a restart stops improving."""
-    x = np.clip(np.asarray(x0, float), lo, hi)
-    f = fun(x)
-    converged = False
-    d = x.size
-    for _ in range(8):
-        simplex = np.vstack(
-            [x]
-            + [
-                np.clip(x + step * e, lo, hi) if x[i] + step <= hi else x - step * e
-                for i, e in enumerate(np.eye(d))
-            ]
-        )
-        res = optimize.minimize(
-            fun,
-            x,
-            method="Nelder-Mead",
-            options={
-                "xatol": 1e-6,
-                "fatol": 1e-10 * max(f, 1e-300),
-                "maxfev": 300 * d + 200,
-                "initial_simplex": simplex,
-            },
-        )
-        fn = float(res.fun)
-        if fn < f * (1 - 1e-10):
-            x, f = np.clip(np.asarray(res.x, float), lo, hi), fn
-            step = max(step / 8, 1e-5)
-        else:
-            converged = bool(res.success) or fn <= f
-            break
-    return f, x, converged
-
-
-def _grid_axis(tau_max: float, npts: int) -> np.ndarray:
-    return np.linspace(math.log(0.25), math.log(4.0 * tau_max), npts)
-
-
-# -------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class ReplicateResult:
     """Result of :func:`fit_replicates`: one model fitted to several recordings.
@@ -145,7 +96,7 @@ class ReplicateResult:
             for name, v in zip(p.param_names, p.values, strict=True):
                 lines.append(f"  {lab + '.' + name:<16} {v:>14.6e}  {param_unit(p.code, name, u)}")
         lines += ["", "  objective by replicate: " + ", ".join(f"{v:.4g}" for v in self.objectives)]
-        lines += _warning_lines(self.at_bound, self.converged, self.message)
+        lines += warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -182,48 +133,6 @@ class ReplicateResult:
             "n_evaluations": int(self.n_evaluations),
             "wv": [w.to_dict() for w in self.wvs],
         }
-
-
-class _RProblem:
-    """Stacked WVs of several replicates and one univariate model (NNLS inner problem)."""
-
-    def __init__(self, model: Model, wvs: list[WaveletVariance], ws: list[np.ndarray]):
-        self.model = model
-        self.fs = wvs[0].fs
-        self.tau = np.concatenate([w.tau_samples.astype(float) for w in wvs])
-        sw = np.sqrt(np.concatenate(ws))
-        self.sw = sw
-        self.b = sw * np.concatenate([w.variance for w in wvs])
-        self.procs = model.processes
-        self.slots = [i for i, p in enumerate(self.procs) if p.nonlinear is not None]
-        self.fixed = [
-            None if p.nonlinear else p.basis(self.tau, self.fs) * np.ones_like(self.tau)
-            for p in self.procs
-        ]
-        self.tc_min = TC_MIN
-        self.tc_max = TC_MAX_FACTOR * max(
-            max(w.n for w in wvs), 2 ** (max(w.n_levels for w in wvs) + 1)
-        )
-        self.n_eval = 0
-
-    def phi_of(self, i: int, u: float) -> float:
-        if isinstance(self.procs[i], AR1) and u < -50:
-            return 0.0
-        tc = math.exp(min(max(u, math.log(self.tc_min)), math.log(self.tc_max)))
-        return math.exp(-1.0 / tc)
-
-    def solve(self, u: np.ndarray) -> tuple[float, np.ndarray]:
-        self.n_eval += 1
-        cols = list(self.fixed)
-        for i, ui in zip(self.slots, u, strict=True):
-            cols[i] = self.procs[i].basis(self.tau, self.fs, self.phi_of(i, float(ui)))
-        a = self.sw[:, None] * np.column_stack(cols)
-        h = _nnls(a, self.b)
-        r = self.b - a @ h
-        return float(r @ r), h
-
-    def profile(self, u: np.ndarray) -> float:
-        return self.solve(np.asarray(u, float))[0]
 
 
 def fit_replicates(
@@ -311,17 +220,20 @@ def fit_replicates(
         if any(np.any(~np.isfinite(v)) or np.any(v < 0) for v in ws):
             raise FitError("the weights must be finite and non-negative")
         wname = "user"
-    prob = _RProblem(m.cleared(), out, ws)
-    lo, hi = math.log(prob.tc_min), math.log(prob.tc_max)
-    k = len(prob.slots)
-    if k == 0:
+    prob = NNLSProblem(
+        m.cleared(),
+        np.concatenate([w.tau_samples for w in out]),
+        fs0,
+        np.diag(np.sqrt(np.concatenate(ws))),
+        np.concatenate([w.variance for w in out]),
+        max(max(w.n for w in out), 2 ** (max(w.n_levels for w in out) + 1)),
+    )
+    if prob.k == 0:
         u = np.zeros(0)
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
-        tau_max = max(float(w.tau_samples[-1]) for w in out)
-        axis = _grid_axis(tau_max, {1: 60, 2: 36, 3: 18}.get(k, 10))
-        cands = [np.array(c) for c in itertools.combinations(axis[::-1], k)]
         # the replicates' own fits (GM/AR1 most persistent first) are candidates too
+        starts = []
         for wv, w in zip(out, ws, strict=True):
             try:
                 fr: GMWMResult = fit_gmwm(wv, m.cleared(), weights=w)
@@ -332,20 +244,12 @@ def fit_replicates(
                 for q in fr.model.processes
                 if q.nonlinear and 0 < q.nl_value(fs0) < 1
             ]
-            if len(tcs) == k:
-                cands.append(np.log(np.array(sorted(tcs, reverse=True))))
+            if len(tcs) == prob.k:
+                starts.append(np.log(np.array(sorted(tcs, reverse=True))))
         if m.is_set:
             tcs = [-1.0 / math.log(q.nl_value(fs0)) for q in m.processes if q.nonlinear]
-            cands.append(np.log(np.array(sorted(tcs, reverse=True))))
-        scored = sorted(((prob.profile(c), i) for i, c in enumerate(cands)))
-        step = float(axis[1] - axis[0])
-        results: list[tuple[float, np.ndarray, bool]] = []
-        for _, i in scored[:4]:
-            c = cands[i]
-            if any(np.max(np.abs(c - r[1])) < 1.5 * step for r in results):
-                continue
-            results.append(_local(prob.profile, c, step / 2, lo, hi))
-        _, u, converged = min(results, key=lambda r: r[0])
+            starts.append(np.log(np.array(sorted(tcs, reverse=True))))
+        _, u, converged = search(prob, starts, keep=4)
         method = "grid+nelder-mead"
         msg = (
             "converged"
@@ -353,30 +257,19 @@ def fit_replicates(
             else "the local search stopped before meeting its "
             "tolerance; the estimate may be slightly above the minimum"
         )
-    _, h = prob.solve(u)
-    nl_vals = {i: prob.phi_of(i, float(ui)) for i, ui in zip(prob.slots, u, strict=True)}
-    procs = [p.from_fit(float(h[i]), nl_vals.get(i), fs0) for i, p in enumerate(prob.procs)]
-    nonlin = sorted(
-        (q for q in procs if q.nonlinear is not None),
-        key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / fs0)),
+    phis = prob.phis_of(u)
+    _, h, _ = prob.solve(phis)
+    nl_vals = dict(zip(prob.nl_idx, phis, strict=True))
+    fitted = persistent_first(
+        [p.from_fit(float(h[i]), nl_vals.get(i), fs0) for i, p in enumerate(prob.model.processes)],
+        fs0,
     )
-    fitted = Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
     implied = [fitted.wv(w.tau_samples, fs0) for w in out]
     objs = [
         float(np.sum(wt * (w.variance - im) ** 2))
         for w, wt, im in zip(out, ws, implied, strict=True)
     ]
     longest = max(out, key=lambda w: w.n_levels)
-    at_bound = []
-    for lab, q in zip(fitted.labels, fitted.processes, strict=True):
-        if q.linear_coef() == 0.0:
-            at_bound.append(f"{lab}.{q.param_names[-1] if q.nonlinear else q.param_names[0]}")
-        if q.nonlinear is not None:
-            phi = q.phi if isinstance(q, AR1) else math.exp(-q.beta / fs0)
-            if 0 < phi < 1:
-                tc = -1.0 / math.log(phi)
-                if tc <= prob.tc_min * 1.0001 or tc >= prob.tc_max / 1.0001:
-                    at_bound.append(f"{lab}.{q.nonlinear}")
     return ReplicateResult(
         model=fitted,
         wvs=out,
@@ -387,7 +280,7 @@ def fit_replicates(
         implied=implied,
         components=fitted.components(longest.tau_samples, fs0),
         converged=converged,
-        at_bound=at_bound,
+        at_bound=at_bound(fitted, fs0, prob.tc_min, prob.tc_max),
         n_evaluations=prob.n_eval,
         method=method,
         message=msg,

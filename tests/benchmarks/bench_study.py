@@ -16,8 +16,9 @@ import time
 
 import numpy as np
 
-from engine.allan import AllanVariance, avsm, avsm_auto, fit_armav, from_gmwm
+from engine.allan import AllanVariance, avsm, avsm_auto, from_gmwm
 from engine.fit import fit_gmwm
+from engine.fit.gmwfm import fit_armav
 from engine.study import METHODS, run_slope_study, table1_model, typical_regions
 from engine.wavelet import wavelet_variance
 
