@@ -40,7 +40,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import optimize
+
+from .._optim import nnls
 
 __all__ = ["ConeLSQ"]
 
@@ -91,6 +92,7 @@ class ConeLSQ:
         self.n_inner = 0
         self.n_coupled = 0
         self._face: tuple[Any, np.ndarray] | None = None  # last certified face, solution
+        self._passive: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # NNLS warm starts
 
     def _matrices(self, c: np.ndarray) -> dict[int, np.ndarray]:
         """The PSD blocks' symmetric matrices of coefficients ``c``."""
@@ -126,13 +128,20 @@ class ConeLSQ:
                 c[keep] = self._relaxed_full(ax[:, keep], self.lower[keep])
                 return c
         if self.groups is not None:  # separable by row group
-            for rows, idx, nonneg in self.groups:
+            for gi, (rows, idx, nonneg) in enumerate(self.groups):
                 if keep is not None:
                     idx = [i for i in idx if keep[i]]
                 if not idx:
                     continue
                 a = ax[rows][:, idx]
-                c[idx] = _nnls(a, self.b[rows]) if nonneg else _lstsq(a, self.b[rows])
+                if nonneg:
+                    # warm start from this group's previous positive set (the profile is
+                    # evaluated at nearby points)
+                    key = (gi, tuple(idx))
+                    c[idx] = _nnls(a, self.b[rows], self._passive.get(key))
+                    self._passive[key] = c[idx] > 0
+                else:
+                    c[idx] = _lstsq(a, self.b[rows])
             return c
         return self._relaxed_full(ax, self.lower)
 
@@ -140,12 +149,25 @@ class ConeLSQ:
         """Bounded least squares ``min ||b - ax c||, c >= lower`` (full weighting matrix)."""
         norms = np.sqrt(np.sum(ax * ax, axis=0))
         norms[norms == 0] = 1.0
-        if np.all(np.isinf(lower)):
-            return np.linalg.lstsq(ax / norms, self.b, rcond=None)[0] / norms
-        res = optimize.lsq_linear(
-            ax / norms, self.b, bounds=(lower, np.inf), method="bvls", tol=1e-14
+        an = ax / norms
+        free = np.isinf(lower)
+        if np.all(free):
+            return np.linalg.lstsq(an, self.b, rcond=None)[0] / norms
+        # the bounds are 0 or -inf: the free coefficients are eliminated (least squares on
+        # the orthogonal complement of their columns), an NNLS gives the bounded ones
+        out = np.zeros(ax.shape[1])
+        if not np.any(free):
+            out[:], _ = nnls(an, self.b, maxiter=50 * an.shape[1] + 50)
+            return out / norms
+        af = an[:, free]
+        u, sv, _ = np.linalg.svd(af, full_matrices=False)
+        u = u[:, sv > sv[0] * max(af.shape) * np.finfo(float).eps]
+        an_b = an[:, ~free]
+        out[~free], _ = nnls(
+            an_b - u @ (u.T @ an_b), self.b - u @ (u.T @ self.b), maxiter=50 * an_b.shape[1] + 50
         )
-        return res.x / norms
+        out[free] = np.linalg.lstsq(af, self.b - an_b @ out[~free], rcond=None)[0]
+        return out / norms
 
     def _coupled(self, ax: np.ndarray, s0: dict[int, np.ndarray]) -> tuple[float, np.ndarray]:
         """The PSD-constrained inner problem, when the relaxed minimiser is not PSD.
@@ -544,10 +566,12 @@ class ConeLSQ:
         return f, c, r
 
 
-def _nnls(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _nnls(a: np.ndarray, b: np.ndarray, passive: np.ndarray | None = None) -> np.ndarray:
+    """NNLS on unit-norm columns; ``passive``: the positive set of a previous, nearby solve
+    (one least squares when it is still optimal)."""
     norms = np.sqrt(np.sum(a * a, axis=0))
     norms[norms == 0] = 1.0
-    g, _ = optimize.nnls(a / norms, b, maxiter=50 * a.shape[1] + 50)
+    g, _ = nnls(a / norms, b, maxiter=50 * a.shape[1] + 50, passive=passive)
     return g / norms
 
 

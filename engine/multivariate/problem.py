@@ -16,8 +16,8 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from scipy import optimize
 
+from .._optim import nelder_mead
 from ..fit import FitError, fit_gmwm
 from ..model import Model, ModelError
 from ..processes import AR1, TC_MAX_FACTOR, TC_MIN
@@ -180,16 +180,8 @@ def _local(
                 for i, e in enumerate(np.eye(d))
             ]
         )
-        res = optimize.minimize(
-            fun,
-            x,
-            method="Nelder-Mead",
-            options={
-                "xatol": 1e-6,
-                "fatol": 1e-10 * max(f, 1e-300),
-                "maxfev": 300 * d + 200,
-                "initial_simplex": simplex,
-            },
+        res = nelder_mead(
+            fun, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300), maxfev=300 * d + 200
         )
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
