@@ -415,6 +415,34 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
     assert res.objective <= ref * (1 + 1e-9), (res.objective, ref)
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_bounded_least_squares_of_the_full_weighting_meets_its_kkt_conditions(seed):
+    """The relaxation with a full weighting matrix (bounds 0 on variances, none on
+    cross-covariances) by elimination of the free coefficients + NNLS: the KKT conditions
+    hold and the objective equals SciPy's BVLS to rounding."""
+    from scipy import optimize
+
+    rng = np.random.default_rng(seed)
+    m, n = 40, 7
+    a = rng.standard_normal((m, n)) * np.geomspace(1e-3, 1e3, n)  # badly scaled columns
+    b = a @ rng.standard_normal(n) + 0.1 * rng.standard_normal(m)
+    lower = np.where(rng.uniform(size=n) < 0.5, 0.0, -np.inf)
+    lower[0] = 0.0
+    cone = ConeLSQ(b, [(i, 0, 0, 0) for i in range(n)], {}, lower, None)
+    c = cone._relaxed_full(a, lower)
+    assert np.all(c[lower == 0] >= 0)
+    grad = a.T @ (a @ c - b) / np.linalg.norm(a, axis=0)  # scale-free gradient
+    tol = 1e-9 * np.linalg.norm(b)
+    free = np.isinf(lower)
+    assert np.all(np.abs(grad[free]) <= tol)
+    assert np.all(grad[~free] >= -tol) and np.all(np.abs(grad[~free][c[~free] > 0]) <= tol)
+    norms = np.linalg.norm(a, axis=0)
+    ref = optimize.lsq_linear(a / norms, b, bounds=(lower, np.inf), method="bvls", tol=1e-14)
+    f, f_ref = np.sum((b - a @ c) ** 2), np.sum((b - a @ (ref.x / norms)) ** 2)
+    assert f <= f_ref * (1 + 1e-12)
+    assert f == pytest.approx(f_ref, rel=1e-12)
+
+
 def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
     """Without any certificate the inner solve ends on the interior-point path (and its
     face): the same objective as the certified candidates, to rounding."""

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .._optim import nelder_mead
 from ..fit import FitError, fit_gmwm
+from ..fit._varpro import local
 from ..model import Model, ModelError
 from ..processes import AR1, TC_MAX_FACTOR, TC_MIN
 from ..wccv import WVMatrix
@@ -164,37 +164,17 @@ class MProblem:
         return self.cone.n_inner
 
 
-def _local(
-    fun, x0: np.ndarray, step: float, lo: float, hi: float
-) -> tuple[float, np.ndarray, bool]:
-    """Nelder-Mead with restarts on a shrinking simplex until a restart stops improving."""
-    x = np.clip(np.asarray(x0, float), lo, hi)
-    f = fun(x)
-    converged = False
-    d = x.size
-    for _ in range(8):
-        simplex = np.vstack(
-            [x]
-            + [
-                np.clip(x + step * e, lo, hi) if x[i] + step <= hi else x - step * e
-                for i, e in enumerate(np.eye(d))
-            ]
-        )
-        res = nelder_mead(
-            fun, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300), maxfev=300 * d + 200
-        )
-        fn = float(res.fun)
-        if fn < f * (1 - 1e-10):
-            x, f = np.clip(np.asarray(res.x, float), lo, hi), fn
-            step = max(step / 8, 1e-5)
-        else:
-            converged = bool(res.success) or fn <= f
-            break
-    return f, x, converged
-
-
 def _grid_axis(tau_max: float, npts: int) -> np.ndarray:
+    """The scan of a shared phi/beta: ``npts`` log correlation times (samples) from 0.25 to 4x
+    the largest scale (the range of :func:`engine.fit._varpro.grid_axis`, with its own
+    number of points)."""
     return np.linspace(math.log(0.25), math.log(4.0 * tau_max), npts)
+
+
+def _maxfev(u: Any) -> int:
+    """Evaluations per Nelder-Mead run: every one is an inner conic solve, so fewer than the
+    core's default."""
+    return 300 * len(u) + 200
 
 
 def fitted_model(
@@ -332,7 +312,7 @@ def search(
     for st in starts:
         if any(np.max(np.abs(st - r[1])) < 1e-9 for r in results):
             continue
-        results.append(_local(prob.profile, st, step, lo, hi))
+        results.append(local(prob.profile, st, step, lo, hi, maxfev=_maxfev(st)))
     f, u, conv = min(results, key=lambda r: r[0])
     # polish block by block (a channel's own AR1/GM terms, then the shared ones)
     blocks: dict[Any, list[int]] = {}
@@ -349,14 +329,14 @@ def search(
                     uu[idx] = v
                     return prob.profile(uu)
 
-                fb, vb, _ = _local(sub, u[idx], step / 4, lo, hi)
+                fb, vb, _ = local(sub, u[idx], step / 4, lo, hi, maxfev=_maxfev(idx))
                 if fb < f * (1 - 1e-10):
                     u = u.copy()
                     u[idx] = vb
                     f, improved = fb, True
             if not improved:
                 break
-        f2, u2, conv2 = _local(prob.profile, u, step / 8, lo, hi)
+        f2, u2, conv2 = local(prob.profile, u, step / 8, lo, hi, maxfev=_maxfev(u))
         if f2 <= f:
             f, u, conv = f2, u2, conv2
     return u, conv
