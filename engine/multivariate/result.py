@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..fit.gmwm import _warning_lines
+from ..fit.result import warning_lines
 from ..model import Model
 from ..units import param_unit
 from ..wccv import WVMatrix
@@ -270,7 +270,7 @@ class MGMWMResult:
                     f"    {ca:<{width}}"
                     + "".join(f"{rho[a, b]:>{width}.4f}" for b in range(len(g)))
                 )
-        lines += _warning_lines(self.at_bound, self.converged, self.message)
+        lines += warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)
 
     def __str__(self) -> str:
