@@ -7,6 +7,15 @@ exactly with :class:`engine.multivariate._cone.ConeLSQ`. :func:`search` minimise
 objective over ``u``: starts from the univariate fit of every channel, a scan of each shared
 phi/beta, then Nelder-Mead on the profiled objective with restarts and a per-block polish.
 Everything is deterministic.
+
+The Nelder-Mead runs are the variable-projection core's :func:`engine.fit._varpro.local`
+(the optimiser of every GMWM-type fit). Its starting strategy, :func:`engine.fit._varpro.search`,
+is not used: it scores a grid of candidates whose correlation times decrease along the
+coordinates, which is right when the AR1/GM terms are interchangeable (one univariate model)
+but not here, where each coordinate belongs to one channel or one shared group (channel a's
+GM may be slower or faster than channel b's), and a full grid over k coordinates (one per
+channel plus the shared ones) grows as ``n^k`` conic solves. The univariate fits of the
+channels give far better starts at the cost of one univariate fit per channel.
 """
 
 from __future__ import annotations
