@@ -11,13 +11,13 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy import optimize
 
+from .._optim import least_squares
 from ..allan import MethodEstimate, from_gmwm
 from ..model import Model, parse_model
 from ..processes import AR1, Process
 from ..wavelet import WaveletVariance
-from ._varpro import NNLSProblem, sqrt_weight
+from ._varpro import NNLSProblem, grid_candidates, sqrt_weight
 from .gmwm import fit_gmwm, weight_matrix
 from .result import FitError
 
@@ -58,6 +58,39 @@ def _f_weights(
             )
         return np.diag(1.0 / width**2), "ci"
     return weight_matrix(wv, weights)
+
+
+def _grid_starts(
+    prob: NNLSProblem,
+    m: Model,
+    wv: WaveletVariance,
+    a: np.ndarray,
+    fy: np.ndarray,
+    fun: Callable,
+    start: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    keep: int = 8,
+) -> list[np.ndarray]:
+    """Starts from the core's grid of correlation times: for each candidate the variances of
+    the linearised problem (NNLS with the weights ``A diag(f'(nu_hat))``, the first-order
+    expansion of ``f`` at the data), scored by the exact f-space objective."""
+    nu = wv.variance
+    with np.errstate(all="ignore"):
+        fp = (np.asarray(fun(nu * (1 + 1e-6)), float) - np.asarray(fun(nu * (1 - 1e-6)), float)) / (
+            2e-6 * nu
+        )
+    if not np.all(np.isfinite(fp)):
+        return []
+    lin = NNLSProblem.from_wv(m, wv, a * fp[None, :])
+    scored = []
+    for u in grid_candidates(prob.axis, prob.k):
+        _, h, x = lin.solve(lin.phis_of(u))
+        with np.errstate(all="ignore"):
+            r = a @ (fy - np.asarray(fun(np.maximum(x @ h, 1e-300)), float))
+        cost = float(r @ r)
+        if np.isfinite(cost):
+            scored.append((cost, u, h))
+    scored.sort(key=lambda t: t[0])
+    return [start(h, np.exp(np.asarray(u))) for _, u, h in scored[:keep]]
 
 
 def fit_gmwfm(
@@ -112,10 +145,10 @@ def fit_gmwfm(
     correlation time). The search space is ``log h`` (scaled per process; a coefficient whose
     curve stays below 1e-9 of the fitted WV at every level is reported as exactly 0, the
     objective being flat there) and the log correlation time in
-    samples; the fit runs bounded trust-region least squares (``scipy.optimize.least_squares``)
-    from the GMWM estimate and from an equal-share start (and, with AR1/GM, from correlation
-    times 4x shorter and longer) and keeps the lowest objective. AR1 coefficients are searched
-    in (0, 1), as correlation times.
+    samples; the fit runs bounded least squares (:func:`engine._optim.least_squares`, a
+    projected Levenberg-Marquardt) from the GMWM estimate and from an equal-share start (and,
+    with AR1/GM, from correlation times 4x shorter and longer) and keeps the lowest objective.
+    AR1 coefficients are searched in (0, 1), as correlation times.
     """
     fname, fun = _resolve_f(f)
     name = method or f"GMWFM({fname})"
@@ -201,23 +234,14 @@ def fit_gmwfm(
         starts.insert(0, start(h0, tc0))
         if k:
             starts += [start(h0, tc0 * 4.0), start(h0, tc0 / 4.0)]
+    if k:
+        starts += _grid_starts(prob, m, wv, a, fy, fun, start)
     lb = np.concatenate([np.full(p, _U_LO), np.full(k, lo_tc)])
     ub = np.concatenate([np.full(p, _U_HI), np.full(k, hi_tc)])
     best = None
     for z0 in starts:
         z0 = np.clip(z0, lb + 1e-9, ub - 1e-9)
-        r = optimize.least_squares(
-            resid,
-            z0,
-            bounds=(lb, ub),
-            method="trf",
-            jac="3-point",
-            x_scale=1.0,
-            ftol=1e-12,
-            xtol=1e-10,
-            gtol=1e-12,
-            max_nfev=2000,
-        )
+        r = least_squares(resid, z0, lb, ub, ftol=1e-12, xtol=1e-10, max_nfev=2000)
         if best is None or r.cost < best.cost:
             best = r
     assert best is not None
@@ -274,7 +298,7 @@ def fit_gmwfm(
             "f": fname,
             "weights": wname,
             "at_bound": at_bound,
-            "converged": bool(best.status > 0),
+            "converged": bool(best.success),
         },
     )
 
