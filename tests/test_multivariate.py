@@ -592,10 +592,14 @@ def test_replicate_fit_of_the_six_adis_logs_lies_between_the_individual_fits(adi
         assert min(vals) <= joint.params[name] <= max(vals), (name, joint.params[name], vals)
     assert 30 < 1 / joint.params["GM_1.beta"] < 300  # the slow GM of about 100 s
     # no replicate's own estimate does better on the summed objective
+    # omega is block diagonal over the stacked levels: each replicate's diagonal weights
+    split = np.cumsum([wv.n_levels for wv in adis_wvs])[:-1]
+    ws = np.split(np.diagonal(joint.omega), split)
+    assert joint.weights == "ci" and joint.omega.shape == (split[-1] + adis_wvs[-1].n_levels,) * 2
     for f in singles:
         total = sum(
             float(np.sum(w * (wv.variance - f.model.wv(wv.tau_samples, wv.fs)) ** 2))
-            for wv, w in zip(adis_wvs, joint.weights, strict=True)
+            for wv, w in zip(adis_wvs, ws, strict=True)
         )
         assert total >= joint.objective * (1 - 1e-9)
     assert "6 recordings" in joint.summary()

@@ -20,143 +20,97 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..model import Model, parse_model
 from ..processes import Process
-from ..units import param_unit
 from ..wavelet import WaveletVariance, wavelet_variance
 from ._varpro import NNLSProblem, at_bound, persistent_first, search, sqrt_weight
-from .result import FitError, ParamRecord, warning_lines
+from .result import FitError, FitResult, ParamTable, warning_lines
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix"]
 
 
-@dataclass(frozen=True, eq=False)
-class GMWMResult:
-    """Result of :func:`fit_gmwm`.
+@dataclass(frozen=True, eq=False, kw_only=True)
+class GMWMResult(FitResult):
+    """Result of :func:`fit_gmwm` (the fields of :class:`engine.fit.result.FitResult`, plus:).
 
     Attributes
     ----------
-    model : Model
-        The fitted model, every parameter set (AR1/GM most persistent first).
     wv : WaveletVariance
         The empirical WV the model was fitted to.
-    omega : ndarray, shape (J, J)
-        Weighting matrix.
-    weights : str
-        ``"ci"``, ``"identity"`` or ``"user"``.
-    objective : float
-        ``(nu_hat - nu)' Omega (nu_hat - nu)`` at the estimate.
     implied : ndarray, shape (J,)
         Model-implied WV at the empirical scales.
     components : dict[str, ndarray]
         Implied WV of each process by label (``WN``, ``GM_1`` ...), summing to ``implied``.
-    converged : bool
-        True when the local search met its tolerance.
-    at_bound : list[str]
-        Parameters estimated on the boundary of their space (a variance at 0, a correlation
-        time at the edge of the explored range): a sign that the model may be too large.
-    n_evaluations : int
-        Number of profiled-objective evaluations.
-    method : str
-        ``"closed-form"`` or ``"grid+nelder-mead"``.
-    message : str
-        Human-readable convergence note.
-    elapsed_s : float
-        Wall time of the fit (s).
+
+    ``weights`` is ``"ci"``, ``"identity"`` or ``"user"``; ``omega`` the (J, J) matrix;
+    ``at_bound`` lists a variance at 0 or a correlation time at the edge of the explored
+    range (a sign that the model may be too large); ``method`` is ``"closed-form"`` or
+    ``"grid+nelder-mead"``.
     """
 
-    model: Model
     wv: WaveletVariance
-    omega: np.ndarray
-    weights: str
-    objective: float
     implied: np.ndarray
     components: dict[str, np.ndarray]
-    converged: bool
-    at_bound: list[str] = field(default_factory=list)
-    n_evaluations: int = 0
-    method: str = ""
-    message: str = ""
-    elapsed_s: float = 0.0
 
     @property
     def fs(self) -> float:
         return self.wv.fs
 
     @property
-    def param_records(self) -> list[ParamRecord]:
-        """Parameters with process code, index among its kind, label, name, value and unit."""
-        out = []
-        m = self.model
-        for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True):
-            for name, v in zip(p.param_names, p.values, strict=True):
-                out.append(
-                    ParamRecord(
-                        p.code, idx, lab, name, float(v), param_unit(p.code, name, self.wv.unit)
-                    )
-                )
-        return out
-
-    @property
-    def params(self) -> dict[str, float]:
-        """Estimated values by unique name (``WN.sigma2``, ``GM_1.beta`` ...)."""
-        return {r.full_name: r.value for r in self.param_records}
+    def unit(self) -> str:
+        return self.wv.unit
 
     def implied_at(self, tau_samples: np.ndarray) -> np.ndarray:
         """Implied WV at other scales (samples), e.g. for a smooth curve."""
         return self.model.wv(tau_samples, self.fs)
 
-    def summary(self) -> str:
-        """Readable summary: model, data, parameters with units and datasheet values, fit."""
-        from ..units import datasheet
+    def conf_int(self, alpha: float = 0.05) -> ParamTable:
+        """Two-sided ``1 - alpha`` asymptotic intervals (the sandwich covariance with the
+        model-implied WV covariance, :func:`engine.inference.param_intervals`); a parameter on
+        a boundary gets ``nan`` bounds."""
+        from ..inference import param_intervals
 
+        ivs = param_intervals(self, level=1.0 - alpha)
+        return ParamTable(
+            names=tuple(iv.name for iv in ivs),
+            estimate=np.array([iv.value for iv in ivs]),
+            lower=np.array([iv.low for iv in ivs]),
+            upper=np.array([iv.high for iv in ivs]),
+            units=tuple(iv.unit for iv in ivs),
+            level=1.0 - alpha,
+        )
+
+    def _summary_head(self) -> list[str]:
         w = self.wv
-        lines = [
+        return [
             f"GMWM fit of {self.model.spec()}",
             f"  data: N = {w.n} samples, fs = {w.fs:g} Hz, {w.n_levels} WV levels"
             f"{' (robust WV)' if w.robust else ''}",
             f"  weights: {self.weights}; objective = {self.objective:.6g}; "
             f"{self.method}, {self.n_evaluations} evaluations, {1e3 * self.elapsed_s:.1f} ms",
-            "",
-            f"  {'parameter':<16} {'value':>14}  unit",
         ]
-        for r in self.param_records:
-            lines.append(f"  {r.full_name:<16} {r.value:>14.6e}  {r.unit}")
-        ds = datasheet(self.model, w.fs, w.unit)
-        if ds:
-            lines += ["", "  datasheet view:"]
-            for row in ds:
-                lines.append(
-                    f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
-                    f"{row['unit']}"
-                )
-        lines += warning_lines(self.at_bound, self.converged, self.message)
-        return "\n".join(lines)
 
-    def __str__(self) -> str:
-        return self.summary()
+    def _summary_tail(self) -> list[str]:
+        from ..units import datasheet
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary (the ``gmwm fit --json`` object)."""
+        ds = datasheet(self.model, self.wv.fs, self.wv.unit)
+        if not ds:
+            return []
+        return ["", "  datasheet view:"] + [
+            f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  {row['unit']}"
+            for row in ds
+        ]
+
+    def _dict_extra(self) -> dict[str, Any]:
         return {
-            "model": self.model.spec(),
-            "model_values": self.model.spec(values=True),
             "n": int(self.wv.n),
-            "fs": float(self.wv.fs),
-            "weights": self.weights,
-            "objective": float(self.objective),
-            "params": [r.to_dict() for r in self.param_records],
             "implied": [float(v) for v in self.implied],
             "components": {k: [float(x) for x in v] for k, v in self.components.items()},
-            "converged": bool(self.converged),
-            "at_bound": list(self.at_bound),
-            "method": self.method,
-            "n_evaluations": int(self.n_evaluations),
             "wv": self.wv.to_dict(),
         }
 

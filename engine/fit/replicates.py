@@ -9,128 +9,72 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..model import Model, ModelError, parse_model
 from ..processes import Process
-from ..units import param_unit
 from ..wavelet import WaveletVariance, wavelet_variance
 from ._varpro import NNLSProblem, at_bound, persistent_first, search
 from .gmwm import GMWMResult, fit_gmwm, weight_matrix
-from .result import FitError, warning_lines
+from .result import FitError, FitResult
 
 __all__ = ["ReplicateResult", "fit_replicates"]
 
 
-@dataclass(frozen=True, eq=False)
-class ReplicateResult:
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ReplicateResult(FitResult):
     """Result of :func:`fit_replicates`: one model fitted to several recordings.
+
+    The fields of :class:`engine.fit.result.FitResult` (``omega`` is block diagonal over the
+    recordings' stacked levels; ``objective`` the sum over recordings), plus:
 
     Attributes
     ----------
-    model : Model
-        The fitted model (AR1/GM most persistent first).
     wvs : list of WaveletVariance
         The replicates' WVs.
-    weights : list of ndarray (J_r,)
-        Diagonal weights of each replicate.
-    weights_name : str
-        ``"ci"``, ``"identity"`` or ``"user"``.
-    objective : float
-        Sum over replicates of ``(nu_hat_r - nu)' Omega_r (nu_hat_r - nu)``.
     objectives : list of float
-        Each replicate's term.
+        Each replicate's term ``(nu_hat_r - nu)' Omega_r (nu_hat_r - nu)``.
     implied : list of ndarray (J_r,)
         Implied WV at each replicate's scales.
     components : dict of str to ndarray
         Implied WV of each process at the scales of the longest replicate.
-    converged, at_bound, n_evaluations, method, message, elapsed_s
-        As :class:`engine.GMWMResult`.
     """
 
-    model: Model
     wvs: list[WaveletVariance]
-    weights: list[np.ndarray]
-    weights_name: str
-    objective: float
     objectives: list[float]
     implied: list[np.ndarray]
     components: dict[str, np.ndarray]
-    converged: bool
-    at_bound: list[str] = field(default_factory=list)
-    n_evaluations: int = 0
-    method: str = ""
-    message: str = ""
-    elapsed_s: float = 0.0
 
     @property
     def fs(self) -> float:
         return self.wvs[0].fs
 
     @property
-    def params(self) -> dict[str, float]:
-        """Estimated values by unique name (``WN.sigma2``, ``GM_1.beta`` ...)."""
-        m = self.model
-        return {
-            f"{lab}.{n}": float(v)
-            for lab, p in zip(m.labels, m.processes, strict=True)
-            for n, v in zip(p.param_names, p.values, strict=True)
-        }
+    def unit(self) -> str:
+        return self.wvs[0].unit
 
-    def summary(self) -> str:
-        """Readable summary."""
-        u = self.wvs[0].unit
-        lines = [
+    def _summary_head(self) -> list[str]:
+        return [
             f"GMWM replicate fit of {self.model.spec()} to {len(self.wvs)} recordings",
             f"  data: N = {', '.join(str(w.n) for w in self.wvs)} samples, fs = {self.fs:g} Hz",
-            f"  weights: {self.weights_name}; objective = {self.objective:.6g} (sum); "
+            f"  weights: {self.weights}; objective = {self.objective:.6g} (sum); "
             f"{self.method}, {self.n_evaluations} evaluations, "
             f"{1e3 * self.elapsed_s:.1f} ms",
-            "",
-            f"  {'parameter':<16} {'value':>14}  unit",
         ]
-        for lab, p in zip(self.model.labels, self.model.processes, strict=True):
-            for name, v in zip(p.param_names, p.values, strict=True):
-                lines.append(f"  {lab + '.' + name:<16} {v:>14.6e}  {param_unit(p.code, name, u)}")
-        lines += ["", "  objective by replicate: " + ", ".join(f"{v:.4g}" for v in self.objectives)]
-        lines += warning_lines(self.at_bound, self.converged, self.message)
-        return "\n".join(lines)
 
-    def __str__(self) -> str:
-        return self.summary()
+    def _summary_tail(self) -> list[str]:
+        return ["", "  objective by replicate: " + ", ".join(f"{v:.4g}" for v in self.objectives)]
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary."""
-        u = self.wvs[0].unit
+    def _dict_extra(self) -> dict[str, Any]:
         return {
             "kind": "replicates",
-            "model": self.model.spec(),
-            "model_values": self.model.spec(values=True),
-            "fs": float(self.fs),
             "n": [int(w.n) for w in self.wvs],
-            "weights": self.weights_name,
-            "objective": float(self.objective),
             "objectives": list(self.objectives),
-            "params": [
-                {
-                    "process": p.code,
-                    "label": lab,
-                    "name": n,
-                    "value": float(v),
-                    "unit": param_unit(p.code, n, u),
-                }
-                for lab, p in zip(self.model.labels, self.model.processes, strict=True)
-                for n, v in zip(p.param_names, p.values, strict=True)
-            ],
             "implied": [v.tolist() for v in self.implied],
             "components": {k: v.tolist() for k, v in self.components.items()},
-            "converged": bool(self.converged),
-            "at_bound": list(self.at_bound),
-            "method": self.method,
-            "n_evaluations": int(self.n_evaluations),
             "wv": [w.to_dict() for w in self.wvs],
         }
 
@@ -273,8 +217,8 @@ def fit_replicates(
     return ReplicateResult(
         model=fitted,
         wvs=out,
-        weights=ws,
-        weights_name=wname,
+        weights=wname,
+        omega=np.diag(np.concatenate(ws)),
         objective=float(sum(objs)),
         objectives=objs,
         implied=implied,
