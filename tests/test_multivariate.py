@@ -266,7 +266,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
     res = eg.fit_mgmwm(wvm, truth.cleared())
     for beta in np.geomspace(0.01, 20, 60):
         fixed = MultiModel(["a", "b"], "GM+WN+RW", shared=["GM"], nl={"GM": float(beta)})
-        prob = MProblem(fixed.cleared(), wvm, res.weights)
+        prob = MProblem(fixed.cleared(), wvm, res.moment_weights)
         u = np.array([prob.u_of_phi(np.exp(-beta / 5.0))])
         assert prob.profile(u) >= res.objective * (1 - 1e-9)
 
@@ -274,7 +274,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
 def kkt(res: eg.MGMWMResult, label: str) -> tuple[float, float, float]:
     """(min eigenvalue of the gradient G, <G, Sigma>, scale) for a shared RW with diagonal
     weights: first-order optimality of min f(Sigma) s.t. Sigma PSD is G PSD, G Sigma = 0."""
-    w, r = res.weights, res.wvm.values - res.implied
+    w, r = res.moment_weights, res.wvm.values - res.implied
     b = RW_BASIS(res.wvm.tau_samples.astype(float))
     k = res.wvm.k
     g = np.empty((k, k))
@@ -314,7 +314,9 @@ def test_psd_constraint_active_gives_a_psd_optimum():
         comps = dict(res.components)
         comps["RW"] = RW_BASIS(res.wvm.tau_samples.astype(float))[:, None, None] * trial
         imp = sum(comps.values())
-        f = np.sum(res.weights[:, iu[0], iu[1]] * (res.wvm.values - imp)[:, iu[0], iu[1]] ** 2)
+        f = np.sum(
+            res.moment_weights[:, iu[0], iu[1]] * (res.wvm.values - imp)[:, iu[0], iu[1]] ** 2
+        )
         assert f >= res.objective * (1 - 1e-9)
 
 
@@ -338,7 +340,7 @@ def boundary_case(name: str) -> tuple[eg.WVMatrix, MultiModel]:
 def shared_kkt(res: eg.MGMWMResult, label: str, basis) -> tuple[float, float, float]:
     """As :func:`kkt`, for any shared linear process with WV shape ``basis(tau)``; the scale
     is the Cauchy-Schwarz bound of the gradient's entries (G may be 0 up to rounding)."""
-    w, r = res.weights, res.wvm.values - res.implied
+    w, r = res.moment_weights, res.wvm.values - res.implied
     b = basis(res.wvm.tau_samples.astype(float))
     g = np.array(
         [
@@ -396,7 +398,7 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
     # Nelder-Mead from the three best points), on a fresh problem
     from scipy import optimize
 
-    prob = MProblem(mm.cleared(), wvm, res.weights)
+    prob = MProblem(mm.cleared(), wvm, res.moment_weights)
     axis = np.linspace(np.log(0.5), np.log(2.0 * prob.tau[-1]), 6)
     grid = [
         np.array(u)
@@ -448,12 +450,12 @@ def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
     face): the same objective as the certified candidates, to rounding."""
     wvm, mm = boundary_case("3 channels RW")
     res = eg.fit_mgmwm(wvm, mm)
-    prob = MProblem(mm.cleared(), wvm, res.weights)
+    prob = MProblem(mm.cleared(), wvm, res.moment_weights)
     u = np.array([prob.u_of_phi(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs)) for c in mm.channels])
     f, _, s, coupled = prob.solve(u)
     assert coupled and f == pytest.approx(res.objective, rel=1e-12)
     monkeypatch.setattr(ConeLSQ, "_uncertified", lambda self, *a, **k: {-1})
-    slow = MProblem(mm.cleared(), wvm, res.weights)
+    slow = MProblem(mm.cleared(), wvm, res.moment_weights)
     f2, _, s2, _ = slow.solve(u)
     assert f2 == pytest.approx(f, rel=1e-10)
     ti = slow.full[0]
@@ -497,7 +499,7 @@ def test_efficient_weights_and_the_moment_covariance():
     emp = np.var(sims[:, 5, 0, 1], ddof=1)
     assert emp / v[8 + 5, 8 + 5] == pytest.approx(1.0, abs=0.3)
     res = eg.fit_mgmwm(m, mm.cleared(), weights="efficient")
-    assert res.weights_name == "efficient" and res.omega is not None
+    assert res.weights == "efficient" and res.omega.shape == (6 * m.n_levels,) * 2
     assert np.all(np.isfinite(res.covariance("RW")))
 
 

@@ -205,20 +205,15 @@ def _fit(
     if omega is None:
         resid = (wvm.values - implied)[:, iu[0], iu[1]]
         objective = float(np.sum(w[:, iu[0], iu[1]] * resid**2))
-        weights = w
+        omega = np.diag(np.concatenate([w[:, p, q] for p, q in prob.pairs]))
     else:
         r = prob.y - np.concatenate([implied[:, p, q] for p, q in prob.pairs])
         objective = float(r @ omega @ r)
-        dg = np.diagonal(omega).reshape(len(prob.pairs), wvm.n_levels)
-        weights = np.zeros_like(w)
-        for pi, (p, q) in enumerate(prob.pairs):
-            weights[:, p, q] = weights[:, q, p] = dg[pi]
     at_bound = boundary_estimates(fitted, prob, u)
     return MGMWMResult(
         model=fitted,
         wvm=wvm,
-        weights=weights,
-        weights_name=wname,
+        weights=wname,
         objective=objective,
         implied=implied,
         components=comps,

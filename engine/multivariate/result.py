@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..fit.result import warning_lines
+from ..fit.result import FitResult, ParamRecord, Summary, warning_lines
 from ..model import Model
 from ..units import param_unit
 from ..wccv import WVMatrix
@@ -66,68 +66,88 @@ class SharedEstimate:
         }
 
 
-@dataclass(frozen=True, eq=False)
-class MGMWMResult:
-    """Result of :func:`fit_mgmwm`.
+@dataclass(frozen=True)
+class MultiParamRecord(ParamRecord):
+    """One estimate of a multivariate fit (:class:`engine.fit.result.ParamRecord` plus where
+    it belongs).
+
+    ``label`` is the process's label in the channel models (``"WN"``, ``"GM_1"``) and
+    ``name`` the parameter (``"sigma2"``, ``"beta"``, ``"cov[gyro_x,gyro_y]"`` for an entry of
+    a shared covariance); ``channels`` the channel (independent process) or the group
+    (shared process), ``shared`` which of the two. The unique name :attr:`full_name` is
+    ``channel.label.name`` for an independent process, ``label.name`` for a shared one.
+    """
+
+    channels: tuple[str, ...] = ()
+    shared: bool = False
+
+    @property
+    def full_name(self) -> str:
+        head = self.label if self.shared else f"{self.channels[0]}.{self.label}"
+        return f"{head}.{self.name}"
+
+    def to_dict(self) -> dict[str, Any]:
+        d = super().to_dict()
+        d["full_name"] = self.full_name
+        d["channels"] = list(self.channels)
+        d["shared"] = self.shared
+        return d
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class MGMWMResult(FitResult):
+    """Result of :func:`fit_mgmwm` (the fields of :class:`engine.fit.result.FitResult`, plus:).
 
     Attributes
     ----------
     model : MultiModel
-        The fitted model, every value set.
+        The fitted model, every value set (the base's ``model`` is a univariate
+        :class:`engine.Model`; a multivariate fit's is a :class:`MultiModel`).
     wvm : WVMatrix
         The empirical WV/WCCV matrix it was fitted to.
-    weights : ndarray, shape (J, k, k)
-        Weight of every moment (symmetric; the objective uses the upper triangle).
-    weights_name : str
-        ``"ci"``, ``"identity"``, ``"user"`` or ``"efficient"`` (then ``weights`` holds the
-        diagonal of ``omega``).
-    objective : float
-        ``sum_{p <= q, j} w (nu_hat - nu)^2`` at the estimate (``r' omega r`` for efficient
-        weights).
     implied : ndarray, shape (J, k, k)
         Model-implied WV (diagonal) and WCCV (off-diagonal).
     components : dict of str to ndarray (J, k, k)
         Implied array of each process (``"RW"`` shared, ``"gyro_x:WN"`` independent).
-    converged : bool
-        The non-linear search met its tolerance (always True without AR1/GM).
-    at_bound : list of str
-        Estimates on the boundary: variances at 0, singular covariances, correlation times
-        at the edge of the explored range.
     psd_active : bool
         The positive semi-definiteness constraint of a covariance was active at the
         estimate (the coupled problem was solved).
-    n_evaluations : int
-        Profiled-objective evaluations.
     n_inner : int
         Newton steps of the PSD-constrained inner solves, over all evaluations (0 when the
         constraint was never active; a few per such evaluation).
-    method : str
-        ``"closed-form"`` (no AR1/GM) or ``"profiled nelder-mead"``.
-    message : str
-        Convergence note.
-    elapsed_s : float
-        Wall time (s).
-    omega : ndarray (P J, P J) or None
-        The full weighting matrix of the stacked moments (``weights="efficient"``); None
-        for diagonal weights.
+
+    ``weights`` is ``"ci"``, ``"identity"``, ``"user"`` or ``"efficient"``; ``omega`` the
+    (P J, P J) weighting matrix of the stacked moments (pair by pair, levels inside, ``P =
+    k (k + 1) / 2``): diagonal except for efficient weights (:attr:`moment_weights` gives
+    its diagonal as a (J, k, k) array). ``objective`` is ``sum_{p <= q, j} w (nu_hat -
+    nu)^2`` at the estimate (``r' omega r`` for efficient weights); ``at_bound`` lists
+    variances at 0, singular covariances and correlation times at the edge of the explored
+    range; ``method`` is ``"closed-form"`` (no AR1/GM) or ``"profiled nelder-mead"``.
     """
 
-    model: MultiModel
+    model: MultiModel  # type: ignore[assignment]
     wvm: WVMatrix
-    weights: np.ndarray
-    weights_name: str
-    objective: float
     implied: np.ndarray
     components: dict[str, np.ndarray]
-    converged: bool
-    at_bound: list[str] = field(default_factory=list)
     psd_active: bool = False
-    n_evaluations: int = 0
-    method: str = ""
-    message: str = ""
-    elapsed_s: float = 0.0
-    omega: np.ndarray | None = field(default=None, repr=False)
     n_inner: int = 0
+
+    @property
+    def moment_weights(self) -> np.ndarray:
+        """The weight of every moment (the diagonal of ``omega``), shape (J, k, k), symmetric."""
+        k, nj = self.wvm.k, self.wvm.n_levels
+        dg = np.diagonal(self.omega)
+        out = np.zeros((nj, k, k))
+        pairs = [(p, q) for p in range(k) for q in range(p, k)]
+        for pi, (p, q) in enumerate(pairs):
+            out[:, p, q] = out[:, q, p] = dg[pi * nj : (pi + 1) * nj]
+        return out
+
+    @property
+    def unit(self) -> str:
+        """The channels' common unit ("" when they differ)."""
+        units = {self._unit(c) for c in self.channels}
+        return units.pop() if len(units) == 1 else ""
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -174,62 +194,58 @@ class MGMWMResult:
         return self.shared[label].corr
 
     @property
-    def param_records(self) -> list[dict[str, Any]]:
-        """Every estimate as ``{"name", "value", "unit", "channels"}``: ``channel.label.name``
-        for independent processes, ``label.cov[a,b]`` (a <= b) and ``label.beta``/``.phi`` for
-        shared ones."""
-        out: list[dict[str, Any]] = []
+    def param_records(self) -> list[MultiParamRecord]:  # type: ignore[override]
+        """Every estimate, shared processes first (their beta/phi, then the upper triangle of
+        their covariance), then each channel's own; unique names ``channel.label.name`` for
+        independent processes, ``label.cov[a,b]`` (a <= b) and ``label.beta``/``.phi`` for
+        shared ones (:attr:`MultiParamRecord.full_name`)."""
+        out: list[MultiParamRecord] = []
         for lab, est in self.shared.items():
             g = est.channels
+            m = self.model.models[g[0]]
+            idx = m.indices[self.model.index(lab, g[0])]
             if est.nl is not None:
+                unit = param_unit(est.code, str(est.nl_name))
                 out.append(
-                    {
-                        "name": f"{lab}.{est.nl_name}",
-                        "value": float(est.nl),
-                        "unit": param_unit(est.code, str(est.nl_name)),
-                        "channels": list(g),
-                    }
+                    MultiParamRecord(
+                        est.code, idx, lab, str(est.nl_name), float(est.nl), unit, g, True
+                    )
                 )
             for a, b in itertools.combinations_with_replacement(range(len(g)), 2):
                 out.append(
-                    {
-                        "name": f"{lab}.cov[{g[a]},{g[b]}]",
-                        "value": float(est.cov[a, b]),
-                        "unit": est.unit,
-                        "channels": [g[a], g[b]],
-                    }
+                    MultiParamRecord(
+                        est.code,
+                        idx,
+                        lab,
+                        f"cov[{g[a]},{g[b]}]",
+                        float(est.cov[a, b]),
+                        est.unit,
+                        (g[a], g[b]),
+                        True,
+                    )
                 )
         for t in self.model.terms():
             if t.shared:
                 continue
             c = self.channels[t.chans[0]]
+            m = self.model.models[c]
+            idx = m.indices[m.labels.index(t.label)]
             for name, v in zip(t.proto.param_names, t.proto.values, strict=True):
-                out.append(
-                    {
-                        "name": f"{c}.{t.label}.{name}",
-                        "value": float(v),
-                        "unit": param_unit(t.code, name, self._unit(c)),
-                        "channels": [c],
-                    }
-                )
+                unit = param_unit(t.code, name, self._unit(c))
+                out.append(MultiParamRecord(t.code, idx, t.label, name, float(v), unit, (c,)))
         return out
-
-    @property
-    def params(self) -> dict[str, float]:
-        """Flat estimates by name (see :attr:`param_records`)."""
-        return {r["name"]: r["value"] for r in self.param_records}
 
     def implied_at(self, tau_samples: np.ndarray) -> np.ndarray:
         """Implied (J', k, k) array at other scales (samples), e.g. for smooth curves."""
         return self.model.implied(tau_samples, self.fs)
 
-    def summary(self) -> str:
+    def summary(self) -> Summary:
         """Readable summary: data, per-channel parameters, shared covariances/correlations."""
         w = self.wvm
         lines = [
             f"MGMWM fit of {self.model.spec()}",
             f"  data: {w.k} channels, N = {w.n} samples, fs = {w.fs:g} Hz, {w.n_levels} levels",
-            f"  weights: {self.weights_name}; objective = {self.objective:.6g}; {self.method}, "
+            f"  weights: {self.weights}; objective = {self.objective:.6g}; {self.method}, "
             f"{self.n_evaluations} evaluations, {1e3 * self.elapsed_s:.1f} ms"
             + ("; PSD constraint active" if self.psd_active else ""),
         ]
@@ -271,31 +287,19 @@ class MGMWMResult:
                     + "".join(f"{rho[a, b]:>{width}.4f}" for b in range(len(g)))
                 )
         lines += warning_lines(self.at_bound, self.converged, self.message)
-        return "\n".join(lines)
+        return Summary("\n".join(lines))
 
-    def __str__(self) -> str:
-        return self.summary()
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary (the ``gmwm fit --channels --json`` object)."""
+    def _dict_extra(self) -> dict[str, Any]:
+        """The ``gmwm fit --channels --json`` object beyond the base's keys."""
         return {
             "kind": "mgmwm",
-            "model": self.model.spec(),
             "channels": list(self.channels),
             "n": int(self.wvm.n),
-            "fs": float(self.wvm.fs),
-            "weights": self.weights_name,
-            "objective": float(self.objective),
-            "params": self.param_records,
             "channel_models": {c: m.spec(values=True) for c, m in self.channel_models.items()},
             "shared": {k: v.to_dict() for k, v in self.shared.items()},
             "implied": self.implied.tolist(),
             "components": {k: v.tolist() for k, v in self.components.items()},
-            "converged": bool(self.converged),
-            "at_bound": list(self.at_bound),
             "psd_active": bool(self.psd_active),
-            "method": self.method,
-            "n_evaluations": int(self.n_evaluations),
             "n_inner": int(self.n_inner),
             "wv_matrix": self.wvm.to_dict(),
         }

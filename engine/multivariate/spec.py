@@ -557,9 +557,10 @@ class MultiModel:
         return x
 
     # ---- text ---------------------------------------------------------------------------
-    def spec(self) -> str:
-        """Readable structure, e.g. ``gyro_x,gyro_y,gyro_z: WN+RW | shared: RW``."""
-        specs = {c: m.spec() for c, m in self.models.items()}
+    def spec(self, values: bool = False) -> str:
+        """Readable structure, e.g. ``gyro_x,gyro_y,gyro_z: WN+RW | shared: RW`` (with
+        ``values``, each channel model with its values, as :meth:`engine.Model.spec`)."""
+        specs = {c: m.spec(values=values) for c, m in self.models.items()}
         if len(set(specs.values())) == 1:
             head = f"{','.join(self.channels)}: {specs[self.channels[0]]}"
         else:
