@@ -1717,7 +1717,7 @@ def fit_mgmwm(
     if not efficient:
         return _fit(wvm, model, w, None, wname, t0)
     first = _fit(wvm, model, w, None, "ci", t0)
-    from .inference import _inverse
+    from .inference import inverse_cov as _inverse
 
     omega = _inverse(moment_covariance(first.model, wvm))
     return _fit(wvm, first.model, w, omega, "efficient", t0)
@@ -1803,7 +1803,8 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     ndarray, shape (P J, P J)
         ``P = k (k + 1) / 2`` pairs.
     """
-    from .inference import _frequency_grid, _spectral_density
+    from .inference import frequency_grid as _frequency_grid
+    from .inference import spectral_density as _spectral_density
 
     if not model.is_set:
         raise FitError("moment_covariance needs a model with every value set (a fitted model)")
@@ -2113,7 +2114,7 @@ def dependence_test(
     -------
     DependenceTest
     """
-    from .inference import _map
+    from .inference import parallel_map as _map
 
     if B < 1:
         raise ValueError(f"B must be at least 1, got {B}")
