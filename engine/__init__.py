@@ -13,8 +13,11 @@ from typing import TYPE_CHECKING, Any
 
 from .fit import (
     FitError,
+    FitResult,
     GMWMResult,
     ParamRecord,
+    ParamTable,
+    Summary,
     fit_gmwm,
     weight_matrix,
 )
@@ -66,6 +69,18 @@ _LAZY: dict[str, str] = {
     "kalibr_models": "export",
     "read_kalibr": "export",
     "write_kalibr": "export",
+    "fit_efficient": "inference",
+    "param_intervals": "inference",
+    "ParamInterval": "inference",
+    "j_test": "inference",
+    "JTest": "inference",
+    "wv_cov_model": "inference",
+    "wv_cov_data": "inference",
+    "wv_cov_bootstrap": "inference",
+    "rank_models": "inference",
+    "submodels": "inference",
+    "SelectionResult": "inference",
+    "Candidate": "inference",
     "ImuLog": "io",
     "LoadError": "io",
     "load_log": "io",
@@ -119,6 +134,20 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     )
     from .fit.gmwfm import fit_armav, fit_gmwfm
     from .fit.replicates import ReplicateResult, fit_replicates
+    from .inference import (
+        Candidate,
+        JTest,
+        ParamInterval,
+        SelectionResult,
+        fit_efficient,
+        j_test,
+        param_intervals,
+        rank_models,
+        submodels,
+        wv_cov_bootstrap,
+        wv_cov_data,
+        wv_cov_model,
+    )
     from .io import (
         ImuLog,
         LoadError,
@@ -195,6 +224,9 @@ __all__ = [
     "GMWMResult",
     "ParamRecord",
     "FitError",
+    "FitResult",
+    "ParamTable",
+    "Summary",
     "weight_matrix",
     "datasheet",
     "param_unit",
@@ -248,3 +280,17 @@ __all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
 ]
 __version__ = "0.1.0"
 __all__ += ["Scenario", "SCENARIOS", "simulate_scenario"]  # teaching (issue 4)
+__all__ += [  # inference and model selection
+    "fit_efficient",
+    "param_intervals",
+    "ParamInterval",
+    "j_test",
+    "JTest",
+    "wv_cov_model",
+    "wv_cov_data",
+    "wv_cov_bootstrap",
+    "rank_models",
+    "submodels",
+    "SelectionResult",
+    "Candidate",
+]

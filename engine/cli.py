@@ -286,7 +286,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .selection import rank_models
+    from .inference import rank_models
 
     if not args.max_model and not args.models:
         raise CliError("give --max-model SPEC or --models 'SPEC1,SPEC2,...'")

@@ -10,7 +10,7 @@ import pytest
 
 import engine as eg
 from engine.cli import main
-from engine.selection import rank_models, submodels
+from engine.inference.selection import rank_models, submodels
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -106,7 +106,7 @@ def dependence_test(
     -------
     DependenceTest
     """
-    from ..inference import _map
+    from ..inference.covariance import parallel_map
 
     if B < 1:
         raise ValueError(f"B must be at least 1, got {B}")
@@ -122,12 +122,12 @@ def dependence_test(
     seeds = np.random.SeedSequence(seed).spawn(B)
     items = [(fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, weights, sd) for sd in seeds]
     if progress is None:
-        out = _map(_boot_dependence, items, workers)
+        out = parallel_map(_boot_dependence, items, workers)
     else:
         out = []
         size = 1 if workers <= 1 else 4 * workers
         for i in range(0, len(items), size):
-            for d in _map(_boot_dependence, items[i : i + size], workers):
+            for d in parallel_map(_boot_dependence, items[i : i + size], workers):
                 out.append(d)
                 progress(len(out), len(items))
     boot = [d for d in out if d is not None]

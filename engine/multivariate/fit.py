@@ -174,9 +174,9 @@ def fit_mgmwm(
     if not efficient:
         return _fit(wvm, model, w, None, wname, t0)
     first = _fit(wvm, model, w, None, "ci", t0)
-    from ..inference import _inverse
+    from ..inference.covariance import inverse_cov
 
-    omega = _inverse(moment_covariance(first.model, wvm))
+    omega = inverse_cov(moment_covariance(first.model, wvm))
     return _fit(wvm, first.model, w, omega, "efficient", t0)
 
 
@@ -255,7 +255,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     ndarray, shape (P J, P J)
         ``P = k (k + 1) / 2`` pairs.
     """
-    from ..inference import _frequency_grid, _spectral_density
+    from ..inference.covariance import frequency_grid, spectral_density
 
     if not model.is_set:
         raise FitError("moment_covariance needs a model with every value set (a fitted model)")
@@ -273,7 +273,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     units = [v[0] for v in shapes.values()]
     cmats = [v[1] for v in shapes.values()]
     ns = len(units)
-    f, wts = _frequency_grid(nj, Model(tuple(units)), fs)
+    f, wts = frequency_grid(nj, Model(tuple(units)), fs)
     integ = np.zeros((ns, ns, nj, nj))
     inv_m2 = 1.0 / 4.0 ** np.arange(nj)
     chunk = 1 << 14
@@ -287,7 +287,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
             sin2 = sin_m * sin_m
             gains[j] = sin2 * sin2 * base * inv_m2[j]
             sin_m, cos_m = 2.0 * sin_m * cos_m, 1.0 - 2.0 * sin2
-        g = [gains * _spectral_density(u, fc, fs) for u in units]
+        g = [gains * spectral_density(u, fc, fs) for u in units]
         for a in range(ns):
             ga = g[a] * wc
             for b in range(a, ns):

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from engine.fit import fit_gmwm
-from engine.inference import _map, fit_efficient
+from engine.inference import fit_efficient, parallel_map
 from engine.multivariate import MultiModel, fit_mgmwm
 from engine.wccv import wv_matrix
 
@@ -210,7 +210,7 @@ def main() -> None:
     rows = []
     chunk = max(2 * args.workers, 50)
     for a in range(0, args.reps, chunk):
-        rows += _map(one_replicate, [(n, s) for s in seeds[a : a + chunk]], args.workers)
+        rows += parallel_map(one_replicate, [(n, s) for s in seeds[a : a + chunk]], args.workers)
         print(
             f"\r{len(rows)}/{args.reps} replicates, {time.perf_counter() - t0:.0f} s",
             end="",
