@@ -116,9 +116,5 @@ def cli_fit(
         return json_ready(d)
     text = f"{args.input} [{', '.join(names)}]\n{res.summary()}"
     if test is not None:
-        text += (
-            f"\n\n  test of dependence ({', '.join(test.labels)} shared vs independent): "
-            f"D = {test.statistic:.4g}, p = {test.p_value:.3g} "
-            f"(parametric bootstrap, B = {test.B})"
-        )
+        text += f"\n\n  {test.summary()}"
     return text

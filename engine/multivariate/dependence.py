@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..fit import FitError
+from ..fit.result import Summary
 from ..model import ModelError
 from ..wccv import WVMatrix, wv_matrix
 from .fit import as_wvm, fit_mgmwm
@@ -27,7 +28,10 @@ class DependenceTest:
     """Parametric-bootstrap test of dependence between channels.
 
     ``statistic = Q_independent - Q_shared`` (objective difference, >= 0 since the models
-    are nested); ``p_value = (1 + #{D_b >= statistic}) / (1 + B)``.
+    are nested); ``p_value = (1 + #{D_b >= statistic}) / (1 + B)``. A test, not a fit: it
+    has no model or estimates of its own, so it does not derive from
+    :class:`engine.fit.result.FitResult`, but it has the same ``summary()`` (a
+    :class:`engine.fit.result.Summary`) and ``to_dict()``.
     """
 
     statistic: float
@@ -38,7 +42,23 @@ class DependenceTest:
     B: int
     bootstrap: tuple[float, ...] = ()
 
+    def summary(self) -> Summary:
+        """One line: the statistic, its p-value and the number of replicates (a :class:`str`
+        with an HTML view for notebooks, as a fit's summary)."""
+        return Summary(
+            f"test of dependence ({', '.join(self.labels)} shared vs independent): "
+            f"D = {self.statistic:.4g}, p = {self.p_value:.3g} "
+            f"(parametric bootstrap, B = {self.B})"
+        )
+
+    def __str__(self) -> str:
+        return str(self.summary())
+
+    def _repr_html_(self) -> str:
+        return self.summary()._repr_html_()
+
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (without the bootstrap values)."""
         return {
             "statistic": self.statistic,
             "p_value": self.p_value,

@@ -22,13 +22,14 @@ from typing import Any
 import numpy as np
 
 from ..fit import FitError
-from ..model import Model, ModelError
+from ..model import ModelError
 from ..wccv import WVMatrix, wv_matrix
+from .moments import moment_covariance
 from .problem import MProblem, boundary_estimates, fitted_model, search
 from .result import MGMWMResult
 from .spec import MultiModel
 
-__all__ = ["fit_mgmwm", "moment_covariance", "as_wvm"]
+__all__ = ["fit_mgmwm", "as_wvm"]
 
 
 def _weights(wvm: WVMatrix, weights: str | np.ndarray) -> tuple[np.ndarray, str]:
@@ -227,87 +228,3 @@ def _fit(
         omega=omega,
         n_inner=prob.n_inner,
     )
-
-
-def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
-    """Asymptotic Gaussian covariance of the stacked WV/WCCV moments implied by a model.
-
-    Moments are stacked pair by pair (``(0,0), (0,1), .., (1,1), ..``), levels inside. With
-    ``S(f) = sum_a s_a(f) C_a`` the model's spectral matrix (``s_a`` the spectral density of a
-    process per unit variance, ``C_a`` its k x k coefficient matrix) and ``G_j = |H_j|^2`` the
-    Haar squared gain,
-
-        Cov(nu_pq_j, nu_rs_l) = 1 / max(M_j, M_l) int G_j G_l (S_pr S_qs + S_ps S_qr) df
-
-    (Isserlis' formula for the products of the coefficient series; with p = q = r = s it is
-    the univariate :func:`engine.inference.wv_cov_model`). The integrals
-    ``int G_j G_l s_a s_b df`` are computed once per pair of process shapes.
-
-    Parameters
-    ----------
-    model : MultiModel
-        Every value set (e.g. ``result.model``).
-    wvm : WVMatrix
-        Gives the levels, ``M_j`` and fs.
-
-    Returns
-    -------
-    ndarray, shape (P J, P J)
-        ``P = k (k + 1) / 2`` pairs.
-    """
-    from ..inference.covariance import frequency_grid, spectral_density
-
-    if not model.is_set:
-        raise FitError("moment_covariance needs a model with every value set (a fitted model)")
-    fs, k, nj = wvm.fs, model.k, wvm.n_levels
-    shapes: dict[tuple[str, float | None], list[Any]] = {}
-    for t in model.terms():
-        c, phi = model.term_values(t, fs)
-        if t.code == "DR" or not np.any(c != 0):
-            continue  # deterministic, or absent
-        key = (t.code, None if phi is None else float(phi))
-        if key not in shapes:
-            unit = t.proto.cleared().from_fit(1.0, phi, fs)
-            shapes[key] = [unit, np.zeros((k, k))]
-        shapes[key][1][np.ix_(t.chans, t.chans)] += c
-    units = [v[0] for v in shapes.values()]
-    cmats = [v[1] for v in shapes.values()]
-    ns = len(units)
-    f, wts = frequency_grid(nj, Model(tuple(units)), fs)
-    integ = np.zeros((ns, ns, nj, nj))
-    inv_m2 = 1.0 / 4.0 ** np.arange(nj)
-    chunk = 1 << 14
-    for a0 in range(0, f.size, chunk):
-        fc, wc = f[a0 : a0 + chunk], wts[a0 : a0 + chunk]
-        x = np.pi * fc
-        sin_m, cos_m = np.sin(x), np.cos(x)
-        base = 1.0 / (sin_m * sin_m)
-        gains = np.empty((nj, fc.size))
-        for j in range(nj):
-            sin2 = sin_m * sin_m
-            gains[j] = sin2 * sin2 * base * inv_m2[j]
-            sin_m, cos_m = 2.0 * sin_m * cos_m, 1.0 - 2.0 * sin2
-        g = [gains * spectral_density(u, fc, fs) for u in units]
-        for a in range(ns):
-            ga = g[a] * wc
-            for b in range(a, ns):
-                # einsum, not BLAS: on a loaded machine a threaded BLAS spins on these small
-                # products (100x slower); the flops are negligible either way
-                integ[a, b] += np.einsum("jf,lf->jl", ga, g[b])
-        for a in range(ns):
-            for b in range(a + 1, ns):
-                integ[b, a] = integ[a, b].T
-    pairs = [(p, q) for p in range(k) for q in range(p, k)]
-    npairs = len(pairs)
-    v = np.zeros((npairs * nj, npairs * nj))
-    for a in range(ns):
-        for b in range(ns):
-            ca, cb = cmats[a], cmats[b]
-            t = np.array(
-                [[ca[p, r] * cb[q, s] + ca[p, s] * cb[q, r] for r, s in pairs] for p, q in pairs]
-            )
-            if np.any(t != 0):
-                v += np.kron(t, integ[a, b])
-    m_j = wvm.n_coef.astype(float)
-    v /= np.tile(np.maximum.outer(m_j, m_j), (npairs, npairs))
-    return 0.5 * (v + v.T)

@@ -8,10 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from ..fit.result import FitResult, ParamRecord, Summary, warning_lines
+from ..fit.result import FitResult, ParamRecord, ParamTable, Summary, warning_lines
 from ..model import Model
 from ..units import param_unit
 from ..wccv import WVMatrix
+from .moments import conf_int as moments_conf_int
 from .spec import MultiModel, corr_matrix
 
 __all__ = ["SharedEstimate", "MGMWMResult"]
@@ -234,6 +235,13 @@ class MGMWMResult(FitResult):
                 unit = param_unit(t.code, name, self._unit(c))
                 out.append(MultiParamRecord(t.code, idx, t.label, name, float(v), unit, (c,)))
         return out
+
+    def conf_int(self, alpha: float = 0.05) -> ParamTable:
+        """Two-sided ``1 - alpha`` asymptotic intervals of every estimate (the sandwich
+        covariance with the model-implied covariance of the stacked WV/WCCV moments,
+        :func:`engine.multivariate.moments.conf_int`); an estimate on a boundary gets ``nan``
+        bounds."""
+        return moments_conf_int(self, alpha)
 
     def implied_at(self, tau_samples: np.ndarray) -> np.ndarray:
         """Implied (J', k, k) array at other scales (samples), e.g. for smooth curves."""
