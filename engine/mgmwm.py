@@ -71,7 +71,7 @@ from scipy import optimize
 
 from ._jsonutil import json_ready
 from .fit import FitError, fit_gmwm
-from .fit.gmwm import _warning_lines
+from .fit.result import warning_lines as _warning_lines
 from .model import Model, ModelError, parse_model
 from .processes import AR1, TC_MAX_FACTOR, TC_MIN, Process
 from .units import param_unit
