@@ -236,9 +236,9 @@ def _estimate_one(
     if meth == "GMWM":
         return from_gmwm(fit_gmwm(wv, model))
     if meth == "ARMAV":
-        return fit_armav(wv, model)
+        return fit_armav(wv, model).as_estimate()
     if meth == "ARMAV-unweighted":
-        est = fit_armav(wv, model, weights="identity")
+        est = fit_armav(wv, model, weights="identity").as_estimate()
         return replace(est, method=meth)
     av = AllanVariance.from_wv(wv)
     if meth == "AVSM":

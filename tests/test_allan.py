@@ -323,8 +323,8 @@ def composite_mc() -> dict[str, np.ndarray]:
         {
             "GMWM-id": lambda wv: from_gmwm(eg.fit_gmwm(wv, model, weights="identity")),
             "GMWM": lambda wv: from_gmwm(eg.fit_gmwm(wv, model)),
-            "ARMAV-id": lambda wv: fit_armav(wv, model, weights="identity"),
-            "ARMAV": lambda wv: fit_armav(wv, model),
+            "ARMAV-id": lambda wv: fit_armav(wv, model, weights="identity").as_estimate(),
+            "ARMAV": lambda wv: fit_armav(wv, model).as_estimate(),
             "AVSM": lambda wv: avsm(AllanVariance.from_wv(wv), regions),
         },
         seed=8,
@@ -370,7 +370,7 @@ def test_common_form_side_by_side(accel_like):
     g = eg.fit_gmwm(wv, truth.cleared())
     ests = [
         from_gmwm(g),
-        fit_armav(wv, truth.cleared()),
+        fit_armav(wv, truth.cleared()).as_estimate(),
         avsm(wv, {"QN": (1, 2), "WN": (4, 64), "RW": (4096, 16384), "DR": (32768, 1e9)}),
         avsm_auto(wv),
     ]

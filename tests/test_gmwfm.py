@@ -50,7 +50,7 @@ def test_armav_reaches_the_minimum_of_its_objective(accel_like):
     assert est.objective <= brute_log10_min(wv, truth.cleared(), w) * (1 + 1e-7)
     unw = fit_armav(wv, truth.cleared(), weights="identity")
     assert unw.objective <= brute_log10_min(wv, truth.cleared(), np.ones(wv.n_levels)) * (1 + 1e-7)
-    assert est.method == "ARMAV" and "f = log10" in est.notes[0]
+    assert est.estimator == "ARMAV" and "f = log10" in est.notes[0]
     r = np.log10(wv.variance) - np.log10(est.implied)
     assert est.objective == pytest.approx(float(np.sum(w * r * r)), rel=1e-12)
 
@@ -62,7 +62,7 @@ def test_gmwfm_identity_is_the_gmwm(accel_like):
     assert exact.params == pytest.approx(g.params, rel=1e-12)
     generic = fit_gmwfm(wv, truth.cleared(), f=lambda v: v)  # the generic optimiser
     assert generic.objective <= g.objective * (1 + 1e-6)
-    assert generic.method == "GMWFM(<lambda>)"
+    assert generic.estimator == "GMWFM(<lambda>)"
 
 
 def test_gmwfm_with_gauss_markov():
@@ -85,3 +85,41 @@ def test_gmwfm_errors(accel_like):
         fit_gmwfm(wv, "WN", f="cube")
     with pytest.raises(eg.ModelError):
         fit_armav(wv.truncate(2), truth.cleared())
+
+
+def test_terms_at_zero_are_named_by_their_label_in_the_ordered_fitted_model():
+    """The old ARMAV named a zero-variance GM by its position before the most-persistent-first
+    ordering, so ``at_bound`` could point at a GM with a positive variance."""
+    truth = eg.parse_model(
+        "GM(beta=5.0, sigma2_gm=1.0)+GM(beta=0.05, sigma2_gm=0.5)+WN(sigma2=1.0)+RW(gamma2=1e-6)"
+    )
+    for seed, f in ((3, "log10"), (4, "sqrt"), (5, "sqrt")):
+        wv = eg.wavelet_variance(truth.simulate(2**14, fs=100.0, rng=seed), fs=100.0)
+        est = fit_gmwfm(wv, "3*GM+WN+RW", f=f)
+        zero = {
+            f"{lab}.{p.param_names[-1] if p.nonlinear else p.param_names[0]}"
+            for lab, p in zip(est.model.labels, est.model.processes, strict=True)
+            if p.linear_coef() == 0.0
+        }
+        assert zero, "the third GM is not needed: some variance is 0"
+        assert zero == {b for b in est.at_bound if not b.endswith((".beta", ".phi"))}
+        betas = [est.params[f"GM_{i}.beta"] for i in (1, 2, 3)]
+        assert betas == sorted(betas)  # most persistent first
+
+
+def test_the_gmwfm_result_shares_the_fit_result_base(accel_like):
+    from engine.fit import FitResult
+
+    truth, wv = accel_like
+    est = fit_armav(wv, truth.cleared())
+    assert isinstance(est, FitResult) and est.weights == "ci" and est.estimator == "ARMAV"
+    w = 1 / (np.log10(wv.ci_high) - np.log10(wv.ci_low)) ** 2
+    np.testing.assert_allclose(np.diagonal(est.omega), w, rtol=1e-12)
+    r = np.log10(wv.variance) - np.log10(est.implied)
+    assert est.objective == pytest.approx(float(r @ est.omega @ r), rel=1e-12)
+    assert est.summary().startswith("ARMAV fit of") and est.n_evaluations > 0
+    d = est.to_dict()
+    assert d["f"] == "log10" and d["weights"] == "ci" and d["params"][0]["label"] == "QN"
+    common = est.as_estimate()
+    assert common.method == "ARMAV" and common.params == est.params
+    assert common.objective == est.objective

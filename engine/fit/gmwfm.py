@@ -8,20 +8,23 @@ autonomous regression method for the Allan variance, Jurado, Schubert Kabban & R
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .._optim import least_squares
-from ..allan import MethodEstimate, from_gmwm
+from ..allan import MethodEstimate
 from ..model import Model, parse_model
-from ..processes import AR1, Process
+from ..processes import Process
 from ..wavelet import WaveletVariance
-from ._varpro import NNLSProblem, grid_candidates, sqrt_weight
+from ._varpro import NNLSProblem, at_bound, grid_candidates, persistent_first, sqrt_weight
 from .gmwm import fit_gmwm, weight_matrix
-from .result import FitError
+from .result import FitError, FitResult
 
-__all__ = ["fit_gmwfm", "fit_armav"]
+__all__ = ["fit_gmwfm", "fit_armav", "GMWFMResult"]
 
 
 # -------------------------------------------------------------------------------------------
@@ -32,6 +35,86 @@ _F: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "sqrt": np.sqrt,
 }
 _U_LO, _U_HI = -70.0, 8.0  # bounds of the log linear coefficients (relative to their scale)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class GMWFMResult(FitResult):
+    """Result of :func:`fit_gmwfm` / :func:`fit_armav` (the fields of
+    :class:`engine.fit.result.FitResult`, the objective in f-space, plus:).
+
+    Attributes
+    ----------
+    wv : WaveletVariance
+        The empirical WV.
+    f : str
+        Name of the function matched (``"log10"``, ``"sqrt"`` ...).
+    estimator : str
+        ``"ARMAV"`` or ``"GMWFM(<f>)"``: the name in comparison tables.
+    implied : ndarray (J,)
+        Implied WV at the empirical scales.
+    components : dict[str, ndarray]
+        Implied WV of each process, summing to ``implied``.
+    notes : tuple of str
+        How the estimate was made (f, weights, starts, evaluations, terms at 0).
+    """
+
+    wv: WaveletVariance
+    f: str
+    estimator: str
+    implied: np.ndarray
+    components: dict[str, np.ndarray]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def fs(self) -> float:
+        return self.wv.fs
+
+    @property
+    def unit(self) -> str:
+        return self.wv.unit
+
+    def _summary_head(self) -> list[str]:
+        w = self.wv
+        return [
+            f"{self.estimator} fit of {self.model.spec()}",
+            f"  data: N = {w.n} samples, fs = {w.fs:g} Hz, {w.n_levels} WV levels",
+            f"  f = {self.f}; weights: {self.weights}; objective = {self.objective:.6g}; "
+            f"{self.method}, {self.n_evaluations} evaluations, {1e3 * self.elapsed_s:.1f} ms",
+        ]
+
+    def _summary_tail(self) -> list[str]:
+        return [""] + [f"  note: {s}" for s in self.notes] if self.notes else []
+
+    def _dict_extra(self) -> dict[str, Any]:
+        return {
+            "f": self.f,
+            "estimator": self.estimator,
+            "n": int(self.wv.n),
+            "implied": [float(v) for v in self.implied],
+            "components": {k: [float(x) for x in v] for k, v in self.components.items()},
+            "notes": list(self.notes),
+        }
+
+    def as_estimate(self) -> MethodEstimate:
+        """The estimate in the common form of the comparison tables (:mod:`engine.allan`)."""
+        return MethodEstimate(
+            method=self.estimator,
+            model=self.model,
+            params=self.model.values(),
+            tau_samples=np.asarray(self.wv.tau_samples),
+            implied=self.implied,
+            components=self.components,
+            fs=float(self.wv.fs),
+            unit=self.wv.unit,
+            objective=float(self.objective),
+            notes=self.notes,
+            details={
+                "f": self.f,
+                "weights": self.weights,
+                "at_bound": list(self.at_bound),
+                "converged": bool(self.converged),
+            },
+        )
 
 
 def _resolve_f(f: str | Callable[[np.ndarray], np.ndarray]) -> tuple[str, Callable]:
@@ -101,7 +184,7 @@ def fit_gmwfm(
     weights: str | np.ndarray = "ci",
     levels: int | None = None,
     method: str | None = None,
-) -> MethodEstimate:
+) -> GMWFMResult:
     """Generalized method of wavelet functional moments (the GMWM paper, eq. 1).
 
     ``theta_hat = argmin ||f(nu_hat) - f(nu(theta))||^2_Omega`` with ``f`` applied level by
@@ -131,7 +214,7 @@ def fit_gmwfm(
 
     Returns
     -------
-    MethodEstimate
+    GMWFMResult
 
     Raises
     ------
@@ -150,6 +233,7 @@ def fit_gmwfm(
     with AR1/GM, from correlation times 4x shorter and longer) and keeps the lowest objective.
     AR1 coefficients are searched in (0, 1), as correlation times.
     """
+    t0 = time.perf_counter()
     fname, fun = _resolve_f(f)
     name = method or f"GMWFM({fname})"
     m = parse_model(model)
@@ -160,7 +244,27 @@ def fit_gmwfm(
     m.validate(wv.n_levels)
     if fname == "identity" and f == "identity":
         res = fit_gmwm(wv, m, weights=weights)
-        return from_gmwm(res, name)
+        notes = [f"GMWM, weights {res.weights}, {res.method}"]
+        if res.at_bound:
+            notes.append(f"at a bound: {', '.join(res.at_bound)}")
+        return GMWFMResult(
+            model=res.model,
+            weights=res.weights,
+            omega=res.omega,
+            objective=res.objective,
+            converged=res.converged,
+            at_bound=list(res.at_bound),
+            n_evaluations=res.n_evaluations,
+            method=res.method,
+            message=res.message,
+            elapsed_s=time.perf_counter() - t0,
+            wv=wv,
+            f=fname,
+            estimator=name,
+            implied=res.implied,
+            components=res.components,
+            notes=tuple(notes),
+        )
     if np.any(~(wv.variance > 0)):
         bad = int(np.flatnonzero(~(wv.variance > 0))[0]) + 1
         raise FitError(f"the WV is zero at level {bad}, so {fname}(WV) is undefined")
@@ -239,14 +343,15 @@ def fit_gmwfm(
     lb = np.concatenate([np.full(p, _U_LO), np.full(k, lo_tc)])
     ub = np.concatenate([np.full(p, _U_HI), np.full(k, hi_tc)])
     best = None
+    n_eval = 0
     for z0 in starts:
         z0 = np.clip(z0, lb + 1e-9, ub - 1e-9)
         r = least_squares(resid, z0, lb, ub, ftol=1e-12, xtol=1e-10, max_nfev=2000)
+        n_eval += r.nfev
         if best is None or r.cost < best.cost:
             best = r
     assert best is not None
     z = best.x.copy()
-    at_bound = []
     h, phis = unpack(z)
     # a coefficient whose curve is below 1e-9 of the fitted WV at every level (or at its lower
     # bound) is estimated as exactly 0: the objective is flat there
@@ -255,21 +360,13 @@ def fit_gmwfm(
     share = np.max(x_fit * h[None, :] / np.maximum(nu_fit, 1e-300)[:, None], axis=0)
     zero = (z[:p] <= _U_LO + 1.0) | (share < 1e-9)
     h = np.where(zero, 0.0, h)
-    procs = []
     nl_vals = dict(zip(prob.nl_idx, phis, strict=True))
-    for i, pr in enumerate(m.processes):
-        q = pr.from_fit(float(h[i]), nl_vals.get(i), wv.fs)
-        procs.append(q)
-    labels = Model(tuple(procs)).labels
-    for i, lab in enumerate(labels):
-        pr = m.processes[i]
-        if zero[i]:
-            at_bound.append(f"{lab}.{pr.param_names[-1] if pr.nonlinear else pr.param_names[0]}")
-    nonlin = sorted(
-        (q for q in procs if q.nonlinear is not None),
-        key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / wv.fs)),
+    fitted = persistent_first(
+        [pr.from_fit(float(h[i]), nl_vals.get(i), wv.fs) for i, pr in enumerate(m.processes)],
+        wv.fs,
     )
-    fitted = Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
+    # labels of the fitted (ordered) model: a variance at 0 or a correlation time at an edge
+    bound = at_bound(fitted, wv.fs, prob.tc_min, prob.tc_max)
     comps = fitted.components(wv.tau_samples, wv.fs)
     implied = np.sum(np.array(list(comps.values())), axis=0)
     with np.errstate(all="ignore"):
@@ -281,25 +378,25 @@ def fit_gmwfm(
         f"bounded least squares, {len(starts)} starts, {int(best.nfev)} evaluations in the "
         "best run",
     ]
-    if at_bound:
-        notes.append(f"at a bound (estimated as 0): {', '.join(at_bound)}")
-    return MethodEstimate(
-        method=name,
+    if bound:
+        notes.append(f"at a bound: {', '.join(bound)}")
+    return GMWFMResult(
         model=fitted,
-        params=fitted.values(),
-        tau_samples=np.asarray(wv.tau_samples),
+        weights=wname,
+        omega=omega,
+        objective=objective,
+        converged=bool(best.success),
+        at_bound=bound,
+        n_evaluations=n_eval,
+        method="bounded least squares",
+        message="converged" if best.success else "the least-squares search hit its budget",
+        elapsed_s=time.perf_counter() - t0,
+        wv=wv,
+        f=fname,
+        estimator=name,
         implied=implied,
         components=comps,
-        fs=float(wv.fs),
-        unit=wv.unit,
-        objective=objective,
         notes=tuple(notes),
-        details={
-            "f": fname,
-            "weights": wname,
-            "at_bound": at_bound,
-            "converged": bool(best.success),
-        },
     )
 
 
@@ -309,7 +406,7 @@ def fit_armav(
     *,
     weights: str | np.ndarray = "ci",
     levels: int | None = None,
-) -> MethodEstimate:
+) -> GMWFMResult:
     """ARMAV: the wavelet functional moments estimator with ``f = log10``.
 
     The autonomous regression method for the Allan variance (Jurado, Schubert Kabban & Raquet,
@@ -338,7 +435,7 @@ def fit_armav(
 
     Returns
     -------
-    MethodEstimate
-        ``method="ARMAV"``.
+    GMWFMResult
+        ``estimator="ARMAV"`` (``.as_estimate()`` gives the comparison form).
     """
     return fit_gmwfm(wv, model, f="log10", weights=weights, levels=levels, method="ARMAV")

@@ -29,7 +29,7 @@ from ..model import Model, parse_model
 from ..processes import Process
 from ..wavelet import WaveletVariance, wavelet_variance
 from ._varpro import NNLSProblem, at_bound, persistent_first, search, sqrt_weight
-from .result import FitError, FitResult, ParamTable, warning_lines
+from .result import FitError, FitResult, ParamTable
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix"]
 
@@ -73,15 +73,16 @@ class GMWMResult(FitResult):
         """Two-sided ``1 - alpha`` asymptotic intervals (the sandwich covariance with the
         model-implied WV covariance, :func:`engine.inference.param_intervals`); a parameter on
         a boundary gets ``nan`` bounds."""
-        from ..inference import param_intervals
+        from ..inference.asymptotic import asymptotic_bounds, wv_cov_model
 
-        ivs = param_intervals(self, level=1.0 - alpha)
+        bounds = asymptotic_bounds(self, wv_cov_model(self.model, self.wv), 1.0 - alpha)
+        recs = self.param_records
         return ParamTable(
-            names=tuple(iv.name for iv in ivs),
-            estimate=np.array([iv.value for iv in ivs]),
-            lower=np.array([iv.low for iv in ivs]),
-            upper=np.array([iv.high for iv in ivs]),
-            units=tuple(iv.unit for iv in ivs),
+            names=tuple(r.full_name for r in recs),
+            estimate=np.array([r.value for r in recs]),
+            lower=np.array([b[0] for b in bounds]),
+            upper=np.array([b[1] for b in bounds]),
+            units=tuple(r.unit for r in recs),
             level=1.0 - alpha,
         )
 
@@ -259,7 +260,3 @@ def fit_gmwm(
         message=msg,
         elapsed_s=time.perf_counter() - t0,
     )
-
-
-# engine/mgmwm.py imports this name until the multivariate split adopts engine.fit.result
-_warning_lines = warning_lines

@@ -26,18 +26,23 @@
 
 from __future__ import annotations
 
+from .asymptotic import (
+    asymptotic_bounds,
+    free_params,
+    frequency_grid,
+    jacobian,
+    spectral_density,
+    wv_cov_model,
+)
 from .covariance import (
     fit_efficient,
-    frequency_grid,
     inverse_cov,
     parallel_map,
-    spectral_density,
     wv_cov,
     wv_cov_bootstrap,
     wv_cov_data,
-    wv_cov_model,
 )
-from .intervals import ParamInterval, free_params, jacobian, param_intervals
+from .intervals import ParamInterval, param_intervals
 from .jtest import JTest, j_test
 from .selection import Candidate, SelectionResult, rank_models, submodels
 
@@ -55,6 +60,7 @@ __all__ = [
     "ParamInterval",
     "jacobian",
     "free_params",
+    "asymptotic_bounds",
     "j_test",
     "JTest",
     "rank_models",

@@ -19,19 +19,16 @@ import numpy as np
 
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..model import Model
-from ..processes import AR1, DR, GM, QN, RW, WN, Process
 from ..wavelet import WaveletVariance, _as_series, _cumsum_demeaned, wavelet_variance
+from .asymptotic import wv_cov_model
 
 __all__ = [
     "wv_cov_data",
-    "wv_cov_model",
     "wv_cov_bootstrap",
     "wv_cov",
     "fit_efficient",
     "inverse_cov",
     "parallel_map",
-    "frequency_grid",
-    "spectral_density",
 ]
 
 
@@ -62,91 +59,6 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
         a_j = float(acf @ acf) - 0.5 * acf[0] ** 2
         out[i] = 2.0 * a_j / w.size
     return np.diag(out)
-
-
-def spectral_density(p: Process, f: np.ndarray, fs: float) -> np.ndarray:
-    """Two-sided spectral density on f in cycles/sample (0 < f <= 1/2); RW generalised."""
-    sin2 = np.sin(np.pi * f) ** 2
-    if isinstance(p, WN):
-        return np.full_like(f, float(p.sigma2))
-    if isinstance(p, QN):
-        return 4.0 * float(p.q2) * sin2
-    if isinstance(p, RW):
-        return float(p.gamma2) / (4.0 * sin2)
-    if isinstance(p, DR):
-        return np.zeros_like(f)  # deterministic: no first-order contribution to Cov(nu_hat)
-    if isinstance(p, (AR1, GM)):
-        ar = p if isinstance(p, AR1) else p.as_ar1(fs)
-        phi, s2 = float(ar.phi), float(ar.sigma2)
-        # 1 - 2 phi cos w + phi^2 = (1 - phi)^2 + 4 phi sin^2(w/2), stable near phi = 1
-        return s2 / ((1.0 - phi) ** 2 + 4.0 * phi * sin2)
-    raise TypeError(f"no spectral density for {p.code}")  # pragma: no cover
-
-
-def frequency_grid(levels: int, model: Model, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes on (0, 1/2] and weights of the periodic trapezoid rule for an even integrand.
-
-    With ``2F`` equispaced nodes on a period, the rule is exact for trigonometric polynomials
-    of degree below ``2F``: the Haar gains of levels j, k have degree ``2^j + 2^k``, so
-    ``F = 2^(J+1)`` integrates white-noise-like terms exactly; AR1/GM terms need ``F`` above a
-    few correlation times (the rule then equals the lag-domain sum up to a negligible wrap).
-    """
-    need = 2 ** (levels + 1)
-    for p in model.processes:
-        if isinstance(p, (AR1, GM)):
-            ar = p if isinstance(p, AR1) else p.as_ar1(fs)
-            if 0 < float(ar.phi) < 1:
-                # a few correlation times, but no more than 8x the longest scale: beyond the
-                # series' span a near-unit-root AR1 acts as a random walk
-                need = max(need, int(min(-16.0 / math.log(float(ar.phi)), 2.0 ** (levels + 4))))
-    f_nodes = 1 << int(math.ceil(math.log2(need)))
-    f = np.arange(1, f_nodes + 1) / (2.0 * f_nodes)
-    w = np.full(f_nodes, 1.0 / f_nodes)  # 2 / (2F): the mirrored node counts twice
-    w[-1] = 0.5 / f_nodes  # f = 1/2 is its own mirror image
-    return f, w
-
-
-def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
-    """Asymptotic Gaussian covariance of the WV implied by a model (full J x J matrix).
-
-    ``Cov(nu_j, nu_k) = (2 / max(M_j, M_k)) int_{-1/2}^{1/2} |H_j|^2 |H_k|^2 S^2 df``.
-
-    Parameters
-    ----------
-    model : Model
-        Every parameter set (e.g. ``result.model``).
-    wv : WaveletVariance
-        Gives the levels, ``M_j`` and fs.
-    """
-    if not model.is_set:
-        raise FitError("wv_cov_model needs a model with every value set (a fitted model)")
-    levels = wv.n_levels
-    # processes fitted at zero contribute nothing (and their phi/beta is arbitrary)
-    model = Model(tuple(p for p in model.processes if p.linear_coef() != 0))
-    f, wts = frequency_grid(levels, model, wv.fs)
-    m_j = wv.n_coef.astype(float)
-    out = np.zeros((levels, levels))
-    inv_m2 = 1.0 / 4.0 ** np.arange(levels)  # 1 / m^2, m = 2^(j-1)
-    chunk = 1 << 14
-    g = np.empty((levels, chunk))
-    for a in range(0, f.size, chunk):
-        fc, wc = f[a : a + chunk], wts[a : a + chunk]
-        k = fc.size
-        s = np.zeros_like(fc)
-        for p in model.processes:
-            s += spectral_density(p, fc, wv.fs)
-        # |H_j|^2 S = sin^4(pi f m) / (m^2 sin^2(pi f)) S, by sin(2x) = 2 sin x cos x
-        x = np.pi * fc
-        sin_m, cos_m = np.sin(x), np.cos(x)
-        base = s / (sin_m * sin_m)
-        for j in range(levels):
-            sin2 = sin_m * sin_m
-            np.multiply(sin2 * sin2, base * inv_m2[j], out=g[j, :k])
-            sin_m, cos_m = 2.0 * sin_m * cos_m, 1.0 - 2.0 * sin2
-        gk = g[:, :k]
-        out += (gk * wc) @ gk.T
-    v = 2.0 * out / np.maximum.outer(m_j, m_j)
-    return v
 
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")

@@ -7,67 +7,22 @@ intervals stay inside the parameter space; or the parametric bootstrap (percenti
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..fit import FitError, GMWMResult, fit_gmwm
-from ..model import Model
-from ..processes import _BACKWARD, _FORWARD
 from ..wavelet import wavelet_variance
+from .asymptotic import asymptotic_bounds
 from .covariance import parallel_map, wv_cov
 
-__all__ = ["param_intervals", "ParamInterval", "jacobian", "free_params"]
+__all__ = ["param_intervals", "ParamInterval"]
 
 
 # ------------------------------------------------------------------------------------------
 # intervals and goodness of fit
 # ------------------------------------------------------------------------------------------
-def free_params(res: GMWMResult) -> list[tuple[int, str]]:
-    """(process index, parameter name) of the free parameters: not on a boundary, and not
-    belonging to an AR1/GM whose variance is 0 (its phi/beta is then not identified)."""
-    out = []
-    for i, (lab, p) in enumerate(zip(res.model.labels, res.model.processes, strict=True)):
-        if p.linear_coef() <= 0:
-            continue
-        for name in p.param_names:
-            if f"{lab}.{name}" not in res.at_bound:
-                out.append((i, name))
-    return out
-
-
-def _set(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
-    """The model with the free parameters set from unconstrained coordinates ``u``."""
-    procs = list(model.processes)
-    for (i, name), ui in zip(free, u, strict=True):
-        procs[i] = procs[i].with_values(**{name: _BACKWARD[name](float(ui))})
-    return Model(tuple(procs))
-
-
-def _u0(model: Model, free: list[tuple[int, str]]) -> np.ndarray:
-    """Unconstrained coordinates of the free parameters."""
-    return np.array([_FORWARD[n](float(getattr(model.processes[i], n))) for i, n in free])
-
-
-def jacobian(res: GMWMResult, free: list[tuple[int, str]] | None = None) -> np.ndarray:
-    """d nu / d u (J x p) at the estimate, u the unconstrained coordinates of free parameters."""
-    free = free_params(res) if free is None else free
-    u0 = _u0(res.model, free)
-    tau = res.wv.tau_samples
-    jac = np.empty((tau.size, len(free)))
-    for k in range(len(free)):
-        h = 1e-5 * max(1.0, abs(u0[k]))
-        up, dn = u0.copy(), u0.copy()
-        up[k] += h
-        dn[k] -= h
-        jac[:, k] = (
-            _set(res.model, free, up).wv(tau, res.fs) - _set(res.model, free, dn).wv(tau, res.fs)
-        ) / (2 * h)
-    return jac
-
-
 @dataclass(frozen=True)
 class ParamInterval:
     """A parameter estimate with its two-sided interval."""
@@ -129,37 +84,15 @@ def param_intervals(
     v : {"model", "bootstrap", "data"} or array
         Covariance of the WV for the asymptotic method.
     """
-    from scipy import stats
-
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
     recs = res.param_records
     if method == "asymptotic":
-        free = free_params(res)
         vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers)
-        a = jacobian(res, free)
-        w = res.omega
-        bread = np.linalg.pinv(a.T @ w @ a)
-        cov = bread @ a.T @ w @ vmat @ w @ a @ bread
-        se = np.sqrt(np.maximum(np.diagonal(cov), 0.0))
-        z = stats.norm.ppf(0.5 + level / 2)
-        u0 = _u0(res.model, free)
-        bounds = {}
-        for k, (i, name) in enumerate(free):
-            lo = _BACKWARD[name](u0[k] - z * se[k])
-            hi = _BACKWARD[name](u0[k] + z * se[k])
-            bounds[(res.model.labels[i], name)] = (min(lo, hi), max(lo, hi))
-        out = []
-        for r in recs:
-            lo, hi = bounds.get((r.label, r.name), (math.nan, math.nan))
-            if r.name == "omega":  # the sign of a drift is not identified: report |omega|
-                lo, hi = (max(lo, 0.0), hi) if r.value >= 0 else (lo, hi)
-            out.append(
-                ParamInterval(
-                    r.full_name, r.value, float(lo), float(hi), r.unit, "asymptotic", level
-                )
-            )
-        return out
+        return [
+            ParamInterval(r.full_name, r.value, lo, hi, r.unit, "asymptotic", level)
+            for r, (lo, hi) in zip(recs, asymptotic_bounds(res, vmat, level), strict=True)
+        ]
     if method == "bootstrap":
         seeds = np.random.SeedSequence(seed).spawn(B)
         omega = None if res.weights == "ci" else res.omega

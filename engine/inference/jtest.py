@@ -10,8 +10,8 @@ import numpy as np
 
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..wavelet import wavelet_variance
+from .asymptotic import free_params
 from .covariance import inverse_cov, wv_cov
-from .intervals import free_params
 
 __all__ = ["j_test", "JTest"]
 

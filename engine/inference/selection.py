@@ -32,8 +32,8 @@ import numpy as np
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..model import Model, ModelError, parse_model
 from ..wavelet import WaveletVariance, wavelet_variance
+from .asymptotic import free_params, jacobian
 from .covariance import inverse_cov, parallel_map, wv_cov
-from .intervals import free_params, jacobian
 
 __all__ = ["submodels", "rank_models", "SelectionResult", "Candidate"]
 

@@ -39,7 +39,7 @@ def step_costs(n: int, fs: float = 250.0) -> None:
         t.append(time.perf_counter())
         from_gmwm(fit_gmwm(wv, truth.cleared()))
         t.append(time.perf_counter())
-        fit_armav(wv, truth.cleared())
+        fit_armav(wv, truth.cleared()).as_estimate()
         t.append(time.perf_counter())
         av = AllanVariance.from_wv(wv)
         avsm(av, typical_regions(sensor, n, fs))
