@@ -14,8 +14,11 @@ from typing import TYPE_CHECKING, Any
 from ._version import __version__ as __version__
 from .fit import (
     FitError,
+    FitResult,
     GMWMResult,
     ParamRecord,
+    ParamTable,
+    Summary,
     fit_gmwm,
     weight_matrix,
 )
@@ -54,8 +57,8 @@ _LAZY: dict[str, str] = {
     "avsm": "allan",
     "avsm_auto": "allan",
     "compare_table": "allan",
-    "fit_armav": "allan",
-    "fit_gmwfm": "allan",
+    "fit_armav": "fit.gmwfm",
+    "fit_gmwfm": "fit.gmwfm",
     "from_gmwm": "allan",
     "ExportError": "export",
     "datasheet_table": "export",
@@ -65,20 +68,32 @@ _LAZY: dict[str, str] = {
     "kalibr_models": "export",
     "read_kalibr": "export",
     "write_kalibr": "export",
+    "fit_efficient": "inference",
+    "param_intervals": "inference",
+    "ParamInterval": "inference",
+    "j_test": "inference",
+    "JTest": "inference",
+    "wv_cov_model": "inference",
+    "wv_cov_data": "inference",
+    "wv_cov_bootstrap": "inference",
+    "rank_models": "inference",
+    "submodels": "inference",
+    "SelectionResult": "inference",
+    "Candidate": "inference",
     "ImuLog": "io",
     "LoadError": "io",
     "load_log": "io",
     "save_log": "io",
-    "DependenceTest": "mgmwm",
-    "MGMWMResult": "mgmwm",
-    "MultiModel": "mgmwm",
-    "ReplicateResult": "mgmwm",
-    "SharedEstimate": "mgmwm",
-    "SharedProcess": "mgmwm",
-    "dependence_test": "mgmwm",
-    "fit_mgmwm": "mgmwm",
-    "fit_replicates": "mgmwm",
-    "moment_covariance": "mgmwm",
+    "DependenceTest": "multivariate",
+    "MGMWMResult": "multivariate",
+    "MultiModel": "multivariate",
+    "ReplicateResult": "fit.replicates",
+    "SharedEstimate": "multivariate",
+    "SharedProcess": "multivariate",
+    "dependence_test": "multivariate",
+    "fit_mgmwm": "multivariate",
+    "fit_replicates": "fit.replicates",
+    "moment_covariance": "multivariate",
     "Session": "io",
     "SessionError": "io",
     "load_session": "io",
@@ -104,8 +119,6 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         avsm,
         avsm_auto,
         compare_table,
-        fit_armav,
-        fit_gmwfm,
         from_gmwm,
     )
     from .export import (
@@ -117,6 +130,22 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         kalibr_models,
         read_kalibr,
         write_kalibr,
+    )
+    from .fit.gmwfm import fit_armav, fit_gmwfm
+    from .fit.replicates import ReplicateResult, fit_replicates
+    from .inference import (
+        Candidate,
+        JTest,
+        ParamInterval,
+        SelectionResult,
+        fit_efficient,
+        j_test,
+        param_intervals,
+        rank_models,
+        submodels,
+        wv_cov_bootstrap,
+        wv_cov_data,
+        wv_cov_model,
     )
     from .io import (
         ImuLog,
@@ -130,16 +159,14 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
         save_log,
         save_session,
     )
-    from .mgmwm import (
+    from .multivariate import (
         DependenceTest,
         MGMWMResult,
         MultiModel,
-        ReplicateResult,
         SharedEstimate,
         SharedProcess,
         dependence_test,
         fit_mgmwm,
-        fit_replicates,
         moment_covariance,
     )
     from .study import (
@@ -190,6 +217,9 @@ __all__ = [
     "GMWMResult",
     "ParamRecord",
     "FitError",
+    "FitResult",
+    "ParamTable",
+    "Summary",
     "weight_matrix",
     "datasheet",
     "param_unit",
@@ -242,3 +272,17 @@ __all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
     "ReplicateResult",
 ]
 __all__ += ["Scenario", "SCENARIOS", "simulate_scenario"]  # teaching (issue 4)
+__all__ += [  # inference and model selection
+    "fit_efficient",
+    "param_intervals",
+    "ParamInterval",
+    "j_test",
+    "JTest",
+    "wv_cov_model",
+    "wv_cov_data",
+    "wv_cov_bootstrap",
+    "rank_models",
+    "submodels",
+    "SelectionResult",
+    "Candidate",
+]

@@ -1,4 +1,4 @@
-"""Allan variance, the slope method (AVSM) and wavelet functional moments (ARMAV, GMWFM).
+"""Allan variance and the slope method (AVSM); the common form of the estimators.
 
 These are the *other* estimators of a latent error model, kept for comparison and teaching:
 
@@ -11,9 +11,7 @@ These are the *other* estimators of a latent error model, kept for comparison an
 * :func:`avsm`: the Allan variance slope method as IEEE Std 952 reads it: a line of fixed
   slope through a user-chosen region of the log-log Allan deviation, read at a fixed
   averaging time; :func:`avsm_auto`: the "automatic" read-off of the ROS calibration tools.
-* :func:`fit_gmwfm`: the generalized method of wavelet functional moments of the GMWM paper
-  (section III, eq. 1), ``argmin ||f(nu_hat) - f(nu(theta))||^2_Omega``; :func:`fit_armav` is
-  its member with ``f = log10`` (the ARMAV of Jurado, Schubert Kabban & Raquet, 2019).
+* the wavelet functional moments (ARMAV, GMWFM) are in :mod:`engine.fit.gmwfm`.
 
 Every estimator returns a :class:`MethodEstimate`, the common form that the app and the Monte
 Carlo study put side by side; :func:`from_gmwm` converts a GMWM fit to it.
@@ -26,15 +24,15 @@ Guerrier, Jurado, Khaghani et al. (2020), IEEE TIM (the GMWM paper); Jurado, Sch
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize, special
+from scipy import special
 
-from .fit import FitError, GMWMResult, _Problem, _sqrt_weight, fit_gmwm, weight_matrix
-from .models import AR1, DR, QN, RW, WN, Model, Process, parse_model
+from .fit import GMWMResult
+from .models import DR, QN, RW, WN, Model, Process
 from .units import datasheet, param_unit
 from .wv import (
     WaveletVariance,
@@ -52,8 +50,6 @@ __all__ = [
     "from_gmwm",
     "avsm",
     "avsm_auto",
-    "fit_gmwfm",
-    "fit_armav",
     "compare_table",
     "BI_FACTOR",
     "SLOPES",
@@ -770,304 +766,6 @@ def avsm_auto(
         "n_points": 1,
     }
     return _slope_estimate(av, lines, "AVSM-auto", notes)
-
-
-# -------------------------------------------------------------------------------------------
-# GMWFM / ARMAV
-# -------------------------------------------------------------------------------------------
-_F: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "identity": lambda v: v,
-    "log10": np.log10,
-    "log": np.log,
-    "sqrt": np.sqrt,
-}
-_U_LO, _U_HI = -70.0, 8.0  # bounds of the log linear coefficients (relative to their scale)
-
-
-def _resolve_f(f: str | Callable[[np.ndarray], np.ndarray]) -> tuple[str, Callable]:
-    if isinstance(f, str):
-        if f not in _F:
-            raise FitError(f"unknown f={f!r}: use one of {', '.join(_F)} or a callable")
-        return f, _F[f]
-    if callable(f):
-        return getattr(f, "__name__", "f"), f
-    raise FitError(f"f must be a name or a callable, got {type(f).__name__}")
-
-
-def _f_weights(
-    wv: WaveletVariance, fun: Callable, weights: str | np.ndarray, fname: str
-) -> tuple[np.ndarray, str]:
-    """Omega in f-space: ``"ci"`` is ``diag(1 / (f(ci_high) - f(ci_low))^2)``."""
-    if isinstance(weights, str) and weights == "ci":
-        with np.errstate(all="ignore"):
-            width = np.asarray(fun(wv.ci_high), float) - np.asarray(fun(wv.ci_low), float)
-        if np.any(~np.isfinite(width)) or np.any(width <= 0):
-            raise FitError(
-                f"the interval of {fname}(WV) is empty or not finite at some level, "
-                "so weights='ci' is undefined; use another weighting"
-            )
-        return np.diag(1.0 / width**2), "ci"
-    return weight_matrix(wv, weights)
-
-
-def fit_gmwfm(
-    wv: WaveletVariance,
-    model: Model | Process | str,
-    *,
-    f: str | Callable[[np.ndarray], np.ndarray] = "log10",
-    weights: str | np.ndarray = "ci",
-    levels: int | None = None,
-    method: str | None = None,
-) -> MethodEstimate:
-    """Generalized method of wavelet functional moments (the GMWM paper, eq. 1).
-
-    ``theta_hat = argmin ||f(nu_hat) - f(nu(theta))||^2_Omega`` with ``f`` applied level by
-    level. ``f = identity`` is the GMWM (delegated to :func:`engine.fit_gmwm`, exact);
-    ``f = log10`` is the ARMAV (see :func:`fit_armav`).
-
-    Parameters
-    ----------
-    wv : WaveletVariance
-        The empirical WV (classical: the identity ``AVAR = 2 nu2`` makes a fit on the octave
-        AVAR the same fit, ``log10`` only adding the constant ``log10 2`` to both sides).
-    model : Model, Process or str
-        Any engine model (QN, WN, RW, DR, AR1, GM).
-    f : {"log10", "log", "sqrt", "identity"} or callable
-        The function of the WV to match; a callable must be vectorised, continuous and
-        strictly increasing on the positive reals.
-    weights : {"ci", "identity"} or array
-        ``"ci"``: ``diag(1 / (f(ci_high) - f(ci_low))^2)``, the inverse squared width of the
-        WV's eta3 interval carried through ``f`` (for ``f = identity`` the GMWM's default
-        weights; for ``log10`` a width that depends only on the level's degrees of freedom,
-        so each level weighs in proportion to its number of independent Haar coefficients).
-        ``"identity"``: unweighted; or a (J,) vector / (J, J) matrix.
-    levels : int, optional
-        Use only the first ``levels`` levels.
-    method : str, optional
-        Name given to the result (default ``"GMWFM(<f>)"``).
-
-    Returns
-    -------
-    MethodEstimate
-
-    Raises
-    ------
-    FitError
-        The WV is zero at some level (``f`` undefined), bad weights, or the model has more
-        parameters than levels.
-
-    Notes
-    -----
-    Each process contributes a non-negative coefficient ``h`` times its WV shape (and AR1/GM a
-    correlation time). The search space is ``log h`` (scaled per process; a coefficient whose
-    curve stays below 1e-9 of the fitted WV at every level is reported as exactly 0, the
-    objective being flat there) and the log correlation time in
-    samples; the fit runs bounded trust-region least squares (``scipy.optimize.least_squares``)
-    from the GMWM estimate and from an equal-share start (and, with AR1/GM, from correlation
-    times 4x shorter and longer) and keeps the lowest objective. AR1 coefficients are searched
-    in (0, 1), as correlation times.
-    """
-    fname, fun = _resolve_f(f)
-    name = method or f"GMWFM({fname})"
-    m = parse_model(model)
-    if levels is not None:
-        if not 1 <= levels <= wv.n_levels:
-            raise FitError(f"levels={levels} is out of range: the WV has {wv.n_levels} levels")
-        wv = wv.truncate(levels)
-    m.validate(wv.n_levels)
-    if fname == "identity" and f == "identity":
-        res = fit_gmwm(wv, m, weights=weights)
-        return from_gmwm(res, name)
-    if np.any(~(wv.variance > 0)):
-        bad = int(np.flatnonzero(~(wv.variance > 0))[0]) + 1
-        raise FitError(f"the WV is zero at level {bad}, so {fname}(WV) is undefined")
-    with np.errstate(all="ignore"):
-        fy = np.asarray(fun(wv.variance), dtype=float)
-    if fy.shape != wv.variance.shape or not np.all(np.isfinite(fy)):
-        raise FitError(f"{fname}(WV) is not finite at every level")
-    omega, wname = _f_weights(wv, fun, weights, fname)
-    a = _sqrt_weight(omega)
-    prob = _Problem(m, wv, np.eye(wv.n_levels))
-    p, k = prob.p, prob.k
-    lo_tc, hi_tc = math.log(prob.tc_min), math.log(prob.tc_max)
-
-    # starting point: the GMWM estimate (weights "ci") in the problem's process order
-    try:
-        g = fit_gmwm(wv, m, weights="ci")
-        gm_model = g.model
-    except FitError:
-        gm_model = None
-
-    def nl_of(pr: Process) -> float:
-        v = pr.nl_value(wv.fs)
-        return -1.0 / math.log(v) if v is not None and 0 < v < 1 else 1.0
-
-    h0 = np.zeros(p)
-    tc0 = np.ones(k)
-    if gm_model is not None:
-        # match processes by kind (AR1/GM most persistent first in both)
-        pool = {
-            c: [q for q in gm_model.processes if q.code == c]
-            for c in {q.code for q in gm_model.processes}
-        }
-        taken: dict[str, int] = {}
-        for i in range(p):
-            c = m.processes[i].code
-            j = taken.get(c, 0)
-            q = pool[c][j]
-            taken[c] = j + 1
-            h0[i] = q.linear_coef()
-            if q.nonlinear is not None:
-                tc0[prob.nl_idx.index(i)] = nl_of(q)
-    if k:
-        tc0 = np.clip(tc0, prob.tc_min * 1.01, prob.tc_max / 1.01)
-    phis0 = tuple(math.exp(-1.0 / t) for t in tc0)
-    x0 = prob.design(phis0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(x0 > 0, wv.variance[:, None] / np.where(x0 > 0, x0, 1.0), np.inf)
-    scale = np.min(ratio, axis=0)  # the largest coefficient whose curve stays below the data
-    scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
-
-    def unpack(z: np.ndarray) -> tuple[np.ndarray, tuple[float, ...]]:
-        h = scale * np.exp(z[:p])
-        phis = tuple(math.exp(-math.exp(-float(v))) for v in z[p:])
-        return h, phis
-
-    def resid(z: np.ndarray) -> np.ndarray:
-        h, phis = unpack(z)
-        nu = prob.design(phis) @ h
-        with np.errstate(all="ignore"):
-            r = fy - np.asarray(fun(np.maximum(nu, 1e-300)), float)
-        return a @ np.where(np.isfinite(r), r, 1e3)
-
-    def start(h: np.ndarray, tcs: np.ndarray) -> np.ndarray:
-        u = np.log(np.maximum(h, 1e-30 * scale) / scale)
-        return np.concatenate(
-            [np.clip(u, _U_LO + 1, _U_HI - 1), np.clip(np.log(tcs), lo_tc + 1e-6, hi_tc - 1e-6)]
-        )
-
-    starts = [start(np.full(p, 1.0 / p) * scale, tc0)]
-    if gm_model is not None:
-        starts.insert(0, start(h0, tc0))
-        if k:
-            starts += [start(h0, tc0 * 4.0), start(h0, tc0 / 4.0)]
-    lb = np.concatenate([np.full(p, _U_LO), np.full(k, lo_tc)])
-    ub = np.concatenate([np.full(p, _U_HI), np.full(k, hi_tc)])
-    best = None
-    for z0 in starts:
-        z0 = np.clip(z0, lb + 1e-9, ub - 1e-9)
-        r = optimize.least_squares(
-            resid,
-            z0,
-            bounds=(lb, ub),
-            method="trf",
-            jac="3-point",
-            x_scale=1.0,
-            ftol=1e-12,
-            xtol=1e-10,
-            gtol=1e-12,
-            max_nfev=2000,
-        )
-        if best is None or r.cost < best.cost:
-            best = r
-    assert best is not None
-    z = best.x.copy()
-    at_bound = []
-    h, phis = unpack(z)
-    # a coefficient whose curve is below 1e-9 of the fitted WV at every level (or at its lower
-    # bound) is estimated as exactly 0: the objective is flat there
-    x_fit = prob.design(phis)
-    nu_fit = x_fit @ h
-    share = np.max(x_fit * h[None, :] / np.maximum(nu_fit, 1e-300)[:, None], axis=0)
-    zero = (z[:p] <= _U_LO + 1.0) | (share < 1e-9)
-    h = np.where(zero, 0.0, h)
-    procs = []
-    nl_vals = dict(zip(prob.nl_idx, phis, strict=True))
-    for i, pr in enumerate(m.processes):
-        q = pr.from_fit(float(h[i]), nl_vals.get(i), wv.fs)
-        procs.append(q)
-    labels = Model(tuple(procs)).labels
-    for i, lab in enumerate(labels):
-        pr = m.processes[i]
-        if zero[i]:
-            at_bound.append(f"{lab}.{pr.param_names[-1] if pr.nonlinear else pr.param_names[0]}")
-    nonlin = sorted(
-        (q for q in procs if q.nonlinear is not None),
-        key=lambda q: -(q.phi if isinstance(q, AR1) else math.exp(-q.beta / wv.fs)),
-    )
-    fitted = Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
-    comps = fitted.components(wv.tau_samples, wv.fs)
-    implied = np.sum(np.array(list(comps.values())), axis=0)
-    with np.errstate(all="ignore"):
-        rr = a @ (fy - np.asarray(fun(np.maximum(implied, 1e-300)), float))
-    objective = float(rr @ rr)
-    notes = [
-        f"f = {fname}, weights {wname}"
-        + (" (1/(f(ci_high) - f(ci_low))^2)" if wname == "ci" else ""),
-        f"bounded least squares, {len(starts)} starts, {int(best.nfev)} evaluations in the "
-        "best run",
-    ]
-    if at_bound:
-        notes.append(f"at a bound (estimated as 0): {', '.join(at_bound)}")
-    return MethodEstimate(
-        method=name,
-        model=fitted,
-        params=fitted.values(),
-        tau_samples=np.asarray(wv.tau_samples),
-        implied=implied,
-        components=comps,
-        fs=float(wv.fs),
-        unit=wv.unit,
-        objective=objective,
-        notes=tuple(notes),
-        details={
-            "f": fname,
-            "weights": wname,
-            "at_bound": at_bound,
-            "converged": bool(best.status > 0),
-        },
-    )
-
-
-def fit_armav(
-    wv: WaveletVariance,
-    model: Model | Process | str,
-    *,
-    weights: str | np.ndarray = "ci",
-    levels: int | None = None,
-) -> MethodEstimate:
-    """ARMAV: the wavelet functional moments estimator with ``f = log10``.
-
-    The autonomous regression method for the Allan variance (Jurado, Schubert Kabban & Raquet,
-    2019) regresses ``log10`` of the octave Allan variance on the log10 of the model-implied
-    one; as the GMWM paper (section III) does, it is computed here as :func:`fit_gmwfm` with
-    ``f = log10`` on the Haar WV (``AVAR = 2 nu2``, so the two are the same estimator).
-
-    Weights (our reading, documented choice): ``"ci"`` (default) weighs each octave by the
-    inverse squared width of the log10 of its chi-square interval, i.e. in proportion to the
-    reliability of that octave's estimate (its equivalent degrees of freedom); this is the
-    log-space counterpart of the GMWM's default ``Omega``, matching the paper's remark that
-    "the GMWM and the ARMAV are based on different but relatively similar choices of Omega".
-    ``weights="identity"`` gives the unweighted log regression of some public ARMAV
-    implementations. Either way ``log10`` of a chi-square-like estimate is biased low
-    (Jensen's inequality: ``E log nu_hat < log E nu_hat``), most at the long scales where few
-    coefficients are averaged, which is the bias the GMWM paper shows.
-
-    Parameters
-    ----------
-    wv : WaveletVariance
-        Classical empirical WV.
-    model : Model, Process or str
-        E.g. ``"QN+WN+RW+DR"`` (Jurado's linear model without bias instability) or with GM.
-    weights, levels
-        See :func:`fit_gmwfm`.
-
-    Returns
-    -------
-    MethodEstimate
-        ``method="ARMAV"``.
-    """
-    return fit_gmwfm(wv, model, f="log10", weights=weights, levels=levels, method="ARMAV")
 
 
 # -------------------------------------------------------------------------------------------

@@ -269,9 +269,10 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     if not 0 < args.level < 1:
         raise CliError(f"--level must be in (0, 1), got {args.level}")
     if args.channels or args.more_inputs or args.shared or args.dependence_test:
-        from .mgmwm import cli_fit  # multivariate GMWM (--channels) or replicates (files)
+        from .cli_export import log_kwargs
+        from .cli_multi import cli_fit  # multivariate GMWM (--channels) or replicates (files)
 
-        return cli_fit(args)
+        return cli_fit(args, load_wv=_load_wv, log_kwargs=log_kwargs)
     model = parse_model(args.model)
     wv, name = _load_wv(args)
     if args.weights == "efficient":
@@ -309,7 +310,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .selection import rank_models
+    from .inference import rank_models
 
     if not args.max_model and not args.models:
         raise CliError("give --max-model SPEC or --models 'SPEC1,SPEC2,...'")

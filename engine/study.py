@@ -5,7 +5,7 @@ each log length T and each replicate: simulate the true model at 250 Hz, compute
 (and from it the octave Allan variance, ``AVAR = 2 nu2``), and estimate the model by
 
 * ``GMWM``: :func:`engine.fit_gmwm`, default weights ``diag(1/(ci_high - ci_low)^2)``;
-* ``ARMAV``: :func:`engine.allan.fit_armav` (``f = log10``, log-space interval weights);
+* ``ARMAV``: :func:`engine.fit.gmwfm.fit_armav` (``f = log10``, log-space interval weights);
   optionally ``ARMAV-unweighted`` (``f = log10``, identity weights);
 * ``AVSM``: :func:`engine.allan.avsm` on the regions a typical user picks
   (:func:`typical_regions`);
@@ -43,8 +43,9 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from .allan import AllanVariance, MethodEstimate, avsm, avsm_auto, fit_armav, from_gmwm
+from .allan import AllanVariance, MethodEstimate, avsm, avsm_auto, from_gmwm
 from .fit import fit_gmwm
+from .fit.gmwfm import fit_armav
 from .models import DR, QN, RW, WN, Model
 from .wv import WaveletVariance, default_levels, wavelet_variance
 
@@ -234,9 +235,9 @@ def _estimate_one(
     if meth == "GMWM":
         return from_gmwm(fit_gmwm(wv, model))
     if meth == "ARMAV":
-        return fit_armav(wv, model)
+        return fit_armav(wv, model).as_estimate()
     if meth == "ARMAV-unweighted":
-        est = fit_armav(wv, model, weights="identity")
+        est = fit_armav(wv, model, weights="identity").as_estimate()
         return replace(est, method=meth)
     av = AllanVariance.from_wv(wv)
     if meth == "AVSM":

@@ -58,8 +58,8 @@ from bokeh.models import (
 from bokeh.plotting import figure
 
 import engine as eg
-from engine.mgmwm import SHAREABLE, DependenceTest, MultiModel
 from engine.models import ModelError, parse_model
+from engine.multivariate import SHAREABLE, DependenceTest, MultiModel
 from engine.units import squared
 
 from .state import format_value
@@ -405,21 +405,13 @@ def parameter_rows(result: Any) -> dict[str, list[Any]]:
     if result is None:
         return rows
     for r in result.param_records:
-        name = r["name"]
-        if ".cov[" in name:
+        if r.name.startswith("cov["):
             continue
-        chans = r["channels"]
-        if len(chans) == 1 and name.startswith(chans[0] + "."):
-            lab, _, pname = name[len(chans[0]) + 1 :].partition(".")
-            ch = chans[0]
-        else:
-            lab, _, pname = name.partition(".")
-            ch = f"shared ({', '.join(chans)})"
-        rows["channel"].append(ch)
-        rows["process"].append(lab)
-        rows["parameter"].append(pname)
-        rows["value"].append(float(r["value"]))
-        rows["unit"].append(_pretty(r["unit"]))
+        rows["channel"].append(f"shared ({', '.join(r.channels)})" if r.shared else r.channels[0])
+        rows["process"].append(r.label)
+        rows["parameter"].append(r.name)
+        rows["value"].append(float(r.value))
+        rows["unit"].append(_pretty(r.unit))
     return rows
 
 
@@ -429,7 +421,7 @@ def fit_text(result: Any) -> str:
         return ""
     w = result.wvm
     parts = [
-        f"**Objective** {format_value(result.objective)} [1] ({result.weights_name} "
+        f"**Objective** {format_value(result.objective)} [1] ({result.weights} "
         f"weights) for **{html.escape(result.model.spec())}**: {w.k} channels, "
         f"N = {w.n:,}, fs = {w.fs:g} Hz, {w.n_levels} levels; {result.method}, "
         f"{result.n_evaluations} evaluations, {1e3 * result.elapsed_s:.0f} ms."

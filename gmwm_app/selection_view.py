@@ -1,6 +1,6 @@
 """The "Model selection" tab of the app and the goodness-of-fit badge of the Fit tab.
 
-:class:`SelectionView` ranks candidate models by WVIC (``engine.selection.rank_models``) in a
+:class:`SelectionView` ranks candidate models by WVIC (``engine.inference.rank_models``) in a
 worker thread, with a progress bar fed by the ranking's ``progress`` callback and a cooperative
 Cancel (the callback raises :class:`_Cancelled`); shows the ranked table (a sortable Bokeh
 DataTable: clicking a row loads that model into the builder and refits); and compares two

@@ -884,7 +884,7 @@ class AppState(param.Parameterized):
     ) -> tuple[eg.WaveletVariance, Any]:
         """Rank models by WVIC on the current WV: every sub-model of a maximal model
         (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
-        from engine.selection import rank_models
+        from engine.inference import rank_models
 
         wv = self.wv
         if wv is None:

@@ -20,8 +20,8 @@ import pytest
 
 import engine as eg
 from engine.io import ImuLog
-from engine.mgmwm import MultiModel
 from engine.models import ModelError
+from engine.multivariate import MultiModel
 from gmwm_app.multi_view import (
     MultiView,
     build_model,

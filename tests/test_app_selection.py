@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from engine.inference import JTest, j_test, param_intervals
-from engine.selection import rank_models
+from engine.inference import JTest, j_test, param_intervals, rank_models
 from gmwm_app.selection_view import jtest_badge, ranking_data
 from gmwm_app.state import AppState, Inference, format_value
 

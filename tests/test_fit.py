@@ -10,7 +10,7 @@ import pytest
 from scipy import optimize
 
 import engine as eg
-from engine.fit import _Problem, _sqrt_weight
+from engine.fit._varpro import NNLSProblem, sqrt_weight
 
 
 def objective(wv, omega, model) -> float:
@@ -81,7 +81,7 @@ def profile_min_brute(wv, spec, axes) -> float:
     """Brute-force minimum of the profiled objective over a grid of correlation times."""
     model = eg.parse_model(spec)
     omega = np.diag(1 / (wv.ci_high - wv.ci_low) ** 2)
-    prob = _Problem(model, wv, _sqrt_weight(omega))
+    prob = NNLSProblem.from_wv(model, wv, sqrt_weight(omega))
     best = math.inf
     for u in axes:
         best = min(best, prob.profile(np.asarray(u, float)))
@@ -97,7 +97,7 @@ def test_ar1_wn_reaches_global_minimum_near_unit_root():
     grid = [(u,) for u in np.linspace(math.log(0.2), math.log(4 * 2**15), 4000)]
     assert res.objective <= profile_min_brute(wv, "AR1+WN", grid) * (1 + 1e-9)
     # objective at the R-like local answer phi = 0.1 is far worse
-    prob = _Problem(eg.parse_model("AR1+WN"), wv, _sqrt_weight(res.omega))
+    prob = NNLSProblem.from_wv(eg.parse_model("AR1+WN"), wv, sqrt_weight(res.omega))
     assert prob.solve((0.1,))[0] > 10 * res.objective
 
 
@@ -244,3 +244,38 @@ def test_bad_weights_rejected():
         eg.fit_gmwm(wv, "WN", weights="efficient-ish")
     with pytest.raises(eg.FitError, match="levels=40"):
         eg.fit_gmwm(wv, "WN", levels=40)
+
+
+def test_every_fit_result_shares_one_base_with_the_same_fields() -> None:
+    from engine.fit import FitResult
+    from engine.inference import param_intervals
+
+    truth = eg.parse_model("GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)")
+    x = truth.simulate(2**15, fs=100.0, rng=3)
+    wv = eg.wavelet_variance(x, fs=100.0)
+    g = eg.fit_gmwm(wv, "GM+WN")
+    r = eg.fit_replicates([wv, eg.wavelet_variance(x[:10_000], fs=100.0)], "GM+WN")
+    for res in (g, r):
+        assert isinstance(res, FitResult) and res.weights == "ci"
+        assert isinstance(res.omega, np.ndarray) and res.omega.ndim == 2
+        text = res.summary()
+        assert isinstance(text, str) and text.startswith("GMWM") and str(res) == text
+        assert res._repr_html_().startswith("<pre>GMWM")
+        d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+        assert {"model", "fs", "weights", "objective", "params", "converged", "at_bound"} <= set(d)
+        assert [f"{p['label']}.{p['name']}" for p in d["params"]] == list(res.params)
+    # the objective is the quadratic form in omega (block diagonal for the replicates)
+    e = wv.variance - g.implied
+    assert g.objective == pytest.approx(float(e @ g.omega @ e), rel=1e-12)
+    e = np.concatenate([w.variance - im for w, im in zip(r.wvs, r.implied, strict=True)])
+    assert r.objective == pytest.approx(float(e @ r.omega @ e), rel=1e-12)
+    # conf_int: the asymptotic intervals, labelled; a 90 % interval inside the 95 % one
+    ci90, ci95 = g.conf_int(0.10), g.conf_int()
+    assert ci90.names == tuple(g.params) and ci90.level == pytest.approx(0.9)
+    for iv in param_intervals(g, level=0.9):
+        assert ci90.row(iv.name) == (iv.value, iv.low, iv.high)
+        _, lo95, hi95 = ci95.row(iv.name)
+        assert lo95 < iv.low < iv.value < iv.high < hi95
+    assert "<table>" in ci90._repr_html_() and "GM.beta" in str(ci90)
+    with pytest.raises(eg.FitError, match="not available"):
+        r.conf_int()

@@ -16,8 +16,10 @@ import pytest
 import engine as eg
 from engine.cli import main as cli_main
 from engine.fit import FitError
-from engine.mgmwm import MultiModel
 from engine.models import ModelError
+from engine.multivariate import MultiModel, dependence
+from engine.multivariate._cone import ConeLSQ
+from engine.multivariate.problem import MProblem
 
 RW_BASIS = staticmethod(lambda tau: (tau**2 + 2.0) / (12.0 * tau))
 
@@ -263,7 +265,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
     res = eg.fit_mgmwm(wvm, truth.cleared())
     for beta in np.geomspace(0.01, 20, 60):
         fixed = MultiModel(["a", "b"], "GM+WN+RW", shared=["GM"], nl={"GM": float(beta)})
-        prob = eg.mgmwm._MProblem(fixed.cleared(), wvm, res.weights)
+        prob = MProblem(fixed.cleared(), wvm, res.moment_weights)
         u = np.array([prob.u_of_phi(np.exp(-beta / 5.0))])
         assert prob.profile(u) >= res.objective * (1 - 1e-9)
 
@@ -271,7 +273,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
 def kkt(res: eg.MGMWMResult, label: str) -> tuple[float, float, float]:
     """(min eigenvalue of the gradient G, <G, Sigma>, scale) for a shared RW with diagonal
     weights: first-order optimality of min f(Sigma) s.t. Sigma PSD is G PSD, G Sigma = 0."""
-    w, r = res.weights, res.wvm.values - res.implied
+    w, r = res.moment_weights, res.wvm.values - res.implied
     b = RW_BASIS(res.wvm.tau_samples.astype(float))
     k = res.wvm.k
     g = np.empty((k, k))
@@ -311,7 +313,9 @@ def test_psd_constraint_active_gives_a_psd_optimum():
         comps = dict(res.components)
         comps["RW"] = RW_BASIS(res.wvm.tau_samples.astype(float))[:, None, None] * trial
         imp = sum(comps.values())
-        f = np.sum(res.weights[:, iu[0], iu[1]] * (res.wvm.values - imp)[:, iu[0], iu[1]] ** 2)
+        f = np.sum(
+            res.moment_weights[:, iu[0], iu[1]] * (res.wvm.values - imp)[:, iu[0], iu[1]] ** 2
+        )
         assert f >= res.objective * (1 - 1e-9)
 
 
@@ -335,7 +339,7 @@ def boundary_case(name: str) -> tuple[eg.WVMatrix, MultiModel]:
 def shared_kkt(res: eg.MGMWMResult, label: str, basis) -> tuple[float, float, float]:
     """As :func:`kkt`, for any shared linear process with WV shape ``basis(tau)``; the scale
     is the Cauchy-Schwarz bound of the gradient's entries (G may be 0 up to rounding)."""
-    w, r = res.weights, res.wvm.values - res.implied
+    w, r = res.moment_weights, res.wvm.values - res.implied
     b = basis(res.wvm.tau_samples.astype(float))
     g = np.array(
         [
@@ -393,7 +397,7 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
     # Nelder-Mead from the three best points), on a fresh problem
     from scipy import optimize
 
-    prob = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
+    prob = MProblem(mm.cleared(), wvm, res.moment_weights)
     axis = np.linspace(np.log(0.5), np.log(2.0 * prob.tau[-1]), 6)
     grid = [
         np.array(u)
@@ -412,17 +416,45 @@ def test_boundary_covariances_fit_within_budget_and_reach_the_minimum(name, weig
     assert res.objective <= ref * (1 + 1e-9), (res.objective, ref)
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_bounded_least_squares_of_the_full_weighting_meets_its_kkt_conditions(seed):
+    """The relaxation with a full weighting matrix (bounds 0 on variances, none on
+    cross-covariances) by elimination of the free coefficients + NNLS: the KKT conditions
+    hold and the objective equals SciPy's BVLS to rounding."""
+    from scipy import optimize
+
+    rng = np.random.default_rng(seed)
+    m, n = 40, 7
+    a = rng.standard_normal((m, n)) * np.geomspace(1e-3, 1e3, n)  # badly scaled columns
+    b = a @ rng.standard_normal(n) + 0.1 * rng.standard_normal(m)
+    lower = np.where(rng.uniform(size=n) < 0.5, 0.0, -np.inf)
+    lower[0] = 0.0
+    cone = ConeLSQ(b, [(i, 0, 0, 0) for i in range(n)], {}, lower, None)
+    c = cone._relaxed_full(a, lower)
+    assert np.all(c[lower == 0] >= 0)
+    grad = a.T @ (a @ c - b) / np.linalg.norm(a, axis=0)  # scale-free gradient
+    tol = 1e-9 * np.linalg.norm(b)
+    free = np.isinf(lower)
+    assert np.all(np.abs(grad[free]) <= tol)
+    assert np.all(grad[~free] >= -tol) and np.all(np.abs(grad[~free][c[~free] > 0]) <= tol)
+    norms = np.linalg.norm(a, axis=0)
+    ref = optimize.lsq_linear(a / norms, b, bounds=(lower, np.inf), method="bvls", tol=1e-14)
+    f, f_ref = np.sum((b - a @ c) ** 2), np.sum((b - a @ (ref.x / norms)) ** 2)
+    assert f <= f_ref * (1 + 1e-12)
+    assert f == pytest.approx(f_ref, rel=1e-12)
+
+
 def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
     """Without any certificate the inner solve ends on the interior-point path (and its
     face): the same objective as the certified candidates, to rounding."""
     wvm, mm = boundary_case("3 channels RW")
     res = eg.fit_mgmwm(wvm, mm)
-    prob = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
+    prob = MProblem(mm.cleared(), wvm, res.moment_weights)
     u = np.array([prob.u_of_phi(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs)) for c in mm.channels])
     f, _, s, coupled = prob.solve(u)
     assert coupled and f == pytest.approx(res.objective, rel=1e-12)
-    monkeypatch.setattr(eg.mgmwm._MProblem, "_uncertified", lambda self, *a, **k: {-1})
-    slow = eg.mgmwm._MProblem(mm.cleared(), wvm, res.weights)
+    monkeypatch.setattr(ConeLSQ, "_uncertified", lambda self, *a, **k: {-1})
+    slow = MProblem(mm.cleared(), wvm, res.moment_weights)
     f2, _, s2, _ = slow.solve(u)
     assert f2 == pytest.approx(f, rel=1e-10)
     ti = slow.full[0]
@@ -443,6 +475,89 @@ def test_without_shared_processes_mgmwm_is_the_univariate_fits():
     for p, c in enumerate(m.channels):
         uni = eg.fit_gmwm(m.wv(c), "WN+RW")
         assert shared.covariance("RW")[p, p] == pytest.approx(uni.params["RW.gamma2"], rel=1e-9)
+
+
+def test_mgmwm_result_has_the_fit_result_interface():
+    """One result base: scheme name in ``weights``, the stacked weighting matrix in
+    ``omega`` (its diagonal the 1 / (ci width)^2 of every moment), labelled records whose
+    unique names are the keys of ``params``, a Summary with an HTML view, to_dict."""
+    from engine.fit.result import FitResult, ParamRecord, Summary
+
+    x = three_gyros().simulate(2**13, rng=6)
+    m = eg.wv_matrix(x, channels=["g1", "g2", "g3"], levels=9)
+    res = eg.fit_mgmwm(m, MultiModel(m.channels, "WN+RW", shared=["RW"]))
+    assert isinstance(res, FitResult) and res.weights == "ci"
+    assert res.omega.shape == (6 * 9, 6 * 9)
+    assert np.count_nonzero(res.omega - np.diag(np.diagonal(res.omega))) == 0
+    np.testing.assert_array_equal(res.moment_weights, 1.0 / (m.ci_high - m.ci_low) ** 2)
+    recs = res.param_records
+    assert all(isinstance(r, ParamRecord) for r in recs)
+    assert [r.full_name for r in recs] == list(res.params)
+    assert res.params["RW.cov[g1,g2]"] == res.covariance("RW")[0, 1]
+    assert res.params["g2.WN.sigma2"] == res.model.models["g2"].processes[0].sigma2
+    text = res.summary()
+    assert isinstance(text, Summary) and "shared RW (RW) over g1, g2, g3" in text
+    assert res._repr_html_().startswith("<pre>") and str(res) == str(text)
+    d = json.loads(json.dumps(res.to_dict()))
+    assert d["weights"] == "ci" and d["kind"] == "mgmwm" and d["fs"] == 1.0
+    assert {p["full_name"]: p["value"] for p in d["params"]} == res.params
+    cov_ab = next(p for p in d["params"] if p["full_name"] == "RW.cov[g1,g3]")
+    assert cov_ab["channels"] == ["g1", "g3"] and cov_ab["shared"] and cov_ab["label"] == "RW"
+    t = eg.DependenceTest(0.5, 0.04, 2.0, 1.5, ("RW",), 99)
+    assert isinstance(t.summary(), Summary) and str(t) == (
+        "test of dependence (RW shared vs independent): D = 0.5, p = 0.04 "
+        "(parametric bootstrap, B = 99)"
+    )
+
+
+def test_mgmwm_intervals_without_shared_processes_are_the_univariate_ones():
+    """With diagonal weights and independent channels the sandwich separates by channel (the
+    model-implied covariance of two channels' WVs is 0): each channel's intervals are those
+    of its univariate fit, whatever the model (GM, AR1, RW)."""
+    truth = MultiModel(
+        ["a", "b", "c"],
+        {
+            "a": "GM(beta=0.3, sigma2_gm=1e-2)+WN(sigma2=1e-1)+RW(gamma2=1e-6)",
+            "b": "WN(sigma2=2)+RW(gamma2=1e-5)",
+            "c": "AR1(phi=0.99, sigma2=1e-3)+WN(sigma2=1)",
+        },
+    )
+    x = truth.simulate(2**15, fs=10.0, rng=4)
+    res = eg.fit_mgmwm(x, truth.cleared(), fs=10.0)
+    table = res.conf_int(0.1)
+    assert table.level == 0.9 and table.names == tuple(res.params)
+    for p, c in enumerate(res.channels):
+        uni = eg.fit_gmwm(res.wvm.wv(p), truth.models[c].cleared()).conf_int(0.1)
+        for name in uni.names:
+            e, lo, hi = uni.row(name)
+            assert table.row(f"{c}.{name}") == pytest.approx((e, lo, hi), rel=1e-10)
+            assert lo < e < hi
+
+
+def test_mgmwm_intervals_of_a_shared_covariance_cover_the_truth():
+    """Monte Carlo: 95 % intervals of a shared RW covariance and a WN variance cover the
+    truth in about 95 % of 60 replicates (at least 85 %: 4 binomial SE), and entries on a
+    boundary get nan bounds."""
+    truth = MultiModel(
+        ["a", "b"],
+        {"a": "WN(sigma2=1)+RW", "b": "WN(sigma2=2)+RW"},
+        shared=["RW"],
+        cov={"RW": [[1e-4, 6e-5], [6e-5, 2e-4]]},
+    )
+    values = {"RW.cov[a,b]": 6e-5, "RW.cov[a,a]": 1e-4, "b.WN.sigma2": 2.0}
+    hits = dict.fromkeys(values, 0)
+    for r in range(60):
+        res = eg.fit_mgmwm(truth.simulate(2**14, rng=1000 + r), truth.cleared())
+        table = res.conf_int()
+        for name, v in values.items():
+            _, lo, hi = table.row(name)
+            hits[name] += lo <= v <= hi
+    assert all(h >= 51 for h in hits.values()), hits
+    wvm, mm = boundary_case("identical")  # rank-1 RW covariance: on the cone's boundary
+    res = eg.fit_mgmwm(wvm, mm)
+    table = res.conf_int()
+    assert "RW.cov (singular)" in res.at_bound
+    assert np.all(np.isnan(table.lower[[n.startswith("RW.cov") for n in table.names]]))
 
 
 def test_efficient_weights_and_the_moment_covariance():
@@ -466,7 +581,7 @@ def test_efficient_weights_and_the_moment_covariance():
     emp = np.var(sims[:, 5, 0, 1], ddof=1)
     assert emp / v[8 + 5, 8 + 5] == pytest.approx(1.0, abs=0.3)
     res = eg.fit_mgmwm(m, mm.cleared(), weights="efficient")
-    assert res.weights_name == "efficient" and res.omega is not None
+    assert res.weights == "efficient" and res.omega.shape == (6 * m.n_levels,) * 2
     assert np.all(np.isfinite(res.covariance("RW")))
 
 
@@ -532,7 +647,7 @@ def test_dependence_test_reports_progress_and_can_be_aborted():
     h0 = h1.without_dependence().cleared()
     fit0 = eg.fit_mgmwm(wvm, h0)
     sd = np.random.SeedSequence(3).spawn(5)[0]
-    d = eg.mgmwm._boot_dependence((fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, "ci", sd))
+    d = dependence._boot_dependence((fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, "ci", sd))
     assert d == plain.bootstrap[0]
 
 
@@ -559,10 +674,14 @@ def test_replicate_fit_of_the_six_adis_logs_lies_between_the_individual_fits(adi
         assert min(vals) <= joint.params[name] <= max(vals), (name, joint.params[name], vals)
     assert 30 < 1 / joint.params["GM_1.beta"] < 300  # the slow GM of about 100 s
     # no replicate's own estimate does better on the summed objective
+    # omega is block diagonal over the stacked levels: each replicate's diagonal weights
+    split = np.cumsum([wv.n_levels for wv in adis_wvs])[:-1]
+    ws = np.split(np.diagonal(joint.omega), split)
+    assert joint.weights == "ci" and joint.omega.shape == (split[-1] + adis_wvs[-1].n_levels,) * 2
     for f in singles:
         total = sum(
             float(np.sum(w * (wv.variance - f.model.wv(wv.tau_samples, wv.fs)) ** 2))
-            for wv, w in zip(adis_wvs, joint.weights, strict=True)
+            for wv, w in zip(adis_wvs, ws, strict=True)
         )
         assert total >= joint.objective * (1 - 1e-9)
     assert "6 recordings" in joint.summary()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import optimize, special
 
-from engine._optim import chi2_isf, gamma_p, nelder_mead, nnls
+from engine._optim import chi2_isf, gamma_p, least_squares, nelder_mead, nnls
 
 DFS = [
     0.3,
@@ -128,6 +128,30 @@ def test_nelder_mead_iterates_as_scipy() -> None:
     assert not nelder_mead(
         f, np.array([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]]), xatol=1e-12, fatol=0.0, maxfev=20
     ).success
+
+
+def test_least_squares_reaches_scipy_cost_with_and_without_active_bounds() -> None:
+    """Exponential-decay fits (a classic non-linear least squares) against SciPy's TRF."""
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 4.0, 30)
+    for _ in range(20):
+        truth = np.array([rng.uniform(0.5, 3), rng.uniform(0.2, 2), rng.uniform(-1, 1)])
+        y = truth[0] * np.exp(-truth[1] * t) + truth[2] + 0.02 * rng.normal(size=t.size)
+
+        def res(p: np.ndarray, y: np.ndarray = y) -> np.ndarray:
+            return p[0] * np.exp(-p[1] * t) + p[2] - y
+
+        for lb, ub in (
+            (np.full(3, -10.0), np.full(3, 10.0)),  # inactive
+            (np.array([0.0, 0.0, 0.0]), np.array([10.0, 10.0, 10.0])),  # offset >= 0
+        ):
+            x0 = np.clip(np.array([1.0, 1.0, 0.5]), lb, ub)
+            ours = least_squares(res, x0, lb, ub)
+            ref = optimize.least_squares(res, x0, bounds=(lb, ub), ftol=1e-12, xtol=1e-10)
+            assert ours.success
+            assert np.all(ours.x >= lb) and np.all(ours.x <= ub)
+            assert ours.cost <= ref.cost * (1 + 1e-9) + 1e-15
+            assert ours.cost == pytest.approx(0.5 * float(res(ours.x) @ res(ours.x)), rel=1e-14)
 
 
 def test_second_difference_sums_same_with_any_blas_pool(monkeypatch: pytest.MonkeyPatch) -> None:

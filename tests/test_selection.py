@@ -9,7 +9,7 @@ import pytest
 
 import engine as eg
 from engine.cli import main
-from engine.selection import rank_models, submodels
+from engine.inference.selection import rank_models, submodels
 
 
 def test_submodels_of_the_maximal_model():

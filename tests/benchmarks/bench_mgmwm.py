@@ -25,8 +25,8 @@ Estimators of the 9 covariance parameters (3 WN variances, 6 RW covariance entri
 
 With diagonal ``"ci"`` weights the MGMWM's variance estimates equal the univariate ones
 whenever the fitted covariance is positive semi-definite without constraint (the stacked
-problem separates by moment pair, see ``engine/mgmwm.py``), so the comparison that matters for
-the variances is the efficient column.
+problem separates by moment pair, see ``engine/multivariate/_cone.py``), so the comparison
+that matters for the variances is the efficient column.
 
 Prints the per-parameter bias, SD and MSE, MSE ratios with Monte Carlo standard errors, a
 markdown table ready for the README, and the wall time; ``--out`` keeps study.json (every
@@ -44,8 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from engine.fit import fit_gmwm
-from engine.inference import _map, fit_efficient
-from engine.mgmwm import MultiModel, fit_mgmwm
+from engine.inference import fit_efficient, parallel_map
+from engine.multivariate import MultiModel, fit_mgmwm
 from engine.wv import wv_matrix
 
 CHANNELS = ("gyro_1", "gyro_2", "gyro_3")
@@ -210,7 +210,7 @@ def main() -> None:
     rows = []
     chunk = max(2 * args.workers, 50)
     for a in range(0, args.reps, chunk):
-        rows += _map(one_replicate, [(n, s) for s in seeds[a : a + chunk]], args.workers)
+        rows += parallel_map(one_replicate, [(n, s) for s in seeds[a : a + chunk]], args.workers)
         print(
             f"\r{len(rows)}/{args.reps} replicates, {time.perf_counter() - t0:.0f} s",
             end="",

@@ -29,10 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from .fit import FitError, GMWMResult, fit_gmwm
-from .inference import _covariance, _free, _inverse, _map, jacobian
-from .models import Model, ModelError, parse_model
-from .wv import WaveletVariance, wavelet_variance
+from ..fit import FitError, GMWMResult, fit_gmwm
+from ..models import Model, ModelError, parse_model
+from ..wv import WaveletVariance, wavelet_variance
+from .asymptotic import free_params, jacobian
+from .covariance import inverse_cov, parallel_map, wv_cov
 
 __all__ = ["submodels", "rank_models", "SelectionResult", "Candidate"]
 
@@ -137,7 +138,7 @@ class SelectionResult:
 
 
 def _asymptotic_optimism(res: GMWMResult, v: np.ndarray) -> float:
-    free = _free(res)
+    free = free_params(res)
     if not free:
         return 0.0
     a = jacobian(res, free)
@@ -222,8 +223,8 @@ def rank_models(
     if not ok:
         raise FitError("no candidate could be fitted: " + "; ".join(e for *_, e in fitted))
     largest = max(ok, key=lambda r: (r.model.n_params, -r.objective))
-    vmat = _covariance(largest, v, B=B, seed=seed, workers=workers)
-    vinv = _inverse(vmat)
+    vmat = wv_cov(largest, v, B=B, seed=seed, workers=workers)
+    vinv = inverse_cov(vmat)
 
     boot_opt: dict[str, float] = {}
     if optimism == "bootstrap":
@@ -234,7 +235,7 @@ def rank_models(
             (largest.model, specs, wv.n, wv.fs, wv.n_levels, weights if omega is None else omega, s)
             for s in seeds
         ]
-        pairs = _map(_boot_pair, items, workers)
+        pairs = parallel_map(_boot_pair, items, workers)
         nus = np.array([p[0] for p in pairs])
         for k, r in enumerate(ok):
             rows = [
@@ -270,7 +271,7 @@ def rank_models(
         opt = boot_opt[m.spec()] if optimism == "bootstrap" else _asymptotic_optimism(r, vmat)
         resid = wv.variance - r.implied
         jstat = float(resid @ vinv @ resid)
-        df = wv.n_levels - len(_free(r))
+        df = wv.n_levels - len(free_params(r))
         jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
         cands.append(
             Candidate(m.spec(), m.n_params, r.objective, opt, r.objective + opt, jstat, df, jp, r)

@@ -1,0 +1,119 @@
+"""``gmwm fit`` with several channels (MGMWM) or several recordings (replicate fit).
+
+The command-line side of :mod:`engine.multivariate` and :mod:`engine.fit.replicates`: it
+loads the inputs and formats the results; the numerics never import the command line. The
+``gmwm`` command (:mod:`engine.cli`) passes its own loaders in, so this module does not
+import it back.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any
+
+from ._jsonutil import json_ready
+from .fit import FitError
+from .fit.replicates import fit_replicates
+from .io import load_log
+from .multivariate import MultiModel, dependence_test, fit_mgmwm
+from .wv import WaveletVariance, wv_matrix
+
+__all__ = ["cli_fit"]
+
+
+def cli_fit(
+    args: argparse.Namespace,
+    *,
+    load_wv: Callable[[argparse.Namespace], tuple[WaveletVariance, str]],
+    log_kwargs: Callable[[argparse.Namespace], dict[str, Any]],
+) -> dict[str, Any] | str:
+    """``gmwm fit`` for several channels (MGMWM) or several recordings (replicates).
+
+    ``gmwm fit IN.h5 --model WN+RW --channels gyro_x,gyro_y,gyro_z [--shared RW]
+    [--dependence-test]`` fits a multivariate model; ``gmwm fit IN1.h5 IN2.h5 ... --model M
+    [--channel gyro_x]`` fits one model to every file. Errors are raised as FitError /
+    ModelError / LoadError (the command prints them on one line, exit status 2).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``gmwm fit`` options.
+    load_wv : callable
+        The command's loader of one channel's WV (``args`` with ``input`` set) -> (WV, name),
+        used for every replicate file.
+    log_kwargs : callable
+        The command's log options (``--segment``, ``--scale`` ...) as keywords of
+        :func:`engine.io.load_log`.
+
+    Returns
+    -------
+    dict or str
+        The JSON-ready object (``--json``) or the readable text.
+    """
+
+    files = [args.input] + list(getattr(args, "more_inputs", None) or [])
+    channels = getattr(args, "channels", None)
+    shared = getattr(args, "shared", None)
+    if getattr(args, "ci", None):
+        raise FitError("--ci intervals are available for single-channel fits only")
+    if channels is None:
+        if shared:
+            raise FitError("--shared needs --channels (the channels that share the processes)")
+        if getattr(args, "dependence_test", False):
+            raise FitError("--dependence-test needs --channels and --shared")
+        if args.weights == "efficient":
+            raise FitError(
+                "--weights efficient is not available for replicate fits; use ci or identity"
+            )
+        wvs, names = [], []
+        for f in files:
+            wv, name = load_wv(argparse.Namespace(**{**vars(args), "input": f}))
+            wvs.append(wv)
+            names.append(name)
+        res = fit_replicates(wvs, args.model, weights=args.weights)
+        if args.json:
+            d = res.to_dict()
+            d["inputs"] = files
+            d["channels"] = names
+            return json_ready(d)
+        head = "\n".join(f"{f} [{n}]" for f, n in zip(files, names, strict=True))
+        return f"{head}\n{res.summary()}"
+    if len(files) > 1:
+        raise FitError(
+            "--channels takes one INPUT (channels recorded together); several "
+            "INPUT files are replicates of one channel (use --channel)"
+        )
+    if getattr(args, "robust", False):
+        raise FitError("--robust is not available with --channels (the WCCV is classical)")
+    if getattr(args, "stream", False):
+        raise FitError("--stream is not available with --channels")
+    names = [c.strip() for c in channels.split(",") if c.strip()]
+    log = load_log(args.input, fs=args.fs, **log_kwargs(args))
+    if log.is_summary:
+        raise FitError(
+            f"{args.input} is a WV summary file: --channels needs the raw channels "
+            "(the WCCV is not stored)"
+        )
+    unknown = [c for c in names if c not in log.channels]
+    if unknown:
+        raise FitError(
+            f"{args.input}: unknown channel(s) {', '.join(unknown)}; the channels "
+            f"are {', '.join(log.channels)}"
+        )
+    model = MultiModel(names, args.model, shared=shared or ())
+    wvm = wv_matrix(log, channels=names, levels=args.levels)
+    res = fit_mgmwm(wvm, model, weights=args.weights)
+    test = None
+    if getattr(args, "dependence_test", False):
+        test = dependence_test(wvm, model, B=args.bootstrap, seed=args.seed, workers=args.workers)
+    if args.json:
+        d = res.to_dict()
+        d["input"] = args.input
+        if test is not None:
+            d["dependence_test"] = test.to_dict()
+        return json_ready(d)
+    text = f"{args.input} [{', '.join(names)}]\n{res.summary()}"
+    if test is not None:
+        text += f"\n\n  {test.summary()}"
+    return text

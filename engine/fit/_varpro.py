@@ -1,0 +1,370 @@
+"""Variable projection: the one search every GMWM-type fit runs.
+
+Each latent process has non-negative linear coefficients (variances) and AR1/GM terms also one
+non-linear parameter, searched as ``u = log(correlation time in samples)``. For fixed ``u`` the
+minimum over the linear part is an inner problem solved exactly (NNLS for a univariate or a
+replicate fit, a conic PSD solve for the multivariate fit); the outer search over ``u`` is:
+
+1. a grid of correlation times for every AR1/GM term (:func:`grid_axis`; the terms are
+   interchangeable, so candidates have decreasing correlation times, :func:`grid_candidates`),
+   plus any extra starts (the user's values, the replicates' own fits ...);
+2. the ``keep`` best candidates by the exact profiled objective, found by branch and bound when
+   the problem gives vectorised lower bounds (:func:`best_candidates`);
+3. a local Nelder-Mead (:func:`local`) from each of them, skipping a start within 1.5 grid
+   steps of a local minimum already found; each local search restarts on a smaller simplex
+   until a restart no longer lowers the objective;
+4. the lowest objective wins (:func:`search`).
+
+The fitted processes are then ordered most persistent first (:func:`persistent_first`) and the
+parameters on the boundary of their space are listed (:func:`at_bound`).
+
+The problem protocol
+--------------------
+:func:`search` (and :func:`best_candidates`, :func:`local`) need an object ``prob`` with
+
+``k : int``
+    Number of non-linear coordinates (AR1/GM terms searched).
+``lo, hi : float``
+    Bounds of every coordinate (``log tc_min``, ``log tc_max``); a start is clipped into them.
+``axis : ndarray``
+    The grid axis of one coordinate (:func:`grid_axis`); its spacing sets the simplex size.
+``profile(u: ndarray (k,)) -> float``
+    The profiled objective: the minimum over the linear part (variances, covariances) for the
+    non-linear coordinates ``u``. It must accept coordinates slightly outside ``[lo, hi]``
+    (Nelder-Mead vertices are not clipped): clamp them.
+``lower_bounds(u: ndarray (C, k)) -> (lower (C,), exact (C,) bool)`` (optional)
+    Lower bounds of ``profile`` for ``C`` candidates at once (e.g. the unconstrained least
+    squares), with ``exact[c]`` True when ``lower[c]`` is the profile itself. Without it, every
+    candidate is profiled.
+
+The inner solve is the problem's business: :class:`NNLSProblem` is the univariate one (also
+used with stacked moments by the replicate fit and for the design matrix by the GMWFM); the
+multivariate problem implements the same protocol with its conic inner solve.
+
+Reference: Golub & Pereyra (2003), Separable nonlinear least squares: the variable projection
+method and its applications, Inverse Problems 19(2).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .._optim import nelder_mead, nnls
+from ..models import AR1, GM, TC_MAX_FACTOR, TC_MIN, Model, Process, ar1_wv_pos
+from ..wv import WaveletVariance
+from .result import FitError
+
+__all__ = [
+    "NNLSProblem",
+    "sqrt_weight",
+    "grid_axis",
+    "grid_candidates",
+    "best_candidates",
+    "local",
+    "search",
+    "persistent_first",
+    "at_bound",
+]
+
+
+def sqrt_weight(omega: np.ndarray) -> np.ndarray:
+    """A with A'A = Omega (so the objective is ||A (nu_hat - nu)||^2)."""
+    if np.count_nonzero(omega - np.diag(np.diagonal(omega))) == 0:
+        d = np.diagonal(omega)
+        if np.any(d < 0):
+            raise FitError("the weight matrix has a negative diagonal weight")
+        return np.diag(np.sqrt(d))
+    vals, vecs = np.linalg.eigh(omega)
+    if vals.min() < -1e-10 * max(vals.max(), 1e-300):
+        raise FitError("the weight matrix is not positive semi-definite")
+    return (vecs * np.sqrt(np.clip(vals, 0, None))).T
+
+
+def grid_axis(tau_max: float, k: int) -> np.ndarray:
+    """Log correlation times (samples) explored per AR1/GM term: 0.25 to 4x the largest scale.
+
+    60 points for one term, 36 for two, 18 for three, 10 beyond (the candidates grow as
+    ``C(n, k)``).
+    """
+    return np.linspace(math.log(0.25), math.log(4.0 * tau_max), {1: 60, 2: 36, 3: 18}.get(k, 10))
+
+
+def grid_candidates(axis: np.ndarray, k: int) -> list[tuple[float, ...]]:
+    """Candidate coordinates: distinct AR1/GM terms are interchangeable, so each candidate
+    lists decreasing correlation times."""
+    return list(itertools.combinations(axis[::-1], k))
+
+
+# -------------------------------------------------------------------------------------------
+# the univariate inner problem
+# -------------------------------------------------------------------------------------------
+class NNLSProblem:
+    """The weighted NNLS sub-problem for a univariate model and (stacked) WV moments.
+
+    ``min_{h >= 0} ||A (nu_hat - X(phi) h)||^2`` with ``X`` the processes' WV shapes at the
+    scales ``tau`` (samples). A replicate fit stacks its recordings' scales and moments with a
+    block-diagonal ``A``.
+
+    Parameters
+    ----------
+    model : Model
+        The model structure (values ignored).
+    tau : ndarray (M,)
+        Scales in samples.
+    fs : float
+        Sampling frequency (Hz).
+    a : ndarray (M, M)
+        Square root of the weighting matrix (:func:`sqrt_weight`).
+    nu : ndarray (M,)
+        Empirical WV at ``tau``.
+    n_max : int
+        Longest series length (samples), which sets the largest correlation time searched.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        tau: np.ndarray,
+        fs: float,
+        a: np.ndarray,
+        nu: np.ndarray,
+        n_max: int,
+        tau_max: float | None = None,
+    ):
+        self.model = model
+        self.tau = np.asarray(tau, dtype=float)
+        self.fs = fs
+        self.a = a
+        self.b = a @ nu
+        self.bb = float(self.b @ self.b)
+        self.nl_idx = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
+        self.k = len(self.nl_idx)
+        self.p = len(model.processes)
+        self.tc_min = TC_MIN
+        self.tc_max = TC_MAX_FACTOR * n_max
+        self.lo, self.hi = math.log(self.tc_min), math.log(self.tc_max)
+        self.axis = grid_axis(float(self.tau.max() if tau_max is None else tau_max), self.k)
+        # constant columns of the linear processes
+        self.x_fixed = np.zeros((self.tau.size, self.p))
+        for i, pr in enumerate(model.processes):
+            if pr.nonlinear is None:
+                self.x_fixed[:, i] = pr.basis(self.tau, self.fs)
+        self.is_gm = [isinstance(pr, GM) for pr in model.processes]
+        self.n_eval = 0
+        self._passive: np.ndarray | None = None
+
+    @classmethod
+    def from_wv(cls, model: Model, wv: WaveletVariance, a: np.ndarray) -> NNLSProblem:
+        """The problem of one WV (all its levels)."""
+        return cls(
+            model,
+            wv.tau_samples,
+            wv.fs,
+            a,
+            wv.variance,
+            max(wv.n, 2 ** (wv.n_levels + 1)),
+            float(wv.tau_samples[-1]),
+        )
+
+    # the non-linear coordinate: log of the correlation time (samples); AR1 may also be < 0
+    def phi_of(self, i: int, u: float) -> float:
+        """phi from the search coordinate of process i."""
+        pr = self.model.processes[i]
+        if isinstance(pr, AR1) and u < -50:
+            return 0.0
+        tc = math.exp(min(max(u, self.lo), self.hi))
+        return math.exp(-1.0 / tc)
+
+    def phis_of(self, u: np.ndarray) -> tuple[float, ...]:
+        """phi of every AR1/GM term from the search coordinates."""
+        return tuple(self.phi_of(i, float(ui)) for i, ui in zip(self.nl_idx, u, strict=True))
+
+    def design(self, phis: tuple[float, ...]) -> np.ndarray:
+        """The (M, p) matrix of WV shapes for the AR1/GM coefficients ``phis``."""
+        x = self.x_fixed.copy()
+        for i, phi in zip(self.nl_idx, phis, strict=True):
+            if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
+                col = ar1_wv_pos(self.tau, phi)
+                x[:, i] = col * (1.0 - phi * phi) if self.is_gm[i] else col
+            else:
+                x[:, i] = self.model.processes[i].basis(self.tau, self.fs, phi)
+        return x
+
+    def solve(self, phis: tuple[float, ...]) -> tuple[float, np.ndarray, np.ndarray]:
+        """Objective, h >= 0 and the design matrix for fixed non-linear values."""
+        self.n_eval += 1
+        x = self.design(phis)
+        c = self.a @ x
+        norms = np.sqrt(np.sum(c * c, axis=0))
+        norms[norms == 0] = 1.0
+        # warm start from the previous solve's positive set (Nelder-Mead moves little)
+        g, _ = nnls(c / norms, self.b, maxiter=50 * self.p, passive=self._passive)
+        self._passive = g > 0
+        h = g / norms
+        r = self.b - c @ h
+        return float(r @ r), h, x
+
+    def profile(self, u: np.ndarray) -> float:
+        """The profiled objective at the search coordinates ``u``."""
+        return self.solve(self.phis_of(u))[0]
+
+    def lower_bounds(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unconstrained weighted least squares of all candidates at once (batched QR).
+
+        It bounds the non-negative one from below and equals it where every coefficient is
+        non-negative.
+        """
+        nc = u.shape[0]
+        xs = np.repeat(self.x_fixed[None, :, :], nc, axis=0)
+        phis = np.exp(-1.0 / np.exp(u))
+        for col, i in enumerate(self.nl_idx):
+            xs[:, :, i] = self.model.processes[i].basis(self.tau, self.fs, phis[:, col])
+        cmat = np.einsum("ij,cjk->cik", self.a, xs)
+        norms = np.sqrt(np.sum(cmat * cmat, axis=1, keepdims=True))
+        norms[norms == 0] = 1.0
+        cn = cmat / norms
+        with np.errstate(all="ignore"):
+            q, r = np.linalg.qr(cn)
+            qb = np.einsum("cjk,j->ck", q, self.b)
+            lower = self.bb - np.sum(qb * qb, axis=1)
+            try:
+                coef = np.linalg.solve(r, qb[:, :, None])[:, :, 0]
+                feasible = np.all(coef >= 0, axis=1) & np.all(np.isfinite(coef), axis=1)
+            except np.linalg.LinAlgError:
+                feasible = np.zeros(nc, dtype=bool)
+        lower = np.where(np.isfinite(lower), np.maximum(lower, 0.0), 0.0)
+        return lower, feasible
+
+
+# -------------------------------------------------------------------------------------------
+# the outer search
+# -------------------------------------------------------------------------------------------
+def best_candidates(
+    prob: Any, cands: Sequence[Sequence[float]], keep: int
+) -> list[tuple[float, tuple[float, ...]]]:
+    """Exact profiled objective of the ``keep`` best candidates, best first.
+
+    With ``prob.lower_bounds``, by branch and bound: candidates are evaluated exactly in
+    increasing order of their lower bound until the bound exceeds the ``keep``-th best exact
+    value (the same candidates as profiling all of them).
+    """
+    u = np.asarray(cands, dtype=float)  # (C, k)
+    if hasattr(prob, "lower_bounds"):
+        lower, exact = prob.lower_bounds(u)
+    else:
+        lower = np.array([prob.profile(c) for c in u])
+        exact = np.ones(u.shape[0], dtype=bool)
+    order = np.argsort(lower, kind="stable")
+    best: list[tuple[float, tuple[float, ...]]] = []
+    for c in order:
+        if len(best) >= keep and lower[c] > best[-1][0] * (1 + 1e-12):
+            break
+        val = float(lower[c]) if exact[c] else prob.profile(u[c])
+        best.append((val, tuple(u[c])))
+        best.sort(key=lambda t: t[0])
+        best = best[:keep]
+    return best
+
+
+def local(
+    fun: Callable[[np.ndarray], float],
+    u0: Sequence[float] | np.ndarray,
+    step: float,
+    lo: float,
+    hi: float,
+    *,
+    maxfev: int | None = None,
+) -> tuple[float, np.ndarray, bool]:
+    """Local minimum of ``fun`` from ``u0`` (clipped into ``[lo, hi]``).
+
+    Nelder-Mead (:func:`engine._optim.nelder_mead`) from a simplex of side ``step``, restarted
+    on a simplex 8x smaller until a restart no longer lowers the objective (Nelder-Mead copes
+    with the kinks where the set of zero variances changes, where gradient methods stall).
+    At most 8 restarts of at most ``maxfev`` evaluations each (default ``400 k``).
+
+    Returns
+    -------
+    f, u, converged
+        The objective, the coordinates and whether the last run met its tolerance.
+    """
+    x = np.clip(np.asarray(u0, float), lo, hi)
+    k = x.size
+    maxfev = 400 * k if maxfev is None else maxfev
+    f = fun(x)
+    converged = False
+    for _ in range(8):
+        simplex = np.vstack([x] + [x + step * e for e in np.eye(k)])
+        res = nelder_mead(fun, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300), maxfev=maxfev)
+        fn = float(res.fun)
+        if fn < f * (1 - 1e-10):
+            x, f = np.asarray(res.x, float), fn
+            step = max(step / 8, 1e-5)
+        else:
+            converged = bool(res.success) or fn <= f
+            break
+    return f, x, converged
+
+
+def search(
+    prob: Any, starts: Sequence[Sequence[float]] = (), *, keep: int = 3
+) -> tuple[float, np.ndarray, bool]:
+    """The variable-projection search over the non-linear coordinates (see the module notes).
+
+    Parameters
+    ----------
+    prob
+        A problem with ``k``, ``lo``, ``hi``, ``axis``, ``profile`` (and optionally
+        ``lower_bounds``), see the module docstring.
+    starts : sequence of (k,) coordinates
+        Extra candidates next to the grid (user values, other fits).
+    keep : int
+        Number of best candidates the local search starts from.
+
+    Returns
+    -------
+    f, u, converged
+    """
+    cands = grid_candidates(prob.axis, prob.k) + [tuple(s) for s in starts]
+    best = best_candidates(prob, cands, keep)
+    spacing = float(prob.axis[1] - prob.axis[0])
+    results: list[tuple[float, np.ndarray, bool]] = []
+    for _, u0 in best:
+        # a start next to a local minimum already found adds nothing
+        if any(np.max(np.abs(np.asarray(u0) - r[1])) < 1.5 * spacing for r in results):
+            continue
+        results.append(local(prob.profile, u0, spacing / 2, prob.lo, prob.hi))
+    return min(results, key=lambda r: r[0])
+
+
+# -------------------------------------------------------------------------------------------
+# the fitted model
+# -------------------------------------------------------------------------------------------
+def _phi(q: Process, fs: float) -> float:
+    return q.phi if isinstance(q, AR1) else math.exp(-q.beta / fs)
+
+
+def persistent_first(procs: Sequence[Process], fs: float) -> Model:
+    """The fitted model with its AR1/GM terms most persistent first, then the others."""
+    nonlin = sorted((q for q in procs if q.nonlinear is not None), key=lambda q: -_phi(q, fs))
+    return Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
+
+
+def at_bound(fitted: Model, fs: float, tc_min: float, tc_max: float) -> list[str]:
+    """Parameters on the boundary of their space: a variance at 0, a correlation time at the
+    edge of the explored range ``[tc_min, tc_max]`` (samples)."""
+    out = []
+    for lab, q in zip(fitted.labels, fitted.processes, strict=True):
+        if q.linear_coef() == 0.0:
+            out.append(f"{lab}.{q.param_names[-1] if q.nonlinear else q.param_names[0]}")
+        if q.nonlinear is not None:
+            phi = _phi(q, fs)
+            if phi > 0:
+                tc = -1.0 / math.log(phi) if phi < 1 else math.inf
+                if tc <= tc_min * 1.0001 or tc >= tc_max / 1.0001:
+                    out.append(f"{lab}.{q.nonlinear}")
+    return out

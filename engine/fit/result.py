@@ -1,0 +1,236 @@
+"""What every fit returns: the error type, labelled parameter records and the result base.
+
+Every fit result (:class:`engine.fit.GMWMResult`, :class:`engine.fit.replicates.ReplicateResult`,
+:class:`engine.fit.gmwfm.GMWFMResult`, the multivariate result) derives from :class:`FitResult`:
+the same fields with one name and one type each (``model``, ``params``, ``objective``, the
+weighting as ``weights: str`` naming the scheme and ``omega: ndarray`` the matrix, ``converged``,
+``at_bound``, ``n_evaluations``, ``method``, ``message``, ``elapsed_s``), and the same methods:
+``conf_int(alpha)`` (a labelled :class:`ParamTable`), ``summary()`` (a :class:`Summary`: a
+string with an HTML view for notebooks) and ``to_dict()`` (JSON-ready).
+"""
+
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..models import Model
+from ..units import param_unit
+
+__all__ = ["FitError", "FitResult", "ParamRecord", "ParamTable", "Summary", "warning_lines"]
+
+
+class FitError(ValueError):
+    """The data or the settings do not allow a fit (says what and how to fix it)."""
+
+
+@dataclass(frozen=True)
+class ParamRecord:
+    """One estimated parameter with its label and unit."""
+
+    process: str
+    index: int
+    label: str
+    name: str
+    value: float
+    unit: str
+
+    @property
+    def full_name(self) -> str:
+        return f"{self.label}.{self.name}"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "process": self.process,
+            "index": self.index,
+            "label": self.label,
+            "name": self.name,
+            "value": float(self.value),
+            "unit": self.unit,
+        }
+
+
+def warning_lines(at_bound: Any, converged: bool, message: str) -> list[str]:
+    """The warning lines that end a fit summary (parameters at a bound, no convergence)."""
+    lines: list[str] = []
+    if at_bound:
+        lines += ["", f"  warning: at a bound: {', '.join(at_bound)}"]
+    if not converged:
+        lines += ["", f"  warning: {message}"]
+    return lines
+
+
+class Summary(str):
+    """A fit summary: the text table (it is a ``str``) with an HTML view for notebooks."""
+
+    def _repr_html_(self) -> str:
+        return f"<pre>{html.escape(str(self))}</pre>"
+
+
+@dataclass(frozen=True)
+class ParamTable:
+    """Labelled interval table: one row per parameter (name, estimate, lower, upper, unit)."""
+
+    names: tuple[str, ...]
+    estimate: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    units: tuple[str, ...]
+    level: float
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def row(self, name: str) -> tuple[float, float, float]:
+        """Estimate, lower and upper bound of one parameter by its unique name."""
+        i = self.names.index(name)
+        return float(self.estimate[i]), float(self.lower[i]), float(self.upper[i])
+
+    def __str__(self) -> str:
+        pct = f"{100 * self.level:g} %"
+        lines = [f"  {'parameter':<16} {'estimate':>13} {'lower':>13} {'upper':>13}  unit ({pct})"]
+        for n, e, lo, hi, u in zip(
+            self.names, self.estimate, self.lower, self.upper, self.units, strict=True
+        ):
+            lines.append(f"  {n:<16} {e:>13.6e} {lo:>13.6e} {hi:>13.6e}  {u}")
+        return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        head = "".join(f"<th>{h}</th>" for h in ("parameter", "estimate", "lower", "upper", "unit"))
+        rows = "".join(
+            f"<tr><td>{html.escape(n)}</td><td>{e:.6e}</td><td>{lo:.6e}</td><td>{hi:.6e}</td>"
+            f"<td>{html.escape(u)}</td></tr>"
+            for n, e, lo, hi, u in zip(
+                self.names, self.estimate, self.lower, self.upper, self.units, strict=True
+            )
+        )
+        return f"<table><tr>{head}</tr>{rows}</table>"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{name: {"estimate", "lower", "upper", "unit"}}`` and the level."""
+        return {
+            "level": float(self.level),
+            "params": {
+                n: {"estimate": float(e), "lower": float(lo), "upper": float(hi), "unit": u}
+                for n, e, lo, hi, u in zip(
+                    self.names, self.estimate, self.lower, self.upper, self.units, strict=True
+                )
+            },
+        }
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class FitResult:
+    """Base of every fit result.
+
+    Attributes
+    ----------
+    model : Model
+        The fitted model, every parameter set (AR1/GM most persistent first).
+    weights : str
+        The weighting scheme: ``"ci"``, ``"identity"``, ``"efficient"`` or ``"user"``.
+    omega : ndarray
+        The weighting matrix itself (for a replicate fit, block diagonal over the stacked
+        levels of the recordings).
+    objective : float
+        The minimised objective at the estimate.
+    converged : bool
+        True when the local search met its tolerance.
+    at_bound : list[str]
+        Parameters estimated on the boundary of their space.
+    n_evaluations : int
+        Number of objective evaluations.
+    method : str
+        The algorithm (``"closed-form"``, ``"grid+nelder-mead"`` ...).
+    message : str
+        Human-readable convergence note.
+    elapsed_s : float
+        Wall time of the fit (s).
+    """
+
+    model: Model
+    weights: str
+    omega: np.ndarray
+    objective: float
+    converged: bool = True
+    at_bound: list[str] = field(default_factory=list)
+    n_evaluations: int = 0
+    method: str = ""
+    message: str = ""
+    elapsed_s: float = 0.0
+
+    # what a subclass provides
+    @property
+    def fs(self) -> float:
+        """Sampling frequency (Hz)."""
+        raise NotImplementedError
+
+    @property
+    def unit(self) -> str:
+        """Signal unit."""
+        return ""
+
+    def _summary_head(self) -> list[str]:
+        return [f"fit of {self.model.spec()}"]
+
+    def _summary_tail(self) -> list[str]:
+        return []
+
+    def _dict_extra(self) -> dict[str, Any]:
+        return {}
+
+    # shared
+    @property
+    def param_records(self) -> list[ParamRecord]:
+        """Parameters with process code, index among its kind, label, name, value and unit."""
+        m = self.model
+        return [
+            ParamRecord(p.code, idx, lab, name, float(v), param_unit(p.code, name, self.unit))
+            for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True)
+            for name, v in zip(p.param_names, p.values, strict=True)
+        ]
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Estimated values by unique name (``WN.sigma2``, ``GM_1.beta`` ...)."""
+        return {r.full_name: r.value for r in self.param_records}
+
+    def conf_int(self, alpha: float = 0.05) -> ParamTable:
+        """Two-sided ``1 - alpha`` asymptotic intervals of every parameter (see
+        :func:`engine.inference.param_intervals`)."""
+        raise FitError(f"asymptotic intervals are not available for a {type(self).__name__}")
+
+    def summary(self) -> Summary:
+        """Readable summary: model, data, parameters with units, fit, warnings."""
+        lines = self._summary_head() + ["", f"  {'parameter':<16} {'value':>14}  unit"]
+        for r in self.param_records:
+            lines.append(f"  {r.full_name:<16} {r.value:>14.6e}  {r.unit}")
+        lines += self._summary_tail()
+        lines += warning_lines(self.at_bound, self.converged, self.message)
+        return Summary("\n".join(lines))
+
+    def __str__(self) -> str:
+        return str(self.summary())
+
+    def _repr_html_(self) -> str:
+        return self.summary()._repr_html_()
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        d: dict[str, Any] = {
+            "model": self.model.spec(),
+            "model_values": self.model.spec(values=True),
+            "fs": float(self.fs),
+            "weights": self.weights,
+            "objective": float(self.objective),
+            "params": [r.to_dict() for r in self.param_records],
+            "converged": bool(self.converged),
+            "at_bound": list(self.at_bound),
+            "method": self.method,
+            "n_evaluations": int(self.n_evaluations),
+        }
+        d.update(self._dict_extra())
+        return d

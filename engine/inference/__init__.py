@@ -1,0 +1,70 @@
+"""Inference for GMWM: covariance of the WV, efficient weights, intervals, goodness of fit.
+
+* ``V = Cov(nu_hat)`` across levels, three ways:
+
+  - :func:`wv_cov_data`: from the data, per level (diagonal), Percival & Walden's asymptotic
+    estimator ``2 A_j / M_j`` with ``A_j = s_0^2 / 2 + sum_{tau>0} s_tau^2`` (``s`` the
+    autocovariances of the level-j coefficients, i.e. the spectral density of the coefficients
+    integrated squared), as in the R ``gmwm`` package;
+  - :func:`wv_cov_model`: from a fitted model, Gaussian and asymptotic but full:
+    ``Cov(nu_j, nu_k) = 2 / max(M_j, M_k) int |H_j(f)|^2 |H_k(f)|^2 S(f)^2 df`` with the Haar
+    squared gains ``|H_j(f)|^2 = sin^4(pi f 2^(j-1)) / (4^(j-1) sin^2(pi f))`` and the model's
+    spectral density ``S`` (checked against Monte Carlo in the tests);
+  - :func:`wv_cov_bootstrap`: parametric bootstrap from a fitted model (simulate, recompute
+    the WV, sample covariance).
+
+* Efficient two-step GMWM (:func:`fit_efficient`): fit with ``weights="ci"``, estimate V from
+  that fit, refit with ``Omega = V^-1`` (the GMWM paper, Corollary 1).
+* Parameter intervals (:func:`param_intervals`): asymptotic sandwich
+  ``(A' W A)^-1 A' W V W A (A' W A)^-1`` (the GMWM paper, Theorem 2 / Lemma 2) in the
+  unconstrained space of each parameter (log variances, log beta, atanh phi) mapped back, so
+  intervals stay inside the parameter space; or the parametric bootstrap (percentile).
+* Goodness of fit (:func:`j_test`): ``T = (nu_hat - nu)' V^-1 (nu_hat - nu)`` against a
+  chi-square with ``J - p`` degrees of freedom.
+* Model selection (:func:`rank_models`, WVIC) in :mod:`engine.inference.selection`.
+"""
+
+from __future__ import annotations
+
+from .asymptotic import (
+    asymptotic_bounds,
+    free_params,
+    frequency_grid,
+    jacobian,
+    spectral_density,
+    wv_cov_model,
+)
+from .covariance import (
+    fit_efficient,
+    inverse_cov,
+    parallel_map,
+    wv_cov,
+    wv_cov_bootstrap,
+    wv_cov_data,
+)
+from .intervals import ParamInterval, param_intervals
+from .jtest import JTest, j_test
+from .selection import Candidate, SelectionResult, rank_models, submodels
+
+__all__ = [
+    "wv_cov_data",
+    "wv_cov_model",
+    "wv_cov_bootstrap",
+    "wv_cov",
+    "fit_efficient",
+    "inverse_cov",
+    "parallel_map",
+    "frequency_grid",
+    "spectral_density",
+    "param_intervals",
+    "ParamInterval",
+    "jacobian",
+    "free_params",
+    "asymptotic_bounds",
+    "j_test",
+    "JTest",
+    "rank_models",
+    "submodels",
+    "SelectionResult",
+    "Candidate",
+]

@@ -1,0 +1,194 @@
+"""The asymptotic pieces of GMWM inference that need no fitting: the model-implied covariance of
+the WV, the Jacobian of the implied WV in the unconstrained coordinates, and the sandwich
+intervals. :meth:`engine.fit.GMWMResult.conf_int` uses them without importing the fitting
+layer back (the rest of :mod:`engine.inference` imports :mod:`engine.fit`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..fit.result import FitError
+from ..models import AR1, DR, FROM_UNCONSTRAINED, GM, QN, RW, TO_UNCONSTRAINED, WN, Model, Process
+from ..wv import WaveletVariance
+
+__all__ = [
+    "spectral_density",
+    "frequency_grid",
+    "wv_cov_model",
+    "free_params",
+    "jacobian",
+    "asymptotic_bounds",
+]
+
+
+def spectral_density(p: Process, f: np.ndarray, fs: float) -> np.ndarray:
+    """Two-sided spectral density on f in cycles/sample (0 < f <= 1/2); RW generalised."""
+    sin2 = np.sin(np.pi * f) ** 2
+    if isinstance(p, WN):
+        return np.full_like(f, float(p.sigma2))
+    if isinstance(p, QN):
+        return 4.0 * float(p.q2) * sin2
+    if isinstance(p, RW):
+        return float(p.gamma2) / (4.0 * sin2)
+    if isinstance(p, DR):
+        return np.zeros_like(f)  # deterministic: no first-order contribution to Cov(nu_hat)
+    if isinstance(p, (AR1, GM)):
+        ar = p if isinstance(p, AR1) else p.as_ar1(fs)
+        phi, s2 = float(ar.phi), float(ar.sigma2)
+        # 1 - 2 phi cos w + phi^2 = (1 - phi)^2 + 4 phi sin^2(w/2), stable near phi = 1
+        return s2 / ((1.0 - phi) ** 2 + 4.0 * phi * sin2)
+    raise TypeError(f"no spectral density for {p.code}")  # pragma: no cover
+
+
+def frequency_grid(levels: int, model: Model, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes on (0, 1/2] and weights of the periodic trapezoid rule for an even integrand.
+
+    With ``2F`` equispaced nodes on a period, the rule is exact for trigonometric polynomials
+    of degree below ``2F``: the Haar gains of levels j, k have degree ``2^j + 2^k``, so
+    ``F = 2^(J+1)`` integrates white-noise-like terms exactly; AR1/GM terms need ``F`` above a
+    few correlation times (the rule then equals the lag-domain sum up to a negligible wrap).
+    """
+    need = 2 ** (levels + 1)
+    for p in model.processes:
+        if isinstance(p, (AR1, GM)):
+            ar = p if isinstance(p, AR1) else p.as_ar1(fs)
+            if 0 < float(ar.phi) < 1:
+                # a few correlation times, but no more than 8x the longest scale: beyond the
+                # series' span a near-unit-root AR1 acts as a random walk
+                need = max(need, int(min(-16.0 / math.log(float(ar.phi)), 2.0 ** (levels + 4))))
+    f_nodes = 1 << int(math.ceil(math.log2(need)))
+    f = np.arange(1, f_nodes + 1) / (2.0 * f_nodes)
+    w = np.full(f_nodes, 1.0 / f_nodes)  # 2 / (2F): the mirrored node counts twice
+    w[-1] = 0.5 / f_nodes  # f = 1/2 is its own mirror image
+    return f, w
+
+
+def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
+    """Asymptotic Gaussian covariance of the WV implied by a model (full J x J matrix).
+
+    ``Cov(nu_j, nu_k) = (2 / max(M_j, M_k)) int_{-1/2}^{1/2} |H_j|^2 |H_k|^2 S^2 df``.
+
+    Parameters
+    ----------
+    model : Model
+        Every parameter set (e.g. ``result.model``).
+    wv : WaveletVariance
+        Gives the levels, ``M_j`` and fs.
+    """
+    if not model.is_set:
+        raise FitError("wv_cov_model needs a model with every value set (a fitted model)")
+    levels = wv.n_levels
+    # processes fitted at zero contribute nothing (and their phi/beta is arbitrary)
+    model = Model(tuple(p for p in model.processes if p.linear_coef() != 0))
+    f, wts = frequency_grid(levels, model, wv.fs)
+    m_j = wv.n_coef.astype(float)
+    out = np.zeros((levels, levels))
+    inv_m2 = 1.0 / 4.0 ** np.arange(levels)  # 1 / m^2, m = 2^(j-1)
+    chunk = 1 << 14
+    g = np.empty((levels, chunk))
+    for a in range(0, f.size, chunk):
+        fc, wc = f[a : a + chunk], wts[a : a + chunk]
+        k = fc.size
+        s = np.zeros_like(fc)
+        for p in model.processes:
+            s += spectral_density(p, fc, wv.fs)
+        # |H_j|^2 S = sin^4(pi f m) / (m^2 sin^2(pi f)) S, by sin(2x) = 2 sin x cos x
+        x = np.pi * fc
+        sin_m, cos_m = np.sin(x), np.cos(x)
+        base = s / (sin_m * sin_m)
+        for j in range(levels):
+            sin2 = sin_m * sin_m
+            np.multiply(sin2 * sin2, base * inv_m2[j], out=g[j, :k])
+            sin_m, cos_m = 2.0 * sin_m * cos_m, 1.0 - 2.0 * sin2
+        gk = g[:, :k]
+        out += (gk * wc) @ gk.T
+    v = 2.0 * out / np.maximum.outer(m_j, m_j)
+    return v
+
+
+def free_params(res: Any) -> list[tuple[int, str]]:
+    """(process index, parameter name) of the free parameters: not on a boundary, and not
+    belonging to an AR1/GM whose variance is 0 (its phi/beta is then not identified)."""
+    out = []
+    for i, (lab, p) in enumerate(zip(res.model.labels, res.model.processes, strict=True)):
+        if p.linear_coef() <= 0:
+            continue
+        for name in p.param_names:
+            if f"{lab}.{name}" not in res.at_bound:
+                out.append((i, name))
+    return out
+
+
+def _set(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
+    """The model with the free parameters set from unconstrained coordinates ``u``."""
+    procs = list(model.processes)
+    for (i, name), ui in zip(free, u, strict=True):
+        procs[i] = procs[i].with_values(**{name: FROM_UNCONSTRAINED[name](float(ui))})
+    return Model(tuple(procs))
+
+
+def _u0(model: Model, free: list[tuple[int, str]]) -> np.ndarray:
+    """Unconstrained coordinates of the free parameters."""
+    return np.array([TO_UNCONSTRAINED[n](float(getattr(model.processes[i], n))) for i, n in free])
+
+
+def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
+    """d nu / d u (J x p) at the estimate, u the unconstrained coordinates of free parameters."""
+    free = free_params(res) if free is None else free
+    u0 = _u0(res.model, free)
+    tau = res.wv.tau_samples
+    jac = np.empty((tau.size, len(free)))
+    for k in range(len(free)):
+        h = 1e-5 * max(1.0, abs(u0[k]))
+        up, dn = u0.copy(), u0.copy()
+        up[k] += h
+        dn[k] -= h
+        jac[:, k] = (
+            _set(res.model, free, up).wv(tau, res.fs) - _set(res.model, free, dn).wv(tau, res.fs)
+        ) / (2 * h)
+    return jac
+
+
+def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[float, float]]:
+    """Wald bounds of every parameter (in ``res.param_records`` order) at two-sided ``level``.
+
+    The sandwich ``(A' W A)^-1 A' W V W A (A' W A)^-1`` (the GMWM paper, Theorem 2 / Lemma 2)
+    in the unconstrained coordinates (log of variances and beta, atanh of phi, omega as is),
+    mapped back, so the bounds respect the parameter space. A parameter on a boundary (or of
+    an AR1/GM with zero variance) gets ``nan`` bounds; a drift's bounds are of ``|omega|``.
+
+    Parameters
+    ----------
+    res : GMWMResult
+        The fit (model, WV, Omega, at_bound).
+    vmat : ndarray (J, J)
+        Covariance of the WV.
+    level : float
+        Two-sided coverage in (0, 1).
+    """
+    from scipy import stats
+
+    free = free_params(res)
+    a = jacobian(res, free)
+    w = res.omega
+    bread = np.linalg.pinv(a.T @ w @ a)
+    cov = bread @ a.T @ w @ vmat @ w @ a @ bread
+    se = np.sqrt(np.maximum(np.diagonal(cov), 0.0))
+    z = stats.norm.ppf(0.5 + level / 2)
+    u0 = _u0(res.model, free)
+    bounds = {}
+    for k, (i, name) in enumerate(free):
+        lo = FROM_UNCONSTRAINED[name](u0[k] - z * se[k])
+        hi = FROM_UNCONSTRAINED[name](u0[k] + z * se[k])
+        bounds[(res.model.labels[i], name)] = (min(lo, hi), max(lo, hi))
+    out = []
+    for r in res.param_records:
+        lo, hi = bounds.get((r.label, r.name), (math.nan, math.nan))
+        if r.name == "omega":  # the sign of a drift is not identified: report |omega|
+            lo, hi = (max(lo, 0.0), hi) if r.value >= 0 else (lo, hi)
+        out.append((float(lo), float(hi)))
+    return out
