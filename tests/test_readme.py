@@ -137,6 +137,6 @@ def test_json_description_lists_the_keys_the_commands_print(tmp_path, capsys):
     assert _described_keys("select") == set(sel)
     # "the object of gmwm wv --json without channel"
     assert set(fit["wv"]) == set(wv) - {"channel"}
-    assert set(fit["params"][0]) == {"process", "index", "name", "value", "unit"}
+    assert set(fit["params"][0]) == {"process", "index", "label", "name", "value", "unit"}
     with pytest.raises(AssertionError):  # the check can fail: a made-up command
         _described_keys("nonsense")
