@@ -123,6 +123,8 @@ def plot(arr: dict[str, Any], out: Path) -> None:
             ax.legend(fontsize=6)
             if a == k - 1:
                 ax.set_xlabel("scale tau [s]")
+            if b == 0:
+                ax.set_ylabel("[g^2]")
     fig.suptitle(
         f"ADIS16405 accel X/Y: {MODEL}, shared {arr['best']} (multivariate paper, Fig. 2)",
         fontsize=9,

@@ -129,7 +129,7 @@ def print_tables(res: dict[str, Any]) -> None:
         f"ARW [deg/sqrt(h)]                 {60 * n_fit * r2d:.4g}        {60 * p['N'] * r2d:.4g}"
     )
     print(
-        f"min WV over scales [(rad/s)^2]    {np.min(fit.implied):.3g}      "
+        f"min implied WV [(rad/s)^2]        {np.min(fit.implied):.3g}      "
         f"{p['bi_floor_wv']:.3g} (BI floor, B = {DATASHEET_BI_DEG_H:g} deg/h)"
     )
     bi_emp = math.sqrt(2 * np.min(wv.variance)) / BI_FACTOR * r2d * 3600
