@@ -16,9 +16,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
-pytestmark = pytest.mark.skipif(
-    not (DATA / "derived" / "navchip_wv_av.h5").exists(), reason="../shared/data missing"
-)
+pytestmark = pytest.mark.real_data  # skipped with one reason without ../shared/data
 
 
 def _load(name: str):
