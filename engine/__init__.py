@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from ._version import __version__ as __version__
 from .fit import (
     FitError,
     GMWMResult,
@@ -248,5 +249,4 @@ __all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
     "fit_replicates",
     "ReplicateResult",
 ]
-__version__ = "0.1.0"
 __all__ += ["Scenario", "SCENARIOS", "simulate_scenario"]  # teaching (issue 4)

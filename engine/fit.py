@@ -156,13 +156,13 @@ class GMWMResult:
         ]
         for r in self.param_records:
             lines.append(f"  {r.full_name:<16} {r.value:>14.6e}  {r.unit}")
-        ds = datasheet(self.model, w.fs, w.unit)
+        ds = datasheet(self.model, w.fs, w.unit, n_levels=w.n_levels)
         if ds:
-            lines += ["", "  datasheet view:"]
+            lines += ["", "  datasheet view (as gmwm export --format datasheet):"]
             for row in ds:
                 lines.append(
-                    f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
-                    f"{row['unit']}"
+                    f"  {row['label']:<8} {row['quantity']:<40} {row['symbol']:<8} "
+                    f"{row['value']:>12.5g}  {row['unit']}"
                 )
         lines += _warning_lines(self.at_bound, self.converged, self.message)
         return "\n".join(lines)

@@ -259,7 +259,7 @@ def session_to_json(
     SessionError
         Unknown ``load`` keys, or ``app`` state that is not JSON-serialisable.
     """
-    from . import __version__
+    from ._version import __version__
 
     load = dict(load or {})
     bad = [k for k in load if k not in _LOAD_KEYS]

@@ -24,6 +24,7 @@ import numpy as np
 
 from ._blas import blas_threads
 from ._optim import chi2_isf
+from .units import squared
 
 __all__ = [
     "WaveletVariance",
@@ -156,7 +157,7 @@ class WaveletVariance(LevelScales):
 
     def table(self) -> str:
         """Readable table with units."""
-        u = f"({self.unit})^2" if self.unit else "unit^2"
+        u = squared(self.unit)
         kind = f"robust (biweight, eff={self.eff:g})" if self.robust else "classical"
         ci = f"{100 * (1 - self.alpha):g}%"
         lines = [

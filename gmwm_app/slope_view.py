@@ -886,7 +886,7 @@ class SlopeView:
         """Draw a result: points, regions, lines, implied curves, table, messages."""
         self.result = result
         av = result.av
-        unit = self.state.unit or "unit"
+        unit = self.state.unit or "u"
         if av is None:
             self.adev_src.data = {"tau_s": [], "adev": [], "lo": [], "hi": []}
         else:
