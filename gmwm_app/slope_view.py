@@ -306,7 +306,7 @@ def comparison_values(
         sources.append(("truth", eg.datasheet(truth, fs, unit)))
     for col, ds in sources:
         for r in ds:
-            key = (r["label"], r["quantity"])
+            key = (r["label"], r["quantity"], r["unit"])  # native and display rows share names
             row = rows.setdefault(
                 key,
                 {
