@@ -85,7 +85,6 @@ __all__ = [
     "from_datasheet",
     "process_values",
     "process_from_values",
-    "display_value",
     "quantity_name",
     "allan_floor",
     "datasheet_rows",
@@ -452,12 +451,6 @@ def process_from_values(code: str, values: Mapping[str, float], fs: float) -> Pr
     q = QUANTITIES[code][0]
     cls = {"WN": pr.WN, "QN": pr.QN, "RW": pr.RW, "DR": pr.DR}[code]
     return cls(q.inverse(values[q.symbol], fs))  # type: ignore[misc]
-
-
-def display_value(kind: str, symbol: str, si_value: float) -> tuple[Display, float] | None:
-    """The datasheet display of a value in SI units, or None when there is none."""
-    d = DISPLAY.get((kind, symbol))
-    return None if d is None else (d, si_value * d.factor)
 
 
 # --------------------------------------------------------------------------- rows

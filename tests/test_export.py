@@ -596,3 +596,14 @@ def test_fit_and_export_datasheet_print_the_same_names_and_units(capsys, channel
         assert {("K", "m/s^3/sqrt(Hz)"), ("Q", "m/s"), ("R", "m/s^3")} <= units
     else:
         assert {("K", "deg/s^2/sqrt(Hz)"), ("N", "deg/s/sqrt(Hz)"), ("T_c", "s")} <= units
+
+
+def test_engine_export_is_the_function_after_importing_the_package(fits) -> None:
+    """``import engine.export`` makes ``engine.export`` the package; it stays callable."""
+    import engine.export
+
+    text = eg.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
+    assert text == engine.export.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
+    assert text.splitlines()[0].startswith("channel,process,quantity,symbol,value")
+    assert set(engine.export.FORMATS) == {"kalibr", "json", "csv", "datasheet", "datasheet-csv"}
+    assert engine.export.FORMATS["kalibr"].reader is engine.export.read_kalibr
