@@ -273,6 +273,8 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         from .cli_multi import cli_fit  # multivariate GMWM (--channels) or replicates (files)
 
         return cli_fit(args, load_wv=_load_wv, log_kwargs=log_kwargs)
+    from .units import datasheet_rows
+
     model = parse_model(args.model)
     wv, name = _load_wv(args)
     if args.weights == "efficient":
@@ -298,6 +300,18 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         d["channel"] = name
         if intervals is not None:
             d["intervals"] = [iv.to_dict() for iv in intervals]
+        # the rows of `gmwm export --format datasheet` (one table: engine.units)
+        d["datasheet"] = [
+            r.to_dict()
+            for r in datasheet_rows(
+                res.model,
+                res.fs,
+                wv.unit,
+                channel=name,
+                intervals={iv.name: (iv.low, iv.high) for iv in intervals or ()},
+                n_levels=wv.n_levels,
+            )
+        ]
         return json_ready(d)
     text = f"{args.input} [{name}]\n{res.summary()}"
     if intervals is not None:

@@ -216,6 +216,7 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 def add_export_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
     from .cli import _positive
+    from .export.registry import FORMATS
 
     ex = sub.add_parser(
         "export",
@@ -235,8 +236,9 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument(
         "--format",
         default="kalibr",
-        choices=["kalibr", "json", "csv", "datasheet", "datasheet-csv"],
-        help="kalibr imu.yaml (default), json report, csv WV curves, datasheet table (text or csv)",
+        choices=list(FORMATS),
+        help="; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
+        + " (default kalibr)",
     )
     ex.add_argument("-o", "--output", required=True, help="output file, or - for stdout")
     ex.add_argument("--fs", type=_positive(float, "--fs"), help="sampling frequency in Hz")

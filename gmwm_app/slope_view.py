@@ -306,7 +306,7 @@ def comparison_values(
         sources.append(("truth", eg.datasheet(truth, fs, unit)))
     for col, ds in sources:
         for r in ds:
-            key = (r["label"], r["quantity"])
+            key = (r["label"], r["quantity"], r["unit"])  # native and display rows share names
             row = rows.setdefault(
                 key,
                 {
@@ -886,7 +886,7 @@ class SlopeView:
         """Draw a result: points, regions, lines, implied curves, table, messages."""
         self.result = result
         av = result.av
-        unit = self.state.unit or "unit"
+        unit = self.state.unit or "u"
         if av is None:
             self.adev_src.data = {"tau_s": [], "adev": [], "lo": [], "hi": []}
         else:

@@ -1117,7 +1117,9 @@ class AppState(param.Parameterized):
         }
         if self.result is not None:
             out["fit"] = self.result.to_dict()
-            out["datasheet"] = eg.datasheet(self.result.model, float(self.fs), self.unit)
+            out["datasheet"] = eg.datasheet(
+                self.result.model, float(self.fs), self.unit, n_levels=self.result.wv.n_levels
+            )
             out["warnings"] = self.warnings()
         else:
             out["fit"] = None

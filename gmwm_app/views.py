@@ -87,8 +87,9 @@ def component_color(label: str) -> str:
 
 
 def unit_squared(unit: str) -> str:
-    """``(deg/s)²`` for ``deg/s``; ``unit²`` when the unit is unknown."""
-    return squared(unit or "unit").replace("^2", "²")
+    """``(deg/s)²`` for ``deg/s``; ``u²`` when the unit is unknown (:func:`engine.units.squared`,
+    printed with ``²``)."""
+    return squared(unit).replace("^2", "²")
 
 
 def model_grid(wv: eg.WaveletVariance, per_octave: int = GRID_PER_OCTAVE) -> np.ndarray:
@@ -620,7 +621,13 @@ def datasheet_rows(state: AppState) -> list[dict[str, str]]:
             "value": format_value(float(r["value"])),
             "unit": _pretty(r["unit"]),
         }
-        for r in eg.datasheet(m, float(state.fs), state.unit)
+        # the rows of the datasheet download (engine.units), bias-instability floor included
+        for r in eg.datasheet(
+            m,
+            float(state.fs),
+            state.unit,
+            n_levels=state.wv.n_levels if state.wv is not None else None,
+        )
     ]
 
 

@@ -100,17 +100,17 @@ def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any,
     assert direct.params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs, rel=1e-9)
     assert res.estimates["AVSM"].params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs, rel=1e-9)
     assert res.estimates["AVSM"].extras["BI.B"] == pytest.approx(b, rel=1e-9)
-    assert _row(view, "WN", "white noise density N")["AVSM"] == format_value(n)
-    assert _row(view, "BI", "bias instability B")["AVSM"] == format_value(b)
+    assert _row(view, "WN", "white noise density")["AVSM"] == format_value(n)
+    assert _row(view, "BI", "bias instability")["AVSM"] == format_value(b)
     unit = app.state.unit
-    assert _row(view, "WN", "white noise density N")["unit"] == f"{unit}/sqrt(Hz)"
+    assert _row(view, "WN", "white noise density")["unit"] == f"{unit}/sqrt(Hz)"
     # GMWM fitted the same processes, the floor as a GM
     assert res.gmwm_spec == "GM+WN"
     g = eg.fit_gmwm(app.state.wv, "GM+WN")
     assert res.estimates["GMWM"].params["WN.sigma2"] == pytest.approx(
         g.params["WN.sigma2"], rel=1e-6
     )
-    assert _row(view, "WN", "white noise density N")["GMWM"] == format_value(
+    assert _row(view, "WN", "white noise density")["GMWM"] == format_value(
         math.sqrt(g.params["WN.sigma2"] / app.state.fs)
     )
     # the slope line passes through its reading point (N at 1 s)
@@ -134,7 +134,7 @@ def test_demo_truth_is_shown_when_the_demo_is_the_bundled_one(
     m = eg.parse_model(spec)
     assert truth_model(app.state).values() == m.values()
     wn = m.values()["WN.sigma2"]
-    assert _row(view, "WN", "white noise density N")["truth"] == format_value(
+    assert _row(view, "WN", "white noise density")["truth"] == format_value(
         math.sqrt(wn / app.state.fs)
     )
 
@@ -151,8 +151,8 @@ def test_scenario_loads_into_the_session_with_its_regions_and_truth(app: Any, vi
     assert s.to_query()["scenario"] == "qn_wn"
     # truth column: the analytic datasheet values
     n_true, q_true = math.sqrt(1e-3 / sc.fs), math.sqrt(4e-4) / sc.fs
-    assert _row(view, "WN", "white noise density N")["truth"] == format_value(n_true)
-    assert _row(view, "QN", "quantization Q")["truth"] == format_value(q_true)
+    assert _row(view, "WN", "white noise density")["truth"] == format_value(n_true)
+    assert _row(view, "QN", "quantization")["truth"] == format_value(q_true)
     est = view.result.estimates
     # GMWM near the truth (its Monte Carlo SD is about 2% on sigma2, 3% on q2: 5 SD bands)
     assert est["GMWM"].params["WN.sigma2"] == pytest.approx(1e-3, rel=0.10)
@@ -277,7 +277,7 @@ def test_pure_helpers_curves_and_table_rows() -> None:
         curves["AVSM"]["adev"] ** 2, 2 * avsm_m.wv(2 * m, fs) + (BI_FACTOR * b) ** 2, rtol=1e-9
     )
     vals = comparison_values(res.estimates, truth, fs, "deg/s")
-    row = next(r for r in vals if r["quantity"] == "white noise density N")
+    row = next(r for r in vals if r["quantity"] == "white noise density")
     assert row["truth"] == pytest.approx(nn, rel=1e-12)
     assert row["AVSM"] == pytest.approx(nn, rel=0.02)
     assert [r["process"] for r in vals].index("WN") < [r["process"] for r in vals].index("DR")

@@ -340,7 +340,7 @@ def test_export_json(app_state: AppState) -> None:
     assert d["data"]["unit"] == "deg/s" and d["data"]["n_samples"] == s.n
     assert {r["quantity"] for r in d["datasheet"]} >= {
         "angle random walk",
-        "correlation time 1/beta",
+        "correlation time",
     }
     assert d["query"]["model"] == "GM+WN+RW"
     assert s.export_filename().endswith("_gyro_x_GM+WN+RW.json")
@@ -461,7 +461,7 @@ def test_tables(app_state: AppState) -> None:
     assert [r["unit"] for r in rows] == ["1/s", "(deg/s)²", "(deg/s)²", "(deg/s)²"]
     ds = datasheet_rows(s)
     q = {r["quantity"]: r["unit"] for r in ds}
-    assert q["angle random walk"] == "deg/sqrt(h)" and q["correlation time 1/beta"] == "s"
+    assert q["angle random walk"] == "deg/sqrt(h)" and q["correlation time"] == "s"
     assert "objective" in fit_summary(s) and "converged" in fit_summary(s)
 
 
