@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.demo import demo_path
 from engine.cli import main
+from engine.demo import demo_path
 from engine.export import (
     BI_FACTOR,
     ExportError,
