@@ -33,17 +33,16 @@ cancel.
 
 from __future__ import annotations
 
-import asyncio
 import html
 import logging
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import panel as pn
+import param
 from bokeh.layouts import gridplot
 from bokeh.models import (
     ColumnDataSource,
@@ -73,7 +72,8 @@ from .views import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .app import GMWMApp
+    from .jobs import Jobs
+    from .state import AppState
 
 __all__ = [
     "MultiView",
@@ -663,13 +663,15 @@ def _table(
 # -----------------------------------------------------------------------------------------
 # the tab
 # -----------------------------------------------------------------------------------------
-class MultiView:
+class MultiView(pn.viewable.Viewer):
     """Widgets, grid, tables and callbacks of the "Multi-channel" tab of one session.
 
     Parameters
     ----------
-    app : GMWMApp
-        The session's app (its ``state`` holds the loaded log).
+    state : AppState
+        The session state (it holds the loaded log).
+    jobs : Jobs
+        The session's job runner (worker threads, document lock, timers).
 
     Attributes
     ----------
@@ -685,9 +687,12 @@ class MultiView:
         Fits started by this view (for tests and diagnostics).
     """
 
-    def __init__(self, app: GMWMApp) -> None:
-        self.app = app
-        self.state = app.state
+    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+
+    def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
+        super().__init__(**params)
+        self.jobs = jobs
+        self.state = state
         self.wvm: eg.WVMatrix | None = None
         self.result: Any = None
         self.error = ""
@@ -878,9 +883,7 @@ class MultiView:
             sizing_mode="stretch_width",
         )
         self.state.param.watch(self._on_state, "revision")
-        tabs = getattr(app, "tabs", None)
-        if tabs is not None:
-            tabs.param.watch(self._on_tab, "active")
+        self.param.watch(self._on_tab, "active")
         self._sync_data(force=True)
 
     # ------------------------------------------------------------------------------------
@@ -987,13 +990,11 @@ class MultiView:
     @property
     def visible(self) -> bool:
         """The tab is the one shown."""
-        tabs = getattr(self.app, "tabs", None)
-        if tabs is None:
-            return True
-        try:
-            return tabs._names[tabs.active] == "Multi-channel"
-        except (IndexError, AttributeError):
-            return False
+        return self.active
+
+    def __panel__(self) -> pn.Column:
+        """The tab's content."""
+        return self.panel
 
     def _on_tab(self, _event: Any) -> None:
         if self._stale and self.visible:
@@ -1114,18 +1115,17 @@ class MultiView:
         if self._running:
             self._dirty = True
             return
-        if self.app._served:
+        if self.jobs.served:
             if self._scheduled:
                 return
             self._scheduled = True
             self._idle.clear()
-            doc = self.app._doc
 
             def fire() -> None:
                 self._scheduled = False
                 self._start()
 
-            doc.add_timeout_callback(fire, DEBOUNCE_MS)
+            self.jobs.later(fire, DEBOUNCE_MS)
             return
         self._start()
 
@@ -1193,43 +1193,23 @@ class MultiView:
             elif not self._scheduled:
                 self._idle.set()
 
-        self.app._spawn(partial(self._background, work, apply, fail, done))
+        self.jobs.run(work, self._guarded(apply), self._guarded(fail), done)
 
-    async def _background(
-        self,
-        work: Callable[[], Any],
-        apply: Callable[[Any], Any],
-        fail: Callable[[BaseException], Any],
-        done: Callable[[], Any],
-    ) -> None:
-        """Run ``work`` in the app's worker pool; the rest under the document lock."""
-        from .app import _EXECUTOR
+    def _guarded(self, fn: Callable[[Any], Any]) -> Callable[[Any], None]:
+        """``fn`` that shows a display problem in the view instead of raising it."""
 
-        out: Any = None
-        err: BaseException | None = None
-        try:
-            out = await asyncio.get_running_loop().run_in_executor(_EXECUTOR, work)
-        except asyncio.CancelledError:  # the session closed
-            self.app._locked(done)
-            raise
-        except Exception as e:  # reported in the view, never a traceback
-            if not isinstance(e, (ValueError, KeyError, TypeError, Cancelled)):
-                log.exception("multi-channel fit failed")
-            err = e
-
-        def finish() -> None:
+        def run(arg: Any) -> None:
+            if isinstance(arg, BaseException) and not isinstance(
+                arg, (ValueError, KeyError, TypeError, Cancelled)
+            ):
+                log.error("multi-channel job failed: %s: %s", type(arg).__name__, arg)
             try:
-                if err is not None:
-                    fail(err)
-                else:
-                    apply(out)
+                fn(arg)
             except Exception as e:  # a display problem: say so, keep the session
                 log.exception("multi-channel display failed")
                 self._message(f"Display error: {type(e).__name__}: {e}")
-            finally:
-                done()
 
-        self.app._locked(finish)
+        return run
 
     # ------------------------------------------------------------------------------------
     # test of dependence (on request, worker thread, progress and cancel)
@@ -1253,7 +1233,7 @@ class MultiView:
             self._dep_last = now
             value = int(100 * done / max(total, 1))
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
-            self.app._locked(
+            self.jobs.locked(
                 lambda: (
                     self.dep_progress.param.update(value=value),
                     setattr(self.dep_text, "object", text),
@@ -1305,8 +1285,8 @@ class MultiView:
             else:
                 self.dep_text.object = f"**Dependence test failed:** {html.escape(_message(e))}"
 
-        self.app._spawn(
-            partial(self._background, work, apply, fail, lambda: self._dep_running(False))
+        self.jobs.run(
+            work, self._guarded(apply), self._guarded(fail), lambda: self._dep_running(False)
         )
         return True
 
@@ -1323,12 +1303,7 @@ class MultiView:
         """Spinner and progress text; on a server the text counts the seconds of a long fit
         (the figures keep the previous result meanwhile)."""
         self.spinner.visible = on
-        doc = self.app._doc if self.app._served else None
-        if self._ticker is not None and doc is not None:
-            try:
-                doc.remove_periodic_callback(self._ticker)
-            except ValueError:  # already removed
-                pass
+        self.jobs.stop(self._ticker)
         self._ticker = None
         if not on:
             if self.status.object.startswith("⏳"):
@@ -1337,15 +1312,14 @@ class MultiView:
         t0 = time.perf_counter()
         text = html.escape(message)
         self.status.object = f"⏳ {text} ..."
-        if doc is not None:
 
-            def tick() -> None:
-                self.status.object = (
-                    f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
-                    "grid shows the previous fit until this one ends)"
-                )
+        def tick() -> None:
+            self.status.object = (
+                f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
+                "grid shows the previous fit until this one ends)"
+            )
 
-            self._ticker = doc.add_periodic_callback(tick, 1000)
+        self._ticker = self.jobs.every(tick, 1000)
 
     def _message(self, text: str) -> None:
         self.error = text

@@ -24,7 +24,6 @@ The fit runs off the server's event loop; a result that is no longer the latest 
 
 from __future__ import annotations
 
-import asyncio
 import json
 import logging
 import math
@@ -35,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import panel as pn
+import param
 from bokeh.models import (
     BoxAnnotation,
     BoxSelectTool,
@@ -55,7 +55,7 @@ from .state import AppState, demo_path, format_value
 from .views import BAND_COLOR, EMPIRICAL_COLOR, redraw_table
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .app import GMWMApp
+    from .jobs import Jobs
 
 __all__ = [
     "SlopeView",
@@ -475,13 +475,15 @@ def _regions_text(result: SlopeResult) -> str:
 # -----------------------------------------------------------------------------------------
 # the tab
 # -----------------------------------------------------------------------------------------
-class SlopeView:
+class SlopeView(pn.viewable.Viewer):
     """Widgets, figure, table and callbacks of the "Slope method" tab of one session.
 
     Parameters
     ----------
-    app : GMWMApp
-        The session's app (its state, worker pool and document lock).
+    state : AppState
+        The session state.
+    jobs : Jobs
+        The session's job runner (worker pool, document lock, data loads).
 
     Attributes
     ----------
@@ -493,13 +495,16 @@ class SlopeView:
         What is shown.
     """
 
-    def __init__(self, app: GMWMApp) -> None:
-        self.app = app
-        self.state: AppState = app.state
+    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+
+    def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
+        super().__init__(**params)
+        self.jobs = jobs
+        self.state: AppState = state
         self.regions: dict[str, tuple[float, float]] = {}
         self._scenario_seen = ""  # last scenario whose naive regions were offered
         self.result: SlopeResult | None = None
-        self._job = 0
+        self._ticket = 0
         self._key: Any = None
         self._dirty = True
         self._syncing = False
@@ -511,7 +516,7 @@ class SlopeView:
         self._build_table()
         self._build_layout()
         self.state.param.watch(self._on_state, "revision")
-        app.tabs.param.watch(self._on_tab, "active")
+        self.param.watch(self._on_tab, "active")
         self.refresh()
 
     # ------------------------------------------------------------------------------------
@@ -759,14 +764,12 @@ class SlopeView:
             self.regions = dict(sc.region_dict)
             self._scenario_seen = key
             self._key = None
-            self.app._install(loaded)
+            self.jobs.install(loaded)
             if self.state.source == "scenario" and self.state.path == key:
                 self.state.set_model(sc.model.cleared())  # the Fit tab fits the true form
 
         self.status.object = f"⏳ Simulating the scenario '{sc.title}' ..."
-        self.app._spawn(
-            partial(self.app._offload, f"Simulating the scenario '{sc.title}'", work, apply)
-        )
+        self.jobs.load(f"Simulating the scenario '{sc.title}'", work, apply)
 
     # ------------------------------------------------------------------------------------
     # callbacks (thin)
@@ -803,13 +806,7 @@ class SlopeView:
             self._on_state()
 
     def _visible(self) -> bool:
-        if not self.app._served:
-            return True  # tests and notebooks: always up to date
-        tabs = self.app.tabs
-        try:
-            return tabs._names[tabs.active] == TITLE
-        except (IndexError, AttributeError):
-            return False
+        return self.active or not self.jobs.served  # tests, notebooks: always up to date
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views
@@ -828,23 +825,19 @@ class SlopeView:
         self._dirty = False
         self._key = key
         wv, regions, truth = s.wv, dict(self.regions), truth_model(s)
-        self._job += 1
-        job = self._job
         self.computing = True
         self.status.object = "⏳ Reading the slopes and fitting GMWM ..."
-        work = partial(compute_slope, wv, regions, truth, gmwm=self._gmwm)
-        if not self.app._served:  # tests, notebooks: at once (no server loop to hand back to)
-            try:
-                out = work()
-            except Exception as e:  # compute_slope reports bad regions itself; anything
-                log.exception("slope computation failed")  # else is shown, not raised
-                self.computing = False
-                self._show_messages([f"could not compute: {type(e).__name__}: {e}"])
-                return
-            self.computing = False
-            self.show(out)
-            return
-        self.app._spawn(partial(self._background, job, work))
+        self._ticket += 1
+        # outside a server at once (tests, notebooks: no server loop to hand back to);
+        # compute_slope reports bad regions itself, anything else is shown by _failed
+        self.jobs.run(
+            partial(compute_slope, wv, regions, truth, gmwm=self._gmwm),
+            self.show,
+            self._failed,
+            partial(self._computed, self._ticket),
+            key="slope",
+            inline=not self.jobs.served,
+        )
 
     def _gmwm(self, wv: eg.WaveletVariance, spec: str) -> MethodEstimate:
         """GMWM of ``spec`` on ``wv``, cached (moving a region does not refit)."""
@@ -857,30 +850,18 @@ class SlopeView:
             self._gmwm_cache[key] = est
         return est
 
-    async def _background(self, job: int, work: Callable[[], SlopeResult]) -> None:
-        from .app import _EXECUTOR
-
-        out: Any = None
-        err: BaseException | None = None
-        try:
-            out = await asyncio.get_running_loop().run_in_executor(_EXECUTOR, work)
-        except asyncio.CancelledError:  # the session closed
-            raise
-        except Exception as e:  # shown in the page, never a traceback
-            log.exception("slope computation failed")
-            err = e
-
-        def finish() -> None:
-            if job != self._job:
-                return  # a newer computation was started: drop this one
+    def _computed(self, ticket: int) -> None:
+        if ticket == self._ticket:  # not when a newer one runs
             self.computing = False
-            if err is not None:
-                self.status.object = ""
-                self._show_messages([f"could not compute: {type(err).__name__}: {err}"])
-            else:
-                self.show(out)
 
-        self.app._locked(finish)
+    def _failed(self, err: BaseException) -> None:
+        log.error("slope computation failed: %s: %s", type(err).__name__, err)
+        self.status.object = ""
+        self._show_messages([f"could not compute: {type(err).__name__}: {err}"])
+
+    def __panel__(self) -> pn.Column:
+        """The tab's content."""
+        return self.panel
 
     def show(self, result: SlopeResult) -> None:
         """Draw a result: points, regions, lines, implied curves, table, messages."""

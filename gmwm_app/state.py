@@ -417,6 +417,20 @@ class AppState(param.Parameterized):
         except Exception:  # reported when installed
             pass
 
+    def read_and_warm(self, source: str, **kw: Any) -> LoadedData:
+        """:meth:`read` data and compute the WV the session will show (worker-thread safe).
+
+        A read error keeps ``(source, kw)`` as its ``gmwm_read`` attribute (to read it again,
+        e.g. its longest clean segment).
+        """
+        try:
+            loaded = self.read(source, **kw)
+        except ValueError as e:
+            e.gmwm_read = (source, kw)  # type: ignore[attr-defined]
+            raise
+        self.precompute(loaded, self.channel, None, self.robust)
+        return loaded
+
     def warm(
         self, channel: str | None = None, fs: float | None = None, robust: bool | None = None
     ) -> None:

@@ -359,7 +359,7 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(
 ) -> None:
     v = open_view(app)
     held: list[Any] = []
-    monkeypatch.setattr(app, "_spawn", lambda coro_fn: held.append(coro_fn))
+    monkeypatch.setattr(app.jobs, "spawn", lambda coro_fn: held.append(coro_fn))
     before = v.n_fits
     v.spec_input.value = "WN+RW"  # starts a fit (held: "running")
     assert v.n_fits == before + 1 and v.busy and v.spinner.visible
