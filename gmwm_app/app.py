@@ -46,7 +46,6 @@ from gmwm_app.state import (  # noqa: E402
     PROCESS_CODES,
     PROCESS_NAMES,
     AppState,
-    SliderSpec,
     format_value,
 )
 from gmwm_app.views import (  # noqa: E402
@@ -55,6 +54,7 @@ from gmwm_app.views import (  # noqa: E402
     component_color,
     fit_summary,
 )
+from gmwm_app.whatif import SliderSpec  # noqa: E402
 
 __all__ = ["GMWMApp", "create_app", "live_apps"]
 

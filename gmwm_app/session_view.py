@@ -23,8 +23,9 @@ import panel as pn
 
 from engine.export import export
 from engine.session import Session, SessionError, session_from_json, session_to_json
+from gmwm_app.data import LoadedData
 from gmwm_app.limits import check_path, check_upload_size
-from gmwm_app.state import AppState, LoadedData, demo_path
+from gmwm_app.state import AppState, demo_path
 
 if TYPE_CHECKING:
     from gmwm_app.jobs import Jobs
@@ -187,7 +188,7 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
         # the uploaded file is loaded in this session again: restore the session on it
         plan = RestorePlan(
             plan.session,
-            LoadedData(state.log, "upload", state.filename, "", wv_cache=dict(state._wv_cache)),
+            LoadedData(state.log, "upload", state.filename, "", wv_cache=state.cached_wvs()),
         )
         problems = []
     if plan.loaded is not None:

@@ -22,6 +22,7 @@ import engine as eg
 from engine.io import ImuLog
 from engine.mgmwm import MultiModel
 from engine.model import ModelError
+from gmwm_app.data import LoadedData
 from gmwm_app.multi_view import (
     MultiView,
     build_model,
@@ -30,7 +31,7 @@ from gmwm_app.multi_view import (
     model_curve_grid,
     parse_overrides,
 )
-from gmwm_app.state import LoadedData, format_value
+from gmwm_app.state import format_value
 
 GYROS = ["gyro_x", "gyro_y", "gyro_z"]
 TITLE = "Multi-channel"

@@ -21,6 +21,7 @@ import engine as eg
 from engine.allan import BI_FACTOR, allan_variance, avsm
 from engine.io import ImuLog
 from engine.teaching import SCENARIOS
+from gmwm_app.data import LoadedData
 from gmwm_app.slope_view import (
     SlopeResult,
     comparison_values,
@@ -29,7 +30,7 @@ from gmwm_app.slope_view import (
     slope_line_data,
     truth_model,
 )
-from gmwm_app.state import AppState, LoadedData, format_value
+from gmwm_app.state import AppState, format_value
 
 
 @pytest.fixture

@@ -16,7 +16,7 @@ import pytest
 
 import engine as eg
 from gmwm_app import state as state_mod
-from gmwm_app.state import AppState, SliderSpec
+from gmwm_app.state import AppState
 from gmwm_app.views import (
     WVFigures,
     datasheet_rows,
@@ -24,6 +24,7 @@ from gmwm_app.views import (
     model_grid,
     parameter_rows,
 )
+from gmwm_app.whatif import SliderSpec
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
 
