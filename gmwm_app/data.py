@@ -14,10 +14,12 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 import engine as eg
 from gmwm_app.limits import check_path, check_upload_size
@@ -38,6 +40,7 @@ __all__ = [
     "fs_source",
     "unit_of",
     "message_of",
+    "wv_matrix_of",
 ]
 
 
@@ -123,7 +126,7 @@ def wv_from_cache(
     if hit is not None:
         return hit
     for (ch, _fs, rob), wv in list(cache.items()):
-        if ch != channel:
+        if ch != channel or not isinstance(wv, eg.WaveletVariance):  # (WV matrices too)
             continue
         if rob == robust:
             return retag_fs(wv, fs)
@@ -313,3 +316,38 @@ def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
         return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch))
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
+
+
+def wv_matrix_of(lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
+    """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
+
+    Channels of different lengths are truncated to the shortest (the notice says so).
+
+    Raises
+    ------
+    ValueError
+        No raw data (a WV summary file), too few or unusable channels.
+    """
+    if lg is None:
+        raise ValueError("load a log first")
+    if lg.is_summary:
+        raise ValueError(
+            f"{getattr(lg, 'source', '') or 'this file'} is a wavelet-variance "
+            "summary without raw samples: the wavelet cross-covariance needs "
+            "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
+        )
+    chans = tuple(channels)
+    series = {c: np.asarray(lg.channels[c]) for c in chans}
+    sizes = {c: int(a.size) for c, a in series.items()}
+    n = min(sizes.values())
+    note = ""
+    if len(set(sizes.values())) > 1:
+        desc = ", ".join(f"{c}: {v:,}" for c, v in sizes.items())
+        note = (
+            f"The channels have different lengths ({desc} samples); all are "
+            f"truncated to the shortest, {n:,} samples."
+        )
+        series = {c: a[:n] for c, a in series.items()}
+    units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
+    wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
+    return wvm, note

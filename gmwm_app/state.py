@@ -22,7 +22,7 @@ import logging
 import math
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +44,7 @@ from gmwm_app.data import (
     summary_has_robust,
     unit_of,
     wv_from_cache,
+    wv_matrix_of,
 )
 from gmwm_app.query import QueryMixin
 from gmwm_app.whatif import SliderSpec, WhatIfMixin, guess_values
@@ -56,6 +57,9 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: WV/WCCV matrices kept in a session's WV cache (multi-channel view).
+N_WV_MATRICES = 4
 
 #: Process codes in the order of the add buttons.
 PROCESS_CODES: tuple[str, ...] = ("WN", "QN", "RW", "DR", "AR1", "GM")
@@ -165,12 +169,33 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         self._log: Any = None
         self._wv_cache: dict[tuple[str, float, bool], eg.WaveletVariance] = {}
         self._lock = threading.Lock()
+        self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
 
     # ---------------------------------------------------------------------------------
     # helpers
     # ---------------------------------------------------------------------------------
+    def wv_matrix(self, lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
+        """:func:`gmwm_app.data.wv_matrix_of`, cached in the session's WV cache while ``lg``
+        is the session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
+        """
+        key = ("wv-matrix", tuple(channels), float(fs))
+        with self._lock:
+            cache = self._wv_cache if self._log is lg else None
+            hit = cache.get(key) if cache is not None else None
+        if hit is not None:
+            return hit
+        out = wv_matrix_of(lg, channels, fs)
+        with self._lock:
+            self.wvm_computations += 1
+            if cache is not None and self._log is lg:
+                cache[key] = out
+                old = [k for k in cache if k[0] == "wv-matrix" and isinstance(k[1], tuple)]
+                for k in old[:-N_WV_MATRICES]:
+                    cache.pop(k)
+        return out
+
     def cached_wvs(self) -> dict[tuple[str, float, bool], eg.WaveletVariance]:
         """A copy of the session's WV cache, ``(channel, fs, robust) -> WaveletVariance``."""
         with self._lock:

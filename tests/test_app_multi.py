@@ -23,14 +23,9 @@ from engine.io import ImuLog
 from engine.mgmwm import MultiModel
 from engine.model import ModelError
 from gmwm_app.data import LoadedData
-from gmwm_app.multi_view import (
-    MultiView,
-    build_model,
-    covariance_rows,
-    grid_data,
-    model_curve_grid,
-    parse_overrides,
-)
+from gmwm_app.multi_figures import covariance_rows, grid_data, model_curve_grid
+from gmwm_app.multi_fit import build_model, parse_overrides
+from gmwm_app.multi_view import MultiView
 from gmwm_app.state import format_value
 
 GYROS = ["gyro_x", "gyro_y", "gyro_z"]
