@@ -22,7 +22,7 @@ from engine.allan import BI_FACTOR, allan_variance, avsm
 from engine.io import ImuLog
 from engine.teaching import SCENARIOS
 from gmwm_app.data import LoadedData
-from gmwm_app.slope_view import (
+from gmwm_app.slope_data import (
     SlopeResult,
     comparison_values,
     compute_slope,
