@@ -518,7 +518,8 @@ def test_page_without_server(app_demo: Path) -> None:
     app.model_panel.spec_input.param.trigger("enter_pressed")
     assert s.model.spec() == "WN+RW"
     app.model_panel.whatif_toggle.value = True
-    assert s.whatif and app.model_panel.sliders.visible and len(app.model_panel.sliders.objects) == 2
+    sliders = app.model_panel.sliders
+    assert s.whatif and sliders.visible and len(sliders.objects) == 2
     slider = app.model_panel.sliders.objects[0]
     slider.value = slider.value + 1.0  # one decade up for WN.sigma2
     assert s.display_model().values()["WN.sigma2"] == pytest.approx(
