@@ -104,6 +104,7 @@ def create_application(path: str | None = None) -> Any:
     from panel.io.handlers import FunctionHandler
 
     limit_blas_once()  # a server process: see limit_blas_threads
+    compat.skip_repeated_css_patch()
     factory = create_app_factory(path)
 
     class OffLoopHandler(FunctionHandler):
@@ -112,17 +113,18 @@ def create_application(path: str | None = None) -> Any:
             if not compat.supported():  # another Panel: built on the loop (modify_document)
                 return
             doc = session_context._document
+            app = session_context.server_context.application_context.application
             loop = asyncio.get_running_loop()
             try:
                 # in a context of its own: whatever the build leaves in context variables
                 # (Panel's current document) must not stay with the pool's thread
                 await loop.run_in_executor(
-                    _build_pool(), contextvars.Context().run, self._build, doc
+                    _build_pool(), contextvars.Context().run, self._build, doc, app
                 )
             except Exception:  # built again on the loop by modify_document
                 log.exception("building the page off the loop failed; building it on the loop")
 
-        def _build(self, doc: Any) -> None:
+        def _build(self, doc: Any, app: Any) -> None:
             # what Panel's run_app does for a function handler, without its patch of Bokeh's
             # global curdoc() stack (shared by all threads: a build in a thread would leave
             # another session's document in Bokeh's global state); the current document is
@@ -146,6 +148,11 @@ def create_application(path: str | None = None) -> Any:
             # every model, ~0.1 s): done here instead, and skipped there for this document
             doc.validate()
             doc.validate = _no_validation
+            # the stylesheet patch Panel's page handler would do on the loop, done here
+            try:
+                compat.patch_css_off_loop(doc, app)
+            except Exception:  # the handler patches them on the loop, as usual
+                log.exception("patching the page's stylesheets off the loop failed")
             _PREBUILT.add(doc)
 
         def modify_document(self, doc: Any) -> None:

@@ -78,3 +78,30 @@ def test_panel_internals_were_checked_for_the_installed_panel() -> None:
     from panel.io.state import state as pn_state
 
     assert hasattr(pn_state, "_thread_id_") and hasattr(pn_state, "_launching")
+
+
+def test_the_off_loop_stylesheet_patch_matches_panels_own() -> None:
+    """A root patched off the loop is skipped by the page handler only for the same dist_url,
+    and Panel's own patch leaves it as it was (the skip changes nothing)."""
+    from panel.io import server as pn_server
+    from panel.io.resources import patch_model_css
+
+    assert compat.skip_repeated_css_patch()
+    assert pn_server.patch_model_css is not patch_model_css  # the handler's name is wrapped
+    page = pn.Column(pn.widgets.Button(label="a"), pn.pane.Markdown("x"))
+    doc = page.server_doc()
+    root = doc.roots[0]
+
+    def urls() -> list[str]:
+        from bokeh.models import ImportedStyleSheet
+
+        return sorted(s.url for s in root.select({"type": ImportedStyleSheet}))
+
+    patch_model_css(root, dist_url="static/extensions/panel/")
+    compat._CSS_DONE[root] = "static/extensions/panel/"
+    before = urls()
+    assert before and all("static/extensions/panel/" in u for u in before if "bundled" in u)
+    pn_server.patch_model_css(root, dist_url="static/extensions/panel/")  # skipped
+    assert urls() == before
+    patch_model_css(root, dist_url="static/extensions/panel/")  # Panel's own: no change
+    assert urls() == before
