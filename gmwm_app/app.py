@@ -1,18 +1,18 @@
-"""The GMWM browser app: one :func:`create_app` per browser session.
+"""The page of one browser session: :func:`create_app` builds it around a fresh state.
 
 Layout: a sidebar with the data (demo, upload, server path, channel, fs, robust WV), the model
-builder (one add button per process, a remove button per process, a text spec), the what-if
-sliders and the exports; the main area with messages, the WV plot, the residual strip, the
-fit summary and the parameter and datasheet tables (with 95% intervals and a J-test badge on
-request), in a "Fit" tab; a "Model selection" tab ranks candidate models by WVIC
-(``selection_view.SelectionView``).
+builder and what-if sliders (:class:`gmwm_app.model_panel.ModelPanel`) and the exports; the
+main area with messages, the WV plot, the residual strip, the fit summary and the parameter
+and datasheet tables (with 95% intervals and a J-test badge on request), in a "Fit" tab; the
+"Model selection", "Slope method" and "Multi-channel" tabs are :class:`panel.viewable.Viewer`
+objects built on first opening with the session state and its job runner
+(:class:`gmwm_app.jobs.Jobs`), never with this page object.
 
-Responsiveness: reading a file and computing a WV run in a worker thread (the event loop,
-and so every other session, stays free) with a loading indicator; the data a URL names are
-read while the browser is still loading the page; a fit takes milliseconds and runs inline;
-every redraw replaces ColumnDataSource data in place (``views.WVFigures``, ``FitTables``), and
-the process rows and what-if sliders come from fixed pools, so an add or a remove creates no
-new Bokeh model (which would make Bokeh re-walk the whole document).
+Responsiveness: reading a file and computing a WV run as jobs in a worker thread (the event
+loop, and so every other session, stays free) with a loading indicator; the data a URL names
+are read while the browser is still loading the page; a fit takes milliseconds and runs
+inline; every redraw replaces ColumnDataSource data in place (``views.WVFigures``,
+``FitTables``). Serving (pages built off the loop, BLAS limits) is :mod:`gmwm_app.server`.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
