@@ -40,6 +40,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "WVFigures",
+    "wv_data",
     "FitTables",
     "N_COMPONENTS",
     "component_color",
@@ -111,7 +112,7 @@ def _empty_wv() -> dict[str, Any]:
     }
 
 
-def _wv_data(wv: eg.WaveletVariance | None) -> dict[str, Any]:
+def wv_data(wv: eg.WaveletVariance | None) -> dict[str, Any]:
     if wv is None:
         return _empty_wv()
     return {
@@ -415,9 +416,9 @@ class WVFigures:
             self.model_hover.tooltips = self._model_tips(state.unit)
         if wv is not self._shown_wv:
             self._shown_wv = wv
-            self.emp.data = _wv_data(wv)
+            self.emp.data = wv_data(wv)
             robust_pair = wv is not None and wv.robust and wv.classical is not None
-            self.alt.data = _wv_data(wv.classical if robust_pair else None)
+            self.alt.data = wv_data(wv.classical if robust_pair else None)
             self.alt_item.visible = bool(robust_pair)
             self.emp_item.label = value(
                 "robust WV (biweight)" if wv is not None and wv.robust else "empirical WV"

@@ -9,7 +9,6 @@ method is off the way the scenario says.
 
 from __future__ import annotations
 
-import asyncio
 import json
 import math
 from pathlib import Path
@@ -22,7 +21,8 @@ import engine as eg
 from engine.allan import BI_FACTOR, allan_variance, avsm
 from engine.io import ImuLog
 from engine.teaching import SCENARIOS
-from gmwm_app.slope_view import (
+from gmwm_app.data import LoadedData
+from gmwm_app.slope_data import (
     SlopeResult,
     comparison_values,
     compute_slope,
@@ -30,7 +30,7 @@ from gmwm_app.slope_view import (
     slope_line_data,
     truth_model,
 )
-from gmwm_app.state import AppState, LoadedData, format_value
+from gmwm_app.state import AppState, format_value
 
 
 @pytest.fixture
@@ -197,11 +197,16 @@ def test_bad_regions_are_messages_and_the_session_keeps_working(app: Any, view: 
 
 def test_a_stale_result_does_not_overwrite_a_newer_one(app: Any, view: Any) -> None:
     view.set_region("WN", 0.01, 1.0)
-    shown = view.result
-    view._job += 1  # a newer computation has started
     stale = SlopeResult(None, messages=["stale"])
-    asyncio.run(view._background(view._job - 1, lambda: stale))
-    assert view.result is shown and "stale" not in view.message.object
+
+    def slow() -> SlopeResult:
+        view.set_region("WN", 0.02, 1.0)  # a newer computation starts (and ends) meanwhile
+        return stale
+
+    view.jobs.run(slow, view.show, key="slope")
+    shown = view.result
+    assert shown is not stale and shown.regions["WN"][0] == pytest.approx(0.02)
+    assert "stale" not in view.message.object and not view.computing
 
 
 def test_hidden_tab_waits_and_robust_wv_still_shows_the_allan_deviation(
@@ -317,10 +322,10 @@ def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
             sel.wait_for(timeout=TIMEOUT_MS)
             sel.select_option(label=SCENARIOS["wn_gm"].title)
             t.wait_for(
-                lambda: _app_for(lambda a: a._served and a.state.source == "scenario") is not None,
+                lambda: _app_for(lambda a: a.served and a.state.source == "scenario") is not None,
                 "the scenario in the session",
             )
-            app = _app_for(lambda a: a._served and a.state.source == "scenario")
+            app = _app_for(lambda a: a.served and a.state.source == "scenario")
             view = app.lazy_views["Slope method"]
             t.wait_for(
                 lambda: view.result is not None and "GMWM" in view.result.estimates,
