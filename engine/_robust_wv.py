@@ -117,12 +117,14 @@ class _OutOfRegion(Exception):
 def _newton(
     means: Callable[[float, float], np.ndarray], a: float, mu: float, s: float, tol: float = _TOL
 ) -> tuple[float, float] | None:
-    """Newton on (mu, log s) for mean psi = 0, mean psi^2 = a; None unless it converges to
-    the upper scale root (d mean psi^2 / d log s < 0)."""
-    for _ in range(60):
-        g, dg, dgr, f, fd, fdr = means(mu, s)
+    """Newton on (mu, log s) for mean psi = 0, mean psi^2 = a, with backtracking on the
+    squared residual; None unless it converges to the upper scale root
+    (d mean psi^2 / d log s < 0 there)."""
+    v = means(mu, s)
+    for _ in range(50):
+        g, dg, dgr, f, fd, fdr = v
         f -= a
-        # d/d(delta) with mu = mu + s delta, d/d(log s): derivatives of r are -1 and -r
+        # derivatives in (delta, log s) with mu = mu + s delta: dr/d delta = -1, dr/d log s = -r
         j11, j12, j21, j22 = -dg, -dgr, -2.0 * fd, -2.0 * fdr
         det = j11 * j22 - j12 * j21
         if not np.isfinite(det) or det == 0.0:
@@ -130,12 +132,19 @@ def _newton(
         delta = -(j22 * g - j12 * f) / det
         dt = -(-j21 * g + j11 * f) / det
         step = max(abs(delta), abs(dt))
-        if step > 0.5:  # damp far steps; a good start never needs them
-            delta, dt = delta * 0.5 / step, dt * 0.5 / step
-        mu += s * delta
-        s *= math.exp(dt)
         if step < tol:
             return (mu, s) if j22 < 0 else None
+        lam = min(1.0, 0.5 / step)  # damp far steps; a good start never needs it
+        merit = g * g + f * f
+        for _ in range(8):
+            mu_n, s_n = mu + s * lam * delta, s * math.exp(lam * dt)
+            v_n = means(mu_n, s_n)
+            if v_n[0] ** 2 + (v_n[3] - a) ** 2 < merit or lam * step < tol:
+                break
+            lam *= 0.5
+        else:
+            return None  # no descent: no root near this start
+        mu, s, v = mu_n, s_n, v_n
     return None
 
 
@@ -169,30 +178,24 @@ def _scale_root(w: np.ndarray, mu: float, s: float, c: float, a: float) -> float
                 )
                 return math.exp(float(res.x))
             hi, lo, f_prev = lo, lo - step, f_lo
-    return math.exp(optimize.brentq(f, lo, hi, xtol=1e-15, rtol=4e-16))
+    return math.exp(optimize.brentq(f, lo, hi, xtol=1e-15, rtol=1e-15))
 
 
-def _alternate(w: np.ndarray, mu: float, s: float, c: float, a: float) -> tuple[float, float]:
-    """Alternate the upper scale root at fixed mu and the location (reweighting) at fixed s."""
-    for _ in range(500):
-        s_new = _scale_root(w, mu, s, c, a)
-        mu_new = mu
-        for _ in range(500):
-            r = (w - mu_new) / s_new
-            keep = np.abs(r) <= c
-            wt = (1 - r[keep] ** 2 / (c * c)) ** 2
-            if wt.sum() <= 0:
-                break
-            nxt = float(np.dot(wt, w[keep]) / wt.sum())
-            done = abs(nxt - mu_new) <= 1e-15 * s_new + 1e-300
-            mu_new = nxt
-            if done:
-                break
-        done = abs(s_new - s) <= 1e-14 * s_new and abs(mu_new - mu) <= 1e-14 * s_new
-        mu, s = mu_new, s_new
+def _one_step(w: np.ndarray, mu: float, s: float, c: float, a: float) -> tuple[float, float]:
+    """Fallback: the biweight location at the start scale (reweighting), then the upper
+    scale root (or the maximiser) about that location."""
+    for _ in range(200):
+        r = (w - mu) / s
+        keep = np.abs(r) <= c
+        wt = (1 - r[keep] ** 2 / (c * c)) ** 2
+        if not wt.sum() > 0:
+            break
+        nxt = float(np.dot(wt, w[keep]) / wt.sum())
+        done = abs(nxt - mu) <= 1e-14 * s
+        mu = nxt
         if done:
             break
-    return mu, s
+    return mu, _scale_root(w, mu, s, c, a)
 
 
 def _start(w: np.ndarray) -> tuple[float, float]:
@@ -230,7 +233,7 @@ def biweight_location_scale(w: np.ndarray, c: float) -> tuple[float, float]:
     a = gaussian_psi2_mean(c)
     res = _newton(lambda m, sc: _direct_means(w, m, sc, c), a, mu, s)
     if res is None:
-        res = _alternate(w, mu, s, c, a)
+        res = _one_step(w, mu, s, c, a)
     return float(res[0]), float(res[1])
 
 
