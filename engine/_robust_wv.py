@@ -132,14 +132,17 @@ def _newton(
         delta = -(j22 * g - j12 * f) / det
         dt = -(-j21 * g + j11 * f) / det
         step = max(abs(delta), abs(dt))
-        if step < tol:
+        # converged: the step is below tol, or the rounding of mu (a large mean, e.g. a drift
+        # at a coarse level, relative to a small scale)
+        tol_k = max(tol, 8e-16 * abs(mu) / s)
+        if step < tol_k:
             return (mu, s) if j22 < 0 else None
         lam = min(1.0, 0.5 / step)  # damp far steps; a good start never needs it
         merit = g * g + f * f
         for _ in range(8):
             mu_n, s_n = mu + s * lam * delta, s * math.exp(lam * dt)
             v_n = means(mu_n, s_n)
-            if v_n[0] ** 2 + (v_n[3] - a) ** 2 < merit or lam * step < tol:
+            if v_n[0] ** 2 + (v_n[3] - a) ** 2 < merit or lam * step < tol_k:
                 break
             lam *= 0.5
         else:

@@ -60,7 +60,7 @@ def max_levels(n: int) -> int:
 
     It exceeds :func:`default_levels` only when N is a power of two; the last level then has a
     single coefficient (``M_J = 1``): its WV is that coefficient squared (the robust WV too),
-    with ``eta_J = 1`` degree of freedom, so its interval spans a factor of about 5,000
+    with ``eta_J = 1`` degree of freedom, so its interval spans a factor of about 5,100
     (``[nu / 5.02, nu / 0.00098]`` at 95 %).
 
     Parameters
@@ -478,7 +478,7 @@ def wavelet_variance(
         Number of levels J; default ``floor(log2(N - 1))`` (every level with ``M_j >= 2``).
         Up to ``floor(log2(N))`` is accepted (R's count; :func:`max_levels`): that differs
         only when N is a power of two, and then the last level has ONE coefficient, one
-        degree of freedom and an interval spanning a factor of about 5,000.
+        degree of freedom and an interval spanning a factor of about 5,100.
     robust : bool
         Robust WV: per level, the Tukey biweight M-estimates of location ``mu_j`` and scale
         ``s_j`` of the coefficients, and ``nu_j = s_j^2 + mu_j^2`` (consistent for the
