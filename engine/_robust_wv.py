@@ -119,9 +119,31 @@ def _newton(
 ) -> tuple[float, float] | None:
     """Newton on (mu, log s) for mean psi = 0, mean psi^2 = a, with backtracking on the
     squared residual; None unless it converges to the upper scale root
-    (d mean psi^2 / d log s < 0 there)."""
+    (d mean psi^2 / d log s < 0 there) within 20 evaluations (from a usable start it needs at
+    most about 6; without a root nearby it would wander)."""
+    evals = [0]
+
+    def means_counted(m: float, sc: float) -> np.ndarray:
+        evals[0] += 1
+        if evals[0] > 20:
+            raise _NoConvergence
+        return means(m, sc)
+
+    try:
+        return _newton_steps(means_counted, a, mu, s, tol)
+    except _NoConvergence:
+        return None
+
+
+class _NoConvergence(Exception):
+    """Newton's evaluation budget is spent."""
+
+
+def _newton_steps(
+    means: Callable[[float, float], np.ndarray], a: float, mu: float, s: float, tol: float
+) -> tuple[float, float] | None:
     v = means(mu, s)
-    for _ in range(50):
+    while True:
         g, dg, dgr, f, fd, fdr = v
         f -= a
         # derivatives in (delta, log s) with mu = mu + s delta: dr/d delta = -1, dr/d log s = -r
@@ -148,7 +170,6 @@ def _newton(
         else:
             return None  # no descent: no root near this start
         mu, s, v = mu_n, s_n, v_n
-    return None
 
 
 def _scale_root(w: np.ndarray, mu: float, s: float, c: float, a: float) -> float:

@@ -110,7 +110,9 @@ def main() -> None:
     print(f"robust WV    : {rb:8.3f} s   ratio robust/classical = {rb / cl:6.1f}x (target <= 20x)")
     if args.old:
         t_old = best_of(lambda: old_robust_wv(x, levels), 1)
-        print(f"old robust WV: {t_old:8.3f} s   ({t_old / cl:6.1f}x classical, {t_old / rb:.1f}x new)")
+        print(
+            f"old robust WV: {t_old:8.3f} s   ({t_old / cl:6.1f}x classical, {t_old / rb:.1f}x new)"
+        )
 
 
 if __name__ == "__main__":
