@@ -29,7 +29,8 @@ the classical WV), but coarse discreteness does: with a step of 2 sigma (52 % ti
 is 0.910 of it (tests/test_robust_wv.py computes both from the exact discrete law). Beyond
 about 60 % ties the scale equation has no root (the fallback above). On the ADIS16405 logs
 (steps 0.15-0.9 sigma of the sample differences) the robust/classical ratio is 0.92-1.00 at
-levels 1-2 and 0.98-1.01 at levels 3-9; the accelerometers' shortfall at level 1 (0.92-0.96)
+levels 1-2 and 0.96-1.14 at levels 3-9 (gyroscopes 0.99-1.01; the accelerometers reach
+1.06-1.14 at level 7); the accelerometers' shortfall at level 1 (0.92-0.96)
 comes mostly from their heavier tails (kurtosis 3.2-3.5), which is what the estimator is
 meant to discount. At levels with few coefficients per scale (``M_j / 2^j`` below about 10)
 robust and classical WV can differ by a factor of several on such logs.
