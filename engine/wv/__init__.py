@@ -23,9 +23,10 @@ from .classical import (
     default_levels,
     eta3_interval,
     haar_coefficients,
+    max_levels,
     wavelet_variance,
 )
-from .robust import biweight_constant, robust_scale_biweight
+from .robust import biweight_constant, robust_scale_biweight, robust_wv
 
 _LAZY: dict[str, str] = {
     "SeriesSource": "stream",
@@ -53,6 +54,8 @@ __all__ = [
     "LevelScales",
     "biweight_constant",
     "robust_scale_biweight",
+    "robust_wv",
+    "max_levels",
     "as_series",
     "cumsum_demeaned",
     "second_difference_sums",

@@ -17,6 +17,7 @@ Guerrier et al. (2020), the GMWM paper, section II.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,12 +26,13 @@ import numpy as np
 from .._optim import chi2_isf
 from ..units import squared
 from ._kernel import as_series, cumsum_demeaned, second_difference_sums
-from .robust import robust_scale_biweight
+from .robust import biweight_constant, robust_wv
 
 __all__ = [
     "WaveletVariance",
     "wavelet_variance",
     "default_levels",
+    "max_levels",
     "haar_coefficients",
     "eta3_interval",
     "LevelScales",
@@ -48,6 +50,24 @@ def default_levels(n: int) -> int:
     if n < 3:
         raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
     return int(np.floor(np.log2(n - 1)))
+
+
+def max_levels(n: int) -> int:
+    """Largest number of levels a WV of ``n`` samples accepts: ``floor(log2(N))``, R's count.
+
+    It exceeds :func:`default_levels` only when N is a power of two; the last level then has a
+    single coefficient (``M_J = 1``): its WV is that coefficient squared (the robust WV too),
+    with ``eta_J = 1`` degree of freedom, so its interval spans a factor of about 5,100
+    (``[nu / 5.02, nu / 0.00098]`` at 95 %).
+
+    Parameters
+    ----------
+    n : int
+        Series length (samples), at least 2.
+    """
+    if n < 2:
+        raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
+    return int(n).bit_length() - 1
 
 
 class LevelScales:
@@ -260,6 +280,7 @@ def wavelet_variance(
     eff: float = 0.6,
     alpha: float = 0.05,
     unit: str = "",
+    progress: Callable[[int, int], object] | None = None,
 ) -> WaveletVariance:
     """Empirical Haar MODWT wavelet variance at levels 1..J with intervals.
 
@@ -271,8 +292,16 @@ def wavelet_variance(
         Sampling frequency in Hz (scales in seconds are ``2^j / fs``).
     levels : int, optional
         Number of levels J; default ``floor(log2(N - 1))`` (every level with ``M_j >= 2``).
+        Up to ``floor(log2(N))`` is accepted (R's count; :func:`max_levels`): that differs
+        only when N is a power of two, and then the last level has ONE coefficient, one
+        degree of freedom and an interval spanning a factor of about 5,100.
     robust : bool
-        Tukey biweight M-estimator of each level's variance instead of the mean of squares.
+        Robust WV: per level, the Tukey biweight M-estimates of location ``mu_j`` and scale
+        ``s_j`` of the coefficients, and ``nu_j = s_j^2 + mu_j^2`` (consistent for the
+        classical WV's target ``E[W^2]`` under Gaussian noise, with or without a drift, whose
+        coefficients have mean ``omega tau / 4``). On quantized logs, where many fine-level
+        coefficients are tied, the robust WV is not the classical one even without outliers:
+        the coefficients are not Gaussian there (see README, "Robust WV").
     eff : float
         Gaussian efficiency of the robust estimator, in (0, 0.99); 0.6 by default.
     alpha : float
@@ -280,6 +309,10 @@ def wavelet_variance(
         for the robust WV, as in the R ``wv`` package).
     unit : str
         Signal unit, carried for display.
+    progress : callable, optional
+        Called as ``progress(j, J)`` once per level, as level j is done (for a progress bar).
+        The robust WV takes seconds on long logs and calls it as it goes; the classical WV
+        computes every level in one pass and makes its J calls at the end.
 
     Returns
     -------
@@ -297,9 +330,9 @@ def wavelet_variance(
         raise ValueError(f"fs must be a positive number of Hz, got {fs}")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
-    jmax = default_levels(n)
+    jmax = max_levels(n)
     if levels is None:
-        levels = jmax
+        levels = default_levels(n)
     levels = int(levels)
     if levels < 1 or levels > jmax:
         raise ValueError(
@@ -329,12 +362,11 @@ def wavelet_variance(
         unit=unit,
     )
     if not robust:
+        if progress is not None:
+            for j in lv:
+                progress(int(j), levels)
         return classical
-    nu_r = np.empty(levels)
-    for j in lv:
-        m = 1 << (j - 1)
-        w = (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
-        nu_r[j - 1] = robust_scale_biweight(w, eff)
+    nu_r = robust_wv(s, n, levels, biweight_constant(eff), progress)[0]
     coef = np.sqrt(1.0 / eff)
     rel_lo = (nu - lo) / np.where(nu > 0, nu, 1.0)
     rel_hi = (hi - nu) / np.where(nu > 0, nu, 1.0)
