@@ -4,285 +4,77 @@
 >>> wv = eg.wavelet_variance(x, fs=100.0)                 # doctest: +SKIP
 >>> res = eg.fit_gmwm(wv, eg.WN() + eg.RW() + 2 * eg.GM())  # doctest: +SKIP
 >>> print(res.summary())                                  # doctest: +SKIP
+
+The public surface is the union of the ``__all__`` of the subpackages in :data:`SUBPACKAGES`
+(one concept each; see README, "Developers"). ``models``, ``wv``, ``fit`` and ``units`` are
+imported with ``engine``; every other name is imported on first use (PEP 562), so that
+``import engine`` and the ``gmwm`` command stay light (SciPy, h5py and the multivariate code
+cost tenths of a second). The lazy names are read from each subpackage's literal ``__all__``
+without importing it; ``tests/test_public_api.py`` checks that every name resolves and that no
+two subpackages export the same name.
 """
 
 from __future__ import annotations
 
+import ast
 import importlib
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any
 
+from . import fit, models, units, wv
 from ._version import __version__ as __version__
-from .fit import (
-    FitError,
-    FitResult,
-    GMWMResult,
-    ParamRecord,
-    ParamTable,
-    Summary,
-    fit_gmwm,
-    weight_matrix,
-)
-from .models import (
-    AR1,
-    DR,
-    GM,
-    QN,
-    RW,
-    WN,
-    Model,
-    ModelError,
-    Process,
-    ar1_wv,
-    parse_model,
-)
-from .units import (
-    datasheet,
-    param_unit,
-)
-from .wv import (
-    WaveletVariance,
-    biweight_constant,
-    default_levels,
-    haar_coefficients,
-    robust_scale_biweight,
-    wavelet_variance,
-)
 
-# the rest is imported on first use (PEP 562): `import engine` stays light, so the `gmwm`
-# command starts fast (SciPy, h5py and the multivariate code cost ~0.5 s to import)
-_LAZY: dict[str, str] = {
-    "AllanVariance": "allan",
-    "MethodEstimate": "allan",
-    "allan_variance": "allan",
-    "avsm": "allan",
-    "avsm_auto": "allan",
-    "compare_table": "allan",
-    "fit_armav": "fit.gmwfm",
-    "fit_gmwfm": "fit.gmwfm",
-    "from_gmwm": "allan",
-    "ExportError": "export",
-    "datasheet_table": "export",
-    "export": "export",
-    "fit_report": "export",
-    "kalibr_imu": "export",
-    "kalibr_models": "export",
-    "read_kalibr": "export",
-    "write_kalibr": "export",
-    "fit_efficient": "inference",
-    "param_intervals": "inference",
-    "ParamInterval": "inference",
-    "j_test": "inference",
-    "JTest": "inference",
-    "wv_cov_model": "inference",
-    "wv_cov_data": "inference",
-    "wv_cov_bootstrap": "inference",
-    "rank_models": "inference",
-    "submodels": "inference",
-    "SelectionResult": "inference",
-    "Candidate": "inference",
-    "ImuLog": "io",
-    "LoadError": "io",
-    "load_log": "io",
-    "save_log": "io",
-    "DependenceTest": "multivariate",
-    "MGMWMResult": "multivariate",
-    "MultiModel": "multivariate",
-    "ReplicateResult": "fit.replicates",
-    "SharedEstimate": "multivariate",
-    "SharedProcess": "multivariate",
-    "dependence_test": "multivariate",
-    "fit_mgmwm": "multivariate",
-    "fit_replicates": "fit.replicates",
-    "moment_covariance": "multivariate",
-    "Session": "io",
-    "SessionError": "io",
-    "load_session": "io",
-    "save_session": "io",
-    "wavelet_variance_stream": "wv",
-    "run_slope_study": "study",
-    "TimeReport": "io",
-    "Scenario": "teaching",
-    "SCENARIOS": "teaching",
-    "simulate_scenario": "teaching",
-    "check_time": "io",
-    "WaveletCrossCovariance": "wv",
-    "WVMatrix": "wv",
-    "wavelet_cross_covariance": "wv",
-    "wv_matrix": "wv",
-}
+#: The subpackages whose ``__all__`` make up ``engine``'s public names, in this order.
+SUBPACKAGES: tuple[str, ...] = (
+    "models",
+    "wv",
+    "fit",
+    "units",
+    "inference",
+    "multivariate",
+    "io",
+    "export",
+    "teaching",
+    "demo",
+)
+_EAGER = {"models": models, "wv": wv, "fit": fit, "units": units}
 
-if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from .allan import (
-        AllanVariance,
-        MethodEstimate,
-        allan_variance,
-        avsm,
-        avsm_auto,
-        compare_table,
-        from_gmwm,
-    )
-    from .export import (
-        ExportError,
-        datasheet_table,
-        export,
-        fit_report,
-        kalibr_imu,
-        kalibr_models,
-        read_kalibr,
-        write_kalibr,
-    )
-    from .fit.gmwfm import fit_armav, fit_gmwfm
-    from .fit.replicates import ReplicateResult, fit_replicates
-    from .inference import (
-        Candidate,
-        JTest,
-        ParamInterval,
-        SelectionResult,
-        fit_efficient,
-        j_test,
-        param_intervals,
-        rank_models,
-        submodels,
-        wv_cov_bootstrap,
-        wv_cov_data,
-        wv_cov_model,
-    )
-    from .io import (
-        ImuLog,
-        LoadError,
-        Session,
-        SessionError,
-        TimeReport,
-        check_time,
-        load_log,
-        load_session,
-        save_log,
-        save_session,
-    )
-    from .multivariate import (
-        DependenceTest,
-        MGMWMResult,
-        MultiModel,
-        SharedEstimate,
-        SharedProcess,
-        dependence_test,
-        fit_mgmwm,
-        moment_covariance,
-    )
-    from .study import (
-        run_slope_study,
-    )
-    from .teaching import SCENARIOS, Scenario, simulate_scenario
-    from .wv import (
-        WaveletCrossCovariance,
-        WVMatrix,
-        wavelet_cross_covariance,
-        wavelet_variance_stream,
-        wv_matrix,
-    )
+
+def _literal_all(package: str) -> list[str]:
+    """A subpackage's ``__all__``, read from its source (a literal list), not imported."""
+    init = Path(__file__).with_name(package)
+    path = init / "__init__.py" if init.is_dir() else init.with_suffix(".py")
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
+        ):
+            return list(ast.literal_eval(node.value))
+    raise ImportError(f"engine.{package} has no literal __all__ (engine's API is built from it)")
+
+
+#: Public name -> the subpackage that defines it.
+_SOURCE: dict[str, str] = {}
+for _pkg in SUBPACKAGES:
+    _names = list(_EAGER[_pkg].__all__) if _pkg in _EAGER else _literal_all(_pkg)
+    for _name in _names:
+        _SOURCE.setdefault(_name, _pkg)
+    # names an eager subpackage already holds are bound now; its own lazy names stay lazy
+    if _pkg in _EAGER:
+        for _name in _names:
+            if _name in vars(_EAGER[_pkg]):
+                globals()[_name] = vars(_EAGER[_pkg])[_name]
+
+__all__ = sorted(_SOURCE)
 
 
 def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
+    pkg = _SOURCE.get(name)
+    if pkg is None:
         raise AttributeError(f"module 'engine' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    value = getattr(importlib.import_module(f".{pkg}", __name__), name)
     globals()[name] = value
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
-
-
-__all__ = [
-    "AR1",
-    "DR",
-    "GM",
-    "QN",
-    "RW",
-    "WN",
-    "Process",
-    "Model",
-    "ModelError",
-    "parse_model",
-    "WaveletVariance",
-    "wavelet_variance",
-    "default_levels",
-    "haar_coefficients",
-    "biweight_constant",
-    "robust_scale_biweight",
-    "ar1_wv",
-    "fit_gmwm",
-    "GMWMResult",
-    "ParamRecord",
-    "FitError",
-    "FitResult",
-    "ParamTable",
-    "Summary",
-    "weight_matrix",
-    "datasheet",
-    "param_unit",
-    "ImuLog",
-    "LoadError",
-    "load_log",
-    "save_log",
-    "AllanVariance",
-    "allan_variance",
-    "MethodEstimate",
-    "from_gmwm",
-    "avsm",
-    "avsm_auto",
-    "fit_gmwfm",
-    "fit_armav",
-    "compare_table",
-    "run_slope_study",
-]
-__all__ += [  # exports, sessions, long and messy logs (issue 7)
-    "ExportError",
-    "datasheet_table",
-    "export",
-    "fit_report",
-    "kalibr_imu",
-    "kalibr_models",
-    "read_kalibr",
-    "write_kalibr",
-    "Session",
-    "SessionError",
-    "load_session",
-    "save_session",
-    "wavelet_variance_stream",
-    "TimeReport",
-    "check_time",
-]
-__all__ += [  # multivariate: WCCV, MGMWM, replicates (issue 6)
-    "WaveletCrossCovariance",
-    "WVMatrix",
-    "wavelet_cross_covariance",
-    "wv_matrix",
-    "MultiModel",
-    "SharedProcess",
-    "fit_mgmwm",
-    "MGMWMResult",
-    "SharedEstimate",
-    "moment_covariance",
-    "dependence_test",
-    "DependenceTest",
-    "fit_replicates",
-    "ReplicateResult",
-]
-__all__ += ["Scenario", "SCENARIOS", "simulate_scenario"]  # teaching (issue 4)
-__all__ += [  # inference and model selection
-    "fit_efficient",
-    "param_intervals",
-    "ParamInterval",
-    "j_test",
-    "JTest",
-    "wv_cov_model",
-    "wv_cov_data",
-    "wv_cov_bootstrap",
-    "rank_models",
-    "submodels",
-    "SelectionResult",
-    "Candidate",
-]
+    return sorted(set(globals()) | set(_SOURCE))

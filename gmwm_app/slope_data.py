@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 
 import engine as eg
-from engine.allan import AllanVariance, MethodEstimate, avsm, avsm_auto, from_gmwm
-from engine.teaching import gmwm_spec
+from engine.fit.estimate import MethodEstimate, from_gmwm
+from engine.teaching import avsm, avsm_auto, gmwm_spec
+from engine.wv.allan import AllanVariance
 
 from .state import AppState, demo_path, format_value
 
@@ -69,7 +70,7 @@ class SlopeResult:
     av : AllanVariance or None
         The octave Allan variance of the (classical) WV.
     estimates : dict
-        ``"AVSM"``, ``"ROS auto"``, ``"GMWM"`` -> :class:`~engine.allan.MethodEstimate`
+        ``"AVSM"``, ``"ROS auto"``, ``"GMWM"`` -> :class:`~engine.fit.estimate.MethodEstimate`
         (missing when the method could not run; the reason is in ``messages``).
     truth : Model or None
         The true model of simulated data.

@@ -5,7 +5,7 @@ The tab shows the overlapping Allan deviation of the session's channel (exactly
 recomputed from the raw data) with its 95% band. The user picks a process (WN slope -1/2,
 QN -1, bias-instability floor 0, RW +1/2, DR +1) and drags a region on the plot (Bokeh box
 select); the regions are shaded, the fixed-slope lines are drawn over them, and a table puts
-the datasheet values the slope method reads (``engine.allan.avsm``) beside the "automatic"
+the datasheet values the slope method reads (``engine.teaching.avsm``) beside the "automatic"
 read-off of the ROS tools (``avsm_auto``), the GMWM fit of the same processes (the
 bias-instability floor has no process of its own in GMWM: a Gauss-Markov term plays its part)
 and, on simulated data (teaching scenarios, the demo log), the truth. Each method's
@@ -44,7 +44,7 @@ from bokeh.models import (
 from bokeh.plotting import figure
 
 import engine as eg
-from engine.allan import MethodEstimate, from_gmwm
+from engine.fit.estimate import MethodEstimate, from_gmwm
 from engine.teaching import SCENARIOS, get_scenario
 
 from .slope_data import (

@@ -9,17 +9,11 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.allan import (
-    BI_FACTOR,
-    AllanVariance,
-    MethodEstimate,
-    allan_variance,
-    avsm,
-    avsm_auto,
-    compare_table,
-    from_gmwm,
-)
+from engine.fit.estimate import MethodEstimate, compare_table, from_gmwm
 from engine.fit.gmwfm import fit_armav
+from engine.teaching import avsm, avsm_auto
+from engine.units import BI_FACTOR
+from engine.wv.allan import AllanVariance, allan_variance
 
 
 def textbook_avar(x: np.ndarray, m: int) -> float:

@@ -1,7 +1,7 @@
 """The "Slope method" tab: browser-free tests of the view and its helpers, and one browser test.
 
 The tab's numbers must be the engine's and the formulas': the Allan deviation is the overlapping
-ADEV of the raw channel (computed here independently with ``engine.allan.allan_variance``), the
+ADEV of the raw channel (computed here independently with ``engine.wv.allan.allan_variance``), the
 slope readings are the IEEE formulas applied to it, the implied curves are the analytic Allan
 variance shapes, and on a teaching scenario the GMWM column is near the truth while the slope
 method is off the way the scenario says.
@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.allan import BI_FACTOR, allan_variance, avsm
 from engine.io import ImuLog
-from engine.teaching import SCENARIOS
+from engine.teaching import SCENARIOS, avsm
+from engine.units import BI_FACTOR
+from engine.wv.allan import allan_variance
 from gmwm_app.data import LoadedData
 from gmwm_app.slope_data import (
     SlopeResult,

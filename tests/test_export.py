@@ -17,7 +17,6 @@ from engine.demo import demo_path
 from engine.export import (
     BI_FACTOR,
     ExportError,
-    allan_floor,
     channel_axis,
     curves_csv,
     datasheet_csv,
@@ -42,6 +41,7 @@ from engine.io import (
     session_from_json,
     session_to_json,
 )
+from engine.units import allan_floor
 
 FS = 100.0
 N = 200_000
@@ -170,7 +170,7 @@ def test_bias_instability_floor_of_wn_rw() -> None:
     wv = eg.WaveletVariance.from_arrays(model.wv(2.0 ** np.arange(1, 25), fs), n=2**25, fs=fs)
     res = eg.fit_gmwm(wv, "WN+RW")
     n, k = math.sqrt(s2 / fs), math.sqrt(g2 * fs)
-    fl = allan_floor(res)
+    fl = allan_floor(res.model, res.fs, res.wv.n_levels)
     assert fl["adev_min"] == pytest.approx(math.sqrt(2 * n * k / math.sqrt(3)), rel=2e-3)
     assert fl["T_s"] == pytest.approx(math.sqrt(3) * n / k, rel=0.05)
     assert fl["bias_instability"] == pytest.approx(fl["adev_min"] / 0.6643, rel=1e-4)
@@ -178,7 +178,7 @@ def test_bias_instability_floor_of_wn_rw() -> None:
     wn_only = eg.fit_gmwm(
         eg.WaveletVariance.from_arrays(eg.WN(sigma2=1.0).wv(2.0 ** np.arange(1, 12)), n=4096), "WN"
     )
-    assert allan_floor(wn_only)["at_edge"]
+    assert allan_floor(wn_only.model, wn_only.fs, wn_only.wv.n_levels)["at_edge"]
     rows = datasheet_table(wn_only)
     assert "upper bound" in rows[-1].note or "upper bound" in rows[-2].note
 

@@ -11,17 +11,16 @@ import pytest
 
 import engine as eg
 from engine.cli import main
-from engine.study import (
+from engine.teaching import (
     STUDY_FS,
     TABLE_I,
     StudyResult,
     estimate_all,
-    from_datasheet,
     run_slope_study,
     table1_model,
-    to_datasheet,
     typical_regions,
 )
+from engine.teaching.table1 import from_datasheet, to_datasheet
 
 
 # -------------------------------------------------------------------------------------------

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.allan import AllanVariance, avsm
-from engine.teaching import SCENARIOS, Scenario, get_scenario, gmwm_spec, simulate_scenario
+from engine.teaching import SCENARIOS, Scenario, avsm, get_scenario, gmwm_spec, simulate_scenario
+from engine.wv.allan import AllanVariance
 
 R = 30  # Monte Carlo replicates per scenario (about 1 s in all)
 

@@ -265,9 +265,9 @@ def test_squared_unit_one_spelling():
 
 
 def test_one_bi_factor():
-    import engine.allan
     import engine.export
+    import engine.teaching.slope
 
-    assert engine.allan.BI_FACTOR is units.BI_FACTOR
+    assert engine.teaching.slope.BI_FACTOR is units.BI_FACTOR
     assert engine.export.BI_FACTOR is units.BI_FACTOR
     assert units.BI_FACTOR == pytest.approx(math.sqrt(2 * math.log(2) / math.pi), rel=1e-15)

@@ -327,7 +327,7 @@ def _one_line(e: BaseException) -> str:
 
 
 def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
-    from ..study import run_slope_study
+    from ..teaching import run_slope_study
 
     try:
         n_values = [float(v) for v in args.n.split(",") if v.strip()]

@@ -1,7 +1,7 @@
 """Exports of GMWM fits for navigation filters and reports.
 
 * :mod:`.datasheet`: :func:`datasheet_table` (rows of the one datasheet table,
-  :mod:`engine.units`), :func:`datasheet_text`, :func:`datasheet_csv`, :func:`allan_floor`;
+  :mod:`engine.units`), :func:`datasheet_text`, :func:`datasheet_csv`;
 * :mod:`.kalibr`: Kalibr ``imu.yaml`` (:func:`kalibr_imu`, :func:`write_kalibr`,
   :func:`read_kalibr`, :func:`kalibr_models`);
 * :mod:`.report`: :func:`fit_report`, :func:`write_report`, :func:`curves_csv`;
@@ -16,7 +16,7 @@ from typing import Any
 
 from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
 from .common import channel_axis
-from .datasheet import allan_floor, datasheet_csv, datasheet_table, datasheet_text
+from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu, kalibr_models, read_kalibr, write_kalibr
 from .registry import FORMATS, Format, export, register
 from .report import curves_csv, fit_report, write_report
@@ -29,7 +29,6 @@ __all__ = [
     "datasheet_table",
     "datasheet_text",
     "datasheet_csv",
-    "allan_floor",
     "KalibrImu",
     "kalibr_imu",
     "write_kalibr",

@@ -20,23 +20,16 @@ import csv
 import io as _io
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ..fit import GMWMResult
 from ..units import DatasheetRow, ExportError, datasheet_rows
-from ..units import allan_floor as _model_floor
 from .common import fmt_float
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
 
-__all__ = ["allan_floor", "datasheet_table", "datasheet_text", "datasheet_csv"]
-
-
-def allan_floor(res: GMWMResult, *, points_per_octave: int = 16) -> dict[str, Any]:
-    """Minimum of the fit's implied Allan deviation over its scales
-    (:func:`engine.units.allan_floor` of ``res.model`` at ``res.fs`` over ``res.wv.n_levels``)."""
-    return _model_floor(res.model, res.fs, res.wv.n_levels, points_per_octave=points_per_octave)
+__all__ = ["datasheet_table", "datasheet_text", "datasheet_csv"]
 
 
 def _intervals_map(intervals: Sequence[ParamInterval] | None) -> dict[str, tuple[float, float]]:

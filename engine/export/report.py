@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING, Any
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import GMWMResult
-from ..units import ExportError, si_factor, squared
+from ..units import ExportError, allan_floor, si_factor, squared
 from .common import channel_axis, fmt_float
-from .datasheet import allan_floor, datasheet_table
+from .datasheet import datasheet_table
 from .kalibr import kalibr_imu
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -67,7 +67,7 @@ def fit_report(
                     {ch: res}, intervals={ch: ivs} if ivs else None, units={ch: unit}
                 )
             ],
-            "allan_floor": allan_floor(res),
+            "allan_floor": allan_floor(res.model, res.fs, res.wv.n_levels),
         }
     out: dict[str, Any] = {
         "schema": "gmwm-report/1",

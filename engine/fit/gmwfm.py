@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from .._optim import least_squares
-from ..allan import MethodEstimate
 from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance
 from ._varpro import NNLSProblem, at_bound, grid_candidates, persistent_first, sqrt_weight
+from .estimate import MethodEstimate
 from .gmwm import fit_gmwm, weight_matrix
 from .result import FitError, FitResult
 
@@ -95,7 +95,7 @@ class GMWFMResult(FitResult):
         }
 
     def as_estimate(self) -> MethodEstimate:
-        """The estimate in the common form of the comparison tables (:mod:`engine.allan`)."""
+        """The estimate in the common form of the comparison tables (:mod:`engine.fit.estimate`)."""
         return MethodEstimate(
             method=self.estimator,
             model=self.model,

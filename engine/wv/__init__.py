@@ -36,9 +36,12 @@ _LAZY: dict[str, str] = {
     "WVMatrix": "wccv",
     "wavelet_cross_covariance": "wccv",
     "wv_matrix": "wccv",
+    "AllanVariance": "allan",
+    "allan_variance": "allan",
 }
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from .allan import AllanVariance, allan_variance
     from .stream import SeriesSource, open_series, wavelet_variance_stream
     from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix
 
@@ -67,4 +70,6 @@ __all__ = [
     "WVMatrix",
     "wavelet_cross_covariance",
     "wv_matrix",
+    "AllanVariance",
+    "allan_variance",
 ]

@@ -16,11 +16,12 @@ import time
 
 import numpy as np
 
-from engine.allan import AllanVariance, avsm, avsm_auto, from_gmwm
 from engine.fit import fit_gmwm
+from engine.fit.estimate import from_gmwm
 from engine.fit.gmwfm import fit_armav
-from engine.study import METHODS, run_slope_study, table1_model, typical_regions
+from engine.teaching import METHODS, avsm, avsm_auto, run_slope_study, table1_model, typical_regions
 from engine.wv import wavelet_variance
+from engine.wv.allan import AllanVariance
 
 
 def step_costs(n: int, fs: float = 250.0) -> None:

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .io import ImuLog
-from .models import Model, parse_model
+from ..io import ImuLog
+from ..models import Model, parse_model
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "simulate_scenario", "gmwm_spec"]
 
@@ -56,7 +56,7 @@ class Scenario:
         Signal unit (``"deg/s"`` for a gyroscope).
     regions : tuple of (str, float, float)
         The averaging-time regions a naive user picks: ``(process code, tau_lo_s, tau_hi_s)``
-        with codes among ``QN, WN, BI, RW, DR`` (see :func:`engine.allan.avsm`).
+        with codes among ``QN, WN, BI, RW, DR`` (see :func:`engine.teaching.avsm`).
     why : str
         One or two sentences: why the slope method goes wrong here.
     channel : str
