@@ -862,7 +862,8 @@ class AppState(param.Parameterized):
         return float(r @ omega @ r)
 
     def warnings(self) -> list[str]:
-        """Warnings about the fit: parameters at a bound, no convergence."""
+        """Warnings about the fit: parameters at a bound, the fit's own warnings (an AR1/GM
+        faster than one sample), no convergence."""
         res = self.result
         if res is None:
             return []
@@ -872,6 +873,7 @@ class AppState(param.Parameterized):
                 f"at a bound: {', '.join(res.at_bound)} (the model may be larger than "
                 "the data support; try removing that process)"
             )
+        out += list(res.warnings)  # e.g. an AR1/GM faster than one sample
         if not res.converged:
             out.append(f"not converged: {res.message}")
         return out
