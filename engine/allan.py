@@ -32,8 +32,8 @@ import numpy as np
 from scipy import special
 
 from .fit import GMWMResult
-from .models import DR, QN, RW, WN, Model, Process
-from .units import datasheet, param_unit
+from .models import Model, Process
+from .units import BI_FACTOR, QUANTITIES, datasheet, param_unit, process_from_values
 from .wv import (
     WaveletVariance,
     as_series,
@@ -55,9 +55,6 @@ __all__ = [
     "SLOPES",
     "READ_TAU",
 ]
-
-#: ADEV of flicker (bias-instability) noise on its floor: ``sqrt(2 ln 2 / pi) B = 0.664 B``.
-BI_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 
 #: Slopes of the log-log Allan *deviation* of each process (IEEE Std 952, annex C).
 SLOPES: dict[str, float] = {"QN": -1.0, "WN": -0.5, "BI": 0.0, "RW": 0.5, "DR": 1.0}
@@ -195,7 +192,7 @@ class AllanVariance:
 
     def table(self) -> str:
         """Readable table with units."""
-        u = self.unit or "unit"
+        u = self.unit or "u"
         ci = f"{100 * (1 - self.alpha):g}%"
         lines = [
             f"Overlapping Allan deviation; N = {self.n} samples, fs = {self.fs:g} Hz, "
@@ -418,17 +415,7 @@ class MethodEstimate:
 
     def datasheet(self) -> list[dict[str, Any]]:
         """Datasheet rows (see :func:`engine.datasheet`), plus the bias instability if any."""
-        rows = datasheet(self.model, self.fs, self.unit) if len(self.model) else []
-        if "BI.B" in self.extras:
-            rows.append(
-                {
-                    "label": "BI",
-                    "quantity": "bias instability B",
-                    "value": float(self.extras["BI.B"]),
-                    "unit": self.unit or "u",
-                }
-            )
-        return rows
+        return datasheet(self.model, self.fs, self.unit, extras=self.extras)
 
     def summary(self) -> str:
         """Readable summary: method, parameters with units, datasheet view, notes."""
@@ -450,8 +437,8 @@ class MethodEstimate:
             lines += ["", "  datasheet view:"]
             for row in ds:
                 lines.append(
-                    f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  "
-                    f"{row['unit']}"
+                    f"  {row['label']:<8} {row['quantity']:<40} {row['symbol']:<8} "
+                    f"{row['value']:>12.5g}  {row['unit']}"
                 )
         if self.notes:
             lines += [""] + [f"  note: {s}" for s in self.notes]
@@ -514,29 +501,6 @@ def _as_allan(data: Any, fs: float | None, unit: str) -> AllanVariance:
     return allan_variance(data, fs=1.0 if fs is None else fs, unit=unit)
 
 
-def _process_from_reading(code: str, value: float, fs: float) -> Process:
-    """Per-sample process from an IEEE datasheet coefficient (CONVENTIONS, units)."""
-    dt = 1.0 / fs
-    if code == "WN":  # N = sqrt(sigma2 dt)
-        return WN(value**2 / dt)
-    if code == "RW":  # K = sqrt(gamma2 / dt)
-        return RW(value**2 * dt)
-    if code == "QN":  # Q = sqrt(q2) dt
-        return QN((value / dt) ** 2)
-    if code == "DR":  # R = omega / dt
-        return DR(value * dt)
-    raise ValueError(code)  # pragma: no cover
-
-
-_READING_NAMES = {
-    "QN": ("Q", "{u}*s"),
-    "WN": ("N", "{u}/sqrt(Hz)"),
-    "BI": ("B", "{u}"),
-    "RW": ("K", "{u}/sqrt(s)"),
-    "DR": ("R", "{u}/s"),
-}
-
-
 def _slope_estimate(
     av: AllanVariance, lines: dict[str, dict[str, Any]], method: str, notes: list[str]
 ) -> MethodEstimate:
@@ -548,6 +512,7 @@ def _slope_estimate(
         if code not in lines:
             continue
         ln = lines[code]
+        q = QUANTITIES[code][0]  # the datasheet coefficient the line reads (N, Q, K, R, B)
         if code == "BI":
             value = 10.0 ** ln["intercept"] / BI_FACTOR
             extras["BI.B"] = value
@@ -556,9 +521,8 @@ def _slope_estimate(
             t = READ_TAU[code]
             value = 10.0 ** (ln["intercept"] + ln["slope"] * math.log10(t))
             ln["read_tau_s"] = t
-            procs.append(_process_from_reading(code, value, av.fs))
-        sym, unit = _READING_NAMES[code]
-        ln["reading"] = {"name": sym, "value": float(value), "unit": unit.format(u=u)}
+            procs.append(process_from_values(code, {q.symbol: value}, av.fs))
+        ln["reading"] = {"name": q.symbol, "value": float(value), "unit": q.unit(u)}
     model = Model(tuple(procs))
     tau = av.wv_tau_samples
     comps = _components(model, tau, av.fs)

@@ -24,7 +24,7 @@ process        gyroscope (deg/s)          accelerometer (m/s^2)
 QN (Q)         --                         1.79e-6 m/s
 WN (sigma)     1.57e-1 deg/sqrt(h)        4.70e-2 m/s/sqrt(h)
 RW (gamma)     1.34 deg/h/sqrt(h)         4.35e1 m/s/h/sqrt(h)
-DR (omega)     --                         4.14e1 m/s/h/h
+DR (omega)     --                         4.14e1 m/s/h^2
 =============  =========================  ===========================
 """
 
@@ -47,6 +47,9 @@ from .allan import AllanVariance, MethodEstimate, avsm, avsm_auto, from_gmwm
 from .fit import fit_gmwm
 from .fit.gmwfm import fit_armav
 from .models import DR, QN, RW, WN, Model
+from .units import DISPLAY, QUANTITIES, si_factor
+from .units import from_datasheet as units_from_datasheet
+from .units import to_datasheet as units_to_datasheet
 from .wv import WaveletVariance, default_levels, wavelet_variance
 
 __all__ = [
@@ -83,7 +86,7 @@ TABLE_I: dict[str, dict[str, Any]] = {
             ("QN", "Q", 1.79e-6, "m/s"),
             ("WN", "sigma", 4.70e-2, "m/s/sqrt(h)"),
             ("RW", "gamma", 4.35e1, "m/s/h/sqrt(h)"),
-            ("DR", "omega", 4.14e1, "m/s/h/h"),
+            ("DR", "omega", 4.14e1, "m/s/h^2"),
         ),
     },
 }
@@ -94,12 +97,29 @@ _PARAM_OF = {"QN": "QN.q2", "WN": "WN.sigma2", "RW": "RW.gamma2", "DR": "DR.omeg
 # -------------------------------------------------------------------------------------------
 # units
 # -------------------------------------------------------------------------------------------
-def to_datasheet(code: str, value: float, fs: float) -> float:
+def _display_symbol(code: str) -> str | None:
+    """Symbol of the hour-based display of a process (ARW/RRW/R) in :data:`engine.units.DISPLAY`;
+    the same for gyroscopes and accelerometers (only the time unit changes)."""
+    sym = QUANTITIES[code][0].symbol
+    return sym if ("gyroscope", sym) in DISPLAY else None
+
+
+def _display_factor(code: str, unit: str) -> float:
+    """Factor from the native datasheet value (N, K, Q, R) of a ``unit`` signal to Table I's."""
+    sym = _display_symbol(code)
+    if sym is None:
+        return 1.0  # Q is quoted in integrated units (u s)
+    kind, f_si = si_factor(unit)
+    return f_si * DISPLAY[(kind, sym)].factor
+
+
+def to_datasheet(code: str, value: float, fs: float, unit: str = "deg/s") -> float:
     """Table I datasheet value of a per-sample parameter (signal in deg/s or m/s^2).
 
-    With ``dt = 1/fs`` (CONVENTIONS, units): ``N = sqrt(sigma2 dt)`` and ``60 N`` per
-    sqrt(h); ``K = sqrt(gamma2 / dt)`` and ``216000 K`` per h per sqrt(h); ``Q = sqrt(q2) dt``
-    (u s); ``R = omega / dt`` and ``3600^2 R`` per h per h.
+    The native value of :func:`engine.units.to_datasheet` (``N = sqrt(sigma2 dt)``,
+    ``K = sqrt(gamma2 / dt)``, ``Q = sqrt(q2) dt``, ``R = omega / dt``) in the display unit of
+    :data:`engine.units.DISPLAY` (``60 N`` per sqrt(h), ``216000 K`` per h per sqrt(h),
+    ``3600^2 R`` per h^2; Q in u s). deg/s and m/s^2 give the same factors (only hours enter).
 
     Parameters
     ----------
@@ -108,31 +128,15 @@ def to_datasheet(code: str, value: float, fs: float) -> float:
         ``sigma2``, ``gamma2``, ``q2`` or ``omega`` (per sample).
     fs : float
         Sampling frequency (Hz).
+    unit : str
+        Signal unit (``"deg/s"`` or ``"m/s^2"``).
     """
-    dt = 1.0 / fs
-    if code == "WN":
-        return 60.0 * math.sqrt(value * dt)
-    if code == "RW":
-        return 216000.0 * math.sqrt(value / dt)
-    if code == "QN":
-        return math.sqrt(value) * dt
-    if code == "DR":
-        return 3600.0**2 * value / dt
-    raise ValueError(f"no datasheet conversion for {code!r}")
+    return units_to_datasheet(code, value, fs) * _display_factor(code, unit)
 
 
-def from_datasheet(code: str, value: float, fs: float) -> float:
+def from_datasheet(code: str, value: float, fs: float, unit: str = "deg/s") -> float:
     """Per-sample parameter from a Table I datasheet value (inverse of :func:`to_datasheet`)."""
-    dt = 1.0 / fs
-    if code == "WN":
-        return (value / 60.0) ** 2 / dt
-    if code == "RW":
-        return (value / 216000.0) ** 2 * dt
-    if code == "QN":
-        return (value / dt) ** 2
-    if code == "DR":
-        return value / 3600.0**2 * dt
-    raise ValueError(f"no datasheet conversion for {code!r}")
+    return units_from_datasheet(code, value / _display_factor(code, unit), fs)
 
 
 def table1_model(sensor: str, fs: float = STUDY_FS) -> Model:
@@ -142,7 +146,10 @@ def table1_model(sensor: str, fs: float = STUDY_FS) -> Model:
         raise ValueError(f"unknown sensor {sensor!r}: use 'gyro' or 'accel'")
     cls = {"WN": WN, "RW": RW, "QN": QN, "DR": DR}
     return Model(
-        tuple(cls[c](from_datasheet(c, v, fs)) for c, _, v, _ in TABLE_I[sensor]["params"])
+        tuple(
+            cls[c](from_datasheet(c, v, fs, TABLE_I[sensor]["unit"]))
+            for c, _, v, _ in TABLE_I[sensor]["params"]
+        )
     )
 
 
@@ -262,7 +269,7 @@ def _replicate(
             est = _estimate_one(meth, wv, sensor, regions)
             vals[meth] = {
                 c: (
-                    to_datasheet(c, est.params[_PARAM_OF[c]], fs)
+                    to_datasheet(c, est.params[_PARAM_OF[c]], fs, TABLE_I[sensor]["unit"])
                     if _PARAM_OF[c] in est.params
                     else math.nan
                 )

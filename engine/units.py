@@ -1,35 +1,137 @@
-"""Units of the model parameters and their datasheet (IEEE / Allan-variance) equivalents.
+"""The ONE datasheet table: per process its symbols, conversions and units.
 
-With ``dt = 1/fs`` and signal unit ``u`` (CONVENTIONS, "Units and datasheet conversions"):
+Every datasheet number of the project (the ``gmwm fit`` text and JSON, ``gmwm export``, the
+app's datasheet table and its download, the Monte Carlo study, the slope method) comes from
+:data:`QUANTITIES` and :data:`DISPLAY` below, so one quantity has one name, one symbol and one
+unit spelling everywhere.
 
-* white noise density ``N = sqrt(sigma2 dt)`` [u/sqrt(Hz)]; angle (velocity) random walk
-  in deg/sqrt(h) (m/s/sqrt(h)) is ``60 N`` with N in deg/s/sqrt(Hz) (m/s^2/sqrt(Hz));
-* rate random walk ``K = sqrt(gamma2 / dt)`` [u/sqrt(s)]; in deg/h/sqrt(h) multiply a
-  deg/s/sqrt(s) value by 216000;
-* quantization ``Q = sqrt(q2) dt`` [u s];
-* drift (rate ramp) ``R = omega / dt`` [u/s];
-* GM correlation time ``1/beta`` [s], driving-noise PSD ``q = 2 beta sigma2_gm`` [u^2/s].
+Conversions (CONVENTIONS, "Units and datasheet conversions"), ``dt = 1/fs``, signal unit ``u``
+(``u`` itself when the unit is unknown), per-sample parameters:
+
+====  ========  ===================================  ==================  ======================
+code  symbol    forward                              inverse             unit
+====  ========  ===================================  ==================  ======================
+WN    N         ``sqrt(sigma2 dt)``                  ``N^2 / dt``        ``u/sqrt(Hz)``
+QN    Q         ``sqrt(q2) dt``                      ``(Q / dt)^2``      ``u*s`` (simplified)
+RW    K         ``sqrt(gamma2 / dt)``                ``K^2 dt``          ``u/s/sqrt(Hz)``
+DR    R         ``omega / dt``                       ``R dt``            ``u/s`` (simplified)
+GM    T_c       ``1 / beta``                         ``1 / T_c``         ``s``
+GM    sigma_gm  ``sqrt(sigma2_gm)``                  ``sigma_gm^2``      ``u``
+GM    q         ``2 beta sigma2_gm``                 --                  ``u^2/s``
+GM    sqrt(q)   ``sqrt(2 beta sigma2_gm)``           --                  ``u/s/sqrt(Hz)``
+BI    B         ``min ADEV / BI_FACTOR``             --                  ``u``
+====  ========  ===================================  ==================  ======================
+
+AR1 (``phi`` in (0, 1)) is reported as the GM it samples: ``beta = -ln(phi) fs``,
+``sigma2_gm = sigma2 / (1 - phi^2)``.
+
+Why these unit spellings (dimensional analysis; ``[x]`` is the unit of x):
+
+* WN: ``[sigma2] = u^2`` and the white noise of density N has per-sample variance
+  ``N^2 / dt``, so ``[N] = u sqrt(s) = u/sqrt(Hz)``; Allan variance ``N^2 / T`` is u^2.
+* RW: the rate integrates a white noise of density K, whose increment over dt has variance
+  ``gamma2 = K^2 dt``, so ``[K] = u/sqrt(s)``. Written per second per root hertz,
+  ``u/sqrt(s) = (u/s) sqrt(s) = u/s/sqrt(Hz)``: the spelling of CONVENTIONS and Kalibr
+  (``rad/s^2/sqrt(Hz)``, ``m/s^3/sqrt(Hz)``), chosen here. The old ``u/sqrt(s)`` of
+  ``units.datasheet`` and the slope method was the same dimension in another spelling.
+  Allan variance ``K^2 T / 3`` is u^2.
+* QN: ``Q = sqrt(q2) dt`` is in ``u s``, which is spelled in integrated units (deg for a deg/s
+  gyro, m/s for an m/s^2 accelerometer, as the GMWM paper's Table I does); Allan variance
+  ``3 Q^2 / T^2`` is u^2.
+* DR: ``R = omega / dt`` is in ``u/s`` (deg/s^2, m/s^3); Allan variance ``R^2 T^2 / 2``.
+* GM: ``q`` is the PSD of the driving noise w of ``db/dt = -beta b + w``:
+  ``[q] = u^2/s`` and ``[sqrt(q)] = u/sqrt(s) = u/s/sqrt(Hz)``.
+
+Display variants (:data:`DISPLAY`), from the value in SI units (rad/s or m/s^2):
+ARW ``deg/sqrt(h) = 60 / (pi/180) x rad/s/sqrt(Hz)`` (``1/sqrt(s) = 60/sqrt(h)``), RRW
+``deg/h/sqrt(h)`` (``x 216000 = 3600 x 60`` from deg/s/sqrt(s)), VRW ``m/s/sqrt(h)`` (``x 60``),
+acceleration random walk ``m/s/h/sqrt(h)`` (``x 216000``), rate ramp ``deg/h^2`` and ``m/s/h^2``
+(``x 3600^2``), bias instability ``deg/h`` (``x 3600``) and ``mg``.
+
+``BI_FACTOR = sqrt(2 ln 2 / pi) = 0.6643``: the Allan deviation floor of flicker (bias
+instability) noise of coefficient B is ``BI_FACTOR B`` (IEEE Std 952, annex C).
 """
 
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 if TYPE_CHECKING:  # pragma: no cover
-    from .models import Model
+    from .models import Model, Process
 
-__all__ = ["param_unit", "datasheet", "squared"]
+__all__ = [
+    "BI_FACTOR",
+    "G0",
+    "ExportError",
+    "Quantity",
+    "Display",
+    "QUANTITIES",
+    "DISPLAY",
+    "DatasheetRow",
+    "squared",
+    "per_s",
+    "times_s",
+    "param_unit",
+    "si_factor",
+    "norm_unit",
+    "to_datasheet",
+    "from_datasheet",
+    "process_values",
+    "process_from_values",
+    "quantity_name",
+    "allan_floor",
+    "datasheet_rows",
+    "datasheet",
+]
 
-RAD2DEG = 180.0 / math.pi
-_GYRO = {"deg/s": 1.0, "rad/s": RAD2DEG, "deg/h": 1.0 / 3600.0}
-_ACCEL = {"m/s^2": 1.0, "m/s2": 1.0, "g": 9.80665, "mg": 9.80665e-3}
+#: ADEV of flicker (bias-instability) noise on its floor: ``sqrt(2 ln 2 / pi) B = 0.664 B``.
+BI_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
+G0 = 9.80665  # standard gravity, m/s^2
+_DEG = math.pi / 180.0
 
 
+class ExportError(ValueError):
+    """A fit cannot be converted or exported as asked (unknown unit, missing process ...);
+    the message says how to fix it."""
+
+
+# --------------------------------------------------------------------------- unit spelling
 def squared(unit: str) -> str:
-    """``(deg/s)^2`` for ``deg/s``, ``g^2`` for ``g``, ``u^2`` when unknown."""
+    """``(deg/s)^2`` for ``deg/s``, ``g^2`` for ``g``, ``u^2`` when the unit is unknown.
+
+    The one spelling of a squared unit (CLI, JSON, app: the app only prints ``^2`` as ``²``).
+    """
     u = unit or "u"
     return f"({u})^2" if any(c in u for c in "/* ^") else f"{u}^2"
+
+
+def per_s(unit: str) -> str:
+    """``unit / s`` simplified: ``deg/s`` -> ``deg/s^2``, ``m/s^2`` -> ``m/s^3``, ``g/s``."""
+    u = unit or "u"
+    if u.endswith("/s"):
+        return u + "^2"
+    m = re.fullmatch(r"(.*)/s\^(\d)", u)
+    if m:
+        return f"{m.group(1)}/s^{int(m.group(2)) + 1}"
+    return f"{u}/s"
+
+
+def times_s(unit: str) -> str:
+    """``unit * s`` simplified: ``deg/s`` -> ``deg``, ``m/s^2`` -> ``m/s``, ``g`` -> ``g*s``."""
+    u = unit or "u"
+    if u.endswith("/s"):
+        return u[:-2]
+    m = re.fullmatch(r"(.*)/s\^(\d)", u)
+    if m:
+        k = int(m.group(2)) - 1
+        return f"{m.group(1)}/s" + (f"^{k}" if k > 1 else "")
+    return f"{u}*s"
 
 
 def param_unit(code: str, name: str, unit: str = "") -> str:
@@ -46,56 +148,547 @@ def param_unit(code: str, name: str, unit: str = "") -> str:
     return ""
 
 
-def datasheet(model: Model, fs: float, unit: str = "") -> list[dict[str, Any]]:
-    """Datasheet quantities of a model with every value set.
+# --------------------------------------------------------------------------- signal units
+# unit -> (sensor, factor to SI): rad/s for rates, m/s^2 for accelerations
+_SI: dict[str, tuple[str, float]] = {
+    "rad/s": ("gyroscope", 1.0),
+    "mrad/s": ("gyroscope", 1e-3),
+    "deg/s": ("gyroscope", _DEG),
+    "dps": ("gyroscope", _DEG),
+    "deg/h": ("gyroscope", _DEG / 3600.0),
+    "deg/hr": ("gyroscope", _DEG / 3600.0),
+    "rad/h": ("gyroscope", 1.0 / 3600.0),
+    "rpm": ("gyroscope", 2.0 * math.pi / 60.0),
+    "m/s^2": ("accelerometer", 1.0),
+    "g": ("accelerometer", G0),
+    "mg": ("accelerometer", 1e-3 * G0),
+    "ug": ("accelerometer", 1e-6 * G0),
+    "cm/s^2": ("accelerometer", 1e-2),
+    "mm/s^2": ("accelerometer", 1e-3),
+    "gal": ("accelerometer", 1e-2),
+}
+_SI_UNIT = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
 
-    Returns a list of rows ``{"label", "quantity", "value", "unit"}`` in the model's order.
-    Gyroscope units (deg/s, rad/s) also give ARW in deg/sqrt(h) and RRW in deg/h/sqrt(h);
-    accelerometer units (m/s^2, g) give VRW in m/s/sqrt(h) and m/s/h/sqrt(h).
+
+def norm_unit(unit: str) -> str:
+    """Canonical spelling of a signal unit (``°/sec`` -> ``deg/s``, ``m/s2`` -> ``m/s^2``)."""
+    u = unit.strip().lower().replace(" ", "").replace("°", "deg").replace("µ", "u")
+    u = u.replace("²", "^2").replace("**", "^").replace("sec", "s").replace("degree", "deg")
+    u = re.sub(r"^degs?(?=/)", "deg", u)
+    u = u.replace("/s/s", "/s^2").replace("/s2", "/s^2").replace("s-2", "/s^2")
+    u = u.replace("ms^-2", "m/s^2").replace("m/s^-2", "m/s^2").replace("m//s^2", "m/s^2")
+    u = u.replace("rad.s^-1", "rad/s").replace("deg.s^-1", "deg/s")
+    return u
+
+
+def si_factor(unit: str, channel: str = "") -> tuple[str, float]:
+    """Sensor kind and factor to SI of a signal unit.
+
+    Parameters
+    ----------
+    unit : str
+        E.g. ``"deg/s"``, ``"rad/s"``, ``"deg/h"``, ``"g"``, ``"mg"``, ``"m/s^2"``.
+    channel : str
+        Channel name, for the error message.
+
+    Returns
+    -------
+    (kind, factor)
+        ``kind`` is ``"gyroscope"`` (SI: rad/s) or ``"accelerometer"`` (SI: m/s^2); SI value
+        = factor x value.
+
+    Raises
+    ------
+    ExportError
+        Missing or unknown unit.
+    """
+    where = f" of channel {channel!r}" if channel else ""
+    known = "deg/s, rad/s, deg/h, mrad/s, g, mg, ug, m/s^2"
+    if not unit or not unit.strip():
+        raise ExportError(
+            f"the unit{where} is unknown: SI conversion needs it; give it with "
+            f"units={{{channel or 'name'!r}: 'deg/s'}} (CLI: --units) among {known}"
+        )
+    got = _SI.get(norm_unit(unit))
+    if got is None:
+        raise ExportError(
+            f"unknown unit {unit!r}{where}: cannot convert to SI; use one of "
+            f"{known} (CLI: --units NAME=UNIT)"
+        )
+    return got
+
+
+# --------------------------------------------------------------------------- the table
+@dataclass(frozen=True)
+class Quantity:
+    """One datasheet quantity of a process.
+
+    ``forward(params, fs)`` maps the process's per-sample parameters (a dict by parameter
+    name; AR1 is first mapped to GM) to the datasheet value, ``inverse(value, fs)`` gives the
+    parameter ``param`` back (None when the quantity is not invertible alone); ``unit(u)`` is
+    the unit for a signal in ``u``; ``si`` says whether an SI row is printed; ``magnitude``
+    that the sign is not identified by the WV (rows report ``|value|``).
+    """
+
+    code: str
+    symbol: str
+    name: str
+    param: str
+    forward: Callable[[Mapping[str, float], float], float]
+    inverse: Callable[[float, float], float] | None
+    unit: Callable[[str], str]
+    si: bool = True
+    magnitude: bool = False
+    accel_name: str = ""
+
+
+@dataclass(frozen=True)
+class Display:
+    """A datasheet display unit of a quantity: ``value = factor x (value in SI)``."""
+
+    symbol: str
+    name: str
+    unit: str
+    factor: float
+
+
+def _sqrt0(x: float) -> float:
+    return math.sqrt(max(x, 0.0))
+
+
+#: Per process code, its quantities in print order (CONVENTIONS, units).
+QUANTITIES: dict[str, tuple[Quantity, ...]] = {
+    "WN": (
+        Quantity(
+            "WN",
+            "N",
+            "white noise density",
+            "sigma2",
+            lambda p, fs: _sqrt0(p["sigma2"] / fs),
+            lambda v, fs: v * v * fs,
+            lambda u: f"{u}/sqrt(Hz)",
+        ),
+    ),
+    "QN": (
+        Quantity(
+            "QN",
+            "Q",
+            "quantization",
+            "q2",
+            lambda p, fs: _sqrt0(p["q2"]) / fs,
+            lambda v, fs: (v * fs) ** 2,
+            times_s,
+        ),
+    ),
+    "RW": (
+        Quantity(
+            "RW",
+            "K",
+            "rate random walk",
+            "gamma2",
+            lambda p, fs: _sqrt0(p["gamma2"] * fs),
+            lambda v, fs: v * v / fs,
+            lambda u: f"{per_s(u)}/sqrt(Hz)",
+            accel_name="acceleration random walk",
+        ),
+    ),
+    "DR": (
+        Quantity(
+            "DR",
+            "R",
+            "rate ramp",
+            "omega",
+            lambda p, fs: p["omega"] * fs,
+            lambda v, fs: v / fs,
+            per_s,
+            magnitude=True,
+            accel_name="acceleration ramp",
+        ),
+    ),
+    "GM": (
+        Quantity(
+            "GM",
+            "T_c",
+            "correlation time",
+            "beta",
+            lambda p, fs: 1.0 / p["beta"],
+            lambda v, fs: 1.0 / v,
+            lambda u: "s",
+            si=False,
+        ),
+        Quantity(
+            "GM",
+            "sigma_gm",
+            "stationary std",
+            "sigma2_gm",
+            lambda p, fs: _sqrt0(p["sigma2_gm"]),
+            lambda v, fs: v * v,
+            lambda u: u,
+            si=False,
+        ),
+        Quantity(
+            "GM",
+            "q",
+            "driving-noise PSD",
+            "",
+            lambda p, fs: 2.0 * p["beta"] * p["sigma2_gm"],
+            None,
+            lambda u: f"{squared(u)}/s",
+            si=False,
+        ),
+        Quantity(
+            "GM",
+            "sqrt(q)",
+            "driving-noise density",
+            "",
+            lambda p, fs: _sqrt0(2.0 * p["beta"] * p["sigma2_gm"]),
+            None,
+            lambda u: f"{per_s(u)}/sqrt(Hz)",
+        ),
+    ),
+    "BI": (
+        Quantity(
+            "BI",
+            "B",
+            "bias instability",
+            "B",
+            lambda p, fs: p["B"],
+            lambda v, fs: v,
+            lambda u: u,
+        ),
+    ),
+}
+
+#: Datasheet display units per (sensor kind, symbol), from the value in SI units.
+DISPLAY: dict[tuple[str, str], Display] = {
+    ("gyroscope", "N"): Display("ARW", "angle random walk", "deg/sqrt(h)", 60.0 / _DEG),
+    ("accelerometer", "N"): Display("VRW", "velocity random walk", "m/s/sqrt(h)", 60.0),
+    ("gyroscope", "K"): Display("RRW", "rate random walk", "deg/h/sqrt(h)", 216000.0 / _DEG),
+    ("accelerometer", "K"): Display("AccRW", "acceleration random walk", "m/s/h/sqrt(h)", 216000.0),
+    ("gyroscope", "R"): Display("R", "rate ramp", "deg/h^2", 3600.0**2 / _DEG),
+    ("accelerometer", "R"): Display("R", "acceleration ramp", "m/s/h^2", 3600.0**2),
+    ("gyroscope", "B"): Display("B", "bias instability", "deg/h", 3600.0 / _DEG),
+    ("accelerometer", "B"): Display("B", "bias instability", "mg", 1e3 / G0),
+}
+
+
+def _quantity(code: str, symbol: str) -> Quantity:
+    for q in QUANTITIES.get("GM" if code == "AR1" else code, ()):
+        if q.symbol == symbol:
+            return q
+    raise ValueError(f"no datasheet quantity {symbol!r} for process {code!r}")
+
+
+def quantity_name(q: Quantity, kind: str | None) -> str:
+    """The quantity's name for a sensor kind (``acceleration random walk`` on accelerometers)."""
+    return q.accel_name if kind == "accelerometer" and q.accel_name else q.name
+
+
+def _gm_params(code: str, params: Mapping[str, float], fs: float) -> dict[str, float]:
+    """GM parameters of an AR1 with phi in (0, 1); the parameters themselves otherwise."""
+    if code != "AR1":
+        return dict(params)
+    phi, s2 = params["phi"], params["sigma2"]
+    if not 0 < phi < 1:
+        raise ValueError(f"AR1 phi = {phi} outside (0, 1) has no correlation time")
+    return {"beta": -math.log(phi) * fs, "sigma2_gm": s2 / (1.0 - phi * phi)}
+
+
+def to_datasheet(code: str, value: float, fs: float, symbol: str | None = None) -> float:
+    """Datasheet value of a one-parameter process (signed for DR).
+
+    Parameters
+    ----------
+    code : {"WN", "QN", "RW", "DR"}
+    value : float
+        ``sigma2``, ``q2``, ``gamma2`` or ``omega`` (per sample).
+    fs : float
+        Sampling frequency (Hz).
+    symbol : str, optional
+        The quantity (default: the process's first, N, Q, K or R).
+    """
+    qs = QUANTITIES.get(code)
+    if not qs or code in ("GM", "BI"):
+        raise ValueError(f"no one-parameter datasheet conversion for {code!r}")
+    q = qs[0] if symbol is None else _quantity(code, symbol)
+    return float(q.forward({q.param: value}, fs))
+
+
+def from_datasheet(code: str, value: float, fs: float, symbol: str | None = None) -> float:
+    """Per-sample parameter from a datasheet value (inverse of :func:`to_datasheet`)."""
+    qs = QUANTITIES.get(code)
+    if not qs:
+        raise ValueError(f"no datasheet conversion for {code!r}")
+    q = qs[0] if symbol is None else _quantity(code, symbol)
+    if q.inverse is None:
+        raise ValueError(f"{q.symbol} of {code} is not invertible alone")
+    return float(q.inverse(value, fs))
+
+
+def process_values(process: Process, fs: float) -> dict[str, float]:
+    """Datasheet values ``{symbol: value}`` of a process with every value set (AR1 as GM)."""
+    params = dict(zip(process.param_names, process.values, strict=True))
+    gm = _gm_params(process.code, params, fs)
+    qs = QUANTITIES["GM" if process.code == "AR1" else process.code]
+    return {q.symbol: float(q.forward(gm, fs)) for q in qs}
+
+
+def process_from_values(code: str, values: Mapping[str, float], fs: float) -> Process:
+    """The per-sample process of datasheet values (inverse of :func:`process_values`).
+
+    ``values`` holds N (WN), Q (QN), K (RW), R (DR) or ``T_c`` and ``sigma_gm`` (GM, AR1).
+    """
+    from .models import processes as pr
+
+    if code in ("GM", "AR1"):
+        beta = _quantity("GM", "T_c").inverse(values["T_c"], fs)  # type: ignore[misc]
+        s2 = _quantity("GM", "sigma_gm").inverse(values["sigma_gm"], fs)  # type: ignore[misc]
+        if code == "GM":
+            return pr.GM(beta=beta, sigma2_gm=s2)
+        phi = math.exp(-beta / fs)
+        return pr.AR1(phi=phi, sigma2=s2 * (1.0 - phi * phi))
+    q = QUANTITIES[code][0]
+    cls = {"WN": pr.WN, "QN": pr.QN, "RW": pr.RW, "DR": pr.DR}[code]
+    return cls(q.inverse(values[q.symbol], fs))  # type: ignore[misc]
+
+
+# --------------------------------------------------------------------------- rows
+@dataclass(frozen=True)
+class DatasheetRow:
+    """One datasheet quantity of one channel.
+
+    ``low``/``high`` are the interval bounds (NaN when no interval is available);
+    ``process`` is the process label (``WN``, ``GM_1`` ...) or ``model`` for quantities of the
+    whole model (bias-instability floor).
+    """
+
+    channel: str
+    process: str
+    quantity: str
+    symbol: str
+    value: float
+    unit: str
+    low: float = math.nan
+    high: float = math.nan
+    note: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (NaN as None)."""
+        d = asdict(self)
+        for k in ("value", "low", "high"):
+            v = d[k]
+            d[k] = float(v) if math.isfinite(v) else None
+        return d
+
+
+def allan_floor(model: Model, fs: float, n_levels: int, *, points_per_octave: int = 16) -> dict:
+    """Minimum of the model-implied Allan deviation over the analysed scales.
+
+    Returns
+    -------
+    dict
+        ``adev_min`` [u], ``T_s`` (Allan averaging time of the minimum, s), ``bias_instability``
+        (``adev_min / BI_FACTOR``, u), ``at_edge`` (True when the minimum is at the shortest or
+        longest scale: no floor inside, an upper bound), ``T_range_s``.
+    """
+    j = n_levels
+    # Allan times T = m / fs, m = 2^(k) samples for k in [0, J - 1] -> WV at tau = 2m
+    k = np.linspace(0.0, max(j - 1, 0), max(j - 1, 0) * points_per_octave + 1)
+    m = 2.0**k
+    avar = 2.0 * model.wv(2.0 * m, fs)
+    avar = np.where(np.isfinite(avar) & (avar > 0), avar, np.inf)
+    i = int(np.argmin(avar))
+    adev = float(math.sqrt(avar[i])) if math.isfinite(avar[i]) else math.nan
+    return {
+        "adev_min": adev,
+        "T_s": float(m[i] / fs),
+        "bias_instability": adev / BI_FACTOR,
+        "at_edge": bool(i == 0 or i == m.size - 1),
+        "T_range_s": [float(m[0] / fs), float(m[-1] / fs)],
+    }
+
+
+def _map_iv(iv: tuple[float, float] | None, fn: Callable[[float], float]) -> tuple[float, float]:
+    """Interval of a monotone function of one parameter (either direction)."""
+    if iv is None or not all(math.isfinite(v) for v in iv):
+        return math.nan, math.nan
+    try:
+        a, b = fn(iv[0]), fn(iv[1])
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return math.nan, math.nan
+    return (min(a, b), max(a, b))
+
+
+def _abs_iv(iv: tuple[float, float] | None) -> tuple[float, float] | None:
+    if iv is None:
+        return None
+    lo, hi = iv
+    if lo <= 0 <= hi:
+        return 0.0, max(abs(lo), abs(hi))
+    return tuple(sorted((abs(lo), abs(hi))))  # type: ignore[return-value]
+
+
+def datasheet_rows(
+    model: Model,
+    fs: float,
+    unit: str = "",
+    *,
+    channel: str = "",
+    intervals: Mapping[str, tuple[float, float]] | None = None,
+    si: bool = True,
+    n_levels: int | None = None,
+    extras: Mapping[str, float] | None = None,
+) -> list[DatasheetRow]:
+    """Datasheet rows of a model with every value set, from :data:`QUANTITIES`.
+
+    Parameters
+    ----------
+    model : Model
+    fs : float
+        Sampling frequency (Hz).
+    unit : str
+        Signal unit (``""``: unknown, spelled ``u``).
+    channel : str
+        Channel name put in the rows.
+    intervals : mapping of str to (float, float), optional
+        Parameter intervals by unique name (``WN.sigma2``); quantities that are monotone
+        functions of one parameter get the mapped interval.
+    si : bool
+        Add SI and datasheet-display rows (:data:`DISPLAY`) when the unit is known; an unknown
+        unit adds a note row (value NaN).
+    n_levels : int, optional
+        Add the model's bias-instability floor (:func:`allan_floor`) over ``n_levels`` levels.
+    extras : mapping, optional
+        ``{"BI.B": B}``: a bias instability read by the slope method (process ``BI``).
+
+    Returns
+    -------
+    list of DatasheetRow
+        Per process in the model's order: for each quantity the native row, then SI and
+        display rows; then ``BI`` (extras) and the floor (process ``model``).
     """
     u = unit or "u"
-    dt = 1.0 / fs
-    gyro = _GYRO.get(unit)
-    acc = _ACCEL.get(unit)
-    rows: list[dict[str, Any]] = []
+    ivs = dict(intervals or {})
+    kind, f_si, note_si = None, math.nan, ""
+    if si:
+        try:
+            kind, f_si = si_factor(unit, channel)
+        except ExportError as e:
+            note_si = f"no SI rows: {e}"
+    su = _SI_UNIT.get(kind or "", "")
+    rows: list[DatasheetRow] = []
 
-    def add(label: str, quantity: str, value: float, unit_: str) -> None:
-        rows.append({"label": label, "quantity": quantity, "value": float(value), "unit": unit_})
+    def add(proc: str, q: Quantity, value: float, iv: tuple[float, float], note: str = "") -> None:
+        name = quantity_name(q, kind)
+        si_name = f"{name[:-1]}, SI)" if name.endswith(")") else f"{name} (SI)"
+        rows.append(DatasheetRow(channel, proc, name, q.symbol, value, q.unit(u), *iv, note))
+        if kind and q.si:
+            c = f_si
+            rows.append(
+                DatasheetRow(
+                    channel,
+                    proc,
+                    si_name,
+                    q.symbol,
+                    value * c,
+                    q.unit(su),
+                    iv[0] * c,
+                    iv[1] * c,
+                    note,
+                )
+            )
+            d = DISPLAY.get((kind, q.symbol))
+            if d is not None:
+                c = f_si * d.factor
+                rows.append(
+                    DatasheetRow(
+                        channel,
+                        proc,
+                        name if name.endswith(")") else d.name,
+                        d.symbol,
+                        value * c,
+                        d.unit,
+                        iv[0] * c,
+                        iv[1] * c,
+                        note,
+                    )
+                )
 
     for lab, p in zip(model.labels, model.processes, strict=True):
-        v = dict(zip(p.param_names, p.values, strict=True))
-        if any(x is None for x in v.values()):
+        params = dict(zip(p.param_names, p.values, strict=True))
+        if any(v is None for v in params.values()):
             continue
-        if p.code == "WN":
-            n = math.sqrt(v["sigma2"] * dt)
-            add(lab, "white noise density N", n, f"{u}/sqrt(Hz)")
-            if gyro is not None:
-                add(lab, "angle random walk", 60.0 * n * gyro, "deg/sqrt(h)")
-            elif acc is not None:
-                add(lab, "velocity random walk", 60.0 * n * acc, "m/s/sqrt(h)")
-        elif p.code == "RW":
-            k = math.sqrt(v["gamma2"] / dt)
-            add(lab, "rate random walk K", k, f"{u}/sqrt(s)")
-            if gyro is not None:
-                add(lab, "rate random walk", 216000.0 * k * gyro, "deg/h/sqrt(h)")
-            elif acc is not None:
-                add(lab, "acceleration random walk", 216000.0 * k * acc, "m/s/h/sqrt(h)")
-        elif p.code == "QN":
-            add(lab, "quantization Q", math.sqrt(v["q2"]) * dt, f"{u}*s")
-        elif p.code == "DR":
-            add(lab, "rate ramp R", abs(v["omega"]) / dt, f"{u}/s")
-        elif p.code == "GM":
-            add(lab, "correlation time 1/beta", 1.0 / v["beta"], "s")
-            add(lab, "stationary std sqrt(sigma2_gm)", math.sqrt(v["sigma2_gm"]), u)
-            add(
-                lab,
-                "driving-noise PSD q = 2 beta sigma2_gm",
-                2 * v["beta"] * v["sigma2_gm"],
-                f"{squared(u)}/s",
+        code = p.code
+        if code == "AR1" and not 0 < params["phi"] < 1:
+            rows.append(
+                DatasheetRow(
+                    channel,
+                    lab,
+                    "AR1 coefficient (no correlation time: phi outside (0, 1))",
+                    "phi",
+                    float(params["phi"]),
+                    "1",
+                )
             )
-        elif p.code == "AR1":
-            phi, s2 = v["phi"], v["sigma2"]
-            if 0 < phi < 1:
-                add(lab, "correlation time", -dt / math.log(phi), "s")
-            add(lab, "stationary std", math.sqrt(s2 / (1 - phi * phi)), u)
+            continue
+        gm = _gm_params(code, params, fs)
+        for q in QUANTITIES["GM" if code == "AR1" else code]:
+            value = float(q.forward(gm, fs))
+            iv: tuple[float, float] = (math.nan, math.nan)
+            if code == "AR1" and q.symbol == "T_c":
+                iv = _map_iv(
+                    ivs.get(f"{lab}.phi"),
+                    lambda ph: -1.0 / (fs * math.log(ph)) if 0 < ph < 1 else math.nan,
+                )
+            elif code != "AR1" and q.param:
+                piv = ivs.get(f"{lab}.{q.param}")
+                if q.magnitude:
+                    piv = _abs_iv(piv)
+                iv = _map_iv(piv, lambda x, q=q, gm=gm: float(q.forward({**gm, q.param: x}, fs)))
+            if q.magnitude:
+                value = abs(value)
+            note = "q = 2 beta sigma2_gm" if q.symbol == "q" else ""
+            add(lab, q, value, iv, note)
+    if extras and "BI.B" in extras:
+        add("BI", QUANTITIES["BI"][0], float(extras["BI.B"]), (math.nan, math.nan))
+    if n_levels is not None:
+        fl = allan_floor(model, fs, n_levels)
+        note = (
+            f"min over T = {fl['T_range_s'][0]:.4g}..{fl['T_range_s'][1]:.4g} s of the implied "
+            f"ADEV / {BI_FACTOR:.3f}, at T = {fl['T_s']:.4g} s"
+        )
+        if fl["at_edge"]:
+            note += "; no floor inside the analysed scales: an upper bound"
+        b = QUANTITIES["BI"][0]
+        floor = Quantity(b.code, b.symbol, f"{b.name} (Allan floor)", "", b.forward, None, b.unit)
+        add("model", floor, fl["bias_instability"], (math.nan, math.nan), note)
+    if note_si:
+        rows.append(DatasheetRow(channel, "model", "units", "", math.nan, "", note=note_si))
     return rows
+
+
+def datasheet(
+    model: Model,
+    fs: float,
+    unit: str = "",
+    *,
+    n_levels: int | None = None,
+    extras: Mapping[str, float] | None = None,
+) -> list[dict[str, Any]]:
+    """Datasheet quantities of a model with every value set, as dictionaries.
+
+    The rows of :func:`datasheet_rows` (same names, symbols and units as ``gmwm export
+    --format datasheet``) without the note-only rows, as ``{"label", "quantity", "symbol",
+    "value", "unit"}`` in the model's order.
+    """
+    return [
+        {
+            "label": r.process,
+            "quantity": r.quantity,
+            "symbol": r.symbol,
+            "value": r.value,
+            "unit": r.unit,
+        }
+        for r in datasheet_rows(model, fs, unit, n_levels=n_levels, extras=extras)
+        if math.isfinite(r.value)
+    ]

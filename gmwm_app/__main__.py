@@ -100,7 +100,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import panel as pn
 
-    from gmwm_app.app import create_application
+    from gmwm_app.server import create_application
 
     kwargs = {}
     origins = list(args.allow_websocket_origin or [])

@@ -1,35 +1,31 @@
-"""The GMWM browser app: one :func:`create_app` per browser session.
+"""The page of one browser session: :func:`create_app` builds it around a fresh state.
 
 Layout: a sidebar with the data (demo, upload, server path, channel, fs, robust WV), the model
-builder (one add button per process, a remove button per process, a text spec), the what-if
-sliders and the exports; the main area with messages, the WV plot, the residual strip, the
-fit summary and the parameter and datasheet tables (with 95% intervals and a J-test badge on
-request), in a "Fit" tab; a "Model selection" tab ranks candidate models by WVIC
-(``selection_view.SelectionView``).
+builder and what-if sliders (:class:`gmwm_app.model_panel.ModelPanel`) and the exports; the
+main area with messages, the WV plot, the residual strip, the fit summary and the parameter
+and datasheet tables (with 95% intervals and a J-test badge on request), in a "Fit" tab; the
+"Model selection", "Slope method" and "Multi-channel" tabs are :class:`panel.viewable.Viewer`
+objects built on first opening with the session state and its job runner
+(:class:`gmwm_app.jobs.Jobs`), never with this page object.
 
-Responsiveness: reading a file and computing a WV run in a worker thread (the event loop,
-and so every other session, stays free) with a loading indicator; the data a URL names are
-read while the browser is still loading the page; a fit takes milliseconds and runs inline;
-every redraw replaces ColumnDataSource data in place (``views.WVFigures``, ``FitTables``), and
-the process rows and what-if sliders come from fixed pools, so an add or a remove creates no
-new Bokeh model (which would make Bokeh re-walk the whole document).
+Responsiveness: reading a file and computing a WV run as jobs in a worker thread (the event
+loop, and so every other session, stays free) with a loading indicator; the data a URL names
+are read while the browser is still loading the page; a fit takes milliseconds and runs
+inline; every redraw replaces ColumnDataSource data in place (``views.WVFigures``,
+``FitTables``). Serving (pages built off the loop, BLAS limits) is :mod:`gmwm_app.server`.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextvars
 import io
 import logging
-import os
 import sys
-import threading
 import time
 import weakref
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -39,109 +35,34 @@ if __package__ in (None, ""):  # run as a script by `panel serve gmwm_app/app.py
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import panel as pn  # noqa: E402
-from bokeh.models import CustomJSTickFormatter  # noqa: E402
-from panel.io.state import set_curdoc  # noqa: E402
 
+from gmwm_app._panel_compat import light_text_updates  # noqa: E402
+from gmwm_app.jobs import Jobs  # noqa: E402
 from gmwm_app.limits import current as current_limits  # noqa: E402
+from gmwm_app.model_panel import ModelPanel  # noqa: E402
 from gmwm_app.selection_view import SelectionView, jtest_badge  # noqa: E402
 from gmwm_app.session_view import SessionPanel  # noqa: E402
 from gmwm_app.state import (  # noqa: E402
-    PROCESS_CODES,
-    PROCESS_NAMES,
     AppState,
-    SliderSpec,
     format_value,
 )
 from gmwm_app.views import (  # noqa: E402
     FitTables,
     WVFigures,
-    component_color,
     fit_summary,
 )
 
-__all__ = ["GMWMApp", "create_app", "create_app_factory", "live_apps"]
+__all__ = ["GMWMApp", "create_app", "live_apps"]
 
 log = logging.getLogger(__name__)
 
 pn.extension("filedropper", notifications=False)
 
 
-def _light_text_updates() -> bool:
-    """Make a text pane's ``object`` change send its text only (Panel 1.9: also stylesheets).
-
-    Panel's HTML/Markdown/Alert panes re-send their whole property set on every ``object``
-    change, the stylesheets included; the first time, that list differs from the one the page
-    was built with (the template's design sheets), and a changed list of Bokeh models makes
-    Bokeh recompute the graph of every model of the document: 0.05-0.1 s per pane and
-    session on the server loop, with about a thousand models per page. The stylesheets a pane
-    was built with are kept (they do not depend on its text). Returns whether it applied.
-    """
-    from panel.pane.markup import HTMLBasePane
-
-    if getattr(HTMLBasePane._update, "_gmwm_light", False):
-        return True
-    original = HTMLBasePane._update
-    if not callable(original) or not hasattr(HTMLBasePane, "_get_properties"):
-        return False  # pragma: no cover - another Panel: leave it alone
-
-    def _update(self: Any, ref: str, model: Any) -> None:
-        if getattr(self, "enable_streaming", False):
-            return original(self, ref, model)
-        props = self._get_properties(model.document)
-        props.pop("stylesheets", None)
-        model.update(**props)
-
-    _update._gmwm_light = True  # type: ignore[attr-defined]
-    HTMLBasePane._update = _update
-    return True
-
-
-_light_text_updates()
-
-
-def limit_blas_threads(n: int = 1) -> bool:
-    """Limit the BLAS (OpenBLAS) thread pool of this process to ``n`` threads.
-
-    In a server, the event loop thread is busy while a worker computes a WV; OpenBLAS's own
-    threads then fight them for the cores at every small ``np.dot``, which made a 1e6-sample
-    WV 30x slower (1 s instead of 30 ms) on a 2-core machine. The engine's matrices are small,
-    so one BLAS thread loses nothing (:func:`engine._blas.set_blas_threads`). Returns True
-    when a limit was set.
-    """
-    from engine._blas import set_blas_threads
-
-    return set_blas_threads(n)
-
-
-_BLAS_LIMITED = False
-
-
-def _limit_blas_once() -> None:
-    global _BLAS_LIMITED
-    if not _BLAS_LIMITED:
-        _BLAS_LIMITED = True
-        limit_blas_threads(1)
-
+light_text_updates()  # see gmwm_app._panel_compat
 
 _APPS: weakref.WeakSet[GMWMApp] = weakref.WeakSet()
 
-
-def _lower_priority() -> None:
-    """Run this worker thread at a lower CPU priority (Linux: nice applies per thread), so
-    that on a busy machine the event loop, which serves every session, comes first."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
-    except (AttributeError, OSError):  # not Linux, or not allowed: keep the priority
-        pass
-
-
-#: Worker threads for reading files and computing WVs (numpy releases the GIL there).
-_EXECUTOR = ThreadPoolExecutor(
-    max_workers=4, thread_name_prefix="gmwm-app", initializer=_lower_priority
-)
-
-#: Process rows created up front (more are added if a model grows beyond).
-N_POOL = 8
 
 # Save the WV plot as an image (PNG or SVG) in the browser; the file name follows the data.
 _EXPORT_JS = """
@@ -155,18 +76,9 @@ view.export("KIND").to_blob().then((blob) => {
 });
 """
 
-_PROCESS_HELP = {
-    "WN": "white noise: WV falls as 1/τ (angle/velocity random walk)",
-    "QN": "quantization noise: WV falls as 1/τ²",
-    "RW": "random walk: WV rises as τ (rate random walk)",
-    "DR": "drift (rate ramp): WV rises as τ²",
-    "AR1": "first-order autoregression (per sample phi, sigma2)",
-    "GM": "Gauss-Markov: a bump at its correlation time 1/beta (bias instability)",
-}
 
-
-def _lazy_view_factories() -> list[tuple[str, Callable[[GMWMApp], Any]]]:
-    """Tabs built on first opening: (title, factory taking the app, returning a view)."""
+def _lazy_view_factories() -> list[tuple[str, Callable[[AppState, Jobs], Any]]]:
+    """Tabs built on first opening: (title, view class taking the state and the jobs)."""
     from gmwm_app.multi_view import MultiView
     from gmwm_app.slope_view import SlopeView
 
@@ -203,22 +115,21 @@ class GMWMApp:
         self.default_path = default_path
         self.views = WVFigures()
         self._syncing = False
-        self._ready = False
-        self._job = 0
+        self.ready = False
         self._last_query: dict[str, str] | None = None
-        self._proc_key: tuple | None = None
-        self._slider_key: Any = None
         self.last_refresh_s = 0.0
         self.busy = False
         self._query: dict[str, Any] = {}
         self._prefetched: Future | None = None
-        # the session this app belongs to (async continuations lose pn.state.curdoc)
-        self._doc = pn.state.curdoc
-        self._location = pn.state.location if self._served else None
-        if self._served:
-            _limit_blas_once()  # a server process: see limit_blas_threads
+        # the session's job runner (async continuations lose pn.state.curdoc: it keeps it)
+        self.jobs = Jobs(pn.state.curdoc)
+        self._location = pn.state.location if self.served else None
         self._build_widgets()
         self._build_layout()
+        self.jobs.busy = self._busy
+        self.jobs.failed = self._load_failed
+        self.jobs.settled = self._settled
+        self.jobs.install = self.install
         self.state.param.watch(self._on_state, "revision")
         self.refresh()
         _APPS.add(self)
@@ -273,64 +184,7 @@ class GMWMApp:
         )
         self.robust_check.param.watch(self._on_robust, "value")
 
-        self.add_buttons = {}
-        for code in PROCESS_CODES:
-            b = pn.widgets.Button(
-                label=f"+ {code}",
-                color="primary",
-                variant="outline",
-                description=f"Add {_PROCESS_HELP[code]}",
-                width=82,
-                margin=(3, 3),
-            )
-            b.on_click(lambda _e, c=code: self._add(c))
-            self.add_buttons[code] = b
-        self.spec_input = pn.widgets.TextInput(
-            label="Model (type a spec, press Enter)",
-            placeholder="e.g. WN+RW+2*GM",
-            sizing_mode="stretch_width",
-        )
-        self.spec_input.param.watch(self._on_spec, "enter_pressed")
-        self.process_list = pn.Column(sizing_mode="stretch_width", margin=0)
-        self.empty_model_note = pn.pane.Markdown(
-            "*Empty model: only the empirical WV is shown.*",
-            margin=(0, 10),
-            styles={"font-size": "13px"},
-        )
-        self.process_list.append(self.empty_model_note)
-        self._proc_rows: list[tuple[pn.Row, pn.pane.HTML, pn.widgets.Button]] = []
-        for _ in range(N_POOL):
-            self._new_process_row()
-        self.clear_button = pn.widgets.Button(
-            label="Remove all", color="light", width=100, margin=(3, 3)
-        )
-        self.clear_button.on_click(lambda _e: self.state.clear_model())
-
-        self.whatif_toggle = pn.widgets.Checkbox(
-            label="What if: move the parameters by hand", value=False, css_classes=["gmwm-whatif"]
-        )
-        self.whatif_toggle.param.watch(self._on_whatif, "value")
-        self.sliders = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
-        self._slider_pool: list[pn.widgets.FloatSlider] = []
-        self._slider_specs: list[SliderSpec] = []
-        self._log_format = CustomJSTickFormatter(code="return Math.pow(10, tick).toExponential(3)")
-        self._phi_format = CustomJSTickFormatter(
-            code="return (1 - Math.pow(10, tick)).toPrecision(6)"
-        )
-        self.reset_button = pn.widgets.Button(
-            label="Back to the fit", color="light", width=130, margin=(3, 3)
-        )
-        self.reset_button.on_click(lambda _e: self._reset_whatif())
-        self.fit_button = pn.widgets.Button(
-            label="Fit from here",
-            color="primary",
-            width=130,
-            margin=(3, 3),
-            description="Refit using the slider values as a starting point",
-        )
-        self.fit_button.on_click(lambda _e: self._fit_from_whatif())
-        self.whatif_buttons = pn.Row(self.reset_button, self.fit_button, visible=False)
-
+        self.model_panel = ModelPanel(self.state)
         self.download = pn.widgets.FileDownload(
             callback=self._export_json,
             filename="gmwm_fit.json",
@@ -393,7 +247,7 @@ class GMWMApp:
         self.intervals_check.param.watch(self._on_intervals, "value")
         self.jtest_pane = pn.pane.HTML("", margin=(0, 10), visible=False)
         # session download/restore, Kalibr and datasheet exports, time-gap box
-        self.session_panel = SessionPanel(self)
+        self.session_panel = SessionPanel(self.state, self.jobs)
 
     def _build_layout(self) -> None:
         h = pn.pane.Markdown
@@ -413,23 +267,7 @@ class GMWMApp:
             self.data_info,
             self.robust_check,
             pn.layout.Divider(),
-            h("### Model", margin=(0, 10)),
-            pn.FlexBox(*self.add_buttons.values(), margin=(0, 5)),
-            self.spec_input,
-            self.process_list,
-            self.clear_button,
-            pn.layout.Divider(),
-            h("### What if", margin=(0, 10)),
-            self.whatif_toggle,
-            h(
-                "Each parameter on a log scale, 3 decades either side; the curves follow as "
-                "you drag.",
-                margin=(0, 10),
-                styles={"font-size": "12px", "color": "#555"},
-            ),
-            self.sliders,
-            self.whatif_buttons,
-            pn.layout.Divider(),
+            *self.model_panel.sidebar(),
             h("### Export", margin=(0, 10)),
             self.download,
             pn.Row(self.png_button, self.svg_button, margin=(0, 5)),
@@ -479,9 +317,11 @@ class GMWMApp:
         # the other views are built on first opening of their tab (or first use): a page
         # opens with the Fit tab only, about half the models of a page with every tab built
         self.lazy_views: dict[str, Any] = {}
-        self._lazy_factories: dict[str, Callable[[], Any]] = {}
+        self._lazy_factories: dict[str, Callable[..., Any]] = {}
+        self._titles = ["Fit"]
         for title, factory in _lazy_view_factories():
-            self._lazy_factories[title] = partial(factory, self)
+            self._lazy_factories[title] = partial(factory, self.state, self.jobs)
+            self._titles.append(title)
             self.tabs.append(
                 (
                     title,
@@ -520,13 +360,14 @@ class GMWMApp:
 
         Returns
         -------
-        object
-            The view object (it has a ``panel`` attribute shown in the tab).
+        panel.viewable.Viewer
+            The view (its ``panel`` is shown in the tab; its ``active`` parameter says
+            whether the tab is shown).
         """
         if title not in self.lazy_views:
-            view = self._lazy_factories[title]()
+            view = self._lazy_factories[title](active=self._shown(title))
             self.lazy_views[title] = view
-            index = list(self.tabs._names).index(title)
+            index = self._titles.index(title)
             self.tabs[index] = (title, view.panel)
         return self.lazy_views[title]
 
@@ -535,14 +376,20 @@ class GMWMApp:
         """The "Model selection" view (built on first use)."""
         return self.open_view("Model selection")
 
+    def _shown(self, title: str) -> bool:
+        """Whether the tab ``title`` is the one shown."""
+        return 0 <= self.tabs.active < len(self._titles) and self._titles[self.tabs.active] == title
+
     def _on_tab(self, event: Any) -> None:
-        title = self.tabs._names[event.new]
+        title = self._titles[event.new]
         if title in self._lazy_factories and title not in self.lazy_views:
             try:
                 self.open_view(title)
             except Exception as e:  # a view that fails to build must not end the session
                 log.exception("building tab %s failed", title)
                 self.alert.param.update(object=f"Could not open {title}: {e}", visible=True)
+        for name, view in self.lazy_views.items():
+            view.active = self._shown(name)
 
     # -------------------------------------------------------------------------------------
     # refresh (state -> widgets and views)
@@ -565,8 +412,7 @@ class GMWMApp:
                 self.resid_box.visible = s.display_model() is not None
                 self._refresh_tables()
                 self._refresh_data_widgets()
-                self._refresh_process_list()
-                self._refresh_sliders()
+                self.model_panel.refresh()
                 self._refresh_messages()
                 self.download.filename = s.export_filename()
                 self.views.save_tool.filename = s.export_filename()[:-5].replace("+", "_")
@@ -599,11 +445,6 @@ class GMWMApp:
             self.fs_input.value = s.fs
         if self.robust_check.value != s.robust:
             self.robust_check.value = s.robust
-        if self.whatif_toggle.value != s.whatif:
-            self.whatif_toggle.value = s.whatif
-        spec = s.model.spec()
-        if self.spec_input.value != spec:
-            self.spec_input.value = spec
         if s.wv is None:
             self.data_info.object = "No data loaded."
         else:
@@ -616,95 +457,6 @@ class GMWMApp:
                 f"fs = {s.fs:g} Hz ({s.fs_source}), unit: {u}, {len(s.wv)} WV levels"
             )
 
-    def _refresh_process_list(self) -> None:
-        """One row per process from a fixed pool (no new Bokeh models on add/remove)."""
-        s = self.state
-        key = tuple(s.model.labels)
-        if key == self._proc_key:
-            return
-        self._proc_key = key
-        procs = list(zip(s.model.labels, s.model.processes, strict=True))
-        while len(self._proc_rows) < len(procs):  # grows only past the initial pool
-            self._new_process_row()
-        for i, (row, label, _btn) in enumerate(self._proc_rows):
-            if i < len(procs):
-                lab, p = procs[i]
-                label.object = (
-                    f'<span style="font-size:13px;line-height:28px;white-space:nowrap">'
-                    f'<span style="display:inline-block;width:18px;height:4px;'
-                    f'margin:0 6px 3px 0;background:{component_color(lab)}"></span>'
-                    f"<b>{lab}</b> {PROCESS_NAMES[p.code]}</span>"
-                )
-                row.visible = True
-            else:
-                row.visible = False
-        self.empty_model_note.visible = not procs
-
-    def _new_process_row(self) -> None:
-        i = len(self._proc_rows)
-        label = pn.pane.HTML("", sizing_mode="stretch_width", margin=(0, 10))
-        btn = pn.widgets.Button(
-            label="✕",
-            color="light",
-            width=34,
-            height=28,
-            margin=(0, 5),
-            css_classes=["gmwm-remove"],
-            description="Remove this process",
-        )
-        btn.on_click(lambda _e, i=i: self._remove(i))
-        row = pn.Row(label, btn, sizing_mode="stretch_width", margin=0, visible=False)
-        self._proc_rows.append((row, label, btn))
-        self.process_list.append(row)
-
-    def _refresh_sliders(self) -> None:
-        """What-if sliders from the parameter specs, from a pool of slider widgets."""
-        s = self.state
-        on = bool(s.whatif and len(s.model))
-        self.sliders.visible = on
-        self.whatif_buttons.visible = on
-        if not on:
-            self._slider_key = None
-            return
-        key = (s.model.spec(values=True), id(s.result), s.channel, s.fs)
-        if key == self._slider_key:
-            return
-        self._slider_key = key
-        specs = s.slider_specs()
-        while len(self._slider_pool) < len(specs):
-            i = len(self._slider_pool)
-            w = pn.widgets.FloatSlider(
-                label="",
-                start=0.0,
-                end=1.0,
-                value=0.5,
-                step=0.01,
-                format=self._log_format,
-                sizing_mode="stretch_width",
-                margin=(2, 10),
-                visible=False,
-            )
-            w.param.watch(lambda e, i=i: self._on_slider(i, e.new), "value")
-            self._slider_pool.append(w)
-            self.sliders.append(w)
-        self._slider_specs = specs
-        for i, w in enumerate(self._slider_pool):
-            if i < len(specs):
-                sp = specs[i]
-                phi = sp.transform == "log10(1-x)"
-                w.param.update(
-                    label=f"{sp.name} [{sp.unit.replace('^2', '²')}]",
-                    start=sp.lo,
-                    end=sp.hi,
-                    value=min(max(sp.x, sp.lo), sp.hi),
-                    step=(sp.hi - sp.lo) / 600,
-                    format=self._phi_format if phi else self._log_format,
-                    bar_color=component_color(sp.label),
-                    visible=True,
-                )
-            elif w.visible:
-                w.visible = False
-
     def _refresh_messages(self) -> None:
         s = self.state
         self.alert.object = s.error
@@ -716,7 +468,7 @@ class GMWMApp:
         self.warning.visible = bool(warn)
 
     def _sync_url(self) -> None:
-        if not self._ready or self._location is None:
+        if not self.ready or self._location is None:
             return
         q = self.state.to_query()
         if q != self._last_query:
@@ -724,45 +476,12 @@ class GMWMApp:
             self._location.search = "?" + urlencode(q, safe="*/")
 
     # -------------------------------------------------------------------------------------
-    # heavy work off the event loop
+    # heavy work off the event loop (gmwm_app.jobs)
     # -------------------------------------------------------------------------------------
     @property
-    def _served(self) -> bool:
-        return self._doc is not None and self._doc.session_context is not None
-
-    def _locked(self, fn: Callable[[], Any]) -> None:
-        """Run ``fn`` with the session's document lock (next tick of the server loop).
-
-        Async jobs run without the lock (so the session stays responsive); every change of
-        the state, and so of Bokeh models, goes through here.
-        """
-        if not self._served:
-            fn()
-            return
-        doc = self._doc
-
-        def run() -> None:
-            with set_curdoc(doc):
-                try:
-                    fn()
-                except Exception as e:  # never leave the page without a word
-                    log.exception("app callback failed")
-                    self.state.report_error(f"Internal error: {type(e).__name__}: {e}")
-
-        doc.add_next_tick_callback(run)
-
-    def _spawn(self, coro_fn: Callable[[], Any]) -> None:
-        """Start an async job: on the server loop when served, else run it to completion."""
-        if self._served:
-            with set_curdoc(self._doc):
-                pn.state.execute(coro_fn)
-            return
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:  # no loop (tests, scripts): run it now
-            asyncio.run(coro_fn())
-        else:  # a notebook's loop
-            loop.create_task(coro_fn())
+    def served(self) -> bool:
+        """True when this page is served (a server loop applies the jobs' results)."""
+        return self.jobs.served
 
     def _busy(self, on: bool, message: str = "") -> None:
         self.busy = on
@@ -771,49 +490,20 @@ class GMWMApp:
         for w in (self.demo_button, self.path_button, self.upload, self.channel_select):
             w.disabled = on
 
-    async def _offload(
-        self, message: str, work: Callable[[], Any] | Future, apply: Callable[[Any], Any]
-    ) -> None:
-        """Run ``work`` in a worker thread (loading indicator on), then ``apply`` its result.
+    def _load_failed(self, message: str, err: BaseException) -> None:
+        self.state.report_error(f"{message}: {err}")
+        self.session_panel.failed(err)  # time gaps: offer the longest segment
 
-        ``apply`` runs under the document lock. A later job supersedes an earlier one (the
-        earlier result is dropped).
-        """
-        self._job += 1
-        job = self._job
-        self._locked(lambda: self._busy(True, message))
-        out: Any = None
-        err: BaseException | None = None
-        try:
-            if isinstance(work, Future):  # already running (started with the session)
-                out = await asyncio.wrap_future(work)
-            else:
-                out = await asyncio.get_running_loop().run_in_executor(_EXECUTOR, work)
-        except Exception as e:  # reported in the page
-            err = e
-
-        def finish() -> None:
-            if job != self._job:
-                return
-            try:
-                if err is not None:
-                    self.state.report_error(f"{message}: {err}")
-                    self.session_panel.failed(err)  # time gaps: offer the longest segment
-                else:
-                    apply(out)
-            finally:
-                self._busy(False)
-                self._ready = True
-                self._sync_url()
-
-        self._locked(finish)
+    def _settled(self) -> None:
+        self.ready = True
+        self._sync_url()
 
     def prefetch(self) -> None:
         """Start reading the data the URL names in a worker thread, while the page loads."""
         query = dict(self._location.query_params) if self._location is not None else {}
         self._query = query
-        self._prefetched = _EXECUTOR.submit(
-            self.state.prepare_query, query, self.default_source, self.default_path
+        self._prefetched = self.jobs.submit(
+            partial(self.state.prepare_query, query, self.default_source, self.default_path)
         )
 
     async def start(self) -> None:
@@ -830,7 +520,7 @@ class GMWMApp:
                 default_path=self.default_path,
             )
 
-        await self._offload(
+        self.jobs.load(
             "Loading the data and computing its wavelet variance", self._prefetched, apply
         )
 
@@ -839,47 +529,22 @@ class GMWMApp:
         self.state.from_query(
             {}, default_source=self.default_source, default_path=self.default_path
         )
-        self._ready = True
+        self.ready = True
 
     # -------------------------------------------------------------------------------------
-    # callbacks (synchronous watchers; heavy work is spawned as an async job)
+    # callbacks (synchronous watchers; heavy work runs as a job)
     # -------------------------------------------------------------------------------------
-    def _read_and_warm(self, source: str, **kw: Any) -> Any:
-        try:
-            loaded = self.state.read(source, **kw)
-        except ValueError as e:
-            e.gmwm_read = (source, kw)  # type: ignore[attr-defined]  # to read it again
-            raise
-        self.state.precompute(loaded, self.state.channel, None, self.state.robust)
-        return loaded
-
     def _on_demo(self, _event: Any = None) -> None:
-        self._spawn(
-            partial(
-                self._offload,
-                "Loading the demo log",
-                partial(self._read_and_warm, "demo"),
-                self._install,
-            )
-        )
+        self.jobs.load("Loading the demo log", partial(self.state.read_and_warm, "demo"))
 
     def _on_upload(self, event: Any) -> None:
         files = event.new or {}
         if not files:
             return
         name, data = list(files.items())[-1]
-
-        def apply(loaded: Any) -> None:
-            self._install(loaded)
-            self.upload.value = {}  # the log is in the state now; free the upload's bytes
-
-        self._spawn(
-            partial(
-                self._offload,
-                f"Reading {name}",
-                partial(self._read_and_warm, "upload", data=data, filename=name),
-                apply,
-            )
+        self.jobs.load(
+            f"Reading {name}",
+            partial(self.state.read_and_warm, "upload", data=data, filename=name),
         )
 
     def _on_path(self, _event: Any = None) -> None:
@@ -887,16 +552,9 @@ class GMWMApp:
         if not path:
             self.state.report_error("Type the path of a log file on the server first")
             return
-        self._spawn(
-            partial(
-                self._offload,
-                f"Reading {path}",
-                partial(self._read_and_warm, "path", path=path),
-                self._install,
-            )
-        )
+        self.jobs.load(f"Reading {path}", partial(self.state.read_and_warm, "path", path=path))
 
-    def _install(self, loaded: Any) -> None:
+    def install(self, loaded: Any) -> None:
         """Make newly read data the session's (and remember how they were read)."""
         self.session_panel.loaded(loaded)
         self.state.install(loaded)
@@ -907,13 +565,10 @@ class GMWMApp:
         if self._syncing or not event.new or event.new == self.state.channel:
             return
         ch = event.new
-        self._spawn(
-            partial(
-                self._offload,
-                f"Computing the wavelet variance of {ch}",
-                partial(self.state.warm, ch),
-                lambda _out: self.state.select_channel(ch),
-            )
+        self.jobs.load(
+            f"Computing the wavelet variance of {ch}",
+            partial(self.state.warm, ch),
+            lambda _out: self.state.select_channel(ch),
         )
 
     def _on_robust(self, event: Any) -> None:
@@ -921,13 +576,10 @@ class GMWMApp:
             return
         rob = bool(event.new)
         what = "robust" if rob else "classical"
-        self._spawn(
-            partial(
-                self._offload,
-                f"Computing the {what} wavelet variance",
-                partial(self.state.warm, robust=rob),
-                lambda _out: self._after_robust(rob),
-            )
+        self.jobs.load(
+            f"Computing the {what} wavelet variance",
+            partial(self.state.warm, robust=rob),
+            lambda _out: self._after_robust(rob),
         )
 
     def _after_robust(self, rob: bool) -> None:
@@ -940,43 +592,9 @@ class GMWMApp:
         if not self.state.set_fs(event.new):
             self.refresh()
 
-    def _add(self, code: str) -> None:
-        self.state.add_process(code)
-
-    def _remove(self, index: int) -> None:
-        self.state.remove_process(index)
-
-    def _on_spec(self, _event: Any = None) -> None:
-        spec = (
-            self.spec_input.value_input
-            if self.spec_input.value_input is not None
-            else self.spec_input.value
-        )
-        if not self.state.set_model(spec or ""):
-            self.refresh()
-
     def _on_intervals(self, event: Any) -> None:
         if not self._syncing and bool(event.new) != self.state.show_intervals:
             self.state.set_show_intervals(bool(event.new))
-
-    def _on_whatif(self, event: Any) -> None:
-        if self._syncing:
-            return
-        self.state.set_whatif(bool(event.new))
-
-    def _on_slider(self, slot: int, x: float) -> None:
-        if self._syncing or slot >= len(self._slider_specs):
-            return
-        spec = self._slider_specs[slot]
-        self.state.set_whatif_value(spec.name, spec.value_of(x))
-
-    def _reset_whatif(self) -> None:
-        self._slider_key = None
-        self.state.reset_whatif()
-
-    def _fit_from_whatif(self) -> None:
-        if self.state.fit_from_whatif():
-            self.state.set_whatif(False)
 
     def _export_json(self) -> io.StringIO:
         return io.StringIO(self.state.export_json())
@@ -1010,114 +628,6 @@ def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn
         else:
             app.start_sync()
     return page
-
-
-def create_app_factory(path: str | None = None) -> Callable[[], pn.viewable.Viewable]:
-    """A function that builds a fresh page per session (for ``pn.serve``), preloading ``path``."""
-
-    def factory() -> pn.viewable.Viewable:
-        if path:
-            return create_app(source="path", path=str(path))
-        return create_app()
-
-    return factory
-
-
-_BUILD_POOL: ThreadPoolExecutor | None = None
-_PREBUILT: weakref.WeakSet[Any] = weakref.WeakSet()  # documents built off the loop
-
-
-def _no_validation() -> None:
-    """Stands for ``Document.validate`` on documents already validated off the loop."""
-
-
-def _build_pool() -> ThreadPoolExecutor:
-    global _BUILD_POOL
-    if _BUILD_POOL is None:
-        # one thread: builds queue in order (the GIL would not run two at once anyway)
-        _BUILD_POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gmwm-page")
-    return _BUILD_POOL
-
-
-def create_application(path: str | None = None) -> Any:
-    """The Bokeh application of the app for ``pn.serve``: each page is built off the loop.
-
-    Opening a page builds a Bokeh document of about a thousand models, 0.3-1 s of Python.
-    Panel builds it in the server's event loop, so a burst of page opens would hold every
-    other session for the sum of their builds. Here the build (the page factory and the
-    document's models) runs in a worker thread while the session is being created (Bokeh
-    awaits ``on_session_created`` before it initialises the document); the loop only waits
-    for it, and keeps serving the other sessions, their events and their HTTP requests
-    meanwhile. If the threaded build fails, the page is built on the loop as usual.
-
-    Parameters
-    ----------
-    path : str, optional
-        Server path preloaded by every session (``gmwm-app FILE``); the demo log otherwise.
-
-    Returns
-    -------
-    panel.io.application.Application
-        Pass it to ``pn.serve({"/": create_application()})``.
-    """
-    from panel.io.application import Application, _eval_panel
-    from panel.io.handlers import FunctionHandler
-    from panel.io.state import state as pn_state
-
-    factory = create_app_factory(path)
-
-    class OffLoopHandler(FunctionHandler):
-        async def on_session_created(self, session_context: Any) -> None:
-            await super().on_session_created(session_context)
-            doc = session_context._document
-            loop = asyncio.get_running_loop()
-            try:
-                # in a context of its own: whatever the build leaves in context variables
-                # (Panel's current document) must not stay with the pool's thread
-                await loop.run_in_executor(
-                    _build_pool(), contextvars.Context().run, self._build, doc
-                )
-            except Exception:  # built again on the loop by modify_document
-                log.exception("building the page off the loop failed; building it on the loop")
-
-        def _build(self, doc: Any) -> None:
-            # what Panel's run_app does for a function handler, without its patch of Bokeh's
-            # global curdoc() stack (shared by all threads: a build in a thread would leave
-            # another session's document in Bokeh's global state); the current document is
-            # Panel's context variable, which is per thread. The document belongs to this
-            # thread while it is built (Panel applies model changes directly only on the
-            # document's thread); Panel's initialize_document gives it to the loop's after.
-            pn_state._thread_id_[doc] = threading.get_ident()
-            pn_state._launching.add(doc)
-            try:
-                self._func(doc)  # the page factory and its document (Panel's _eval_panel)
-            except BaseException:
-                doc.clear()  # built again on the loop
-                raise
-            finally:
-                pn_state._launching.discard(doc)
-            doc.config.update(
-                reconnect_session=pn.config.reconnect is True,
-                notifications=None,
-                notify_connection_status=False,
-            )
-            if not doc.roots:
-                raise RuntimeError("the page factory produced an empty document")
-            # Bokeh validates the document after the handlers ran, on the loop (a walk of
-            # every model, ~0.1 s): done here instead, and skipped there for this document
-            doc.validate()
-            doc.validate = _no_validation
-            _PREBUILT.add(doc)
-
-        def modify_document(self, doc: Any) -> None:
-            if doc in _PREBUILT:
-                _PREBUILT.discard(doc)
-                return
-            super().modify_document(doc)
-
-    title = "GMWM: stochastic calibration of inertial sensors"
-    handler = OffLoopHandler(partial(_eval_panel, factory, None, title, True, False))
-    return Application(handler, admin=False)
 
 
 if __name__.startswith("bokeh"):  # `panel serve gmwm_app/app.py`

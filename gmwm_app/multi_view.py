@@ -33,63 +33,58 @@ cancel.
 
 from __future__ import annotations
 
-import asyncio
 import html
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
-from functools import partial
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import panel as pn
-from bokeh.layouts import gridplot
+import param
 from bokeh.models import (
-    ColumnDataSource,
-    DataRange1d,
-    DataTable,
-    HoverTool,
     NumberFormatter,
     ScientificFormatter,
-    StringFormatter,
-    TableColumn,
 )
-from bokeh.plotting import figure
 
 import engine as eg
-from engine.models import ModelError, parse_model
-from engine.multivariate import SHAREABLE, DependenceTest, MultiModel
-from engine.units import squared
+from engine.models import parse_model
+from engine.multivariate import SHAREABLE, DependenceTest
 
-from .state import format_value
+from .data import message_of
+from .multi_figures import (
+    GridFigure,
+    color_label,
+    covariance_rows,
+    grid_data,
+    make_table,
+    parameter_rows,
+)
+from .multi_fit import (
+    MAX_CHANNELS,
+    MIN_CHANNELS,
+    Cancelled,
+    build_model,
+    dependence_text,
+    fit_text,
+    parse_overrides,
+    run_dependence_test,
+    shareable_labels,
+)
 from .views import (
-    BAND_COLOR,
-    EMPIRICAL_COLOR,
     TOTAL_COLOR,
     component_color,
     redraw_table,
-    unit_squared,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .app import GMWMApp
+    from .jobs import Jobs
+    from .state import AppState
 
 __all__ = [
     "MultiView",
     "DEFAULT_SPEC",
     "DEFAULT_SHARED",
-    "MIN_CHANNELS",
-    "MAX_CHANNELS",
-    "model_curve_grid",
-    "grid_data",
-    "covariance_rows",
-    "parameter_rows",
-    "parse_overrides",
-    "shareable_labels",
-    "build_model",
-    "run_dependence_test",
-    "dependence_text",
 ]
 
 log = logging.getLogger(__name__)
@@ -98,571 +93,21 @@ log = logging.getLogger(__name__)
 #: rate random walk) and the processes shared by every channel at first.
 DEFAULT_SPEC = "GM+WN+RW"
 DEFAULT_SHARED = ("RW",)
-MIN_CHANNELS = 2
-MAX_CHANNELS = 6
-#: Component renderers per cell (a model with more processes draws the first ones).
-N_CELL_COMPONENTS = 8
 #: Shared-process controls created up front (one per shareable label of the model).
 N_SHARE_POOL = 6
-#: Points per octave of the smooth model curves.
-PER_OCTAVE = 8
 #: Wait (ms) after a change before a fit starts, on a server (a burst costs one fit).
 DEBOUNCE_MS = 150
-#: Cached WV/WCCV matrices per session.
-N_CACHE = 4
 
-_HOLLOW = "white"
 
-
-def _message(e: BaseException) -> str:
-    if isinstance(e, KeyError) and e.args:
-        return str(e.args[0])
-    return str(e) or type(e).__name__
-
-
-def _pretty(unit: str) -> str:
-    return unit.replace("^2", "²")
-
-
-# -----------------------------------------------------------------------------------------
-# pure helpers (tested without a browser)
-# -----------------------------------------------------------------------------------------
-def parse_overrides(text: str, channels: Sequence[str]) -> dict[str, str]:
-    """Per-channel model specs from lines ``channel: spec`` (blank lines and ``#`` ignored).
-
-    Raises
-    ------
-    ModelError
-        A line without ``:``, or a channel that is not among ``channels``.
-    """
-    out: dict[str, str] = {}
-    for raw in (text or "").splitlines():
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        name, sep, spec = line.partition(":")
-        if not sep or not name.strip() or not spec.strip():
-            raise ModelError(
-                f"cannot read the per-channel line {raw.strip()!r}: write "
-                "'channel: spec', e.g. 'gyro_z: GM+WN+RW'"
-            )
-        name = name.strip()
-        if name not in channels:
-            raise ModelError(
-                f"the per-channel line names {name!r}, which is not among the "
-                f"chosen channels ({', '.join(channels)})"
-            )
-        out[name] = spec.strip()
-    return out
-
-
-def shareable_labels(models: Mapping[str, eg.Model]) -> list[tuple[str, list[str]]]:
-    """Labels of the shareable processes (WN, RW, AR1, GM) in model order, each with the
-    channels whose model has it: ``[("GM", [...]), ("WN", [...]), ...]``."""
-    order: list[str] = []
-    has: dict[str, list[str]] = {}
-    for c, m in models.items():
-        for lab, p in zip(m.labels, m.processes, strict=True):
-            if p.code not in SHAREABLE:
-                continue
-            if lab not in has:
-                order.append(lab)
-                has[lab] = []
-            has[lab].append(c)
-    return [(lab, has[lab]) for lab in order]
-
-
-def build_model(
-    channels: Sequence[str],
-    spec: str,
-    overrides: str = "",
-    shared: Mapping[str, Sequence[str]] | None = None,
-) -> MultiModel:
-    """The multivariate model of the view's controls.
-
-    Parameters
-    ----------
-    channels : sequence of str
-        The chosen channels (2 to 6), in grid order.
-    spec : str
-        Latent model of every channel (``"WN+RW"``), parsed by :func:`engine.parse_model`.
-    overrides : str
-        Optional lines ``channel: spec`` replacing ``spec`` for some channels.
-    shared : mapping of str to sequence of str, optional
-        Label -> channels that share it; groups of fewer than 2 chosen channels mean "not
-        shared" and are ignored.
-
-    Returns
-    -------
-    MultiModel
-
-    Raises
-    ------
-    ModelError
-        Bad spec, unknown channel, a process that cannot be shared, fewer than 2 channels.
-    """
-    chans = list(channels)
-    if len(chans) < MIN_CHANNELS:
-        raise ModelError(
-            f"choose at least {MIN_CHANNELS} channels (chosen: {', '.join(chans) or 'none'})"
-        )
-    if not (spec or "").strip():
-        raise ModelError("the model is empty: type a per-channel model, e.g. WN+RW")
-    base = parse_model(spec)
-    per = parse_overrides(overrides, chans)
-    models = {c: parse_model(per[c]) if c in per else base for c in chans}
-    groups: dict[str, list[str]] = {}
-    for lab, group in (shared or {}).items():
-        g = [c for c in chans if c in set(group)]
-        if len(g) >= 2:
-            groups[lab] = g
-    return MultiModel(chans, models, shared=groups)
-
-
-def model_curve_grid(n_levels: int, per_octave: int = PER_OCTAVE) -> np.ndarray:
-    """Scales (samples) of the smooth model curves: ``2 .. 2^J``, ``per_octave`` per octave.
-
-    Every ``per_octave``-th point is a dyadic scale ``2^j`` (where the empirical values are).
-    """
-    j = int(n_levels)
-    return 2.0 ** np.linspace(1.0, float(j), (j - 1) * per_octave + 1)
-
-
-def _nan_unless(mask: np.ndarray, a: np.ndarray) -> np.ndarray:
-    return np.where(mask, a, np.nan)
-
-
-def _empirical(wvm: eg.WVMatrix, p: int, q: int) -> dict[str, Any]:
-    v = np.asarray(wvm.values[:, p, q], float)
-    lo = np.asarray(wvm.ci_low[:, p, q], float)
-    hi = np.asarray(wvm.ci_high[:, p, q], float)
-    tau_s = np.asarray(wvm.tau_s, float)
-    base = {
-        "tau_s": tau_s,
-        "level": np.asarray(wvm.levels),
-        "value": v,
-        "ci_low": lo,
-        "ci_high": hi,
-    }
-    if p == q:
-        return {
-            **base,
-            "y": _nan_unless(v > 0, v),
-            "y_low": _nan_unless(lo > 0, lo),
-            "y_high": _nan_unless(hi > 0, hi),
-            "fill": [EMPIRICAL_COLOR] * v.size,
-            "sign": ["+" if x >= 0 else "-" for x in v],
-        }
-    a = np.abs(v)
-    straddle = (lo <= 0) & (hi >= 0)
-    ends = np.concatenate(
-        [a[a > 0], np.abs(lo)[~straddle & (lo != 0)], np.abs(hi)[~straddle & (hi != 0)]]
-    )
-    floor = 0.5 * float(ends.min()) if ends.size else 1e-300
-    y_low = np.where(straddle, floor, np.minimum(np.abs(lo), np.abs(hi)))
-    y_high = np.maximum(np.abs(lo), np.abs(hi))
-    return {
-        **base,
-        "y": _nan_unless(a > 0, a),
-        "y_low": y_low,
-        "y_high": y_high,
-        "fill": [EMPIRICAL_COLOR if x >= 0 else _HOLLOW for x in v],
-        "sign": ["+" if x >= 0 else "-" for x in v],
-    }
-
-
-def _empty_emp() -> dict[str, Any]:
-    return {
-        k: np.zeros(0)
-        for k in ("tau_s", "level", "value", "ci_low", "ci_high", "y", "y_low", "y_high")
-    } | {"fill": [], "sign": []}
-
-
-def _empty_total() -> dict[str, Any]:
-    return {"tau_s": np.zeros(0), "pos": np.zeros(0), "neg": np.zeros(0), "value": np.zeros(0)}
-
-
-def _empty_comp() -> dict[str, Any]:
-    return {"tau_s": np.zeros(0), "wv": np.zeros(0)}
-
-
-def _color_label(key: str) -> str:
-    """``gyro_x:WN`` -> ``WN``; a shared key is its label."""
-    return key.rpartition(":")[2]
-
-
-def grid_data(
-    wvm: eg.WVMatrix, result: Any = None, per_octave: int = PER_OCTAVE
-) -> dict[tuple[int, int], dict[str, Any]]:
-    """The data of every cell of the grid (row p, column q, q <= p).
-
-    Parameters
-    ----------
-    wvm : WVMatrix
-        The empirical WV (diagonal) and WCCV (off-diagonal) with intervals.
-    result : MGMWMResult, optional
-        A fit of ``wvm``'s channels; None draws the empirical values only.
-    per_octave : int
-        Points per octave of the model curves (on :func:`model_curve_grid`).
-
-    Returns
-    -------
-    dict
-        ``(p, q) -> {"emp", "total", "components"}``. ``emp``: the columns of the empirical
-        source: ``value``, ``ci_low``, ``ci_high`` as estimated, ``y``/``y_low``/``y_high``
-        as drawn (the WV on the diagonal; ``|WCCV|`` off it, an interval containing 0
-        reaching down to half the smallest non-zero magnitude of the cell), ``fill`` (hollow
-        for a negative WCCV). ``total``: ``tau_s``, ``value`` (the implied WV/WCCV),
-        ``pos``/``neg`` (its magnitude where positive/negative, else NaN). ``components``: a
-        list of ``(key, label, negative, {"tau_s", "wv"})`` for every process non-zero in the
-        cell (keys as ``MGMWMResult.components``: ``"RW"`` shared, ``"gyro_x:WN"`` own).
-    """
-    k = wvm.k
-    out: dict[tuple[int, int], dict[str, Any]] = {}
-    comps: dict[str, np.ndarray] = {}
-    if result is not None:
-        tau = model_curve_grid(wvm.n_levels, per_octave)
-        tau_s = tau / wvm.fs
-        comps = result.model.components(tau, wvm.fs)
-        total = np.sum(np.array(list(comps.values())), axis=0)
-    for p in range(k):
-        for q in range(p + 1):
-            cell: dict[str, Any] = {
-                "emp": _empirical(wvm, p, q),
-                "total": _empty_total(),
-                "components": [],
-            }
-            if result is not None:
-                t = total[:, p, q]
-                cell["total"] = {
-                    "tau_s": tau_s,
-                    "value": t,
-                    "pos": _nan_unless(t > 0, t),
-                    "neg": _nan_unless(t < 0, -t),
-                }
-                for key, arr in comps.items():
-                    y = arr[:, p, q]
-                    if not np.any(y != 0):
-                        continue
-                    neg = bool(np.sum(y) < 0)
-                    cell["components"].append(
-                        (
-                            key,
-                            _color_label(key),
-                            neg,
-                            {"tau_s": tau_s, "wv": _nan_unless(y != 0, np.abs(y))},
-                        )
-                    )
-            out[(p, q)] = cell
-    return out
-
-
-COV_COLUMNS = ("process", "channel_a", "channel_b", "covariance", "unit", "correlation")
-PARAM_COLUMNS = ("channel", "process", "parameter", "value", "unit")
-
-
-def _channel_unit(wvm: eg.WVMatrix, channel: str) -> str:
-    i = wvm.channels.index(channel)
-    return wvm.units[i] if i < len(wvm.units) else ""
-
-
-def covariance_rows(result: Any) -> dict[str, list[Any]]:
-    """Rows of the shared-process table: every pair ``a <= b`` of every shared group.
-
-    Columns: ``process`` (label and code, with beta/phi for AR1/GM), ``channel_a``,
-    ``channel_b``, ``covariance`` (float, per-sample linear parameter: WN sigma2, RW gamma2,
-    AR1 innovation variance, GM stationary variance), ``unit`` (of the pair: ``(deg/s)^2``,
-    or ``deg/s·m/s^2`` for channels in different units), ``correlation`` [1] (float; 1 on
-    the diagonal pairs, NaN when a variance is 0).
-    """
-    rows: dict[str, list[Any]] = {c: [] for c in COV_COLUMNS}
-    if result is None:
-        return rows
-    for lab, est in result.shared.items():
-        name = lab if lab == est.code else f"{lab} ({est.code})"
-        if est.nl is not None:
-            name += f", {est.nl_name} = {format_value(est.nl)}{' 1/s' if est.code == 'GM' else ''}"
-        rho = est.corr
-        g = est.channels
-        units = [_channel_unit(result.wvm, c) for c in g]
-        for a in range(len(g)):
-            for b in range(a, len(g)):
-                ua, ub = units[a], units[b]
-                unit = squared(ua or "u") if ua == ub else f"{ua or 'u'}·{ub or 'u'}"
-                rows["process"].append(name)
-                rows["channel_a"].append(g[a])
-                rows["channel_b"].append(g[b])
-                rows["covariance"].append(float(est.cov[a, b]))
-                rows["unit"].append(_pretty(unit))
-                rows["correlation"].append(float(rho[a, b]))
-    return rows
-
-
-def parameter_rows(result: Any) -> dict[str, list[Any]]:
-    """Rows of the per-channel parameter table (independent processes, plus the common
-    beta/phi of shared AR1/GM processes); ``value`` as float."""
-    rows: dict[str, list[Any]] = {c: [] for c in PARAM_COLUMNS}
-    if result is None:
-        return rows
-    for r in result.param_records:
-        if r.name.startswith("cov["):
-            continue
-        rows["channel"].append(f"shared ({', '.join(r.channels)})" if r.shared else r.channels[0])
-        rows["process"].append(r.label)
-        rows["parameter"].append(r.name)
-        rows["value"].append(float(r.value))
-        rows["unit"].append(_pretty(r.unit))
-    return rows
-
-
-def fit_text(result: Any) -> str:
-    """One paragraph: objective, weights, method, time and warnings of a fit."""
-    if result is None:
-        return ""
-    w = result.wvm
-    parts = [
-        f"**Objective** {format_value(result.objective)} [1] ({result.weights} "
-        f"weights) for **{html.escape(result.model.spec())}**: {w.k} channels, "
-        f"N = {w.n:,}, fs = {w.fs:g} Hz, {w.n_levels} levels; {result.method}, "
-        f"{result.n_evaluations} evaluations, {1e3 * result.elapsed_s:.0f} ms."
-    ]
-    if result.psd_active:
-        parts.append("A covariance is on the edge of positive semi-definiteness.")
-    if result.at_bound:
-        parts.append(f"At a bound: {html.escape(', '.join(result.at_bound))}.")
-    parts += [f"Warning: {html.escape(w)}." for w in result.warnings]
-    if not result.converged:
-        parts.append(html.escape(result.message))
-    return " ".join(parts)
-
-
-class Cancelled(Exception):
-    """Raised by the progress callback when the user cancels the dependence test."""
-
-
-def run_dependence_test(
-    wvm: eg.WVMatrix,
-    model: MultiModel,
-    *,
-    B: int = 100,
-    seed: int = 0,
-    progress: Callable[[int, int], None] | None = None,
-) -> DependenceTest:
-    """:func:`engine.dependence_test` of every shared process (``weights="ci"``, one worker).
-
-    ``progress(done, B)`` is called first with ``done = 0`` and then after every replicate;
-    it may raise to stop the test.
-
-    Raises
-    ------
-    ModelError
-        The model shares nothing.
-    FitError
-        Half of the replicates or more failed.
-    """
-    if B < 1:
-        raise ValueError(f"B must be at least 1, got {B}")
-    if not model.shared:
-        raise ModelError(
-            "the model shares no process: mark the channels that share one first (nothing to test)"
-        )
-    if progress is not None:
-        progress(0, B)  # the two observed fits come first
-    return eg.dependence_test(
-        wvm, model, B=B, seed=seed, workers=1, weights="ci", progress=progress
-    )
-
-
-def dependence_text(t: DependenceTest, spec: str) -> str:
-    """The test's outcome in words (Markdown)."""
-    verdict = (
-        "the channels are dependent (the shared covariances improve the fit more than chance)"
-        if t.p_value < 0.05
-        else "no evidence of dependence at the 5% level"
-    )
-    return (
-        f"**Dependence test** of {', '.join(t.labels)} in *{html.escape(spec)}*: "
-        f"D = Q(independent) - Q(shared) = {format_value(t.statistic)} [1], "
-        f"p = {format_value(t.p_value, 3)} from {t.B} parametric-bootstrap replicates: "
-        f"{verdict}."
-    )
-
-
-# -----------------------------------------------------------------------------------------
-# figures (built once per grid size, updated in place)
-# -----------------------------------------------------------------------------------------
-class _Cell:
-    """One small log-log figure of the grid."""
-
-    def __init__(self, diag: bool, x_range: Any, size: int, name: str) -> None:
-        p = figure(
-            x_axis_type="log",
-            y_axis_type="log",
-            width=size,
-            height=int(0.8 * size),
-            x_range=x_range,
-            tools="pan,wheel_zoom,box_zoom,reset,save",
-            name=name,
-            title="",
-            min_border_left=5,
-            min_border_right=5,
-        )
-        p.title.text_font_size = "12px"
-        p.grid.grid_line_alpha = 0.35
-        p.axis.major_label_text_font_size = "10px"
-        self.diag = diag
-        self.emp = ColumnDataSource(_empty_emp())
-        if diag:
-            p.varea(
-                x="tau_s",
-                y1="y_low",
-                y2="y_high",
-                source=self.emp,
-                fill_color=BAND_COLOR,
-                fill_alpha=0.25,
-            )
-            p.line("tau_s", "y", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.2)
-        else:
-            p.segment(
-                x0="tau_s",
-                y0="y_low",
-                x1="tau_s",
-                y1="y_high",
-                source=self.emp,
-                line_color=BAND_COLOR,
-                line_width=2,
-                line_alpha=0.7,
-            )
-        dots = p.scatter(
-            "tau_s", "y", source=self.emp, size=5, fill_color="fill", line_color=EMPIRICAL_COLOR
-        )
-        p.add_tools(
-            HoverTool(
-                renderers=[dots],
-                tooltips=[
-                    ("level", "@level"),
-                    ("τ [s]", "@tau_s{0.[000]e}"),
-                    ("estimate", "@value{0.000e}"),
-                    ("95% interval", "@ci_low{0.00e} .. @ci_high{0.00e}"),
-                ],
-            )
-        )
-        self.comps = [ColumnDataSource(_empty_comp()) for _ in range(N_CELL_COMPONENTS)]
-        self.comp_renderers = [
-            p.line("tau_s", "wv", source=s, line_width=1.6, line_dash="dashed", visible=False)
-            for s in self.comps
-        ]
-        self.total = ColumnDataSource(_empty_total())
-        p.line("tau_s", "pos", source=self.total, line_color=TOTAL_COLOR, line_width=2.2)
-        if not diag:
-            p.line(
-                "tau_s",
-                "neg",
-                source=self.total,
-                line_color=TOTAL_COLOR,
-                line_width=2.2,
-                line_dash="dotted",
-            )
-        self.figure = p
-
-    def update(self, data: dict[str, Any] | None, title: str, ylabel: str) -> None:
-        self.figure.title.text = title
-        if self.figure.yaxis[0].axis_label != ylabel:
-            self.figure.yaxis.axis_label = ylabel
-        if data is None:
-            self.emp.data = _empty_emp()
-            self.total.data = _empty_total()
-            comps: list[Any] = []
-        else:
-            self.emp.data = data["emp"]
-            self.total.data = data["total"]
-            comps = data["components"]
-        for i, (src, r) in enumerate(zip(self.comps, self.comp_renderers, strict=True)):
-            if i < len(comps):
-                _key, lab, neg, d = comps[i]
-                src.data = d
-                r.glyph.line_color = component_color(lab)
-                r.glyph.line_dash = "dotted" if neg else "dashed"
-                r.visible = True
-            elif r.visible or len(src.data["tau_s"]):
-                src.data = _empty_comp()
-                r.visible = False
-
-
-class _Grid:
-    """The k x k grid (lower triangle and diagonal) with one shared x range."""
-
-    def __init__(self, k: int) -> None:
-        self.k = k
-        size = max(170, min(300, 1000 // k))
-        self.x_range = DataRange1d()
-        self.cells: dict[tuple[int, int], _Cell] = {}
-        rows = []
-        for p in range(k):
-            row: list[Any] = []
-            for q in range(k):
-                if q <= p:
-                    c = _Cell(p == q, self.x_range, size, f"mcell_{p}_{q}")
-                    self.cells[(p, q)] = c
-                    row.append(c.figure)
-                else:
-                    row.append(None)
-            rows.append(row)
-        for q in range(k):
-            self.cells[(k - 1, q)].figure.xaxis.axis_label = "scale τ [s]"
-        self.layout = gridplot(rows, toolbar_location="right", merge_tools=True)
-        self.pane = pn.pane.Bokeh(self.layout, margin=(5, 10))
-
-    def update(self, wvm: eg.WVMatrix | None, data: dict[tuple[int, int], Any] | None) -> None:
-        for (p, q), cell in self.cells.items():
-            if wvm is None or data is None:
-                cell.update(None, "", "")
-                continue
-            a, b = wvm.channels[p], wvm.channels[q]
-            ua = wvm.units[p] if p < len(wvm.units) else ""
-            ub = wvm.units[q] if q < len(wvm.units) else ""
-            if p == q:
-                title, ylab = f"WV {a}", f"ν² [{unit_squared(ua)}]"
-            else:
-                unit = unit_squared(ua) if ua == ub else f"{ua or 'unit'}·{ub or 'unit'}"
-                title, ylab = f"|WCCV| {a} × {b}", f"[{unit}]"
-            cell.update(data[(p, q)], title, ylab if q == 0 else "")
-
-
-def _table(
-    columns: Sequence[tuple[str, str, int, Any]], name: str, css: str, height: int
-) -> tuple[ColumnDataSource, DataTable]:
-    src = ColumnDataSource({c: [] for c, *_ in columns}, name=f"{name}_rows")
-    cols = [
-        TableColumn(field=c, title=t, width=w, formatter=f or StringFormatter(), sortable=False)
-        for c, t, w, f in columns
-    ]
-    table = DataTable(
-        source=src,
-        columns=cols,
-        index_position=None,
-        sortable=False,
-        selectable=False,
-        autosize_mode="force_fit",
-        height=height,
-        row_height=26,
-        sizing_mode="stretch_width",
-        name=name,
-        css_classes=[css],
-    )
-    return src, table
-
-
-# -----------------------------------------------------------------------------------------
-# the tab
-# -----------------------------------------------------------------------------------------
-class MultiView:
+class MultiView(pn.viewable.Viewer):
     """Widgets, grid, tables and callbacks of the "Multi-channel" tab of one session.
 
     Parameters
     ----------
-    app : GMWMApp
-        The session's app (its ``state`` holds the loaded log).
+    state : AppState
+        The session state (it holds the loaded log).
+    jobs : Jobs
+        The session's job runner (worker threads, document lock, timers).
 
     Attributes
     ----------
@@ -678,14 +123,16 @@ class MultiView:
         Fits started by this view (for tests and diagnostics).
     """
 
-    def __init__(self, app: GMWMApp) -> None:
-        self.app = app
-        self.state = app.state
+    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+
+    def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
+        super().__init__(**params)
+        self.jobs = jobs
+        self.state = state
         self.wvm: eg.WVMatrix | None = None
         self.result: Any = None
         self.error = ""
         self.n_fits = 0
-        self.n_wvm = 0  # WV/WCCV matrices computed (cache misses)
         self._syncing = False
         self._running = False
         self._dirty = False
@@ -694,15 +141,12 @@ class MultiView:
         self._ticker: Any = None
         self._idle = threading.Event()
         self._idle.set()
-        self._cache_lock = threading.Lock()
-        self._cache_log: Any = None
-        self._cache: dict[tuple, tuple[eg.WVMatrix, str]] = {}
         self._data_key: Any = None
         self._shared_groups: dict[str, list[str]] = {lab: [] for lab in DEFAULT_SHARED}
         self._shared_all = set(DEFAULT_SHARED)  # labels shared by every channel (default)
         self._share_labels: list[str] = []
-        self._grids: dict[int, _Grid] = {}
-        self.grid: _Grid | None = None
+        self._grids: dict[int, GridFigure] = {}
+        self.grid: GridFigure | None = None
 
         self.channel_choice = pn.widgets.MultiChoice(
             label=f"Channels ({MIN_CHANNELS} to {MAX_CHANNELS}, in grid order)",
@@ -758,7 +202,7 @@ class MultiView:
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mobjective"]
         )
         sci = ScientificFormatter(precision=4)
-        self.cov_source, self.cov_table = _table(
+        self.cov_source, self.cov_table = make_table(
             [
                 ("process", "shared process", 150, None),
                 ("channel_a", "channel", 80, None),
@@ -771,7 +215,7 @@ class MultiView:
             "gmwm-mcov",
             300,
         )
-        self.param_source, self.param_table = _table(
+        self.param_source, self.param_table = make_table(
             [
                 ("channel", "channel", 110, None),
                 ("process", "process", 60, None),
@@ -871,9 +315,7 @@ class MultiView:
             sizing_mode="stretch_width",
         )
         self.state.param.watch(self._on_state, "revision")
-        tabs = getattr(app, "tabs", None)
-        if tabs is not None:
-            tabs.param.watch(self._on_tab, "active")
+        self.param.watch(self._on_tab, "active")
         self._sync_data(force=True)
 
     # ------------------------------------------------------------------------------------
@@ -980,13 +422,11 @@ class MultiView:
     @property
     def visible(self) -> bool:
         """The tab is the one shown."""
-        tabs = getattr(self.app, "tabs", None)
-        if tabs is None:
-            return True
-        try:
-            return tabs._names[tabs.active] == "Multi-channel"
-        except (IndexError, AttributeError):
-            return False
+        return self.active
+
+    def __panel__(self) -> pn.Column:
+        """The tab's content."""
+        return self.panel
 
     def _on_tab(self, _event: Any) -> None:
         if self._stale and self.visible:
@@ -1030,53 +470,6 @@ class MultiView:
     # ------------------------------------------------------------------------------------
     # the WV/WCCV matrix (worker thread, cached)
     # ------------------------------------------------------------------------------------
-    def wv_matrix_for(self, lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
-        """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
-
-        Computed once per (log, channels, fs) and cached (worker-thread safe).
-
-        Raises
-        ------
-        ValueError
-            No raw data (a WV summary file), too few or unusable channels.
-        """
-        if lg is None:
-            raise ValueError("load a log first")
-        if lg.is_summary:
-            raise ValueError(
-                f"{getattr(lg, 'source', '') or 'this file'} is a wavelet-variance "
-                "summary without raw samples: the wavelet cross-covariance needs "
-                "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
-            )
-        chans = tuple(channels)
-        key = (chans, float(fs))
-        with self._cache_lock:
-            if self._cache_log is not lg:
-                self._cache_log, self._cache = lg, {}
-            hit = self._cache.get(key)
-        if hit is not None:
-            return hit
-        series = {c: np.asarray(lg.channels[c]) for c in chans}
-        sizes = {c: int(a.size) for c, a in series.items()}
-        n = min(sizes.values())
-        note = ""
-        if len(set(sizes.values())) > 1:
-            desc = ", ".join(f"{c}: {v:,}" for c, v in sizes.items())
-            note = (
-                f"The channels have different lengths ({desc} samples); all are "
-                f"truncated to the shortest, {n:,} samples."
-            )
-            series = {c: a[:n] for c, a in series.items()}
-        units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
-        wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
-        with self._cache_lock:
-            if self._cache_log is lg:
-                self._cache[key] = (wvm, note)
-                while len(self._cache) > N_CACHE:
-                    self._cache.pop(next(iter(self._cache)))
-            self.n_wvm += 1
-        return wvm, note
-
     # ------------------------------------------------------------------------------------
     # fitting (worker thread, coalesced, stale results dropped)
     # ------------------------------------------------------------------------------------
@@ -1093,6 +486,11 @@ class MultiView:
         )
 
     @property
+    def n_wvm(self) -> int:
+        """WV/WCCV matrices computed by the session (the state's cache misses)."""
+        return self.state.wvm_computations
+
+    @property
     def busy(self) -> bool:
         """A fit is running or scheduled."""
         return self._running or self._scheduled
@@ -1107,18 +505,17 @@ class MultiView:
         if self._running:
             self._dirty = True
             return
-        if self.app._served:
+        if self.jobs.served:
             if self._scheduled:
                 return
             self._scheduled = True
             self._idle.clear()
-            doc = self.app._doc
 
             def fire() -> None:
                 self._scheduled = False
                 self._start()
 
-            doc.add_timeout_callback(fire, DEBOUNCE_MS)
+            self.jobs.later(fire, DEBOUNCE_MS)
             return
         self._start()
 
@@ -1158,12 +555,12 @@ class MultiView:
         self._set_busy(True, f"Fitting {', '.join(chans)}")
 
         def work() -> tuple[Any, Any, str, str]:
-            wvm, note = self.wv_matrix_for(lg, chans, float(fs or lg.fs))
+            wvm, note = self.state.wv_matrix(lg, chans, float(fs or lg.fs))
             try:
                 mm = build_model(chans, spec, over, groups)
                 res = eg.fit_mgmwm(wvm, mm)
             except ValueError as e:  # ModelError, FitError: bad spec, unidentifiable, short
-                return wvm, None, f"Could not fit the model: {_message(e)}", note
+                return wvm, None, f"Could not fit the model: {message_of(e)}", note
             return wvm, res, "", note
 
         def apply(out: tuple[Any, Any, str, str]) -> None:
@@ -1175,7 +572,7 @@ class MultiView:
         def fail(e: BaseException) -> None:
             if self._dirty or settings != self._settings():
                 return
-            self._show(None, None, f"Could not compute the WV/WCCV matrix: {_message(e)}", "")
+            self._show(None, None, f"Could not compute the WV/WCCV matrix: {message_of(e)}", "")
 
         def done() -> None:
             self._running = False
@@ -1186,43 +583,23 @@ class MultiView:
             elif not self._scheduled:
                 self._idle.set()
 
-        self.app._spawn(partial(self._background, work, apply, fail, done))
+        self.jobs.run(work, self._guarded(apply), self._guarded(fail), done)
 
-    async def _background(
-        self,
-        work: Callable[[], Any],
-        apply: Callable[[Any], Any],
-        fail: Callable[[BaseException], Any],
-        done: Callable[[], Any],
-    ) -> None:
-        """Run ``work`` in the app's worker pool; the rest under the document lock."""
-        from .app import _EXECUTOR
+    def _guarded(self, fn: Callable[[Any], Any]) -> Callable[[Any], None]:
+        """``fn`` that shows a display problem in the view instead of raising it."""
 
-        out: Any = None
-        err: BaseException | None = None
-        try:
-            out = await asyncio.get_running_loop().run_in_executor(_EXECUTOR, work)
-        except asyncio.CancelledError:  # the session closed
-            self.app._locked(done)
-            raise
-        except Exception as e:  # reported in the view, never a traceback
-            if not isinstance(e, (ValueError, KeyError, TypeError, Cancelled)):
-                log.exception("multi-channel fit failed")
-            err = e
-
-        def finish() -> None:
+        def run(arg: Any) -> None:
+            if isinstance(arg, BaseException) and not isinstance(
+                arg, (ValueError, KeyError, TypeError, Cancelled)
+            ):
+                log.error("multi-channel job failed: %s: %s", type(arg).__name__, arg)
             try:
-                if err is not None:
-                    fail(err)
-                else:
-                    apply(out)
+                fn(arg)
             except Exception as e:  # a display problem: say so, keep the session
                 log.exception("multi-channel display failed")
                 self._message(f"Display error: {type(e).__name__}: {e}")
-            finally:
-                done()
 
-        self.app._locked(finish)
+        return run
 
     # ------------------------------------------------------------------------------------
     # test of dependence (on request, worker thread, progress and cancel)
@@ -1246,7 +623,7 @@ class MultiView:
             self._dep_last = now
             value = int(100 * done / max(total, 1))
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
-            self.app._locked(
+            self.jobs.locked(
                 lambda: (
                     self.dep_progress.param.update(value=value),
                     setattr(self.dep_text, "object", text),
@@ -1296,10 +673,10 @@ class MultiView:
             if isinstance(e, Cancelled):
                 self.dep_text.object = "Dependence test cancelled."
             else:
-                self.dep_text.object = f"**Dependence test failed:** {html.escape(_message(e))}"
+                self.dep_text.object = f"**Dependence test failed:** {html.escape(message_of(e))}"
 
-        self.app._spawn(
-            partial(self._background, work, apply, fail, lambda: self._dep_running(False))
+        self.jobs.run(
+            work, self._guarded(apply), self._guarded(fail), lambda: self._dep_running(False)
         )
         return True
 
@@ -1316,12 +693,7 @@ class MultiView:
         """Spinner and progress text; on a server the text counts the seconds of a long fit
         (the figures keep the previous result meanwhile)."""
         self.spinner.visible = on
-        doc = self.app._doc if self.app._served else None
-        if self._ticker is not None and doc is not None:
-            try:
-                doc.remove_periodic_callback(self._ticker)
-            except ValueError:  # already removed
-                pass
+        self.jobs.stop(self._ticker)
         self._ticker = None
         if not on:
             if self.status.object.startswith("⏳"):
@@ -1330,24 +702,23 @@ class MultiView:
         t0 = time.perf_counter()
         text = html.escape(message)
         self.status.object = f"⏳ {text} ..."
-        if doc is not None:
 
-            def tick() -> None:
-                self.status.object = (
-                    f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
-                    "grid shows the previous fit until this one ends)"
-                )
+        def tick() -> None:
+            self.status.object = (
+                f"⏳ {text} ... {time.perf_counter() - t0:.0f} s (the "
+                "grid shows the previous fit until this one ends)"
+            )
 
-            self._ticker = doc.add_periodic_callback(tick, 1000)
+        self._ticker = self.jobs.every(tick, 1000)
 
     def _message(self, text: str) -> None:
         self.error = text
         self.alert.param.update(object=html.escape(text), visible=bool(text))
 
-    def _grid_for(self, k: int) -> _Grid:
+    def _grid_for(self, k: int) -> GridFigure:
         g = self._grids.get(k)
         if g is None:
-            g = self._grids[k] = _Grid(k)
+            g = self._grids[k] = GridFigure(k)
         if self.grid is not g:
             self.grid = g
             self.grid_box.objects = [g.pane]
@@ -1391,7 +762,7 @@ class MultiView:
             seen: dict[str, str] = {}
             shared = {lab: est.channels for lab, est in result.shared.items()}
             for key in result.components:
-                lab = _color_label(key)
+                lab = color_label(key)
                 if lab in seen:
                     continue
                 seen[lab] = f"{lab} (shared by {', '.join(shared[lab])})" if lab in shared else lab

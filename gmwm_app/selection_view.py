@@ -12,17 +12,16 @@ Every figure and table is built once; updates replace ColumnDataSource data in p
 
 from __future__ import annotations
 
-import asyncio
 import html
 import math
 import threading
 import time
 from collections.abc import Callable
-from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import panel as pn
+import param
 from bokeh.models import (
     ColumnDataSource,
     DataTable,
@@ -38,15 +37,15 @@ from .views import (
     BAND_COLOR,
     EMPIRICAL_COLOR,
     TOTAL_COLOR,
-    _wv_data,
     component_color,
     model_grid,
     redraw_table,
     unit_squared,
+    wv_data,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .app import GMWMApp
+    from .jobs import Jobs
     from .state import AppState
 
 __all__ = ["SelectionView", "DEFAULT_MAX_MODEL", "jtest_badge", "ranking_data"]
@@ -141,7 +140,7 @@ class _DecompFigure:
         p.xaxis.axis_label = "scale τ [s]"
         p.axis.axis_label_text_font_style = "normal"
         p.grid.grid_line_alpha = 0.35
-        self.emp = ColumnDataSource(_wv_data(None))
+        self.emp = ColumnDataSource(wv_data(None))
         p.varea(
             x="tau_s",
             y1="ci_low",
@@ -166,7 +165,7 @@ class _DecompFigure:
         self.figure = p
 
     def update(self, wv: Any, model: Any, title: str, unit: str) -> None:
-        self.emp.data = _wv_data(wv)
+        self.emp.data = wv_data(wv)
         self.figure.title.text = title
         label = f"wavelet variance ν² [{unit_squared(unit)}]"
         if self.figure.yaxis[0].axis_label != label:
@@ -195,12 +194,23 @@ class _DecompFigure:
 # -----------------------------------------------------------------------------------------
 # the tab
 # -----------------------------------------------------------------------------------------
-class SelectionView:
-    """Widgets, figures and callbacks of the "Model selection" tab of one session."""
+class SelectionView(pn.viewable.Viewer):
+    """Widgets, figures and callbacks of the "Model selection" tab of one session.
 
-    def __init__(self, app: GMWMApp) -> None:
-        self.app = app
-        self.state: AppState = app.state
+    Parameters
+    ----------
+    state : AppState
+        The session state.
+    jobs : Jobs
+        The session's job runner (worker threads, document lock).
+    """
+
+    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+
+    def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
+        super().__init__(**params)
+        self.jobs = jobs
+        self.state: AppState = state
         self.running = False
         self._cancel = threading.Event()
         self._syncing = False
@@ -350,6 +360,10 @@ class SelectionView:
         )
         self.refresh()  # built on first opening: show the session's ranking at once
 
+    def __panel__(self) -> pn.Column:
+        """The tab's content."""
+        return self.panel
+
     # ------------------------------------------------------------------------------------
     # ranking (off the event loop, with progress and cancel)
     # ------------------------------------------------------------------------------------
@@ -371,13 +385,13 @@ class SelectionView:
         if done == total or now - self._last_progress > 0.1:  # at most ~10 updates a second
             self._last_progress = now
             value = int(100 * done / max(total, 1))
-            self.app._locked(lambda: self.progress.param.update(value=value))
+            self.jobs.locked(lambda: self.progress.param.update(value=value))
             what = (
                 f"Fitted {total} candidates; computing the WV covariance and the WVIC"
                 if done == total
                 else f"Fitting candidate {done} of {total}"
             )
-            self.app._locked(lambda: setattr(self.status, "object", f"⏳ {what} ..."))
+            self.jobs.locked(lambda: setattr(self.status, "object", f"⏳ {what} ..."))
 
     def start_ranking(
         self, spec: str | None = None, *, observer: Callable[[int, int], None] | None = None
@@ -420,48 +434,13 @@ class SelectionView:
                 self.status.object = f"**Ranking failed:** {_message(e)}"
                 state.report_error(f"Could not rank the models: {_message(e)}")
 
-        self.app._spawn(
-            partial(self._background, work, apply, fail, lambda: self._set_running(False))
-        )
+        self.jobs.run(work, apply, fail, lambda: self._set_running(False), key="ranking")
 
     def cancel(self) -> None:
         """Ask the running ranking to stop (at its next candidate)."""
         if self.running:
             self._cancel.set()
             self.status.object = "Cancelling ..."
-
-    async def _background(
-        self,
-        work: Callable[[], Any],
-        apply: Callable[[Any], Any],
-        fail: Callable[[BaseException], Any],
-        done: Callable[[], Any] | None = None,
-    ) -> None:
-        """Run ``work`` in the app's worker pool; ``apply``/``fail`` under the document lock."""
-        from .app import _EXECUTOR
-
-        out: Any = None
-        err: BaseException | None = None
-        try:
-            out = await asyncio.get_running_loop().run_in_executor(_EXECUTOR, work)
-        except asyncio.CancelledError:  # the session closed
-            if done is not None:
-                self.app._locked(done)
-            raise
-        except Exception as e:  # reported in the page (never a traceback)
-            err = e
-
-        def finish() -> None:
-            try:
-                if err is not None:
-                    fail(err)
-                else:
-                    apply(out)
-            finally:
-                if done is not None:
-                    done()
-
-        self.app._locked(finish)
 
     # ------------------------------------------------------------------------------------
     # intervals and J-test (Fit tab and comparison), cached per fit
@@ -480,7 +459,7 @@ class SelectionView:
         def fail(e: BaseException) -> None:
             state.report_error(f"Could not compute the intervals: {_message(e)}")
 
-        if not self.app._served:  # tests, notebooks: at once
+        if not self.jobs.served:  # tests, notebooks: at once
             try:
                 return state.install_inference(state.compute_inference(result))
             except ValueError as e:
@@ -488,14 +467,11 @@ class SelectionView:
                 return False
         self._pending.add(id(result))
 
-        self.app._spawn(
-            partial(
-                self._background,
-                lambda: state.compute_inference(result),
-                state.install_inference,
-                fail,
-                lambda: self._pending.discard(id(result)),
-            )
+        self.jobs.run(
+            lambda: state.compute_inference(result),
+            state.install_inference,
+            fail,
+            lambda: self._pending.discard(id(result)),
         )
         return False
 

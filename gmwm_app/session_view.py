@@ -23,11 +23,12 @@ import panel as pn
 
 from engine.export import export
 from engine.io import Session, SessionError, session_from_json, session_to_json
+from gmwm_app.data import LoadedData
 from gmwm_app.limits import check_path, check_upload_size
-from gmwm_app.state import AppState, LoadedData, demo_path
+from gmwm_app.state import AppState, demo_path
 
 if TYPE_CHECKING:
-    from gmwm_app.app import GMWMApp
+    from gmwm_app.jobs import Jobs
 
 __all__ = [
     "session_json",
@@ -187,7 +188,7 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
         # the uploaded file is loaded in this session again: restore the session on it
         plan = RestorePlan(
             plan.session,
-            LoadedData(state.log, "upload", state.filename, "", wv_cache=dict(state._wv_cache)),
+            LoadedData(state.log, "upload", state.filename, "", wv_cache=state.cached_wvs()),
         )
         problems = []
     if plan.loaded is not None:
@@ -248,9 +249,10 @@ _SMALL = {"font-size": "12px", "color": "#555"}
 class SessionPanel:
     """The session, export and time-gap widgets of one page (see the module docstring)."""
 
-    def __init__(self, app: GMWMApp) -> None:
-        self.app = app
-        s = app.state
+    def __init__(self, state: AppState, jobs: Jobs) -> None:
+        self.state = state
+        self.jobs = jobs
+        s = state
         self._retry: tuple[str, dict[str, Any]] | None = None
         self._load: dict[str, Any] = {}  # load options of the data shown (for the session)
         self.session_download = pn.widgets.FileDownload(
@@ -333,7 +335,7 @@ class SessionPanel:
             pass
 
     def refresh(self) -> None:
-        s = self.app.state
+        s = self.state
         self.session_download.filename = session_filename(s)
         stem = Path(s.filename or "data").stem
         self.kalibr_download.filename = f"imu_{stem}_{s.channel or 'none'}.yaml"
@@ -351,7 +353,7 @@ class SessionPanel:
 
     # callbacks -------------------------------------------------------------------------------
     def _session_file(self) -> io.StringIO:
-        s = self.app.state
+        s = self.state
         try:
             return io.StringIO(session_json(s, self._load))
         except (SessionError, ValueError) as e:
@@ -359,7 +361,7 @@ class SessionPanel:
             return io.StringIO(f"# could not write the session: {e}\n")
 
     def _export(self, fmt: str) -> io.StringIO:
-        s = self.app.state
+        s = self.state
         try:
             return io.StringIO(export_text(s, fmt))
         except ValueError as e:
@@ -375,17 +377,10 @@ class SessionPanel:
         def apply(plan: RestorePlan) -> None:
             if plan.loaded is not None:
                 self._load = dict(plan.loaded.load)
-            apply_restore(self.app.state, plan)
+            apply_restore(self.state, plan)
             self.restore_input.value = None  # the same file can be restored again
 
-        self.app._spawn(
-            partial(
-                self.app._offload,
-                f"Restoring the session {name}",
-                partial(prepare_restore, data, name),
-                apply,
-            )
-        )
+        self.jobs.load(f"Restoring the session {name}", partial(prepare_restore, data, name), apply)
 
     def loaded(self, loaded: LoadedData) -> None:
         """Remember the load options of newly installed data (for the session file)."""
@@ -413,11 +408,7 @@ class SessionPanel:
         self.gap_box.visible = False
         kw = {**kw, "segment": "longest"}
         what = kw.get("filename") or kw.get("path") or source
-        self.app._spawn(
-            partial(
-                self.app._offload,
-                f"Reading the longest clean segment of {what}",
-                partial(self.app._read_and_warm, source, **kw),
-                self.app._install,
-            )
+        self.jobs.load(
+            f"Reading the longest clean segment of {what}",
+            partial(self.state.read_and_warm, source, **kw),
         )

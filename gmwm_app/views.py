@@ -40,6 +40,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "WVFigures",
+    "wv_data",
     "FitTables",
     "N_COMPONENTS",
     "component_color",
@@ -87,8 +88,9 @@ def component_color(label: str) -> str:
 
 
 def unit_squared(unit: str) -> str:
-    """``(deg/s)²`` for ``deg/s``; ``unit²`` when the unit is unknown."""
-    return squared(unit or "unit").replace("^2", "²")
+    """``(deg/s)²`` for ``deg/s``; ``u²`` when the unit is unknown (:func:`engine.units.squared`,
+    printed with ``²``)."""
+    return squared(unit).replace("^2", "²")
 
 
 def model_grid(wv: eg.WaveletVariance, per_octave: int = GRID_PER_OCTAVE) -> np.ndarray:
@@ -110,7 +112,7 @@ def _empty_wv() -> dict[str, Any]:
     }
 
 
-def _wv_data(wv: eg.WaveletVariance | None) -> dict[str, Any]:
+def wv_data(wv: eg.WaveletVariance | None) -> dict[str, Any]:
     if wv is None:
         return _empty_wv()
     return {
@@ -414,9 +416,9 @@ class WVFigures:
             self.model_hover.tooltips = self._model_tips(state.unit)
         if wv is not self._shown_wv:
             self._shown_wv = wv
-            self.emp.data = _wv_data(wv)
+            self.emp.data = wv_data(wv)
             robust_pair = wv is not None and wv.robust and wv.classical is not None
-            self.alt.data = _wv_data(wv.classical if robust_pair else None)
+            self.alt.data = wv_data(wv.classical if robust_pair else None)
             self.alt_item.visible = bool(robust_pair)
             self.emp_item.label = value(
                 "robust WV (biweight)" if wv is not None and wv.robust else "empirical WV"
@@ -620,7 +622,13 @@ def datasheet_rows(state: AppState) -> list[dict[str, str]]:
             "value": format_value(float(r["value"])),
             "unit": _pretty(r["unit"]),
         }
-        for r in eg.datasheet(m, float(state.fs), state.unit)
+        # the rows of the datasheet download (engine.units), bias-instability floor included
+        for r in eg.datasheet(
+            m,
+            float(state.fs),
+            state.unit,
+            n_levels=state.wv.n_levels if state.wv is not None else None,
+        )
     ]
 
 

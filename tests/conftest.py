@@ -122,7 +122,7 @@ def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
     the demo; yields (port, server thread) once the port accepts connections; always stops."""
     import panel as pn
 
-    from gmwm_app.app import create_application
+    from gmwm_app.server import create_application
 
     old = os.environ.get("GMWM_APP_DEMO")
     os.environ["GMWM_APP_DEMO"] = str(demo_file)

@@ -165,15 +165,12 @@ def test_avsm_reads_the_ieee_coefficients_on_exact_curves(truth, region, rtol):
     assert est.method == "AVSM"
     assert est.params == pytest.approx(model.values(), rel=rtol)
     # the line's reading is the datasheet coefficient (CONVENTIONS, units)
-    ds = {r["quantity"]: r["value"] for r in eg.datasheet(model, FS)}
-    reading = est.details["lines"][truth.code]["reading"]["value"]
-    key = {
-        "WN": "white noise density N",
-        "QN": "quantization Q",
-        "DR": "rate ramp R",
-        "RW": "rate random walk K",
-    }[truth.code]
-    assert reading == pytest.approx(ds[key], rel=rtol)
+    ds = {r["symbol"]: r for r in eg.datasheet(model, FS)}
+    reading = est.details["lines"][truth.code]["reading"]
+    key = {"WN": "N", "QN": "Q", "DR": "R", "RW": "K"}[truth.code]
+    assert reading["value"] == pytest.approx(ds[key]["value"], rel=rtol)
+    # the same symbol and unit spelling as the datasheet (one table: engine.units)
+    assert (reading["name"], reading["unit"]) == (key, ds[key]["unit"])
     np.testing.assert_allclose(est.implied, model.wv(est.tau_samples, FS), rtol=rtol * 10)
 
 
@@ -193,7 +190,8 @@ def test_avsm_bias_instability_floor():
     assert est.extras["BI.B"] == pytest.approx(math.sqrt(floor) / BI_FACTOR, rel=1e-3)
     assert BI_FACTOR == pytest.approx(0.664, abs=5e-4)
     assert "BI" in est.components and len(est.model) == 0
-    assert est.datasheet()[-1]["quantity"] == "bias instability B"
+    assert est.datasheet()[-1]["quantity"] == "bias instability"
+    assert est.datasheet()[-1]["symbol"] == "B"
 
 
 def test_avsm_is_biased_where_the_region_overlaps_another_process():

@@ -10,7 +10,7 @@ discarded by the server (what happens when a closed tab's session expires) and m
 ``live_apps()``, and repeated open/close cycles must not grow the resident memory.
 
 Opening a page builds a Bokeh document of about a thousand models (~1 s of Python on two
-cores); the app builds it in a worker thread (``gmwm_app.app.create_application``), so during
+cores); the app builds it in a worker thread (``gmwm_app.server.create_application``), so during
 the burst of nine page opens the server loop must also keep answering within a second.
 """
 
@@ -194,10 +194,10 @@ def _in_session(app: Any, fn: Any) -> None:
     from panel.io.state import set_curdoc
 
     def run() -> None:
-        with set_curdoc(app._doc):
+        with set_curdoc(app.jobs.doc):
             fn()
 
-    app._doc.add_next_tick_callback(run)
+    app.jobs.doc.add_next_tick_callback(run)
 
 
 class _Probe:
@@ -238,13 +238,13 @@ def _open(served: dict[str, Any], queries: list[dict[str, str]]) -> tuple[list[A
         g.start()
     for g in gets:
         g.join(timeout=60)
-    apps = [a for a in live_apps() if a._served and not any(a is b for b in before)]
+    apps = [a for a in live_apps() if a.served and not any(a is b for b in before)]
     del before
     assert len(apps) == len(queries)
     _MINE.extend(weakref.ref(a) for a in apps)
     for a in apps:  # what the page does once the browser opened it: read, WV, fit
-        a._doc.add_next_tick_callback(a.start)
-    _wait(lambda: all(a._ready and not a.busy for a in apps), "the sessions to start", 40)
+        a.jobs.doc.add_next_tick_callback(a.start)
+    _wait(lambda: all(a.ready and not a.busy for a in apps), "the sessions to start", 40)
     return apps, time.perf_counter() - t0
 
 

@@ -22,15 +22,11 @@ import engine as eg
 from engine.io import ImuLog
 from engine.models import ModelError
 from engine.multivariate import MultiModel
-from gmwm_app.multi_view import (
-    MultiView,
-    build_model,
-    covariance_rows,
-    grid_data,
-    model_curve_grid,
-    parse_overrides,
-)
-from gmwm_app.state import LoadedData, format_value
+from gmwm_app.data import LoadedData
+from gmwm_app.multi_figures import covariance_rows, grid_data, model_curve_grid
+from gmwm_app.multi_fit import build_model, parse_overrides
+from gmwm_app.multi_view import MultiView
+from gmwm_app.state import format_value
 
 GYROS = ["gyro_x", "gyro_y", "gyro_z"]
 TITLE = "Multi-channel"
@@ -361,7 +357,7 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(
 ) -> None:
     v = open_view(app)
     held: list[Any] = []
-    monkeypatch.setattr(app, "_spawn", lambda coro_fn: held.append(coro_fn))
+    monkeypatch.setattr(app.jobs, "spawn", lambda coro_fn: held.append(coro_fn))
     before = v.n_fits
     v.spec_input.value = "WN+RW"  # starts a fit (held: "running")
     assert v.n_fits == before + 1 and v.busy and v.spinner.visible

@@ -148,6 +148,15 @@ def test_exports_of_the_fit(app_state: AppState) -> None:
     )
     ds = sv.export_text(s, "datasheet")
     assert "gyro_x" in ds and "correlation time" in ds
+    # the on-screen datasheet table shows the download's rows (one table: engine.units)
+    from gmwm_app.views import datasheet_rows
+
+    screen = datasheet_rows(s)
+    lines = [ln for ln in ds.splitlines()[1:] if ln.strip()]
+    assert len(screen) == len(lines) and len(screen) > 8
+    for r, ln in zip(screen, lines, strict=True):
+        assert ln.split()[1] == r["process"] and f" {r['quantity']} " in ln
+        assert ln.endswith("  " + r["unit"].replace("²", "^2")), (ln, r)
 
 
 # ---------------------------------------------------------------------------------------------

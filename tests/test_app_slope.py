@@ -9,7 +9,6 @@ method is off the way the scenario says.
 
 from __future__ import annotations
 
-import asyncio
 import json
 import math
 from pathlib import Path
@@ -22,7 +21,8 @@ import engine as eg
 from engine.allan import BI_FACTOR, allan_variance, avsm
 from engine.io import ImuLog
 from engine.teaching import SCENARIOS
-from gmwm_app.slope_view import (
+from gmwm_app.data import LoadedData
+from gmwm_app.slope_data import (
     SlopeResult,
     comparison_values,
     compute_slope,
@@ -30,7 +30,7 @@ from gmwm_app.slope_view import (
     slope_line_data,
     truth_model,
 )
-from gmwm_app.state import AppState, LoadedData, format_value
+from gmwm_app.state import AppState, format_value
 
 
 @pytest.fixture
@@ -100,17 +100,17 @@ def test_regions_give_the_ieee_readings_and_gmwm_of_the_same_processes(app: Any,
     assert direct.params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs, rel=1e-9)
     assert res.estimates["AVSM"].params["WN.sigma2"] == pytest.approx(n**2 * app.state.fs, rel=1e-9)
     assert res.estimates["AVSM"].extras["BI.B"] == pytest.approx(b, rel=1e-9)
-    assert _row(view, "WN", "white noise density N")["AVSM"] == format_value(n)
-    assert _row(view, "BI", "bias instability B")["AVSM"] == format_value(b)
+    assert _row(view, "WN", "white noise density")["AVSM"] == format_value(n)
+    assert _row(view, "BI", "bias instability")["AVSM"] == format_value(b)
     unit = app.state.unit
-    assert _row(view, "WN", "white noise density N")["unit"] == f"{unit}/sqrt(Hz)"
+    assert _row(view, "WN", "white noise density")["unit"] == f"{unit}/sqrt(Hz)"
     # GMWM fitted the same processes, the floor as a GM
     assert res.gmwm_spec == "GM+WN"
     g = eg.fit_gmwm(app.state.wv, "GM+WN")
     assert res.estimates["GMWM"].params["WN.sigma2"] == pytest.approx(
         g.params["WN.sigma2"], rel=1e-6
     )
-    assert _row(view, "WN", "white noise density N")["GMWM"] == format_value(
+    assert _row(view, "WN", "white noise density")["GMWM"] == format_value(
         math.sqrt(g.params["WN.sigma2"] / app.state.fs)
     )
     # the slope line passes through its reading point (N at 1 s)
@@ -134,7 +134,7 @@ def test_demo_truth_is_shown_when_the_demo_is_the_bundled_one(
     m = eg.parse_model(spec)
     assert truth_model(app.state).values() == m.values()
     wn = m.values()["WN.sigma2"]
-    assert _row(view, "WN", "white noise density N")["truth"] == format_value(
+    assert _row(view, "WN", "white noise density")["truth"] == format_value(
         math.sqrt(wn / app.state.fs)
     )
 
@@ -151,8 +151,8 @@ def test_scenario_loads_into_the_session_with_its_regions_and_truth(app: Any, vi
     assert s.to_query()["scenario"] == "qn_wn"
     # truth column: the analytic datasheet values
     n_true, q_true = math.sqrt(1e-3 / sc.fs), math.sqrt(4e-4) / sc.fs
-    assert _row(view, "WN", "white noise density N")["truth"] == format_value(n_true)
-    assert _row(view, "QN", "quantization Q")["truth"] == format_value(q_true)
+    assert _row(view, "WN", "white noise density")["truth"] == format_value(n_true)
+    assert _row(view, "QN", "quantization")["truth"] == format_value(q_true)
     est = view.result.estimates
     # GMWM near the truth (its Monte Carlo SD is about 2% on sigma2, 3% on q2: 5 SD bands)
     assert est["GMWM"].params["WN.sigma2"] == pytest.approx(1e-3, rel=0.10)
@@ -197,11 +197,16 @@ def test_bad_regions_are_messages_and_the_session_keeps_working(app: Any, view: 
 
 def test_a_stale_result_does_not_overwrite_a_newer_one(app: Any, view: Any) -> None:
     view.set_region("WN", 0.01, 1.0)
-    shown = view.result
-    view._job += 1  # a newer computation has started
     stale = SlopeResult(None, messages=["stale"])
-    asyncio.run(view._background(view._job - 1, lambda: stale))
-    assert view.result is shown and "stale" not in view.message.object
+
+    def slow() -> SlopeResult:
+        view.set_region("WN", 0.02, 1.0)  # a newer computation starts (and ends) meanwhile
+        return stale
+
+    view.jobs.run(slow, view.show, key="slope")
+    shown = view.result
+    assert shown is not stale and shown.regions["WN"][0] == pytest.approx(0.02)
+    assert "stale" not in view.message.object and not view.computing
 
 
 def test_hidden_tab_waits_and_robust_wv_still_shows_the_allan_deviation(
@@ -277,7 +282,7 @@ def test_pure_helpers_curves_and_table_rows() -> None:
         curves["AVSM"]["adev"] ** 2, 2 * avsm_m.wv(2 * m, fs) + (BI_FACTOR * b) ** 2, rtol=1e-9
     )
     vals = comparison_values(res.estimates, truth, fs, "deg/s")
-    row = next(r for r in vals if r["quantity"] == "white noise density N")
+    row = next(r for r in vals if r["quantity"] == "white noise density")
     assert row["truth"] == pytest.approx(nn, rel=1e-12)
     assert row["AVSM"] == pytest.approx(nn, rel=0.02)
     assert [r["process"] for r in vals].index("WN") < [r["process"] for r in vals].index("DR")
@@ -317,10 +322,10 @@ def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
             sel.wait_for(timeout=TIMEOUT_MS)
             sel.select_option(label=SCENARIOS["wn_gm"].title)
             t.wait_for(
-                lambda: _app_for(lambda a: a._served and a.state.source == "scenario") is not None,
+                lambda: _app_for(lambda a: a.served and a.state.source == "scenario") is not None,
                 "the scenario in the session",
             )
-            app = _app_for(lambda a: a._served and a.state.source == "scenario")
+            app = _app_for(lambda a: a.served and a.state.source == "scenario")
             view = app.lazy_views["Slope method"]
             t.wait_for(
                 lambda: view.result is not None and "GMWM" in view.result.estimates,

@@ -16,7 +16,7 @@ import pytest
 
 import engine as eg
 from gmwm_app import state as state_mod
-from gmwm_app.state import AppState, SliderSpec
+from gmwm_app.state import AppState
 from gmwm_app.views import (
     WVFigures,
     datasheet_rows,
@@ -24,6 +24,7 @@ from gmwm_app.views import (
     model_grid,
     parameter_rows,
 )
+from gmwm_app.whatif import SliderSpec
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
 
@@ -340,7 +341,7 @@ def test_export_json(app_state: AppState) -> None:
     assert d["data"]["unit"] == "deg/s" and d["data"]["n_samples"] == s.n
     assert {r["quantity"] for r in d["datasheet"]} >= {
         "angle random walk",
-        "correlation time 1/beta",
+        "correlation time",
     }
     assert d["query"]["model"] == "GM+WN+RW"
     assert s.export_filename().endswith("_gyro_x_GM+WN+RW.json")
@@ -461,7 +462,7 @@ def test_tables(app_state: AppState) -> None:
     assert [r["unit"] for r in rows] == ["1/s", "(deg/s)²", "(deg/s)²", "(deg/s)²"]
     ds = datasheet_rows(s)
     q = {r["quantity"]: r["unit"] for r in ds}
-    assert q["angle random walk"] == "deg/sqrt(h)" and q["correlation time 1/beta"] == "s"
+    assert q["angle random walk"] == "deg/sqrt(h)" and q["correlation time"] == "s"
     assert "objective" in fit_summary(s) and "converged" in fit_summary(s)
 
 
@@ -496,29 +497,30 @@ def test_page_without_server(app_demo: Path) -> None:
     s = app.state
     assert s.channel == "gyro_x" and s.error == ""
     assert list(app.channel_select.options) == CHANNELS
-    assert set(app.add_buttons) == {"WN", "QN", "RW", "DR", "AR1", "GM"}
-    assert all(f"+ {code}" == b.label for code, b in app.add_buttons.items())
-    app.add_buttons["GM"].clicks += 1
-    app.add_buttons["WN"].clicks += 1
+    assert set(app.model_panel.add_buttons) == {"WN", "QN", "RW", "DR", "AR1", "GM"}
+    assert all(f"+ {code}" == b.label for code, b in app.model_panel.add_buttons.items())
+    app.model_panel.add_buttons["GM"].clicks += 1
+    app.model_panel.add_buttons["WN"].clicks += 1
     assert s.model.spec() == "GM+WN"
     assert list(app.tables.param_source.data["process"]) == ["GM", "GM", "WN"]
     assert app.views.comp_renderers[0].visible and app.views.comp_items[0].label.value.startswith(
         "GM"
     )
-    rows = [r for r in app.process_list.objects[1:] if r.visible]
+    rows = [r for r in app.model_panel.process_list.objects[1:] if r.visible]
     assert len(rows) == 2 and "GM" in rows[0].objects[0].object
-    app.add_buttons["WN"].clicks += 1  # unidentifiable
+    app.model_panel.add_buttons["WN"].clicks += 1  # unidentifiable
     assert app.alert.visible and "2 WN terms" in app.alert.object
     assert s.model.spec() == "GM+WN"
     remove = rows[0].objects[1]
     remove.clicks += 1
     assert s.model.spec() == "WN" and not app.alert.visible
-    app.spec_input.value_input = "WN+RW"
-    app.spec_input.param.trigger("enter_pressed")
+    app.model_panel.spec_input.value_input = "WN+RW"
+    app.model_panel.spec_input.param.trigger("enter_pressed")
     assert s.model.spec() == "WN+RW"
-    app.whatif_toggle.value = True
-    assert s.whatif and app.sliders.visible and len(app.sliders.objects) == 2
-    slider = app.sliders.objects[0]
+    app.model_panel.whatif_toggle.value = True
+    sliders = app.model_panel.sliders
+    assert s.whatif and sliders.visible and len(sliders.objects) == 2
+    slider = app.model_panel.sliders.objects[0]
     slider.value = slider.value + 1.0  # one decade up for WN.sigma2
     assert s.display_model().values()["WN.sigma2"] == pytest.approx(
         10 * s.result.params["WN.sigma2"], rel=1e-9

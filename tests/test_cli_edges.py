@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import engine as eg
-from engine.cli import _build_parser, main
+from engine.cli import build_parser, main
 
 REPO = Path(__file__).resolve().parents[1]
 SIM = "GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)"
@@ -188,7 +188,7 @@ def _actions(p: argparse.ArgumentParser, prefix: str):
 def test_every_option_of_every_command_has_help():
     from gmwm_app.__main__ import build_parser as app_parser
 
-    found = list(_actions(_build_parser(), "gmwm")) + list(_actions(app_parser(), "gmwm-app"))
+    found = list(_actions(build_parser(), "gmwm")) + list(_actions(app_parser(), "gmwm-app"))
     commands = {c for c, _, _ in found}
     assert {"gmwm wv", "gmwm fit", "gmwm select", "gmwm simulate", "gmwm export"} <= commands
     missing = [f"{c} {opt}" for c, opt, h in found if not (h and h.strip())]

@@ -13,6 +13,7 @@ import pytest
 
 import engine as eg
 from engine.cli import main
+from engine.demo import demo_path
 from engine.export import (
     BI_FACTOR,
     ExportError,
@@ -146,7 +147,7 @@ def test_datasheet_formulas(fits) -> None:
     assert _row(rows, "gyro_x", "rate random walk", "deg/h/sqrt(h)").value == pytest.approx(
         216000 * k_deg, rel=1e-14
     )
-    assert _row(rows, "gyro_x", "random walk (SI)", "rad/s^2/sqrt(Hz)").value == pytest.approx(
+    assert _row(rows, "gyro_x", "rate random walk (SI)", "rad/s^2/sqrt(Hz)").value == pytest.approx(
         k_deg * DEG, rel=1e-14
     )
     n_g = math.sqrt(a.params["WN.sigma2"] / FS)
@@ -544,3 +545,65 @@ def test_session_detects_changed_data_and_bad_files(fits, tmp_path: Path) -> Non
     (tmp_path / "unset.json").write_text(json.dumps(doc))
     with pytest.raises(SessionError, match="channel 'x'.*unset values"):
         load_session(tmp_path / "unset.json")
+
+
+# ---------------------------------------------- one datasheet table for fit and export
+DEMO = demo_path()  # the bundled demo log (package data: always there)
+
+
+@pytest.mark.parametrize(
+    "channel, spec",
+    [("gyro_x", "2*GM+WN+RW"), ("accel_x", "QN+WN+RW+DR")],
+)
+def test_fit_and_export_datasheet_print_the_same_names_and_units(capsys, channel, spec):
+    """Issue 11: `gmwm fit` (text and JSON) and `gmwm export --format datasheet` name and unit
+    every quantity of every process alike (accel RW K: m/s^3/sqrt(Hz); gyro K:
+    deg/s^2/sqrt(Hz); QN: m/s), with equal values."""
+    assert main(["fit", str(DEMO), "--channel", channel, "--model", spec, "--json"]) == 0
+    fit_rows = json.loads(capsys.readouterr().out)["datasheet"]
+    assert main(["fit", str(DEMO), "--channel", channel, "--model", spec]) == 0
+    fit_text = capsys.readouterr().out
+    argv = ["export", str(DEMO), "--model", spec, "--channels", channel]
+    assert main([*argv, "--format", "datasheet-csv", "-o", "-"]) == 0
+    exp_rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert main([*argv, "--format", "datasheet", "-o", "-"]) == 0
+    exp_text = capsys.readouterr().out
+
+    def key(r):
+        return (r["process"], r["quantity"], r["symbol"], r["unit"])
+
+    exp = {key(r): float(r["value"]) for r in exp_rows if r["value"]}
+    got = {key(r): r["value"] for r in fit_rows if r["value"] is not None}
+    assert set(got) == set(exp) and len(got) == len(fit_rows) - sum(
+        r["value"] is None for r in fit_rows
+    )
+    for k, v in got.items():
+        assert v == pytest.approx(exp[k], rel=1e-9), k
+    codes = {r["process"].split("_")[0] for r in fit_rows}
+    procs = {p.code for p in eg.parse_model(spec).processes}
+    assert procs <= codes and "model" in codes  # every process, and the Allan floor
+    for p, q, sym, unit in got:  # the text outputs print the same rows
+        assert any(
+            ln.split()[:1] == [p] and f" {q} " in ln and f" {sym} " in ln and ln.endswith(unit)
+            for ln in fit_text.splitlines()
+        ), (p, q, sym, unit)
+        assert any(
+            ln.split()[1:2] == [p] and f" {q} " in ln and ln.endswith(f"  {unit}")
+            for ln in exp_text.splitlines()
+        ), (p, q, unit)
+    units = {(sym, unit) for _p, _q, sym, unit in got}
+    if channel == "accel_x":
+        assert {("K", "m/s^3/sqrt(Hz)"), ("Q", "m/s"), ("R", "m/s^3")} <= units
+    else:
+        assert {("K", "deg/s^2/sqrt(Hz)"), ("N", "deg/s/sqrt(Hz)"), ("T_c", "s")} <= units
+
+
+def test_engine_export_is_the_function_after_importing_the_package(fits) -> None:
+    """``import engine.export`` makes ``engine.export`` the package; it stays callable."""
+    import engine.export
+
+    text = eg.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
+    assert text == engine.export.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
+    assert text.splitlines()[0].startswith("channel,process,quantity,symbol,value")
+    assert set(engine.export.FORMATS) == {"kalibr", "json", "csv", "datasheet", "datasheet-csv"}
+    assert engine.export.FORMATS["kalibr"].reader is engine.export.read_kalibr

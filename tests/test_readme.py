@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from engine.cli import _build_parser, main
+from engine.cli import build_parser, main
 
 REPO = Path(__file__).resolve().parents[1]
 README = (REPO / "README.md").read_text(encoding="utf-8")
@@ -102,7 +102,7 @@ def test_shell_examples_run_as_written(tmp_path):
 
 
 def test_synopsis_names_only_options_that_exist():
-    parser = _build_parser()
+    parser = build_parser()
     subs = next(a for a in parser._actions if hasattr(a, "choices") and a.choices).choices
     lines = [ln for c in blocks("text") for ln in c.splitlines() if ln.startswith("gmwm ")]
     assert {ln.split()[1] for ln in lines} >= {"wv", "fit", "simulate", "select", "export"}

@@ -67,17 +67,18 @@ def test_table1_allan_shapes_give_back_the_datasheet_values(sensor):
 def test_conversions_agree_with_the_engine_datasheet(sensor):
     model = table1_model(sensor)
     rows = {
-        r["quantity"]: r["value"] for r in eg.datasheet(model, STUDY_FS, TABLE_I[sensor]["unit"])
+        (r["quantity"], r["unit"]): r["value"]
+        for r in eg.datasheet(model, STUDY_FS, TABLE_I[sensor]["unit"])
     }
     key = {
         "WN": "angle random walk" if sensor == "gyro" else "velocity random walk",
         "RW": "rate random walk" if sensor == "gyro" else "acceleration random walk",
-        "QN": "quantization Q",
-        "DR": "rate ramp R",
+        "QN": "quantization",
+        "DR": "rate ramp" if sensor == "gyro" else "acceleration ramp",
     }
-    for code, _, value, _ in TABLE_I[sensor]["params"]:
-        ds = rows[key[code]] * (3600.0**2 if code == "DR" else 1.0)
-        assert ds == pytest.approx(value, rel=1e-12)
+    for code, _, value, unit in TABLE_I[sensor]["params"]:
+        # Table I's value and unit are a row of the one datasheet table
+        assert rows[(key[code], unit)] == pytest.approx(value, rel=1e-12)
         per_sample = from_datasheet(code, value, STUDY_FS)
         assert to_datasheet(code, per_sample, STUDY_FS) == pytest.approx(value, rel=1e-12)
     with pytest.raises(ValueError, match="sensor"):

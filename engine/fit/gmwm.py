@@ -106,11 +106,12 @@ class GMWMResult(FitResult):
     def _summary_tail(self) -> list[str]:
         from ..units import datasheet
 
-        ds = datasheet(self.model, self.wv.fs, self.wv.unit)
+        ds = datasheet(self.model, self.wv.fs, self.wv.unit, n_levels=self.wv.n_levels)
         if not ds:
             return []
-        return ["", "  datasheet view:"] + [
-            f"  {row['label']:<8} {row['quantity']:<32} {row['value']:>12.5g}  {row['unit']}"
+        return ["", "  datasheet view (as gmwm export --format datasheet):"] + [
+            f"  {row['label']:<8} {row['quantity']:<40} {row['symbol']:<8} "
+            f"{row['value']:>12.5g}  {row['unit']}"
             for row in ds
         ]
 

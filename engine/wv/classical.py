@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._optim import chi2_isf
+from ..units import squared
 from ._kernel import as_series, cumsum_demeaned, second_difference_sums
 from .robust import robust_scale_biweight
 
@@ -152,7 +153,7 @@ class WaveletVariance(LevelScales):
 
     def table(self) -> str:
         """Readable table with units."""
-        u = f"({self.unit})^2" if self.unit else "unit^2"
+        u = squared(self.unit)
         kind = f"robust (biweight, eff={self.eff:g})" if self.robust else "classical"
         ci = f"{100 * (1 - self.alpha):g}%"
         lines = [

@@ -159,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     import panel as pn
     from playwright.sync_api import sync_playwright
 
-    from gmwm_app.app import create_application, live_apps
+    from gmwm_app.app import live_apps
+    from gmwm_app.server import create_application
 
     rows: list[tuple[str, str, str, str]] = []
     with tempfile.TemporaryDirectory(prefix="gmwm_bench_") as d:

@@ -1,33 +1,27 @@
 """``gmwm fit`` with several channels (MGMWM) or several recordings (replicate fit).
 
 The command-line side of :mod:`engine.multivariate` and :mod:`engine.fit.replicates`: it
-loads the inputs and formats the results; the numerics never import the command line. The
-``gmwm`` command (:mod:`engine.cli`) passes its own loaders in, so this module does not
-import it back.
+loads the inputs (with the command's shared loaders, :mod:`engine.cli.common`) and formats the
+results; the numerics never import the command line.
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
 from typing import Any
 
-from ._jsonutil import json_ready
-from .fit import FitError
-from .fit.replicates import fit_replicates
-from .io import load_log
-from .multivariate import MultiModel, dependence_test, fit_mgmwm
-from .wv import WaveletVariance, wv_matrix
+from .._jsonutil import json_ready
+from ..fit import FitError
+from ..fit.replicates import fit_replicates
+from ..io import load_log
+from ..multivariate import MultiModel, dependence_test, fit_mgmwm
+from ..wv import wv_matrix
+from .common import load_wv, log_kwargs
 
 __all__ = ["cli_fit"]
 
 
-def cli_fit(
-    args: argparse.Namespace,
-    *,
-    load_wv: Callable[[argparse.Namespace], tuple[WaveletVariance, str]],
-    log_kwargs: Callable[[argparse.Namespace], dict[str, Any]],
-) -> dict[str, Any] | str:
+def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     """``gmwm fit`` for several channels (MGMWM) or several recordings (replicates).
 
     ``gmwm fit IN.h5 --model WN+RW --channels gyro_x,gyro_y,gyro_z [--shared RW]
@@ -39,12 +33,6 @@ def cli_fit(
     ----------
     args : argparse.Namespace
         The parsed ``gmwm fit`` options.
-    load_wv : callable
-        The command's loader of one channel's WV (``args`` with ``input`` set) -> (WV, name),
-        used for every replicate file.
-    log_kwargs : callable
-        The command's log options (``--segment``, ``--scale`` ...) as keywords of
-        :func:`engine.io.load_log`.
 
     Returns
     -------

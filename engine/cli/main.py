@@ -18,37 +18,17 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import sys
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
+from .._jsonutil import json_ready
+from ..fit import FitError, fit_gmwm
+from ..models import ModelError, parse_model
+from .common import CliError, load_wv, positive
 
-from ._jsonutil import json_ready
-from .fit import FitError, fit_gmwm
-from .models import ModelError, parse_model
-from .wv import WaveletVariance, wavelet_variance
-
-__all__ = ["main"]
-
-
-class CliError(Exception):
-    """A user error: printed as one line, exit status 2."""
-
-
-def _positive(kind: type, name: str):
-    def conv(text: str):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not (math.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text!r}")
-        return v
-
-    return conv
+__all__ = ["main", "build_parser"]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -56,15 +36,15 @@ class _Parser(argparse.ArgumentParser):
         raise CliError(f"{self.prog}: {message}")
 
 
-def _build_parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="gmwm", description="GMWM stochastic calibration of inertial sensors.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def data_args(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5 or a WV summary HDF5")
         sp.add_argument("--channel", help="channel name or index (default: the first)")
-        sp.add_argument("--fs", type=_positive(float, "--fs"), help="sampling frequency in Hz")
-        sp.add_argument("--levels", type=_positive(int, "--levels"), help="number of WV levels J")
+        sp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
+        sp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
         sp.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
         sp.add_argument(
             "--eff",
@@ -73,7 +53,7 @@ def _build_parser() -> argparse.ArgumentParser:
             help="efficiency of the robust WV, in (0, 0.99) (default 0.6)",
         )
         sp.add_argument("--json", action="store_true", help="print one JSON object")
-        from .cli_export import add_log_options  # --segment --scale --units --topic --stream
+        from .common import add_log_options  # --segment --scale --units --topic --stream
 
         add_log_options(sp)
 
@@ -117,14 +97,14 @@ def _build_parser() -> argparse.ArgumentParser:
     fit.add_argument(
         "-B",
         "--bootstrap",
-        type=_positive(int, "-B"),
+        type=positive(int, "-B"),
         default=100,
         help="bootstrap replicates (100)",
     )
     fit.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
     fit.add_argument(
         "--workers",
-        type=_positive(int, "--workers"),
+        type=positive(int, "--workers"),
         default=2,
         help="processes for the bootstrap (2)",
     )
@@ -144,27 +124,27 @@ def _build_parser() -> argparse.ArgumentParser:
     sel.add_argument(
         "-B",
         "--bootstrap",
-        type=_positive(int, "-B"),
+        type=positive(int, "-B"),
         default=100,
         help="bootstrap replicates for --optimism bootstrap (100)",
     )
     sel.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
     sel.add_argument(
         "--workers",
-        type=_positive(int, "--workers"),
+        type=positive(int, "--workers"),
         default=2,
         help="processes fitting the candidates (2)",
     )
     sel.add_argument(
-        "--top", type=_positive(int, "--top"), help="show only the best N (all are ranked)"
+        "--top", type=positive(int, "--top"), help="show only the best N (all are ranked)"
     )
 
     sim = sub.add_parser("simulate", help="simulate a model with given values")
     sim.add_argument(
         "--model", required=True, help="model with values, e.g. 'WN(sigma2=1e-4)+RW(gamma2=1e-9)'"
     )
-    sim.add_argument("-n", type=_positive(int, "-n"), required=True, help="number of samples")
-    sim.add_argument("--fs", type=_positive(float, "--fs"), default=1.0, help="Hz (default 1)")
+    sim.add_argument("-n", type=positive(int, "-n"), required=True, help="number of samples")
+    sim.add_argument("--fs", type=positive(float, "--fs"), default=1.0, help="Hz (default 1)")
     sim.add_argument("--seed", type=int, default=None, help="random seed")
     sim.add_argument("--channel", default="x", help="channel name in the output (default x)")
     sim.add_argument("--unit", default="", help="signal unit stored in the output")
@@ -182,7 +162,7 @@ def _build_parser() -> argparse.ArgumentParser:
     st.add_argument("name", choices=["slope"], help="the study to run")
     st.add_argument(
         "--reps",
-        type=_positive(int, "--reps"),
+        type=positive(int, "--reps"),
         default=100,
         help="replicates per log length and sensor (100)",
     )
@@ -193,7 +173,7 @@ def _build_parser() -> argparse.ArgumentParser:
         help="log lengths in samples, separated by commas (2.5e6,6.3e6)",
     )
     st.add_argument(
-        "--workers", type=_positive(int, "--workers"), default=2, help="worker processes (2)"
+        "--workers", type=positive(int, "--workers"), default=2, help="worker processes (2)"
     )
     st.add_argument(
         "--methods",
@@ -203,61 +183,16 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
-    from .cli_export import add_export_parser  # gmwm export: Kalibr, JSON, CSV, datasheet
+    from .export import add_export_parser  # gmwm export: Kalibr, JSON, CSV, datasheet
 
     add_export_parser(sub)
     return p
 
 
-def _load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVariance, str]:
-    """The WV of the selected channel (computed, or read from a summary file)."""
-    from .cli_export import log_kwargs, stream_wv
-    from .io import load_log
-
-    if getattr(args, "stream", False):  # long logs: blocks from .npy/HDF5, bounded memory
-        return stream_wv(args, alpha)
-    log = load_log(args.input, channel=args.channel, fs=args.fs, **log_kwargs(args))
-    name = log.names[0]
-    if log.is_summary:
-        wv = log.wv[name]
-        if args.robust:
-            raise CliError(
-                f"{args.input}: a WV summary file holds a fixed WV; --robust needs the raw log"
-            )
-        if args.levels is not None:
-            if args.levels > wv.n_levels:
-                raise CliError(
-                    f"--levels {args.levels} is too many: {args.input} has "
-                    f"{wv.n_levels} levels for {name}"
-                )
-            wv = wv.truncate(args.levels)
-        return wv, name
-    x = log[name]
-    if x.size >= 4 and np.ptp(x) == 0:
-        raise CliError(
-            f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
-            f"{x[0]:g}): there is no noise to analyse"
-        )
-    if log.fs_source == "default":
-        from .cli_export import warn_fs_unknown
-
-        warn_fs_unknown(args, args.input)
-    wv = wavelet_variance(
-        x,
-        fs=log.fs,
-        levels=args.levels,
-        robust=args.robust,
-        eff=args.eff,
-        alpha=alpha,
-        unit=log.units.get(name, ""),
-    )
-    return wv, name
-
-
 def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
     if not 0 < args.alpha < 1:
         raise CliError(f"--alpha must be in (0, 1), got {args.alpha}")
-    wv, name = _load_wv(args, args.alpha)
+    wv, name = load_wv(args, args.alpha)
     if args.json:
         d = wv.to_dict()
         d["channel"] = name
@@ -269,21 +204,22 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     if not 0 < args.level < 1:
         raise CliError(f"--level must be in (0, 1), got {args.level}")
     if args.channels or args.more_inputs or args.shared or args.dependence_test:
-        from .cli_export import log_kwargs
-        from .cli_multi import cli_fit  # multivariate GMWM (--channels) or replicates (files)
+        from .multi import cli_fit  # multivariate GMWM (--channels) or replicates (files)
 
-        return cli_fit(args, load_wv=_load_wv, log_kwargs=log_kwargs)
+        return cli_fit(args)
+    from ..units import datasheet_rows
+
     model = parse_model(args.model)
-    wv, name = _load_wv(args)
+    wv, name = load_wv(args)
     if args.weights == "efficient":
-        from .inference import fit_efficient
+        from ..inference import fit_efficient
 
         res = fit_efficient(wv, model)
     else:
         res = fit_gmwm(wv, model, weights=args.weights)
     intervals = None
     if args.ci:
-        from .inference import param_intervals
+        from ..inference import param_intervals
 
         intervals = param_intervals(
             res,
@@ -298,6 +234,18 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         d["channel"] = name
         if intervals is not None:
             d["intervals"] = [iv.to_dict() for iv in intervals]
+        # the rows of `gmwm export --format datasheet` (one table: engine.units)
+        d["datasheet"] = [
+            r.to_dict()
+            for r in datasheet_rows(
+                res.model,
+                res.fs,
+                wv.unit,
+                channel=name,
+                intervals={iv.name: (iv.low, iv.high) for iv in intervals or ()},
+                n_levels=wv.n_levels,
+            )
+        ]
         return json_ready(d)
     text = f"{args.input} [{name}]\n{res.summary()}"
     if intervals is not None:
@@ -310,11 +258,11 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .inference import rank_models
+    from ..inference import rank_models
 
     if not args.max_model and not args.models:
         raise CliError("give --max-model SPEC or --models 'SPEC1,SPEC2,...'")
-    wv, name = _load_wv(args)
+    wv, name = load_wv(args)
     cands = [m for m in args.models.split(",") if m.strip()] if args.models else None
 
     def progress(done: int, total: int) -> None:
@@ -355,7 +303,7 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .io import save_log
+    from ..io import save_log
 
     model = parse_model(args.model)
     model.validate()
@@ -367,7 +315,7 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     save_log(out, {args.channel: x}, args.fs, units={args.channel: args.unit}, attrs=attrs)
     also = ""
     if out.lower().endswith(".npy"):  # the array holds samples only: fs, name, unit beside it
-        from .io import write_npy_sidecar
+        from ..io import write_npy_sidecar
 
         side = write_npy_sidecar(out, args.fs, [args.channel], {args.channel: args.unit}, **attrs)
         also = f" (fs, channel and unit in {side})"
@@ -379,7 +327,7 @@ def _one_line(e: BaseException) -> str:
 
 
 def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .study import run_slope_study
+    from ..study import run_slope_study
 
     try:
         n_values = [float(v) for v in args.n.split(",") if v.strip()]
@@ -403,20 +351,20 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .cli_export import cmd_export
+    from .export import cmd_export
 
     return cmd_export(args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``gmwm`` console script; returns the exit status."""
-    from ._blas import set_blas_threads
-    from .io import LoadError
+    from .._blas import set_blas_threads
+    from ..io import LoadError
 
     if argv is None:  # the command itself (not a call from Python): see engine._blas
         set_blas_threads(1)
     try:
-        args = _build_parser().parse_args(argv)
+        args = build_parser().parse_args(argv)
         handler = {
             "wv": _cmd_wv,
             "fit": _cmd_fit,
@@ -446,7 +394,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())  # the exit-time flush writes nowhere
         return 141  # 128 + SIGPIPE, what a shell tool killed by the closed pipe reports
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -1,0 +1,248 @@
+"""What the ``gmwm`` subcommands share: the user-error types, argument converters, the log
+options (``--segment --scale --units --topic --stream``) and the loading of one channel's WV."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+import numpy as np
+
+from ..wv import WaveletVariance, wavelet_variance
+
+__all__ = [
+    "CliError",
+    "UsageError",
+    "usage_error",
+    "positive",
+    "add_log_options",
+    "log_kwargs",
+    "stream_wv",
+    "warn_fs_unknown",
+    "load_wv",
+]
+
+
+class CliError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+def positive(kind: type, name: str):
+    def conv(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text!r}")
+        return v
+
+    return conv
+
+
+def load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVariance, str]:
+    """The WV of the selected channel (computed, or read from a summary file)."""
+    from ..io import load_log
+
+    if getattr(args, "stream", False):  # long logs: blocks from .npy/HDF5, bounded memory
+        return stream_wv(args, alpha)
+    log = load_log(args.input, channel=args.channel, fs=args.fs, **log_kwargs(args))
+    name = log.names[0]
+    if log.is_summary:
+        wv = log.wv[name]
+        if args.robust:
+            raise CliError(
+                f"{args.input}: a WV summary file holds a fixed WV; --robust needs the raw log"
+            )
+        if args.levels is not None:
+            if args.levels > wv.n_levels:
+                raise CliError(
+                    f"--levels {args.levels} is too many: {args.input} has "
+                    f"{wv.n_levels} levels for {name}"
+                )
+            wv = wv.truncate(args.levels)
+        return wv, name
+    x = log[name]
+    if x.size >= 4 and np.ptp(x) == 0:
+        raise CliError(
+            f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
+            f"{x[0]:g}): there is no noise to analyse"
+        )
+    if log.fs_source == "default":
+        warn_fs_unknown(args, args.input)
+    wv = wavelet_variance(
+        x,
+        fs=log.fs,
+        levels=args.levels,
+        robust=args.robust,
+        eff=args.eff,
+        alpha=alpha,
+        unit=log.units.get(name, ""),
+    )
+    return wv, name
+
+
+class UsageError(ValueError):
+    """A command-line usage error; ``gmwm`` prints it as one line and exits with status 2.
+
+    A ValueError (which ``gmwm`` catches) rather than ``engine.cli.CliError``: under
+    ``python -m engine.cli`` the CLI module runs as ``__main__`` and its CliError is another
+    class than ``engine.cli.CliError``.
+    """
+
+
+def usage_error(msg: str) -> Exception:
+    return UsageError(msg)
+
+
+def _float_map(opt: str) -> Any:
+    def conv(text: str) -> float | dict[str, float]:
+        def num(s: str) -> float:
+            try:
+                v = float(s)
+            except ValueError:
+                raise argparse.ArgumentTypeError(
+                    f"{opt} takes a number or NAME=NUMBER pairs separated by commas, got {text!r}"
+                ) from None
+            if not math.isfinite(v) or v == 0:
+                raise argparse.ArgumentTypeError(f"{opt} must be finite and non-zero, got {s!r}")
+            return v
+
+        if "=" not in text:
+            return num(text)
+        out = {}
+        for part in text.split(","):
+            k, sep, v = part.partition("=")
+            if not sep or not k.strip():
+                raise argparse.ArgumentTypeError(f"{opt}: {part!r} is not NAME=NUMBER")
+            out[k.strip()] = num(v)
+        return out
+
+    return conv
+
+
+def _str_map(text: str) -> str | dict[str, str]:
+    if "=" not in text:
+        return text.strip()
+    out = {}
+    for part in text.split(","):
+        k, sep, v = part.partition("=")
+        if not sep or not k.strip():
+            raise argparse.ArgumentTypeError(f"--units: {part!r} is not NAME=UNIT")
+        out[k.strip()] = v.strip()
+    return out
+
+
+def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None:
+    """Add ``--segment --scale --units --topic`` (and ``--stream``) to a sub-command."""
+    sp.add_argument(
+        "--segment",
+        choices=["stop", "longest", "report"],
+        help="time column with gaps/duplicates: stop with a report (default), "
+        "analyse the longest clean segment, or keep every sample (report)",
+    )
+    sp.add_argument(
+        "--scale",
+        type=_float_map("--scale"),
+        help="scale factor for raw counts: 0.05, or gyro_x=0.05,accel_z=0.001",
+    )
+    sp.add_argument(
+        "--units",
+        type=_str_map,
+        help="signal unit(s) overriding the file: deg/s, or gyro_x=deg/s,accel_x=g",
+    )
+    sp.add_argument("--topic", help="ROS bag: the sensor_msgs/Imu topic")
+    if stream:
+        sp.add_argument(
+            "--stream",
+            action="store_true",
+            help="stream a .npy/HDF5 log larger than memory in blocks (classical WV)",
+        )
+
+
+def log_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """The :func:`engine.io.load_log` keyword arguments given on the command line."""
+    return {
+        k: getattr(args, k)
+        for k in ("segment", "scale", "units", "topic")
+        if getattr(args, k, None) is not None
+    }
+
+
+def stream_wv(
+    args: argparse.Namespace, alpha: float = 0.05, channel: str | None = None
+) -> tuple[Any, str]:
+    """``(WaveletVariance, channel name)`` of ``--stream``."""
+    from ..wv import open_series, wavelet_variance_stream
+
+    if getattr(args, "robust", False):
+        raise usage_error(
+            "--stream computes the classical WV; the robust WV needs the whole "
+            "log in memory (drop --robust or --stream)"
+        )
+    for opt in ("segment", "topic"):
+        if getattr(args, opt, None) is not None:
+            raise usage_error(
+                f"--{opt} does not apply to --stream (streaming reads .npy/HDF5 "
+                "samples as uniformly spaced)"
+            )
+    ch = channel if channel is not None else getattr(args, "channel", None)
+    kw: dict[str, Any] = {}
+    if ch is not None and str(ch).lstrip("-").isdigit() and str(args.input).endswith(".npy"):
+        kw["column"] = int(ch)
+    elif ch is not None:
+        kw["dataset"] = str(ch)
+    scale = getattr(args, "scale", None)
+    if isinstance(scale, dict):
+        scale = scale.get(str(ch))
+    fs, side = args.fs, None
+    if str(args.input).lower().endswith(".npy"):
+        from ..io import read_npy_sidecar
+
+        side = read_npy_sidecar(args.input)  # `gmwm simulate -o x.npy` keeps fs and unit there
+        if fs is None and side is not None and "fs_hz" in side:
+            fs = float(side["fs_hz"])
+    src = open_series(args.input, fs=fs, **kw)
+    name = _loaded_name(args.input, src, side)
+    if fs is None and src.fs is None:
+        warn_fs_unknown(args, str(args.input))
+    units = getattr(args, "units", None)
+    unit = units.get(name, None) if isinstance(units, dict) else units
+    if unit is None and side is not None and isinstance(side.get("units"), dict):
+        unit = side["units"].get(name)
+    wv = wavelet_variance_stream(
+        src, fs=fs, levels=args.levels, scale=scale, alpha=alpha, unit=unit
+    )
+    if not np.any(wv.variance > 0):
+        raise usage_error(
+            f"{args.input}: channel {name!r} is constant: there is no noise to analyse"
+        )
+    return wv, name
+
+
+def warn_fs_unknown(args: argparse.Namespace, path: str) -> None:
+    """Queue the loud stderr warning that the sampling frequency of ``path`` is unknown (1 Hz
+    assumed); ``gmwm`` prints queued warnings with the result (an error stays one line)."""
+    msg = (
+        f"gmwm: warning: {path} does not say its sampling frequency: fs = 1 Hz ASSUMED, so "
+        "every time in seconds and every datasheet value is per sample; pass --fs HZ"
+    )
+    queued = getattr(args, "warnings", None)
+    if queued is None:
+        queued = args.warnings = []
+    if msg not in queued:
+        queued.append(msg)
+
+
+def _loaded_name(path: Any, src: Any, side: dict[str, Any] | None) -> str:
+    """The name :func:`engine.io.load_log` gives the streamed channel, so that ``--stream``
+    and the in-memory WV label it alike: for ``.npy`` the sidecar's channel name, else ``x``
+    (1-D) or ``col<j>`` (2-D); for HDF5 the dataset name."""
+    if not str(path).lower().endswith(".npy"):
+        return src.name
+    column = int(getattr(src, "column", 0) or 0)
+    names = side.get("channels") if side is not None else None
+    if isinstance(names, list) and len(names) == getattr(src, "k", 1) and column < len(names):
+        return str(names[column])
+    return "x" if np.load(path, mmap_mode="r").ndim == 1 else f"col{column}"

@@ -1,0 +1,228 @@
+"""``gmwm export`` (:func:`add_export_parser`, :func:`cmd_export`)::
+
+    gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
+                --format kalibr|json|csv|datasheet|datasheet-csv -o OUT|-
+                [--ci asymptotic|bootstrap] [--weights ci|identity|efficient]
+                [--fs HZ] [--levels J] [--robust] [--segment ...] [--scale ...] [--units ...]
+                [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
+
+The log options and the streamed WV are shared with the other subcommands
+(:mod:`engine.cli.common`). Errors are raised as :class:`~engine.cli.common.UsageError` (or the
+engine's ValueError subclasses), which ``gmwm`` prints as one line with exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import numpy as np
+
+from .common import (
+    add_log_options,
+    log_kwargs,
+    positive,
+    stream_wv,
+    usage_error,
+    warn_fs_unknown,
+)
+
+__all__ = ["add_export_parser", "cmd_export"]
+
+
+def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
+    """Refuse ``k*CODE`` with a huge k before the model is built (k copies of a process)."""
+    import re
+
+    for k in re.findall(r"(\d+)\s*\*|\*\s*(\d+)", spec):
+        v = int(k[0] or k[1])
+        if v > limit:
+            raise usage_error(
+                f"{opt}: the multiplier {v} is too large (a model has at most "
+                f"{limit} terms of a kind)"
+            )
+    return spec
+
+
+def add_export_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
+    from ..export.registry import FORMATS
+
+    ex = sub.add_parser(
+        "export",
+        help="fit channels and export Kalibr imu.yaml, a JSON report, "
+        "WV curves (CSV) or a datasheet table",
+    )
+    ex.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
+    ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
+    ex.add_argument(
+        "--model-for",
+        action="append",
+        default=[],
+        metavar="CH=SPEC",
+        help="model of one channel (repeatable), e.g. gyro_z=2*GM+WN+RW",
+    )
+    ex.add_argument("--channels", help="channels separated by commas (default: all)")
+    ex.add_argument(
+        "--format",
+        default="kalibr",
+        choices=list(FORMATS),
+        help="; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
+        + " (default kalibr)",
+    )
+    ex.add_argument("-o", "--output", required=True, help="output file, or - for stdout")
+    ex.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
+    ex.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
+    ex.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
+    ex.add_argument("--eff", type=float, default=0.6, help="robust WV efficiency (0.6)")
+    ex.add_argument(
+        "--weights",
+        default="ci",
+        choices=["ci", "identity", "efficient"],
+        help="weighting matrix: ci (default), identity, or efficient (two-step, V^-1)",
+    )
+    ex.add_argument("--ci", choices=["asymptotic", "bootstrap"], help="parameter intervals")
+    ex.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
+    ex.add_argument(
+        "-B",
+        "--bootstrap",
+        type=positive(int, "-B"),
+        default=100,
+        help="bootstrap replicates for --ci bootstrap (100)",
+    )
+    ex.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
+    ex.add_argument(
+        "--workers",
+        type=positive(int, "--workers"),
+        default=2,
+        help="processes for the bootstrap (2)",
+    )
+    ex.add_argument("--rostopic", default="/imu0", help="Kalibr rostopic entry (/imu0)")
+    ex.add_argument(
+        "--partial",
+        action="store_true",
+        help="Kalibr: allow a file with only gyroscope or only accelerometer keys",
+    )
+    ex.add_argument("--json", action="store_true", help="print one JSON object (what was written)")
+    add_log_options(ex)
+    return ex
+
+
+def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
+    """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
+    from ..export import export
+    from ..fit import fit_gmwm
+    from ..inference import fit_efficient, param_intervals
+    from ..io import load_log, pick_channel
+    from ..models import parse_model
+    from ..wv import wavelet_variance
+
+    if not 0 < args.level < 1:
+        raise usage_error(f"--level must be in (0, 1), got {args.level}")
+    if args.robust and not 0 < args.eff < 0.99:
+        raise usage_error(f"--eff must be in (0, 0.99), got {args.eff}")
+    model = parse_model(_small_multipliers(args.model, "--model"))
+    per: dict[str, Any] = {}
+    for item in args.model_for:
+        ch, sep, spec = item.partition("=")
+        if not sep or not ch.strip():
+            raise usage_error(f"--model-for takes CH=SPEC, got {item!r}")
+        per[ch.strip()] = parse_model(_small_multipliers(spec, "--model-for"))
+    wanted = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+    log = None
+    wvs: dict[str, Any] = {}
+    if args.stream:
+        if not wanted:
+            raise usage_error("--stream needs --channels (dataset names or .npy columns)")
+        for ch in wanted:
+            wv, _ = stream_wv(args, channel=ch)
+            wvs[ch] = wv
+    else:
+        log = load_log(args.input, fs=args.fs, **log_kwargs(args))
+        if log.fs_source == "default":
+            warn_fs_unknown(args, str(args.input))
+        names = (
+            [pick_channel(str(args.input), log.names, c) for c in wanted] if wanted else log.names
+        )
+        for ch in names:
+            if log.is_summary:
+                if ch not in log.wv:
+                    raise usage_error(
+                        f"{args.input} has no channel {ch!r}; channels: {', '.join(log.names)}"
+                    )
+                if args.robust:
+                    raise usage_error(
+                        f"{args.input}: a WV summary file holds a fixed WV; "
+                        "--robust needs the raw log"
+                    )
+                wv = log.wv[ch]
+                if args.levels is not None:
+                    if args.levels > wv.n_levels:
+                        raise usage_error(
+                            f"--levels {args.levels} is too many: {ch} has {wv.n_levels} levels"
+                        )
+                    wv = wv.truncate(args.levels)
+            else:
+                x = log[ch]
+                if np.ptp(x) == 0:
+                    raise usage_error(
+                        f"{args.input}: channel {ch!r} is constant: there is no noise to analyse"
+                    )
+                wv = wavelet_variance(
+                    x,
+                    fs=log.fs,
+                    levels=args.levels,
+                    robust=args.robust,
+                    eff=args.eff,
+                    unit=log.units.get(ch, ""),
+                )
+            wvs[ch] = wv
+    unknown = [c for c in per if c not in wvs]
+    if unknown:
+        raise usage_error(
+            f"--model-for names unknown channel(s) {unknown}; channels: {', '.join(wvs)}"
+        )
+    fits, intervals = {}, {}
+    for ch, wv in wvs.items():
+        m = per.get(ch, model)
+        fits[ch] = (
+            fit_efficient(wv, m)
+            if args.weights == "efficient"
+            else fit_gmwm(wv, m, weights=args.weights)
+        )
+        if args.ci:
+            intervals[ch] = param_intervals(
+                fits[ch],
+                method=args.ci,
+                level=args.level,
+                B=args.bootstrap,
+                seed=args.seed,
+                workers=args.workers,
+            )
+    units = (
+        args.units
+        if isinstance(args.units, dict)
+        else (dict.fromkeys(fits, args.units) if args.units else None)
+    )
+    out = None if args.output == "-" else args.output
+    text = export(
+        out,
+        fits,
+        args.format,
+        intervals=intervals or None,
+        log=log,
+        units=units,
+        source=str(args.input),
+        rostopic=args.rostopic,
+        allow_partial=args.partial,
+    )
+    if out is None:
+        return text.rstrip("\n")
+    if args.json:
+        return {
+            "output": out,
+            "format": args.format,
+            "channels": list(fits),
+            "models": {ch: r.model.spec(values=True) for ch, r in fits.items()},
+        }
+    return f"wrote {args.format} export of {len(fits)} channel(s) ({', '.join(fits)}) to {out}"

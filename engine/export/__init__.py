@@ -1,0 +1,58 @@
+"""Exports of GMWM fits for navigation filters and reports.
+
+* :mod:`.datasheet`: :func:`datasheet_table` (rows of the one datasheet table,
+  :mod:`engine.units`), :func:`datasheet_text`, :func:`datasheet_csv`, :func:`allan_floor`;
+* :mod:`.kalibr`: Kalibr ``imu.yaml`` (:func:`kalibr_imu`, :func:`write_kalibr`,
+  :func:`read_kalibr`, :func:`kalibr_models`);
+* :mod:`.report`: :func:`fit_report`, :func:`write_report`, :func:`curves_csv`;
+* :mod:`.registry`: the formats by name (:data:`FORMATS`) and :func:`export`.
+"""
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import Any
+
+from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
+from .common import channel_axis
+from .datasheet import allan_floor, datasheet_csv, datasheet_table, datasheet_text
+from .kalibr import KalibrImu, kalibr_imu, kalibr_models, read_kalibr, write_kalibr
+from .registry import FORMATS, Format, export, register
+from .report import curves_csv, fit_report, write_report
+
+__all__ = [
+    "ExportError",
+    "DatasheetRow",
+    "si_factor",
+    "channel_axis",
+    "datasheet_table",
+    "datasheet_text",
+    "datasheet_csv",
+    "allan_floor",
+    "KalibrImu",
+    "kalibr_imu",
+    "write_kalibr",
+    "read_kalibr",
+    "kalibr_models",
+    "fit_report",
+    "write_report",
+    "curves_csv",
+    "export",
+    "FORMATS",
+    "Format",
+    "register",
+    "BI_FACTOR",
+]
+
+
+class _ExportModule(types.ModuleType):
+    """``engine.export`` is both this package and the function :func:`export`: importing the
+    package makes ``engine.export`` the module (Python sets the parent's attribute), so the
+    module is callable and ``engine.export(path, fits, fmt)`` works either way."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> str:
+        return export(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _ExportModule

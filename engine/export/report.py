@@ -1,0 +1,158 @@
+"""Reports: :func:`fit_report` (JSON of every channel's fit, its intervals, datasheet rows,
+Allan floor and Kalibr numbers) and :func:`curves_csv` (the empirical and implied WV curves)."""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .._jsonutil import json_ready
+from .._version import __version__
+from ..fit import GMWMResult
+from ..units import ExportError, si_factor, squared
+from .common import channel_axis, fmt_float
+from .datasheet import allan_floor, datasheet_table
+from .kalibr import kalibr_imu
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..inference import ParamInterval
+    from ..io import ImuLog
+
+__all__ = ["fit_report", "write_report", "curves_csv"]
+
+
+def fit_report(
+    fits: Mapping[str, GMWMResult],
+    *,
+    intervals: Mapping[str, Sequence[ParamInterval]] | None = None,
+    log: ImuLog | None = None,
+    units: Mapping[str, str] | None = None,
+    source: str = "",
+    kalibr: bool = True,
+) -> dict[str, Any]:
+    """A JSON-ready report of every channel's fit.
+
+    Returns
+    -------
+    dict
+        ``schema`` (``"gmwm-report/1"``), ``engine_version``, ``source``, ``log`` (fs, n,
+        units, time report and notes when ``log`` is given), and ``channels``: per channel the
+        unit, sensor kind and axis, the fit (:meth:`GMWMResult.to_dict`), its intervals, the
+        datasheet rows and the Allan floor; ``kalibr`` (or the reason it is missing).
+        NaN values are ``null``.
+    """
+    units = dict(units or {})
+    chans: dict[str, Any] = {}
+    for ch, res in fits.items():
+        unit = units.get(ch, res.wv.unit) or ""
+        try:
+            kind: str | None = si_factor(unit, ch)[0]
+        except ExportError:
+            kind = None
+        ivs = (intervals or {}).get(ch)
+        chans[ch] = {
+            "unit": unit,
+            "sensor": kind,
+            "axis": channel_axis(ch),
+            "fit": res.to_dict(),
+            "intervals": [iv.to_dict() for iv in ivs] if ivs else None,
+            "datasheet": [
+                r.to_dict()
+                for r in datasheet_table(
+                    {ch: res}, intervals={ch: ivs} if ivs else None, units={ch: unit}
+                )
+            ],
+            "allan_floor": allan_floor(res),
+        }
+    out: dict[str, Any] = {
+        "schema": "gmwm-report/1",
+        "engine_version": __version__,
+        "source": source or (log.source if log is not None else ""),
+        "channels": chans,
+    }
+    if log is not None:
+        out["log"] = {
+            "fs": log.fs,
+            "fs_source": log.fs_source,
+            "n": log.n,
+            "units": dict(log.units),
+            "format": log.meta.get("format"),
+            "time_report": log.meta.get("time_report"),
+            "segment": log.meta.get("segment"),
+            "scale": log.meta.get("scale"),
+            "notes": log.meta.get("notes", []),
+        }
+    if kalibr:
+        try:
+            out["kalibr"] = kalibr_imu(
+                fits, units=units or None, source=out["source"], allow_partial=True
+            ).to_dict()
+        except ExportError as e:
+            out["kalibr"] = {"error": str(e)}
+    return json_ready(out)
+
+
+def write_report(
+    path: str | os.PathLike[str], fits: Mapping[str, GMWMResult], **kwargs: Any
+) -> Path:
+    """Write :func:`fit_report` as strict JSON (no NaN); returns the path."""
+    p = Path(path)
+    p.write_text(json.dumps(fit_report(fits, **kwargs), indent=1, allow_nan=False) + "\n")
+    return p
+
+
+def curves_csv(fits: GMWMResult | Mapping[str, GMWMResult]) -> str:
+    """CSV of the empirical WV, its interval and the implied WV (total and per process).
+
+    Columns: ``channel, level, tau_samples, tau_s, wv, ci_low, ci_high, implied`` then one
+    column per process label (``GM_1, WN, RW`` ...; the union over channels, empty where a
+    channel's model lacks the process), and ``wv_unit``. Numbers are written with 17
+    significant digits (exact round trip).
+    """
+    if isinstance(fits, GMWMResult):
+        fits = {"x": fits}
+    labels: list[str] = []
+    for res in fits.values():
+        labels += [lab for lab in res.components if lab not in labels]
+    buf = _io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(
+        [
+            "channel",
+            "level",
+            "tau_samples",
+            "tau_s",
+            "wv",
+            "ci_low",
+            "ci_high",
+            "implied",
+            *labels,
+            "wv_unit",
+        ]
+    )
+    for ch, res in fits.items():
+        wv = res.wv
+        for i in range(wv.n_levels):
+            comp = [
+                fmt_float(res.components[lab][i]) if lab in res.components else "" for lab in labels
+            ]
+            w.writerow(
+                [
+                    ch,
+                    int(wv.levels[i]),
+                    int(wv.tau_samples[i]),
+                    fmt_float(wv.tau_s[i]),
+                    fmt_float(wv.variance[i]),
+                    fmt_float(wv.ci_low[i]),
+                    fmt_float(wv.ci_high[i]),
+                    fmt_float(res.implied[i]),
+                    *comp,
+                    squared(wv.unit) if wv.unit else "",
+                ]
+            )
+    return buf.getvalue()

@@ -1,0 +1,353 @@
+"""Reading data for a session: sources, the loaded log, and its WV cache (no widgets).
+
+Worker-thread safe: nothing here changes a session's state. :func:`read_source` reads the
+demo, an upload, a server path or a teaching scenario into a :class:`LoadedData`;
+:func:`precompute` fills its WV cache, ``(channel, fs, robust) -> WaveletVariance``, the one
+WV cache of a session (:class:`gmwm_app.state.AppState` keeps it with the log, and every tab
+reads its WVs from there).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import engine as eg
+from gmwm_app.limits import check_path, check_upload_size
+
+__all__ = [
+    "LoadedData",
+    "PreparedQuery",
+    "read_log",
+    "read_source",
+    "precompute",
+    "compute_wv",
+    "wv_from_cache",
+    "store_wv",
+    "retag_fs",
+    "check_fs",
+    "channel_names",
+    "summary_has_robust",
+    "fs_source",
+    "unit_of",
+    "message_of",
+    "wv_matrix_of",
+]
+
+
+def read_log(
+    path: str | os.PathLike[str], *, fs: float | None = None, segment: str | None = None
+) -> Any:
+    """Read an IMU log with the engine's loader (``engine.load_log``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV/TSV/text, NPY/NPZ, HDF5 log or WV summary HDF5 file.
+    fs : float, optional
+        Sampling frequency (Hz) to use when the file has none.
+
+    Returns
+    -------
+    ImuLog
+
+    Raises
+    ------
+    ValueError
+        (``engine.LoadError``) with a message naming the file and the fix.
+    """
+    from engine.io import load_log  # imported here: the app module loads without h5py work
+
+    return load_log(path, fs=fs, segment=segment)
+
+
+@dataclass
+class LoadedData:
+    """A log read from a source, with the WVs precomputed for it (filled by a worker thread).
+
+    Attributes
+    ----------
+    log : ImuLog
+        The loaded log.
+    source : str
+        ``"demo"``, ``"upload"`` or ``"path"``.
+    name : str
+        File name shown to the user.
+    path : str
+        Server path (empty for uploads).
+    wv_cache : dict
+        ``(channel, fs, robust) -> WaveletVariance``.
+    elapsed_s : float
+        Time spent reading the file (s).
+    """
+
+    log: Any
+    source: str
+    name: str
+    path: str = ""
+    wv_cache: dict[tuple[str, float, bool], eg.WaveletVariance] = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    computations: int = 0
+    load: dict[str, Any] = field(default_factory=dict)  # load_log options (segment)
+
+
+@dataclass
+class PreparedQuery:
+    """What :meth:`AppState.prepare_query` read for a URL query (settings, data, problems)."""
+
+    settings: dict[str, Any]
+    loaded: LoadedData | None
+    problems: list[str]
+
+
+def retag_fs(wv: eg.WaveletVariance, fs: float) -> eg.WaveletVariance:
+    """The same WV at another sampling frequency (the variances do not depend on fs)."""
+    classical = None if wv.classical is None else dataclasses.replace(wv.classical, fs=fs)
+    return dataclasses.replace(wv, fs=fs, classical=classical)
+
+
+def wv_from_cache(
+    cache: Mapping[tuple[str, float, bool], eg.WaveletVariance],
+    channel: str,
+    fs: float,
+    robust: bool,
+) -> eg.WaveletVariance | None:
+    """A cached WV for (channel, fs, robust), derived without recomputation when possible."""
+    hit = cache.get((channel, fs, robust))
+    if hit is not None:
+        return hit
+    for (ch, _fs, rob), wv in list(cache.items()):
+        if ch != channel or not isinstance(wv, eg.WaveletVariance):  # (WV matrices too)
+            continue
+        if rob == robust:
+            return retag_fs(wv, fs)
+        if not robust and rob and wv.classical is not None:
+            return retag_fs(wv.classical, fs)
+    return None
+
+
+def store_wv(cache: dict, ch: str, fs: float, robust: bool, wv: eg.WaveletVariance) -> None:
+    """Put ``wv`` in a WV cache under ``(ch, fs, robust)``."""
+    cache[(ch, fs, robust)] = wv
+    if robust and wv.classical is not None:
+        cache.setdefault((ch, fs, False), wv.classical)
+
+
+def read_source(
+    source: str,
+    *,
+    path: str | os.PathLike[str] | None = None,
+    data: bytes | str | None = None,
+    filename: str = "",
+    segment: str | None = None,
+    demo: Path | None = None,
+) -> LoadedData:
+    """Read a log from a source. Heavy; touches no state, safe in a worker thread.
+
+    Parameters
+    ----------
+    source : {"demo", "upload", "path"}
+        The bundled demo, uploaded bytes (``data`` + ``filename``), or a server ``path``.
+    demo : Path
+        The demo log (``gmwm_app.state.demo_path()``).
+
+    Raises
+    ------
+    ValueError
+        Missing/unreadable file or a file the loader rejects (message says why).
+    """
+    t0 = time.perf_counter()
+    if source == "demo":
+        p = Path(demo) if demo is not None else Path("data/demo_imu.h5")
+        if not p.exists():
+            raise ValueError(
+                f"the demo log {p} is missing: run `python data/make_demo.py` "
+                "in the repository, or load a file"
+            )
+        lg = read_log(p)
+        out = LoadedData(lg, "demo", p.name, str(p))
+    elif source == "path":
+        if not path or not str(path).strip():
+            raise ValueError("no path given: type the path of a log file on the server")
+        p = Path(str(path).strip()).expanduser()
+        check_path(p)  # only the configured folders (gmwm-app --data-dir), checked first
+        if not p.exists():  # so that nothing is said about files outside them
+            raise ValueError(f"no such file on the server: {p}")
+        if p.is_dir():
+            raise ValueError(f"{p} is a folder: give the path of a log file")
+        out = LoadedData(read_log(p, segment=segment), "path", p.name, str(p))
+    elif source == "upload":
+        if data is None or len(data) == 0:
+            raise ValueError(f"the uploaded file {filename or ''} is empty".replace("  ", " "))
+        if isinstance(data, str):
+            data = data.encode("utf-8")
+        check_upload_size(len(data), filename)
+        name = Path(filename or "upload.csv").name
+        suffix = "".join(Path(name).suffixes[-2:]) or ".csv"
+        fd, tmp = tempfile.mkstemp(prefix="gmwm_upload_", suffix=suffix)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            try:
+                lg = read_log(tmp, segment=segment)
+            except ValueError as e:  # name the user's file, not the temporary one
+                raise ValueError(str(e).replace(tmp, name).replace(Path(tmp).name, name)) from None
+        finally:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        out = LoadedData(lg, "upload", name, "")
+    elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path
+        from engine.teaching import get_scenario, simulate_scenario
+
+        try:
+            sc = get_scenario(str(path or "").strip())
+        except KeyError as e:
+            raise ValueError(e.args[0]) from None
+        out = LoadedData(simulate_scenario(sc), "scenario", f"scenario {sc.key}", sc.key)
+    else:
+        raise ValueError(f"unknown data source {source!r}: use demo, upload or path")
+    if not out.log.is_summary and not out.log.channels:
+        raise ValueError(f"{out.name} has no data channel")
+    out.elapsed_s = time.perf_counter() - t0
+    if segment:
+        out.load["segment"] = segment
+    return out
+
+
+def precompute(
+    loaded: LoadedData,
+    channel: str | None = None,
+    fs: float | None = None,
+    robust: bool = False,
+) -> None:
+    """Compute the WV of one channel of ``loaded`` into its cache (worker-thread safe).
+
+    Errors are not raised here; :meth:`install` reports them.
+    """
+    lg = loaded.log
+    names = channel_names(lg)
+    if not names:
+        return
+    ch = channel if channel in names else names[0]
+    try:
+        f = float(fs) if fs else float(lg.fs)
+        if wv_from_cache(loaded.wv_cache, ch, f, robust) is None:
+            store_wv(loaded.wv_cache, ch, f, robust, compute_wv(lg, ch, f, robust))
+            loaded.computations += 1
+    except Exception:  # reported when installed
+        pass
+
+
+def message_of(e: BaseException) -> str:
+    """An exception as a sentence (KeyError's quotes removed)."""
+    if isinstance(e, KeyError) and e.args:
+        return str(e.args[0])
+    return str(e) or type(e).__name__
+
+
+def check_fs(fs: Any) -> float:
+    """``fs`` as a positive finite number of Hz; ValueError naming the bad value."""
+    try:
+        f = float(fs)
+    except (TypeError, ValueError):
+        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}") from None
+    if not math.isfinite(f) or f <= 0:
+        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
+    return f
+
+
+def channel_names(lg: Any) -> list[str]:
+    """Channel names of a log (raw or WV summary), in file order."""
+    return list(lg.names)
+
+
+def summary_has_robust(lg: Any, ch: str) -> bool:
+    """Whether a WV summary file holds a robust WV for ``ch``."""
+    wv = lg.wv.get(ch)
+    return wv is not None and bool(wv.robust)
+
+
+def fs_source(lg: Any) -> str:
+    """Where a log's fs came from (``"file"``, ``"time column"`` ...)."""
+    return str(getattr(lg, "fs_source", "file") or "file")
+
+
+def unit_of(lg: Any, ch: str) -> str:
+    """Unit of channel ``ch`` of a log (empty when the file names none)."""
+    units = getattr(lg, "units", None) or {}
+    u = units.get(ch, "")
+    if not u and lg.is_summary and ch in lg.wv:
+        u = lg.wv[ch].unit
+    return str(u or "")
+
+
+def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
+    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``)."""
+    if lg is None:
+        raise ValueError("load a log first")
+    if lg.is_summary:
+        if ch not in lg.wv:
+            raise ValueError(f"there is no channel {ch!r} in the summary file")
+        wv = lg.wv[ch]
+        if robust and not wv.robust:
+            raise ValueError(
+                "this file holds a classical WV summary only; the robust WV needs the raw log"
+            )
+        if not robust and wv.robust:
+            if wv.classical is None:
+                raise ValueError("this summary file holds a robust WV only")
+            wv = wv.classical
+        return wv if wv.fs == fs else retag_fs(wv, fs)
+    if ch not in lg.channels:
+        raise ValueError(f"there is no channel {ch!r}; channels: {', '.join(lg.channels)}")
+    x = lg.channels[ch]
+    try:
+        return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch))
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"channel {ch}: {message_of(e)}") from None
+
+
+def wv_matrix_of(lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
+    """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
+
+    Channels of different lengths are truncated to the shortest (the notice says so).
+
+    Raises
+    ------
+    ValueError
+        No raw data (a WV summary file), too few or unusable channels.
+    """
+    if lg is None:
+        raise ValueError("load a log first")
+    if lg.is_summary:
+        raise ValueError(
+            f"{getattr(lg, 'source', '') or 'this file'} is a wavelet-variance "
+            "summary without raw samples: the wavelet cross-covariance needs "
+            "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
+        )
+    chans = tuple(channels)
+    series = {c: np.asarray(lg.channels[c]) for c in chans}
+    sizes = {c: int(a.size) for c, a in series.items()}
+    n = min(sizes.values())
+    note = ""
+    if len(set(sizes.values())) > 1:
+        desc = ", ".join(f"{c}: {v:,}" for c, v in sizes.items())
+        note = (
+            f"The channels have different lengths ({desc} samples); all are "
+            f"truncated to the shortest, {n:,} samples."
+        )
+        series = {c: a[:n] for c, a in series.items()}
+    units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
+    wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
+    return wvm, note

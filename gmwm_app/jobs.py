@@ -1,0 +1,283 @@
+"""The job runner of one session: work in a worker thread, its result applied on the page.
+
+Every view of a session gets the same :class:`Jobs` (with the session state) instead of the
+page object. A job is a callable run in the shared worker pool (:data:`EXECUTOR`; numpy
+releases the GIL there, so the server loop and the other sessions stay free); its result is
+applied with the session's document lock on the server loop, a failure is handed to the
+job's ``fail`` (an in-page message, never a traceback), a newer job of the same key
+supersedes a running one (the stale result is dropped), and :meth:`Jobs.cancel` drops a
+running job's result. Outside a server (tests, scripts) a job is waited for.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
+from typing import Any
+
+from panel.io.state import set_curdoc
+from panel.io.state import state as pn_state
+
+__all__ = ["EXECUTOR", "Jobs", "lower_priority"]
+
+log = logging.getLogger(__name__)
+
+
+def lower_priority() -> None:
+    """Run this worker thread at a lower CPU priority (Linux: nice applies per thread), so
+    that on a busy machine the event loop, which serves every session, comes first."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
+    except (AttributeError, OSError):  # not Linux, or not allowed: keep the priority
+        pass
+
+
+#: Worker threads for reading files, computing WVs and fits (shared by every session).
+EXECUTOR = ThreadPoolExecutor(
+    max_workers=4, thread_name_prefix="gmwm-app", initializer=lower_priority
+)
+
+
+def _ignore(*_args: Any) -> None:
+    """A hook that does nothing."""
+
+
+class Jobs:
+    """Run work off the loop and apply it on the page, for one session.
+
+    Parameters
+    ----------
+    doc : bokeh.document.Document, optional
+        The session's document (default: Panel's current document). Without a served
+        document every job runs at once, in the calling thread.
+
+    Attributes
+    ----------
+    busy : callable
+        ``busy(on, message)``: the page-wide loading indicator (set by the page).
+    failed : callable
+        ``failed(message, error)``: a page-wide load failed (set by the page).
+    settled : callable
+        ``settled()``: a page-wide load ended, well or not (set by the page).
+    install : callable
+        ``install(loaded)``: make newly read data the session's (set by the page).
+    """
+
+    def __init__(self, doc: Any = None) -> None:
+        self.doc = doc if doc is not None else pn_state.curdoc
+        self._latest: dict[str, int] = {}
+        self._count = 0
+        self._loads = 0
+        self.busy: Callable[[bool, str], None] = _ignore
+        self.failed: Callable[[str, BaseException], None] = _ignore
+        self.settled: Callable[[], None] = _ignore
+        self.install: Callable[[Any], None] = _ignore
+
+    @property
+    def served(self) -> bool:
+        """True when the session is served (a server loop applies the results)."""
+        return self.doc is not None and self.doc.session_context is not None
+
+    # ------------------------------------------------------------------------------------
+    # the page: lock, spawn, timers
+    # ------------------------------------------------------------------------------------
+    def locked(self, fn: Callable[[], Any]) -> None:
+        """Run ``fn`` with the session's document lock (next tick of the server loop).
+
+        Async jobs run without the lock (so the session stays responsive); every change of
+        the state, and so of Bokeh models, goes through here. Outside a server: at once.
+        """
+        if not self.served:
+            fn()
+            return
+        doc = self.doc
+
+        def run() -> None:
+            with set_curdoc(doc):
+                try:
+                    fn()
+                except Exception:  # never leave the loop with an exception
+                    log.exception("page callback failed")
+
+        doc.add_next_tick_callback(run)
+
+    def spawn(self, coro_fn: Callable[[], Any]) -> None:
+        """Start an async job: on the server loop when served, else run it to completion."""
+        if self.served:
+            with set_curdoc(self.doc):
+                pn_state.execute(coro_fn)
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no loop (tests, scripts): run it now
+            asyncio.run(coro_fn())
+        else:  # a notebook's loop
+            loop.create_task(coro_fn())
+
+    def later(self, fn: Callable[[], Any], ms: int) -> None:
+        """Run ``fn`` on the loop after ``ms`` milliseconds (at once outside a server)."""
+        if not self.served:
+            fn()
+            return
+        self.doc.add_timeout_callback(fn, ms)
+
+    def every(self, fn: Callable[[], Any], ms: int) -> Any:
+        """Run ``fn`` every ``ms`` milliseconds on the loop; returns a handle (None unserved)."""
+        if not self.served:
+            return None
+        return self.doc.add_periodic_callback(fn, ms)
+
+    def stop(self, handle: Any) -> None:
+        """Stop a periodic callback of :meth:`every`."""
+        if handle is None or not self.served:
+            return
+        try:
+            self.doc.remove_periodic_callback(handle)
+        except ValueError:  # already removed
+            pass
+
+    def submit(self, work: Callable[[], Any]) -> Future:
+        """Start ``work`` in the worker pool now; its future (for :meth:`run`)."""
+        return EXECUTOR.submit(work)
+
+    # ------------------------------------------------------------------------------------
+    # jobs
+    # ------------------------------------------------------------------------------------
+    def cancel(self, key: str) -> None:
+        """Drop the result of the running job of ``key`` (its ``done`` still runs)."""
+        self._count += 1
+        self._latest[key] = self._count
+
+    def current(self, key: str, ticket: int) -> bool:
+        """Whether ``ticket`` (from :meth:`run`) is still the latest job of ``key``."""
+        return self._latest.get(key) == ticket
+
+    def run(
+        self,
+        work: Callable[[], Any] | Future,
+        apply: Callable[[Any], Any],
+        fail: Callable[[BaseException], Any] | None = None,
+        done: Callable[[], Any] | None = None,
+        *,
+        key: str | None = None,
+        inline: bool = False,
+    ) -> int:
+        """Run ``work`` in a worker, then ``apply(result)`` (or ``fail(error)``) and ``done()``.
+
+        Parameters
+        ----------
+        work : callable or Future
+            The computation (no Bokeh or state changes in it), or a future already running.
+        apply, fail, done : callable
+            Run with the document lock on the loop; ``fail`` gets the exception (default:
+            logged); ``done`` runs in every case, after them.
+        key : str, optional
+            Jobs of one key supersede each other: only the latest one's ``apply``/``fail``
+            runs.
+        inline : bool
+            Run ``work`` at once in this thread (quick work). Otherwise it runs in a worker;
+            outside a server this call still waits for it and its ``apply`` (no loop to
+            hand back to).
+
+        Returns
+        -------
+        int
+            The job's ticket (see :meth:`current`).
+        """
+        self._count += 1
+        ticket = self._count
+        if key is not None:
+            self._latest[key] = ticket
+        if inline:
+            out: Any = None
+            err: BaseException | None = None
+            try:
+                out = work.result() if isinstance(work, Future) else work()
+            except Exception as e:  # handed to fail
+                err = e
+            self._finish(key, ticket, out, err, apply, fail, done)
+            return ticket
+        self.spawn(partial(self._background, key, ticket, work, apply, fail, done))
+        return ticket
+
+    async def _background(
+        self,
+        key: str | None,
+        ticket: int,
+        work: Callable[[], Any] | Future,
+        apply: Callable[[Any], Any],
+        fail: Callable[[BaseException], Any] | None,
+        done: Callable[[], Any] | None,
+    ) -> None:
+        out: Any = None
+        err: BaseException | None = None
+        try:
+            if isinstance(work, Future):
+                out = await asyncio.wrap_future(work)
+            else:
+                out = await asyncio.get_running_loop().run_in_executor(EXECUTOR, work)
+        except asyncio.CancelledError:  # the session closed
+            if done is not None:
+                self.locked(done)
+            raise
+        except Exception as e:  # handed to fail: shown in the page
+            err = e
+        self.locked(partial(self._finish, key, ticket, out, err, apply, fail, done))
+
+    def _finish(
+        self,
+        key: str | None,
+        ticket: int,
+        out: Any,
+        err: BaseException | None,
+        apply: Callable[[Any], Any],
+        fail: Callable[[BaseException], Any] | None,
+        done: Callable[[], Any] | None,
+    ) -> None:
+        try:
+            if key is None or self.current(key, ticket):
+                if err is None:
+                    apply(out)
+                elif fail is not None:
+                    fail(err)
+                else:
+                    log.error("job failed: %s: %s", type(err).__name__, err)
+        finally:
+            if done is not None:
+                done()
+
+    # ------------------------------------------------------------------------------------
+    # page-wide loads (data): loading indicator, failure message, install
+    # ------------------------------------------------------------------------------------
+    def load(
+        self,
+        message: str,
+        work: Callable[[], Any] | Future,
+        apply: Callable[[Any], Any] | None = None,
+    ) -> int:
+        """Read data in a worker with the page's loading indicator on, then apply them.
+
+        ``apply`` defaults to the page's :attr:`install`. A later load supersedes an
+        earlier one; a failure goes to the page's :attr:`failed` hook.
+        """
+        self._loads += 1
+        self.locked(lambda: self.busy(True, message))
+        return self.run(
+            work,
+            apply if apply is not None else self.install,
+            lambda e: self.failed(message, e),
+            self._settle,
+            key="page-load",
+        )
+
+    def _settle(self) -> None:
+        self._loads -= 1
+        if self._loads <= 0:  # the latest load ended (a superseded one keeps it on)
+            self._loads = 0
+            self.busy(False, "")
+            self.settled()

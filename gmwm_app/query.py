@@ -1,0 +1,171 @@
+"""The URL round trip of a session: its shareable settings as query parameters and back.
+
+:class:`QueryMixin` holds these methods of :class:`gmwm_app.state.AppState` (it has the
+state's parameters, ``read``, ``precompute``, ``install`` and ``set_model``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from gmwm_app.data import PreparedQuery, check_fs, message_of
+
+__all__ = ["QueryMixin"]
+
+
+class QueryMixin:
+    """URL query methods of :class:`gmwm_app.state.AppState`."""
+
+    param: Any
+
+    def to_query(self) -> dict[str, str]:
+        """The shareable state as URL query parameters (all strings).
+
+        E.g. ``{"source": "demo", "channel": "gyro_x", "fs": "100", "robust": "0",
+        "model": "2*GM+WN+RW"}``; ``path`` is added for a server file.
+        """
+        q = {"source": self.source}
+        if self.source == "path" and self.path:
+            q["path"] = self.path
+        if self.source == "scenario" and self.path:
+            q["scenario"] = self.path
+        if self.channel:
+            q["channel"] = self.channel
+        if self.fs:
+            q["fs"] = f"{self.fs:.12g}"
+        q["robust"] = "1" if self.robust else "0"
+        if len(self.model):
+            q["model"] = self.model.spec()
+        return q
+
+    def parse_query(self, query: Mapping[str, Any]) -> dict[str, Any]:
+        """Read URL query parameters (strings or lists of strings) into settings.
+
+        Returns ``{"source", "path", "channel", "fs", "robust", "model", "problems"}``;
+        unreadable values are left out and described in ``problems``.
+        """
+        q = {k: (v[-1] if isinstance(v, (list, tuple)) and v else v) for k, v in query.items()}
+        q = {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in q.items()}
+        out: dict[str, Any] = {"problems": []}
+        src = q.get("source", "").strip().lower()
+        if src == "path" or (not src and q.get("path")):
+            out["source"], out["path"] = "path", q.get("path", "")
+        elif src == "scenario":
+            out["source"], out["path"] = "scenario", q.get("scenario", "")
+        elif src == "upload":
+            out["source"] = None  # an upload cannot be replayed from a link
+            out["problems"].append(
+                "the link refers to an uploaded file, which is not part of "
+                "the link: upload it again"
+            )
+        elif src in ("", "demo"):
+            out["source"] = "demo" if src == "demo" else None
+        else:
+            out["source"] = None
+            out["problems"].append(f"unknown source {src!r} in the link (use demo or path)")
+        if q.get("channel"):
+            out["channel"] = q["channel"].strip()
+        if q.get("fs"):
+            try:
+                out["fs"] = check_fs(float(q["fs"]))
+            except ValueError:
+                out["problems"].append(f"fs={q['fs']!r} in the link is not a positive number of Hz")
+        if "robust" in q:
+            r = q["robust"].strip().lower()
+            if r in ("1", "true", "yes", "on"):
+                out["robust"] = True
+            elif r in ("0", "false", "no", "off", ""):
+                out["robust"] = False
+            else:
+                out["problems"].append(f"robust={q['robust']!r} in the link is not 0 or 1")
+        if "model" in q:
+            out["model"] = q["model"].strip()
+        return out
+
+    def prepare_query(
+        self, query: Mapping[str, Any], default_source: str = "demo", default_path: str = ""
+    ) -> PreparedQuery:
+        """Read the data a URL query asks for and precompute its WV (worker-thread safe).
+
+        A server path that cannot be read falls back to the demo (with a message).
+        """
+        s = self.parse_query(query)
+        problems = list(s["problems"])
+        src = s.get("source") or default_source
+        path = s.get("path") if s.get("source") in ("path", "scenario") else default_path
+        loaded = None
+        try:
+            loaded = self.read(src, path=path)
+        except ValueError as e:
+            problems.append(message_of(e))
+            if src != "demo":
+                try:
+                    loaded = self.read("demo")
+                    problems.append("showing the demo instead")
+                except ValueError as e2:
+                    problems.append(message_of(e2))
+        if loaded is not None:
+            self.precompute(loaded, s.get("channel"), s.get("fs"), bool(s.get("robust", False)))
+        return PreparedQuery(s, loaded, problems)
+
+    def from_query(
+        self,
+        query: Mapping[str, Any],
+        prepared: PreparedQuery | None = None,
+        default_source: str = "demo",
+        default_path: str = "",
+    ) -> bool:
+        """Restore a session from URL query parameters (see :meth:`to_query`).
+
+        Parameters
+        ----------
+        query : mapping
+            Query parameters, e.g. ``pn.state.location.query_params`` (values may be lists).
+        prepared : PreparedQuery, optional
+            The data already read by :meth:`prepare_query` (in a worker thread).
+        default_source, default_path
+            Data to load when the query names none (the demo, or the app's FILE argument).
+
+        Returns
+        -------
+        bool
+            True when everything in the query could be honoured; otherwise :attr:`error`
+            lists what could not (the rest is applied).
+        """
+        if prepared is None:
+            prepared = self.prepare_query(query, default_source, default_path)
+        s = prepared.settings
+        problems = list(prepared.problems)
+        if prepared.loaded is not None:
+            self.install(
+                prepared.loaded, channel=s.get("channel"), fs=s.get("fs"), robust=s.get("robust")
+            )
+            if self.error:
+                problems.append(self.error)
+        elif s.get("robust") is not None:
+            self.param.update(robust=s["robust"])
+        if s.get("model") is not None and (s["model"] or len(self.model)):
+            if not self.set_model(s["model"]):
+                problems.append(self.error)
+        if problems:
+            self.param.update(error="; ".join(dict.fromkeys(problems)), revision=self.revision + 1)
+            return False
+        return True
+
+    def data_info(self) -> dict[str, Any]:
+        """Description of the data (for exports and the info panel)."""
+        return {
+            "source": self.source,
+            "file": self.filename,
+            "path": self.path,
+            "channel": self.channel,
+            "channels": list(self.channels),
+            "fs_hz": self.fs,
+            "fs_source": self.fs_source,
+            "n_samples": self.n,
+            "duration_s": self.duration_s,
+            "unit": self.unit,
+            "robust_wv": self.robust,
+            "wv_summary_file": self.is_summary,
+        }

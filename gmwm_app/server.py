@@ -1,0 +1,166 @@
+"""Serving the app: one Bokeh application whose pages are built off the server loop.
+
+:func:`create_application` is what ``gmwm-app`` serves; :func:`limit_blas_threads` keeps
+OpenBLAS's threads from fighting the loop for the cores. The Panel internals this needs are
+in :mod:`gmwm_app._panel_compat`; the page itself is :func:`gmwm_app.app.create_app`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextvars
+import logging
+import weakref
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
+from typing import Any
+
+import panel as pn
+
+from gmwm_app import _panel_compat as compat
+from gmwm_app._panel_compat import building_off_loop
+from gmwm_app.app import create_app
+
+__all__ = ["create_application", "create_app_factory", "limit_blas_threads", "limit_blas_once"]
+
+log = logging.getLogger(__name__)
+
+
+def limit_blas_threads(n: int = 1) -> bool:
+    """Limit the BLAS (OpenBLAS) thread pool of this process to ``n`` threads.
+
+    In a server, the event loop thread is busy while a worker computes a WV; OpenBLAS's own
+    threads then fight them for the cores at every small ``np.dot``, which made a 1e6-sample
+    WV 30x slower (1 s instead of 30 ms) on a 2-core machine. The engine's matrices are small,
+    so one BLAS thread loses nothing (:func:`engine._blas.set_blas_threads`). Returns True
+    when a limit was set.
+    """
+    from engine._blas import set_blas_threads
+
+    return set_blas_threads(n)
+
+
+_BLAS_LIMITED = False
+
+
+def limit_blas_once() -> None:
+    """:func:`limit_blas_threads` to one thread, the first time it is called."""
+    global _BLAS_LIMITED
+    if not _BLAS_LIMITED:
+        _BLAS_LIMITED = True
+        limit_blas_threads(1)
+
+
+def create_app_factory(path: str | None = None) -> Callable[[], pn.viewable.Viewable]:
+    """A function that builds a fresh page per session (for ``pn.serve``), preloading ``path``."""
+
+    def factory() -> pn.viewable.Viewable:
+        if path:
+            return create_app(source="path", path=str(path))
+        return create_app()
+
+    return factory
+
+
+_BUILD_POOL: ThreadPoolExecutor | None = None
+_PREBUILT: weakref.WeakSet[Any] = weakref.WeakSet()  # documents built off the loop
+
+
+def _no_validation() -> None:
+    """Stands for ``Document.validate`` on documents already validated off the loop."""
+
+
+def _build_pool() -> ThreadPoolExecutor:
+    global _BUILD_POOL
+    if _BUILD_POOL is None:
+        # one thread: builds queue in order (the GIL would not run two at once anyway)
+        _BUILD_POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gmwm-page")
+    return _BUILD_POOL
+
+
+def create_application(path: str | None = None) -> Any:
+    """The Bokeh application of the app for ``pn.serve``: each page is built off the loop.
+
+    Opening a page builds a Bokeh document of about a thousand models, 0.3-1 s of Python.
+    Panel builds it in the server's event loop, so a burst of page opens would hold every
+    other session for the sum of their builds. Here the build (the page factory and the
+    document's models) runs in a worker thread while the session is being created (Bokeh
+    awaits ``on_session_created`` before it initialises the document); the loop only waits
+    for it, and keeps serving the other sessions, their events and their HTTP requests
+    meanwhile. If the threaded build fails, the page is built on the loop as usual.
+
+    Parameters
+    ----------
+    path : str, optional
+        Server path preloaded by every session (``gmwm-app FILE``); the demo log otherwise.
+
+    Returns
+    -------
+    panel.io.application.Application
+        Pass it to ``pn.serve({"/": create_application()})``.
+    """
+    from panel.io.application import Application
+    from panel.io.handlers import FunctionHandler
+
+    limit_blas_once()  # a server process: see limit_blas_threads
+    compat.skip_repeated_css_patch()
+    factory = create_app_factory(path)
+
+    class OffLoopHandler(FunctionHandler):
+        async def on_session_created(self, session_context: Any) -> None:
+            await super().on_session_created(session_context)
+            if not compat.supported():  # another Panel: built on the loop (modify_document)
+                return
+            doc = session_context._document
+            app = session_context.server_context.application_context.application
+            loop = asyncio.get_running_loop()
+            try:
+                # in a context of its own: whatever the build leaves in context variables
+                # (Panel's current document) must not stay with the pool's thread
+                await loop.run_in_executor(
+                    _build_pool(), contextvars.Context().run, self._build, doc, app
+                )
+            except Exception:  # built again on the loop by modify_document
+                log.exception("building the page off the loop failed; building it on the loop")
+
+        def _build(self, doc: Any, app: Any) -> None:
+            # what Panel's run_app does for a function handler, without its patch of Bokeh's
+            # global curdoc() stack (shared by all threads: a build in a thread would leave
+            # another session's document in Bokeh's global state); the current document is
+            # Panel's context variable, which is per thread. The document belongs to this
+            # thread while it is built (Panel applies model changes directly only on the
+            # document's thread); Panel's initialize_document gives it to the loop's after.
+            with building_off_loop(doc):
+                try:
+                    self._func(doc)  # the page factory and its document (Panel's build)
+                except BaseException:
+                    doc.clear()  # built again on the loop
+                    raise
+            doc.config.update(
+                reconnect_session=pn.config.reconnect is True,
+                notifications=None,
+                notify_connection_status=False,
+            )
+            if not doc.roots:
+                raise RuntimeError("the page factory produced an empty document")
+            # Bokeh validates the document after the handlers ran, on the loop (a walk of
+            # every model, ~0.1 s): done here instead, and skipped there for this document
+            doc.validate()
+            doc.validate = _no_validation
+            # the stylesheet patch Panel's page handler would do on the loop, done here
+            try:
+                compat.patch_css_off_loop(doc, app)
+            except Exception:  # the handler patches them on the loop, as usual
+                log.exception("patching the page's stylesheets off the loop failed")
+            _PREBUILT.add(doc)
+
+        def modify_document(self, doc: Any) -> None:
+            if doc in _PREBUILT:
+                _PREBUILT.discard(doc)
+                return
+            super().modify_document(doc)
+
+    title = "GMWM: stochastic calibration of inertial sensors"
+    handler = OffLoopHandler(partial(compat.eval_panel, factory, title))
+    return Application(handler, admin=False)

@@ -1,0 +1,151 @@
+"""The what-if mode of a session: sliders over the model's parameters (no widgets).
+
+:class:`SliderSpec` describes one log-scaled slider; :class:`WhatIfMixin` holds the what-if
+actions of :class:`gmwm_app.state.AppState` (it has the state's parameters); :func:`guess_values`
+reads rough values off a WV for a model not fitted yet.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+import engine as eg
+
+__all__ = ["SliderSpec", "WhatIfMixin", "guess_values"]
+
+
+@dataclass(frozen=True)
+class SliderSpec:
+    """A "what if" slider generated from a parameter (no widget: the app builds it).
+
+    The slider moves ``x = log10(value)`` (``log10(1 - phi)`` for an AR1 ``phi``) over
+    ``[lo, hi]``, 3 decades either side of the current value.
+    """
+
+    name: str  # unique parameter name, e.g. "GM_1.beta"
+    label: str  # process label, e.g. "GM_1"
+    param: str  # engine parameter name, e.g. "beta"
+    unit: str
+    transform: str  # "log10" or "log10(1-x)"
+    lo: float
+    hi: float
+    x: float  # slider position
+
+    def value_of(self, x: float) -> float:
+        """Parameter value at slider position ``x``."""
+        return 1.0 - 10.0**x if self.transform == "log10(1-x)" else 10.0**x
+
+    @staticmethod
+    def position_of(transform: str, value: float) -> float:
+        """Slider position of a parameter value."""
+        if transform == "log10(1-x)":
+            return math.log10(max(1.0 - value, 1e-15))
+        return math.log10(abs(value))
+
+
+class WhatIfMixin:
+    """What-if actions of :class:`gmwm_app.state.AppState` (its parameters ``model``,
+    ``result``, ``wv``, ``whatif``, ``whatif_values``, ``revision``; its ``_guard``,
+    ``_model_update`` and ``_apply_model``)."""
+
+    param: Any
+    model: eg.Model
+    wv: Any
+    whatif_values: dict[str, float]
+    revision: int
+
+    def set_whatif(self, on: bool) -> bool:
+        """Turn the what-if mode on (curves follow the sliders) or off (curves show the fit)."""
+        vals = dict(self.whatif_values)
+        if on:
+            vals = {**self._default_values(), **vals}
+        self.param.update(whatif=bool(on), whatif_values=vals, revision=self.revision + 1)
+        return True
+
+    def set_whatif_value(self, name: str, value: float) -> bool:
+        """Set one what-if parameter (unique name like ``GM_1.beta``); curves move, no fit."""
+
+        def run() -> bool:
+            if name not in self.model.param_names:
+                raise ValueError(f"the model has no parameter {name!r}")
+            v = float(value)
+            if not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number, got {value}")
+            self.whatif_model({name: v})  # validates the value (e.g. beta > 0)
+            self.param.update(
+                whatif_values={**self.whatif_values, name: v}, error="", revision=self.revision + 1
+            )
+            return True
+
+        return self._guard("Could not set the what-if value", run)
+
+    def reset_whatif(self) -> bool:
+        """What-if values back to the fitted ones."""
+        self.param.update(
+            whatif_values=self._model_update(self.model, self.result)["whatif_values"]
+            or self._default_values(),
+            error="",
+            revision=self.revision + 1,
+        )
+        return True
+
+    def fit_from_whatif(self) -> bool:
+        """Refit, using the what-if values as extra starting values."""
+        return self._guard(
+            "Could not fit",
+            lambda: self._apply_model(self.model.cleared(), start=self.whatif_model()),
+        )
+
+    def _default_values(self) -> dict[str, float]:
+        """Fitted values where known, else rough guesses read off the WV."""
+        vals = {k: v for k, v in self.model.values().items() if v is not None}
+        if self.wv is None:
+            return vals
+        for name, v in guess_values(self.model, self.wv).items():
+            vals.setdefault(name, v)
+        return vals
+
+    def whatif_model(self, override: Mapping[str, float] | None = None) -> eg.Model:
+        """The model with the what-if values (guesses where none), every value set."""
+        vals = {**self._default_values(), **self.whatif_values, **(override or {})}
+        procs = []
+        for lab, p in zip(self.model.labels, self.model.processes, strict=True):
+            procs.append(p.with_values(**{n: vals[f"{lab}.{n}"] for n in p.param_names}))
+        return eg.Model(tuple(procs))
+
+
+def guess_values(model: eg.Model, wv: eg.WaveletVariance) -> dict[str, float]:
+    """Rough starting values read off the WV (for what-if sliders before a fit).
+
+    AR1/GM correlation times are spread geometrically over the scales; each variance-like
+    parameter is half the largest value whose curve stays below the empirical WV.
+    """
+    tau = wv.tau_samples.astype(float)
+    nl = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
+    tcs = np.geomspace(tau[-1] / 4, max(tau[0], 2.0), len(nl)) if nl else []
+    out: dict[str, float] = {}
+    for k, i in enumerate(nl):
+        lab, p = model.labels[i], model.processes[i]
+        phi = math.exp(-1.0 / float(tcs[k]))
+        if p.code == "GM":
+            out[f"{lab}.beta"] = -math.log(phi) * wv.fs
+        else:
+            out[f"{lab}.phi"] = phi
+    pos = wv.variance > 0
+    for lab, p in zip(model.labels, model.processes, strict=True):
+        if p.nonlinear is not None:
+            nlv = math.exp(-out[f"{lab}.beta"] / wv.fs) if p.code == "GM" else out[f"{lab}.phi"]
+        else:
+            nlv = None
+        basis = np.asarray(p.basis(tau, wv.fs, nlv), float)
+        ok = pos & (basis > 0)
+        h = 0.5 * float(np.min(wv.variance[ok] / basis[ok])) if np.any(ok) else 1e-12
+        h = max(h, 1e-300)
+        name = p.param_names[-1] if p.nonlinear else p.param_names[0]
+        out[f"{lab}.{name}"] = math.sqrt(h) if p.code == "DR" else h
+    return out

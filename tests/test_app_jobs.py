@@ -1,0 +1,107 @@
+"""The session job runner (``gmwm_app.jobs``) and the Panel-internals module's version guard."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import panel as pn
+
+from gmwm_app import _panel_compat as compat
+from gmwm_app.jobs import Jobs
+
+
+def test_a_job_applies_its_result_then_runs_done() -> None:
+    jobs = Jobs(doc=None)
+    seen: list[Any] = []
+    jobs.run(lambda: 6 * 7, seen.append, None, lambda: seen.append("done"))
+    assert seen == [42, "done"] and not jobs.served
+
+
+def test_a_failure_goes_to_fail_never_to_apply() -> None:
+    jobs = Jobs(doc=None)
+    seen: list[Any] = []
+    jobs.run(lambda: 1 / 0, seen.append, lambda e: seen.append(type(e).__name__))
+    assert seen == ["ZeroDivisionError"]
+
+
+def test_a_newer_job_of_the_same_key_supersedes_a_running_one() -> None:
+    jobs = Jobs(doc=None)
+    seen: list[Any] = []
+
+    def slow() -> str:
+        jobs.run(lambda: "new", seen.append, key="k")  # starts (and ends) meanwhile
+        return "old"
+
+    jobs.run(slow, seen.append, key="k", inline=True)
+    assert seen == ["new"]
+    # another key is not affected
+    jobs.run(lambda: "other", seen.append, key="j")
+    assert seen == ["new", "other"]
+
+
+def test_cancel_drops_the_result_but_done_still_runs() -> None:
+    jobs = Jobs(doc=None)
+    seen: list[Any] = []
+
+    def work() -> str:
+        jobs.cancel("k")
+        return "dropped"
+
+    jobs.run(work, seen.append, seen.append, lambda: seen.append("done"), key="k")
+    assert seen == ["done"]
+
+
+def test_a_page_load_turns_the_indicator_on_and_off_and_installs() -> None:
+    jobs = Jobs(doc=None)
+    seen: list[Any] = []
+    jobs.busy = lambda on, msg: seen.append(("busy", on, msg))
+    jobs.install = lambda x: seen.append(("install", x))
+    jobs.settled = lambda: seen.append("settled")
+    jobs.failed = lambda msg, e: seen.append(("failed", msg, str(e)))
+    jobs.load("Reading", lambda: 3)
+    assert seen == [("busy", True, "Reading"), ("install", 3), ("busy", False, ""), "settled"]
+    seen.clear()
+    jobs.load("Reading x", lambda: int("x"))
+    assert seen[1][0] == "failed" and seen[1][1] == "Reading x" and seen[2][1] is False
+
+
+def test_panel_internals_were_checked_for_the_installed_panel() -> None:
+    """Fails on a Panel upgrade: re-check gmwm_app/_panel_compat.py, then add the version."""
+    assert pn.__version__ in compat.PANEL_VERSIONS, (
+        f"Panel {pn.__version__}: re-check the internals used by gmwm_app/_panel_compat.py "
+        f"(written for {compat.PANEL_VERSIONS})"
+    )
+    assert compat.supported() and compat.light_text_updates()
+    from panel.pane.markup import HTMLBasePane
+
+    assert getattr(HTMLBasePane._update, "_gmwm_light", False)
+    from panel.io.state import state as pn_state
+
+    assert hasattr(pn_state, "_thread_id_") and hasattr(pn_state, "_launching")
+
+
+def test_the_off_loop_stylesheet_patch_matches_panels_own() -> None:
+    """A root patched off the loop is skipped by the page handler only for the same dist_url,
+    and Panel's own patch leaves it as it was (the skip changes nothing)."""
+    from panel.io import server as pn_server
+    from panel.io.resources import patch_model_css
+
+    assert compat.skip_repeated_css_patch()
+    assert pn_server.patch_model_css is not patch_model_css  # the handler's name is wrapped
+    page = pn.Column(pn.widgets.Button(label="a"), pn.pane.Markdown("x"))
+    doc = page.server_doc()
+    root = doc.roots[0]
+
+    def urls() -> list[str]:
+        from bokeh.models import ImportedStyleSheet
+
+        return sorted(s.url for s in root.select({"type": ImportedStyleSheet}))
+
+    patch_model_css(root, dist_url="static/extensions/panel/")
+    compat._CSS_DONE[root] = "static/extensions/panel/"
+    before = urls()
+    assert before and all("static/extensions/panel/" in u for u in before if "bundled" in u)
+    pn_server.patch_model_css(root, dist_url="static/extensions/panel/")  # skipped
+    assert urls() == before
+    patch_model_css(root, dist_url="static/extensions/panel/")  # Panel's own: no change
+    assert urls() == before
