@@ -139,6 +139,7 @@ def fit_text(result: Any) -> str:
         parts.append("A covariance is on the edge of positive semi-definiteness.")
     if result.at_bound:
         parts.append(f"At a bound: {html.escape(', '.join(result.at_bound))}.")
+    parts += [f"Warning: {html.escape(w)}." for w in result.warnings]
     if not result.converged:
         parts.append(html.escape(result.message))
     return " ".join(parts)

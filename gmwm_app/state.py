@@ -627,7 +627,8 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         return float(r @ omega @ r)
 
     def warnings(self) -> list[str]:
-        """Warnings about the fit: parameters at a bound, no convergence."""
+        """Warnings about the fit: parameters at a bound, the fit's own warnings (an AR1/GM
+        faster than one sample), no convergence."""
         res = self.result
         if res is None:
             return []
@@ -637,6 +638,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
                 f"at a bound: {', '.join(res.at_bound)} (the model may be larger than "
                 "the data support; try removing that process)"
             )
+        out += list(res.warnings)  # e.g. an AR1/GM faster than one sample
         if not res.converged:
             out.append(f"not converged: {res.message}")
         return out

@@ -18,6 +18,20 @@ replicate fit, a conic PSD solve for the multivariate fit); the outer search ove
 The fitted processes are then ordered most persistent first (:func:`persistent_first`) and the
 parameters on the boundary of their space are listed (:func:`at_bound`).
 
+Correlation times shorter than one sample
+-----------------------------------------
+The search explores correlation times down to ``TC_MIN`` (0.01 samples) and does not stop at one
+sample: an AR1/GM faster than the sampling interval has no physical correlation time (it is
+white noise in disguise at every Haar scale), but it is still a valid discrete-time AR1 whose
+``phi`` the data identify. Real sensors produce it: a static log whose samples are correlated
+with their neighbours only (the sensor's own low-pass or FIR filter; the ADIS16405 gyros have a
+lag-1 autocorrelation of 0.17 and none at lag 2) is fitted best with such a term. Bounding it at
+one sample would make the fit several times worse there and push the misfit into the other
+terms (measured: README, "Correlation times shorter than one sample"). So every fit keeps the
+minimum and *flags* the term instead (:func:`sub_sample_warnings`, ``TC_FLAG``): the warning
+says it is white noise in disguise, gives its white-noise equivalent (for the noise density)
+and, for a term whose variance is 0, that its correlation time means nothing.
+
 The problem protocol
 --------------------
 :func:`search` (and :func:`best_candidates`, :func:`local`) need an object ``prob`` with
@@ -56,6 +70,7 @@ import numpy as np
 
 from .._optim import nelder_mead, nnls
 from ..models import AR1, GM, TC_MAX_FACTOR, TC_MIN, Model, Process, ar1_wv_pos
+from ..units import param_unit
 from ..wv import WaveletVariance
 from .result import FitError
 
@@ -69,7 +84,13 @@ __all__ = [
     "search",
     "persistent_first",
     "at_bound",
+    "TC_FLAG",
+    "sub_sample_message",
+    "sub_sample_warnings",
 ]
+
+# AR1/GM correlation times (samples) below this are flagged after every fit: one sample.
+TC_FLAG = 1.0
 
 
 def sqrt_weight(omega: np.ndarray) -> np.ndarray:
@@ -367,4 +388,62 @@ def at_bound(fitted: Model, fs: float, tc_min: float, tc_max: float) -> list[str
                 tc = -1.0 / math.log(phi) if phi < 1 else math.inf
                 if tc <= tc_min * 1.0001 or tc >= tc_max / 1.0001:
                     out.append(f"{lab}.{q.nonlinear}")
+    return out
+
+
+def sub_sample_message(label: str, q: Process, fs: float, unit: str = "") -> str | None:
+    """The warning for one fitted AR1/GM term whose correlation time is below ``TC_FLAG`` (one
+    sample), else None.
+
+    Parameters
+    ----------
+    label : str
+        The term as the result names it (``GM_2``, ``gyro_x.GM_1`` ...).
+    q : Process
+        The fitted process (every value set).
+    fs : float
+        Sampling frequency (Hz).
+    unit : str
+        Signal unit (for the white-noise equivalent).
+
+    Notes
+    -----
+    At scales much longer than its correlation time an AR1(phi, sigma2) has the WV of a WN of
+    variance ``sigma2 / (1 - phi)^2`` (a GM: ``sigma2_gm (1 + phi) / (1 - phi)``): the
+    *white-noise equivalent* a datasheet's noise density should count.
+    """
+    if q.nonlinear is None:
+        return None
+    phi = _phi(q, fs)
+    tc = -1.0 / math.log(phi) if 0 < phi < 1 else (math.inf if phi >= 1 else 0.0)
+    if tc >= TC_FLAG:
+        return None
+    dt = 1.0 / fs
+    head = (
+        f"{label}: correlation time {tc * dt:.3g} s = {tc:.2g} samples, shorter than one "
+        f"sample (1/fs = {dt:g} s)"
+    )
+    if q.linear_coef() == 0.0:
+        return (
+            f"{head}: its variance is 0 (absent from the fit), so its {q.nonlinear} means "
+            "nothing; drop it"
+        )
+    ar = q if isinstance(q, AR1) else q.as_ar1(fs)
+    equiv = ar.sigma2 / (1.0 - ar.phi) ** 2
+    return (
+        f"{head}: white noise in disguise, with neighbouring samples correlated (e.g. by the "
+        f"sensor's filter), not a physical correlation time; its WN-equivalent sigma2 = "
+        f"{equiv:.4g} {param_unit('WN', 'sigma2', unit)} (N = {math.sqrt(equiv / fs):.4g} "
+        f"{unit or 'u'}/sqrt(Hz)) belongs to the noise density (add it to WN's)"
+    )
+
+
+def sub_sample_warnings(fitted: Model, fs: float, unit: str = "", prefix: str = "") -> list[str]:
+    """:func:`sub_sample_message` of every AR1/GM term of ``fitted`` whose correlation time is
+    below one sample; ``prefix`` (e.g. a channel name and a dot) goes before the labels."""
+    out = []
+    for lab, q in zip(fitted.labels, fitted.processes, strict=True):
+        msg = sub_sample_message(prefix + lab, q, fs, unit)
+        if msg is not None:
+            out.append(msg)
     return out

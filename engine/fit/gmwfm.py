@@ -18,7 +18,14 @@ import numpy as np
 from .._optim import least_squares
 from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance
-from ._varpro import NNLSProblem, at_bound, grid_candidates, persistent_first, sqrt_weight
+from ._varpro import (
+    NNLSProblem,
+    at_bound,
+    grid_candidates,
+    persistent_first,
+    sqrt_weight,
+    sub_sample_warnings,
+)
 from .estimate import MethodEstimate
 from .gmwm import fit_gmwm, weight_matrix
 from .result import FitError, FitResult
@@ -253,6 +260,7 @@ def fit_gmwfm(
             objective=res.objective,
             converged=res.converged,
             at_bound=list(res.at_bound),
+            warnings=list(res.warnings),
             n_evaluations=res.n_evaluations,
             method=res.method,
             message=res.message,
@@ -386,6 +394,7 @@ def fit_gmwfm(
         objective=objective,
         converged=bool(best.success),
         at_bound=bound,
+        warnings=sub_sample_warnings(fitted, wv.fs, wv.unit),
         n_evaluations=n_eval,
         method="bounded least squares",
         message="converged" if best.success else "the least-squares search hit its budget",

@@ -27,7 +27,14 @@ import numpy as np
 
 from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
-from ._varpro import NNLSProblem, at_bound, persistent_first, search, sqrt_weight
+from ._varpro import (
+    NNLSProblem,
+    at_bound,
+    persistent_first,
+    search,
+    sqrt_weight,
+    sub_sample_warnings,
+)
 from .result import FitError, FitResult, ParamTable
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix"]
@@ -48,8 +55,9 @@ class GMWMResult(FitResult):
 
     ``weights`` is ``"ci"``, ``"identity"`` or ``"user"``; ``omega`` the (J, J) matrix;
     ``at_bound`` lists a variance at 0 or a correlation time at the edge of the explored
-    range (a sign that the model may be too large); ``method`` is ``"closed-form"`` or
-    ``"grid+nelder-mead"``.
+    range (a sign that the model may be too large); ``warnings`` flags an AR1/GM whose
+    correlation time is shorter than one sample (white noise in disguise); ``method`` is
+    ``"closed-form"`` or ``"grid+nelder-mead"``.
     """
 
     wv: WaveletVariance
@@ -255,6 +263,7 @@ def fit_gmwm(
         components=comps,
         converged=converged,
         at_bound=at_bound(fitted, wv.fs, prob.tc_min, prob.tc_max),
+        warnings=sub_sample_warnings(fitted, wv.fs, wv.unit),
         n_evaluations=prob.n_eval,
         method=method,
         message=msg,

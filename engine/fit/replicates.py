@@ -16,7 +16,7 @@ import numpy as np
 
 from ..models import Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
-from ._varpro import NNLSProblem, at_bound, persistent_first, search
+from ._varpro import NNLSProblem, at_bound, persistent_first, search, sub_sample_warnings
 from .gmwm import GMWMResult, fit_gmwm, weight_matrix
 from .result import FitError, FitResult
 
@@ -224,6 +224,7 @@ def fit_replicates(
         components=fitted.components(longest.tau_samples, fs0),
         converged=converged,
         at_bound=at_bound(fitted, fs0, prob.tc_min, prob.tc_max),
+        warnings=sub_sample_warnings(fitted, fs0, out[0].unit),
         n_evaluations=prob.n_eval,
         method=method,
         message=msg,

@@ -4,9 +4,9 @@ Every fit result (:class:`engine.fit.GMWMResult`, :class:`engine.fit.replicates.
 :class:`engine.fit.gmwfm.GMWFMResult`, the multivariate result) derives from :class:`FitResult`:
 the same fields with one name and one type each (``model``, ``params``, ``objective``, the
 weighting as ``weights: str`` naming the scheme and ``omega: ndarray`` the matrix, ``converged``,
-``at_bound``, ``n_evaluations``, ``method``, ``message``, ``elapsed_s``), and the same methods:
-``conf_int(alpha)`` (a labelled :class:`ParamTable`), ``summary()`` (a :class:`Summary`: a
-string with an HTML view for notebooks) and ``to_dict()`` (JSON-ready).
+``at_bound``, ``warnings``, ``n_evaluations``, ``method``, ``message``, ``elapsed_s``), and the
+same methods: ``conf_int(alpha)`` (a labelled :class:`ParamTable`), ``summary()`` (a
+:class:`Summary`: a string with an HTML view for notebooks) and ``to_dict()`` (JSON-ready).
 """
 
 from __future__ import annotations
@@ -53,11 +53,14 @@ class ParamRecord:
         }
 
 
-def warning_lines(at_bound: Any, converged: bool, message: str) -> list[str]:
-    """The warning lines that end a fit summary (parameters at a bound, no convergence)."""
+def warning_lines(at_bound: Any, converged: bool, message: str, warnings: Any = ()) -> list[str]:
+    """The warning lines that end a fit summary (parameters at a bound, the fit's readable
+    ``warnings``, no convergence)."""
     lines: list[str] = []
     if at_bound:
         lines += ["", f"  warning: at a bound: {', '.join(at_bound)}"]
+    for w in warnings:
+        lines += ["", f"  warning: {w}"]
     if not converged:
         lines += ["", f"  warning: {message}"]
     return lines
@@ -141,6 +144,9 @@ class FitResult:
         True when the local search met its tolerance.
     at_bound : list[str]
         Parameters estimated on the boundary of their space.
+    warnings : list[str]
+        Readable warnings about the estimate: an AR1/GM whose correlation time is shorter
+        than one sample (white noise in disguise, :func:`engine.fit._varpro.sub_sample_message`).
     n_evaluations : int
         Number of objective evaluations.
     method : str
@@ -157,6 +163,7 @@ class FitResult:
     objective: float
     converged: bool = True
     at_bound: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     n_evaluations: int = 0
     method: str = ""
     message: str = ""
@@ -209,7 +216,7 @@ class FitResult:
         for r in self.param_records:
             lines.append(f"  {r.full_name:<16} {r.value:>14.6e}  {r.unit}")
         lines += self._summary_tail()
-        lines += warning_lines(self.at_bound, self.converged, self.message)
+        lines += warning_lines(self.at_bound, self.converged, self.message, self.warnings)
         return Summary("\n".join(lines))
 
     def __str__(self) -> str:
@@ -229,6 +236,7 @@ class FitResult:
             "params": [r.to_dict() for r in self.param_records],
             "converged": bool(self.converged),
             "at_bound": list(self.at_bound),
+            "warnings": list(self.warnings),
             "method": self.method,
             "n_evaluations": int(self.n_evaluations),
         }

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..fit import FitError
+from ..fit._varpro import sub_sample_warnings
 from ..models import ModelError
 from ..wv import WVMatrix, wv_matrix
 from .moments import moment_covariance
@@ -220,6 +221,13 @@ def _fit(
         components=comps,
         converged=converged,
         at_bound=at_bound,
+        warnings=[
+            w
+            for p, c in enumerate(fitted.channels)
+            for w in sub_sample_warnings(
+                fitted.models[c], wvm.fs, wvm.units[p] if p < len(wvm.units) else "", f"{c}."
+            )
+        ],
         psd_active=coupled,
         n_evaluations=prob.n_eval,
         method=method,

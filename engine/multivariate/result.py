@@ -294,7 +294,7 @@ class MGMWMResult(FitResult):
                     f"    {ca:<{width}}"
                     + "".join(f"{rho[a, b]:>{width}.4f}" for b in range(len(g)))
                 )
-        lines += warning_lines(self.at_bound, self.converged, self.message)
+        lines += warning_lines(self.at_bound, self.converged, self.message, self.warnings)
         return Summary("\n".join(lines))
 
     def _dict_extra(self) -> dict[str, Any]:
