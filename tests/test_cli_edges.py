@@ -92,6 +92,12 @@ def test_unknown_fs_is_a_loud_warning_on_stderr(capsys, tmp_path):
     assert code == 0 and "1 Hz ASSUMED" in err
     code, _, err = run(capsys, "export", str(plain), "--model", "WN", "--format", "json", "-o", "-")
     assert code == 0 and "1 Hz ASSUMED" in err
+    two = tmp_path / "two.npy"  # several channels (MGMWM) and several recordings
+    np.save(two, np.random.default_rng(2).standard_normal((5000, 2)))
+    code, _, err = run(capsys, "fit", str(two), "--model", "WN", "--channels", "col0,col1")
+    assert code == 0 and "1 Hz ASSUMED" in err and "two.npy" in err
+    code, _, err = run(capsys, "fit", str(plain), str(plain), "--model", "WN")
+    assert code == 0 and "1 Hz ASSUMED" in err
     # an error stays one line (the warning is printed only with a result)
     code, out, err = run(capsys, "fit", str(plain), "--model", "WN+WN")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1 and "WN" in err

@@ -16,7 +16,7 @@ from ..fit.replicates import fit_replicates
 from ..io import load_log
 from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
-from .common import load_wv, log_kwargs
+from .common import load_wv, log_kwargs, warn_fs_unknown
 
 __all__ = ["cli_fit"]
 
@@ -56,7 +56,14 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             )
         wvs, names = [], []
         for f in files:
-            wv, name = load_wv(argparse.Namespace(**{**vars(args), "input": f}))
+            one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
+            wv, name = load_wv(one)
+            for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
+                warn = getattr(args, "warnings", None)
+                if warn is None:
+                    warn = args.warnings = []
+                if w not in warn:
+                    warn.append(w)
             wvs.append(wv)
             names.append(name)
         res = fit_replicates(wvs, args.model, weights=args.weights)
@@ -83,6 +90,8 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             f"{args.input} is a WV summary file: --channels needs the raw channels "
             "(the WCCV is not stored)"
         )
+    if log.fs_source == "default":
+        warn_fs_unknown(args, str(args.input))
     unknown = [c for c in names if c not in log.channels]
     if unknown:
         raise FitError(
