@@ -73,8 +73,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = None
     if args.file:
         f = Path(args.file).expanduser()
-        if not f.is_file():
-            print(f"gmwm-app: error: no such file: {f}", file=sys.stderr)
+        if not (f.is_file() or (f / "metadata.yaml").is_file()):  # a log, or a ROS 2 bag folder
+            print(f"gmwm-app: error: no such file (or ROS 2 bag folder): {f}", file=sys.stderr)
             return 2
         path = str(f.resolve())
     if not 0 <= args.port <= 65535:

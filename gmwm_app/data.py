@@ -182,8 +182,11 @@ def read_source(
         check_path(p)  # only the configured folders (gmwm-app --data-dir), checked first
         if not p.exists():  # so that nothing is said about files outside them
             raise ValueError(f"no such file on the server: {p}")
-        if p.is_dir():
-            raise ValueError(f"{p} is a folder: give the path of a log file")
+        if p.is_dir() and not (p / "metadata.yaml").is_file():  # a ROS 2 bag is a folder
+            raise ValueError(
+                f"{p} is a folder: give the path of a log file, or of a ROS 2 bag folder "
+                "(the one holding metadata.yaml)"
+            )
         out = LoadedData(read_log(p, segment=segment), "path", p.name, str(p))
     elif source == "upload":
         if data is None or len(data) == 0:

@@ -18,6 +18,7 @@ from engine.io import (  # noqa: E402
     LoadError,
     imu_topics,
     load_log,
+    mcap_profile,
     read_imu_bag,
     rosbag,
     write_imu_bag,
@@ -183,3 +184,56 @@ def test_fit_and_cli(tmp_path: Path, imu, capsys) -> None:
     assert main(["wv", str(path), "--topic", "/nope"]) == 2
     assert "/nope" in capsys.readouterr().err
     shutil.rmtree(path)
+
+
+def _mcap_with_profile(path: Path, profile: str) -> Path:
+    """The start of an MCAP file: magic and a Header record (opcode 1, length, profile, library)."""
+    prof, lib = profile.encode(), b"test"
+    body = len(prof).to_bytes(4, "little") + prof + len(lib).to_bytes(4, "little") + lib
+    path.write_bytes(
+        b"\x89MCAP0\r\n" + b"\x01" + len(body).to_bytes(8, "little") + body + b"\0" * 64
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    "profile, said", [("ros1", "'ros1' profile (ROS 1 messages in MCAP)"), ("", "empty profile")]
+)
+def test_mcap_of_another_profile_names_the_real_cause(tmp_path: Path, profile, said) -> None:
+    """Issue 12: an MCAP with the ROS 1 profile or none is not called a damaged bag."""
+    f = _mcap_with_profile(tmp_path / "x.mcap", profile)
+    assert mcap_profile(f) == profile
+    with pytest.raises(LoadError, match="MCAP") as e:
+        load_log(f)
+    assert said in str(e.value) and "damaged" not in str(e.value) and "'ros2'" in str(e.value)
+
+
+def test_a_ros2_mcap_bag_reports_its_profile(tmp_path: Path, imu) -> None:
+    gyro, acc, stamps = imu
+    d = write_imu_bag(tmp_path / "m", gyro, acc, stamps, ros=2, storage="mcap")
+    (f,) = sorted(Path(d).glob("*.mcap"))
+    assert mcap_profile(f) == "ros2"
+    assert load_log(d)["gyro_x"].size == gyro.shape[0]
+
+
+def test_the_app_reads_a_ros2_bag_folder_by_server_path(tmp_path: Path, imu) -> None:
+    """Issue 12: a ROS 2 bag (a folder with metadata.yaml) can be chosen as a server path."""
+    from gmwm_app import limits
+    from gmwm_app.state import AppState
+
+    gyro, acc, stamps = imu
+    d = write_imu_bag(tmp_path / "bag2", gyro, acc, stamps, ros=2)
+    before = limits.current()
+    limits.configure(data_dirs=[tmp_path])
+    try:
+        st = AppState()
+        assert st.load_path(str(d)), st.error
+        assert st.channel in IMU_CHANNELS and st.n == gyro.shape[0]
+        assert not st.load_path(str(tmp_path))  # a plain folder: a clear message, data kept
+        assert "ROS 2 bag folder" in st.error and st.n == gyro.shape[0]
+    finally:
+        limits.configure(
+            max_upload_mb=before.max_upload_mb,
+            data_dirs=before.data_dirs,
+            allowed_files=before.allowed_files,
+        )

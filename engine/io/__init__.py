@@ -17,7 +17,7 @@ from __future__ import annotations
 from .load import load_log
 from .log import ImuLog, LoadError, pick_channel
 from .npy import npy_sidecar_path, read_npy_sidecar, write_npy_sidecar
-from .rosbag import IMU_CHANNELS, ImuBag, imu_topics, read_imu_bag, write_imu_bag
+from .rosbag import IMU_CHANNELS, ImuBag, imu_topics, mcap_profile, read_imu_bag, write_imu_bag
 from .save import save_log
 from .session import (
     Session,
@@ -48,6 +48,7 @@ __all__ = [
     "read_imu_bag",
     "imu_topics",
     "write_imu_bag",
+    "mcap_profile",
     "TimeEvent",
     "TimeReport",
     "check_time",

@@ -29,7 +29,7 @@ import numpy as np
 
 from .log import LoadError
 
-__all__ = ["ImuBag", "read_imu_bag", "imu_topics", "write_imu_bag", "IMU_CHANNELS"]
+__all__ = ["ImuBag", "read_imu_bag", "imu_topics", "write_imu_bag", "IMU_CHANNELS", "mcap_profile"]
 
 IMU_TYPES = ("sensor_msgs/msg/Imu", "sensor_msgs/Imu")
 IMU_CHANNELS = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
@@ -103,7 +103,48 @@ def _bag_paths(path: Path, src: str) -> tuple[list[Path], str]:
     )
 
 
+def mcap_profile(path: str | os.PathLike[str]) -> str | None:
+    """The profile of an MCAP file's header record (``"ros2"``, ``"ros1"``, ``""`` ...), or None
+    when the file does not start like an MCAP file.
+
+    MCAP layout: the 8-byte magic, then the Header record: opcode ``0x01``, its length (uint64
+    LE), the profile (uint32 LE length + UTF-8) and the library string.
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(8 + 1 + 8 + 4 + 256)
+    if not head.startswith(b"\x89MCAP0\r\n") or len(head) < 21 or head[8] != 0x01:
+        return None
+    n = int.from_bytes(head[17:21], "little")
+    if 21 + n > len(head):
+        return None
+    return head[21 : 21 + n].decode("utf-8", "replace")
+
+
+def _check_mcap(paths: list[Path], src: str) -> None:
+    """A ROS 1 or profile-less MCAP gets a message naming that cause (rosbags reads ROS 2 MCAP)."""
+    for p in paths:
+        files = sorted(p.glob("*.mcap")) if p.is_dir() else [p]
+        for f in files:
+            if f.suffix.lower() != ".mcap":
+                continue
+            prof = mcap_profile(f)
+            if prof is None or prof == "ros2":
+                continue  # not an MCAP header at all: the reader says what is wrong
+            what = (
+                "has an empty profile (written by a generic MCAP tool, not 'ros2 bag record')"
+                if prof == ""
+                else f"has the '{prof}' profile"
+                + (" (ROS 1 messages in MCAP)" if prof == "ros1" else "")
+            )
+            raise LoadError(
+                f"file '{src}' is an MCAP file that {what}: this reader reads ROS 2 MCAP bags "
+                "(profile 'ros2') and ROS 1 .bag files; record with 'ros2 bag record -s mcap', "
+                "or convert it to a ROS 1 .bag, then load that"
+            )
+
+
 def _open(paths: list[Path], src: str) -> Any:
+    _check_mcap(paths, src)
     hl = _rosbags()
     try:
         reader = hl.AnyReader(paths)
