@@ -9,7 +9,6 @@ reads its WVs from there).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import tempfile
@@ -33,7 +32,6 @@ __all__ = [
     "compute_wv",
     "wv_from_cache",
     "store_wv",
-    "retag_fs",
     "check_fs",
     "channel_names",
     "summary_has_robust",
@@ -109,12 +107,6 @@ class PreparedQuery:
     problems: list[str]
 
 
-def retag_fs(wv: eg.WaveletVariance, fs: float) -> eg.WaveletVariance:
-    """The same WV at another sampling frequency (the variances do not depend on fs)."""
-    classical = None if wv.classical is None else dataclasses.replace(wv.classical, fs=fs)
-    return dataclasses.replace(wv, fs=fs, classical=classical)
-
-
 def wv_from_cache(
     cache: Mapping[tuple[str, float, bool], eg.WaveletVariance],
     channel: str,
@@ -129,9 +121,9 @@ def wv_from_cache(
         if ch != channel or not isinstance(wv, eg.WaveletVariance):  # (WV matrices too)
             continue
         if rob == robust:
-            return retag_fs(wv, fs)
+            return wv.with_fs(fs)
         if not robust and rob and wv.classical is not None:
-            return retag_fs(wv.classical, fs)
+            return wv.classical.with_fs(fs)
     return None
 
 
@@ -308,7 +300,7 @@ def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
             if wv.classical is None:
                 raise ValueError("this summary file holds a robust WV only")
             wv = wv.classical
-        return wv if wv.fs == fs else retag_fs(wv, fs)
+        return wv if wv.fs == fs else wv.with_fs(fs)
     if ch not in lg.channels:
         raise ValueError(f"there is no channel {ch!r}; channels: {', '.join(lg.channels)}")
     x = lg.channels[ch]
