@@ -47,7 +47,7 @@ from gmwm_app.data import (
     wv_matrix_of,
 )
 from gmwm_app.query import QueryMixin
-from gmwm_app.whatif import SliderSpec, WhatIfMixin, guess_values
+from gmwm_app.whatif import SliderSpec, WhatIfMixin
 
 __all__ = [
     "AppState",
@@ -573,7 +573,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         if not len(self.model) or self.wv is None:
             return []
         vals = {**self._default_values(), **self.whatif_values}
-        guesses = guess_values(self.model, self.wv)
+        guesses = eg.starting_values(self.model, self.wv)
         out = []
         for lab, p in zip(self.model.labels, self.model.processes, strict=True):
             for name in p.param_names:
