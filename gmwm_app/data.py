@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -43,14 +42,20 @@ __all__ = [
 
 
 def read_log(
-    path: str | os.PathLike[str], *, fs: float | None = None, segment: str | None = None
+    path: str | os.PathLike[str] | bytes,
+    *,
+    fs: float | None = None,
+    segment: str | None = None,
+    name: str | None = None,
 ) -> Any:
     """Read an IMU log with the engine's loader (``engine.load_log``).
 
     Parameters
     ----------
-    path : str or path-like
-        CSV/TSV/text, NPY/NPZ, HDF5 log or WV summary HDF5 file.
+    path : str, path-like or bytes
+        CSV/TSV/text, NPY/NPZ, HDF5 log or WV summary HDF5 file, or its content (an upload).
+    name : str, optional
+        The uploaded file's name, for content (its extension and the name in messages).
     fs : float, optional
         Sampling frequency (Hz) to use when the file has none.
 
@@ -65,7 +70,7 @@ def read_log(
     """
     from engine.io import load_log  # imported here: the app module loads without h5py work
 
-    return load_log(path, fs=fs, segment=segment)
+    return load_log(path, fs=fs, segment=segment, name=name)
 
 
 @dataclass
@@ -184,20 +189,7 @@ def read_source(
             data = data.encode("utf-8")
         check_upload_size(len(data), filename)
         name = Path(filename or "upload.csv").name
-        suffix = "".join(Path(name).suffixes[-2:]) or ".csv"
-        fd, tmp = tempfile.mkstemp(prefix="gmwm_upload_", suffix=suffix)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            try:
-                lg = read_log(tmp, segment=segment)
-            except ValueError as e:  # name the user's file, not the temporary one
-                raise ValueError(str(e).replace(tmp, name).replace(Path(tmp).name, name)) from None
-        finally:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+        lg = read_log(bytes(data), segment=segment, name=name)
         out = LoadedData(lg, "upload", name, "")
     elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path
         from engine.teaching import get_scenario, simulate_scenario
