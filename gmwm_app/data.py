@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -276,8 +276,18 @@ def unit_of(lg: Any, ch: str) -> str:
     return str(u or "")
 
 
-def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
-    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``)."""
+def compute_wv(
+    lg: Any,
+    ch: str,
+    fs: float,
+    robust: bool,
+    progress: Callable[[int, int], object] | None = None,
+) -> eg.WaveletVariance:
+    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``).
+
+    ``progress(j, J)`` is called as each level of a computed WV is done (see
+    :func:`engine.wavelet_variance`); not for a summary file's stored WV.
+    """
     if lg is None:
         raise ValueError("load a log first")
     if lg.is_summary:
@@ -297,7 +307,7 @@ def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
         raise ValueError(f"there is no channel {ch!r}; channels: {', '.join(lg.channels)}")
     x = lg.channels[ch]
     try:
-        return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch))
+        return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch), progress=progress)
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
 

@@ -250,11 +250,17 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         return loaded
 
     def warm(
-        self, channel: str | None = None, fs: float | None = None, robust: bool | None = None
+        self,
+        channel: str | None = None,
+        fs: float | None = None,
+        robust: bool | None = None,
+        progress: Callable[[int, int], object] | None = None,
     ) -> None:
         """Compute a WV of the current log into the cache (worker-thread safe, no state change).
 
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
+        ``progress(j, J)`` is called as each level is done (a robust WV of a long log takes
+        seconds).
         """
         with self._lock:  # the log and its cache, together (a new log brings a new cache)
             lg, cache = self._log, self._wv_cache
@@ -267,7 +273,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             with self._lock:
                 if wv_from_cache(cache, ch, f, rob) is not None:
                     return
-            wv = compute_wv(lg, ch, f, rob)
+            wv = compute_wv(lg, ch, f, rob, progress)
             with self._lock:
                 store_wv(cache, ch, f, rob, wv)
                 self.wv_computations += 1
