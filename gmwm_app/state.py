@@ -628,9 +628,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             return None
         if not self.whatif and self.result is not None:
             return float(self.result.objective)
-        omega, _ = eg.weight_matrix(self.wv, self.weights)
-        r = self.wv.variance - m.wv(self.wv.tau_samples, self.wv.fs)
-        return float(r @ omega @ r)
+        return eg.gmwm_objective(self.wv, m, self.weights)
 
     def warnings(self) -> list[str]:
         """Warnings about the fit: parameters at a bound, the fit's own warnings (an AR1/GM

@@ -1,4 +1,4 @@
-"""engine.fit.start: rough starting values read off an empirical WV (closed forms)."""
+"""engine.fit.start (rough starting values read off a WV) and engine.fit.gmwm_objective."""
 
 from __future__ import annotations
 
@@ -67,3 +67,24 @@ def test_each_guessed_curve_touches_half_the_empirical_wv(
         total += curve
     r = total / wv.variance
     assert r.max() >= 0.5 - 1e-9 and r.max() <= 0.5 * len(model) + 1e-9
+
+
+def test_gmwm_objective_is_the_fits_objective_and_a_weighted_sum(wv: eg.WaveletVariance) -> None:
+    """``gmwm_objective`` at a fit's estimate is the fit's objective; at other values it is
+    sum_j w_j (nu_hat_j - nu_j)^2 with the diagonal weights 1 / (ci_high - ci_low)^2."""
+    for spec in ("WN+RW", "GM+WN"):
+        for weights in ("ci", "identity"):
+            fit = eg.fit_gmwm(wv, spec, weights=weights)
+            got = eg.gmwm_objective(wv, fit.model, weights)
+            assert got == pytest.approx(fit.objective, rel=1e-12, abs=0)
+    model = eg.parse_model("WN(sigma2=0.01)+RW(gamma2=1e-6)")
+    tau = wv.tau_samples.astype(float)
+    nu = 0.01 / tau + 1e-6 * (tau**2 + 2) / (12 * tau)
+    w = 1.0 / (wv.ci_high - wv.ci_low) ** 2
+    want = float(np.sum(w * (wv.variance - nu) ** 2))
+    assert eg.gmwm_objective(wv, model) == pytest.approx(want, rel=1e-12)
+    assert eg.gmwm_objective(wv, "WN(sigma2=0.01)+RW(gamma2=1e-6)") == pytest.approx(
+        want, rel=1e-12
+    )
+    ident = float(np.sum((wv.variance - nu) ** 2))
+    assert eg.gmwm_objective(wv, model, "identity") == pytest.approx(ident, rel=1e-12)

@@ -1,6 +1,7 @@
 """GMWM fitting: the univariate fit, its result and the result base every fit shares.
 
-* :mod:`engine.fit.gmwm`: :func:`fit_gmwm`, :class:`GMWMResult`, :func:`weight_matrix`;
+* :mod:`engine.fit.gmwm`: :func:`fit_gmwm`, :class:`GMWMResult`, :func:`weight_matrix`,
+  :func:`gmwm_objective`;
 * :mod:`engine.fit.result`: :class:`FitResult` (the base of every fit's result),
   :class:`ParamRecord`, :class:`ParamTable`, :class:`Summary`, :class:`FitError`;
 * :mod:`engine.fit.start`: :func:`starting_values` (rough values read off a WV);
@@ -19,7 +20,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .._lazy import lazy_attributes
-from .gmwm import GMWMResult, fit_gmwm, weight_matrix
+from .gmwm import GMWMResult, fit_gmwm, gmwm_objective, weight_matrix
 from .result import FitError, FitResult, ParamRecord, ParamTable, Summary
 from .start import starting_values
 
@@ -46,6 +47,7 @@ __all__ = [
     "GMWMResult",
     "starting_values",
     "weight_matrix",
+    "gmwm_objective",
     "FitError",
     "FitResult",
     "ParamRecord",
