@@ -567,8 +567,9 @@ class GMWMApp:
         ch = event.new
         self.jobs.load(
             f"Computing the wavelet variance of {ch}",
-            partial(self.state.warm, ch),
+            lambda report: self.state.warm(ch, progress=report),
             lambda _out: self.state.select_channel(ch),
+            progress=True,
         )
 
     def _on_robust(self, event: Any) -> None:
@@ -578,8 +579,9 @@ class GMWMApp:
         what = "robust" if rob else "classical"
         self.jobs.load(
             f"Computing the {what} wavelet variance",
-            partial(self.state.warm, robust=rob),
+            lambda report: self.state.warm(robust=rob, progress=report),
             lambda _out: self._after_robust(rob),
+            progress=True,
         )
 
     def _after_robust(self, rob: bool) -> None:

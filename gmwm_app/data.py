@@ -9,12 +9,10 @@ reads its WVs from there).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
-import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,7 +31,6 @@ __all__ = [
     "compute_wv",
     "wv_from_cache",
     "store_wv",
-    "retag_fs",
     "check_fs",
     "channel_names",
     "summary_has_robust",
@@ -45,14 +42,20 @@ __all__ = [
 
 
 def read_log(
-    path: str | os.PathLike[str], *, fs: float | None = None, segment: str | None = None
+    path: str | os.PathLike[str] | bytes,
+    *,
+    fs: float | None = None,
+    segment: str | None = None,
+    name: str | None = None,
 ) -> Any:
     """Read an IMU log with the engine's loader (``engine.load_log``).
 
     Parameters
     ----------
-    path : str or path-like
-        CSV/TSV/text, NPY/NPZ, HDF5 log or WV summary HDF5 file.
+    path : str, path-like or bytes
+        CSV/TSV/text, NPY/NPZ, HDF5 log or WV summary HDF5 file, or its content (an upload).
+    name : str, optional
+        The uploaded file's name, for content (its extension and the name in messages).
     fs : float, optional
         Sampling frequency (Hz) to use when the file has none.
 
@@ -67,7 +70,7 @@ def read_log(
     """
     from engine.io import load_log  # imported here: the app module loads without h5py work
 
-    return load_log(path, fs=fs, segment=segment)
+    return load_log(path, fs=fs, segment=segment, name=name)
 
 
 @dataclass
@@ -109,12 +112,6 @@ class PreparedQuery:
     problems: list[str]
 
 
-def retag_fs(wv: eg.WaveletVariance, fs: float) -> eg.WaveletVariance:
-    """The same WV at another sampling frequency (the variances do not depend on fs)."""
-    classical = None if wv.classical is None else dataclasses.replace(wv.classical, fs=fs)
-    return dataclasses.replace(wv, fs=fs, classical=classical)
-
-
 def wv_from_cache(
     cache: Mapping[tuple[str, float, bool], eg.WaveletVariance],
     channel: str,
@@ -129,9 +126,9 @@ def wv_from_cache(
         if ch != channel or not isinstance(wv, eg.WaveletVariance):  # (WV matrices too)
             continue
         if rob == robust:
-            return retag_fs(wv, fs)
+            return wv.with_fs(fs)
         if not robust and rob and wv.classical is not None:
-            return retag_fs(wv.classical, fs)
+            return wv.classical.with_fs(fs)
     return None
 
 
@@ -195,20 +192,7 @@ def read_source(
             data = data.encode("utf-8")
         check_upload_size(len(data), filename)
         name = Path(filename or "upload.csv").name
-        suffix = "".join(Path(name).suffixes[-2:]) or ".csv"
-        fd, tmp = tempfile.mkstemp(prefix="gmwm_upload_", suffix=suffix)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            try:
-                lg = read_log(tmp, segment=segment)
-            except ValueError as e:  # name the user's file, not the temporary one
-                raise ValueError(str(e).replace(tmp, name).replace(Path(tmp).name, name)) from None
-        finally:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+        lg = read_log(bytes(data), segment=segment, name=name)
         out = LoadedData(lg, "upload", name, "")
     elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path
         from engine.teaching import get_scenario, simulate_scenario
@@ -295,8 +279,18 @@ def unit_of(lg: Any, ch: str) -> str:
     return str(u or "")
 
 
-def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
-    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``)."""
+def compute_wv(
+    lg: Any,
+    ch: str,
+    fs: float,
+    robust: bool,
+    progress: Callable[[int, int], object] | None = None,
+) -> eg.WaveletVariance:
+    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``).
+
+    ``progress(j, J)`` is called as each level of a computed WV is done (see
+    :func:`engine.wavelet_variance`); not for a summary file's stored WV.
+    """
     if lg is None:
         raise ValueError("load a log first")
     if lg.is_summary:
@@ -311,12 +305,12 @@ def compute_wv(lg: Any, ch: str, fs: float, robust: bool) -> eg.WaveletVariance:
             if wv.classical is None:
                 raise ValueError("this summary file holds a robust WV only")
             wv = wv.classical
-        return wv if wv.fs == fs else retag_fs(wv, fs)
+        return wv if wv.fs == fs else wv.with_fs(fs)
     if ch not in lg.channels:
         raise ValueError(f"there is no channel {ch!r}; channels: {', '.join(lg.channels)}")
     x = lg.channels[ch]
     try:
-        return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch))
+        return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch), progress=progress)
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
 

@@ -257,16 +257,24 @@ class Jobs:
     def load(
         self,
         message: str,
-        work: Callable[[], Any] | Future,
+        work: Callable[..., Any] | Future,
         apply: Callable[[Any], Any] | None = None,
+        *,
+        progress: bool = False,
     ) -> int:
         """Read data in a worker with the page's loading indicator on, then apply them.
 
         ``apply`` defaults to the page's :attr:`install`. A later load supersedes an
-        earlier one; a failure goes to the page's :attr:`failed` hook.
+        earlier one; a failure goes to the page's :attr:`failed` hook. With ``progress``,
+        ``work`` is called as ``work(report)``: the worker calls ``report(j, J)`` as step
+        ``j`` of ``J`` ends (e.g. a WV level), and the indicator's text becomes
+        ``"<message>: level j of J"`` on the loop, while this load is the latest one.
         """
         self._loads += 1
         self.locked(lambda: self.busy(True, message))
+        if progress and not isinstance(work, Future):
+            ticket = self._count + 1  # the ticket run() gives this load (just below)
+            work = partial(work, self.progress_reporter(message, "page-load", ticket))
         return self.run(
             work,
             apply if apply is not None else self.install,
@@ -274,6 +282,20 @@ class Jobs:
             self._settle,
             key="page-load",
         )
+
+    def progress_reporter(self, message: str, key: str, ticket: int) -> Callable[[int, int], None]:
+        """A thread-safe ``report(j, J)`` that shows ``"<message>: level j of J"`` in the
+        loading indicator (through :meth:`locked`) while job ``ticket`` of ``key`` is the latest.
+        """
+
+        def show(text: str) -> None:
+            if self.current(key, ticket):
+                self.busy(True, text)
+
+        def report(j: int, n: int) -> None:
+            self.locked(partial(show, f"{message}: level {int(j)} of {int(n)}"))
+
+        return report
 
     def _settle(self) -> None:
         self._loads -= 1

@@ -47,7 +47,7 @@ from gmwm_app.data import (
     wv_matrix_of,
 )
 from gmwm_app.query import QueryMixin
-from gmwm_app.whatif import SliderSpec, WhatIfMixin, guess_values
+from gmwm_app.whatif import SliderSpec, WhatIfMixin
 
 __all__ = [
     "AppState",
@@ -250,11 +250,17 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         return loaded
 
     def warm(
-        self, channel: str | None = None, fs: float | None = None, robust: bool | None = None
+        self,
+        channel: str | None = None,
+        fs: float | None = None,
+        robust: bool | None = None,
+        progress: Callable[[int, int], object] | None = None,
     ) -> None:
         """Compute a WV of the current log into the cache (worker-thread safe, no state change).
 
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
+        ``progress(j, J)`` is called as each level is done (a robust WV of a long log takes
+        seconds).
         """
         with self._lock:  # the log and its cache, together (a new log brings a new cache)
             lg, cache = self._log, self._wv_cache
@@ -267,7 +273,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             with self._lock:
                 if wv_from_cache(cache, ch, f, rob) is not None:
                     return
-            wv = compute_wv(lg, ch, f, rob)
+            wv = compute_wv(lg, ch, f, rob, progress)
             with self._lock:
                 store_wv(cache, ch, f, rob, wv)
                 self.wv_computations += 1
@@ -573,7 +579,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         if not len(self.model) or self.wv is None:
             return []
         vals = {**self._default_values(), **self.whatif_values}
-        guesses = guess_values(self.model, self.wv)
+        guesses = eg.starting_values(self.model, self.wv)
         out = []
         for lab, p in zip(self.model.labels, self.model.processes, strict=True):
             for name in p.param_names:
@@ -622,9 +628,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             return None
         if not self.whatif and self.result is not None:
             return float(self.result.objective)
-        omega, _ = eg.weight_matrix(self.wv, self.weights)
-        r = self.wv.variance - m.wv(self.wv.tau_samples, self.wv.fs)
-        return float(r @ omega @ r)
+        return eg.gmwm_objective(self.wv, m, self.weights)
 
     def warnings(self) -> list[str]:
         """Warnings about the fit: parameters at a bound, the fit's own warnings (an AR1/GM

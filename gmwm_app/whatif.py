@@ -1,8 +1,8 @@
 """The what-if mode of a session: sliders over the model's parameters (no widgets).
 
 :class:`SliderSpec` describes one log-scaled slider; :class:`WhatIfMixin` holds the what-if
-actions of :class:`gmwm_app.state.AppState` (it has the state's parameters); :func:`guess_values`
-reads rough values off a WV for a model not fitted yet.
+actions of :class:`gmwm_app.state.AppState` (it has the state's parameters); a model not fitted
+yet starts from :func:`engine.fit.starting_values` (rough values read off the WV).
 """
 
 from __future__ import annotations
@@ -12,11 +12,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 import engine as eg
 
-__all__ = ["SliderSpec", "WhatIfMixin", "guess_values"]
+__all__ = ["SliderSpec", "WhatIfMixin"]
 
 
 @dataclass(frozen=True)
@@ -106,7 +104,7 @@ class WhatIfMixin:
         vals = {k: v for k, v in self.model.values().items() if v is not None}
         if self.wv is None:
             return vals
-        for name, v in guess_values(self.model, self.wv).items():
+        for name, v in eg.starting_values(self.model, self.wv).items():
             vals.setdefault(name, v)
         return vals
 
@@ -117,35 +115,3 @@ class WhatIfMixin:
         for lab, p in zip(self.model.labels, self.model.processes, strict=True):
             procs.append(p.with_values(**{n: vals[f"{lab}.{n}"] for n in p.param_names}))
         return eg.Model(tuple(procs))
-
-
-def guess_values(model: eg.Model, wv: eg.WaveletVariance) -> dict[str, float]:
-    """Rough starting values read off the WV (for what-if sliders before a fit).
-
-    AR1/GM correlation times are spread geometrically over the scales; each variance-like
-    parameter is half the largest value whose curve stays below the empirical WV.
-    """
-    tau = wv.tau_samples.astype(float)
-    nl = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
-    tcs = np.geomspace(tau[-1] / 4, max(tau[0], 2.0), len(nl)) if nl else []
-    out: dict[str, float] = {}
-    for k, i in enumerate(nl):
-        lab, p = model.labels[i], model.processes[i]
-        phi = math.exp(-1.0 / float(tcs[k]))
-        if p.code == "GM":
-            out[f"{lab}.beta"] = -math.log(phi) * wv.fs
-        else:
-            out[f"{lab}.phi"] = phi
-    pos = wv.variance > 0
-    for lab, p in zip(model.labels, model.processes, strict=True):
-        if p.nonlinear is not None:
-            nlv = math.exp(-out[f"{lab}.beta"] / wv.fs) if p.code == "GM" else out[f"{lab}.phi"]
-        else:
-            nlv = None
-        basis = np.asarray(p.basis(tau, wv.fs, nlv), float)
-        ok = pos & (basis > 0)
-        h = 0.5 * float(np.min(wv.variance[ok] / basis[ok])) if np.any(ok) else 1e-12
-        h = max(h, 1e-300)
-        name = p.param_names[-1] if p.nonlinear else p.param_names[0]
-        out[f"{lab}.{name}"] = math.sqrt(h) if p.code == "DR" else h
-    return out

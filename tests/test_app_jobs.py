@@ -120,3 +120,51 @@ def test_a_server_process_favours_the_loops_latency() -> None:
         assert sys.getswitchinterval() == server.SWITCH_INTERVAL_S == 0.0005
     finally:
         sys.setswitchinterval(before)
+
+
+def test_progress_reports_reach_the_indicator_while_the_load_is_the_latest() -> None:
+    jobs = Jobs(doc=None)
+    seen: list[Any] = []
+    jobs.busy = lambda on, msg: seen.append((on, msg))
+
+    def work(report: Any) -> int:
+        for j in range(1, 4):
+            report(j, 3)
+        return 3
+
+    jobs.load("Computing", work, lambda out: seen.append(("applied", out)), progress=True)
+    assert seen == [
+        (True, "Computing"),
+        (True, "Computing: level 1 of 3"),
+        (True, "Computing: level 2 of 3"),
+        (True, "Computing: level 3 of 3"),
+        ("applied", 3),
+        (False, ""),
+    ]
+    # a superseded load's reports are dropped
+    seen.clear()
+    stale = jobs.progress_reporter("Old", "page-load", ticket=-1)
+    stale(5, 9)
+    assert seen == []
+
+
+def test_the_robust_toggle_shows_the_wv_levels_as_they_compute(app_demo: Any) -> None:
+    """The app (no browser, no server): switching to the robust WV computes it in a page load
+    whose status text follows the levels, 1 to J, then clears."""
+    from gmwm_app.app import create_app
+
+    app = create_app().gmwm_app
+    assert app.state.wv is not None and not app.state.robust
+    texts: list[str] = []
+    busy = app.jobs.busy
+    app.jobs.busy = lambda on, msg="": (busy(on, msg), texts.append(app.status.object))
+    app.robust_check.value = True
+    assert app.state.robust and app.state.wv.robust, app.state.error
+    n = app.state.wv.n_levels
+    levels = [t for t in texts if "level" in t]
+    want = [
+        f"⏳ Computing the robust wavelet variance: level {j} of {n} ..." for j in range(1, n + 1)
+    ]
+    assert levels == want
+    assert texts[0] == "⏳ Computing the robust wavelet variance ..." and texts[-1] == ""
+    assert app.status.object == "" and not app.busy

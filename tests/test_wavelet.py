@@ -257,3 +257,23 @@ def test_import_engine_leaves_the_wccv_and_stream_modules_to_first_use():
         "else:\n    raise SystemExit('no AttributeError')\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_with_fs_retags_scales_and_robust_companion() -> None:
+    """``with_fs``: same variances and intervals, scales in seconds follow the new fs; a
+    robust WV's classical companion is re-tagged too; the original is unchanged."""
+    x = np.random.default_rng(3).normal(size=4096)
+    wv = eg.wavelet_variance(x, fs=100.0, robust=True)
+    re = wv.with_fs(400.0)
+    assert re.fs == 400.0 and wv.fs == 100.0
+    np.testing.assert_array_equal(re.variance, wv.variance)
+    np.testing.assert_array_equal(re.ci_low, wv.ci_low)
+    np.testing.assert_array_equal(re.ci_high, wv.ci_high)
+    np.testing.assert_array_equal(re.tau_samples, wv.tau_samples)
+    np.testing.assert_allclose(re.tau_s, 2.0 ** np.arange(1, wv.n_levels + 1) / 400.0, rtol=0)
+    assert re.robust and re.classical is not None and re.classical.fs == 400.0
+    np.testing.assert_array_equal(re.classical.variance, wv.classical.variance)
+    np.testing.assert_allclose(re.classical.tau_s, wv.classical.tau_s / 4.0, rtol=1e-15)
+    assert wv.with_fs(400.0).to_dict() == eg.wavelet_variance(x, fs=400.0, robust=True).to_dict()
+    with pytest.raises(ValueError, match="fs"):
+        wv.with_fs(0.0)

@@ -1,8 +1,10 @@
 """GMWM fitting: the univariate fit, its result and the result base every fit shares.
 
-* :mod:`engine.fit.gmwm`: :func:`fit_gmwm`, :class:`GMWMResult`, :func:`weight_matrix`;
+* :mod:`engine.fit.gmwm`: :func:`fit_gmwm`, :class:`GMWMResult`, :func:`weight_matrix`,
+  :func:`gmwm_objective`;
 * :mod:`engine.fit.result`: :class:`FitResult` (the base of every fit's result),
   :class:`ParamRecord`, :class:`ParamTable`, :class:`Summary`, :class:`FitError`;
+* :mod:`engine.fit.start`: :func:`starting_values` (rough values read off a WV);
 * :mod:`engine.fit.replicates`: one model fitted to several recordings;
 * :mod:`engine.fit.gmwfm`: the wavelet functional moments (ARMAV, GMWFM);
 * :mod:`engine.fit.estimate`: the common form of every estimator's answer (GMWM, ARMAV,
@@ -18,8 +20,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .._lazy import lazy_attributes
-from .gmwm import GMWMResult, fit_gmwm, weight_matrix
+from .gmwm import GMWMResult, fit_gmwm, gmwm_objective, weight_matrix
 from .result import FitError, FitResult, ParamRecord, ParamTable, Summary
+from .start import starting_values
 
 _LAZY: dict[str, str] = {
     "fit_replicates": "replicates",
@@ -42,7 +45,9 @@ __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 __all__ = [
     "fit_gmwm",
     "GMWMResult",
+    "starting_values",
     "weight_matrix",
+    "gmwm_objective",
     "FitError",
     "FitResult",
     "ParamRecord",

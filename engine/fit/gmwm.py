@@ -37,7 +37,7 @@ from ._varpro import (
 )
 from .result import FitError, FitResult, ParamTable
 
-__all__ = ["fit_gmwm", "GMWMResult", "weight_matrix"]
+__all__ = ["fit_gmwm", "GMWMResult", "weight_matrix", "gmwm_objective"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -160,6 +160,34 @@ def weight_matrix(wv: WaveletVariance, weights: str | np.ndarray = "ci") -> tupl
     if not np.all(np.isfinite(w)) or not np.allclose(w, w.T, rtol=1e-10, atol=0):
         raise FitError("the weight matrix must be finite and symmetric")
     return w, "user"
+
+
+def gmwm_objective(
+    wv: WaveletVariance, model: Model | Process | str, weights: str | np.ndarray = "ci"
+) -> float:
+    """The GMWM objective of a model with every value set: ``r' Omega r``, ``r = nu_hat - nu``.
+
+    The quantity :func:`fit_gmwm` minimises, at given values (e.g. what-if values), with the
+    weights of :func:`weight_matrix`; at a fit's estimate it is the fit's ``objective``.
+
+    Parameters
+    ----------
+    wv : WaveletVariance
+        The empirical WV ``nu_hat``.
+    model : Model, Process or str
+        The model, every parameter set (``nu`` is its implied WV at ``wv``'s scales).
+    weights : {"ci", "identity"} or array
+        As in :func:`weight_matrix`.
+
+    Returns
+    -------
+    float
+        The objective (dimensionless with ``"ci"`` weights).
+    """
+    m = model if isinstance(model, Model) else parse_model(model)
+    omega, _ = weight_matrix(wv, weights)
+    r = wv.variance - m.wv(wv.tau_samples, wv.fs)
+    return float(r @ omega @ r)
 
 
 def fit_gmwm(

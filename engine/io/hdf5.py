@@ -7,6 +7,7 @@ wavelet-variance summaries are read by :mod:`engine.io.summary`.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,7 +36,7 @@ H5_EXT = {".h5", ".hdf5", ".hdf", ".he5"}
 _SUMMARY_KINDS = {"wavelet_and_allan_variance", "wavelet_variance"}
 
 
-def read_h5(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     import h5py  # lazily: 0.1 s to import, not needed for text and NPY logs
 
     try:

@@ -22,13 +22,15 @@ Sample indices in messages are 0-based; line numbers are 1-based, as in an edito
 
 from __future__ import annotations
 
+import io
 import os
 import struct
+import tempfile
 import zipfile
 import zlib
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from ._assemble import LoadOptions, check_fs, finish_log
 from .hdf5 import H5_EXT, read_h5
@@ -49,8 +51,9 @@ _MAGIC = {
 
 
 def load_log(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | bytes | bytearray | memoryview | IO[bytes],
     *,
+    name: str | None = None,
     channel: str | int | None = None,
     fs: float | None = None,
     segment: str | tuple[int, int] | None = None,
@@ -62,11 +65,17 @@ def load_log(
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, path-like, bytes or binary file object
         CSV/TSV/whitespace text (``.csv .tsv .txt .dat`` or any unknown extension), ``.npy``,
         ``.npz``, HDF5 (``.h5 .hdf5``), or a ROS bag with ``sensor_msgs/Imu`` messages: ROS 1
         ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``. The
-        content's magic bytes win over the extension.
+        content's magic bytes win over the extension. The file's content may be given instead
+        of its path (an upload): ``bytes`` or a binary file object (read to its end); ``name``
+        then gives its extension and its name in messages. (A ROS bag given as content goes
+        through a temporary file: the bag library reads paths only.)
+    name : str, optional
+        For content: the file's name (e.g. ``"run1.h5"``), whose extension hints at the format
+        and which error messages name (default ``"<upload>"``). Ignored for a path.
     channel : str or int, optional
         Keep only this channel (name, or index into :attr:`ImuLog.names`).
     fs : float, optional
@@ -106,6 +115,8 @@ def load_log(
         fewer than 4 samples, unknown channel, invalid ``fs`` or ``scale``, a time column
         with gaps under ``segment="stop"``.
     """
+    if isinstance(path, (bytes, bytearray, memoryview)) or hasattr(path, "read"):
+        return _load_content(path, name, channel, fs, segment, scale, units, topic)
     src = str(path)
     p = Path(path)
     fs_user = None if fs is None else check_fs(fs, src, "fs", "pass fs in Hz, e.g. fs=100")
@@ -124,11 +135,17 @@ def load_log(
             head = fh.read(16)
     except OSError as exc:
         raise LoadError(f"cannot read file '{src}' ({exc.strerror}): check permissions") from exc
+    fmt = _sniff(head, p.suffix, src)
+    return _guarded(_READERS[fmt], p, src, channel, opts, fmt)
+
+
+def _sniff(head: bytes, suffix: str, src: str) -> str:
+    """The format of a file from its first bytes (magic numbers), else its extension."""
     if not head:
         raise LoadError(f"file '{src}' is empty (0 bytes): check that the logger wrote data")
     fmt = next((v for k, v in _MAGIC.items() if head.startswith(k)), None)
-    ext = p.suffix.lower()
-    fmt = fmt or (
+    ext = suffix.lower()
+    return fmt or (
         "hdf5"
         if ext in H5_EXT
         else ext[1:]
@@ -137,14 +154,49 @@ def load_log(
         if ext in (".bag", ".db3", ".mcap")
         else "text"
     )
-    reader = {
-        "hdf5": read_h5,
-        "npy": read_npy,
-        "npz": read_npz,
-        "text": read_text,
-        "bag": _read_bag,
-    }[fmt]
-    return _guarded(reader, p, src, channel, opts, fmt)
+
+
+def _load_content(
+    content: Any,
+    name: str | None,
+    channel: Any,
+    fs: float | None,
+    segment: Any,
+    scale: Any,
+    units: Any,
+    topic: str | None,
+) -> ImuLog:
+    """:func:`load_log` of a file's content (bytes or a binary file object) named ``name``."""
+    src = Path(name).name if name else "<upload>"
+    if hasattr(content, "read"):
+        try:
+            content = content.read()
+        except OSError as exc:
+            raise LoadError(f"cannot read '{src}' ({exc})") from exc
+    if isinstance(content, str):
+        raise LoadError(f"'{src}': give the content as bytes (encode the text), not str")
+    data = bytes(content)
+    fs_user = None if fs is None else check_fs(fs, src, "fs", "pass fs in Hz, e.g. fs=100")
+    opts = LoadOptions(fs_user=fs_user, segment=segment, scale=scale, units=units, topic=topic)
+    fmt = _sniff(data[:16], Path(src).suffix, src)
+    if fmt == "bag":
+        return _bag_from_bytes(data, src, channel, opts)
+    return _guarded(_READERS[fmt], io.BytesIO(data), src, channel, opts, fmt)
+
+
+def _bag_from_bytes(data: bytes, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+    """A one-file ROS bag given as content: through a temporary file (rosbags reads paths)."""
+    suffix = Path(src).suffix if Path(src).suffix in (".bag", ".db3", ".mcap") else ".bag"
+    fd, tmp = tempfile.mkstemp(prefix="gmwm_bag_", suffix=suffix)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        return _guarded(_read_bag, Path(tmp), src, channel, opts, "bag")
+    finally:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
 
 
 _CORRUPT = (
@@ -165,7 +217,12 @@ _CORRUPT = (
 
 
 def _guarded(
-    reader: Callable[..., ImuLog], p: Path, src: str, channel: Any, opts: LoadOptions, fmt: str
+    reader: Callable[..., ImuLog],
+    p: Path | io.BytesIO,
+    src: str,
+    channel: Any,
+    opts: LoadOptions,
+    fmt: str,
 ) -> ImuLog:
     """Run a reader; a library error on damaged content becomes a LoadError (with its type, so
     that the cause stays visible)."""
@@ -198,3 +255,12 @@ def _read_bag(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
         meta=bag.meta,
         notes=list(bag.notes),
     )
+
+
+_READERS: dict[str, Callable[..., ImuLog]] = {
+    "hdf5": read_h5,
+    "npy": read_npy,
+    "npz": read_npz,
+    "text": read_text,
+    "bag": _read_bag,
+}

@@ -6,6 +6,7 @@ A structured array gives one channel per field (a time-named field is the time c
 
 from __future__ import annotations
 
+import io
 import json
 import os
 from collections.abc import Mapping
@@ -33,7 +34,7 @@ def _columns(
     return {fmt.format(key=key, j=j): a[:, j] for j in range(a.shape[1])}
 
 
-def read_npy(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+def read_npy(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     try:
         a = np.load(path, allow_pickle=False)
     except Exception as exc:
@@ -60,7 +61,7 @@ def read_npy(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
         )
     units: dict[str, str] = {}
     fs_file = None
-    side = read_npy_sidecar(path)
+    side = None if isinstance(path, io.BytesIO) else read_npy_sidecar(path)
     if side is not None:  # written by `gmwm simulate -o x.npy`: fs, channel names, units
         names = side.get("channels")
         if isinstance(names, list) and len(names) == len(cols) and len(set(names)) == len(names):
@@ -128,7 +129,7 @@ def write_npy_sidecar(
     return side
 
 
-def read_npz(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+def read_npz(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     cols: dict[str, np.ndarray] = {}
     notes: list[str] = []
     meta: dict[str, Any] = {}

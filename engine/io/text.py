@@ -8,6 +8,7 @@ comment. Errors name the line (1-based, as in an editor) and the column.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import Any
 
@@ -64,8 +65,9 @@ def _decode(raw: bytes, src: str) -> str:
         return text
 
 
-def read_text(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
-    text = _decode(path.read_bytes(), src)
+def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+    raw = path.getvalue() if isinstance(path, io.BytesIO) else path.read_bytes()
+    text = _decode(raw, src)
     contents: list[str] = []
     linenos: list[int] = []
     for i, line in enumerate(text.splitlines(), start=1):

@@ -18,7 +18,7 @@ Guerrier et al. (2020), the GMWM paper, section II.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -152,6 +152,28 @@ class WaveletVariance(LevelScales):
             unit=self.unit,
             classical=None if self.classical is None else self.classical.truncate(levels),
         )
+
+    def with_fs(self, fs: float) -> WaveletVariance:
+        """The same WV at another sampling frequency ``fs`` (Hz), without recomputation.
+
+        The variances, intervals and sample scales do not depend on ``fs``; only the scales
+        in seconds (:attr:`tau_s`) do. The classical companion of a robust WV is re-tagged too.
+
+        Parameters
+        ----------
+        fs : float
+            The new sampling frequency, > 0.
+
+        Returns
+        -------
+        WaveletVariance
+            A new WV; this one is unchanged.
+        """
+        fs = float(fs)
+        if not np.isfinite(fs) or fs <= 0:
+            raise ValueError(f"fs must be a positive number, got {fs}")
+        classical = None if self.classical is None else self.classical.with_fs(fs)
+        return replace(self, fs=fs, classical=classical)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (the ``gmwm wv --json`` object)."""
