@@ -24,7 +24,6 @@ import panel as pn
 import param
 from bokeh.models import (
     ColumnDataSource,
-    DataTable,
     NumberFormatter,
     ScientificFormatter,
     StringFormatter,
@@ -34,10 +33,11 @@ from bokeh.plotting import figure
 
 from .state import Inference, format_value
 from .views import (
-    BAND_COLOR,
     EMPIRICAL_COLOR,
     TOTAL_COLOR,
     component_color,
+    data_table,
+    interval_band,
     model_grid,
     redraw_table,
     unit_squared,
@@ -141,14 +141,7 @@ class _DecompFigure:
         p.axis.axis_label_text_font_style = "normal"
         p.grid.grid_line_alpha = 0.35
         self.emp = ColumnDataSource(wv_data(None))
-        p.varea(
-            x="tau_s",
-            y1="ci_low",
-            y2="ci_high",
-            source=self.emp,
-            fill_color=BAND_COLOR,
-            fill_alpha=0.25,
-        )
+        interval_band(p, self.emp)
         p.line("tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5)
         p.scatter("tau_s", "variance", source=self.emp, size=5, color=EMPIRICAL_COLOR)
         self.comps = [
@@ -280,19 +273,8 @@ class SelectionView(pn.viewable.Viewer):
             )
             for c in RANK_COLUMNS
         ]
-        self.table = DataTable(
-            source=self.source,
-            columns=cols,
-            index_position=None,
-            sortable=True,
-            reorderable=False,
-            selectable=True,
-            autosize_mode="force_fit",
-            height=330,
-            row_height=26,
-            sizing_mode="stretch_width",
-            name="ranking",
-            css_classes=["gmwm-ranking"],
+        self.table = data_table(
+            self.source, cols, "ranking", "gmwm-ranking", 330, sortable=True, selectable=True
         )
         self.source.selected.on_change("indices", self._on_row)
 
@@ -319,18 +301,8 @@ class SelectionView(pn.viewable.Viewer):
                 ("unit", "unit", 85),
             )
         ]
-        self.compare_table = DataTable(
-            source=self.compare_source,
-            columns=ccols,
-            index_position=None,
-            sortable=False,
-            selectable=False,
-            autosize_mode="force_fit",
-            height=240,
-            row_height=26,
-            sizing_mode="stretch_width",
-            name="compare_params",
-            css_classes=["gmwm-compare"],
+        self.compare_table = data_table(
+            self.compare_source, ccols, "compare_params", "gmwm-compare", 240, reorderable=True
         )
 
         h = pn.pane.Markdown

@@ -35,7 +35,6 @@ from bokeh.models import (
     BoxAnnotation,
     BoxSelectTool,
     ColumnDataSource,
-    DataTable,
     Legend,
     LegendItem,
     StringFormatter,
@@ -61,7 +60,7 @@ from .slope_data import (
     truth_model,
 )
 from .state import AppState
-from .views import BAND_COLOR, EMPIRICAL_COLOR, redraw_table
+from .views import EMPIRICAL_COLOR, data_table, interval_band, redraw_table
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -199,14 +198,7 @@ class SlopeView(pn.viewable.Viewer):
         self.adev_src = ColumnDataSource(
             {"tau_s": [], "adev": [], "lo": [], "hi": []}, name="slope_adev_points"
         )
-        band = p.varea(
-            x="tau_s",
-            y1="lo",
-            y2="hi",
-            source=self.adev_src,
-            fill_color=BAND_COLOR,
-            fill_alpha=0.25,
-        )
+        band = interval_band(p, self.adev_src, "lo", "hi")
         line = p.line(
             "tau_s", "adev", source=self.adev_src, line_color=EMPIRICAL_COLOR, line_width=1.5
         )
@@ -300,21 +292,7 @@ class SlopeView(pn.viewable.Viewer):
             )
             for c in TABLE_COLUMNS
         ]
-        # autosize_mode "fit_columns" fails on data updates in BokehJS 3.9.2 (see views.py)
-        self.table = DataTable(
-            source=self.table_src,
-            columns=cols,
-            index_position=None,
-            sortable=False,
-            reorderable=False,
-            selectable=False,
-            autosize_mode="force_fit",
-            height=260,
-            row_height=26,
-            sizing_mode="stretch_width",
-            name="slope_table",
-            css_classes=["gmwm-slope-table"],
-        )
+        self.table = data_table(self.table_src, cols, "slope_table", "gmwm-slope-table", 260)
 
     def _build_layout(self) -> None:
         h = pn.pane.Markdown

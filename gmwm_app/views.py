@@ -196,14 +196,7 @@ class WVFigures:
         p.xgrid.minor_grid_line_alpha = 0.6
 
         # classical WV drawn beside the robust one (robust mode only)
-        alt_band = p.varea(
-            x="tau_s",
-            y1="ci_low",
-            y2="ci_high",
-            source=self.alt,
-            fill_color=CLASSICAL_COLOR,
-            fill_alpha=0.12,
-        )
+        alt_band = interval_band(p, self.alt, color=CLASSICAL_COLOR, alpha=0.12)
         alt_line = p.line(
             "tau_s",
             "variance",
@@ -222,14 +215,7 @@ class WVFigures:
             fill_color="white",
         )
         # empirical WV and its interval
-        band = p.varea(
-            x="tau_s",
-            y1="ci_low",
-            y2="ci_high",
-            source=self.emp,
-            fill_color=BAND_COLOR,
-            fill_alpha=0.25,
-        )
+        band = interval_band(p, self.emp)
         emp_line = p.line(
             "tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5
         )
@@ -321,9 +307,7 @@ class WVFigures:
         r.yaxis.axis_label = "empirical / model [1]"
         r.axis.axis_label_text_font_style = "normal"
         r.grid.grid_line_alpha = 0.35
-        rband = r.varea(
-            x="tau_s", y1="lo", y2="hi", source=self.resid, fill_color=BAND_COLOR, fill_alpha=0.25
-        )
+        rband = interval_band(r, self.resid, "lo", "hi")
         rline = r.line(
             "tau_s", "ratio", source=self.resid, line_color=EMPIRICAL_COLOR, line_width=1
         )
@@ -497,19 +481,43 @@ PARAM_COLUMNS = ("process", "parameter", "value", "low", "high", "unit")
 DATASHEET_COLUMNS = ("process", "quantity", "value", "unit")
 
 
-def _table(
-    columns: tuple[str, ...], widths: dict[str, int], name: str, height: int, css: str
-) -> tuple[DataTable, ColumnDataSource]:
-    src = ColumnDataSource({c: [] for c in columns}, name=f"{name}_rows")
-    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False) for c in columns]
+def data_table(
+    source: ColumnDataSource,
+    columns: list[TableColumn],
+    name: str,
+    css: str,
+    height: int,
+    *,
+    sortable: bool = False,
+    selectable: bool = False,
+    reorderable: bool = False,
+) -> DataTable:
+    """A full-width table in the app's style: no index column, 26 px rows.
+
+    Parameters
+    ----------
+    source, columns
+        The table's data source and its columns.
+    name, css
+        The model name (tests find the table by it) and its CSS class.
+    height
+        Height in pixels.
+    sortable, selectable, reorderable
+        Passed to Bokeh's ``DataTable``.
+
+    Returns
+    -------
+    DataTable
+        The table.
+    """
     # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
-    table = DataTable(
-        source=src,
-        columns=cols,
+    return DataTable(
+        source=source,
+        columns=columns,
         index_position=None,
-        sortable=False,
-        reorderable=False,
-        selectable=False,
+        sortable=sortable,
+        reorderable=reorderable,
+        selectable=selectable,
         autosize_mode="force_fit",
         height=height,
         row_height=26,
@@ -517,7 +525,43 @@ def _table(
         name=name,
         css_classes=[css],
     )
-    return table, src
+
+
+def interval_band(
+    p: Any,
+    source: ColumnDataSource,
+    y1: str = "ci_low",
+    y2: str = "ci_high",
+    color: str = BAND_COLOR,
+    alpha: float = 0.25,
+) -> Any:
+    """Shade an interval between the columns ``y1`` and ``y2`` over ``tau_s``.
+
+    Parameters
+    ----------
+    p
+        The Bokeh figure.
+    source
+        The data source with ``tau_s``, ``y1`` and ``y2`` columns.
+    y1, y2
+        Lower and upper bound columns.
+    color, alpha
+        Fill colour and opacity.
+
+    Returns
+    -------
+    GlyphRenderer
+        The area's renderer.
+    """
+    return p.varea(x="tau_s", y1=y1, y2=y2, source=source, fill_color=color, fill_alpha=alpha)
+
+
+def _table(
+    columns: tuple[str, ...], widths: dict[str, int], name: str, height: int, css: str
+) -> tuple[DataTable, ColumnDataSource]:
+    src = ColumnDataSource({c: [] for c in columns}, name=f"{name}_rows")
+    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False) for c in columns]
+    return data_table(src, cols, name, css, height), src
 
 
 def redraw_table(table: DataTable) -> None:
