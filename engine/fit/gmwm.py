@@ -35,13 +35,13 @@ from ._varpro import (
     sqrt_weight,
     sub_sample_warnings,
 )
-from .result import FitError, FitResult, ParamTable
+from .result import FitError, FitResult, OneWVFit, ParamTable
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class GMWMResult(FitResult):
+class GMWMResult(OneWVFit, FitResult):
     """Result of :func:`fit_gmwm` (the fields of :class:`engine.fit.result.FitResult`, plus:).
 
     Attributes
@@ -63,14 +63,6 @@ class GMWMResult(FitResult):
     wv: WaveletVariance
     implied: np.ndarray
     components: dict[str, np.ndarray]
-
-    @property
-    def fs(self) -> float:
-        return self.wv.fs
-
-    @property
-    def unit(self) -> str:
-        return self.wv.unit
 
     def implied_at(self, tau_samples: np.ndarray) -> np.ndarray:
         """Implied WV at other scales (samples), e.g. for a smooth curve."""
