@@ -74,6 +74,7 @@ from .multi_fit import (
 from .views import (
     TOTAL_COLOR,
     component_color,
+    job_progress,
     redraw_table,
 )
 
@@ -247,15 +248,7 @@ class MultiView(pn.viewable.Viewer):
             label="Cancel", color="light", width=90, margin=(22, 5, 5, 5), disabled=True
         )
         self.dep_cancel.on_click(lambda _e: self.cancel_dependence_test())
-        self.dep_progress = pn.indicators.Progress(
-            value=0,
-            max=100,
-            bar_color="primary",
-            height=14,
-            visible=False,
-            sizing_mode="stretch_width",
-            margin=(0, 10),
-        )
+        self.dep_progress = job_progress()
         self.dep_text = pn.pane.Markdown(
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mdependence"]
         )

@@ -38,6 +38,7 @@ from .views import (
     component_color,
     data_table,
     interval_band,
+    job_progress,
     model_grid,
     redraw_table,
     unit_squared,
@@ -226,15 +227,7 @@ class SelectionView(pn.viewable.Viewer):
             label="Cancel", color="light", width=100, margin=(22, 5, 5, 5), disabled=True
         )
         self.cancel_button.on_click(lambda _e: self.cancel())
-        self.progress = pn.indicators.Progress(
-            value=0,
-            max=100,
-            bar_color="primary",
-            sizing_mode="stretch_width",
-            height=14,
-            visible=False,
-            margin=(0, 10),
-        )
+        self.progress = job_progress()
         self.status = pn.pane.Markdown(
             "Rank the candidate models of the selected channel by "
             "WVIC = objective + optimism (smallest first).",

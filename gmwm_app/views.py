@@ -564,6 +564,27 @@ def _table(
     return data_table(src, cols, name, css, height), src
 
 
+def job_progress() -> Any:
+    """The progress bar of a tab's background job (hidden until the job starts).
+
+    Returns
+    -------
+    panel.indicators.Progress
+        A full-width bar, 0 of 100.
+    """
+    import panel as pn
+
+    return pn.indicators.Progress(
+        value=0,
+        max=100,
+        bar_color="primary",
+        height=14,
+        visible=False,
+        sizing_mode="stretch_width",
+        margin=(0, 10),
+    )
+
+
 def redraw_table(table: DataTable) -> None:
     """Make BokehJS redraw a DataTable's cells after a data change that keeps the row count.
 
