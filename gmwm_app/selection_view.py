@@ -29,16 +29,16 @@ from bokeh.models import (
     StringFormatter,
     TableColumn,
 )
-from bokeh.plotting import figure
 
 from .state import Inference, format_value
 from .views import (
-    EMPIRICAL_COLOR,
     TOTAL_COLOR,
     component_color,
     data_table,
+    empirical_curve,
     interval_band,
     job_progress,
+    log_figure,
     model_grid,
     redraw_table,
     unit_squared,
@@ -126,25 +126,11 @@ class _DecompFigure:
 
     def __init__(self, name: str, x_range: Any = None, y_range: Any = None) -> None:
         kw = {} if x_range is None else {"x_range": x_range, "y_range": y_range}
-        p = figure(
-            x_axis_type="log",
-            y_axis_type="log",
-            height=300,
-            sizing_mode="stretch_width",
-            tools="pan,wheel_zoom,box_zoom,reset,save",
-            toolbar_location="above",
-            name=name,
-            title="",
-            **kw,
-        )
+        p = log_figure(name, "", 300, "scale τ [s]", **kw)
         p.title.text_font_size = "13px"
-        p.xaxis.axis_label = "scale τ [s]"
-        p.axis.axis_label_text_font_style = "normal"
-        p.grid.grid_line_alpha = 0.35
         self.emp = ColumnDataSource(wv_data(None))
         interval_band(p, self.emp)
-        p.line("tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5)
-        p.scatter("tau_s", "variance", source=self.emp, size=5, color=EMPIRICAL_COLOR)
+        empirical_curve(p, self.emp, "variance", 1.5, 5)
         self.comps = [
             ColumnDataSource({"tau_s": [], "wv": []}) for _ in range(N_COMPARE_COMPONENTS)
         ]

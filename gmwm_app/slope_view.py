@@ -40,7 +40,6 @@ from bokeh.models import (
     StringFormatter,
     TableColumn,
 )
-from bokeh.plotting import figure
 
 import engine as eg
 from engine.fit.estimate import MethodEstimate, from_gmwm
@@ -60,7 +59,7 @@ from .slope_data import (
     truth_model,
 )
 from .state import AppState
-from .views import EMPIRICAL_COLOR, data_table, interval_band, redraw_table
+from .views import data_table, empirical_curve, interval_band, log_figure, redraw_table
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -181,35 +180,20 @@ class SlopeView(pn.viewable.Viewer):
         )
 
     def _build_figure(self) -> None:
-        p = figure(
-            x_axis_type="log",
-            y_axis_type="log",
-            height=460,
-            sizing_mode="stretch_width",
+        p = log_figure(
+            "slope_adev",
+            "Overlapping Allan deviation",
+            460,
+            "averaging time τ [s]",
             tools="pan,wheel_zoom,reset,save",
-            toolbar_location="above",
-            name="slope_adev",
-            title="Overlapping Allan deviation",
         )
-        p.xaxis.axis_label = "averaging time τ [s]"
         p.yaxis.axis_label = "Allan deviation"
-        p.axis.axis_label_text_font_style = "normal"
-        p.grid.grid_line_alpha = 0.35
         self.adev_src = ColumnDataSource(
             {"tau_s": [], "adev": [], "lo": [], "hi": []}, name="slope_adev_points"
         )
         band = interval_band(p, self.adev_src, "lo", "hi")
-        line = p.line(
-            "tau_s", "adev", source=self.adev_src, line_color=EMPIRICAL_COLOR, line_width=1.5
-        )
-        pts = p.scatter(
-            "tau_s",
-            "adev",
-            source=self.adev_src,
-            size=7,
-            color=EMPIRICAL_COLOR,
-            selection_color="#D62728",
-            nonselection_alpha=1.0,
+        line, pts = empirical_curve(
+            p, self.adev_src, "adev", 1.5, 7, selection_color="#D62728", nonselection_alpha=1.0
         )
         self.box_select = BoxSelectTool(dimensions="width", renderers=[pts], persistent=False)
         p.add_tools(self.box_select)
