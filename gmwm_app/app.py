@@ -50,6 +50,7 @@ from gmwm_app.views import (  # noqa: E402
     FitTables,
     WVFigures,
     fit_summary,
+    hidden_alert,
 )
 
 __all__ = ["GMWMApp", "create_app", "live_apps"]
@@ -203,15 +204,9 @@ class GMWMApp:
             )
 
         # main area
-        self.alert = pn.pane.Alert(
-            "", alert_type="danger", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
-        self.notice = pn.pane.Alert(
-            "", alert_type="info", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
-        self.warning = pn.pane.Alert(
-            "", alert_type="warning", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
+        self.alert = hidden_alert("danger")
+        self.notice = hidden_alert("info")
+        self.warning = hidden_alert("warning")
         self.status = pn.pane.Markdown(
             "",
             sizing_mode="stretch_width",

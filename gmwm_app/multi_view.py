@@ -74,6 +74,7 @@ from .multi_fit import (
 from .views import (
     TOTAL_COLOR,
     component_color,
+    hidden_alert,
     job_progress,
     redraw_table,
 )
@@ -182,12 +183,8 @@ class MultiView(pn.viewable.Viewer):
             "", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}
         )
 
-        self.alert = pn.pane.Alert(
-            "", alert_type="danger", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
-        self.notice = pn.pane.Alert(
-            "", alert_type="info", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
+        self.alert = hidden_alert("danger")
+        self.notice = hidden_alert("info")
         self.spinner = pn.indicators.LoadingSpinner(
             value=True, size=18, visible=False, margin=(8, 0, 0, 10)
         )

@@ -59,7 +59,14 @@ from .slope_data import (
     truth_model,
 )
 from .state import AppState
-from .views import data_table, empirical_curve, interval_band, log_figure, redraw_table
+from .views import (
+    data_table,
+    empirical_curve,
+    hidden_alert,
+    interval_band,
+    log_figure,
+    redraw_table,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -156,22 +163,8 @@ class SlopeView(pn.viewable.Viewer):
             label="Clear regions", color="light", width=130, margin=(22, 5, 5, 5)
         )
         self.clear_button.on_click(lambda _e: self.clear_regions())
-        self.explain = pn.pane.Alert(
-            "",
-            alert_type="info",
-            visible=False,
-            sizing_mode="stretch_width",
-            margin=(5, 10),
-            css_classes=["gmwm-scenario-why"],
-        )
-        self.message = pn.pane.Alert(
-            "",
-            alert_type="warning",
-            visible=False,
-            sizing_mode="stretch_width",
-            margin=(5, 10),
-            css_classes=["gmwm-slope-message"],
-        )
+        self.explain = hidden_alert("info", css_classes=["gmwm-scenario-why"])
+        self.message = hidden_alert("warning", css_classes=["gmwm-slope-message"])
         self.status = pn.pane.Markdown(
             "",
             sizing_mode="stretch_width",

@@ -619,6 +619,28 @@ def _table(
     return data_table(src, cols, name, css, height), src
 
 
+def hidden_alert(alert_type: str, **kw: Any) -> Any:
+    """An empty full-width alert, hidden until it has something to say.
+
+    Parameters
+    ----------
+    alert_type
+        ``"danger"``, ``"warning"`` or ``"info"``.
+    **kw
+        More settings (e.g. ``css_classes``).
+
+    Returns
+    -------
+    panel.pane.Alert
+        The alert.
+    """
+    import panel as pn
+
+    return pn.pane.Alert(
+        "", alert_type=alert_type, visible=False, sizing_mode="stretch_width", margin=(5, 10), **kw
+    )
+
+
 def job_progress() -> Any:
     """The progress bar of a tab's background job (hidden until the job starts).
 
