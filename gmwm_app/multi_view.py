@@ -52,6 +52,7 @@ from engine.models import parse_model
 from engine.multivariate import SHAREABLE, DependenceTest
 
 from .data import message_of
+from .jobs import ProgressThrottle
 from .multi_figures import (
     GridFigure,
     color_label,
@@ -229,7 +230,7 @@ class MultiView(pn.viewable.Viewer):
         self.dep_running = False
         self.dependence: DependenceTest | None = None
         self._dep_cancel = threading.Event()
-        self._dep_last = 0.0
+        self._dep_throttle = ProgressThrottle()  # at most ~10 updates a second
         self.dep_b = pn.widgets.IntInput(
             label="Bootstrap replicates B", value=100, start=10, end=2000, step=10, width=170
         )
@@ -608,9 +609,7 @@ class MultiView(pn.viewable.Viewer):
             observer(done, total)
         if self._dep_cancel.is_set():
             raise Cancelled
-        now = time.perf_counter()
-        if done == total or now - self._dep_last > 0.1:  # at most ~10 updates a second
-            self._dep_last = now
+        if self._dep_throttle.due(done, total):
             value = int(100 * done / max(total, 1))
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
             self.jobs.locked(

@@ -15,7 +15,6 @@ from __future__ import annotations
 import html
 import math
 import threading
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +29,7 @@ from bokeh.models import (
     TableColumn,
 )
 
+from .jobs import ProgressThrottle
 from .state import Inference, format_value
 from .views import (
     TOTAL_COLOR,
@@ -197,7 +197,7 @@ class SelectionView(pn.viewable.Viewer):
         self._shown_selection: Any = None
         self._compare_key: Any = None
         self._pending: set[int] = set()  # ids of fits whose inference is being computed
-        self._last_progress = 0.0
+        self._throttle = ProgressThrottle()  # at most ~10 updates a second
 
         self.max_input = pn.widgets.TextInput(
             label="Maximal model (every sub-model), or candidates separated by commas",
@@ -332,9 +332,7 @@ class SelectionView(pn.viewable.Viewer):
             observer(done, total)
         if self._cancel.is_set():
             raise _Cancelled
-        now = time.perf_counter()
-        if done == total or now - self._last_progress > 0.1:  # at most ~10 updates a second
-            self._last_progress = now
+        if self._throttle.due(done, total):
             value = int(100 * done / max(total, 1))
             self.jobs.locked(lambda: self.progress.param.update(value=value))
             what = (
