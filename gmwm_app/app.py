@@ -41,7 +41,7 @@ from gmwm_app.jobs import Jobs  # noqa: E402
 from gmwm_app.limits import current as current_limits  # noqa: E402
 from gmwm_app.model_panel import ModelPanel  # noqa: E402
 from gmwm_app.selection_view import SelectionView, jtest_badge  # noqa: E402
-from gmwm_app.session_view import SessionPanel  # noqa: E402
+from gmwm_app.session_view import SessionPanel, download_button  # noqa: E402
 from gmwm_app.state import (  # noqa: E402
     AppState,
     format_value,
@@ -50,6 +50,7 @@ from gmwm_app.views import (  # noqa: E402
     FitTables,
     WVFigures,
     fit_summary,
+    hidden_alert,
 )
 
 __all__ = ["GMWMApp", "create_app", "live_apps"]
@@ -185,13 +186,8 @@ class GMWMApp:
         self.robust_check.param.watch(self._on_robust, "value")
 
         self.model_panel = ModelPanel(self.state)
-        self.download = pn.widgets.FileDownload(
-            callback=self._export_json,
-            filename="gmwm_fit.json",
-            label="Download fit (JSON)",
-            color="primary",
-            sizing_mode="stretch_width",
-            embed=False,
+        self.download = download_button(
+            self._export_json, "gmwm_fit.json", "Download fit (JSON)", "primary"
         )
         # plot images are made in the browser by BokehJS (PlotView.export), like the toolbar's
         # save tool, but in either format whatever the plot's output backend
@@ -208,15 +204,9 @@ class GMWMApp:
             )
 
         # main area
-        self.alert = pn.pane.Alert(
-            "", alert_type="danger", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
-        self.notice = pn.pane.Alert(
-            "", alert_type="info", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
-        self.warning = pn.pane.Alert(
-            "", alert_type="warning", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
+        self.alert = hidden_alert("danger")
+        self.notice = hidden_alert("info")
+        self.warning = hidden_alert("warning")
         self.status = pn.pane.Markdown(
             "",
             sizing_mode="stretch_width",

@@ -15,6 +15,7 @@ import asyncio
 import logging
 import os
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from functools import partial
@@ -23,7 +24,7 @@ from typing import Any
 from panel.io.state import set_curdoc
 from panel.io.state import state as pn_state
 
-__all__ = ["EXECUTOR", "Jobs", "lower_priority"]
+__all__ = ["EXECUTOR", "Jobs", "ProgressThrottle", "lower_priority"]
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +46,28 @@ EXECUTOR = ThreadPoolExecutor(
 
 def _ignore(*_args: Any) -> None:
     """A hook that does nothing."""
+
+
+class ProgressThrottle:
+    """Lets a job's progress through at most every ``interval`` seconds, and always at the end.
+
+    Parameters
+    ----------
+    interval : float
+        Shortest time between two updates (s).
+    """
+
+    def __init__(self, interval: float = 0.1) -> None:
+        self.interval = interval
+        self.last = 0.0
+
+    def due(self, done: int, total: int) -> bool:
+        """Whether step ``done`` of ``total`` is shown (it is then the last one shown)."""
+        now = time.perf_counter()
+        if done == total or now - self.last > self.interval:
+            self.last = now
+            return True
+        return False
 
 
 class Jobs:

@@ -30,6 +30,8 @@ from .views import (
     EMPIRICAL_COLOR,
     TOTAL_COLOR,
     component_color,
+    data_table,
+    interval_band,
     unit_squared,
 )
 
@@ -281,14 +283,7 @@ class CellFigure:
         self.diag = diag
         self.emp = ColumnDataSource(_empty_emp())
         if diag:
-            p.varea(
-                x="tau_s",
-                y1="y_low",
-                y2="y_high",
-                source=self.emp,
-                fill_color=BAND_COLOR,
-                fill_alpha=0.25,
-            )
+            interval_band(p, self.emp, "y_low", "y_high")
             p.line("tau_s", "y", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.2)
         else:
             p.segment(
@@ -405,19 +400,7 @@ def make_table(
         TableColumn(field=c, title=t, width=w, formatter=f or StringFormatter(), sortable=False)
         for c, t, w, f in columns
     ]
-    table = DataTable(
-        source=src,
-        columns=cols,
-        index_position=None,
-        sortable=False,
-        selectable=False,
-        autosize_mode="force_fit",
-        height=height,
-        row_height=26,
-        sizing_mode="stretch_width",
-        name=name,
-        css_classes=[css],
-    )
+    table = data_table(src, cols, name, css, height, reorderable=True)
     return src, table
 
 

@@ -52,6 +52,7 @@ from engine.models import parse_model
 from engine.multivariate import SHAREABLE, DependenceTest
 
 from .data import message_of
+from .jobs import ProgressThrottle
 from .multi_figures import (
     GridFigure,
     color_label,
@@ -74,6 +75,8 @@ from .multi_fit import (
 from .views import (
     TOTAL_COLOR,
     component_color,
+    hidden_alert,
+    job_progress,
     redraw_table,
 )
 
@@ -181,12 +184,8 @@ class MultiView(pn.viewable.Viewer):
             "", margin=(0, 10), styles={"font-size": "12px", "color": "#555"}
         )
 
-        self.alert = pn.pane.Alert(
-            "", alert_type="danger", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
-        self.notice = pn.pane.Alert(
-            "", alert_type="info", visible=False, sizing_mode="stretch_width", margin=(5, 10)
-        )
+        self.alert = hidden_alert("danger")
+        self.notice = hidden_alert("info")
         self.spinner = pn.indicators.LoadingSpinner(
             value=True, size=18, visible=False, margin=(8, 0, 0, 10)
         )
@@ -231,7 +230,7 @@ class MultiView(pn.viewable.Viewer):
         self.dep_running = False
         self.dependence: DependenceTest | None = None
         self._dep_cancel = threading.Event()
-        self._dep_last = 0.0
+        self._dep_throttle = ProgressThrottle()  # at most ~10 updates a second
         self.dep_b = pn.widgets.IntInput(
             label="Bootstrap replicates B", value=100, start=10, end=2000, step=10, width=170
         )
@@ -247,15 +246,7 @@ class MultiView(pn.viewable.Viewer):
             label="Cancel", color="light", width=90, margin=(22, 5, 5, 5), disabled=True
         )
         self.dep_cancel.on_click(lambda _e: self.cancel_dependence_test())
-        self.dep_progress = pn.indicators.Progress(
-            value=0,
-            max=100,
-            bar_color="primary",
-            height=14,
-            visible=False,
-            sizing_mode="stretch_width",
-            margin=(0, 10),
-        )
+        self.dep_progress = job_progress()
         self.dep_text = pn.pane.Markdown(
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mdependence"]
         )
@@ -618,9 +609,7 @@ class MultiView(pn.viewable.Viewer):
             observer(done, total)
         if self._dep_cancel.is_set():
             raise Cancelled
-        now = time.perf_counter()
-        if done == total or now - self._dep_last > 0.1:  # at most ~10 updates a second
-            self._dep_last = now
+        if self._dep_throttle.due(done, total):
             value = int(100 * done / max(total, 1))
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
             self.jobs.locked(

@@ -15,7 +15,6 @@ from __future__ import annotations
 import html
 import math
 import threading
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -24,20 +23,22 @@ import panel as pn
 import param
 from bokeh.models import (
     ColumnDataSource,
-    DataTable,
     NumberFormatter,
     ScientificFormatter,
     StringFormatter,
     TableColumn,
 )
-from bokeh.plotting import figure
 
+from .jobs import ProgressThrottle
 from .state import Inference, format_value
 from .views import (
-    BAND_COLOR,
-    EMPIRICAL_COLOR,
     TOTAL_COLOR,
     component_color,
+    data_table,
+    empirical_curve,
+    interval_band,
+    job_progress,
+    log_figure,
     model_grid,
     redraw_table,
     unit_squared,
@@ -125,32 +126,11 @@ class _DecompFigure:
 
     def __init__(self, name: str, x_range: Any = None, y_range: Any = None) -> None:
         kw = {} if x_range is None else {"x_range": x_range, "y_range": y_range}
-        p = figure(
-            x_axis_type="log",
-            y_axis_type="log",
-            height=300,
-            sizing_mode="stretch_width",
-            tools="pan,wheel_zoom,box_zoom,reset,save",
-            toolbar_location="above",
-            name=name,
-            title="",
-            **kw,
-        )
+        p = log_figure(name, "", 300, "scale τ [s]", **kw)
         p.title.text_font_size = "13px"
-        p.xaxis.axis_label = "scale τ [s]"
-        p.axis.axis_label_text_font_style = "normal"
-        p.grid.grid_line_alpha = 0.35
         self.emp = ColumnDataSource(wv_data(None))
-        p.varea(
-            x="tau_s",
-            y1="ci_low",
-            y2="ci_high",
-            source=self.emp,
-            fill_color=BAND_COLOR,
-            fill_alpha=0.25,
-        )
-        p.line("tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5)
-        p.scatter("tau_s", "variance", source=self.emp, size=5, color=EMPIRICAL_COLOR)
+        interval_band(p, self.emp)
+        empirical_curve(p, self.emp, "variance", 1.5, 5)
         self.comps = [
             ColumnDataSource({"tau_s": [], "wv": []}) for _ in range(N_COMPARE_COMPONENTS)
         ]
@@ -217,7 +197,7 @@ class SelectionView(pn.viewable.Viewer):
         self._shown_selection: Any = None
         self._compare_key: Any = None
         self._pending: set[int] = set()  # ids of fits whose inference is being computed
-        self._last_progress = 0.0
+        self._throttle = ProgressThrottle()  # at most ~10 updates a second
 
         self.max_input = pn.widgets.TextInput(
             label="Maximal model (every sub-model), or candidates separated by commas",
@@ -233,15 +213,7 @@ class SelectionView(pn.viewable.Viewer):
             label="Cancel", color="light", width=100, margin=(22, 5, 5, 5), disabled=True
         )
         self.cancel_button.on_click(lambda _e: self.cancel())
-        self.progress = pn.indicators.Progress(
-            value=0,
-            max=100,
-            bar_color="primary",
-            sizing_mode="stretch_width",
-            height=14,
-            visible=False,
-            margin=(0, 10),
-        )
+        self.progress = job_progress()
         self.status = pn.pane.Markdown(
             "Rank the candidate models of the selected channel by "
             "WVIC = objective + optimism (smallest first).",
@@ -280,19 +252,8 @@ class SelectionView(pn.viewable.Viewer):
             )
             for c in RANK_COLUMNS
         ]
-        self.table = DataTable(
-            source=self.source,
-            columns=cols,
-            index_position=None,
-            sortable=True,
-            reorderable=False,
-            selectable=True,
-            autosize_mode="force_fit",
-            height=330,
-            row_height=26,
-            sizing_mode="stretch_width",
-            name="ranking",
-            css_classes=["gmwm-ranking"],
+        self.table = data_table(
+            self.source, cols, "ranking", "gmwm-ranking", 330, sortable=True, selectable=True
         )
         self.source.selected.on_change("indices", self._on_row)
 
@@ -319,18 +280,8 @@ class SelectionView(pn.viewable.Viewer):
                 ("unit", "unit", 85),
             )
         ]
-        self.compare_table = DataTable(
-            source=self.compare_source,
-            columns=ccols,
-            index_position=None,
-            sortable=False,
-            selectable=False,
-            autosize_mode="force_fit",
-            height=240,
-            row_height=26,
-            sizing_mode="stretch_width",
-            name="compare_params",
-            css_classes=["gmwm-compare"],
+        self.compare_table = data_table(
+            self.compare_source, ccols, "compare_params", "gmwm-compare", 240, reorderable=True
         )
 
         h = pn.pane.Markdown
@@ -381,9 +332,7 @@ class SelectionView(pn.viewable.Viewer):
             observer(done, total)
         if self._cancel.is_set():
             raise _Cancelled
-        now = time.perf_counter()
-        if done == total or now - self._last_progress > 0.1:  # at most ~10 updates a second
-            self._last_progress = now
+        if self._throttle.due(done, total):
             value = int(100 * done / max(total, 1))
             self.jobs.locked(lambda: self.progress.param.update(value=value))
             what = (

@@ -14,6 +14,7 @@ Two layers, like the rest of the app:
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
     from gmwm_app.jobs import Jobs
 
 __all__ = [
+    "download_button",
     "session_json",
     "session_filename",
     "prepare_restore",
@@ -246,6 +248,37 @@ def is_gap_error(err: BaseException | str) -> bool:
 _SMALL = {"font-size": "12px", "color": "#555"}
 
 
+def download_button(
+    callback: Callable[[], Any], filename: str, label: str, color: str = "default"
+) -> Any:
+    """A full-width download button whose file ``callback`` makes on click.
+
+    Parameters
+    ----------
+    callback
+        Makes the file's content (a file-like object) when the button is clicked.
+    filename
+        The name the browser saves it under.
+    label
+        The button's text.
+    color
+        The button's colour (``"primary"`` or ``"default"``).
+
+    Returns
+    -------
+    panel.widgets.FileDownload
+        The button.
+    """
+    return pn.widgets.FileDownload(
+        callback=callback,
+        filename=filename,
+        label=label,
+        color=color,
+        sizing_mode="stretch_width",
+        embed=False,
+    )
+
+
 class SessionPanel:
     """The session, export and time-gap widgets of one page (see the module docstring)."""
 
@@ -255,33 +288,18 @@ class SessionPanel:
         s = state
         self._retry: tuple[str, dict[str, Any]] | None = None
         self._load: dict[str, Any] = {}  # load options of the data shown (for the session)
-        self.session_download = pn.widgets.FileDownload(
-            callback=self._session_file,
-            filename="gmwm_session.json",
-            label="Download session",
-            color="primary",
-            sizing_mode="stretch_width",
-            embed=False,
+        self.session_download = download_button(
+            self._session_file, "gmwm_session.json", "Download session", "primary"
         )
         self.restore_input = pn.widgets.FileInput(
             accept=".json", multiple=False, sizing_mode="stretch_width"
         )
         self.restore_input.param.watch(self._on_restore, "value")
-        self.kalibr_download = pn.widgets.FileDownload(
-            callback=partial(self._export, "kalibr"),
-            filename="imu.yaml",
-            label="Kalibr imu.yaml",
-            color="default",
-            sizing_mode="stretch_width",
-            embed=False,
+        self.kalibr_download = download_button(
+            partial(self._export, "kalibr"), "imu.yaml", "Kalibr imu.yaml", "default"
         )
-        self.datasheet_download = pn.widgets.FileDownload(
-            callback=partial(self._export, "datasheet"),
-            filename="gmwm_datasheet.txt",
-            label="Datasheet (text)",
-            color="default",
-            sizing_mode="stretch_width",
-            embed=False,
+        self.datasheet_download = download_button(
+            partial(self._export, "datasheet"), "gmwm_datasheet.txt", "Datasheet (text)", "default"
         )
         self.export_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
         self.gap_report = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))

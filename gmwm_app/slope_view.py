@@ -35,13 +35,11 @@ from bokeh.models import (
     BoxAnnotation,
     BoxSelectTool,
     ColumnDataSource,
-    DataTable,
     Legend,
     LegendItem,
     StringFormatter,
     TableColumn,
 )
-from bokeh.plotting import figure
 
 import engine as eg
 from engine.fit.estimate import MethodEstimate, from_gmwm
@@ -61,7 +59,14 @@ from .slope_data import (
     truth_model,
 )
 from .state import AppState
-from .views import BAND_COLOR, EMPIRICAL_COLOR, redraw_table
+from .views import (
+    data_table,
+    empirical_curve,
+    hidden_alert,
+    interval_band,
+    log_figure,
+    redraw_table,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -158,22 +163,8 @@ class SlopeView(pn.viewable.Viewer):
             label="Clear regions", color="light", width=130, margin=(22, 5, 5, 5)
         )
         self.clear_button.on_click(lambda _e: self.clear_regions())
-        self.explain = pn.pane.Alert(
-            "",
-            alert_type="info",
-            visible=False,
-            sizing_mode="stretch_width",
-            margin=(5, 10),
-            css_classes=["gmwm-scenario-why"],
-        )
-        self.message = pn.pane.Alert(
-            "",
-            alert_type="warning",
-            visible=False,
-            sizing_mode="stretch_width",
-            margin=(5, 10),
-            css_classes=["gmwm-slope-message"],
-        )
+        self.explain = hidden_alert("info", css_classes=["gmwm-scenario-why"])
+        self.message = hidden_alert("warning", css_classes=["gmwm-slope-message"])
         self.status = pn.pane.Markdown(
             "",
             sizing_mode="stretch_width",
@@ -182,42 +173,20 @@ class SlopeView(pn.viewable.Viewer):
         )
 
     def _build_figure(self) -> None:
-        p = figure(
-            x_axis_type="log",
-            y_axis_type="log",
-            height=460,
-            sizing_mode="stretch_width",
+        p = log_figure(
+            "slope_adev",
+            "Overlapping Allan deviation",
+            460,
+            "averaging time τ [s]",
             tools="pan,wheel_zoom,reset,save",
-            toolbar_location="above",
-            name="slope_adev",
-            title="Overlapping Allan deviation",
         )
-        p.xaxis.axis_label = "averaging time τ [s]"
         p.yaxis.axis_label = "Allan deviation"
-        p.axis.axis_label_text_font_style = "normal"
-        p.grid.grid_line_alpha = 0.35
         self.adev_src = ColumnDataSource(
             {"tau_s": [], "adev": [], "lo": [], "hi": []}, name="slope_adev_points"
         )
-        band = p.varea(
-            x="tau_s",
-            y1="lo",
-            y2="hi",
-            source=self.adev_src,
-            fill_color=BAND_COLOR,
-            fill_alpha=0.25,
-        )
-        line = p.line(
-            "tau_s", "adev", source=self.adev_src, line_color=EMPIRICAL_COLOR, line_width=1.5
-        )
-        pts = p.scatter(
-            "tau_s",
-            "adev",
-            source=self.adev_src,
-            size=7,
-            color=EMPIRICAL_COLOR,
-            selection_color="#D62728",
-            nonselection_alpha=1.0,
+        band = interval_band(p, self.adev_src, "lo", "hi")
+        line, pts = empirical_curve(
+            p, self.adev_src, "adev", 1.5, 7, selection_color="#D62728", nonselection_alpha=1.0
         )
         self.box_select = BoxSelectTool(dimensions="width", renderers=[pts], persistent=False)
         p.add_tools(self.box_select)
@@ -300,21 +269,7 @@ class SlopeView(pn.viewable.Viewer):
             )
             for c in TABLE_COLUMNS
         ]
-        # autosize_mode "fit_columns" fails on data updates in BokehJS 3.9.2 (see views.py)
-        self.table = DataTable(
-            source=self.table_src,
-            columns=cols,
-            index_position=None,
-            sortable=False,
-            reorderable=False,
-            selectable=False,
-            autosize_mode="force_fit",
-            height=260,
-            row_height=26,
-            sizing_mode="stretch_width",
-            name="slope_table",
-            css_classes=["gmwm-slope-table"],
-        )
+        self.table = data_table(self.table_src, cols, "slope_table", "gmwm-slope-table", 260)
 
     def _build_layout(self) -> None:
         h = pn.pane.Markdown

@@ -170,40 +170,26 @@ class WVFigures:
         self._shown_wv: Any = None
         self._unit: str | None = None
 
-        p = figure(
-            x_axis_type="log",
-            y_axis_type="log",
-            sizing_mode="stretch_width",
-            height=480,
-            tools="pan,wheel_zoom,box_zoom,reset,save",
-            toolbar_location="above",
+        p = log_figure(
+            "wv_plot",
+            "Load a log to see its wavelet variance",
+            480,
+            "scale τ [s]",
             x_range=DataRange1d(range_padding=0.08),
             y_range=DataRange1d(range_padding=0.08),
-            title="Load a log to see its wavelet variance",
-            name="wv_plot",
             min_border_left=80,
         )
-        p.xaxis.axis_label = "scale τ [s]"
         p.yaxis.axis_label = f"wavelet variance ν² [{unit_squared('')}]"
         p.title.text_font_size = "14px"
-        p.axis.axis_label_text_font_style = "normal"
         p.axis.axis_label_text_font_size = "13px"
         p.axis.major_label_text_font_size = "12px"
-        p.grid.grid_line_alpha = 0.35
         p.xgrid.minor_grid_line_color = "#e6e6e6"
         p.ygrid.minor_grid_line_color = "#eeeeee"
         p.ygrid.minor_grid_line_alpha = 0.6
         p.xgrid.minor_grid_line_alpha = 0.6
 
         # classical WV drawn beside the robust one (robust mode only)
-        alt_band = p.varea(
-            x="tau_s",
-            y1="ci_low",
-            y2="ci_high",
-            source=self.alt,
-            fill_color=CLASSICAL_COLOR,
-            fill_alpha=0.12,
-        )
+        alt_band = interval_band(p, self.alt, color=CLASSICAL_COLOR, alpha=0.12)
         alt_line = p.line(
             "tau_s",
             "variance",
@@ -222,25 +208,8 @@ class WVFigures:
             fill_color="white",
         )
         # empirical WV and its interval
-        band = p.varea(
-            x="tau_s",
-            y1="ci_low",
-            y2="ci_high",
-            source=self.emp,
-            fill_color=BAND_COLOR,
-            fill_alpha=0.25,
-        )
-        emp_line = p.line(
-            "tau_s", "variance", source=self.emp, line_color=EMPIRICAL_COLOR, line_width=1.5
-        )
-        emp_pts = p.scatter(
-            "tau_s",
-            "variance",
-            source=self.emp,
-            size=7,
-            line_color=EMPIRICAL_COLOR,
-            fill_color=EMPIRICAL_COLOR,
-        )
+        band = interval_band(p, self.emp)
+        emp_line, emp_pts = empirical_curve(p, self.emp, "variance", 1.5, 7)
         # the axes follow the data, not the model curves (a tiny RW at short scales would
         # otherwise squash the plot, and dragging a what-if slider would make it jump)
         p.x_range.renderers = [emp_line, alt_line]
@@ -304,37 +273,21 @@ class WVFigures:
         self.figure = p
         self.save_tool = p.select_one(SaveTool)
 
-        r = figure(
-            x_axis_type="log",
+        r = log_figure(
+            "residual_plot",
+            "Residuals: empirical / model, with the 95% interval",
+            180,
+            "scale τ [s]",
+            tools="pan,wheel_zoom,reset,save",
+            y_axis_type="auto",
             x_range=p.x_range,
-            height=180,
             y_range=DataRange1d(range_padding=0.6, start=0.0),
             min_border_left=80,
-            sizing_mode="stretch_width",
-            tools="pan,wheel_zoom,reset,save",
-            toolbar_location="above",
-            name="residual_plot",
-            title="Residuals: empirical / model, with the 95% interval",
         )
         r.title.text_font_size = "13px"
-        r.xaxis.axis_label = "scale τ [s]"
         r.yaxis.axis_label = "empirical / model [1]"
-        r.axis.axis_label_text_font_style = "normal"
-        r.grid.grid_line_alpha = 0.35
-        rband = r.varea(
-            x="tau_s", y1="lo", y2="hi", source=self.resid, fill_color=BAND_COLOR, fill_alpha=0.25
-        )
-        rline = r.line(
-            "tau_s", "ratio", source=self.resid, line_color=EMPIRICAL_COLOR, line_width=1
-        )
-        ratio_pts = r.scatter(
-            "tau_s",
-            "ratio",
-            source=self.resid,
-            size=6,
-            line_color=EMPIRICAL_COLOR,
-            fill_color=EMPIRICAL_COLOR,
-        )
+        rband = interval_band(r, self.resid, "lo", "hi")
+        rline, ratio_pts = empirical_curve(r, self.resid, "ratio", 1, 6)
         # linear ratio axis that follows the points (the interval at the longest scales is
         # orders of magnitude wide and would flatten them)
         r.y_range.renderers = [ratio_pts]
@@ -497,19 +450,93 @@ PARAM_COLUMNS = ("process", "parameter", "value", "low", "high", "unit")
 DATASHEET_COLUMNS = ("process", "quantity", "value", "unit")
 
 
-def _table(
-    columns: tuple[str, ...], widths: dict[str, int], name: str, height: int, css: str
-) -> tuple[DataTable, ColumnDataSource]:
-    src = ColumnDataSource({c: [] for c in columns}, name=f"{name}_rows")
-    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False) for c in columns]
+def log_figure(
+    name: str,
+    title: str,
+    height: int,
+    x_label: str,
+    *,
+    tools: str = "pan,wheel_zoom,box_zoom,reset,save",
+    y_axis_type: str = "log",
+    **kw: Any,
+) -> Any:
+    """A full-width plot over a log scale axis in the app's style (toolbar above, plain
+    axis labels, light grid).
+
+    Parameters
+    ----------
+    name, title
+        The model name (tests find the plot by it) and the title.
+    height
+        Height in pixels.
+    x_label
+        The x axis label.
+    tools
+        Bokeh tools.
+    y_axis_type
+        ``"log"`` or ``"auto"`` (linear).
+    **kw
+        More ``figure`` settings (ranges, borders).
+
+    Returns
+    -------
+    bokeh.plotting.figure
+        The plot.
+    """
+    p = figure(
+        x_axis_type="log",
+        y_axis_type=y_axis_type,
+        height=height,
+        sizing_mode="stretch_width",
+        tools=tools,
+        toolbar_location="above",
+        name=name,
+        title=title,
+        **kw,
+    )
+    p.xaxis.axis_label = x_label
+    p.axis.axis_label_text_font_style = "normal"
+    p.grid.grid_line_alpha = 0.35
+    return p
+
+
+def data_table(
+    source: ColumnDataSource,
+    columns: list[TableColumn],
+    name: str,
+    css: str,
+    height: int,
+    *,
+    sortable: bool = False,
+    selectable: bool = False,
+    reorderable: bool = False,
+) -> DataTable:
+    """A full-width table in the app's style: no index column, 26 px rows.
+
+    Parameters
+    ----------
+    source, columns
+        The table's data source and its columns.
+    name, css
+        The model name (tests find the table by it) and its CSS class.
+    height
+        Height in pixels.
+    sortable, selectable, reorderable
+        Passed to Bokeh's ``DataTable``.
+
+    Returns
+    -------
+    DataTable
+        The table.
+    """
     # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
-    table = DataTable(
-        source=src,
-        columns=cols,
+    return DataTable(
+        source=source,
+        columns=columns,
         index_position=None,
-        sortable=False,
-        reorderable=False,
-        selectable=False,
+        sortable=sortable,
+        reorderable=reorderable,
+        selectable=selectable,
         autosize_mode="force_fit",
         height=height,
         row_height=26,
@@ -517,7 +544,122 @@ def _table(
         name=name,
         css_classes=[css],
     )
-    return table, src
+
+
+def interval_band(
+    p: Any,
+    source: ColumnDataSource,
+    y1: str = "ci_low",
+    y2: str = "ci_high",
+    color: str = BAND_COLOR,
+    alpha: float = 0.25,
+) -> Any:
+    """Shade an interval between the columns ``y1`` and ``y2`` over ``tau_s``.
+
+    Parameters
+    ----------
+    p
+        The Bokeh figure.
+    source
+        The data source with ``tau_s``, ``y1`` and ``y2`` columns.
+    y1, y2
+        Lower and upper bound columns.
+    color, alpha
+        Fill colour and opacity.
+
+    Returns
+    -------
+    GlyphRenderer
+        The area's renderer.
+    """
+    return p.varea(x="tau_s", y1=y1, y2=y2, source=source, fill_color=color, fill_alpha=alpha)
+
+
+def empirical_curve(
+    p: Any, source: ColumnDataSource, y: str, line_width: float, size: float, **points_kw: Any
+) -> tuple[Any, Any]:
+    """Draw an empirical curve over ``tau_s``: a line through its points.
+
+    Parameters
+    ----------
+    p
+        The Bokeh figure.
+    source
+        The data source with ``tau_s`` and ``y`` columns.
+    y
+        The value column.
+    line_width, size
+        Width of the line and size of the points.
+    **points_kw
+        More settings of the points (e.g. their selection look).
+
+    Returns
+    -------
+    tuple
+        The line's and the points' renderers.
+    """
+    line = p.line("tau_s", y, source=source, line_color=EMPIRICAL_COLOR, line_width=line_width)
+    pts = p.scatter(
+        "tau_s",
+        y,
+        source=source,
+        size=size,
+        line_color=EMPIRICAL_COLOR,
+        fill_color=EMPIRICAL_COLOR,
+        **points_kw,
+    )
+    return line, pts
+
+
+def _table(
+    columns: tuple[str, ...], widths: dict[str, int], name: str, height: int, css: str
+) -> tuple[DataTable, ColumnDataSource]:
+    src = ColumnDataSource({c: [] for c in columns}, name=f"{name}_rows")
+    cols = [TableColumn(field=c, title=c, width=widths.get(c, 80), sortable=False) for c in columns]
+    return data_table(src, cols, name, css, height), src
+
+
+def hidden_alert(alert_type: str, **kw: Any) -> Any:
+    """An empty full-width alert, hidden until it has something to say.
+
+    Parameters
+    ----------
+    alert_type
+        ``"danger"``, ``"warning"`` or ``"info"``.
+    **kw
+        More settings (e.g. ``css_classes``).
+
+    Returns
+    -------
+    panel.pane.Alert
+        The alert.
+    """
+    import panel as pn
+
+    return pn.pane.Alert(
+        "", alert_type=alert_type, visible=False, sizing_mode="stretch_width", margin=(5, 10), **kw
+    )
+
+
+def job_progress() -> Any:
+    """The progress bar of a tab's background job (hidden until the job starts).
+
+    Returns
+    -------
+    panel.indicators.Progress
+        A full-width bar, 0 of 100.
+    """
+    import panel as pn
+
+    return pn.indicators.Progress(
+        value=0,
+        max=100,
+        bar_color="primary",
+        height=14,
+        visible=False,
+        sizing_mode="stretch_width",
+        margin=(0, 10),
+    )
 
 
 def redraw_table(table: DataTable) -> None:

@@ -28,6 +28,34 @@ import engine as eg
 REAL_DATA_ENV = "GMWM_REAL_DATA"
 REQUIRE_REAL_DATA_ENV = "GMWM_REQUIRE_REAL_DATA"
 
+#: The headless Chromium of the browser tests and the app benchmark, and its flags.
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+#: The keys of a WV's JSON form (``WaveletVariance.to_dict``, ``gmwm wv --json``).
+WV_KEYS = {
+    "n",
+    "fs",
+    "levels",
+    "tau_samples",
+    "tau_s",
+    "variance",
+    "ci_low",
+    "ci_high",
+    "n_coef",
+    "robust",
+    "eff",
+    "alpha",
+}
+
 
 def real_data_dir() -> Path:
     """The folder of the real IMU logs: ``$GMWM_REAL_DATA`` or ``<repo>/../shared/data``."""
@@ -104,6 +132,16 @@ def app_demo(app_demo_file: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """Point ``gmwm_app.state.demo_path()`` at the test demo log; returns its path."""
     monkeypatch.setenv("GMWM_APP_DEMO", str(app_demo_file))
     return app_demo_file
+
+
+@pytest.fixture
+def app(app_demo: Path) -> Any:
+    """A fresh app (``create_app().gmwm_app``) with the demo log loaded and its WV computed."""
+    from gmwm_app.app import create_app
+
+    a = create_app().gmwm_app
+    assert a.state.error == "" and a.state.log is not None and a.state.wv is not None
+    return a
 
 
 @pytest.fixture

@@ -14,20 +14,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import served_app
+from conftest import CHROMIUM, CHROMIUM_ARGS, served_app
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 TIMEOUT_MS = 20_000
 
 

@@ -32,15 +32,6 @@ GYROS = ["gyro_x", "gyro_y", "gyro_z"]
 TITLE = "Multi-channel"
 
 
-@pytest.fixture
-def app(app_demo: Path) -> Any:
-    from gmwm_app.app import create_app
-
-    a = create_app().gmwm_app
-    assert a.state.error == "" and a.state.log is not None
-    return a
-
-
 def open_view(app: Any, show: bool = True) -> MultiView:
     v = app.open_view(TITLE)
     if show:

@@ -6,7 +6,6 @@ WV, the interval columns are ``param_intervals`` of the fit.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,15 +16,6 @@ from gmwm_app.selection_view import jtest_badge, ranking_data
 from gmwm_app.state import AppState, Inference, format_value
 
 SMALL = "GM+WN+RW"
-
-
-@pytest.fixture
-def app(app_demo: Path) -> Any:
-    from gmwm_app.app import create_app
-
-    a = create_app().gmwm_app
-    assert a.state.error == "" and a.state.wv is not None
-    return a
 
 
 def test_ranking_through_the_state_equals_rank_models(app_state: AppState) -> None:

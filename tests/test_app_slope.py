@@ -35,15 +35,6 @@ from gmwm_app.state import AppState, format_value
 
 
 @pytest.fixture
-def app(app_demo: Path) -> Any:
-    from gmwm_app.app import create_app
-
-    a = create_app().gmwm_app
-    assert a.state.error == "" and a.state.wv is not None
-    return a
-
-
-@pytest.fixture
 def view(app: Any) -> Any:
     return app.open_view("Slope method")
 

@@ -9,24 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import WV_KEYS
 
 import engine as eg
 from engine.cli import main
-
-WV_KEYS = {
-    "n",
-    "fs",
-    "levels",
-    "tau_samples",
-    "tau_s",
-    "variance",
-    "ci_low",
-    "ci_high",
-    "n_coef",
-    "robust",
-    "eff",
-    "alpha",
-}
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:

@@ -380,68 +380,23 @@ def test_export_dispatch(fits, tmp_path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- CLI
+def export_wn_rw(log: Path, *args: str) -> int:
+    """Exit code of ``gmwm export LOG --model WN+RW ARGS...``."""
+    return main(["export", str(log), "--model", "WN+RW", *args])
+
+
 def test_cli_export(six: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "imu.yaml"
-    assert (
-        main(
-            [
-                "export",
-                str(six),
-                "--model",
-                "WN+RW",
-                "--format",
-                "kalibr",
-                "-o",
-                str(out),
-                "--rostopic",
-                "/imu/data",
-            ]
-        )
-        == 0
-    )
+    assert export_wn_rw(six, "--format", "kalibr", "-o", str(out), "--rostopic", "/imu/data") == 0
     assert "wrote kalibr export of 6 channel(s)" in capsys.readouterr().out
     d = read_kalibr(out)
     assert d["rostopic"] == "/imu/data" and d["update_rate"] == FS
-    assert (
-        main(
-            [
-                "export",
-                str(six),
-                "--model",
-                "WN+RW",
-                "--model-for",
-                "gyro_x=GM+WN+RW",
-                "--channels",
-                "gyro_x,accel_x",
-                "--format",
-                "json",
-                "-o",
-                "-",
-                "--ci",
-                "asymptotic",
-            ]
-        )
-        == 0
-    )
+    args = ["--model-for", "gyro_x=GM+WN+RW", "--channels", "gyro_x,accel_x", "--format", "json"]
+    assert export_wn_rw(six, *args, "-o", "-", "--ci", "asymptotic") == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["channels"]["gyro_x"]["fit"]["model"] == "GM+WN+RW"
     assert rep["channels"]["accel_x"]["intervals"]
-    assert (
-        main(
-            [
-                "export",
-                str(six),
-                "--model",
-                "WN+RW",
-                "--format",
-                "csv",
-                "-o",
-                str(tmp_path / "c.csv"),
-                "--json",
-            ]
-        )
-        == 0
-    )
+    assert export_wn_rw(six, "--format", "csv", "-o", str(tmp_path / "c.csv"), "--json") == 0
     assert json.loads(capsys.readouterr().out)["format"] == "csv"
     bad = [
         (["--channels", "gyro_x"], "only gyroscope"),
@@ -451,8 +406,7 @@ def test_cli_export(six: Path, tmp_path: Path, capsys) -> None:
         (["--model", "WN+XX"], "unknown process"),
     ]
     for extra, frag in bad:
-        argv = ["export", str(six), "--model", "WN+RW", "-o", "-", *extra]
-        assert main(argv) == 2, extra
+        assert export_wn_rw(six, "-o", "-", *extra) == 2, extra
         err = capsys.readouterr().err
         assert frag in err and err.count("\n") == 1, (extra, err)
 

@@ -376,50 +376,36 @@ def test_missing_empty_and_binary(tmp_path: Path) -> None:
     raises(tmp_path, "directory")
 
 
+_ROWS = [f"{i / 100},{i * 0.1},{i}" for i in range(30)]
+
+
+@pytest.mark.parametrize(
+    ("name", "edits", "fragments"),
+    [
+        # header at line 1: row 15 is line 17
+        ("abc", {15: "0.15,abc,15"}, ("column 'gyro_x'", "line 17", "'abc' is not a number")),
+        ("gap", {3: "0.03,,3"}, ("column 'gyro_x'", "line 5", "empty field")),
+        ("ragged", {7: "0.07,0.7"}, ("line 9", "2 value(s) where 3")),
+        (
+            "nan",
+            {i: f"{i / 100},{'nan' if i < 20 else 'inf'},{i}" for i in (10, 12, 20)},
+            ("column 'gyro_x' has 3 NaN/Inf", "first at line 12 (sample 10)", "interpolate"),
+        ),
+        ("order", {4: _ROWS[5], 5: _ROWS[4]}, ("time column 'time'", "line 7", "fs=")),
+    ],
+)
+def test_bad_csv_rows(
+    tmp_path: Path, name: str, edits: dict[int, str], fragments: tuple[str, ...]
+) -> None:
+    bad = [edits.get(i, row) for i, row in enumerate(_ROWS)]
+    path = write(tmp_path / f"{name}.csv", "time,gyro_x,n\n" + "\n".join(bad))
+    raises(path, *fragments)
+    if name == "order":
+        assert load_log(path, fs=100).fs == 100.0  # user fs ignores the time
+
+
 def test_bad_values(tmp_path: Path) -> None:
-    rows = [f"{i / 100},{i * 0.1},{i}" for i in range(30)]
-    bad = rows.copy()
-    bad[15] = "0.15,abc,15"  # header at line 1: row 15 is line 17
-    raises(
-        write(tmp_path / "abc.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-        "column 'gyro_x'",
-        "line 17",
-        "'abc' is not a number",
-    )
-    bad = rows.copy()
-    bad[3] = "0.03,,3"
-    raises(
-        write(tmp_path / "gap.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-        "column 'gyro_x'",
-        "line 5",
-        "empty field",
-    )
-    bad = rows.copy()
-    bad[7] = "0.07,0.7"
-    raises(
-        write(tmp_path / "ragged.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-        "line 9",
-        "2 value(s) where 3",
-    )
-    bad = rows.copy()
-    for i in (10, 12, 20):
-        bad[i] = f"{i / 100},{'nan' if i < 20 else 'inf'},{i}"
-    raises(
-        write(tmp_path / "nan.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-        "column 'gyro_x' has 3 NaN/Inf",
-        "first at line 12 (sample 10)",
-        "interpolate",
-    )
     raises(write(tmp_path / "short.csv", "t,x\n0,1\n1,2\n2,3\n"), "only 3 sample", "at least 4")
-    bad = rows.copy()
-    bad[4], bad[5] = bad[5], bad[4]
-    raises(
-        write(tmp_path / "order.csv", "time,gyro_x,n\n" + "\n".join(bad)),
-        "time column 'time'",
-        "line 7",
-        "fs=",
-    )
-    assert load_log(tmp_path / "order.csv", fs=100).fs == 100.0  # user fs ignores the time
     x = np.ones(20)
     x[5] = np.inf
     np.save(tmp_path / "inf.npy", x)

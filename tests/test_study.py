@@ -119,17 +119,14 @@ def test_estimate_all_returns_every_method():
 # -------------------------------------------------------------------------------------------
 # end to end
 # -------------------------------------------------------------------------------------------
+#: The small study's setting (the number of replicates, workers and progress vary).
+SMALL_STUDY = {"seed": 4, "n_values": (2e5,), "methods": ("GMWM", "ARMAV", "AVSM", "AVSM-auto")}
+
+
 @pytest.fixture(scope="module")
 def small_study() -> StudyResult:
     stream = io.StringIO()
-    res = run_slope_study(
-        3,
-        seed=4,
-        n_values=(2e5,),
-        workers=2,
-        progress=stream,
-        methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"),
-    )
+    res = run_slope_study(3, workers=2, progress=stream, **SMALL_STUDY)
     object.__setattr__(res, "_progress_text", stream.getvalue())
     return res
 
@@ -161,14 +158,7 @@ def test_study_runs_end_to_end_and_writes_its_outputs(small_study, tmp_path):
 
 def test_study_does_not_depend_on_the_number_of_workers_or_replicates(small_study):
     # replicate r has its own seed: 2 replicates in process equal the first 2 of 3 on 2 workers
-    one = run_slope_study(
-        2,
-        seed=4,
-        n_values=(2e5,),
-        workers=1,
-        progress=False,
-        methods=("GMWM", "ARMAV", "AVSM", "AVSM-auto"),
-    )
+    one = run_slope_study(2, workers=1, progress=False, **SMALL_STUDY)
     for n, by_s in small_study.estimates.items():
         for s, by_m in by_s.items():
             for m, by_c in by_m.items():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import WV_KEYS
 
 import engine as eg
 from engine.wv import eta3_interval
@@ -200,20 +201,7 @@ def test_to_dict_is_json_ready():
 
     wv = eg.wavelet_variance(np.random.default_rng(1).standard_normal(100), fs=2.0)
     d = json.loads(json.dumps(wv.to_dict()))
-    assert set(d) >= {
-        "n",
-        "fs",
-        "levels",
-        "tau_samples",
-        "tau_s",
-        "variance",
-        "ci_low",
-        "ci_high",
-        "n_coef",
-        "robust",
-        "eff",
-        "alpha",
-    }
+    assert set(d) >= WV_KEYS
     assert d["n"] == 100 and d["fs"] == 2.0 and len(d["variance"]) == 6
 
 

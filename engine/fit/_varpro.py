@@ -83,6 +83,8 @@ __all__ = [
     "local",
     "search",
     "persistent_first",
+    "fitted_model",
+    "search_message",
     "at_bound",
     "TC_FLAG",
     "sub_sample_message",
@@ -373,6 +375,43 @@ def persistent_first(procs: Sequence[Process], fs: float) -> Model:
     """The fitted model with its AR1/GM terms most persistent first, then the others."""
     nonlin = sorted((q for q in procs if q.nonlinear is not None), key=lambda q: -_phi(q, fs))
     return Model(tuple(nonlin + [q for q in procs if q.nonlinear is None]))
+
+
+def search_message(converged: bool) -> str:
+    """The message of a fit by :func:`search` (whether the local search met its tolerance)."""
+    if converged:
+        return "converged"
+    return (
+        "the local search stopped before meeting its tolerance; the estimate may be "
+        "slightly above the minimum"
+    )
+
+
+def fitted_model(prob: NNLSProblem, u: np.ndarray, fs: float) -> Model:
+    """The fitted model at the optimum ``u`` of the correlations: each process with its
+    NNLS variance and its correlation, AR1/GM most persistent first.
+
+    Parameters
+    ----------
+    prob : NNLSProblem
+        The problem that was searched.
+    u : ndarray
+        The optimum (the log correlation times of its AR1/GM; empty without them).
+    fs : float
+        Sampling frequency (Hz).
+
+    Returns
+    -------
+    Model
+        Every parameter set.
+    """
+    phis = prob.phis_of(u)
+    _, h, _ = prob.solve(phis)
+    nl_vals = dict(zip(prob.nl_idx, phis, strict=True))
+    procs = [
+        p.from_fit(float(h[i]), nl_vals.get(i), fs) for i, p in enumerate(prob.model.processes)
+    ]
+    return persistent_first(procs, fs)
 
 
 def at_bound(fitted: Model, fs: float, tc_min: float, tc_max: float) -> list[str]:

@@ -28,7 +28,7 @@ from ._varpro import (
 )
 from .estimate import MethodEstimate
 from .gmwm import fit_gmwm, weight_matrix
-from .result import FitError, FitResult
+from .result import FitError, FitResult, OneWVFit
 
 __all__ = ["fit_gmwfm", "fit_armav", "GMWFMResult"]
 
@@ -44,7 +44,7 @@ _U_LO, _U_HI = -70.0, 8.0  # bounds of the log linear coefficients (relative to 
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class GMWFMResult(FitResult):
+class GMWFMResult(OneWVFit, FitResult):
     """Result of :func:`fit_gmwfm` / :func:`fit_armav` (the fields of
     :class:`engine.fit.result.FitResult`, the objective in f-space, plus:).
 
@@ -70,14 +70,6 @@ class GMWFMResult(FitResult):
     implied: np.ndarray
     components: dict[str, np.ndarray]
     notes: tuple[str, ...] = ()
-
-    @property
-    def fs(self) -> float:
-        return self.wv.fs
-
-    @property
-    def unit(self) -> str:
-        return self.wv.unit
 
     def _summary_head(self) -> list[str]:
         w = self.wv

@@ -30,18 +30,19 @@ from ..wv import WaveletVariance, wavelet_variance
 from ._varpro import (
     NNLSProblem,
     at_bound,
-    persistent_first,
+    fitted_model,
     search,
+    search_message,
     sqrt_weight,
     sub_sample_warnings,
 )
-from .result import FitError, FitResult, ParamTable
+from .result import FitError, FitResult, OneWVFit, ParamTable
 
 __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix", "gmwm_objective"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class GMWMResult(FitResult):
+class GMWMResult(OneWVFit, FitResult):
     """Result of :func:`fit_gmwm` (the fields of :class:`engine.fit.result.FitResult`, plus:).
 
     Attributes
@@ -63,14 +64,6 @@ class GMWMResult(FitResult):
     wv: WaveletVariance
     implied: np.ndarray
     components: dict[str, np.ndarray]
-
-    @property
-    def fs(self) -> float:
-        return self.wv.fs
-
-    @property
-    def unit(self) -> str:
-        return self.wv.unit
 
     def implied_at(self, tau_samples: np.ndarray) -> np.ndarray:
         """Implied WV at other scales (samples), e.g. for a smooth curve."""
@@ -262,21 +255,8 @@ def fit_gmwm(
             tcs = sorted((-1.0 / math.log(v) for v in given), reverse=True)
             extra.append(tuple(math.log(t) for t in tcs))
         _, u, converged = search(prob, extra, keep=3)
-        method = "grid+nelder-mead"
-        msg = (
-            "converged"
-            if converged
-            else "the local search stopped before meeting its tolerance; the estimate may be "
-            "slightly above the minimum"
-        )
-    phis = prob.phis_of(u)
-    _, h, _ = prob.solve(phis)
-
-    # build the fitted model; AR1/GM most persistent first
-    nl_vals = dict(zip(prob.nl_idx, phis, strict=True))
-    fitted = persistent_first(
-        [p.from_fit(float(h[i]), nl_vals.get(i), wv.fs) for i, p in enumerate(m.processes)], wv.fs
-    )
+        method, msg = "grid+nelder-mead", search_message(converged)
+    fitted = fitted_model(prob, u, wv.fs)
     comps = fitted.components(wv.tau_samples, wv.fs)
     implied = np.sum(np.array(list(comps.values())), axis=0)
     resid = wv.variance - implied

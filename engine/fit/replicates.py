@@ -16,7 +16,14 @@ import numpy as np
 
 from ..models import Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
-from ._varpro import NNLSProblem, at_bound, persistent_first, search, sub_sample_warnings
+from ._varpro import (
+    NNLSProblem,
+    at_bound,
+    fitted_model,
+    search,
+    search_message,
+    sub_sample_warnings,
+)
 from .gmwm import GMWMResult, fit_gmwm, weight_matrix
 from .result import FitError, FitResult
 
@@ -193,20 +200,8 @@ def fit_replicates(
             tcs = [-1.0 / math.log(q.nl_value(fs0)) for q in m.processes if q.nonlinear]
             starts.append(np.log(np.array(sorted(tcs, reverse=True))))
         _, u, converged = search(prob, starts, keep=4)
-        method = "grid+nelder-mead"
-        msg = (
-            "converged"
-            if converged
-            else "the local search stopped before meeting its "
-            "tolerance; the estimate may be slightly above the minimum"
-        )
-    phis = prob.phis_of(u)
-    _, h, _ = prob.solve(phis)
-    nl_vals = dict(zip(prob.nl_idx, phis, strict=True))
-    fitted = persistent_first(
-        [p.from_fit(float(h[i]), nl_vals.get(i), fs0) for i, p in enumerate(prob.model.processes)],
-        fs0,
-    )
+        method, msg = "grid+nelder-mead", search_message(converged)
+    fitted = fitted_model(prob, u, fs0)
     implied = [fitted.wv(w.tau_samples, fs0) for w in out]
     objs = [
         float(np.sum(wt * (w.variance - im) ** 2))

@@ -19,8 +19,17 @@ import numpy as np
 
 from ..models import Model
 from ..units import param_unit
+from ..wv import WaveletVariance
 
-__all__ = ["FitError", "FitResult", "ParamRecord", "ParamTable", "Summary", "warning_lines"]
+__all__ = [
+    "FitError",
+    "FitResult",
+    "OneWVFit",
+    "ParamRecord",
+    "ParamTable",
+    "Summary",
+    "warning_lines",
+]
 
 
 class FitError(ValueError):
@@ -123,6 +132,22 @@ class ParamTable:
                 )
             },
         }
+
+
+class OneWVFit:
+    """A fit of one channel's WV (GMWM, GMWFM): its sampling rate and unit are the WV's."""
+
+    wv: WaveletVariance
+
+    @property
+    def fs(self) -> float:
+        """Sampling frequency of the fitted WV (Hz)."""
+        return self.wv.fs
+
+    @property
+    def unit(self) -> str:
+        """Signal unit of the fitted WV."""
+        return self.wv.unit
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

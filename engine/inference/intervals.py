@@ -7,7 +7,7 @@ intervals stay inside the parameter space; or the parametric bootstrap (percenti
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -36,15 +36,8 @@ class ParamInterval:
     level: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "value": self.value,
-            "low": self.low,
-            "high": self.high,
-            "unit": self.unit,
-            "method": self.method,
-            "level": self.level,
-        }
+        """JSON-ready dictionary: every field by name."""
+        return asdict(self)
 
 
 def _boot_fit(args: tuple) -> dict[str, float] | None:

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -26,12 +26,8 @@ class JTest:
     method: str
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "statistic": self.statistic,
-            "df": self.df,
-            "p_value": self.p_value,
-            "method": self.method,
-        }
+        """JSON-ready dictionary: every field by name."""
+        return asdict(self)
 
 
 def j_test(

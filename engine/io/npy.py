@@ -34,14 +34,19 @@ def _columns(
     return {fmt.format(key=key, j=j): a[:, j] for j in range(a.shape[1])}
 
 
-def read_npy(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+def _np_load(path: Path | io.BytesIO, src: str, what: str, save_with: str) -> Any:
+    """``np.load`` without pickles; a file it cannot read is a LoadError saying how to
+    re-save it."""
     try:
-        a = np.load(path, allow_pickle=False)
+        return np.load(path, allow_pickle=False)
     except Exception as exc:
         raise LoadError(
-            f"file '{src}' is not a readable .npy array of numbers ({exc}): "
-            "re-save it with numpy.save(path, array)"
+            f"file '{src}' is not a readable {what} ({exc}): re-save it with {save_with}"
         ) from exc
+
+
+def read_npy(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
+    a = _np_load(path, src, ".npy array of numbers", "numpy.save(path, array)")
     notes: list[str] = []
     time = None
     if a.dtype.names and a.ndim == 1:  # structured array: one channel per field
@@ -135,13 +140,7 @@ def read_npz(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions)
     meta: dict[str, Any] = {}
     units: dict[str, str] = {}
     fs_file = time = None
-    try:
-        z = np.load(path, allow_pickle=False)
-    except Exception as exc:
-        raise LoadError(
-            f"file '{src}' is not a readable .npz archive ({exc}): re-save it with "
-            "numpy.savez(path, gyro_x=..., fs=100.0)"
-        ) from exc
+    z = _np_load(path, src, ".npz archive", "numpy.savez(path, gyro_x=..., fs=100.0)")
     with z:
         for key in z.files:
             try:

@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -322,21 +322,13 @@ class WVMatrix(LevelScales):
         if len(set(idx)) != len(idx):
             raise ValueError(f"channels repeat in {list(channels)}")
         ix = np.ix_(range(self.n_levels), idx, idx)
-        return WVMatrix(
+        return replace(
+            self,
             channels=tuple(self.channels[i] for i in idx),
-            levels=self.levels,
-            tau_samples=self.tau_samples,
             values=self.values[ix],
             ci_low=self.ci_low[ix],
             ci_high=self.ci_high[ix],
             std_error=self.std_error[ix],
-            ci_method=self.ci_method,
-            bandwidth=self.bandwidth,
-            df=self.df,
-            n_coef=self.n_coef,
-            n=self.n,
-            fs=self.fs,
-            alpha=self.alpha,
             units=tuple(self._unit(i) for i in idx),
         )
 
@@ -345,22 +337,21 @@ class WVMatrix(LevelScales):
         if not 1 <= levels <= self.n_levels:
             raise ValueError(f"levels must be between 1 and {self.n_levels}, got {levels}")
         s = slice(0, levels)
-        return WVMatrix(
-            channels=self.channels,
-            levels=self.levels[s],
-            tau_samples=self.tau_samples[s],
-            values=self.values[s],
-            ci_low=self.ci_low[s],
-            ci_high=self.ci_high[s],
-            std_error=self.std_error[s],
+        per_level = (
+            "levels",
+            "tau_samples",
+            "values",
+            "ci_low",
+            "ci_high",
+            "std_error",
+            "bandwidth",
+            "df",
+            "n_coef",
+        )
+        return replace(
+            self,
             ci_method=self.ci_method[:levels],
-            bandwidth=self.bandwidth[s],
-            df=self.df[s],
-            n_coef=self.n_coef[s],
-            n=self.n,
-            fs=self.fs,
-            alpha=self.alpha,
-            units=self.units,
+            **{f: getattr(self, f)[s] for f in per_level},
         )
 
     def to_dict(self) -> dict[str, Any]:
