@@ -212,6 +212,41 @@ class WaveletVariance(LevelScales):
         return "\n".join(lines)
 
     @classmethod
+    def from_sums(
+        cls,
+        sums: np.ndarray,
+        n: int,
+        *,
+        fs: float,
+        alpha: float = 0.05,
+        eff: float = 0.6,
+        unit: str = "",
+    ) -> WaveletVariance:
+        """The classical WV of levels ``1..len(sums)`` from the per-level sums of squares
+        ``sums[j-1] = sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2`` (``m = 2^(j-1)``, ``S`` the
+        cumulative sum of the de-meaned series of ``n`` samples): ``nu_j = sums / (4^j M_j)``
+        with its eta3 interval. Shared by the in-memory and the streamed WV."""
+        lv = np.arange(1, len(sums) + 1)
+        tau = 2**lv
+        m_j = n - tau + 1
+        nu = np.asarray(sums, dtype=float) / (tau.astype(float) ** 2 * m_j)
+        lo, hi = eta3_interval(nu, m_j, tau, alpha)
+        return cls(
+            levels=lv,
+            tau_samples=tau,
+            variance=nu,
+            ci_low=lo,
+            ci_high=hi,
+            n_coef=m_j,
+            n=n,
+            fs=float(fs),
+            robust=False,
+            eff=eff,
+            alpha=alpha,
+            unit=unit,
+        )
+
+    @classmethod
     def from_arrays(
         cls,
         variance: np.ndarray,
@@ -363,29 +398,12 @@ def wavelet_variance(
     if robust and not 0 < eff < 0.99:
         raise ValueError(f"eff must be in (0, 0.99), got {eff}")
     s = cumsum_demeaned(a)
-    lv = np.arange(1, levels + 1)
-    tau = 2**lv
-    m_j = n - tau + 1
     sums = _classical_sums(s, n, levels)
-    nu = sums / (tau.astype(float) ** 2 * m_j)
-    lo, hi = eta3_interval(nu, m_j, tau, alpha)
-    classical = WaveletVariance(
-        levels=lv,
-        tau_samples=tau,
-        variance=nu,
-        ci_low=lo,
-        ci_high=hi,
-        n_coef=m_j,
-        n=n,
-        fs=float(fs),
-        robust=False,
-        eff=eff,
-        alpha=alpha,
-        unit=unit,
-    )
+    classical = WaveletVariance.from_sums(sums, n, fs=fs, alpha=alpha, eff=eff, unit=unit)
+    nu, lo, hi = classical.variance, classical.ci_low, classical.ci_high
     if not robust:
         if progress is not None:
-            for j in lv:
+            for j in classical.levels:
                 progress(int(j), levels)
         return classical
     nu_r = robust_wv(s, n, levels, biweight_constant(eff), progress)[0]
@@ -395,18 +413,6 @@ def wavelet_variance(
     lo_r = nu_r * (1.0 - coef * rel_lo)
     lo_r = np.where(lo_r > 0, lo_r, nu_r * 1e-3)
     hi_r = nu_r * (1.0 + coef * rel_hi)
-    return WaveletVariance(
-        levels=lv,
-        tau_samples=tau,
-        variance=nu_r,
-        ci_low=lo_r,
-        ci_high=hi_r,
-        n_coef=m_j,
-        n=n,
-        fs=float(fs),
-        robust=True,
-        eff=eff,
-        alpha=alpha,
-        unit=unit,
-        classical=classical,
+    return replace(
+        classical, variance=nu_r, ci_low=lo_r, ci_high=hi_r, robust=True, classical=classical
     )

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from ._kernel import sumsq_kernel
-from .classical import WaveletVariance, default_levels, eta3_interval
+from .classical import WaveletVariance, default_levels
 
 __all__ = ["wavelet_variance_stream", "open_series", "SeriesSource"]
 
@@ -570,21 +570,6 @@ def wavelet_variance_stream(
         for c in clones:
             c.close()
         src.close()
-    lv = np.arange(1, levels + 1)
-    tau = 2**lv
-    m_j = n - tau + 1
-    nu = sums / (tau.astype(float) ** 2 * m_j)
-    lo, hi = eta3_interval(nu, m_j, tau, alpha)
-    return WaveletVariance(
-        levels=lv,
-        tau_samples=tau,
-        variance=nu,
-        ci_low=lo,
-        ci_high=hi,
-        n_coef=m_j,
-        n=n,
-        fs=fs_v,
-        robust=False,
-        alpha=alpha,
-        unit=src.unit if unit is None else unit,
+    return WaveletVariance.from_sums(
+        sums, n, fs=fs_v, alpha=alpha, unit=src.unit if unit is None else unit
     )
