@@ -177,9 +177,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument(
         "--methods",
-        default="GMWM,ARMAV,AVSM",
-        help="comma-separated among GMWM, ARMAV, ARMAV-unweighted, AVSM, "
-        "AVSM-auto (default GMWM,ARMAV,AVSM)",
+        default="GMWM,GMWM-efficient,ARMAV,AVSM",
+        help="comma-separated among GMWM (ci weights), GMWM-efficient (two-step "
+        "Omega = V^-1, V from the first fit's model), ARMAV, ARMAV-unweighted, AVSM, "
+        "AVSM-auto (default GMWM,GMWM-efficient,ARMAV,AVSM)",
     )
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
