@@ -58,7 +58,9 @@ def main() -> None:
     ap.add_argument("--n", default="2.5e6,6.3e6", help="log lengths, comma-separated")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument(
-        "--methods", default="GMWM,GMWM-efficient,ARMAV,AVSM", help=f"comma-separated among {','.join(METHODS)}"
+        "--methods",
+        default="GMWM,GMWM-efficient,ARMAV,AVSM",
+        help=f"comma-separated among {','.join(METHODS)}",
     )
     ap.add_argument("--out", default=None, help="output directory")
     ap.add_argument("--no-steps", action="store_true", help="skip the per-step timing")
