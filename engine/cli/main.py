@@ -8,6 +8,7 @@
     gmwm simulate --model SPEC_WITH_VALUES -n N [--fs HZ] [--seed S] -o OUT(.h5|.npy|.csv)
     gmwm study slope --reps R --seed S [--n 2.5e6,6.3e6] [--workers 2] [--out DIR] [--json]
     gmwm select INPUT --max-model SPEC | --models SPEC1,SPEC2 [--optimism asymptotic|bootstrap]
+             [--weights ci|identity|efficient]
 
 Without ``--json`` a readable table with units is printed; with ``--json`` exactly one JSON
 object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
@@ -115,6 +116,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-model", help="rank every sub-model of this model, e.g. '3*GM+WN+QN+RW+DR'"
     )
     sel.add_argument("--models", help="candidate models separated by commas")
+    sel.add_argument(
+        "--weights",
+        default="ci",
+        choices=["ci", "identity", "efficient"],
+        help="weighting matrix, the same for every candidate: ci (default, "
+        "1/(ci_high-ci_low)^2, the R package's), identity, or efficient (two-step: V from "
+        "the largest candidate's ci fit, every candidate refitted with V^-1; the J-test's "
+        "chi-square assumes efficient weights)",
+    )
     sel.add_argument(
         "--optimism",
         choices=["asymptotic", "bootstrap"],
@@ -274,6 +284,7 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
         wv,
         cands,
         max_model=args.max_model,
+        weights=args.weights,
         optimism=args.optimism,
         B=args.bootstrap,
         seed=args.seed,
