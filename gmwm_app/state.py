@@ -644,14 +644,10 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             return None
         if not self.whatif and self.result is not None:
             return float(self.result.objective)
-        if self.weights == "efficient":  # the fit's V^-1 (ci weights before any fit)
-            omega = self.result.omega if self.result is not None else None
-        else:
-            omega = None
+        eff = self.weights == "efficient"  # the fit's V^-1 (ci weights without a fit)
+        omega = self.result.omega if eff and self.result is not None else None
         if omega is None:
-            omega, _ = eg.weight_matrix(
-                self.wv, "ci" if self.weights == "efficient" else self.weights
-            )
+            omega, _ = eg.weight_matrix(self.wv, "ci" if eff else self.weights)
         r = self.wv.variance - m.wv(self.wv.tau_samples, self.wv.fs)
         return float(r @ omega @ r)
 
