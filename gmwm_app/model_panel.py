@@ -32,6 +32,17 @@ _PROCESS_HELP = {
 }
 
 
+#: The weights choice of the fit (label, value of ``AppState.weights``).
+_WEIGHTS = (("ci weights", "ci"), ("efficient", "efficient"))
+
+_WEIGHTS_HELP = (
+    "ci: Omega = diag(1/(ci_high - ci_low)^2), the R package's default. efficient: two "
+    "steps, Omega = V^-1 with V the WV covariance implied by the first fit's model (the "
+    "GMWM paper, Corollary 1): smaller errors on the long-tau processes (RW, drift) and the "
+    "J-test's chi-square holds."
+)
+
+
 class ModelPanel:
     """Model and what-if widgets of one page, driven by the session state.
 
@@ -78,6 +89,16 @@ class ModelPanel:
             label="Remove all", color="light", width=100, margin=(3, 3)
         )
         self.clear_button.on_click(lambda _e: self.state.clear_model())
+        self.weights_select = pn.widgets.RadioButtonGroup(
+            label="Weights",
+            options=dict(_WEIGHTS),
+            value=state.weights if state.weights in dict(_WEIGHTS).values() else "ci",
+            color="default",
+            description=_WEIGHTS_HELP,
+            css_classes=["gmwm-weights"],
+            margin=(3, 10),
+        )
+        self.weights_select.param.watch(self._on_weights, "value")
 
         self.whatif_toggle = pn.widgets.Checkbox(
             label="What if: move the parameters by hand", value=False, css_classes=["gmwm-whatif"]
@@ -112,6 +133,8 @@ class ModelPanel:
             self.spec_input,
             self.process_list,
             self.clear_button,
+            pn.pane.Markdown("Weights", margin=(0, 10), styles={"font-size": "13px"}),
+            self.weights_select,
             pn.layout.Divider(),
             pn.pane.Markdown("### What if", margin=(0, 10)),
             self.whatif_toggle,
@@ -132,6 +155,8 @@ class ModelPanel:
         try:
             if self.whatif_toggle.value != s.whatif:
                 self.whatif_toggle.value = s.whatif
+            if s.weights != self.weights_select.value and s.weights in dict(_WEIGHTS).values():
+                self.weights_select.value = s.weights
             spec = s.model.spec()
             if self.spec_input.value != spec:
                 self.spec_input.value = spec
@@ -243,6 +268,12 @@ class ModelPanel:
         )
         if not self.state.set_model(spec or ""):
             self.refresh()  # put the spec back
+
+    def _on_weights(self, event: Any) -> None:
+        if self._syncing or event.new == self.state.weights:
+            return
+        if not self.state.set_weights(event.new):
+            self.refresh()  # put the choice back
 
     def _on_whatif(self, event: Any) -> None:
         if self._syncing:

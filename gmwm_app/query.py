@@ -35,6 +35,8 @@ class QueryMixin:
         if self.fs:
             q["fs"] = f"{self.fs:.12g}"
         q["robust"] = "1" if self.robust else "0"
+        if self.weights != "ci":
+            q["weights"] = self.weights
         if len(self.model):
             q["model"] = self.model.spec()
         return q
@@ -42,7 +44,8 @@ class QueryMixin:
     def parse_query(self, query: Mapping[str, Any]) -> dict[str, Any]:
         """Read URL query parameters (strings or lists of strings) into settings.
 
-        Returns ``{"source", "path", "channel", "fs", "robust", "model", "problems"}``;
+        Returns ``{"source", "path", "channel", "fs", "robust", "weights", "model",
+        "problems"}``;
         unreadable values are left out and described in ``problems``.
         """
         q = {k: (v[-1] if isinstance(v, (list, tuple)) and v else v) for k, v in query.items()}
@@ -79,6 +82,14 @@ class QueryMixin:
                 out["robust"] = False
             else:
                 out["problems"].append(f"robust={q['robust']!r} in the link is not 0 or 1")
+        if "weights" in q:
+            w = q["weights"].strip().lower()
+            if w in ("ci", "identity", "efficient"):
+                out["weights"] = w
+            else:
+                out["problems"].append(
+                    f"weights={q['weights']!r} in the link is not ci, identity or efficient"
+                )
         if "model" in q:
             out["model"] = q["model"].strip()
         return out
@@ -145,6 +156,10 @@ class QueryMixin:
                 problems.append(self.error)
         elif s.get("robust") is not None:
             self.param.update(robust=s["robust"])
+        if s.get("weights") is not None and s["weights"] != self.weights:
+            self.param.update(weights=s["weights"])  # before the model: one fit
+            if s.get("model") is None and len(self.model) and not self.set_model(self.model):
+                problems.append(self.error)
         if s.get("model") is not None and (s["model"] or len(self.model)):
             if not self.set_model(s["model"]):
                 problems.append(self.error)

@@ -157,7 +157,11 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
     )
     whatif = param.Boolean(default=False, doc="Draw the what-if values instead of the fit.")
     whatif_values = param.Dict(default={}, doc="What-if values by unique parameter name.")
-    weights = param.String(default="ci", doc="GMWM weighting ('ci' or 'identity').")
+    weights = param.String(
+        default="ci",
+        doc="GMWM weighting: 'ci' (the R default), 'identity' or 'efficient' (two-step, "
+        "Omega = V^-1 with V from the first fit's model).",
+    )
     # model selection and inference (see gmwm_app/selection_view.py)
     selection = param.Parameter(default=None, doc="Last WVIC ranking (SelectionResult).")
     show_intervals = param.Boolean(default=False, doc="Show 95% intervals and the J-test.")
@@ -493,10 +497,13 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         """Fit ``model`` (structure only, so a spec always gives the same fit) or say why not."""
         if len(model) == 0:
             return None
+        m = start if start is not None else model.cleared()
         try:
-            return eg.fit_gmwm(
-                wv, start if start is not None else model.cleared(), weights=self.weights
-            )
+            if self.weights == "efficient":
+                from engine.inference import fit_efficient
+
+                return fit_efficient(wv, m)
+            return eg.fit_gmwm(wv, m, weights=self.weights)
         except (eg.ModelError, eg.FitError, ValueError) as e:
             return message_of(e)
 
@@ -504,6 +511,21 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         shown = result.model if result is not None else model
         values = {k: v for k, v in shown.values().items() if v is not None}
         return {"model": shown, "result": result, "whatif_values": values}
+
+    def set_weights(self, weights: str) -> bool:
+        """Switch the GMWM weights (``"ci"``, ``"identity"`` or ``"efficient"``) and refit."""
+
+        def run() -> bool:
+            if weights not in ("ci", "identity", "efficient"):
+                raise ValueError(f"unknown weights {weights!r}: use ci, identity or efficient")
+            old = self.weights
+            self.param.update(weights=weights)
+            if self.wv is None or not len(self.model) or self._apply_model(self.model):
+                return True
+            self.param.update(weights=old)
+            return False
+
+        return self._guard("Could not switch the weights", run)
 
     def set_model(self, model: eg.Model | str) -> bool:
         """Replace the model (a Model or a spec like ``"WN+RW+2*GM"``) and refit.
@@ -628,7 +650,9 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             return None
         if not self.whatif and self.result is not None:
             return float(self.result.objective)
-        return eg.gmwm_objective(self.wv, m, self.weights)
+        eff = self.weights == "efficient"  # the fit's V^-1 (ci weights without a fit)
+        w = self.result.omega if eff and self.result is not None else None
+        return eg.gmwm_objective(self.wv, m, ("ci" if eff else self.weights) if w is None else w)
 
     def warnings(self) -> list[str]:
         """Warnings about the fit: parameters at a bound, the fit's own warnings (an AR1/GM

@@ -517,6 +517,13 @@ def test_page_without_server(app_demo: Path) -> None:
     app.model_panel.spec_input.value_input = "WN+RW"
     app.model_panel.spec_input.param.trigger("enter_pressed")
     assert s.model.spec() == "WN+RW"
+    weights = app.model_panel.weights_select  # the Fit tab's weights choice
+    assert weights.value == "ci" and s.result.weights == "ci"
+    weights.value = "efficient"
+    assert s.weights == "efficient" and s.result.weights == "efficient", s.error
+    s.set_weights("ci")  # from the state back to the widget
+    app.model_panel.refresh()
+    assert weights.value == "ci" and s.result.weights == "ci"
     app.model_panel.whatif_toggle.value = True
     sliders = app.model_panel.sliders
     assert s.whatif and sliders.visible and len(sliders.objects) == 2
@@ -546,3 +553,38 @@ def test_demo_path_default(monkeypatch: pytest.MonkeyPatch) -> None:
     p = state_mod.demo_path()
     assert p.name == "demo_imu.h5" and p.parent.name == "demo" and p.is_file()
     assert p == Path(eg.__file__).resolve().parent / "demo" / "demo_imu.h5"  # package data
+
+
+def test_weights_switch_refits_with_efficient_weights(app_state: AppState, app_demo: Path) -> None:
+    # the demo's accel_x is QN+WN+RW+DR (engine/demo/demo_imu_truth.json)
+    from engine.inference import fit_efficient
+
+    s = app_state
+    assert s.select_channel("accel_x") and s.set_model("QN+WN+RW+DR"), s.error
+    ref = eg.wavelet_variance(eg.io.load_log(app_demo)["accel_x"], fs=100.0)
+    ci = eg.fit_gmwm(ref, "QN+WN+RW+DR")
+    assert s.result.weights == "ci" and "weights" not in s.to_query()
+    assert s.compute_inference(s.result).j_test.p_value < 0.01  # ci weights reject the truth
+    assert s.set_weights("efficient"), s.error
+    assert s.weights == "efficient" and s.result.weights == "efficient"
+    eff = fit_efficient(ref, "QN+WN+RW+DR")
+    assert_params_equal(s.result.params, eff.params)
+    np.testing.assert_allclose(s.result.omega, eff.omega, rtol=1e-12)
+    assert not np.allclose(s.result.omega, ci.omega)  # V^-1 is full, ci weights diagonal
+    assert s.result.params["RW.gamma2"] != pytest.approx(ci.params["RW.gamma2"], rel=1e-3)
+    assert s.display_objective() == pytest.approx(eff.objective, rel=1e-12)
+    assert s.compute_inference(s.result).j_test.p_value >= 0.05  # and efficient ones do not
+    # the link keeps the choice and restores the same fit
+    q = s.to_query()
+    assert q["weights"] == "efficient"
+    t = AppState()
+    assert t.from_query(parse_qs(urlencode(q, safe="*"))), t.error
+    assert t.weights == "efficient" and t.result.weights == "efficient"
+    assert_params_equal(t.result.params, eff.params)
+    # back to ci: the ci fit again; an unknown choice is refused and changes nothing
+    assert s.set_weights("ci") and s.result.weights == "ci"
+    assert_params_equal(s.result.params, ci.params)
+    assert not s.set_weights("optimal") and "unknown weights" in s.error and s.weights == "ci"
+    bad = AppState()
+    assert not bad.from_query({"source": "demo", "weights": "best"})
+    assert "weights='best'" in bad.error and bad.weights == "ci"

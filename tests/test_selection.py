@@ -98,3 +98,30 @@ def test_cli_select(capsys, real_data):
     assert [c["model"] for c in d["candidates"]][0] == "2*GM+WN+RW"
     assert main(["select", str(real_data / "adis16405_imu2.h5")]) == 2
     assert "--max-model" in capsys.readouterr().err
+
+
+def test_cli_select_efficient_weights_accept_the_demo_accel_true_model(capsys):
+    # the demo's accel_x is simulated from QN+WN+RW+DR (engine/demo/demo_imu_truth.json). The
+    # J-test's chi-square assumes efficient weights: with the R-default ci weights (the
+    # residual is weighted by 1/width^2, not V^-1, yet compared with chi2(J - p)) it rejects
+    # the true model at p = 0.0056; with two-step efficient weights (V from the largest
+    # candidate's ci fit, every candidate refitted with V^-1) p = 0.19
+    from engine.demo import demo_path
+
+    truth = json.loads((demo_path().parent / "demo_imu_truth.json").read_text())
+    assert truth["models"]["accel_x"].startswith("QN(")
+    p, opt = {}, {}
+    for w in ("ci", "efficient"):
+        argv = ["select", str(demo_path()), "--channel", "accel_x", "--json", "--weights", w]
+        assert main([*argv, "--max-model", "QN+WN+RW+DR", "--workers", "1"]) == 0
+        d = json.loads(capsys.readouterr().out)
+        assert d["weights"] == w
+        c = {c["model"]: c for c in d["candidates"]}
+        p[w] = c["QN+WN+RW+DR"]["j_p_value"]
+        opt[w] = {m: (c[m]["optimism"], c[m]["n_params"]) for m in ("QN+WN+RW+DR", "QN+WN+RW")}
+    assert p["ci"] < 0.01 and p["ci"] == pytest.approx(0.0056, abs=5e-4)
+    assert p["efficient"] >= 0.05
+    # with Omega = V^-1 the asymptotic optimism 2 tr(W A (A'WA)^-1 A' W V) is exactly 2p
+    for o, n_params in opt["efficient"].values():
+        assert o == pytest.approx(2 * n_params, rel=1e-6)
+    assert all(abs(o - 2 * n) > 1 for o, n in opt["ci"].values())

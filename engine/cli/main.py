@@ -8,6 +8,7 @@
     gmwm simulate --model SPEC_WITH_VALUES -n N [--fs HZ] [--seed S] -o OUT(.h5|.npy|.csv)
     gmwm study slope --reps R --seed S [--n 2.5e6,6.3e6] [--workers 2] [--out DIR] [--json]
     gmwm select INPUT --max-model SPEC | --models SPEC1,SPEC2 [--optimism asymptotic|bootstrap]
+             [--weights ci|identity|efficient]
 
 Without ``--json`` a readable table with units is printed; with ``--json`` exactly one JSON
 object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
@@ -116,6 +117,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sel.add_argument("--models", help="candidate models separated by commas")
     sel.add_argument(
+        "--weights",
+        default="ci",
+        choices=["ci", "identity", "efficient"],
+        help="weighting matrix, the same for every candidate: ci (default, "
+        "1/(ci_high-ci_low)^2, the R package's), identity, or efficient (two-step: V from "
+        "the largest candidate's ci fit, every candidate refitted with V^-1; the J-test's "
+        "chi-square assumes efficient weights)",
+    )
+    sel.add_argument(
         "--optimism",
         choices=["asymptotic", "bootstrap"],
         default="asymptotic",
@@ -177,9 +187,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument(
         "--methods",
-        default="GMWM,ARMAV,AVSM",
-        help="comma-separated among GMWM, ARMAV, ARMAV-unweighted, AVSM, "
-        "AVSM-auto (default GMWM,ARMAV,AVSM)",
+        default="GMWM,GMWM-efficient,ARMAV,AVSM",
+        help="comma-separated among GMWM (ci weights), GMWM-efficient (two-step "
+        "Omega = V^-1, V from the first fit's model), ARMAV, ARMAV-unweighted, AVSM, "
+        "AVSM-auto (default GMWM,GMWM-efficient,ARMAV,AVSM)",
     )
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
@@ -273,6 +284,7 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
         wv,
         cands,
         max_model=args.max_model,
+        weights=args.weights,
         optimism=args.optimism,
         B=args.bootstrap,
         seed=args.seed,

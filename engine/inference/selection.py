@@ -181,8 +181,11 @@ def rank_models(
         The empirical WV.
     candidates : iterable of Model or str, optional
         The candidates; or ``max_model`` to rank every sub-model (:func:`submodels`).
-    weights : {"ci", "identity"} or array
-        Omega, the same for every candidate.
+    weights : {"ci", "identity", "efficient"} or array
+        Omega, the same for every candidate. ``"efficient"``: two-step, every candidate is
+        first fitted with ``"ci"`` weights, V is estimated (``v``) from the largest candidate
+        that fits, and every candidate is refitted with ``Omega = V^-1`` (the GMWM paper,
+        Corollary 1), so that the J-test's chi-square applies and the objectives compare.
     optimism : {"asymptotic", "bootstrap"}
         How the optimism is estimated (see the module docstring).
     v : {"model", "bootstrap"} or array
@@ -209,22 +212,37 @@ def rank_models(
             uniq.append(m)
     if not uniq:
         raise ModelError("no candidate models to rank")
-    total = len(uniq)
-    fitted: list[tuple[Model, GMWMResult | None, str]] = []
-    for i, m in enumerate(uniq):
-        try:
-            m.validate(wv.n_levels)
-            fitted.append((m, fit_gmwm(wv, m, weights=weights), ""))
-        except (FitError, ModelError) as e:
-            fitted.append((m, None, str(e)))
-        if progress is not None:
-            progress(i + 1, total)
-    ok = [r for _, r, _ in fitted if r is not None]
-    if not ok:
-        raise FitError("no candidate could be fitted: " + "; ".join(e for *_, e in fitted))
-    largest = max(ok, key=lambda r: (r.model.n_params, -r.objective))
+    efficient = isinstance(weights, str) and weights == "efficient"
+    total = 2 * len(uniq) if efficient else len(uniq)
+
+    def fit_all(w: str | np.ndarray, done: int) -> list[tuple[Model, GMWMResult | None, str]]:
+        out: list[tuple[Model, GMWMResult | None, str]] = []
+        for i, m in enumerate(uniq):
+            try:
+                m.validate(wv.n_levels)
+                out.append((m, fit_gmwm(wv, m, weights=w), ""))
+            except (FitError, ModelError) as e:
+                out.append((m, None, str(e)))
+            if progress is not None:
+                progress(done + i + 1, total)
+        return out
+
+    def largest_fit(
+        fits: list[tuple[Model, GMWMResult | None, str]],
+    ) -> tuple[list[GMWMResult], GMWMResult]:
+        ok = [r for _, r, _ in fits if r is not None]
+        if not ok:
+            raise FitError("no candidate could be fitted: " + "; ".join(e for *_, e in fits))
+        return ok, max(ok, key=lambda r: (r.model.n_params, -r.objective))
+
+    fitted = fit_all("ci" if efficient else weights, 0)
+    ok, largest = largest_fit(fitted)
     vmat = wv_cov(largest, v, B=B, seed=seed, workers=workers)
     vinv = inverse_cov(vmat)
+    if efficient:  # second step: one Omega = V^-1 for every candidate
+        weights = vinv
+        fitted = fit_all(vinv, len(uniq))
+        ok, largest = largest_fit(fitted)
 
     boot_opt: dict[str, float] = {}
     if optimism == "bootstrap":
@@ -287,5 +305,5 @@ def rank_models(
         )
 
     cands.sort(key=functools.cmp_to_key(order))
-    wname = weights if isinstance(weights, str) else "user"
+    wname = "efficient" if efficient else (weights if isinstance(weights, str) else "user")
     return SelectionResult(cands, optimism, wname, time.perf_counter() - t0)

@@ -5,6 +5,9 @@ each log length T and each replicate: simulate the true model at 250 Hz, compute
 (and from it the octave Allan variance, ``AVAR = 2 nu2``), and estimate the model by
 
 * ``GMWM``: :func:`engine.fit_gmwm`, default weights ``diag(1/(ci_high - ci_low)^2)``;
+* ``GMWM-efficient``: :func:`engine.inference.fit_efficient`, two-step efficient weights
+  ``Omega = V^-1`` with V the WV covariance implied by the first (``ci``) fit's model
+  (the GMWM paper, Corollary 1);
 * ``ARMAV``: :func:`engine.fit.gmwfm.fit_armav` (``f = log10``, log-space interval weights);
   optionally ``ARMAV-unweighted`` (``f = log10``, identity weights);
 * ``AVSM``: :func:`engine.teaching.avsm` on the regions a typical user picks
@@ -85,7 +88,8 @@ def estimate_all(
     fs : float
         Sampling frequency (Hz).
     methods : sequence of str
-        Among ``GMWM``, ``ARMAV``, ``ARMAV-unweighted``, ``AVSM``, ``AVSM-auto``.
+        Among ``GMWM``, ``GMWM-efficient``, ``ARMAV``, ``ARMAV-unweighted``, ``AVSM``,
+        ``AVSM-auto``.
     regions : dict, optional
         AVSM regions (s); default :func:`typical_regions`.
 
@@ -106,6 +110,10 @@ def _estimate_one(
     model = table1_model(sensor, wv.fs).cleared()
     if meth == "GMWM":
         return from_gmwm(fit_gmwm(wv, model))
+    if meth == "GMWM-efficient":
+        from ..inference import fit_efficient
+
+        return from_gmwm(fit_efficient(wv, model), method=meth)
     if meth == "ARMAV":
         return fit_armav(wv, model).as_estimate()
     if meth == "ARMAV-unweighted":
@@ -214,7 +222,8 @@ def run_slope_study(
         Log lengths T in samples (default 2.5e6 and 6.3e6, i.e. 2.8 h and 7 h at 250 Hz).
     sensors : sequence of {"gyro", "accel"}
     methods : sequence of str
-        Among ``GMWM``, ``ARMAV``, ``ARMAV-unweighted``, ``AVSM``, ``AVSM-auto``.
+        Among ``GMWM``, ``GMWM-efficient``, ``ARMAV``, ``ARMAV-unweighted``, ``AVSM``,
+        ``AVSM-auto``.
     fs : float
         Sampling frequency (Hz).
     workers : int or None

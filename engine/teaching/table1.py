@@ -36,10 +36,12 @@ STUDY_FS = 250.0
 STUDY_N = (2_500_000, 6_300_000)
 
 
-METHODS = ("GMWM", "ARMAV", "ARMAV-unweighted", "AVSM", "AVSM-auto")
+#: ``GMWM`` uses the R-default ``ci`` weights; ``GMWM-efficient`` the two-step efficient weights
+#: ``Omega = V^-1`` with V implied by the first (``ci``) fit's model (the GMWM paper, Corollary 1).
+METHODS = ("GMWM", "GMWM-efficient", "ARMAV", "ARMAV-unweighted", "AVSM", "AVSM-auto")
 
 
-DEFAULT_METHODS = ("GMWM", "ARMAV", "AVSM")
+DEFAULT_METHODS = ("GMWM", "GMWM-efficient", "ARMAV", "AVSM")
 
 
 SENSOR_ID = {"gyro": 1, "accel": 2}
