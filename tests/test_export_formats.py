@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -159,3 +160,95 @@ def test_openvins_round_trip_simulate_refit(log, tmp_path) -> None:
         se = g.std(axis=0, ddof=1) / math.sqrt(reps)
         assert np.all(np.abs(g.mean(axis=0) - [n, k]) < 4 * se), (sensor, g.mean(0), [n, k], se)
         assert np.all(se / [n, k] < 0.1)  # the check has power: errors of a few percent
+
+
+# ----------------------------------------------------------------------------- autopilots
+def _px4(text: str) -> dict[str, float]:
+    out = {}
+    for ln in text.splitlines():
+        if ln and not ln.startswith("#"):
+            vid, cid, name, value, typ = ln.split("\t")
+            assert (vid, cid, typ) == ("1", "1", "9")
+            out[name] = float(value)
+    return out
+
+
+def _ardupilot(text: str) -> dict[str, float]:
+    return {
+        m.group(1): float(m.group(2))
+        for m in re.finditer(r"^([A-Z0-9_]+),(\S+)$", text, flags=re.MULTILINE)
+    }
+
+
+@pytest.mark.parametrize(("fmt", "rate"), [("px4", 100.0), ("ardupilot", 400.0)])
+def test_autopilot_params(fits, fmt: str, rate: float) -> None:
+    text = export(None, fits, fmt, filter_rate=rate)
+    d = (_px4 if fmt == "px4" else _ardupilot)(text)
+    names = (
+        ("EKF2_GYR_NOISE", "EKF2_ACC_NOISE", "EKF2_GYR_B_NOISE", "EKF2_ACC_B_NOISE")
+        if fmt == "px4"
+        else ("EK3_GYRO_P_NSE", "EK3_ACC_P_NSE", "EK3_GBIAS_P_NSE", "EK3_ABIAS_P_NSE")
+    )
+    want = (
+        worst(fits, GYROS, n_si),
+        worst(fits, ACCELS, n_si),
+        worst(fits, GYROS, k_si),
+        worst(fits, ACCELS, k_si),
+    )
+    assert list(d) == list(names)
+    for name, w in zip(names, want, strict=True):
+        assert close(d[name], w * math.sqrt(rate)), name
+        assert f"# {name} [" in text
+    assert "warning" not in text  # the demo's values are inside the documented ranges
+
+
+def test_autopilot_needs_rate_and_warns_out_of_range(fits) -> None:
+    with pytest.raises(ExportError, match="filter rate"):
+        export(None, fits, "px4")
+    # inflate 200: EKF2_GYR_NOISE = 200 x 9.6e-4 rad/s > 0.1, its documented maximum
+    with pytest.warns(UserWarning, match=r"EKF2_GYR_NOISE = .* outside .*\[0.0001, 0.1\]"):
+        text = export(None, fits, "px4", filter_rate=100.0, inflate=200.0)
+    assert "# warning: EKF2_GYR_NOISE" in text
+    # a tiny value goes below EK3_GBIAS_P_NSE's documented minimum 1e-5
+    with pytest.warns(UserWarning, match="EK3_GBIAS_P_NSE"):
+        export(None, fits, "ardupilot", filter_rate=100.0, inflate=0.01)
+    d1 = _px4(export(None, fits, "px4", filter_rate=100.0))
+    d3 = _px4(export(None, fits, "px4", filter_rate=100.0, inflate=3.0))
+    assert all(close(d3[k], 3.0 * d1[k]) for k in d1)
+
+
+def test_cli_export_inflate_and_filter_rate(fits, tmp_path, capsys) -> None:
+    from engine.cli import main
+
+    out = tmp_path / "ekf.params"
+    argv = ["export", str(demo_path()), "--model", "GM+WN+RW", "--format", "px4"]
+    assert main([*argv, "-o", str(out), "--filter-rate", "250", "--inflate", "2"]) == 0
+    text = out.read_text()
+    assert "inflate = 2.0" in text and "filter rate 250.0 Hz" in text
+    d = _px4(text)
+    assert close(d["EKF2_GYR_NOISE"], 2.0 * worst(fits, GYROS, n_si) * math.sqrt(250.0))
+    assert main([*argv, "-o", str(out)]) == 2  # no --filter-rate: a one-line error
+    assert "filter rate" in capsys.readouterr().err
+    assert main([*argv[:-1], "openvins", "-o", "-"]) == 0
+    assert "rostopic: /imu0" in capsys.readouterr().out  # not a bag: the default topic
+
+
+def test_cli_openvins_rostopic_is_the_bags_topic(tmp_path, capsys) -> None:
+    from engine.cli import main
+    from engine.io import write_imu_bag
+
+    rng = np.random.default_rng(5)
+    n = 4000
+    bag = write_imu_bag(
+        tmp_path / "imu.bag",
+        1e-3 * rng.standard_normal((n, 3)),
+        1e-2 * rng.standard_normal((n, 3)),
+        np.arange(n, dtype=np.int64) * 10_000_000,
+        topic="/drone/imu/data",
+    )
+    argv = ["export", str(bag), "--model", "WN+RW", "--format", "openvins", "-o", "-"]
+    assert main(argv) == 0
+    d = _cv_yaml(capsys.readouterr().out + "\n")["imu0"]
+    assert d["rostopic"] == "/drone/imu/data" and d["update_rate"] == 100.0
+    assert main([*argv, "--rostopic", "/other"]) == 0
+    assert "rostopic: /other" in capsys.readouterr().out

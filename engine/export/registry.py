@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..fit import GMWMResult
 from ..units import ExportError
-from . import vio
+from . import autopilot, vio
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import kalibr_imu, read_kalibr
 from .noise import check_inflate
@@ -125,6 +125,18 @@ register(Format("datasheet-csv", "datasheet CSV", _datasheet_csv, None, ".csv"))
 register(Format("openvins", "OpenVINS kalibr_imu_chain.yaml", vio.openvins_yaml, None, ".yaml"))
 register(Format("basalt", "Basalt calibration JSON (IMU noise)", vio.basalt_json, None, ".json"))
 register(Format("orbslam3", "ORB-SLAM3 settings IMU.* keys", vio.orbslam3_yaml, None, ".yaml"))
+register(
+    Format("px4", "PX4 EKF2 noise parameters (.params)", autopilot.px4_params, None, ".params")
+)
+register(
+    Format(
+        "ardupilot",
+        "ArduPilot EKF3 noise parameters (.param)",
+        autopilot.ardupilot_params,
+        None,
+        ".param",
+    )
+)
 register(Format("vins", "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w", vio.vins_yaml, None, ".yaml"))
 
 
