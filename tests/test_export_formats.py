@@ -252,3 +252,88 @@ def test_cli_openvins_rostopic_is_the_bags_topic(tmp_path, capsys) -> None:
     assert d["rostopic"] == "/drone/imu/data" and d["update_rate"] == 100.0
     assert main([*argv, "--rostopic", "/other"]) == 0
     assert "rostopic: /other" in capsys.readouterr().out
+
+
+# ----------------------------------------------------------------------------- simulators, INS
+def b_si(r: eg.GMWMResult) -> float:
+    return ds(r, "bias instability (Allan floor, SI)", "B")
+
+
+def tc(r: eg.GMWMResult) -> float:
+    return ds(r, "correlation time", "T_c", "GM")
+
+
+def sgm_si(r: eg.GMWMResult) -> float:
+    return ds(r, "stationary std", "sigma_gm", "GM") * si_factor(r.wv.unit)[1]
+
+
+def sq_si(r: eg.GMWMResult) -> float:
+    return ds(r, "driving-noise density (SI)", "sqrt(q)", "GM")
+
+
+def test_matlab(fits) -> None:
+    text = export(None, fits, "matlab", inflate=1.5)
+    assert re.search(r"^fs = 100\.0;", text, flags=re.MULTILINE)
+    assert (
+        "imuSensor('accel-gyro', 'SampleRate', fs, 'Gyroscope', gyro, 'Accelerometer', accel)"
+        in text
+    )
+    for var, fn, chans in (("gyro", "gyroparams", GYROS), ("accel", "accelparams", ACCELS)):
+        block = re.search(rf"{var} = {fn}\( \.\.\.\n(.*?\);)", text, flags=re.DOTALL).group(1)
+        for key, f in (("NoiseDensity", n_si), ("RandomWalk", k_si), ("BiasInstability", b_si)):
+            m = re.search(rf"'{key}', \[([^\]]+)\]", block)
+            got = [float(v) for v in m.group(1).split()]
+            assert all(close(g, 1.5 * f(fits[c])) for g, c in zip(got, chans, strict=True)), key
+    assert "(rad/s)/sqrt(Hz)" in text and "(m/s^2)*sqrt(Hz)" in text
+
+
+def test_gazebo_rotors(fits) -> None:
+    import xml.etree.ElementTree as ET
+
+    text = export(None, fits, "gazebo", inflate=2.0)
+    root = ET.fromstring(text[text.index("<plugin") :])
+    v = {e.tag: float(e.text) for e in root}
+    for s, chans in (("gyroscope", GYROS), ("accelerometer", ACCELS)):
+        assert close(v[f"{s}NoiseDensity"], 2.0 * worst(fits, chans, n_si))
+        assert close(v[f"{s}RandomWalk"], 2.0 * worst(fits, chans, sq_si))  # GM, not RW
+        assert close(v[f"{s}BiasCorrelationTime"], worst(fits, chans, tc))  # not inflated
+        assert v[f"{s}TurnOnBiasSigma"] == 0.0
+    assert len(v) == 8
+    wn_rw = {c: eg.fit_gmwm(fits[c].wv, "WN+RW") for c in ("gyro_x", "accel_x")}
+    with pytest.raises(ExportError, match="GM term"):
+        export(None, wn_rw, "gazebo")
+
+
+def test_kfgins(fits) -> None:
+    d = yaml.safe_load(export(None, fits, "kf-gins"))["imunoise"]
+    deg = math.pi / 180
+    for key, chans, f, factor in (
+        ("arw", GYROS, n_si, 60 / deg),  # rad/s/sqrt(Hz) -> deg/sqrt(h)
+        ("vrw", ACCELS, n_si, 60.0),  # m/s^2/sqrt(Hz) -> m/s/sqrt(h)
+        ("gbstd", GYROS, sgm_si, 3600 / deg),  # rad/s -> deg/h
+        ("abstd", ACCELS, sgm_si, 1e5),  # m/s^2 -> mGal
+    ):
+        assert len(d[key]) == 3
+        assert all(close(g, f(fits[c]) * factor) for g, c in zip(d[key], chans, strict=True)), key
+    assert close(d["corrtime"], max(tc(r) for r in fits.values()) / 3600)
+
+
+def test_ros_imu_covariance(fits) -> None:
+    d = yaml.safe_load(export(None, fits, "ros-imu", inflate=3.0))
+    assert d["orientation_covariance"][0] == -1.0
+    for key, chans in (
+        ("angular_velocity_covariance", GYROS),
+        ("linear_acceleration_covariance", ACCELS),
+    ):
+        m = np.reshape(d[key], (3, 3))
+        assert np.all(m[~np.eye(3, dtype=bool)] == 0)
+        for i, c in enumerate(chans):  # per-sample variance = N^2 fs, x inflate^2
+            assert close(m[i, i], 9.0 * n_si(fits[c]) ** 2 * fits[c].fs)
+
+
+def test_every_registered_filter_format_records_inflate(fits) -> None:
+    filt = ["kalibr", "openvins", "basalt", "orbslam3", "vins", "px4", "ardupilot", "matlab"]
+    filt += ["gazebo", "kf-gins", "ros-imu"]
+    assert set(filt) | {"json", "csv", "datasheet", "datasheet-csv"} == set(eg.export.FORMATS)
+    for f in filt:
+        assert "inflate = 1.25" in export(None, fits, f, inflate=1.25, filter_rate=100.0), f

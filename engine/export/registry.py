@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..fit import GMWMResult
 from ..units import ExportError
-from . import autopilot, vio
+from . import autopilot, ins, sim, vio
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import kalibr_imu, read_kalibr
 from .noise import check_inflate
@@ -137,6 +137,10 @@ register(
         ".param",
     )
 )
+register(Format("matlab", "MATLAB gyroparams/accelparams .m", sim.matlab_m, None, ".m"))
+register(Format("gazebo", "Gazebo/RotorS IMU plugin (GM bias)", sim.gazebo_xml, None, ".xml"))
+register(Format("kf-gins", "KF-GINS imunoise (GM bias)", ins.kfgins_yaml, None, ".yaml"))
+register(Format("ros-imu", "sensor_msgs/Imu covariances", ins.ros_imu_yaml, None, ".yaml"))
 register(Format("vins", "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w", vio.vins_yaml, None, ".yaml"))
 
 
