@@ -51,8 +51,9 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
 
     ex = sub.add_parser(
         "export",
-        help="fit channels and export Kalibr imu.yaml, a JSON report, "
-        "WV curves (CSV) or a datasheet table",
+        help="fit channels and export Kalibr imu.yaml, a JSON report, WV curves (CSV), a "
+        "datasheet table, or a filter/simulator format (OpenVINS, Basalt, ORB-SLAM3, VINS, "
+        "PX4, ArduPilot, MATLAB, Gazebo, KF-GINS, sensor_msgs/Imu)",
     )
     ex.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")

@@ -63,6 +63,7 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         f"  gbstd: {_flow(vec(g, 'sigma_gm', DISPLAY[(g, 'B')].factor))}  # [deg/hr]",
         f"  abstd: {_flow(vec(a, 'sigma_gm', 1.0 / MGAL))}  # [mGal]",
         f"  corrtime: {yaml_float(max(tcs.values()) / _HOUR)}  # [hr]",
+        "  # gsstd/asstd (scale-factor std, ppm) are not estimated by GMWM: keep your config's",
     ]
     return "\n".join(lines) + "\n"
 
