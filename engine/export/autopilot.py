@@ -31,7 +31,7 @@ from typing import Any
 
 from ..fit import GMWMResult
 from ..units import ExportError
-from .noise import imu_noise
+from .noise import noise_for
 
 __all__ = ["RANGES", "autopilot_params", "px4_params", "ardupilot_params"]
 
@@ -73,13 +73,7 @@ def autopilot_params(
             "(filter_rate=..., CLI --filter-rate): its noise parameters are per filter step"
         )
     fr = float(fr)
-    nz = imu_noise(
-        fits,
-        units=kw.get("units"),
-        inflate=kw.get("inflate", 1.0),
-        source=kw.get("source", ""),
-        fmt=f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters",
-    )
+    nz = noise_for(fits, f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters", kw)
     header = [
         *nz.header,
         f"filter rate {fr!r} Hz: value = density x sqrt(filter rate) (N in rad/s/sqrt(Hz) "

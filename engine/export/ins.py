@@ -21,7 +21,7 @@ from typing import Any
 from ..fit import GMWMResult
 from ..units import DISPLAY
 from .common import yaml_float
-from .noise import imu_noise
+from .noise import noise_for
 
 __all__ = ["MGAL", "kfgins_yaml", "ros_imu_yaml"]
 
@@ -36,18 +36,8 @@ def _flow(vals: list[float]) -> str:
 def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
     one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
-    nz = imu_noise(
-        fits,
-        units=kw.get("units"),
-        inflate=kw.get("inflate", 1.0),
-        source=kw.get("source", ""),
-        fmt="KF-GINS imunoise",
-    )
+    nz = noise_for(fits, "KF-GINS imunoise", kw)
     nz.need("T_c", "the KF-GINS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
-
-    def vec(kind: str, q: str, factor: float) -> list[float]:
-        d = nz.values[kind][q]
-        return [d.get(a, max(d.values())) * factor for a in "xyz"]
 
     g, a = "gyroscope", "accelerometer"
     tcs = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
@@ -58,10 +48,10 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         + ", ".join(f"{k} {v:.6g}" for k, v in tcs.items())
         + ")",
         "imunoise:",
-        f"  arw: {_flow(vec(g, 'N', DISPLAY[(g, 'N')].factor))}  # [deg/sqrt(hr)]",
-        f"  vrw: {_flow(vec(a, 'N', DISPLAY[(a, 'N')].factor))}  # [m/s/sqrt(hr)]",
-        f"  gbstd: {_flow(vec(g, 'sigma_gm', DISPLAY[(g, 'B')].factor))}  # [deg/hr]",
-        f"  abstd: {_flow(vec(a, 'sigma_gm', 1.0 / MGAL))}  # [mGal]",
+        f"  arw: {_flow(nz.xyz(g, 'N', DISPLAY[(g, 'N')].factor))}  # [deg/sqrt(hr)]",
+        f"  vrw: {_flow(nz.xyz(a, 'N', DISPLAY[(a, 'N')].factor))}  # [m/s/sqrt(hr)]",
+        f"  gbstd: {_flow(nz.xyz(g, 'sigma_gm', DISPLAY[(g, 'B')].factor))}  # [deg/hr]",
+        f"  abstd: {_flow(nz.xyz(a, 'sigma_gm', 1.0 / MGAL))}  # [mGal]",
         f"  corrtime: {yaml_float(max(tcs.values()) / _HOUR)}  # [hr]",
         "  # gsstd/asstd (scale-factor std, ppm) are not estimated by GMWM: keep your config's",
     ]
@@ -71,14 +61,7 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """``sensor_msgs/Imu`` covariance fields (YAML): diagonal per-sample WN variances in SI
     (``inflate**2`` applied), ``orientation_covariance[0] = -1``."""
-    nz = imu_noise(
-        fits,
-        units=kw.get("units"),
-        inflate=kw.get("inflate", 1.0),
-        source=kw.get("source", ""),
-        fmt="sensor_msgs/Imu covariances",
-        allow_partial=True,
-    )
+    nz = noise_for(fits, "sensor_msgs/Imu covariances", kw, allow_partial=True)
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines.append(
         f"# per-sample variance of the white noise at {nz.fs:g} Hz, sigma2_WN = N^2 fs (SI), "
@@ -92,8 +75,7 @@ def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         if kind not in nz.values:
             lines.append(f"{field}: " + _flow([-1.0] + [0.0] * 8) + "  # -1: not fitted")
             continue
-        d = nz.values[kind]["sigma2"]
-        diag = [d.get(a, max(d.values())) for a in "xyz"]
+        diag = nz.xyz(kind, "sigma2")
         m = [diag[i] if i == j else 0.0 for i in range(3) for j in range(3)]
         lines.append(f"{field}: {_flow(m)}  # [{u}]")
     return "\n".join(lines) + "\n"

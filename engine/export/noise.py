@@ -11,13 +11,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from ..fit import GMWMResult
 from ..units import ExportError, datasheet_rows, si_factor
 from .common import channel_axis
 from .kalibr import kalibr_imu
 
-__all__ = ["ImuNoise", "imu_noise", "check_inflate", "SENSORS"]
+__all__ = ["ImuNoise", "imu_noise", "noise_for", "check_inflate", "SENSORS"]
 
 #: Sensor kinds in file order, with their SI signal unit.
 SENSORS = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
@@ -62,6 +63,12 @@ class ImuNoise:
         if not d:
             raise ExportError(f"no {kind} {quantity} in the fits")
         return max(d.values())
+
+    def xyz(self, kind: str, quantity: str, factor: float = 1.0) -> list[float]:
+        """Values on axes x, y, z times ``factor``; an axis that was not fitted gets the max
+        over the fitted ones."""
+        d = self.values[kind][quantity]
+        return [d.get(a, max(d.values())) * factor for a in "xyz"]
 
     def need(self, quantity: str, fmt: str, hint: str) -> None:
         """Refuse when some channel lacks ``quantity`` (e.g. a GM term)."""
@@ -133,3 +140,20 @@ def imu_noise(
         "(variances x inflate^2; times and rates unchanged)",
     ]
     return ImuNoise(vals, kal.update_rate, f, header, list(kal.warnings))
+
+
+def noise_for(
+    fits: Mapping[str, GMWMResult],
+    fmt: str,
+    options: Mapping[str, Any],
+    allow_partial: bool = False,
+) -> ImuNoise:
+    """:func:`imu_noise` with a writer's options (``units``, ``inflate``, ``source``)."""
+    return imu_noise(
+        fits,
+        units=options.get("units"),
+        inflate=options.get("inflate", 1.0),
+        source=options.get("source", ""),
+        fmt=fmt,
+        allow_partial=allow_partial,
+    )

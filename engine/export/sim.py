@@ -23,28 +23,16 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..fit import GMWMResult
-from .noise import ImuNoise, imu_noise
+from .noise import noise_for
 
 __all__ = ["matlab_m", "gazebo_xml"]
-
-
-def _vec(nz: ImuNoise, kind: str, q: str) -> list[float]:
-    d = nz.values[kind][q]
-    return [d.get(a, max(d.values())) for a in "xyz"]
 
 
 def matlab_m(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """A runnable MATLAB script: ``gyroparams``/``accelparams`` with per-axis (x, y, z)
     ``NoiseDensity`` = N, ``RandomWalk`` = K, ``BiasInstability`` = B (SI), and an
     ``imuSensor`` at the log's rate (an axis not fitted gets the max over fitted ones)."""
-    nz = imu_noise(
-        fits,
-        units=kw.get("units"),
-        inflate=kw.get("inflate", 1.0),
-        source=kw.get("source", ""),
-        fmt="MATLAB gyroparams/accelparams",
-        allow_partial=True,
-    )
+    nz = noise_for(fits, "MATLAB gyroparams/accelparams", kw, allow_partial=True)
     lines = [f"% {c}" for c in nz.header] + [f"% warning: {w}" for w in nz.warnings]
     lines.append(f"fs = {nz.fs!r};  % Hz, the log's sampling rate")
     ctor = {
@@ -58,7 +46,7 @@ def matlab_m(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         made.append((kind, var))
 
         def row(q: str, kind: str = kind) -> str:
-            return "[" + " ".join(repr(v) for v in _vec(nz, kind, q)) + "]"
+            return "[" + " ".join(repr(v) for v in nz.xyz(kind, q)) + "]"
 
         lines += [
             f"{var} = {fn}( ...",
@@ -78,13 +66,7 @@ def gazebo_xml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     ``*NoiseDensity`` = N, ``*RandomWalk`` = sqrt(q), ``*BiasCorrelationTime`` = T_c of the
     most persistent GM term, ``*TurnOnBiasSigma`` = 0 (not identified); max over axes. Needs a
     GM (or AR1) term in every channel's model."""
-    nz = imu_noise(
-        fits,
-        units=kw.get("units"),
-        inflate=kw.get("inflate", 1.0),
-        source=kw.get("source", ""),
-        fmt="Gazebo/RotorS IMU plugin",
-    )
+    nz = noise_for(fits, "Gazebo/RotorS IMU plugin", kw)
     nz.need("T_c", "the Gazebo/RotorS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
     lines = ["<!--", *(f"  {c.replace('--', '-')}" for c in nz.header)]
     lines += [f"  warning: {w.replace('--', '-')}" for w in nz.warnings]

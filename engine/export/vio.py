@@ -36,22 +36,12 @@ from typing import Any
 
 from ..fit import GMWMResult
 from .common import yaml_float
-from .noise import ImuNoise, imu_noise
+from .noise import noise_for
 
 __all__ = ["openvins_yaml", "basalt_json", "orbslam3_yaml", "vins_yaml"]
 
 _ND = {"gyroscope": "rad/s/sqrt(Hz)", "accelerometer": "m/s^2/sqrt(Hz)"}
 _RW = {"gyroscope": "rad/s^2/sqrt(Hz)", "accelerometer": "m/s^3/sqrt(Hz)"}
-
-
-def _noise(fits: Mapping[str, GMWMResult], fmt: str, **kw: Any) -> ImuNoise:
-    return imu_noise(
-        fits,
-        units=kw.get("units"),
-        inflate=kw.get("inflate", 1.0),
-        source=kw.get("source", ""),
-        fmt=fmt,
-    )
 
 
 def _eye(n: int, indent: str, zero: bool = False) -> list[str]:
@@ -66,7 +56,7 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     identity ``T_i_b``/``Tw``/``R_IMUtoGYRO``/``Ta``/``R_IMUtoACC``, zero ``Tg``, the four Kalibr
     densities (max over axes, SI), ``rostopic`` (``kw["rostopic"]``), ``time_offset: 0.0``,
     ``update_rate`` (the log's rate) and ``model: "kalibr"``."""
-    nz = _noise(fits, "OpenVINS kalibr_imu_chain.yaml", **kw)
+    nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", kw)
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     lines += ["", "imu0:", "  T_i_b:  # IMU to body: identity (not estimated by GMWM)"]
@@ -94,7 +84,7 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     ``accel_bias_std`` = K in SI; an axis that was not fitted gets the max over the fitted
     axes. JSON has no comments: ``gmwm_export`` (a sibling of ``value0``, which Basalt does
     not read) holds the header and units. Merge ``value0``'s keys into the calib file."""
-    nz = _noise(fits, "Basalt calibration JSON", **kw)
+    nz = noise_for(fits, "Basalt calibration JSON", kw)
     v0: dict[str, Any] = {"imu_update_rate": nz.fs}
     units: dict[str, str] = {"imu_update_rate": "Hz"}
     for kind, short in (("accelerometer", "accel"), ("gyroscope", "gyro")):
@@ -102,7 +92,7 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
             if q not in nz.values.get(kind, {}):
                 continue
             d = nz.values[kind][q]
-            v0[f"{short}_{key}"] = [d.get(a, max(d.values())) for a in "xyz"]
+            v0[f"{short}_{key}"] = nz.xyz(kind, q)
             units[f"{short}_{key}"] = f"{u} per axis x, y, z" + (
                 "" if all(a in d for a in "xyz") else " (missing axes: max over fitted ones)"
             )
@@ -115,7 +105,7 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """ORB-SLAM3 settings lines (``%YAML:1.0``): ``IMU.NoiseGyro``/``IMU.NoiseAcc`` = N,
     ``IMU.GyroWalk``/``IMU.AccWalk`` = K (max over axes, SI), ``IMU.Frequency`` [Hz]."""
-    nz = _noise(fits, "ORB-SLAM3 IMU settings", **kw)
+    nz = noise_for(fits, "ORB-SLAM3 IMU settings", kw)
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     g, a = "gyroscope", "accelerometer"
@@ -132,7 +122,7 @@ def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """VINS-Mono/Fusion IMU keys (``%YAML:1.0``): ``acc_n``/``gyr_n`` = N, ``acc_w``/``gyr_w``
     = K (max over axes, SI): the Kalibr continuous-time convention, stated in the file."""
-    nz = _noise(fits, "VINS-Mono/Fusion IMU parameters", **kw)
+    nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", kw)
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     lines.append(
