@@ -252,6 +252,13 @@ def test_cli_openvins_rostopic_is_the_bags_topic(tmp_path, capsys) -> None:
     assert d["rostopic"] == "/drone/imu/data" and d["update_rate"] == 100.0
     assert main([*argv, "--rostopic", "/other"]) == 0
     assert "rostopic: /other" in capsys.readouterr().out
+    # the Python API: the log's topic when the log came from a bag
+    blog = eg.load_log(bag)
+    bfits = {c: eg.fit_gmwm(eg.wavelet_variance(blog[c], fs=blog.fs), "WN+RW") for c in blog.names}
+    units = {c: blog.units.get(c) or ("rad/s" if "gyro" in c else "m/s^2") for c in blog.names}
+    text = export(None, bfits, "kalibr", log=blog, units=units)
+    assert yaml.safe_load(text)["rostopic"] == "/drone/imu/data"
+    assert "rostopic: /imu0" in export(None, bfits, "openvins", units=units)
 
 
 # ----------------------------------------------------------------------------- simulators, INS

@@ -153,7 +153,7 @@ def export(
     log: ImuLog | None = None,
     units: Mapping[str, str] | None = None,
     source: str = "",
-    rostopic: str = "/imu0",
+    rostopic: str | None = None,
     allow_partial: bool = False,
     inflate: float = 1.0,
     filter_rate: float | None = None,
@@ -178,6 +178,9 @@ def export(
         Filter formats: every noise value (density, random walk, bias std) is the fitted value
         times ``inflate`` (variances times ``inflate**2``), written in the file's header;
         the reports (json, csv, datasheet) refuse a factor other than 1. Default 1.
+    rostopic : str, optional
+        Kalibr/OpenVINS ``rostopic``; default: the bag's IMU topic when ``log`` came from a
+        bag, else ``/imu0``.
     filter_rate : float, optional
         PX4/ArduPilot: the rate (Hz) the EKF predicts at (required by those formats).
     """
@@ -190,7 +193,7 @@ def export(
         log=log,
         units=units,
         source=source,
-        rostopic=rostopic,
+        rostopic=rostopic or (log.meta.get("topic") if log is not None else None) or "/imu0",
         allow_partial=allow_partial,
         inflate=inflate,
         filter_rate=filter_rate,
