@@ -559,5 +559,5 @@ def test_engine_export_is_the_function_after_importing_the_package(fits) -> None
     text = eg.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
     assert text == engine.export.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
     assert text.splitlines()[0].startswith("channel,process,quantity,symbol,value")
-    assert set(engine.export.FORMATS) == {"kalibr", "json", "csv", "datasheet", "datasheet-csv"}
+    assert {"kalibr", "json", "csv", "datasheet", "datasheet-csv"} <= set(engine.export.FORMATS)
     assert engine.export.FORMATS["kalibr"].reader is engine.export.read_kalibr

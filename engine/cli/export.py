@@ -1,10 +1,11 @@
 """``gmwm export`` (:func:`add_export_parser`, :func:`cmd_export`)::
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
-                --format kalibr|json|csv|datasheet|datasheet-csv -o OUT|-
+                --format NAME (engine.export.FORMATS) -o OUT|-
                 [--ci asymptotic|bootstrap] [--weights ci|identity|efficient]
                 [--fs HZ] [--levels J] [--robust] [--segment ...] [--scale ...] [--units ...]
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
+                [--inflate F] [--filter-rate HZ]
 
 The log options and the streamed WV are shared with the other subcommands
 (:mod:`engine.cli.common`). Errors are raised as :class:`~engine.cli.common.UsageError` (or the
@@ -50,8 +51,9 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
 
     ex = sub.add_parser(
         "export",
-        help="fit channels and export Kalibr imu.yaml, a JSON report, "
-        "WV curves (CSV) or a datasheet table",
+        help="fit channels and export Kalibr imu.yaml, a JSON report, WV curves (CSV), a "
+        "datasheet table, or a filter/simulator format (OpenVINS, Basalt, ORB-SLAM3, VINS, "
+        "PX4, ArduPilot, MATLAB, Gazebo, KF-GINS, sensor_msgs/Imu)",
     )
     ex.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
@@ -97,7 +99,23 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
         default=2,
         help="processes for the bootstrap (2)",
     )
-    ex.add_argument("--rostopic", default="/imu0", help="Kalibr rostopic entry (/imu0)")
+    ex.add_argument(
+        "--rostopic",
+        help="rostopic entry of Kalibr/OpenVINS files (default: the bag's IMU topic when a "
+        "bag was loaded, else /imu0)",
+    )
+    ex.add_argument(
+        "--inflate",
+        type=positive(float, "--inflate"),
+        default=1.0,
+        help="filter formats: multiply every noise value by this factor (variances by its "
+        "square), written in the file's header (default 1: the fitted values)",
+    )
+    ex.add_argument(
+        "--filter-rate",
+        type=positive(float, "--filter-rate"),
+        help="px4/ardupilot: the rate (Hz) the EKF predicts at (required by those formats)",
+    )
     ex.add_argument(
         "--partial",
         action="store_true",
@@ -213,8 +231,10 @@ def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
         log=log,
         units=units,
         source=str(args.input),
-        rostopic=args.rostopic,
+        rostopic=args.rostopic or (log.meta.get("topic") if log is not None else None) or "/imu0",
         allow_partial=args.partial,
+        inflate=args.inflate,
+        filter_rate=args.filter_rate,
     )
     if out is None:
         return text.rstrip("\n")

@@ -5,6 +5,10 @@
 * :mod:`.kalibr`: Kalibr ``imu.yaml`` (:func:`kalibr_imu`, :func:`write_kalibr`,
   :func:`read_kalibr`, :func:`kalibr_models`);
 * :mod:`.report`: :func:`fit_report`, :func:`write_report`, :func:`curves_csv`;
+* :mod:`.noise`: :func:`imu_noise` (N, K, B and the GM numbers per sensor and axis, in SI,
+  with the explicit ``inflate`` factor) for the filter formats:
+* :mod:`.vio` (OpenVINS, Basalt, ORB-SLAM3, VINS), :mod:`.autopilot` (PX4 EKF2, ArduPilot
+  EKF3), :mod:`.sim` (MATLAB, Gazebo/RotorS), :mod:`.ins` (KF-GINS, ``sensor_msgs/Imu``);
 * :mod:`.registry`: the formats by name (:data:`FORMATS`) and :func:`export`.
 """
 
@@ -18,6 +22,7 @@ from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
 from .common import channel_axis
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu, kalibr_models, read_kalibr, write_kalibr
+from .noise import ImuNoise, imu_noise
 from .registry import FORMATS, Format, export, register
 from .report import curves_csv, fit_report, write_report
 
@@ -42,6 +47,8 @@ __all__ = [
     "Format",
     "register",
     "BI_FACTOR",
+    "ImuNoise",
+    "imu_noise",
 ]
 
 

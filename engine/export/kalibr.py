@@ -18,7 +18,7 @@ from typing import Any
 from ..fit import GMWMResult
 from ..models import RW, WN, Model
 from ..units import ExportError, from_datasheet, process_values, si_factor, to_datasheet
-from .common import channel_axis
+from .common import channel_axis, yaml_float
 
 __all__ = ["KalibrImu", "kalibr_imu", "write_kalibr", "read_kalibr", "kalibr_models"]
 
@@ -78,7 +78,7 @@ class KalibrImu:
         lines = [f"# {c}" for c in self.comments]
         lines += [f"# warning: {w}" for w in self.warnings]
         lines.append(f"rostopic: {self.rostopic}")
-        lines.append(f"update_rate: {_yfloat(self.update_rate)}  # Hz (the log's sampling rate)")
+        lines.append(f"update_rate: {yaml_float(self.update_rate)}  # Hz (the log's sampling rate)")
         lines.append("")
         for key in _KALIBR_KEYS:
             if key not in self.values:
@@ -89,9 +89,11 @@ class KalibrImu:
                 f"# {key} [{si[key]}{unit[kind]}]: conservative choice = max over "
                 f"axes {', '.join(axes) or '-'}; largest on {self.chosen.get(key, '-')}"
             )
-            lines.append(f"{key}: {_yfloat(self.values[key])}  # from {self.chosen.get(key, '-')}")
+            lines.append(
+                f"{key}: {yaml_float(self.values[key])}  # from {self.chosen.get(key, '-')}"
+            )
             if axes:
-                flow = ", ".join(f"{a}: {_yfloat(v)}" for a, v in axes.items())
+                flow = ", ".join(f"{a}: {yaml_float(v)}" for a, v in axes.items())
                 lines.append(f"{key}_per_axis: {{{flow}}}")
             lines.append("")
         return "\n".join(lines).rstrip() + "\n"
@@ -107,24 +109,6 @@ class KalibrImu:
             "sources": dict(self.sources),
             "warnings": list(self.warnings),
         }
-
-
-def _yfloat(v: float) -> str:
-    """A float that YAML 1.1 (PyYAML) reads as a float: ``1.0e-05``, not ``1e-05``."""
-    v = float(v)
-    if not math.isfinite(v):
-        return ".nan" if v != v else (".inf" if v > 0 else "-.inf")
-    s = repr(v)
-    if "e" in s:
-        mant, exp = s.split("e")
-        if "." not in mant:
-            mant += ".0"
-        if exp[0] not in "+-":
-            exp = "+" + exp
-        s = f"{mant}e{exp}"
-    elif "." not in s:
-        s += ".0"
-    return s
 
 
 def kalibr_imu(

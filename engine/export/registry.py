@@ -7,6 +7,7 @@ the one datasheet table (:mod:`engine.units`), plus one :func:`register` call be
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -16,8 +17,10 @@ from typing import TYPE_CHECKING, Any
 
 from ..fit import GMWMResult
 from ..units import ExportError
+from . import autopilot, ins, sim, vio
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import kalibr_imu, read_kalibr
+from .noise import check_inflate
 from .report import curves_csv, fit_report
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -32,7 +35,7 @@ class Format:
     """An export format: ``writer(fits, **options) -> text``; ``reader(path or text)``.
 
     The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
-    ``source``, ``rostopic``, ``allow_partial``.
+    ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``.
     """
 
     name: str
@@ -53,16 +56,35 @@ def register(fmt: Format) -> Format:
 
 
 def _kalibr(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    return kalibr_imu(
+    kal = kalibr_imu(
         fits,
         units=kw.get("units"),
-        rostopic=kw.get("rostopic", "/imu0"),
+        rostopic=kw.get("rostopic") or "/imu0",
         source=kw.get("source", ""),
         allow_partial=kw.get("allow_partial", False),
-    ).to_yaml()
+    )
+    f = check_inflate(kw.get("inflate", 1.0))
+    kal = dataclasses.replace(
+        kal,
+        values={k: v * f for k, v in kal.values.items()},
+        per_axis={k: {a: v * f for a, v in d.items()} for k, d in kal.per_axis.items()},
+        comments=[
+            *kal.comments,
+            f"inflate = {f!r}: every noise value below is the fitted value x {f!r}",
+        ],
+    )
+    return kal.to_yaml()
+
+
+def _no_inflate(kw: Mapping[str, Any], name: str) -> None:
+    if check_inflate(kw.get("inflate", 1.0)) != 1.0:
+        raise ExportError(
+            f"--inflate is for filter formats; the {name} reports the fit itself (inflate 1)"
+        )
 
 
 def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    _no_inflate(kw, "JSON report")
     rep = fit_report(
         fits,
         intervals=kw.get("intervals"),
@@ -74,6 +96,7 @@ def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 
 
 def _datasheet(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    _no_inflate(kw, "datasheet")
     return (
         datasheet_text(datasheet_table(fits, intervals=kw.get("intervals"), units=kw.get("units")))
         + "\n"
@@ -81,6 +104,7 @@ def _datasheet(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 
 
 def _datasheet_csv(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    _no_inflate(kw, "datasheet")
     return datasheet_csv(
         datasheet_table(fits, intervals=kw.get("intervals"), units=kw.get("units"))
     )
@@ -91,12 +115,33 @@ register(Format("json", "JSON report", _json, None, ".json"))
 
 
 def _curves(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    _no_inflate(kw, "curves CSV")
     return curves_csv(fits)
 
 
 register(Format("csv", "CSV of the WV and implied curves", _curves, None, ".csv"))
 register(Format("datasheet", "readable datasheet table", _datasheet, None, ".txt"))
 register(Format("datasheet-csv", "datasheet CSV", _datasheet_csv, None, ".csv"))
+register(Format("openvins", "OpenVINS kalibr_imu_chain.yaml", vio.openvins_yaml, None, ".yaml"))
+register(Format("basalt", "Basalt calibration JSON (IMU noise)", vio.basalt_json, None, ".json"))
+register(Format("orbslam3", "ORB-SLAM3 settings IMU.* keys", vio.orbslam3_yaml, None, ".yaml"))
+register(
+    Format("px4", "PX4 EKF2 noise parameters (.params)", autopilot.px4_params, None, ".params")
+)
+register(
+    Format(
+        "ardupilot",
+        "ArduPilot EKF3 noise parameters (.param)",
+        autopilot.ardupilot_params,
+        None,
+        ".param",
+    )
+)
+register(Format("matlab", "MATLAB gyroparams/accelparams .m", sim.matlab_m, None, ".m"))
+register(Format("gazebo", "Gazebo/RotorS IMU plugin (GM bias)", sim.gazebo_xml, None, ".xml"))
+register(Format("kf-gins", "KF-GINS imunoise (GM bias)", ins.kfgins_yaml, None, ".yaml"))
+register(Format("ros-imu", "sensor_msgs/Imu covariances", ins.ros_imu_yaml, None, ".yaml"))
+register(Format("vins", "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w", vio.vins_yaml, None, ".yaml"))
 
 
 def export(
@@ -108,8 +153,10 @@ def export(
     log: ImuLog | None = None,
     units: Mapping[str, str] | None = None,
     source: str = "",
-    rostopic: str = "/imu0",
+    rostopic: str | None = None,
     allow_partial: bool = False,
+    inflate: float = 1.0,
+    filter_rate: float | None = None,
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -121,10 +168,21 @@ def export(
     fmt : str
         A name of :data:`FORMATS`: ``"kalibr"`` (Kalibr ``imu.yaml``), ``"json"`` (JSON
         report), ``"csv"`` (WV and implied curves), ``"datasheet"`` (readable datasheet
-        table), ``"datasheet-csv"``.
+        table), ``"datasheet-csv"``, and the filter formats ``"openvins"``, ``"basalt"``,
+        ``"orbslam3"``, ``"vins"``, ``"px4"``, ``"ardupilot"``, ``"matlab"``, ``"gazebo"``,
+        ``"kf-gins"``, ``"ros-imu"`` (README, "Export formats").
     intervals, log, units, source, rostopic, allow_partial
         Passed to the format's writer (parameter intervals per channel, the log for the JSON
         report, signal unit per channel, source name, Kalibr topic, partial Kalibr file).
+    inflate : float
+        Filter formats: every noise value (density, random walk, bias std) is the fitted value
+        times ``inflate`` (variances times ``inflate**2``), written in the file's header;
+        the reports (json, csv, datasheet) refuse a factor other than 1. Default 1.
+    rostopic : str, optional
+        Kalibr/OpenVINS ``rostopic``; default: the bag's IMU topic when ``log`` came from a
+        bag, else ``/imu0``.
+    filter_rate : float, optional
+        PX4/ArduPilot: the rate (Hz) the EKF predicts at (required by those formats).
     """
     f = FORMATS.get(fmt)
     if f is None:
@@ -135,8 +193,10 @@ def export(
         log=log,
         units=units,
         source=source,
-        rostopic=rostopic,
+        rostopic=rostopic or (log.meta.get("topic") if log is not None else None) or "/imu0",
         allow_partial=allow_partial,
+        inflate=inflate,
+        filter_rate=filter_rate,
     )
     if path is not None:
         Path(path).write_text(text)

@@ -1,0 +1,139 @@
+"""Visual-inertial estimators: OpenVINS ``kalibr_imu_chain.yaml``, Basalt calibration JSON,
+ORB-SLAM3 settings and VINS-Mono/Fusion config keys.
+
+All four take continuous-time densities in SI: the white-noise density
+``N = sqrt(sigma2 / fs)`` and the random-walk density ``K = sqrt(gamma2 fs)`` of
+:mod:`engine.units` (CONVENTIONS, "Units and datasheet conversions"), as gathered by
+:func:`~engine.export.noise.imu_noise`. Where a format takes one number per sensor it gets the
+conservative choice (max over axes); Basalt takes one per axis.
+
+Sources of the keys' meaning:
+
+* OpenVINS: ``config/euroc_mav/kalibr_imu_chain.yaml`` of rpng/open_vins (``%YAML:1.0``,
+  ``imu0:`` with ``T_i_b``, the Kalibr densities with units
+  ``[ rad / s / sqrt(Hz) ]`` ..., ``rostopic``, ``time_offset``, ``update_rate``,
+  ``model: "kalibr"``, identity ``Tw``, ``R_IMUtoGYRO``, ``Ta``, ``R_IMUtoACC`` and a zero
+  gravity sensitivity ``Tg``);
+* Basalt: ``data/euroc_ds_calib.json`` of VladyslavUsenko/basalt (``value0`` with
+  ``imu_update_rate`` and per-axis ``accel_noise_std``, ``gyro_noise_std``,
+  ``accel_bias_std``, ``gyro_bias_std``; ``calibration.hpp`` turns them into discrete-time
+  values by ``x sqrt(imu_update_rate)``, so they are continuous-time densities);
+* ORB-SLAM3: ``Examples/Monocular-Inertial/EuRoC.yaml`` (``IMU.NoiseGyro: 1.7e-4``,
+  ``IMU.NoiseAcc: 2.0e-3``, ``IMU.GyroWalk: 1.9393e-05``, ``IMU.AccWalk: 3.0e-03``,
+  ``IMU.Frequency: 200.0``: the Kalibr EuRoC densities; ``ImuTypes.cc`` multiplies them by
+  ``sqrt(freq)``);
+* VINS-Mono/Fusion: ``config/euroc/euroc_mono_imu_config.yaml`` (``acc_n``, ``gyr_n``,
+  ``acc_w``, ``gyr_w``). Their comments call them "measurement noise standard deviation" and
+  "bias random work noise standard deviation" and the EuRoC values are the Kalibr densities
+  inflated by hand; we write the Kalibr convention (N and K) and say so in the file.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from ..fit import GMWMResult
+from .common import yaml_float
+from .noise import noise_for
+
+__all__ = ["openvins_yaml", "basalt_json", "orbslam3_yaml", "vins_yaml"]
+
+_ND = {"gyroscope": "rad/s/sqrt(Hz)", "accelerometer": "m/s^2/sqrt(Hz)"}
+_RW = {"gyroscope": "rad/s^2/sqrt(Hz)", "accelerometer": "m/s^3/sqrt(Hz)"}
+
+
+def _eye(n: int, indent: str, zero: bool = False) -> list[str]:
+    return [
+        indent + "- [" + ", ".join("1.0" if i == j and not zero else "0.0" for j in range(n)) + "]"
+        for i in range(n)
+    ]
+
+
+def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    """OpenVINS ``kalibr_imu_chain.yaml`` (OpenCV ``%YAML:1.0``): the ``imu0`` block with
+    identity ``T_i_b``/``Tw``/``R_IMUtoGYRO``/``Ta``/``R_IMUtoACC``, zero ``Tg``, the four Kalibr
+    densities (max over axes, SI), ``rostopic`` (``kw["rostopic"]``), ``time_offset: 0.0``,
+    ``update_rate`` (the log's rate) and ``model: "kalibr"``."""
+    nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", kw)
+    lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
+    lines += [f"# warning: {w}" for w in nz.warnings]
+    lines += ["", "imu0:", "  T_i_b:  # IMU to body: identity (not estimated by GMWM)"]
+    lines += _eye(4, "    ")
+    for kind in ("accelerometer", "gyroscope"):
+        n, k = nz.conservative(kind, "N"), nz.conservative(kind, "K")
+        lines.append(f"  {kind}_noise_density: {yaml_float(n)}  # [{_ND[kind]}] N, max over axes")
+        lines.append(f"  {kind}_random_walk: {yaml_float(k)}  # [{_RW[kind]}] K, max over axes")
+    lines += [
+        f"  rostopic: {kw.get('rostopic') or '/imu0'}",
+        "  time_offset: 0.0  # [s] (not estimated by GMWM)",
+        f"  update_rate: {yaml_float(nz.fs)}  # [Hz] the log's sampling rate",
+        '  model: "kalibr"',
+        "  # intrinsics not estimated by GMWM: identity, and zero gravity sensitivity Tg",
+    ]
+    for name in ("Tw", "R_IMUtoGYRO", "Ta", "R_IMUtoACC", "Tg"):
+        lines.append(f"  {name}:")
+        lines += _eye(3, "    ", zero=name == "Tg")
+    return "\n".join(lines) + "\n"
+
+
+def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    """Basalt calibration JSON fragment: ``value0`` with ``imu_update_rate`` [Hz] and per-axis
+    (x, y, z) ``gyro_noise_std`` = N, ``accel_noise_std`` = N, ``gyro_bias_std`` = K,
+    ``accel_bias_std`` = K in SI; an axis that was not fitted gets the max over the fitted
+    axes. JSON has no comments: ``gmwm_export`` (a sibling of ``value0``, which Basalt does
+    not read) holds the header and units. Merge ``value0``'s keys into the calib file."""
+    nz = noise_for(fits, "Basalt calibration JSON", kw)
+    v0: dict[str, Any] = {"imu_update_rate": nz.fs}
+    units: dict[str, str] = {"imu_update_rate": "Hz"}
+    for kind, short in (("accelerometer", "accel"), ("gyroscope", "gyro")):
+        for q, key, u in (("N", "noise_std", _ND[kind]), ("K", "bias_std", _RW[kind])):
+            if q not in nz.values.get(kind, {}):
+                continue
+            d = nz.values[kind][q]
+            v0[f"{short}_{key}"] = nz.xyz(kind, q)
+            units[f"{short}_{key}"] = f"{u} per axis x, y, z" + (
+                "" if all(a in d for a in "xyz") else " (missing axes: max over fitted ones)"
+            )
+    out = {"value0": v0, "gmwm_export": {"header": nz.header, "units": units}}
+    if nz.warnings:
+        out["gmwm_export"]["warnings"] = nz.warnings
+    return json.dumps(out, indent=1, allow_nan=False) + "\n"
+
+
+def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    """ORB-SLAM3 settings lines (``%YAML:1.0``): ``IMU.NoiseGyro``/``IMU.NoiseAcc`` = N,
+    ``IMU.GyroWalk``/``IMU.AccWalk`` = K (max over axes, SI), ``IMU.Frequency`` [Hz]."""
+    nz = noise_for(fits, "ORB-SLAM3 IMU settings", kw)
+    lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
+    lines += [f"# warning: {w}" for w in nz.warnings]
+    g, a = "gyroscope", "accelerometer"
+    lines += [
+        f"IMU.NoiseGyro: {yaml_float(nz.conservative(g, 'N'))}  # [{_ND[g]}] N",
+        f"IMU.NoiseAcc: {yaml_float(nz.conservative(a, 'N'))}  # [{_ND[a]}] N",
+        f"IMU.GyroWalk: {yaml_float(nz.conservative(g, 'K'))}  # [{_RW[g]}] K",
+        f"IMU.AccWalk: {yaml_float(nz.conservative(a, 'K'))}  # [{_RW[a]}] K",
+        f"IMU.Frequency: {yaml_float(nz.fs)}  # [Hz]",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+    """VINS-Mono/Fusion IMU keys (``%YAML:1.0``): ``acc_n``/``gyr_n`` = N, ``acc_w``/``gyr_w``
+    = K (max over axes, SI): the Kalibr continuous-time convention, stated in the file."""
+    nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", kw)
+    lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
+    lines += [f"# warning: {w}" for w in nz.warnings]
+    lines.append(
+        "# convention: continuous-time densities as in Kalibr (acc_n = N, acc_w = K); "
+        "VINS's EuRoC config uses hand-inflated values: scale with --inflate if needed"
+    )
+    g, a = "gyroscope", "accelerometer"
+    lines += [
+        f"acc_n: {yaml_float(nz.conservative(a, 'N'))}  # [{_ND[a]}] accelerometer N",
+        f"gyr_n: {yaml_float(nz.conservative(g, 'N'))}  # [{_ND[g]}] gyroscope N",
+        f"acc_w: {yaml_float(nz.conservative(a, 'K'))}  # [{_RW[a]}] accelerometer bias K",
+        f"gyr_w: {yaml_float(nz.conservative(g, 'K'))}  # [{_RW[g]}] gyroscope bias K",
+    ]
+    return "\n".join(lines) + "\n"
