@@ -17,7 +17,7 @@ i.e. ``(0.664 B)^2 / 2`` in wavelet variance (``nu2_j = AVAR(tau_j / 2) / 2``).
 
 Run from the repository root::
 
-    python tests/benchmarks/case_navchip.py [--out tests/benchmarks/figures/navchip_gyro_x.png]
+    python tests/benchmarks/case_navchip.py [--out tests/benchmarks/figures/case_navchip_gyro_x.png]
 """
 
 from __future__ import annotations
