@@ -72,6 +72,19 @@ def test_wccv_of_a_series_with_itself_is_its_wv():
     np.testing.assert_allclose(m.values[:, 0, 2], m.values[:, 0, 0], rtol=1e-12)
 
 
+def test_wccv_units_are_spelled_like_the_wv_units():
+    """Issue 14: one spelling of a squared unit; the WCCV of two channels in g is g^2, like
+    their WV (the pair used to build "(g)^2" by hand)."""
+    rng = np.random.default_rng(4)
+    xy = rng.standard_normal((4096, 2))
+    m = eg.wv_matrix(xy, channels=["a", "b"], units=["g", "g"])
+    assert m.pair("a", "b").unit == "g^2" == m.wv("a").unit + "^2"
+    m2 = eg.wv_matrix(xy, channels=["a", "b"], units=["deg/s", "deg/s"])
+    assert m2.pair("a", "b").unit == "(deg/s)^2"
+    m3 = eg.wv_matrix(xy, channels=["a", "b"], units=["g", "m/s^2"])
+    assert m3.pair("a", "b").unit == "g*m/s^2"
+
+
 def test_wv_matrix_is_symmetric_bilinear_and_consistent_with_pairs():
     rng = np.random.default_rng(3)
     x, z = rng.standard_normal((2, 4096))

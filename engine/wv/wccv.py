@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from ..units import squared
 from ._kernel import as_series, cumsum_demeaned
 from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval
 
@@ -295,7 +296,7 @@ class WVMatrix(LevelScales):
         """The WCCV of two channels as a :class:`WaveletCrossCovariance`."""
         p, q = self.index(a), self.index(b)
         up, uq = self._unit(p), self._unit(q)
-        unit = (f"({up})^2" if up == uq else f"{up}*{uq}") if up and uq else ""
+        unit = (squared(up) if up == uq else f"{up}*{uq}") if up and uq else ""
         return WaveletCrossCovariance(
             levels=self.levels,
             tau_samples=self.tau_samples,
