@@ -20,6 +20,7 @@ Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.
 from __future__ import annotations
 
 import io
+import itertools
 import logging
 import sys
 import time
@@ -62,7 +63,9 @@ pn.extension("filedropper", notifications=False)
 
 light_text_updates()  # see gmwm_app._panel_compat
 
-_APPS: weakref.WeakSet[GMWMApp] = weakref.WeakSet()
+# app -> creation serial: a weak registry that still lists the sessions oldest first
+_APPS: weakref.WeakKeyDictionary[GMWMApp, int] = weakref.WeakKeyDictionary()
+_SERIAL = itertools.count()
 
 
 # Save the WV plot as an image (PNG or SVG) in the browser; the file name follows the data.
@@ -91,8 +94,12 @@ def _lazy_view_factories() -> list[tuple[str, Callable[[AppState, Jobs], Any]]]:
 
 
 def live_apps() -> list[GMWMApp]:
-    """The app objects of the sessions alive in this process (for tests and diagnostics)."""
-    return list(_APPS)
+    """The app objects of the sessions alive in this process, oldest first.
+
+    For tests and diagnostics: the last item is the most recently opened session.
+    """
+    items = list(_APPS.items())
+    return [app for app, _ in sorted(items, key=lambda kv: kv[1])]
 
 
 class GMWMApp:
@@ -133,7 +140,7 @@ class GMWMApp:
         self.jobs.install = self.install
         self.state.param.watch(self._on_state, "revision")
         self.refresh()
-        _APPS.add(self)
+        _APPS[self] = next(_SERIAL)
 
     # -------------------------------------------------------------------------------------
     # widgets and layout

@@ -168,3 +168,21 @@ def test_the_robust_toggle_shows_the_wv_levels_as_they_compute(app_demo: Any) ->
     assert levels == want
     assert texts[0] == "⏳ Computing the robust wavelet variance ..." and texts[-1] == ""
     assert app.status.object == "" and not app.busy
+
+
+def test_live_apps_lists_sessions_oldest_first_and_forgets_closed_ones(app_demo: Any) -> None:
+    """``live_apps()[-1]`` is the newest session (tests pick theirs that way); a discarded
+    app leaves the registry."""
+    import gc
+
+    from gmwm_app.app import create_app, live_apps
+
+    apps = [create_app().gmwm_app for _ in range(4)]
+    listed = [a for a in live_apps() if any(a is b for b in apps)]
+    assert [id(a) for a in listed] == [id(a) for a in apps]
+    assert live_apps()[-1] is apps[-1]
+    gone = id(apps[1])
+    del apps[1], listed
+    gc.collect()
+    assert gone not in {id(a) for a in live_apps()}
+    assert [id(a) for a in live_apps() if any(a is b for b in apps)] == [id(a) for a in apps]
