@@ -1,4 +1,4 @@
-"""``gmwm export`` (:func:`add_export_parser`, :func:`cmd_export`)::
+"""``gmwm export`` (:func:`add_parser`, :func:`run`)::
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
                 --format NAME (engine.export.FORMATS) -o OUT|-
@@ -28,7 +28,7 @@ from .common import (
     warn_fs_unknown,
 )
 
-__all__ = ["add_export_parser", "cmd_export"]
+__all__ = ["add_parser", "run"]
 
 
 def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
@@ -45,7 +45,7 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
     return spec
 
 
-def add_export_parser(sub: Any) -> argparse.ArgumentParser:
+def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
     from ..export.registry import FORMATS
 
@@ -126,7 +126,7 @@ def add_export_parser(sub: Any) -> argparse.ArgumentParser:
     return ex
 
 
-def cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
+def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
     from ..export import export
     from ..fit import fit_gmwm

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import os
 import sys
@@ -30,6 +31,10 @@ from ..models import ModelError, parse_model
 from .common import CliError, load_wv, positive
 
 __all__ = ["main", "build_parser"]
+
+# Subcommands that live in their own module engine/cli/<name>.py, each with
+# ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
+_MODULE_COMMANDS = ("export",)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -194,9 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
-    from .export import add_export_parser  # gmwm export: Kalibr, JSON, CSV, datasheet
-
-    add_export_parser(sub)
+    for name in _MODULE_COMMANDS:  # each in its own module: add_parser(sub) and run(args)
+        importlib.import_module(f".{name}", __package__).add_parser(sub)
     return p
 
 
@@ -383,8 +387,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             "simulate": _cmd_simulate,
             "select": _cmd_select,
             "study": _cmd_study,
-            "export": _cmd_export,
-        }[args.command]
+        }.get(args.command)
+        if handler is None:  # a subcommand in its own module (_MODULE_COMMANDS)
+            handler = importlib.import_module(f".{args.command}", __package__).run
         out = handler(args)
     except (CliError, LoadError, ModelError, FitError) as e:
         print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)
