@@ -74,6 +74,15 @@ DEFAULTS: dict[str, dict[str, str]] = {
 }
 
 
+NOTE = (
+    "Type the datasheet's values (empty: not given), or upload a Kalibr `imu.yaml`, a gmwm "
+    "JSON report, a datasheet CSV or a datasheet JSON. Bias instability is drawn as its "
+    "Allan-deviation floor `(0.664 B)²` (a constant WV `(0.664 B)²/2`); each scale is marked "
+    "inside, above or below the empirical 95 % interval."
+)
+_NOTE_LOOK: dict[str, Any] = {"margin": (0, 10), "styles": {"font-size": "13px", "color": "#444"}}
+
+
 def _fmt(v: float) -> str:
     return f"{v:.4g}"
 
@@ -108,15 +117,13 @@ class CheckView(pn.viewable.Viewer):
         self.kind = ""
         self.file_spec: eg.DatasheetSpec | None = None
         self._key: Any = None
-        self._dirty = True
+        self._dirty = True  # something changed while the tab was hidden
         self._syncing = False
-        self._ticket = 0
-        self._build_widgets()
-        self._build_figures()
-        self._build_table()
+        for build in (self._build_widgets, self._build_figures, self._build_table):
+            build()
         self._build_layout()
-        self.state.param.watch(self._on_state, "revision")
-        self.param.watch(self._on_tab, "active")
+        self.state.param.watch(self._on_change, "revision")
+        self.param.watch(self._on_change, "active")
         self.refresh()
 
     # ------------------------------------------------------------------------------------
@@ -205,15 +212,7 @@ class CheckView(pn.viewable.Viewer):
         self.table = data_table(self.table_src, cols, "check_table", "gmwm-check-table", 300)
 
     def _build_layout(self) -> None:
-        note = pn.pane.Markdown(
-            "Type the datasheet's values (empty: not given), or upload a Kalibr `imu.yaml`, a "
-            "gmwm JSON report, a datasheet CSV or a datasheet JSON. Bias instability is drawn "
-            "as its Allan-deviation floor `(0.664 B)²` (a constant WV `(0.664 B)²/2`); each "
-            "scale is marked inside, above or below the empirical 95 % interval.",
-            sizing_mode="stretch_width",
-            margin=(0, 10),
-            styles={"font-size": "13px", "color": "#444"},
-        )
+        note = pn.pane.Markdown(NOTE, sizing_mode="stretch_width", **_NOTE_LOOK)
         self.panel = pn.Column(
             note,
             pn.Row(*self.inputs, sizing_mode="stretch_width"),
@@ -285,19 +284,15 @@ class CheckView(pn.viewable.Viewer):
         if event.new:
             self.load_file(event.new, self.upload.filename or "datasheet.yaml")
 
-    def _on_state(self, _event: Any = None) -> None:
+    def _on_change(self, event: Any = None) -> None:
+        """The session changed, or the tab was shown: refresh (never raising into Panel)."""
+        if getattr(event, "name", "") == "active" and not (self.active and self._dirty):
+            return
         try:
             self.refresh()
         except Exception as e:  # a display problem must not break the session
             log.exception("datasheet check refresh failed")
             self._show([f"display error: {type(e).__name__}: {e}"])
-
-    def _on_tab(self, _event: Any = None) -> None:
-        if self._visible() and self._dirty:
-            self._on_state()
-
-    def _visible(self) -> bool:
-        return self.active or not self.jobs.served
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views
@@ -358,7 +353,7 @@ class CheckView(pn.viewable.Viewer):
         key = (s.wv, s.result, s.unit, self.kind, tuple(w.value for w in self.inputs))
         if key == self._key and not force:
             return
-        if not self._visible():
+        if not (self.active or not self.jobs.served):  # tests, notebooks: always drawn
             self._dirty = True
             return
         self._dirty = False
@@ -381,7 +376,6 @@ class CheckView(pn.viewable.Viewer):
             self._clear([str(e)])
             return
         fit = s.result if s.result is not None and s.result.wv is s.wv else None
-        self._ticket += 1
         self.jobs.run(
             partial(eg.check_datasheet, s.wv, spec, fit=fit),
             self.show,

@@ -59,8 +59,8 @@ def test_true_datasheet_inside_within_binomial_tolerance(sims):
     # If the datasheet is the true model, each scale is outside its 95 % interval with
     # probability about 0.05: over 10 logs x 17 scales (170 checks) about 8.5 outside, binomial
     # sd sqrt(170 * 0.05 * 0.95) = 2.8. Percival's eta3 interval is conservative (its degrees
-    # of freedom M_j / 2^j are fewer than the true ones for these noises): measured 3 of 340
-    # on 20 seeds. The test allows the mean + 3 sd.
+    # of freedom M_j / 2^j are fewer than the true ones for these noises): measured 1 of these
+    # 170 (3 of 340 on 20 seeds). The test allows the mean + 3 sd.
     outside = checks = 0
     for wv in sims:
         v = eg.check_datasheet(wv, DS_TEXT).verdict

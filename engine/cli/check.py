@@ -3,7 +3,7 @@
     gmwm check INPUT [--channel NAME] [--fs HZ] [--levels J] [--level 0.95]
                --datasheet "arw=0.3 deg/sqrt(h), bi=5 deg/h, rrw=2 deg/h/sqrt(h)"
                | --datasheet-file imu.yaml|report.json|datasheet.csv
-               [--model SPEC] [--weights ci|identity] [--units U] [--json]
+               [--model SPEC] [--units U] [--json]
 
 The datasheet model (white noise, random walk, quantization, bias-instability floor) is drawn
 at the empirical WV's scales, with a per-scale verdict against the empirical interval
@@ -45,12 +45,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="Kalibr imu.yaml, gmwm JSON report or datasheet CSV (gmwm export), or a "
         "datasheet JSON (gmwm check --json)",
     )
-    ck.add_argument("--model", help="also fit this GMWM model, e.g. 'GM+WN+RW'")
     ck.add_argument(
-        "--weights",
-        default="ci",
-        choices=["ci", "identity"],
-        help="weighting matrix of the --model fit (default ci)",
+        "--model", help="also fit this GMWM model (ci weights) beside it, e.g. 'GM+WN+RW'"
     )
     ck.add_argument("--json", action="store_true", help="print one JSON object")
     add_log_options(ck)
@@ -78,7 +74,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         except ExportError:
             pass  # the check itself says the unit is needed
         ds = read_datasheet(args.datasheet_file, channel=name, kind=kind)
-    fit = fit_gmwm(wv, model, weights=args.weights) if model is not None else None
+    fit = fit_gmwm(wv, model) if model is not None else None
     res = check_datasheet(wv, ds, fit=fit, level=args.level)
     if args.json:
         d = res.to_dict()

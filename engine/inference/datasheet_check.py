@@ -731,16 +731,18 @@ def check_datasheet(
             )
         fit_verdict = _verdicts(fit_wv, lo, hi)
         fit_model = fit.model.spec()
+    # fields in declaration order: wv, datasheet, level, interval, datasheet WV and terms,
+    # verdicts, then the fit's WV, verdicts and model
     return DatasheetCheck(
-        wv=wv,
-        datasheet=datasheet,
-        level=float(level),
-        ci_low=lo,
-        ci_high=hi,
-        datasheet_wv=total,
-        components=comps,
-        verdict=_verdicts(total, lo, hi),
-        fit_wv=fit_wv,
-        fit_verdict=fit_verdict,
-        fit_model=fit_model,
+        wv,
+        datasheet,
+        float(level),
+        lo,
+        hi,
+        total,
+        comps,
+        _verdicts(total, lo, hi),
+        fit_wv,
+        fit_verdict,
+        fit_model,
     )
