@@ -33,7 +33,14 @@ import engine as eg
 from engine.units import DISPLAY, ExportError, si_factor, times_s
 
 from .state import AppState
-from .views import data_table, empirical_curve, hidden_alert, interval_band, log_figure
+from .views import (
+    data_table,
+    empirical_curve,
+    hidden_alert,
+    interval_band,
+    log_figure,
+    redraw_table,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -425,6 +432,7 @@ class CheckView(pn.viewable.Viewer):
         self.wv_figure.yaxis.axis_label = f"wavelet variance [{u}]"
         self.adev_figure.yaxis.axis_label = f"Allan deviation [{self.state.unit or 'u'}]"
         fv = chk.fit_verdict or ("",) * len(chk.verdict)
+        same_rows = len(self.table_src.data["verdict"]) == len(chk.verdict)
         self.table_src.data = {
             "tau [s]": [_fmt(t) for t in chk.tau_s],
             "WV": [_fmt(v) for v in chk.wv.variance],
@@ -434,6 +442,8 @@ class CheckView(pn.viewable.Viewer):
             "verdict": list(chk.verdict),
             "GMWM": list(fv),
         }
+        if same_rows:  # BokehJS keeps the old cells when the row count does not change
+            redraw_table(self.table)
         self.status.object = (
             f"**{chk.datasheet.describe()}** on {self.state.channel} (WV in {u}).  \n"
             + chk.text_summary().replace("\n  ", "  \n")

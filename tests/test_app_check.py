@@ -63,7 +63,9 @@ def test_the_fit_tabs_gmwm_is_drawn_beside(app: Any, view: Any) -> None:
     fig, src = view.wv_figure, view.wv_src
     assert np.all(np.isnan(src.data["fit"]))  # no fit yet: nothing drawn, a hint shown
     assert view.message.visible and "Fit tab" in view.message.object
+    tags = list(view.table.tags)
     assert app.state.set_model("GM+WN+RW"), app.state.error
+    assert view.table.tags != tags  # same row count: the table is told to redraw its cells
     np.testing.assert_allclose(view.wv_src.data["fit"], app.state.result.implied)
     np.testing.assert_allclose(view.adev_src.data["fit"], np.sqrt(2 * app.state.result.implied))
     lo, hi = view.result.ci_low, view.result.ci_high
@@ -137,3 +139,49 @@ def test_engine_check_is_the_views(app: Any, view: Any) -> None:
     chk = eg.check_datasheet(app.state.wv, "arw=0.3 deg/sqrt(h), bi=10 deg/h, rrw=2 deg/h/sqrt(h)")
     np.testing.assert_allclose(view.wv_src.data["ds"], chk.datasheet_wv, rtol=1e-12)
     assert tuple(view.wv_src.data["verdict"]) == chk.verdict
+
+
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.browser
+def test_browser_typed_value_redraws_the_check(app_demo_file: Any) -> None:
+    from conftest import served_app
+    from test_app_browser import (
+        CHROMIUM,
+        CHROMIUM_ARGS,
+        TIMEOUT_MS,
+        Tab,
+        _app_for,
+        _require_chromium,
+    )
+
+    _require_chromium()
+    from playwright.sync_api import sync_playwright
+
+    with served_app(app_demo_file) as (port, _thread), sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            ctx = b.new_context(viewport={"width": 1400, "height": 1000})
+            t = Tab(ctx.new_page()).open(f"http://127.0.0.1:{port}/?model=GM%2BWN%2BRW")
+            page = t.page
+            page.locator(".bk-tab", has_text="Datasheet check").first.click()
+            box = page.locator(".gmwm-check-0 input").first
+            box.wait_for(timeout=TIMEOUT_MS)
+            box.fill("0.9")
+            box.press("Enter")
+            app = _app_for(lambda a: a.served and "Datasheet check" in a.lazy_views)
+            assert app is not None
+            view = app.lazy_views["Datasheet check"]
+            t.wait_for(
+                lambda: (
+                    view.result is not None
+                    and "ARW 0.9 deg/sqrt(h)" in view.result.datasheet.describe()
+                ),
+                "the typed ARW in the session's check",
+            )
+            # ARW 0.9: the white-noise WV is 9x a 0.3 datasheet's; the page shows the verdicts
+            t.wait_for(lambda: "above" in t.table_text(".gmwm-check-table"), "the verdicts")
+            assert "inside" in t.table_text(".gmwm-check-table")  # the GMWM column
+            assert page.get_by_text("ARW 0.9 deg/sqrt(h)").first.is_visible()
+            assert t.errors == [], t.errors
+        finally:
+            b.close()
