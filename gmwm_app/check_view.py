@@ -32,15 +32,8 @@ from bokeh.models import ColumnDataSource, Legend, LegendItem, StringFormatter, 
 import engine as eg
 from engine.units import DISPLAY, ExportError, si_factor, times_s
 
+from . import views
 from .state import AppState
-from .views import (
-    data_table,
-    empirical_curve,
-    hidden_alert,
-    interval_band,
-    log_figure,
-    redraw_table,
-)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -147,7 +140,7 @@ class CheckView(pn.viewable.Viewer):
             accept=".yaml,.yml,.json,.csv", multiple=False, css_classes=["gmwm-check-upload"]
         )
         self.upload.param.watch(self._on_upload, "value")
-        self.message = hidden_alert("warning", css_classes=["gmwm-check-message"])
+        self.message = views.hidden_alert("warning", css_classes=["gmwm-check-message"])
         self.status = pn.pane.Markdown(
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-check-status"]
         )
@@ -157,9 +150,9 @@ class CheckView(pn.viewable.Viewer):
         return ColumnDataSource({c: [] for c in cols}, name=name)
 
     def _figure(self, name: str, title: str, x_label: str, src: ColumnDataSource) -> Any:
-        p = log_figure(name, title, 400, x_label)
-        band = interval_band(p, src, "lo", "hi")
-        line, pts = empirical_curve(p, src, "emp", 1.5, 5)
+        p = views.log_figure(name, title, 400, x_label)
+        band = views.interval_band(p, src, "lo", "hi")
+        line, pts = views.empirical_curve(p, src, "emp", 1.5, 5)
         ds_line = p.line("tau_s", "ds", source=src, line_color=DATASHEET_COLOR, line_width=2.5)
         ds_pts = p.scatter(
             "tau_s",
@@ -216,7 +209,7 @@ class CheckView(pn.viewable.Viewer):
             TableColumn(field=c, title=c, width=95, sortable=False, formatter=StringFormatter())
             for c in self.table_columns
         ]
-        self.table = data_table(self.table_src, cols, "check_table", "gmwm-check-table", 300)
+        self.table = views.data_table(self.table_src, cols, "check_table", "gmwm-check-table", 300)
 
     def _build_layout(self) -> None:
         note = pn.pane.Markdown(NOTE, sizing_mode="stretch_width", **_NOTE_LOOK)
@@ -443,7 +436,7 @@ class CheckView(pn.viewable.Viewer):
             "GMWM": list(fv),
         }
         if same_rows:  # BokehJS keeps the old cells when the row count does not change
-            redraw_table(self.table)
+            views.redraw_table(self.table)
         self.status.object = (
             f"**{chk.datasheet.describe()}** on {self.state.channel} (WV in {u}).  \n"
             + chk.text_summary().replace("\n  ", "  \n")

@@ -13,10 +13,16 @@ from typing import Any
 
 import numpy as np
 import pytest
+import test_app_browser
 
 import engine as eg
 
 BI_FACTOR = math.sqrt(2 * math.log(2) / math.pi)
+
+# the browser fixtures of tests/test_app_browser.py (a served app, chromium, a new page)
+browser = test_app_browser.browser
+server = test_app_browser.server
+new_tab = test_app_browser.new_tab
 
 
 @pytest.fixture
@@ -143,45 +149,31 @@ def test_engine_check_is_the_views(app: Any, view: Any) -> None:
 
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.browser
-def test_browser_typed_value_redraws_the_check(app_demo_file: Any) -> None:
-    from conftest import served_app
-    from test_app_browser import (
-        CHROMIUM,
-        CHROMIUM_ARGS,
-        TIMEOUT_MS,
-        Tab,
-        _app_for,
-        _require_chromium,
+def test_browser_typed_value_redraws_the_check(server: str, new_tab: Any) -> None:
+    from test_app_browser import TIMEOUT_MS, _app_for
+
+    t = new_tab().open(f"{server}?model=GM%2BWN%2BRW")
+    page = t.page
+    page.locator(".bk-tab", has_text="Datasheet check").first.click()
+    box = page.locator(".gmwm-check-0 input").first
+    box.wait_for(timeout=TIMEOUT_MS)
+    box.fill("0.9")
+    box.press("Enter")
+    t.wait_for(
+        lambda: _app_for(lambda a: a.served and "Datasheet check" in a.lazy_views) is not None,
+        "the tab built in the session",
     )
-
-    _require_chromium()
-    from playwright.sync_api import sync_playwright
-
-    with served_app(app_demo_file) as (port, _thread), sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            ctx = b.new_context(viewport={"width": 1400, "height": 1000})
-            t = Tab(ctx.new_page()).open(f"http://127.0.0.1:{port}/?model=GM%2BWN%2BRW")
-            page = t.page
-            page.locator(".bk-tab", has_text="Datasheet check").first.click()
-            box = page.locator(".gmwm-check-0 input").first
-            box.wait_for(timeout=TIMEOUT_MS)
-            box.fill("0.9")
-            box.press("Enter")
-            app = _app_for(lambda a: a.served and "Datasheet check" in a.lazy_views)
-            assert app is not None
-            view = app.lazy_views["Datasheet check"]
-            t.wait_for(
-                lambda: (
-                    view.result is not None
-                    and "ARW 0.9 deg/sqrt(h)" in view.result.datasheet.describe()
-                ),
-                "the typed ARW in the session's check",
-            )
-            # ARW 0.9: the white-noise WV is 9x a 0.3 datasheet's; the page shows the verdicts
-            t.wait_for(lambda: "above" in t.table_text(".gmwm-check-table"), "the verdicts")
-            assert "inside" in t.table_text(".gmwm-check-table")  # the GMWM column
-            assert page.get_by_text("ARW 0.9 deg/sqrt(h)").first.is_visible()
-            assert t.errors == [], t.errors
-        finally:
-            b.close()
+    view = _app_for(lambda a: a.served and "Datasheet check" in a.lazy_views).lazy_views[
+        "Datasheet check"
+    ]
+    t.wait_for(
+        lambda: (
+            view.result is not None and "ARW 0.9 deg/sqrt(h)" in view.result.datasheet.describe()
+        ),
+        "the typed ARW in the session's check",
+    )
+    # ARW 0.9: the white-noise WV is 9x a 0.3 datasheet's; the page shows the verdicts
+    t.wait_for(lambda: "above" in t.table_text(".gmwm-check-table"), "the verdicts")
+    assert "inside" in t.table_text(".gmwm-check-table")  # the GMWM column
+    assert page.get_by_text("ARW 0.9 deg/sqrt(h)").first.is_visible()
+    assert t.errors == [], t.errors
