@@ -120,6 +120,7 @@ def test_verdict_invariants(sims):
 
 def test_parse_spellings_and_units():
     a = eg.parse_datasheet("arw=0.3 deg/sqrt(h)")
+    assert eg.parse_datasheet("arw=3e-1deg/sqrt(h)").values == a.values  # no space needed
     b = eg.parse_datasheet("n=0.005 (deg/s)/sqrt(Hz)")
     c = eg.parse_datasheet("ARW = 0.3 °/√hr")
     want = 0.3 / 60 * D2R  # rad/s/sqrt(Hz)
@@ -150,6 +151,8 @@ def test_parse_spellings_and_units():
         ("arw=-1 deg/sqrt(h)", "non-negative"),
         ("arw=0.3 deg/sqrt(h), n=0.005 deg/s/sqrt(Hz)", "second time"),
         ("", "no value"),
+        ("arw=1..2 deg/sqrt(h)", "KEY=VALUE UNIT"),
+        ("arw=abc deg/sqrt(h)", "KEY=VALUE UNIT"),
     ],
 )
 def test_parse_errors(text, msg):
@@ -197,6 +200,8 @@ def test_reader_round_trip_reports(tmp_path, gyro_fit, fmt, suffix):
     path = tmp_path / f"report{suffix}"
     eg.export(path, {"gyro_x": gyro_fit}, fmt)
     ds = eg.read_datasheet(path)
+    # the file's only channel is read whatever the log's channel is called
+    assert eg.read_datasheet(path, channel="gyro_y").values == ds.values
     n, k = _fit_nk(gyro_fit)
     assert ds.values["N"] == pytest.approx(n, rel=1e-9)
     assert ds.values["K"] == pytest.approx(k, rel=1e-9)

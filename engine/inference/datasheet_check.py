@@ -314,13 +314,12 @@ def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec
         if not raw.strip():
             continue
         key, sep, rest = raw.partition("=")
-        m = re.fullmatch(r"\s*([-+0-9.eE]+)\s*(\S.*?)?\s*", rest)
+        m = re.fullmatch(
+            r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)(?![\d.])\s*(\S.*?)?\s*", rest
+        )
         if not sep or not key.strip() or m is None:
             raise DatasheetError(f"datasheet item {raw.strip()!r} is not KEY=VALUE UNIT")
-        try:
-            value = float(m.group(1))
-        except ValueError:
-            raise DatasheetError(f"datasheet item {raw.strip()!r}: bad number") from None
+        value = float(m.group(1))  # the pattern admits only numbers float() reads
         if not m.group(2):
             raise DatasheetError(
                 f"datasheet item {raw.strip()!r} has no unit (e.g. arw=0.3 deg/sqrt(h))"
@@ -354,7 +353,8 @@ def _from_rows(rows: list[Mapping[str, Any]], kind: str | None, where: str) -> D
 
 
 def _pick(names: list[str], channel: str | None, where: str) -> str:
-    if channel is not None:
+    """The channel to read: ``channel``, or the file's only one."""
+    if channel is not None and not (len(names) == 1 and channel not in names):
         if channel not in names:
             raise DatasheetError(f"{where} has no channel {channel!r}; channels: {names}")
         return channel
