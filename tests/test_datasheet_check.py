@@ -342,3 +342,22 @@ def test_real_adis16405_gyro_departs(real_data):
         # the datasheet's white noise is below the data at 0.1-10 s by 0.6-0.8 in WV
         mid = (wv.tau_s > 0.1) & (wv.tau_s < 10)
         assert np.all((chk.ratio[mid] > 0.6) & (chk.ratio[mid] < 0.8)), chk.ratio[mid]
+
+
+def test_real_navchip_reproduces_the_case_study(real_data):
+    # README case study "NavChip gyroscope" (tests/benchmarks/case_navchip.py, its own
+    # conversion): datasheet ARW 0.003 (deg/s)/sqrt(Hz), BI 10 deg/h; below the interval at 17
+    # of 20 scales, above at the 3 scales 0.26-1 s; GMWM (the paper's model) outside at 8.
+    log = eg.load_log(real_data / "derived" / "navchip_wv_av.h5")
+    wv = log.wv["gyro_x"]
+    chk = eg.check_datasheet(
+        wv, "n=0.003 deg/s/sqrt(Hz), bi=10 deg/h", fit=eg.fit_gmwm(wv, "QN+WN+2*GM+RW+DR")
+    )
+    n, b = 0.003 * D2R, 10 / 3600 * D2R  # rad/s/sqrt(Hz), rad/s
+    floor = (math.sqrt(2 * math.log(2) / math.pi) * b) ** 2 / 2
+    np.testing.assert_allclose(chk.datasheet_wv, n * n * wv.fs / wv.tau_samples + floor)
+    s = chk.summary()
+    assert (s["below"], s["above"], s["fit_outside"]) == (17, 3, 8)
+    above = [band for band in s["bands"] if band["verdict"] == "above"]
+    assert len(above) == 1 and above[0]["tau_s_from"] == pytest.approx(0.256)
+    assert above[0]["tau_s_to"] == pytest.approx(1.024)
