@@ -60,8 +60,9 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from .._jsonutil import JsonFields, columns_table, interval_columns
 from ..units import squared
-from ._kernel import as_series, cumsum_demeaned
+from ._kernel import as_series, check_fs_alpha, cumsum_demeaned
 from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval
 
 __all__ = [
@@ -90,7 +91,7 @@ def _t_quantile(alpha: float, df: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class WaveletCrossCovariance(LevelScales):
+class WaveletCrossCovariance(LevelScales, JsonFields):
     """Empirical Haar WCCV (lag 0) of two series, with its asymptotic interval.
 
     Attributes
@@ -143,6 +144,11 @@ class WaveletCrossCovariance(LevelScales):
     names: tuple[str, str] = ("x", "y")
     unit: str = ""
 
+    json_fields = (
+        "names n fs alpha unit levels tau_samples tau_s covariance ci_low ci_high std_error "
+        "correlation ci_method bandwidth df n_coef"
+    )
+
     @property
     def correlation(self) -> np.ndarray:
         """Wavelet correlation ``nu_xy / sqrt(nu_xx nu_yy)`` per level (nan where a WV is 0)."""
@@ -150,50 +156,26 @@ class WaveletCrossCovariance(LevelScales):
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(den > 0, self.covariance / np.where(den > 0, den, 1.0), np.nan)
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary."""
-        return {
-            "names": list(self.names),
-            "n": int(self.n),
-            "fs": float(self.fs),
-            "alpha": float(self.alpha),
-            "unit": self.unit,
-            "levels": self.levels.tolist(),
-            "tau_samples": self.tau_samples.tolist(),
-            "tau_s": self.tau_s.tolist(),
-            "covariance": self.covariance.tolist(),
-            "ci_low": self.ci_low.tolist(),
-            "ci_high": self.ci_high.tolist(),
-            "std_error": self.std_error.tolist(),
-            "correlation": [None if not np.isfinite(v) else float(v) for v in self.correlation],
-            "ci_method": list(self.ci_method),
-            "bandwidth": self.bandwidth.tolist(),
-            "df": self.df.tolist(),
-            "n_coef": self.n_coef.tolist(),
-        }
-
     def table(self) -> str:
         """Readable table."""
-        ci = f"{100 * (1 - self.alpha):g}%"
         u = f" [{self.unit}]" if self.unit else ""
-        lines = [
+        return columns_table(
             f"Haar wavelet cross-covariance of {self.names[0]} and {self.names[1]}{u}; "
             f"N = {self.n}, fs = {self.fs:g} Hz",
-            f"{'level':>5} {'tau [s]':>11} {'WCCV':>13} {ci + ' low':>12} "
-            f"{ci + ' high':>12} {'corr':>7}  interval",
-        ]
-        rho = self.correlation
-        for i in range(self.n_levels):
-            lines.append(
-                f"{self.levels[i]:>5d} {self.tau_s[i]:>11.5g} {self.covariance[i]:>13.5e} "
-                f"{self.ci_low[i]:>12.4e} {self.ci_high[i]:>12.4e} {rho[i]:>7.3f}  "
-                f"{self.ci_method[i]}"
-            )
-        return "\n".join(lines)
+            [
+                ("level", ">5d", self.levels),
+                ("tau [s]", ">11.5g", self.tau_s),
+                ("WCCV", ">13.5e", self.covariance),
+                *interval_columns(self.alpha, self.ci_low, self.ci_high),
+                ("corr", ">7.3f", self.correlation),
+                # the method column is set off by two spaces
+                (" interval", "", [" " + m for m in self.ci_method]),
+            ],
+        )
 
 
 @dataclass(frozen=True, eq=False)
-class WVMatrix(LevelScales):
+class WVMatrix(LevelScales, JsonFields):
     """Wavelet variances (diagonal) and cross-covariances (off-diagonal) of k channels.
 
     ``values[j - 1]`` is the k x k matrix at level j: symmetric, the WV of channel p at
@@ -245,6 +227,12 @@ class WVMatrix(LevelScales):
     alpha: float = 0.05
     units: tuple[str, ...] = ()
 
+    #: the ``to_dict()`` keys; matrices as nested lists ``[level][p][q]``
+    json_fields = (
+        "channels units n fs alpha levels tau_samples tau_s values ci_low ci_high std_error "
+        "correlation ci_method bandwidth df n_coef"
+    )
+
     # ---- shape and names -----------------------------------------------------------------
     @property
     def k(self) -> int:
@@ -267,6 +255,12 @@ class WVMatrix(LevelScales):
     def _unit(self, p: int) -> str:
         return self.units[p] if p < len(self.units) else ""
 
+    def _common(self) -> dict[str, Any]:
+        """The fields a one-channel or one-pair view shares with the matrix."""
+        return {
+            f: getattr(self, f) for f in ("levels", "tau_samples", "n_coef", "n", "fs", "alpha")
+        }
+
     # ---- views ----------------------------------------------------------------------------
     @property
     def correlation(self) -> np.ndarray:
@@ -280,15 +274,10 @@ class WVMatrix(LevelScales):
         """The WV of one channel (equal to :func:`engine.wavelet_variance` of it)."""
         p = self.index(channel)
         return WaveletVariance(
-            levels=self.levels,
-            tau_samples=self.tau_samples,
+            **self._common(),
             variance=self.values[:, p, p],
             ci_low=self.ci_low[:, p, p],
             ci_high=self.ci_high[:, p, p],
-            n_coef=self.n_coef,
-            n=self.n,
-            fs=self.fs,
-            alpha=self.alpha,
             unit=self._unit(p),
         )
 
@@ -298,8 +287,7 @@ class WVMatrix(LevelScales):
         up, uq = self._unit(p), self._unit(q)
         unit = (squared(up) if up == uq else f"{up}*{uq}") if up and uq else ""
         return WaveletCrossCovariance(
-            levels=self.levels,
-            tau_samples=self.tau_samples,
+            **self._common(),
             covariance=self.values[:, p, q],
             ci_low=self.ci_low[:, p, q],
             ci_high=self.ci_high[:, p, q],
@@ -309,10 +297,6 @@ class WVMatrix(LevelScales):
             ci_method=self.ci_method,
             bandwidth=self.bandwidth,
             df=self.df,
-            n_coef=self.n_coef,
-            n=self.n,
-            fs=self.fs,
-            alpha=self.alpha,
             names=(self.channels[p], self.channels[q]),
             unit=unit,
         )
@@ -354,31 +338,6 @@ class WVMatrix(LevelScales):
             ci_method=self.ci_method[:levels],
             **{f: getattr(self, f)[s] for f in per_level},
         )
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary; matrices as nested lists ``[level][p][q]``."""
-        rho = self.correlation
-        return {
-            "channels": list(self.channels),
-            "units": list(self.units),
-            "n": int(self.n),
-            "fs": float(self.fs),
-            "alpha": float(self.alpha),
-            "levels": self.levels.tolist(),
-            "tau_samples": self.tau_samples.tolist(),
-            "tau_s": self.tau_s.tolist(),
-            "values": self.values.tolist(),
-            "ci_low": self.ci_low.tolist(),
-            "ci_high": self.ci_high.tolist(),
-            "std_error": self.std_error.tolist(),
-            "correlation": [
-                [[float(v) if np.isfinite(v) else None for v in row] for row in lev] for lev in rho
-            ],
-            "ci_method": list(self.ci_method),
-            "bandwidth": self.bandwidth.tolist(),
-            "df": self.df.tolist(),
-            "n_coef": self.n_coef.tolist(),
-        }
 
     def table(self) -> str:
         """Readable summary: the WV of each channel and the wavelet correlation of each pair."""
@@ -543,13 +502,6 @@ def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> d
     }
 
 
-def _check_common(fs: float, alpha: float) -> None:
-    if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs) and fs > 0):
-        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
-
-
 def _levels(n: int, levels: int | None) -> int:
     jmax = default_levels(n)
     if levels is None:
@@ -610,7 +562,7 @@ def wavelet_cross_covariance(
             f"the two series have different lengths ({a.size} and {b.size} "
             "samples): a cross-covariance needs series sampled together"
         )
-    _check_common(fs, alpha)
+    check_fs_alpha(fs, alpha)
     lv = _levels(a.size, levels)
     r = _compute([a, b], lv, alpha, ci=True)
     return WaveletCrossCovariance(
@@ -770,7 +722,7 @@ def wv_matrix(
     summation order (agreement to about 1e-15 relative).
     """
     names, series, fs_v, unit_list = _gather(data, channels, fs, units)
-    _check_common(fs_v, alpha)
+    check_fs_alpha(fs_v, alpha)
     lv = _levels(series[0].size, levels)
     r = _compute(series, lv, alpha, ci=ci)
     return WVMatrix(
