@@ -73,10 +73,8 @@ def check_fs_alpha(fs: float, alpha: float) -> None:
 
     Parameters
     ----------
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level ``1 - alpha``.
+    fs, alpha : float
+        Sampling frequency (Hz) and interval level ``1 - alpha``.
     """
     if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs) and fs > 0):
         raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")

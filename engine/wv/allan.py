@@ -38,12 +38,8 @@ class AllanVariance(JsonFields):
         Allan variance and its interval, in (signal unit)^2.
     n_terms : ndarray of int, shape (K,)
         Number of overlapping differences summed, ``N - 2m + 1``.
-    n : int
-        Series length (samples).
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level ``1 - alpha``.
+    n, fs, alpha : int, float, float
+        Series length (samples), sampling frequency (Hz), interval level ``1 - alpha``.
     interval : str
         ``"chi2"`` (chi-square, Percival's eta3 degrees of freedom) or ``"rel"`` (the
         ``1/sqrt(2 (N/m - 1))`` relative error of the inertial-sensor literature).

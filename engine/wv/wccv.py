@@ -90,50 +90,35 @@ def _t_quantile(alpha: float, df: np.ndarray) -> np.ndarray:
     return np.where(df > 1e6, special.ndtri(1.0 - alpha / 2.0), q)
 
 
-@dataclass(frozen=True, eq=False)
-class WaveletCrossCovariance(LevelScales, JsonFields):
-    """Empirical Haar WCCV (lag 0) of two series, with its asymptotic interval.
+@dataclass(frozen=True, eq=False, kw_only=True)
+class LagWindowIntervals(LevelScales, JsonFields):
+    """The per-level settings and intervals that a WCCV and a WV matrix share (keyword-only
+    fields; the entries' shapes are the subclass's).
 
     Attributes
     ----------
     levels, tau_samples : ndarray of int, shape (J,)
         Levels ``1..J`` and scales ``2^j`` (samples).
-    covariance : ndarray, shape (J,)
-        WCCV ``nu_xy_j`` in ``unit_x * unit_y``.
-    ci_low, ci_high : ndarray, shape (J,)
-        ``1 - alpha`` interval ``nu -/+ t_{1-alpha/2}(df) std_error``.
-    std_error : ndarray, shape (J,)
-        Asymptotic standard error ``sqrt(sigma2_LR / M_j)``.
-    variance_x, variance_y : ndarray, shape (J,)
-        The WV of each series (by-products of the same pass).
+    ci_low, ci_high, std_error
+        ``1 - alpha`` interval ``nu -/+ t_{1-alpha/2}(df) std_error`` and the asymptotic
+        standard error ``sqrt(sigma2_LR / M_j)`` of every entry.
     ci_method : tuple of str, length J
         ``"lag-window"`` (weighted overlapping batch means) or ``"gaussian-edf"`` per level.
     bandwidth : ndarray of int, shape (J,)
         Lag-window half-width ``2 b`` in samples (0 where the Gaussian approximation is used).
     df : ndarray, shape (J,)
-        Degrees of freedom of the Student quantile of the interval.
+        Degrees of freedom of the Student quantile of the (off-diagonal) intervals.
     n_coef : ndarray of int, shape (J,)
         ``M_j``.
-    n : int
-        Series length (samples).
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level ``1 - alpha``.
-    names : tuple of str
-        Names of the two series.
-    unit : str
-        Unit of the WCCV (e.g. ``"(deg/s)^2"``), empty when unknown.
+    n, fs, alpha : int, float, float
+        Samples per series, sampling frequency (Hz), interval level ``1 - alpha``.
     """
 
     levels: np.ndarray
     tau_samples: np.ndarray
-    covariance: np.ndarray
     ci_low: np.ndarray
     ci_high: np.ndarray
     std_error: np.ndarray
-    variance_x: np.ndarray
-    variance_y: np.ndarray
     ci_method: tuple[str, ...]
     bandwidth: np.ndarray
     df: np.ndarray
@@ -141,6 +126,29 @@ class WaveletCrossCovariance(LevelScales, JsonFields):
     n: int
     fs: float = 1.0
     alpha: float = 0.05
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WaveletCrossCovariance(LagWindowIntervals):
+    """Empirical Haar WCCV (lag 0) of two series, with its asymptotic interval.
+
+    Attributes
+    ----------
+    covariance : ndarray, shape (J,)
+        WCCV ``nu_xy_j`` in ``unit_x * unit_y``.
+    variance_x, variance_y : ndarray, shape (J,)
+        The WV of each series (by-products of the same pass).
+    names : tuple of str
+        Names of the two series.
+    unit : str
+        Unit of the WCCV (e.g. ``"(deg/s)^2"``), empty when unknown.
+
+    The levels, intervals (shape (J,)) and settings are :class:`LagWindowIntervals`'s.
+    """
+
+    covariance: np.ndarray
+    variance_x: np.ndarray
+    variance_y: np.ndarray
     names: tuple[str, str] = ("x", "y")
     unit: str = ""
 
@@ -174,8 +182,8 @@ class WaveletCrossCovariance(LevelScales, JsonFields):
         )
 
 
-@dataclass(frozen=True, eq=False)
-class WVMatrix(LevelScales, JsonFields):
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WVMatrix(LagWindowIntervals):
     """Wavelet variances (diagonal) and cross-covariances (off-diagonal) of k channels.
 
     ``values[j - 1]`` is the k x k matrix at level j: symmetric, the WV of channel p at
@@ -187,44 +195,17 @@ class WVMatrix(LevelScales, JsonFields):
     ----------
     channels : tuple of str, length k
         Channel names, in matrix order.
-    levels, tau_samples : ndarray of int, shape (J,)
-        Levels and scales ``2^j`` (samples).
-    values, ci_low, ci_high, std_error : ndarray, shape (J, k, k)
-        Estimates, ``1 - alpha`` intervals (eta3 chi-square on the diagonal, normal with the
-        lag-window long-run variance off it) and asymptotic standard errors (lag-window for
-        every entry; the Gaussian EDF approximation at the top levels).
-    ci_method : tuple of str, length J
-        ``"lag-window"`` or ``"gaussian-edf"`` per level (off-diagonal intervals).
-    bandwidth : ndarray of int, shape (J,)
-        Lag-window half-width in samples (0 where the Gaussian approximation is used).
-    df : ndarray, shape (J,)
-        Degrees of freedom of the Student quantile of the off-diagonal intervals.
-    n_coef : ndarray of int, shape (J,)
-        ``M_j``.
-    n : int
-        Samples per channel.
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level.
+    values : ndarray, shape (J, k, k)
+        Estimates. The intervals and standard errors (:class:`LagWindowIntervals`) have the
+        same shape: eta3 chi-square intervals on the diagonal, normal with the lag-window
+        long-run variance off it; lag-window standard errors for every entry (the Gaussian
+        EDF approximation at the top levels).
     units : tuple of str, length k
         Unit of each channel (empty when unknown).
     """
 
     channels: tuple[str, ...]
-    levels: np.ndarray
-    tau_samples: np.ndarray
     values: np.ndarray
-    ci_low: np.ndarray
-    ci_high: np.ndarray
-    std_error: np.ndarray
-    ci_method: tuple[str, ...]
-    bandwidth: np.ndarray
-    df: np.ndarray
-    n_coef: np.ndarray
-    n: int
-    fs: float = 1.0
-    alpha: float = 0.05
     units: tuple[str, ...] = ()
 
     #: the ``to_dict()`` keys; matrices as nested lists ``[level][p][q]``
@@ -448,7 +429,16 @@ def _long_run_variances(
     return acc / max(n_t, 1) / _window_norms(_R, sbin, m_used) / (scale * scale)
 
 
-def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> dict[str, Any]:
+def _compute(
+    series: list[np.ndarray],
+    levels: int,
+    alpha: float,
+    ci: bool,
+    *,
+    names: Sequence[str],
+    fs: float,
+    units: Sequence[str] = (),
+) -> WVMatrix:
     """Values, standard errors and intervals of all pairs of k series (shared code)."""
     n = series[0].size
     k = len(series)
@@ -488,18 +478,23 @@ def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> d
     hi = vals + z * se
     for p in range(k):
         lo[:, p, p], hi[:, p, p] = eta3_interval(vals[:, p, p], m_j, tau, alpha)
-    return {
-        "levels": lv,
-        "tau": tau,
-        "m_j": m_j,
-        "values": vals,
-        "se": se,
-        "lo": lo,
-        "hi": hi,
-        "method": tuple(method),
-        "bandwidth": bandwidth,
-        "df": df,
-    }
+    return WVMatrix(
+        channels=tuple(names),
+        levels=lv,
+        tau_samples=tau,
+        values=vals,
+        ci_low=lo,
+        ci_high=hi,
+        std_error=se,
+        ci_method=tuple(method),
+        bandwidth=bandwidth,
+        df=df,
+        n_coef=m_j,
+        n=int(n),
+        fs=float(fs),
+        alpha=float(alpha),
+        units=tuple(units),
+    )
 
 
 def _levels(n: int, levels: int | None) -> int:
@@ -564,26 +559,8 @@ def wavelet_cross_covariance(
         )
     check_fs_alpha(fs, alpha)
     lv = _levels(a.size, levels)
-    r = _compute([a, b], lv, alpha, ci=True)
-    return WaveletCrossCovariance(
-        levels=r["levels"],
-        tau_samples=r["tau"],
-        covariance=r["values"][:, 0, 1],
-        ci_low=r["lo"][:, 0, 1],
-        ci_high=r["hi"][:, 0, 1],
-        std_error=r["se"][:, 0, 1],
-        variance_x=r["values"][:, 0, 0],
-        variance_y=r["values"][:, 1, 1],
-        ci_method=r["method"],
-        bandwidth=r["bandwidth"],
-        df=r["df"],
-        n_coef=r["m_j"],
-        n=int(a.size),
-        fs=float(fs),
-        alpha=float(alpha),
-        names=(str(names[0]), str(names[1])),
-        unit=unit,
-    )
+    pair = (str(names[0]), str(names[1]))
+    return replace(_compute([a, b], lv, alpha, True, names=pair, fs=fs).pair(0, 1), unit=unit)
 
 
 def _is_log(data: Any) -> bool:
@@ -724,21 +701,4 @@ def wv_matrix(
     names, series, fs_v, unit_list = _gather(data, channels, fs, units)
     check_fs_alpha(fs_v, alpha)
     lv = _levels(series[0].size, levels)
-    r = _compute(series, lv, alpha, ci=ci)
-    return WVMatrix(
-        channels=tuple(names),
-        levels=r["levels"],
-        tau_samples=r["tau"],
-        values=r["values"],
-        ci_low=r["lo"],
-        ci_high=r["hi"],
-        std_error=r["se"],
-        ci_method=r["method"],
-        bandwidth=r["bandwidth"],
-        df=r["df"],
-        n_coef=r["m_j"],
-        n=int(series[0].size),
-        fs=float(fs_v),
-        alpha=float(alpha),
-        units=tuple(unit_list),
-    )
+    return _compute(series, lv, alpha, ci, names=names, fs=fs_v, units=unit_list)
