@@ -3,6 +3,7 @@ and the plain-text column tables of the per-level results."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Iterable, Sequence
@@ -10,7 +11,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-__all__ = ["json_ready", "json_fields", "JsonFields", "columns_table", "interval_columns"]
+__all__ = [
+    "json_ready",
+    "json_fields",
+    "JsonFields",
+    "FieldsDict",
+    "columns_table",
+    "interval_columns",
+]
 
 
 def json_ready(o: Any) -> Any:
@@ -58,6 +66,15 @@ class JsonFields:
         """JSON-ready dictionary of the attributes named in ``json_fields``, in that order
         (arrays as lists, NaN as None)."""
         return json_fields(self, self.json_fields)
+
+
+class FieldsDict:
+    """Mixin for a dataclass: ``to_dict()`` is ``dataclasses.asdict`` (every field by name,
+    values as they are)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary: every field by name."""
+        return dataclasses.asdict(self)  # type: ignore[call-overload]
 
 
 def interval_columns(

@@ -48,9 +48,7 @@ def default_levels(n: int) -> int:
     n : int
         Series length (samples), at least 3.
     """
-    if n < 3:
-        raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
-    return int(np.floor(np.log2(n - 1)))
+    return _log2_levels(n, 3, n - 1)
 
 
 def max_levels(n: int) -> int:
@@ -66,9 +64,14 @@ def max_levels(n: int) -> int:
     n : int
         Series length (samples), at least 2.
     """
-    if n < 2:
+    return _log2_levels(n, 2, n)
+
+
+def _log2_levels(n: int, least: int, m: int) -> int:
+    """``floor(log2(m))`` (exact, integer) for a series of ``n >= least`` samples."""
+    if n < least:
         raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
-    return int(n).bit_length() - 1
+    return int(m).bit_length() - 1
 
 
 class LevelScales:
