@@ -69,6 +69,23 @@ class ProgressThrottle:
             return True
         return False
 
+    def step(
+        self,
+        done: int,
+        total: int,
+        observer: Callable[[int, int], None] | None,
+        cancel: threading.Event,
+        cancelled: type[Exception],
+    ) -> int | None:
+        """The head of a job's progress callback (worker thread): tell ``observer``, raise
+        ``cancelled`` once ``cancel`` is set, and return the bar's value (0-100) when an update
+        is due (:meth:`due`), else None."""
+        if observer is not None:
+            observer(done, total)
+        if cancel.is_set():
+            raise cancelled
+        return int(100 * done / max(total, 1)) if self.due(done, total) else None
+
 
 class Jobs:
     """Run work off the loop and apply it on the page, for one session.

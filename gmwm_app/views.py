@@ -13,6 +13,7 @@ plain data for the widgets of ``app.py``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -660,6 +661,49 @@ def job_progress() -> Any:
         sizing_mode="stretch_width",
         margin=(0, 10),
     )
+
+
+def job_controls(
+    label: str,
+    start: Callable[[], Any],
+    cancel: Callable[[], Any],
+    *,
+    width: int,
+    cancel_width: int,
+    margin: tuple[int, ...] = (22, 5, 5, 5),
+    description: str | None = None,
+) -> tuple[Any, Any, Any]:
+    """The controls of a tab's background job: its start button, a Cancel button (disabled
+    until a job runs) and its progress bar (:func:`job_progress`).
+
+    Parameters
+    ----------
+    label : str
+        Text of the start button.
+    start, cancel : callable
+        Called without arguments when the start or the Cancel button is clicked.
+    width, cancel_width : int
+        Widths of the two buttons (px).
+    margin : tuple of int
+        Margin of the start button.
+    description : str, optional
+        Tooltip of the start button.
+
+    Returns
+    -------
+    (start_button, cancel_button, progress)
+    """
+    import panel as pn
+
+    run = pn.widgets.Button(
+        label=label, color="primary", width=width, margin=margin, description=description
+    )
+    run.on_click(lambda _e: start())
+    stop = pn.widgets.Button(
+        label="Cancel", color="light", width=cancel_width, margin=(22, 5, 5, 5), disabled=True
+    )
+    stop.on_click(lambda _e: cancel())
+    return run, stop, job_progress()
 
 
 def redraw_table(table: DataTable) -> None:
