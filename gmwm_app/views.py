@@ -507,10 +507,7 @@ def data_table(
     name: str,
     css: str,
     height: int,
-    *,
-    sortable: bool = False,
-    selectable: bool = False,
-    reorderable: bool = False,
+    **flags: bool,
 ) -> DataTable:
     """A full-width table in the app's style: no index column, 26 px rows.
 
@@ -522,28 +519,28 @@ def data_table(
         The model name (tests find the table by it) and its CSS class.
     height
         Height in pixels.
-    sortable, selectable, reorderable
-        Passed to Bokeh's ``DataTable``.
+    **flags
+        ``sortable``, ``selectable``, ``reorderable``: passed to Bokeh's ``DataTable``, each
+        False unless given.
 
     Returns
     -------
     DataTable
         The table.
     """
+    flags = {"sortable": False, "selectable": False, "reorderable": False, **flags}
     # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
     return DataTable(
         source=source,
         columns=columns,
         index_position=None,
-        sortable=sortable,
-        reorderable=reorderable,
-        selectable=selectable,
         autosize_mode="force_fit",
         height=height,
         row_height=26,
         sizing_mode="stretch_width",
         name=name,
         css_classes=[css],
+        **flags,
     )
 
 

@@ -37,6 +37,7 @@ __all__ = [
     "haar_coefficients",
     "eta3_interval",
     "LevelScales",
+    "level_grid",
 ]
 
 
@@ -72,6 +73,20 @@ def _log2_levels(n: int, least: int, m: int) -> int:
     if n < least:
         raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
     return int(m).bit_length() - 1
+
+
+def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
+    """The per-level axes of a result of ``levels`` levels over ``n`` samples.
+
+    Returns
+    -------
+    dict
+        ``levels`` (1..J), ``tau_samples`` (``2^j``) and ``n_coef`` (``M_j = N - 2^j + 1``,
+        at least 0), as keyword arguments of the results' constructors.
+    """
+    lv = np.arange(1, levels + 1)
+    tau = 2**lv
+    return {"levels": lv, "tau_samples": tau, "n_coef": np.maximum(n - tau + 1, 0)}
 
 
 class LevelScales:
@@ -237,18 +252,14 @@ class WaveletVariance(LevelScales, JsonFields):
             raise ValueError("variance must be a non-empty 1-D array")
         if not np.all(np.isfinite(v)) or np.any(v < 0):
             raise ValueError("variance must be finite and non-negative at every level")
-        levels = np.arange(1, v.size + 1)
-        tau = 2**levels
-        m = np.maximum(n - tau + 1, 0)
+        grid = level_grid(n, v.size)
         if ci_low is None or ci_high is None:
-            ci_low, ci_high = eta3_interval(v, m, tau, alpha)
+            ci_low, ci_high = eta3_interval(v, grid["n_coef"], grid["tau_samples"], alpha)
         return cls(
-            levels=levels,
-            tau_samples=tau,
+            **grid,
             variance=v,
             ci_low=np.asarray(ci_low, float),
             ci_high=np.asarray(ci_high, float),
-            n_coef=m,
             n=int(n),
             fs=float(fs),
             robust=robust,

@@ -63,7 +63,7 @@ from scipy import special
 from .._jsonutil import JsonFields, columns_table, interval_columns
 from ..units import squared
 from ._kernel import as_series, check_fs_alpha, cumsum_demeaned
-from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval
+from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval, level_grid
 
 __all__ = [
     "WaveletCrossCovariance",
@@ -445,9 +445,8 @@ def _compute(
     s = np.empty((k, n + 1))
     for p, x in enumerate(series):
         s[p] = cumsum_demeaned(x)
-    lv = np.arange(1, levels + 1)
-    tau = 2**lv
-    m_j = n - tau + 1
+    grid = level_grid(n, levels)
+    lv, tau, m_j = grid["levels"], grid["tau_samples"], grid["n_coef"]
     sums = _product_sums(s, n, levels)
     vals = sums / (tau.astype(float) ** 2 * m_j)[:, None, None]
     vals = 0.5 * (vals + np.transpose(vals, (0, 2, 1)))  # exact symmetry
@@ -480,8 +479,7 @@ def _compute(
         lo[:, p, p], hi[:, p, p] = eta3_interval(vals[:, p, p], m_j, tau, alpha)
     return WVMatrix(
         channels=tuple(names),
-        levels=lv,
-        tau_samples=tau,
+        **grid,
         values=vals,
         ci_low=lo,
         ci_high=hi,
@@ -489,7 +487,6 @@ def _compute(
         ci_method=tuple(method),
         bandwidth=bandwidth,
         df=df,
-        n_coef=m_j,
         n=int(n),
         fs=float(fs),
         alpha=float(alpha),
