@@ -52,7 +52,7 @@ from engine.models import parse_model
 from engine.multivariate import SHAREABLE, DependenceTest
 
 from .data import message_of
-from .jobs import ProgressThrottle
+from .jobs import ProgressThrottle, job_controls
 from .multi_figures import (
     GridFigure,
     color_label,
@@ -76,7 +76,6 @@ from .views import (
     TOTAL_COLOR,
     component_color,
     hidden_alert,
-    job_controls,
     redraw_table,
 )
 

@@ -29,7 +29,7 @@ from bokeh.models import (
     TableColumn,
 )
 
-from .jobs import ProgressThrottle
+from .jobs import ProgressThrottle, job_controls
 from .state import Inference, format_value
 from .views import (
     TOTAL_COLOR,
@@ -37,7 +37,6 @@ from .views import (
     data_table,
     empirical_curve,
     interval_band,
-    job_controls,
     log_figure,
     model_grid,
     redraw_table,

@@ -18,7 +18,7 @@ from scipy import special
 
 from .._jsonutil import JsonFields, columns_table, interval_columns
 from ._kernel import as_series, check_fs_alpha, cumsum_demeaned, second_difference_sums
-from .classical import WaveletVariance, default_levels, eta3_interval
+from .classical import SeriesSettings, WaveletVariance, default_levels, eta3_interval
 
 __all__ = ["AllanVariance", "allan_variance"]
 
@@ -27,7 +27,7 @@ __all__ = ["AllanVariance", "allan_variance"]
 # Allan variance
 # -------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
-class AllanVariance(JsonFields):
+class AllanVariance(SeriesSettings, JsonFields):
     """Overlapping Allan variance of one series, with its ``1 - alpha`` interval.
 
     Attributes
@@ -38,13 +38,13 @@ class AllanVariance(JsonFields):
         Allan variance and its interval, in (signal unit)^2.
     n_terms : ndarray of int, shape (K,)
         Number of overlapping differences summed, ``N - 2m + 1``.
-    n, fs, alpha : int, float, float
-        Series length (samples), sampling frequency (Hz), interval level ``1 - alpha``.
     interval : str
         ``"chi2"`` (chi-square, Percival's eta3 degrees of freedom) or ``"rel"`` (the
         ``1/sqrt(2 (N/m - 1))`` relative error of the inertial-sensor literature).
     unit : str
         Signal unit (the AVAR is in unit^2).
+
+    ``n``, ``fs`` and ``alpha`` are :class:`~engine.wv.classical.SeriesSettings`'s.
     """
 
     tau_samples: np.ndarray
@@ -52,9 +52,6 @@ class AllanVariance(JsonFields):
     ci_low: np.ndarray
     ci_high: np.ndarray
     n_terms: np.ndarray
-    n: int
-    fs: float = 1.0
-    alpha: float = 0.05
     interval: str = "chi2"
     unit: str = ""
 

@@ -37,6 +37,7 @@ __all__ = [
     "haar_coefficients",
     "eta3_interval",
     "LevelScales",
+    "SeriesSettings",
     "level_grid",
 ]
 
@@ -87,6 +88,22 @@ def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
     lv = np.arange(1, levels + 1)
     tau = 2**lv
     return {"levels": lv, "tau_samples": tau, "n_coef": np.maximum(n - tau + 1, 0)}
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SeriesSettings:
+    """The length, rate and interval level an interval result carries (keyword-only fields;
+    the Allan variance, the WCCV and the WV matrix).
+
+    Attributes
+    ----------
+    n, fs, alpha : int, float, float
+        Series length (samples), sampling frequency (Hz), interval level ``1 - alpha``.
+    """
+
+    n: int
+    fs: float = 1.0
+    alpha: float = 0.05
 
 
 class LevelScales:

@@ -63,7 +63,14 @@ from scipy import special
 from .._jsonutil import JsonFields, columns_table, interval_columns
 from ..units import squared
 from ._kernel import as_series, check_fs_alpha, cumsum_demeaned
-from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval, level_grid
+from .classical import (
+    LevelScales,
+    SeriesSettings,
+    WaveletVariance,
+    default_levels,
+    eta3_interval,
+    level_grid,
+)
 
 __all__ = [
     "WaveletCrossCovariance",
@@ -91,7 +98,7 @@ def _t_quantile(alpha: float, df: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class LagWindowIntervals(LevelScales, JsonFields):
+class LagWindowIntervals(SeriesSettings, LevelScales, JsonFields):
     """The per-level settings and intervals that a WCCV and a WV matrix share (keyword-only
     fields; the entries' shapes are the subclass's).
 
@@ -110,8 +117,8 @@ class LagWindowIntervals(LevelScales, JsonFields):
         Degrees of freedom of the Student quantile of the (off-diagonal) intervals.
     n_coef : ndarray of int, shape (J,)
         ``M_j``.
-    n, fs, alpha : int, float, float
-        Samples per series, sampling frequency (Hz), interval level ``1 - alpha``.
+
+    ``n`` (samples per series), ``fs`` and ``alpha`` are :class:`SeriesSettings`'s.
     """
 
     levels: np.ndarray
@@ -123,9 +130,6 @@ class LagWindowIntervals(LevelScales, JsonFields):
     bandwidth: np.ndarray
     df: np.ndarray
     n_coef: np.ndarray
-    n: int
-    fs: float = 1.0
-    alpha: float = 0.05
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
