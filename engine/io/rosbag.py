@@ -361,21 +361,20 @@ def read_imu_bag(
         name: np.ascontiguousarray(col)
         for name, col in zip(IMU_CHANNELS, [*gyro.T, *acc.T], strict=True)
     }
-    meta = {
-        "topic": topic,
-        "frame_id": frame,
-        "n_messages": int(n),
-        "msgtype": msgtype,
-        "decoder": "+".join(sorted(decoders)),
-        "bag_format": fmt,
-        "imu_topics": topics,
-    }
     return ImuBag(
         channels=channels,
         stamps_ns=stamps,
         stamp_source=source,
         format=fmt,
-        meta=meta,
+        meta={
+            "topic": topic,
+            "frame_id": frame,
+            "n_messages": int(n),
+            "msgtype": msgtype,
+            "decoder": "+".join(sorted(decoders)),
+            "bag_format": fmt,
+            "imu_topics": topics,
+        },
         notes=tuple(notes),
     )
 
