@@ -237,6 +237,7 @@ class ProgressLine:
         self._next_pct = 10
 
     def __call__(self, done: int, total: int) -> None:
+        self.total = total
         self.update(done - self.done)
 
     def update(self, k: int = 1) -> None:
