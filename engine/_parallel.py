@@ -52,25 +52,25 @@ def _run_chunk(fn: Callable[[Any], Any], chunk: Sequence[Any]) -> list[Any]:
 @contextmanager
 def _local_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     """``workers`` spawned processes with one BLAS thread each: forked workers that inherit a
-    multithreaded BLAS spin on each other's small matrix products (10x slower)."""
+    multithreaded BLAS spin on each other's small matrix products (10x slower). The pool
+    starts its processes as tasks are submitted, so the variables stay set until it is shut
+    down."""
     saved = {k: os.environ.get(k) for k in _THREAD_VARS}
     os.environ.update({k: "1" for k in _THREAD_VARS})
+    ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
-        ex = ProcessPoolExecutor(
-            max_workers=workers, mp_context=multiprocessing.get_context("spawn")
-        )
+        yield ex
+    except BaseException:  # Ctrl-C, a failed task or a cancel: drop the queued tasks
+        ex.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        ex.shutdown(wait=True)
     finally:
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
-    try:
-        yield ex
-    except BaseException:  # Ctrl-C, a failed task or a cancel: drop the queued tasks
-        ex.shutdown(wait=False, cancel_futures=True)
-        raise
-    ex.shutdown(wait=True)
 
 
 def parallel_map(
