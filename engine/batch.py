@@ -195,6 +195,11 @@ def fit_log(
     return LogFit(src, fits, report, "", errors, float(log.fs), log.n, time.perf_counter() - t0)
 
 
+_FIT_LOG_OPTIONS = frozenset(
+    ("model", "select", "channels", "fs", "levels", "weights", "load_options")
+)
+
+
 def _fit_channel(wv: Any, model: str | None, select: str | None, weights: str) -> GMWMResult:
     if select is not None:
         from .inference import rank_models
@@ -245,16 +250,10 @@ def expand_paths(patterns: Iterable[str | os.PathLike[str]]) -> list[tuple[str, 
 def fit_batch(
     paths: Iterable[str | os.PathLike[str]],
     *,
-    model: str | None = None,
-    select: str | None = None,
-    channels: Sequence[str] | None = None,
-    fs: float | None = None,
-    levels: int | None = None,
-    weights: str = "ci",
-    load_options: Mapping[str, Any] | None = None,
     workers: int = 2,
     executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
+    **options: Any,
 ) -> BatchResult:
     """Fit every channel of every log, in parallel, and summarise the fleet.
 
@@ -263,8 +262,6 @@ def fit_batch(
     paths : iterable of path or glob pattern
         The logs (``"lab/unit_*.h5"`` is expanded, sorted); a pattern that matches nothing is
         reported as a failed log.
-    model, select, channels, fs, levels, weights, load_options
-        As :func:`fit_log`, the same for every log.
     workers : int
         Local worker processes (1: in process).
     executor : concurrent.futures.Executor, optional
@@ -272,29 +269,30 @@ def fit_batch(
         workers must see the logs at the same paths). The results do not depend on it.
     progress : callable (done, total), optional
         Called after every log.
+    **options
+        The keywords of :func:`fit_log`, the same for every log: ``model`` or ``select``,
+        ``channels``, ``fs``, ``levels``, ``weights``, ``load_options``.
 
     Returns
     -------
     BatchResult
         Failed logs are in it with their error; none raises.
     """
-    _check_choice(model, select)
-    if weights not in ("ci", "identity", "efficient"):
-        raise ValueError(f"unknown weights {weights!r}: use 'ci', 'identity' or 'efficient'")
-    if model is not None:
-        parse_model(model)  # a bad spec is the caller's error, not every log's
+    unknown = sorted(set(options) - _FIT_LOG_OPTIONS)
+    if unknown:
+        raise TypeError(f"fit_batch() got unknown option(s) {', '.join(unknown)}")
+    kw = {k: options.get(k) for k in sorted(_FIT_LOG_OPTIONS)}
+    kw["weights"] = kw["weights"] or "ci"
+    kw["channels"] = list(kw["channels"]) if kw["channels"] else None
+    kw["load_options"] = dict(kw["load_options"] or {})
+    _check_choice(kw["model"], kw["select"])
+    if kw["weights"] not in ("ci", "identity", "efficient"):
+        raise ValueError(f"unknown weights {kw['weights']!r}: use 'ci', 'identity' or 'efficient'")
+    if kw["model"] is not None:
+        parse_model(kw["model"])  # a bad spec is the caller's error, not every log's
     t0 = time.perf_counter()
     entries = expand_paths(paths)
     todo = [p for p, err in entries if not err]
-    kw = {
-        "model": model,
-        "select": select,
-        "channels": list(channels) if channels else None,
-        "fs": fs,
-        "levels": levels,
-        "weights": weights,
-        "load_options": dict(load_options or {}),
-    }
     done = parallel_map(
         _fit_log_task,
         [(p, kw) for p in todo],
@@ -304,12 +302,7 @@ def fit_batch(
         chunksize=1,
     )
     settings = {
-        "model": model,
-        "select": select,
-        "weights": weights,
-        "channels": kw["channels"],
-        "fs": fs,
-        "levels": levels,
+        **{k: v for k, v in kw.items() if k != "load_options"},
         "workers": executor_workers(executor, workers),
         "executor": "local" if executor is None else type(executor).__name__,
     }

@@ -24,6 +24,7 @@ from .common import CliError, add_log_options, log_kwargs, positive
 
 __all__ = ["add_parser", "run", "add_scheduler_option", "scheduler_executor"]
 
+_SELECT_HELP = "per channel, the WVIC-best sub-model of this model, e.g. '2*GM+WN+RW+DR'"
 _EXIT = (
     "exit status: 0 when at least one log was fitted (the logs that failed are listed on "
     "stderr and in DIR/summary.json), 2 when none was or the command line is wrong"
@@ -77,11 +78,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     what = bt.add_mutually_exclusive_group(required=True)
     what.add_argument("--model", help="model of every channel, e.g. 'GM+WN+RW'")
-    what.add_argument(
-        "--select",
-        metavar="MAX_MODEL",
-        help="per channel, the WVIC-best sub-model of this model, e.g. '2*GM+WN+RW+DR'",
-    )
+    what.add_argument("--select", metavar="MAX_MODEL", help=_SELECT_HELP)
     bt.add_argument(
         "-o",
         "--output",
