@@ -22,6 +22,7 @@ import multiprocessing
 import os
 import sys
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -198,12 +199,14 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
         ) from e
     cluster = None
     if address == "local":
-        cluster = LocalCluster(
-            n_workers=max(1, int(workers)),
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-        )
+        with warnings.catch_warnings():  # its HTTP server moves off a busy port: no news
+            warnings.filterwarnings("ignore", message="Port .* is already in use")
+            cluster = LocalCluster(
+                n_workers=max(1, int(workers)),
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+            )
         client = Client(cluster)
     else:
         try:

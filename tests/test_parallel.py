@@ -10,6 +10,7 @@ change the last bit. So this module runs its in-process references with one BLAS
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sys
@@ -186,6 +187,21 @@ def test_study_is_identical_on_dask(dask_ex):
         assert len(set(ref.estimates[2**14]["gyro"][m]["WN"].tolist())) == 4  # 4 replicates
     assert got.settings["workers"] == 2 and got.settings["executor"] == "ClientExecutor"
     assert ref.settings["executor"] == "in process"
+
+
+def test_cli_study_scheduler_local_gives_the_numbers_of_the_local_run(tmp_path, capsys):
+    from engine.cli import main
+
+    argv = ["study", "slope", "--reps", "2", "--seed", "5", "--n", "3e4", "--methods", "GMWM"]
+    assert main([*argv, "--workers", "1", "--json"]) == 0
+    local = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--scheduler", "local", "--json"]) == 0
+    cap = capsys.readouterr()
+    on_dask = json.loads(cap.out)
+    assert on_dask["settings"]["executor"] == "ClientExecutor"
+    # this process's BLAS has one thread here (the module's fixture), as the workers'
+    assert on_dask["summary"] == local["summary"] and len(local["summary"]) == 6
+    assert "gmwm study slope" in cap.err
 
 
 # -------------------------------------------------------------------------------------------
