@@ -37,6 +37,12 @@ __all__ = [
 ]
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+#: glibc's trim threshold, which Dask sets to 64 KiB for its workers (and, once a LocalCluster
+#: has started, in this process's environment). Set at all, it turns off glibc's dynamic mmap
+#: threshold, so every array above 128 KiB is a fresh mmap whose pages fault in again: the
+#: study's replicates ran 3-5x slower (bench_dask.py). Neither our pool nor our LocalCluster
+#: sets it.
+_MALLOC_TRIM = "MALLOC_TRIM_THRESHOLD_"
 
 
 def main_importable() -> bool:
@@ -55,9 +61,10 @@ def _local_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     """``workers`` spawned processes with one BLAS thread each: forked workers that inherit a
     multithreaded BLAS spin on each other's small matrix products (10x slower). The pool
     starts its processes as tasks are submitted, so the variables stay set until it is shut
-    down."""
-    saved = {k: os.environ.get(k) for k in _THREAD_VARS}
+    down. Without ``MALLOC_TRIM_THRESHOLD_`` (see :data:`_MALLOC_TRIM`)."""
+    saved = {k: os.environ.get(k) for k in (*_THREAD_VARS, _MALLOC_TRIM)}
     os.environ.update({k: "1" for k in _THREAD_VARS})
+    os.environ.pop(_MALLOC_TRIM, None)
     ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
         yield ex
@@ -179,9 +186,11 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
     ----------
     address : str
         ``"local"``: start a ``LocalCluster`` of ``workers`` processes (one thread each) on
-        this machine; otherwise a running scheduler's address (``tcp://host:8786``), e.g. one
-        started by ``dask scheduler`` or by dask-jobqueue. Its workers need this package (the
-        same version) and must see the input files at the same paths.
+        this machine (without Dask's ``MALLOC_TRIM_THRESHOLD_``, which slows NumPy code with
+        large temporaries 3-5x); otherwise a running scheduler's address
+        (``tcp://host:8786``), e.g. one started by ``dask scheduler`` or by dask-jobqueue.
+        Its workers need this package (the same version) and must see the input files at the
+        same paths.
     workers : int
         Worker processes of ``"local"``.
 
@@ -199,7 +208,11 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
         ) from e
     cluster = None
     if address == "local":
-        with warnings.catch_warnings():  # its HTTP server moves off a busy port: no news
+        import dask
+
+        no_trim = {f"distributed.nanny.pre-spawn-environ.{_MALLOC_TRIM}": None}  # see above
+        with warnings.catch_warnings(), dask.config.set(no_trim):
+            # its HTTP server moves off a busy port: no news
             warnings.filterwarnings("ignore", message="Port .* is already in use")
             cluster = LocalCluster(
                 n_workers=max(1, int(workers)),

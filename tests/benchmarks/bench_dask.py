@@ -17,6 +17,7 @@ tasks, ``wall(N) ~ T * max(t / N, o) + start-up``; the speed-up is ``T t / wall(
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import tempfile
@@ -27,7 +28,7 @@ import numpy as np
 
 import engine as eg
 from engine._blas import set_blas_threads
-from engine._parallel import parallel_map
+from engine._parallel import dask_executor, parallel_map
 
 
 def _noop(k: int) -> int:
@@ -57,18 +58,18 @@ def main() -> None:
     ap.add_argument("--logs", type=int, default=8, help="logs in the batch (8)")
     ap.add_argument("--samples", type=float, default=2e5, help="samples per channel (2e5)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument(
+        "--trim-check",
+        action="store_true",
+        help="also time the study on a LocalCluster with Dask's default MALLOC_TRIM_THRESHOLD_",
+    )
     args = ap.parse_args()
-    from distributed import Client, LocalCluster
-
     set_blas_threads(1)  # as the workers: the in-process reference has one BLAS thread too
     w = args.workers
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+    stack = contextlib.ExitStack()
     t0 = time.perf_counter()
-    cluster = LocalCluster(
-        n_workers=w, threads_per_worker=1, processes=True, dashboard_address=None
-    )
-    client = Client(cluster)
-    ex = client.get_executor(pure=False)
+    ex = stack.enter_context(dask_executor("local", w))  # what --scheduler local starts
     startup = time.perf_counter() - t0
     print(f"LocalCluster of {w} worker processes: start-up {startup:.2f} s")
 
@@ -106,6 +107,23 @@ def main() -> None:
         f"{t_pool / t_dask:.2f}x the local pool; + {startup:.1f} s start-up once)"
     )
 
+    if args.trim_check:
+        from distributed import Client, LocalCluster
+
+        with (
+            LocalCluster(
+                n_workers=w, threads_per_worker=1, processes=True, dashboard_address=None
+            ) as cl,
+            Client(cl) as cli,
+        ):
+            dex = cli.get_executor(pure=False)
+            eg.run_slope_study(2, **{**kw, "n_values": (2**14,)}, executor=dex)
+            trim, t_trim = _timed(eg.run_slope_study, args.reps, executor=dex, **kw)
+        print(
+            f"  Dask's default worker env (MALLOC_TRIM_THRESHOLD_=65536) {t_trim:7.2f} s "
+            f"({t_dask / t_trim:.2f}x ours; identical: {_estimates(trim) == _estimates(ref)})"
+        )
+
     # ---- a batch of logs ----------------------------------------------------------------------
     with tempfile.TemporaryDirectory() as d:
         truth = eg.parse_model("GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)+RW(gamma2=1e-9)")
@@ -140,8 +158,7 @@ def main() -> None:
         f"  LocalCluster, {w} procs {tbd:7.2f} s  ({tb1 / tbd:.2f}x in process, "
         f"{tbp / tbd:.2f}x the local pool)"
     )
-    client.close()
-    cluster.close()
+    stack.close()
 
     # ---- on paper: N workers -----------------------------------------------------------------
     print(
