@@ -101,6 +101,22 @@ def test_parallel_map_keeps_order_counts_progress_and_cancels():
     assert executor_workers(None, 3) == 3
 
 
+def test_dask_is_imported_only_when_a_cluster_is_asked_for():
+    import subprocess
+    from pathlib import Path
+
+    code = (
+        "import sys, engine as eg, engine.cli.batch, engine.cli.main; eg.fit_batch; "
+        "eg.param_intervals; eg.run_slope_study; eg.dependence_test; "
+        "print('dask' in sys.modules, 'distributed' in sys.modules)"
+    )
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root
+    )
+    assert out.stdout.split() == ["False", "False"]
+
+
 def test_progress_line_prints_every_tenth_with_its_noun():
     import io
 
