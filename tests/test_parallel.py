@@ -40,10 +40,14 @@ def one_blas_thread():
 
 @pytest.fixture(scope="module")
 def dask_client():
-    """One 2-process LocalCluster for the module (start-up 2-5 s)."""
-    cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
-    )
+    """One 2-process LocalCluster for the module (start-up 2-5 s), with the workers'
+    environment of ``gmwm --scheduler local`` (no MALLOC_TRIM_THRESHOLD_: engine._parallel)."""
+    import dask
+
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+        cluster = distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        )
     client = distributed.Client(cluster)
     yield client
     client.close()
