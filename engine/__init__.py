@@ -36,6 +36,7 @@ SUBPACKAGES: tuple[str, ...] = (
     "export",
     "teaching",
     "demo",
+    "batch",
 )
 _EAGER = {"models": models, "wv": wv, "fit": fit, "units": units}
 

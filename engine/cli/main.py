@@ -6,7 +6,8 @@
     gmwm fit INPUT --model SPEC [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E]
              [--weights ci] [--json]
     gmwm simulate --model SPEC_WITH_VALUES -n N [--fs HZ] [--seed S] -o OUT(.h5|.npy|.csv)
-    gmwm study slope --reps R --seed S [--n 2.5e6,6.3e6] [--workers 2] [--out DIR] [--json]
+    gmwm study slope --reps R --seed S [--n 2.5e6,6.3e6] [--workers 2] [--scheduler ADDRESS]
+             [--out DIR] [--json]
     gmwm select INPUT --max-model SPEC | --models SPEC1,SPEC2 [--optimism asymptotic|bootstrap]
              [--weights ci|identity|efficient]
 
@@ -41,7 +42,7 @@ __all__ = ["main", "build_parser"]
 
 # Subcommands that live in their own module engine/cli/<name>.py, each with
 # ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
-_MODULE_COMMANDS = ("export", "check")
+_MODULE_COMMANDS = ("export", "check", "batch")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -178,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
         "Omega = V^-1, V from the first fit's model), ARMAV, ARMAV-unweighted, AVSM, "
         "AVSM-auto (default GMWM,GMWM-efficient,ARMAV,AVSM)",
     )
+    from .batch import add_scheduler_option  # --scheduler local|ADDRESS (Dask)
+
+    add_scheduler_option(st)
     st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     for name in _MODULE_COMMANDS:  # each in its own module: add_parser(sub) and run(args)
@@ -327,14 +331,18 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
     except ValueError:
         raise CliError(f"--n takes sample counts separated by commas, got {args.n!r}") from None
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    res = run_slope_study(
-        args.reps,
-        seed=args.seed,
-        n_values=n_values,
-        methods=methods,
-        workers=args.workers,
-        progress=True,
-    )
+    from .batch import scheduler_executor
+
+    with scheduler_executor(args) as ex:
+        res = run_slope_study(
+            args.reps,
+            seed=args.seed,
+            n_values=n_values,
+            methods=methods,
+            workers=args.workers,
+            progress=True,
+            executor=ex,
+        )
     paths = res.save(args.out) if args.out else {}
     if args.json:
         d = res.to_dict(raw=False)

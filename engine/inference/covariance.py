@@ -9,14 +9,12 @@ Percival & Walden), :func:`wv_cov_model` (from a fitted model, Gaussian and asym
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
-import sys
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor
 from typing import Any
 
 import numpy as np
 
+from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..models import Model
 from ..wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
@@ -61,51 +59,37 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
     return np.diag(out)
 
 
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
 def _boot_wv(args: tuple) -> np.ndarray:
     model, n, fs, levels, robust, eff, seed = args
     x = model.simulate(n, fs=fs, rng=np.random.default_rng(seed))
     return wavelet_variance(x, fs=fs, levels=levels, robust=robust, eff=eff).variance
 
 
-def parallel_map(fn, items: list, workers: int) -> list:
-    """``map`` over processes. Workers are spawned with one BLAS thread each: forked workers
-    that inherit a multithreaded BLAS spin on each other's small matrix products (10x slower)."""
-    main_file = getattr(sys.modules.get("__main__"), "__file__", None)
-    if workers <= 1 or len(items) < 4 or not main_file or not os.path.exists(main_file):
-        return [fn(it) for it in items]  # spawned workers cannot re-import an interactive main
-    saved = {k: os.environ.get(k) for k in _THREAD_VARS}
-    os.environ.update({k: "1" for k in _THREAD_VARS})
-    try:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-            return list(ex.map(fn, items, chunksize=max(1, len(items) // (4 * workers))))
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
 def wv_cov_bootstrap(
-    model: Model, wv: WaveletVariance, *, B: int = 100, seed: int | None = 0, workers: int = 1
+    model: Model,
+    wv: WaveletVariance,
+    *,
+    B: int = 100,
+    seed: int | None = 0,
+    workers: int = 1,
+    executor: Executor | None = None,
 ) -> np.ndarray:
     """Parametric-bootstrap covariance of the WV: simulate ``B`` series of the model's length.
 
     Parameters
     ----------
     model : Model
-        Every value set. B, seed, workers: replicates, base seed (replicate b uses
-        ``[seed, b]``), processes (results do not depend on it).
+        Every value set. B, seed, workers: replicates, base seed (replicate b uses the b-th
+        child of ``SeedSequence(seed)``), local processes (results do not depend on it).
+    executor : concurrent.futures.Executor, optional
+        Runs the replicates instead of the local pool (e.g. a Dask ``Client.get_executor()``);
+        the results do not depend on it (:func:`engine.inference.parallel_map`).
     """
     if B < 2:
         raise ValueError(f"B must be at least 2, got {B}")
     seeds = np.random.SeedSequence(seed).spawn(B)
     items = [(model, wv.n, wv.fs, wv.n_levels, wv.robust, wv.eff, s) for s in seeds]
-    sims = np.array(parallel_map(_boot_wv, items, workers))
+    sims = np.array(parallel_map(_boot_wv, items, workers, executor=executor))
     return np.cov(sims, rowvar=False)
 
 
@@ -129,6 +113,7 @@ def fit_efficient(
     B: int = 100,
     seed: int | None = 0,
     workers: int = 1,
+    executor: Executor | None = None,
 ) -> GMWMResult:
     """Two-step efficient GMWM: ``weights="ci"``, then ``Omega = V^-1`` with V estimated.
 
@@ -137,9 +122,11 @@ def fit_efficient(
     v : {"model", "bootstrap", "data"} or array
         How V is estimated: from the first-step fit (analytic Gaussian or parametric
         bootstrap), from the data (needs ``x``; diagonal), or given.
+    B, seed, workers, executor
+        The bootstrap's replicates, seed, local processes or executor (:func:`wv_cov`).
     """
     first = fit_gmwm(wv, model)
-    vmat = wv_cov(first, v, x=x, B=B, seed=seed, workers=workers)
+    vmat = wv_cov(first, v, x=x, B=B, seed=seed, workers=workers, executor=executor)
     res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat))
     object.__setattr__(res, "weights", "efficient")
     return res
@@ -153,6 +140,7 @@ def wv_cov(
     B: int = 100,
     seed: int | None = 0,
     workers: int = 1,
+    executor: Executor | None = None,
 ) -> np.ndarray:
     """The covariance V of a fit's WV, by name.
 
@@ -161,7 +149,8 @@ def wv_cov(
     res : GMWMResult
         The fit (its model and WV).
     v : {"model", "bootstrap", "data"} or ndarray (J, J)
-        :func:`wv_cov_model`, :func:`wv_cov_bootstrap` (``B``, ``seed``, ``workers``),
+        :func:`wv_cov_model`, :func:`wv_cov_bootstrap` (``B``, ``seed``, ``workers``,
+        ``executor``),
         :func:`wv_cov_data` (needs the raw series ``x``) or a given matrix (checked).
     """
     if isinstance(v, np.ndarray):
@@ -171,7 +160,9 @@ def wv_cov(
     if v == "model":
         return wv_cov_model(res.model, res.wv)
     if v == "bootstrap":
-        return wv_cov_bootstrap(res.model, res.wv, B=B, seed=seed, workers=workers)
+        return wv_cov_bootstrap(
+            res.model, res.wv, B=B, seed=seed, workers=workers, executor=executor
+        )
     if v == "data":
         if x is None:
             raise FitError("v='data' needs the raw series x")

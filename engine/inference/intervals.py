@@ -7,6 +7,8 @@ intervals stay inside the parameter space; or the parametric bootstrap (percenti
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -61,6 +63,8 @@ def param_intervals(
     B: int = 100,
     seed: int | None = 0,
     workers: int = 1,
+    executor: Executor | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[ParamInterval]:
     """Two-sided intervals for every parameter of a fit.
 
@@ -76,12 +80,22 @@ def param_intervals(
         normal quantile at 1 - alpha).
     v : {"model", "bootstrap", "data"} or array
         Covariance of the WV for the asymptotic method.
+    B, seed : int
+        Bootstrap replicates (the bootstrap method, or ``v="bootstrap"``) and base seed:
+        replicate b draws from the b-th child of ``SeedSequence(seed)``.
+    workers : int
+        Local worker processes (1: in process).
+    executor : concurrent.futures.Executor, optional
+        Runs the replicates instead of the local pool, e.g. a Dask ``Client.get_executor()``.
+        The intervals do not depend on ``workers`` or ``executor``.
+    progress : callable (done, total), optional
+        Called after every bootstrap refit (the bootstrap method).
     """
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
     recs = res.param_records
     if method == "asymptotic":
-        vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers)
+        vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers, executor=executor)
         return [
             ParamInterval(r.full_name, r.value, lo, hi, r.unit, "asymptotic", level)
             for r, (lo, hi) in zip(recs, asymptotic_bounds(res, vmat, level), strict=True)
@@ -93,7 +107,8 @@ def param_intervals(
             (res.model, res.model.cleared(), res.wv.n, res.fs, res.wv.n_levels, omega, s)
             for s in seeds
         ]
-        fits = [f for f in parallel_map(_boot_fit, items, workers) if f is not None]
+        boot = parallel_map(_boot_fit, items, workers, executor=executor, progress=progress)
+        fits = [f for f in boot if f is not None]
         if len(fits) < max(10, B // 2):
             raise FitError("too many bootstrap refits failed; the model may be unidentifiable")
         out = []

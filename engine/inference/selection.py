@@ -24,6 +24,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Iterable
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -172,6 +173,7 @@ def rank_models(
     seed: int | None = 0,
     workers: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    executor: Executor | None = None,
 ) -> SelectionResult:
     """Fit and rank candidate models by WVIC = objective + optimism.
 
@@ -191,6 +193,13 @@ def rank_models(
     v : {"model", "bootstrap"} or array
         Covariance of the WV for the asymptotic optimism and the J-test, estimated once from
         the largest candidate that fits.
+    B, seed, workers, executor
+        Bootstrap replicates (``optimism="bootstrap"`` or ``v="bootstrap"``), base seed
+        (replicate b draws from the b-th child of ``SeedSequence(seed)``), and where they run:
+        ``workers`` local processes, or ``executor`` (any ``concurrent.futures.Executor``,
+        e.g. a Dask ``Client.get_executor()``). The ranking does not depend on either. The
+        candidate fits themselves run in process (milliseconds each: shipping them would
+        cost more than it saves).
     progress : callable, optional
         Called as ``progress(done, total)`` after each candidate.
     """
@@ -237,7 +246,7 @@ def rank_models(
 
     fitted = fit_all("ci" if efficient else weights, 0)
     ok, largest = largest_fit(fitted)
-    vmat = wv_cov(largest, v, B=B, seed=seed, workers=workers)
+    vmat = wv_cov(largest, v, B=B, seed=seed, workers=workers, executor=executor)
     vinv = inverse_cov(vmat)
     if efficient:  # second step: one Omega = V^-1 for every candidate
         weights = vinv
@@ -253,7 +262,7 @@ def rank_models(
             (largest.model, specs, wv.n, wv.fs, wv.n_levels, weights if omega is None else omega, s)
             for s in seeds
         ]
-        pairs = parallel_map(_boot_pair, items, workers)
+        pairs = parallel_map(_boot_pair, items, workers, executor=executor)
         nus = np.array([p[0] for p in pairs])
         for k, r in enumerate(ok):
             rows = [

@@ -8,11 +8,13 @@ parametric-bootstrap distribution under the restricted model.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .._parallel import parallel_map
 from ..fit import FitError
 from ..fit.result import Summary
 from ..models import ModelError
@@ -92,6 +94,7 @@ def dependence_test(
     weights: str = "ci",
     fs: float | None = None,
     progress: Callable[[int, int], None] | None = None,
+    executor: Executor | None = None,
 ) -> DependenceTest:
     """Does sharing processes between channels improve the fit more than chance?
 
@@ -117,17 +120,17 @@ def dependence_test(
     fs : float, optional
         Sampling frequency of raw data (Hz).
     progress : callable (done, total), optional
-        Called after every bootstrap replicate (with ``workers > 1``, after every batch of
-        ``4 workers`` replicates, once per replicate of the batch). An exception raised by
-        it aborts the test and propagates (e.g. a user's cancel). Results do not depend on
-        it.
+        Called after every bootstrap replicate, in this process. An exception raised by it
+        aborts the test (the replicates not yet started are cancelled) and propagates (e.g.
+        a user's cancel). Results do not depend on it.
+    executor : concurrent.futures.Executor, optional
+        Runs the replicates instead of ``workers`` local processes, e.g. a Dask
+        ``Client.get_executor()``; results do not depend on it.
 
     Returns
     -------
     DependenceTest
     """
-    from ..inference.covariance import parallel_map
-
     if B < 1:
         raise ValueError(f"B must be at least 1, got {B}")
     if not model.shared:
@@ -141,15 +144,7 @@ def dependence_test(
     stat = fit0.objective - fit1.objective
     seeds = np.random.SeedSequence(seed).spawn(B)
     items = [(fit0.model, h0, h1, wvm.n, wvm.fs, wvm.n_levels, weights, sd) for sd in seeds]
-    if progress is None:
-        out = parallel_map(_boot_dependence, items, workers)
-    else:
-        out = []
-        size = 1 if workers <= 1 else 4 * workers
-        for i in range(0, len(items), size):
-            for d in parallel_map(_boot_dependence, items[i : i + size], workers):
-                out.append(d)
-                progress(len(out), len(items))
+    out = parallel_map(_boot_dependence, items, workers, executor=executor, progress=progress)
     boot = [d for d in out if d is not None]
     if len(boot) < max(1, B // 2):
         raise FitError("too many bootstrap replicates failed; the model may be unidentifiable")

@@ -38,12 +38,13 @@ import os
 import sys
 import time
 from collections.abc import Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor
 from dataclasses import replace
 from typing import Any, TextIO
 
 import numpy as np
 
+from .._parallel import ProgressLine, executor_workers, parallel_map
 from ..fit import fit_gmwm
 from ..fit.estimate import MethodEstimate, from_gmwm
 from ..fit.gmwfm import fit_armav
@@ -155,46 +156,6 @@ def _replicate(
 
 
 # -------------------------------------------------------------------------------------------
-# progress
-# -------------------------------------------------------------------------------------------
-class _Progress:
-    """A text progress bar on a stream (a bar on a terminal, a line per 10 % otherwise)."""
-
-    def __init__(self, total: int, stream: TextIO | None, label: str = "study") -> None:
-        self.total, self.stream, self.label = total, stream, label
-        self.done = 0
-        self.t0 = time.perf_counter()
-        self.tty = bool(stream is not None and hasattr(stream, "isatty") and stream.isatty())
-        self._next_pct = 10
-
-    def update(self, k: int = 1) -> None:
-        self.done += k
-        if self.stream is None:
-            return
-        el = time.perf_counter() - self.t0
-        eta = el / self.done * (self.total - self.done) if self.done else math.nan
-        pct = 100.0 * self.done / self.total
-        if self.tty:
-            w = 30
-            fill = int(w * self.done / self.total)
-            self.stream.write(
-                f"\r{self.label} [{'#' * fill}{'.' * (w - fill)}] "
-                f"{self.done}/{self.total} {el:6.0f} s, ETA {eta:5.0f} s"
-            )
-            if self.done == self.total:
-                self.stream.write("\n")
-            self.stream.flush()
-        elif pct >= self._next_pct or self.done == self.total:
-            while self._next_pct <= pct:
-                self._next_pct += 10
-            self.stream.write(
-                f"{self.label}: {self.done}/{self.total} ({pct:.0f} %), "
-                f"{el:.0f} s, ETA {eta:.0f} s\n"
-            )
-            self.stream.flush()
-
-
-# -------------------------------------------------------------------------------------------
 # the run
 # -------------------------------------------------------------------------------------------
 def run_slope_study(
@@ -208,6 +169,7 @@ def run_slope_study(
     workers: int | None = 2,
     regions: dict[str, dict[str, tuple[float, float]]] | None = None,
     progress: bool | TextIO = True,
+    executor: Executor | None = None,
 ) -> StudyResult:
     """Run the Monte Carlo of the GMWM paper's Fig. 1-2 with Table I's true values.
 
@@ -227,13 +189,17 @@ def run_slope_study(
     fs : float
         Sampling frequency (Hz).
     workers : int or None
-        Worker processes (``concurrent.futures.ProcessPoolExecutor``); 1 runs in process;
+        Local worker processes (:func:`engine.inference.parallel_map`); 1 runs in process;
         None uses every CPU.
     regions : dict, optional
         AVSM regions per sensor (``{"gyro": {"WN": (lo, hi), ...}}``, seconds); default
         :func:`typical_regions` for each log length.
     progress : bool or stream
         Progress bar on stderr (True), on a given stream, or none (False).
+    executor : concurrent.futures.Executor, optional
+        Runs the replicates instead of the local processes, e.g. a Dask cluster's
+        ``Client.get_executor()`` (``gmwm study --scheduler``); the estimates do not depend
+        on it.
 
     Returns
     -------
@@ -267,7 +233,7 @@ def run_slope_study(
         for r in range(reps)
     ]
     stream = sys.stderr if progress is True else (progress or None)
-    bar = _Progress(len(tasks), stream, label="gmwm study slope")  # type: ignore[arg-type]
+    bar = ProgressLine(len(tasks), stream, label="gmwm study slope")  # type: ignore[arg-type]
     est: dict[int, dict[str, dict[str, dict[str, np.ndarray]]]] = {
         n: {
             s: {m: {c: np.full(reps, np.nan) for c, *_ in TABLE_I[s]["params"]} for m in methods}
@@ -276,30 +242,16 @@ def run_slope_study(
         for n in ns
     }
     errors: list[dict[str, Any]] = []
-
-    def store(result: tuple) -> None:
-        (n, s, r), vals, errs = result
+    t0 = time.perf_counter()
+    # one replicate per job (each takes 0.1-1 s): the finest progress, and a lost worker
+    # loses one replicate
+    results = parallel_map(_replicate, tasks, workers, executor=executor, progress=bar, chunksize=1)
+    for (n, s, r), vals, errs in results:
         for m, by_c in vals.items():
             for c, v in by_c.items():
                 est[n][s][m][c][r] = v
         for m, e in errs.items():
             errors.append({"n": n, "sensor": s, "rep": r, "method": m, "error": e})
-        bar.update()
-
-    t0 = time.perf_counter()
-    if workers == 1:
-        for t in tasks:
-            store(_replicate(t))
-    else:
-        ex = ProcessPoolExecutor(max_workers=workers)
-        try:
-            futs = [ex.submit(_replicate, t) for t in tasks]
-            for f in as_completed(futs):
-                store(f.result())
-        except BaseException:  # Ctrl-C or a worker crash: drop the queued replicates
-            ex.shutdown(wait=False, cancel_futures=True)
-            raise
-        ex.shutdown(wait=True)
     wall = time.perf_counter() - t0
     errors.sort(key=lambda e: (e["n"], e["sensor"], e["rep"], e["method"]))
     settings = {
@@ -309,7 +261,10 @@ def run_slope_study(
         "fs": float(fs),
         "methods": list(methods),
         "sensors": list(sensors),
-        "workers": workers,
+        "workers": executor_workers(executor, workers),
+        "executor": "in process"
+        if executor is None and workers == 1
+        else ("local processes" if executor is None else type(executor).__name__),
         "regions": {
             n: {s: {c: list(t) for c, t in r.items()} for s, r in by.items()}
             for n, by in used_regions.items()
