@@ -16,10 +16,12 @@ ctypes (the libraries are found in ``/proc/self/maps``, Linux).
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from typing import Any
 
-__all__ = ["blas_threads", "set_blas_threads"]
+__all__ = ["blas_threads", "set_blas_threads", "one_blas_thread"]
 
 _SET = (
     "scipy_openblas_set_num_threads64_",
@@ -108,3 +110,22 @@ def set_blas_threads(n: int = 1) -> bool:
                 done = True
                 break
     return done
+
+
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Run the block with NumPy's BLAS on one thread, then restore the previous count.
+
+    The tasks of :func:`engine._parallel.parallel_map` run like this in process, as they do in
+    the pool's and Dask's workers, so a result does not depend on where its task ran (the WV
+    kernel sums in chunks on a multi-threaded BLAS: the last bit can differ).
+    """
+    prev = blas_threads()
+    if prev is None or prev == 1:
+        yield
+        return
+    set_blas_threads(1)
+    try:
+        yield
+    finally:
+        set_blas_threads(prev)

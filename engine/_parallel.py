@@ -28,6 +28,8 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_complet
 from contextlib import contextmanager
 from typing import Any, TextIO
 
+from ._blas import one_blas_thread
+
 __all__ = [
     "parallel_map",
     "ProgressLine",
@@ -121,10 +123,11 @@ def parallel_map(
     total = len(items)
     if executor is None and (workers <= 1 or total < 4 or not main_importable()):
         out = []
-        for it in items:
-            out.append(fn(it))
-            if progress is not None:
-                progress(len(out), total)
+        with one_blas_thread():  # as in a worker: the same numbers wherever a task runs
+            for it in items:
+                out.append(fn(it))
+                if progress is not None:
+                    progress(len(out), total)
         return out
     if chunksize is None:
         chunksize = 1 if executor is not None else max(1, total // (4 * max(1, workers)))

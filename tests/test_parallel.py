@@ -259,3 +259,24 @@ def test_a_worker_killed_mid_run_loses_no_task(dask_client, dask_ex):
             break
         time.sleep(0.2)
     assert killed[0][0] not in dask_client.run(os.getpid).values()
+
+
+def _blas_threads_in_task(_: int) -> int | None:
+    return blas_threads()
+
+
+def test_tasks_run_in_process_with_one_blas_thread_and_the_count_is_restored():
+    """In process, the tasks see one BLAS thread as in a worker (the WV kernel sums in chunks
+    on a multi-threaded BLAS, so the last bit would depend on where a task ran); the caller's
+    setting is back afterwards. The study with workers=1 then equals the pooled study to the
+    bit (tests/test_study.py)."""
+    if blas_threads() is None:
+        pytest.skip("no OpenBLAS thread control in this process")
+    prev = blas_threads()
+    try:
+        set_blas_threads(2)
+        assert blas_threads() == 2
+        assert parallel_map(_blas_threads_in_task, range(5), workers=1) == [1] * 5
+        assert blas_threads() == 2
+    finally:
+        set_blas_threads(prev or 1)
