@@ -85,8 +85,9 @@ def optimal_weights(n: Any) -> np.ndarray:
     Returns
     -------
     ndarray, shape (k,)
-        The weights. A singular ``N`` (a combination with zero WV) uses the pseudo-inverse
-        (the minimum-norm solution of ``N u = 1``).
+        The weights, from the KKT system ``[[N, 1], [1', 0]]`` (equal to the closed form for a
+        regular ``N``; a singular ``N``, where a combination has zero WV, gives that
+        combination).
 
     Raises
     ------
@@ -110,17 +111,19 @@ def optimal_weights(n: Any) -> np.ndarray:
         bad = int(np.argmin(np.diagonal(a)))
         raise ValueError(f"N has a non-positive variance at channel {bad}: {a[bad, bad]:g}")
     a = 0.5 * (a + a.T) / scale
-    one = np.ones(a.shape[0])
-    try:
-        u = np.linalg.solve(a, one)
-        if not np.all(np.isfinite(u)) or np.linalg.cond(a) > 1e12:
-            raise np.linalg.LinAlgError
-    except np.linalg.LinAlgError:
-        u = np.linalg.pinv(a, rcond=1e-12, hermitian=True) @ one
-    s = float(one @ u)
-    if not (math.isfinite(s) and s > 0):
-        raise ValueError("N is not positive semi-definite: 1' N^-1 1 <= 0")
-    return u / s
+    k = a.shape[0]
+    # the KKT system of min w'Nw s.t. 1'w = 1: [[N, 1], [1', 0]] [w; -lambda/2] = [0; 1];
+    # it is regular whenever N is positive definite on {d : 1'd = 0} (also for a singular N)
+    kkt = np.zeros((k + 1, k + 1))
+    kkt[:k, :k] = a
+    kkt[:k, k] = kkt[k, :k] = 1.0
+    rhs = np.zeros(k + 1)
+    rhs[k] = 1.0
+    sol = np.linalg.lstsq(kkt, rhs, rcond=1e-13)[0]
+    w = sol[:k]
+    if not (np.all(np.isfinite(w)) and math.isclose(float(w.sum()), 1.0, abs_tol=1e-9)):
+        raise ValueError("no weights minimise w' N w: N is not positive semi-definite")
+    return w / w.sum()
 
 
 def _quad(n: np.ndarray, w: np.ndarray) -> np.ndarray:
