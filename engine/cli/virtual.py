@@ -58,6 +58,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     vp.add_argument("--model", required=True, help="model of every sensor, e.g. 'GM+WN+RW'")
     vp.add_argument("--shared", help="processes shared by the sensors, e.g. WN,RW,GM")
+    vp.add_argument(
+        "--weights",
+        choices=["ci", "identity", "efficient"],
+        default="ci",
+        help="MGMWM weighting: ci (default), identity, or efficient (two-step, V^-1)",
+    )
     vp.add_argument("--channel", help="several LOGs: the channel of each (default: the first)")
     vp.add_argument("--channels", help="one LOG: its sensors' channels, e.g. gyro_a,gyro_b")
     target = vp.add_mutually_exclusive_group()
@@ -71,12 +77,6 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "--absolute",
         action="store_true",
         help="band: sum the WVs plainly (default: each relative to the average's WV)",
-    )
-    vp.add_argument(
-        "--weights",
-        default="ci",
-        choices=["ci", "identity", "efficient"],
-        help="MGMWM weighting: ci (default), identity, or efficient (two-step, V^-1)",
     )
     vp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
     vp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
