@@ -290,6 +290,42 @@ def test_virtual_sensor_of_a_fit_scale_band_and_export(tmp_path):
         eg.virtual_sensor(res, scale=1.0, band=(1.0, 2.0))
 
 
+def test_interval_is_the_moment_covariance_of_w_nhat_w():
+    # the interval's variance is c' V c with V the MGMWM moments' covariance (independent
+    # path: moment_covariance over every pair), put in chi-square form with eta = 2 nu^2 / var
+    from engine.inference.asymptotic import wv_cov_model
+
+    k3 = ["a", "b", "c"]
+    truth = MultiModel(
+        k3,
+        {
+            "a": "WN+RW+GM(beta=1, sigma2_gm=1e-3)",
+            "b": "WN+RW+GM(beta=5, sigma2_gm=2e-3)",
+            "c": "WN+RW+GM(beta=1, sigma2_gm=5e-4)",
+        },  # fmt: skip
+        shared=["WN", "RW"],
+        cov={
+            "WN": np.diag([1e-2, 3e-2, 2e-2]),
+            "RW": np.array([[1.0, 0.8, -0.3], [0.8, 1.0, 0.0], [-0.3, 0.0, 1.0]]) * 2e-7,
+        },
+    )
+    x = truth.simulate(1 << 13, fs=FS, rng=4)
+    wvm = eg.wv_matrix(x, channels=k3, fs=FS)
+    res = eg.fit_mgmwm(wvm, truth.cleared())
+    vs = eg.virtual_sensor(res, band=(0.05, 5.0))
+    v = eg.moment_covariance(res.model, wvm)
+    w, nj = vs.weights, wvm.n_levels
+    pairs = [(p, q) for p in range(3) for q in range(p, 3)]
+    c = np.array([w[p] * w[q] * (1.0 if p == q else 2.0) for p, q in pairs])
+    var = np.einsum("a,ajbj,b->j", c, v.reshape(len(pairs), nj, len(pairs), nj), c)
+    np.testing.assert_allclose(np.diagonal(wv_cov_model(vs.model, vs.wv())), var, rtol=1e-6)
+    # the chi-square range with eta = 2 nu^2 / var: the interval's width matches 2 x 1.96 sd
+    # where eta is large (the short levels)
+    sd = np.sqrt(var[:3])
+    np.testing.assert_allclose(vs.ci_high[:3] - vs.ci_low[:3], 2 * 1.959964 * sd, rtol=0.02)
+    assert np.all(vs.ci_low < vs.implied) and np.all(vs.implied < vs.ci_high)
+
+
 # -------------------------------------------------------------------------------------------
 # the command
 # -------------------------------------------------------------------------------------------

@@ -40,7 +40,9 @@ Intervals (``VirtualSensor.ci_low/ci_high``): where the empirical WV of the N-sa
 combined series falls with probability ``1 - alpha`` if the fitted model is right. Its
 variance is ``c_j' V_j c_j``, with ``V`` the model-implied Gaussian covariance of the
 stacked WV/WCCV moments (:func:`engine.multivariate.moment_covariance`, Isserlis) and
-``c_pq = w_p w_q (2 - [p = q])``, put in chi-square form as Percival's eta3 (equivalent
+``c_pq = w_p w_q (2 - [p = q])``; it equals the univariate model-implied variance of the WV
+of the virtual model (:func:`engine.inference.wv_cov_model`), which is what is computed. It
+is put in chi-square form as Percival's eta3 (equivalent
 degrees of freedom ``eta = 2 nu^2 / var``): ``[nu chi2_{a/2}(eta) / eta, nu
 chi2_{1-a/2}(eta) / eta]``. The estimation uncertainty of the fitted parameters is not
 propagated (the MGMWM exposes per-parameter bounds, not their joint covariance): at
@@ -62,7 +64,6 @@ from ..fit import FitError, GMWMResult, weight_matrix
 from ..models import Model, Process
 from ..units import squared
 from ..wv import WaveletVariance, WVMatrix
-from .moments import moment_covariance
 from .spec import MultiModel
 
 __all__ = [
@@ -523,7 +524,7 @@ def virtual_sensor(
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
     wvm: WVMatrix = result.wvm
     model: MultiModel = result.model
-    k, nj = wvm.k, wvm.n_levels
+    k = wvm.k
     sel, name = target_levels(wvm.tau_s, scale, band)
     imp = np.asarray(result.implied, float)
     emp = np.asarray(wvm.values, float)
@@ -532,12 +533,15 @@ def virtual_sensor(
     n_emp, _ = band_matrix(emp, sel, relative)
     w_emp = optimal_weights(n_emp)
     nu = _quad(imp, w)
-    # sampling variance of w' N_hat(j) w under the model: c' V_jj c
-    v = moment_covariance(model, wvm)
-    pairs = [(p, q) for p in range(k) for q in range(p, k)]
-    c = np.array([w[p] * w[q] * (1.0 if p == q else 2.0) for p, q in pairs])
-    vv = v.reshape(len(pairs), nj, len(pairs), nj)
-    var = np.einsum("a,ajbj,b->j", c, vv, c)
+    vmodel = virtual_model(model, w, wvm.fs)
+    # sampling variance of w' N_hat(j) w under the model: c' V_jj c with V the moments'
+    # covariance (moment_covariance), which is the univariate Var(nu_hat_j) of the virtual
+    # model (v is one Gaussian series with spectral density w' S(f) w; Isserlis on both
+    # sides) and costs one J x J integral instead of (P J)^2
+    from ..inference.asymptotic import wv_cov_model
+
+    shape = WaveletVariance.from_arrays(np.maximum(nu, 0.0), n=wvm.n, fs=wvm.fs, alpha=alpha)
+    var = np.diagonal(wv_cov_model(vmodel, shape)).copy()
     lo, hi = _interval(nu, var, alpha)
     avg = np.full(k, 1.0 / k)
     diag = np.einsum("jpp->jp", imp)
@@ -564,7 +568,7 @@ def virtual_sensor(
         objective=float(np.sum(nu[sel] / a[sel])),
         average_objective=float(np.sum(_quad(imp, avg)[sel] / a[sel])),
         sensor_objectives=np.sum(diag[sel] / a[sel, None], axis=0),
-        model=virtual_model(model, w, wvm.fs),
+        model=vmodel,
         n=int(wvm.n),
         alpha=alpha,
     )
