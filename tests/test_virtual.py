@@ -154,6 +154,10 @@ def test_wv_of_the_combined_signal_is_w_nhat_w():
     wvm = eg.wv_matrix(x, channels=list("abc"), fs=FS)
     wv = eg.wavelet_variance(v, fs=FS)
     np.testing.assert_allclose(wv.variance, np.einsum("p,jpq,q->j", w, wvm.values, w), rtol=1e-9)
+    log = eg.ImuLog(channels=dict(zip("abc", x.T, strict=True)), fs=FS)
+    np.testing.assert_allclose(eg.virtual_signal(log, w), v, rtol=1e-14)
+    with pytest.raises(ValueError, match="give 3 weights"):
+        eg.virtual_signal(log, [0.5, 0.5])
     # replicates of different lengths: cut to the shortest; a log by channel names
     assert eg.virtual_signal([x[:, 0], x[:100, 1]], [0.5, 0.5]).size == 100
     assert eg.virtual_signal(dict(zip("abc", x.T, strict=True)), w, channels=list("abc"))[

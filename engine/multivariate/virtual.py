@@ -211,6 +211,8 @@ def virtual_signal(data: Any, weights: Any, channels: Sequence[str] | None = Non
         cols = list(np.asarray(data, float).T)
     elif isinstance(data, Mapping):
         cols = [np.asarray(v, float) for v in data.values()]
+    elif isinstance(getattr(data, "channels", None), Mapping):  # an ImuLog: every channel
+        cols = [np.asarray(v, float) for v in data.channels.values()]
     else:
         cols = [np.asarray(v, float) for v in data]
     if any(c.ndim != 1 for c in cols):
