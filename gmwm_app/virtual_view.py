@@ -24,6 +24,7 @@ from bokeh.models import ColumnDataSource, NumberFormatter, ScientificFormatter
 
 import engine as eg
 from engine.export import FORMATS, export
+from engine.units import param_unit
 
 from .data import message_of
 from .multi_figures import make_table
@@ -105,9 +106,9 @@ class VirtualView:
         self.weight_source, self.weight_table = make_table(
             [
                 ("channel", "channel", 120, None),
-                ("weight", "weight (model) [1]", 120, NumberFormatter(format="0.0000")),
-                ("weight_data", "weight (data) [1]", 120, NumberFormatter(format="0.0000")),
-                ("adev", "Allan dev. at target", 130, sci),
+                ("weight", "w (model) [1]", 95, NumberFormatter(format="0.0000")),
+                ("weight_data", "w (data) [1]", 95, NumberFormatter(format="0.0000")),
+                ("adev", "Allan dev.", 95, sci),
                 ("unit", "unit", 70, None),
             ],
             "virtual_weights",
@@ -180,7 +181,7 @@ class VirtualView:
             self.info,
             pn.Row(
                 pn.pane.Bokeh(self.figure, sizing_mode="stretch_width"),
-                pn.pane.Bokeh(self.weight_table, width=580, margin=(5, 10)),
+                pn.pane.Bokeh(self.weight_table, width=520, margin=(5, 10)),
                 sizing_mode="stretch_width",
             ),
             pn.Row(self.name_input, self.format_select, self.download),
@@ -312,5 +313,11 @@ class VirtualView:
             f"criterion is **{vs.gain_vs_average:.3f} x the plain average's** and "
             f"**{vs.gain_vs_best:.3f} x the best channel's** ({html.escape(vs.best_sensor)}). "
             f"Allan deviation column: at {vs.tau_s[int(vs.target_levels[0])]:g} s. "
-            f"Model of the virtual sensor: `{html.escape(vs.model.spec(values=True))}`."
+            f"Model of the virtual sensor ({html.escape(vs.model.spec())}): "
+            + ", ".join(
+                f"{lab}.{name} = {v:.4g} {param_unit(p.code, name, vs.unit).replace('^2', '²')}"
+                for lab, p in zip(vs.model.labels, vs.model.processes, strict=True)
+                for name, v in zip(p.param_names, p.values, strict=True)
+            )
+            + "."
         )
