@@ -91,6 +91,7 @@ def plot(out: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    path.parent.mkdir(parents=True, exist_ok=True)
     vs = out["band"]
     t = vs.tau_s
     ad = lambda v: np.sqrt(2 * np.maximum(v, 0.0)) * DEG_H  # noqa: E731
@@ -119,17 +120,17 @@ def plot(out: dict[str, Any], path: Path) -> None:
     bx.legend(fontsize=7)
     bx.set_title("optimal weights (sum 1)", fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
 
 
-def main() -> None:
-    """Command-line entry: print the summary and the README table, write the figure."""
+def main(argv: list[str] | None = None) -> None:
+    """Command-line entry: write the figure, print the summary and the README table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=FIG)
-    args = ap.parse_args()
+    ap.add_argument("--out", type=Path, default=FIG, help="the figure (PNG)")
+    fig_path = ap.parse_args(argv).out
     out = run()
+    plot(out, fig_path)
     res, vs, vs2 = out["res"], out["band"], out["scale"]
     print(f"MGMWM: objective {res.objective:.6g}, converged {res.converged}")
     for lab, est in res.shared.items():
@@ -141,8 +142,7 @@ def main() -> None:
     print(f"  weights {np.round(vs2.weights, 3)}; gain vs average {vs2.gain_vs_average:.3f}")
     print()
     print(table(out))
-    plot(out, args.out)
-    print(f"figure: {args.out}")
+    print(f"figure: {fig_path}")
 
 
 if __name__ == "__main__":
