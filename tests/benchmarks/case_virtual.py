@@ -64,7 +64,7 @@ def table(out: dict[str, Any]) -> str:
     vs, vs2 = out["band"], out["scale"]
     idx = [int(np.argmin(np.abs(vs.tau_s - s))) for s in TABLE_SCALES]
     head = "| sensor | weight (every level) | weight (81.92 s) | " + " | ".join(
-        f"{vs.tau_s[i]:g} s" for i in idx
+        f"ADEV at {vs.tau_s[i]:g} s [deg/h]" for i in idx
     )
     lines = [head + " |", "|---" * (3 + len(idx)) + "|"]
     for p, c in enumerate(vs.channels):
