@@ -211,7 +211,8 @@ class VirtualView:
         relative = bool(self.relative.value)
 
         def work() -> eg.VirtualSensor:
-            return eg.virtual_sensor(res, relative=relative, **kw)
+            # the sampling band only: the delta-method interval costs as much as the fit
+            return eg.virtual_sensor(res, relative=relative, confidence=False, **kw)
 
         def apply(vs: eg.VirtualSensor) -> None:
             if res is self.result:

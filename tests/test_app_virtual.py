@@ -62,6 +62,8 @@ def test_view_shows_the_engine_virtual_sensor_of_the_fit(app: Any, array_log: Pa
     assert vs is not None and vv.error == ""
     direct = eg.virtual_sensor(v.result)
     np.testing.assert_allclose(vs.weights, direct.weights, rtol=1e-12)
+    np.testing.assert_allclose(vs.ci_low, direct.ci_low, rtol=1e-12)
+    assert np.all(np.isnan(vs.conf_low))  # not computed live
     # the table: each channel, the average and the virtual sensor
     rows = vv.weight_source.data
     assert rows["channel"] == ["imu_a", "imu_b", "plain average", "virtual sensor"]
