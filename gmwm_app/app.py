@@ -83,6 +83,7 @@ view.export("KIND").to_blob().then((blob) => {
 
 def _lazy_view_factories() -> list[tuple[str, Callable[[AppState, Jobs], Any]]]:
     """Tabs built on first opening: (title, view class taking the state and the jobs)."""
+    from gmwm_app.check_view import CheckView
     from gmwm_app.multi_view import MultiView
     from gmwm_app.slope_view import SlopeView
 
@@ -90,6 +91,7 @@ def _lazy_view_factories() -> list[tuple[str, Callable[[AppState, Jobs], Any]]]:
         ("Model selection", SelectionView),
         ("Slope method", SlopeView),
         ("Multi-channel", MultiView),
+        ("Datasheet check", CheckView),
     ]
 
 

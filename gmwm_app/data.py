@@ -41,23 +41,18 @@ __all__ = [
 ]
 
 
-def read_log(
-    path: str | os.PathLike[str] | bytes,
-    *,
-    fs: float | None = None,
-    segment: str | None = None,
-    name: str | None = None,
-) -> Any:
-    """Read an IMU log with the engine's loader (``engine.load_log``).
+def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> Any:
+    """Read an IMU log with the engine's loader (``engine.load_log``, imported on first use:
+    the app module loads without h5py work).
 
     Parameters
     ----------
     path : str, path-like or bytes
         CSV/TSV/text, NPY/NPZ, HDF5 log or WV summary HDF5 file, or its content (an upload).
-    name : str, optional
-        The uploaded file's name, for content (its extension and the name in messages).
-    fs : float, optional
-        Sampling frequency (Hz) to use when the file has none.
+    **options
+        ``load_log``'s keyword arguments: here ``name`` (the uploaded file's name, for
+        content: its extension and the name in messages), ``fs`` (Hz, when the file has none)
+        and ``segment``.
 
     Returns
     -------
@@ -68,9 +63,9 @@ def read_log(
     ValueError
         (``engine.LoadError``) with a message naming the file and the fix.
     """
-    from engine.io import load_log  # imported here: the app module loads without h5py work
+    from engine.io import load_log
 
-    return load_log(path, fs=fs, segment=segment, name=name)
+    return load_log(path, **options)
 
 
 @dataclass

@@ -24,7 +24,7 @@ from typing import Any
 from panel.io.state import set_curdoc
 from panel.io.state import state as pn_state
 
-__all__ = ["EXECUTOR", "Jobs", "ProgressThrottle", "lower_priority"]
+__all__ = ["EXECUTOR", "Jobs", "ProgressThrottle", "lower_priority", "job_progress", "job_controls"]
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +68,23 @@ class ProgressThrottle:
             self.last = now
             return True
         return False
+
+    def step(
+        self,
+        done: int,
+        total: int,
+        observer: Callable[[int, int], None] | None,
+        cancel: threading.Event,
+        cancelled: type[Exception],
+    ) -> int | None:
+        """The head of a job's progress callback (worker thread): tell ``observer``, raise
+        ``cancelled`` once ``cancel`` is set, and return the bar's value (0-100) when an update
+        is due (:meth:`due`), else None."""
+        if observer is not None:
+            observer(done, total)
+        if cancel.is_set():
+            raise cancelled
+        return int(100 * done / max(total, 1)) if self.due(done, total) else None
 
 
 class Jobs:
@@ -326,3 +343,67 @@ class Jobs:
             self._loads = 0
             self.busy(False, "")
             self.settled()
+
+
+def job_progress() -> Any:
+    """The progress bar of a tab's background job (hidden until the job starts).
+
+    Returns
+    -------
+    panel.indicators.Progress
+        A full-width bar, 0 of 100.
+    """
+    import panel as pn
+
+    return pn.indicators.Progress(
+        value=0,
+        max=100,
+        bar_color="primary",
+        height=14,
+        visible=False,
+        sizing_mode="stretch_width",
+        margin=(0, 10),
+    )
+
+
+def job_controls(
+    label: str,
+    start: Callable[[], Any],
+    cancel: Callable[[], Any],
+    *,
+    width: int,
+    cancel_width: int,
+    margin: tuple[int, ...] = (22, 5, 5, 5),
+    description: str | None = None,
+) -> tuple[Any, Any, Any]:
+    """The controls of a tab's background job: its start button, a Cancel button (disabled
+    until a job runs) and its progress bar (:func:`job_progress`).
+
+    Parameters
+    ----------
+    label : str
+        Text of the start button.
+    start, cancel : callable
+        Called without arguments when the start or the Cancel button is clicked.
+    width, cancel_width : int
+        Widths of the two buttons (px).
+    margin : tuple of int
+        Margin of the start button.
+    description : str, optional
+        Tooltip of the start button.
+
+    Returns
+    -------
+    (start_button, cancel_button, progress)
+    """
+    import panel as pn
+
+    run = pn.widgets.Button(
+        label=label, color="primary", width=width, margin=margin, description=description
+    )
+    run.on_click(lambda _e: start())
+    stop = pn.widgets.Button(
+        label="Cancel", color="light", width=cancel_width, margin=(22, 5, 5, 5), disabled=True
+    )
+    stop.on_click(lambda _e: cancel())
+    return run, stop, job_progress()

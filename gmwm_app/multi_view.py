@@ -52,7 +52,7 @@ from engine.models import parse_model
 from engine.multivariate import SHAREABLE, DependenceTest
 
 from .data import message_of
-from .jobs import ProgressThrottle
+from .jobs import ProgressThrottle, job_controls
 from .multi_figures import (
     GridFigure,
     color_label,
@@ -76,7 +76,6 @@ from .views import (
     TOTAL_COLOR,
     component_color,
     hidden_alert,
-    job_progress,
     redraw_table,
 )
 from .virtual_view import VirtualView
@@ -235,19 +234,15 @@ class MultiView(pn.viewable.Viewer):
         self.dep_b = pn.widgets.IntInput(
             label="Bootstrap replicates B", value=100, start=10, end=2000, step=10, width=170
         )
-        self.dep_button = pn.widgets.Button(
-            label="Test dependence",
-            color="primary",
+        self.dep_button, self.dep_cancel, self.dep_progress = job_controls(
+            "Test dependence",
+            lambda: self.start_dependence_test(),
+            lambda: self.cancel_dependence_test(),
             width=150,
+            cancel_width=90,
             margin=(22, 5, 5, 10),
             description="Parametric bootstrap of the objective difference (shared vs independent)",
         )
-        self.dep_button.on_click(lambda _e: self.start_dependence_test())
-        self.dep_cancel = pn.widgets.Button(
-            label="Cancel", color="light", width=90, margin=(22, 5, 5, 5), disabled=True
-        )
-        self.dep_cancel.on_click(lambda _e: self.cancel_dependence_test())
-        self.dep_progress = job_progress()
         self.dep_text = pn.pane.Markdown(
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mdependence"]
         )
@@ -608,12 +603,8 @@ class MultiView(pn.viewable.Viewer):
         self, done: int, total: int, observer: Callable[[int, int], None] | None
     ) -> None:
         """Progress callback (worker thread): bar, text, cancel point."""
-        if observer is not None:
-            observer(done, total)
-        if self._dep_cancel.is_set():
-            raise Cancelled
-        if self._dep_throttle.due(done, total):
-            value = int(100 * done / max(total, 1))
+        value = self._dep_throttle.step(done, total, observer, self._dep_cancel, Cancelled)
+        if value is not None:
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
             self.jobs.locked(
                 lambda: (

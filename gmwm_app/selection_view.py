@@ -29,7 +29,7 @@ from bokeh.models import (
     TableColumn,
 )
 
-from .jobs import ProgressThrottle
+from .jobs import ProgressThrottle, job_controls
 from .state import Inference, format_value
 from .views import (
     TOTAL_COLOR,
@@ -37,7 +37,6 @@ from .views import (
     data_table,
     empirical_curve,
     interval_band,
-    job_progress,
     log_figure,
     model_grid,
     redraw_table,
@@ -205,15 +204,9 @@ class SelectionView(pn.viewable.Viewer):
             sizing_mode="stretch_width",
             css_classes=["gmwm-max-model"],
         )
-        self.rank_button = pn.widgets.Button(
-            label="Rank", color="primary", width=100, margin=(22, 5, 5, 5)
+        self.rank_button, self.cancel_button, self.progress = job_controls(
+            "Rank", lambda: self.start_ranking(), lambda: self.cancel(), width=100, cancel_width=100
         )
-        self.rank_button.on_click(lambda _e: self.start_ranking())
-        self.cancel_button = pn.widgets.Button(
-            label="Cancel", color="light", width=100, margin=(22, 5, 5, 5), disabled=True
-        )
-        self.cancel_button.on_click(lambda _e: self.cancel())
-        self.progress = job_progress()
         self.status = pn.pane.Markdown(
             "Rank the candidate models of the selected channel by "
             "WVIC = objective + optimism (smallest first).",
@@ -328,12 +321,8 @@ class SelectionView(pn.viewable.Viewer):
 
     def _progress(self, done: int, total: int, observer: Callable[[int, int], None] | None) -> None:
         """Progress callback of ``rank_models`` (worker thread): bar update, cancel point."""
-        if observer is not None:
-            observer(done, total)
-        if self._cancel.is_set():
-            raise _Cancelled
-        if self._throttle.due(done, total):
-            value = int(100 * done / max(total, 1))
+        value = self._throttle.step(done, total, observer, self._cancel, _Cancelled)
+        if value is not None:
             self.jobs.locked(lambda: self.progress.param.update(value=value))
             what = (
                 f"Fitted {total} candidates; computing the WV covariance and the WVIC"

@@ -7,6 +7,7 @@ Two layers, like the rest of the app:
   WV, model, WV and fit) with :func:`engine.io.session.session_to_json`; :func:`prepare_restore`
   (worker-thread safe) reads a session file and its data again; :func:`apply_restore` puts it
   in the state; :func:`export_text` gives the Kalibr ``imu.yaml`` or the datasheet of the fit;
+  :func:`export_fits` writes the fits of several channels in any registered format;
 * :class:`SessionPanel`: the widgets of one page (downloads, restore input, the time-gap box
   with "Analyse the longest clean segment"), driven by a :class:`~gmwm_app.app.GMWMApp`.
 """
@@ -14,7 +15,8 @@ Two layers, like the rest of the app:
 from __future__ import annotations
 
 import io
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -22,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import panel as pn
 
-from engine.export import export
+from engine.export import FORMATS, export
 from engine.io import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.limits import check_path, check_upload_size
@@ -39,6 +41,7 @@ __all__ = [
     "apply_restore",
     "RestorePlan",
     "export_text",
+    "export_fits",
     "is_gap_error",
     "SessionPanel",
 ]
@@ -237,6 +240,52 @@ def export_text(state: AppState, fmt: str) -> str:
     return export(None, fits, fmt, units=units, source=src)
 
 
+def export_fits(
+    state: AppState,
+    fits: Mapping[str, Any],
+    fmt: str,
+    *,
+    inflate: float = 1.0,
+    filter_rate: float | None = None,
+) -> str:
+    """The fits of several channels of the loaded log in any export format.
+
+    Parameters
+    ----------
+    state : AppState
+        The session (its units, file name and, for a ROS bag, its IMU topic).
+    fits : mapping of channel to GMWMResult
+        The fits to export (the filter formats need a gyroscope and an accelerometer).
+    fmt : str
+        A name of :data:`engine.export.FORMATS`.
+    inflate : float
+        Filter formats: the noise values times this factor (written in the file).
+    filter_rate : float, optional
+        PX4/ArduPilot: the EKF prediction rate in Hz.
+
+    Raises
+    ------
+    ValueError
+        No fit, or the format cannot be written from these fits; the message says why.
+    """
+    if not fits:
+        raise ValueError("no fit yet: add processes to the model first")
+    log = state.log
+    units = {ch: u for ch in fits if (u := (log.units or {}).get(ch) if log else None)}
+    topic = (log.meta.get("topic") if log is not None else None) or None
+    return export(
+        None,
+        dict(fits),
+        fmt,
+        units=units or None,
+        source=state.filename,
+        rostopic=topic,
+        allow_partial=fmt == "kalibr",
+        inflate=inflate,
+        filter_rate=filter_rate,
+    )
+
+
 def is_gap_error(err: BaseException | str) -> bool:
     """True for the loader's "time gaps, choose a segment" error."""
     return _GAP_MARK in str(err)
@@ -302,6 +351,27 @@ class SessionPanel:
             partial(self._export, "datasheet"), "gmwm_datasheet.txt", "Datasheet (text)", "default"
         )
         self.export_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
+        # every format of the registry, from the fits of the channels fitted in this session
+        self._fits: dict[str, Any] = {}  # channel -> its latest fit (this log, this fs)
+        self._fits_of: tuple[Any, ...] = ()
+        self.format_select = pn.widgets.Select(
+            label="Format",
+            options={f"{f.description} ({k})": k for k, f in FORMATS.items()},
+            value="openvins",
+            sizing_mode="stretch_width",
+        )
+        self.inflate_input = pn.widgets.FloatInput(
+            label="Inflate (x, filter formats)", value=1.0, start=1.0, step=0.5, width=140
+        )
+        self.rate_input = pn.widgets.FloatInput(
+            label="Filter rate (Hz)", value=None, start=0.0, width=140, visible=False
+        )
+        self.format_download = download_button(
+            self._export_format, "imu.yaml", "Download in this format", "default"
+        )
+        self.fits_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
+        for w in (self.format_select, self.inflate_input, self.rate_input):
+            w.param.watch(self._on_format, "value")
         self.gap_report = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.longest_button = pn.widgets.Button(
             label="Analyse the longest clean segment", color="warning", margin=(3, 10)
@@ -327,6 +397,10 @@ class SessionPanel:
             pn.Column(  # one Bokeh root (each template root costs a document walk)
                 pn.Row(self.kalibr_download, self.datasheet_download, margin=0),
                 self.export_note,
+                self.format_select,
+                pn.Row(self.inflate_input, self.rate_input, margin=0),
+                self.format_download,
+                self.fits_note,
                 pn.layout.Divider(),
                 h("### Session", margin=(0, 10)),
                 self.session_download,
@@ -366,8 +440,34 @@ class SessionPanel:
             if fit
             else "Kalibr and datasheet exports need a fit: add processes to the model."
         )
+        self._remember_fit()
+        self._on_format()
         if self.gap_box.visible and not is_gap_error(s.error):
             self.gap_box.visible = False
+
+    def _remember_fit(self) -> None:
+        """Keep the latest fit of each channel of the shown log (new data forget them)."""
+        s = self.state
+        of = (id(s.log), s.filename, s.fs, s.robust)
+        if of != self._fits_of:
+            self._fits, self._fits_of = {}, of
+        if s.result is not None and s.channel:
+            self._fits[s.channel] = s.result
+        elif s.channel:
+            self._fits.pop(s.channel, None)
+
+    def _on_format(self, _event: Any = None) -> None:
+        key = self.format_select.value
+        f = FORMATS[key]
+        self.rate_input.visible = key in ("px4", "ardupilot")
+        stem = Path(self.state.filename or "data").stem
+        self.format_download.filename = f"{key}_{stem}{f.suffix}"
+        self.format_download.disabled = not self._fits
+        names = ", ".join(self._fits) or "none yet"
+        self.fits_note.object = (
+            f"Channels fitted in this session: **{names}**. Filter formats need a gyroscope "
+            "and an accelerometer: show another channel and fit it to add it."
+        )
 
     # callbacks -------------------------------------------------------------------------------
     def _session_file(self) -> io.StringIO:
@@ -385,6 +485,27 @@ class SessionPanel:
         except ValueError as e:
             s.report_error(f"Could not export ({fmt}): {e}")
             return io.StringIO(f"# could not export: {e}\n")
+
+    def _export_format(self) -> io.StringIO:
+        s = self.state
+        key = self.format_select.value
+        rate = self.rate_input.value if self.rate_input.visible else None
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                text = export_fits(
+                    s,
+                    self._fits,
+                    key,
+                    inflate=float(self.inflate_input.value or 1.0),
+                    filter_rate=rate,
+                )
+        except ValueError as e:
+            s.report_error(f"Could not export ({key}): {e}")
+            return io.StringIO(f"# could not export: {e}\n")
+        if caught:  # e.g. an autopilot value outside its documented range
+            s.notice = "Export warning: " + "; ".join(str(w.message) for w in caught)
+        return io.StringIO(text)
 
     def _on_restore(self, event: Any) -> None:
         data = event.new

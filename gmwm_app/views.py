@@ -506,10 +506,7 @@ def data_table(
     name: str,
     css: str,
     height: int,
-    *,
-    sortable: bool = False,
-    selectable: bool = False,
-    reorderable: bool = False,
+    **flags: bool,
 ) -> DataTable:
     """A full-width table in the app's style: no index column, 26 px rows.
 
@@ -521,28 +518,28 @@ def data_table(
         The model name (tests find the table by it) and its CSS class.
     height
         Height in pixels.
-    sortable, selectable, reorderable
-        Passed to Bokeh's ``DataTable``.
+    **flags
+        ``sortable``, ``selectable``, ``reorderable``: passed to Bokeh's ``DataTable``, each
+        False unless given.
 
     Returns
     -------
     DataTable
         The table.
     """
+    flags = {"sortable": False, "selectable": False, "reorderable": False, **flags}
     # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
     return DataTable(
         source=source,
         columns=columns,
         index_position=None,
-        sortable=sortable,
-        reorderable=reorderable,
-        selectable=selectable,
         autosize_mode="force_fit",
         height=height,
         row_height=26,
         sizing_mode="stretch_width",
         name=name,
         css_classes=[css],
+        **flags,
     )
 
 
@@ -638,27 +635,6 @@ def hidden_alert(alert_type: str, **kw: Any) -> Any:
 
     return pn.pane.Alert(
         "", alert_type=alert_type, visible=False, sizing_mode="stretch_width", margin=(5, 10), **kw
-    )
-
-
-def job_progress() -> Any:
-    """The progress bar of a tab's background job (hidden until the job starts).
-
-    Returns
-    -------
-    panel.indicators.Progress
-        A full-width bar, 0 of 100.
-    """
-    import panel as pn
-
-    return pn.indicators.Progress(
-        value=0,
-        max=100,
-        bar_color="primary",
-        height=14,
-        visible=False,
-        sizing_mode="stretch_width",
-        margin=(0, 10),
     )
 
 

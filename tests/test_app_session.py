@@ -256,3 +256,65 @@ def test_page_session_widgets(app_demo: Path) -> None:
     assert s.channel == "gyro_x" and s.model.spec() == "GM+WN+RW" and s.error == ""
     sp.restore_input.value = b"nonsense"
     assert "not a GMWM session" in s.error or "cannot read session" in s.error
+
+
+def test_page_export_menu_every_format_from_the_fitted_channels(app_demo: Path) -> None:
+    """The sidebar's format menu: the filter formats take the fits of every channel fitted in
+    the session; the numbers follow the per-sample parameters (N = sqrt(sigma2 / fs),
+    K = sqrt(gamma2 * fs), deg -> rad); inflate and the filter rate reach the file."""
+    import math
+
+    import yaml
+
+    from engine.export import FORMATS
+    from gmwm_app.app import create_app
+
+    app = create_app().gmwm_app
+    sp, s = app.session_panel, app.state
+    assert set(sp.format_select.options.values()) == set(FORMATS)
+    assert sp.format_download.disabled and "none yet" in sp.fits_note.object
+    s.set_model("WN+RW")
+    assert not sp.format_download.disabled and "**gyro_x**" in sp.fits_note.object
+    # a gyroscope alone: the VIO file cannot be written; the page says why, no traceback
+    sp.format_select.value = "openvins"
+    assert sp.format_download.callback().getvalue().startswith("# could not export")
+    assert "accelerometer" in s.error
+    gyro = s.result
+    s.select_channel("accel_x")
+    s.set_model("WN+RW")
+    accel = s.result
+    assert "**gyro_x, accel_x**" in sp.fits_note.object
+    sp.inflate_input.value = 2.0
+    text = sp.format_download.callback().getvalue()
+    assert sp.format_download.filename == "openvins_demo_imu.yaml"
+    d = yaml.safe_load(text.split("\n", 1)[1])["imu0"]
+    fs = s.fs
+    wn = {r: next(p for p in r.model.processes if p.code == "WN") for r in (gyro, accel)}
+    rw = {r: next(p for p in r.model.processes if p.code == "RW") for r in (gyro, accel)}
+    rad = math.pi / 180
+    assert d["gyroscope_noise_density"] == pytest.approx(
+        2 * rad * math.sqrt(wn[gyro].sigma2 / fs), rel=1e-9
+    )
+    assert d["gyroscope_random_walk"] == pytest.approx(
+        2 * rad * math.sqrt(rw[gyro].gamma2 * fs), rel=1e-9
+    )
+    assert d["accelerometer_noise_density"] == pytest.approx(
+        2 * math.sqrt(wn[accel].sigma2 / fs), rel=1e-9
+    )
+    assert d["accelerometer_random_walk"] == pytest.approx(
+        2 * math.sqrt(rw[accel].gamma2 * fs), rel=1e-9
+    )
+    # PX4 needs the filter rate: the input shows, and the value scales by sqrt(rate)
+    sp.format_select.value = "px4"
+    assert sp.rate_input.visible and sp.format_download.filename == "px4_demo_imu.params"
+    assert sp.format_download.callback().getvalue().startswith("# could not export")
+    assert "rate" in s.error
+    sp.inflate_input.value = 1.0
+    sp.rate_input.value = 250.0
+    px4 = sp.format_download.callback().getvalue()
+    line = next(ln for ln in px4.splitlines() if "EKF2_GYR_NOISE" in ln and not ln.startswith("#"))
+    value = float(line.split("\t")[3])  # QGC format: vehicle, component, name, value, type
+    assert value == pytest.approx(rad * math.sqrt(wn[gyro].sigma2 / fs) * math.sqrt(250.0), 1e-5)
+    # new data forget the fits of the old: only the channel refitted on the new log is left
+    s.load_demo()
+    assert s.channel == "accel_x" and "fitted in this session: **accel_x**." in sp.fits_note.object

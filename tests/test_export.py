@@ -31,16 +31,7 @@ from engine.export import (
     write_kalibr,
 )
 from engine.inference import param_intervals
-from engine.io import (
-    SessionError,
-    file_fingerprint,
-    load_session,
-    result_from_dict,
-    result_to_dict,
-    save_session,
-    session_from_json,
-    session_to_json,
-)
+from engine.io import session as sessions
 from engine.units import allan_floor
 
 FS = 100.0
@@ -345,19 +336,10 @@ def test_json_report(fits, six: Path) -> None:
 def test_curves_csv(fits) -> None:
     text = curves_csv(fits)
     rows = list(csv.DictReader(io.StringIO(text)))
-    assert list(rows[0]) == [
-        "channel",
-        "level",
-        "tau_samples",
-        "tau_s",
-        "wv",
-        "ci_low",
-        "ci_high",
-        "implied",
-        "WN",
-        "RW",
-        "wv_unit",
-    ]
+    # the documented header (curves_csv's docstring): the WV columns, one column per process of
+    # the model (WN+RW here), the unit
+    header = "channel level tau_samples tau_s wv ci_low ci_high implied WN RW wv_unit"
+    assert list(rows[0]) == header.split()
     assert len(rows) == sum(r.wv.n_levels for r in fits.values())
     r0 = fits["gyro_x"]
     first = rows[0]
@@ -440,7 +422,7 @@ def test_cli_export_counts_with_scale(tmp_path: Path, capsys) -> None:
 def test_session_round_trip(fits, six: Path, tmp_path: Path) -> None:
     ivs = {"gyro_x": param_intervals(fits["gyro_x"])}
     robust = eg.wavelet_variance(eg.load_log(six)["gyro_y"], fs=FS, robust=True, unit="deg/s")
-    p = save_session(
+    p = sessions.save_session(
         tmp_path / "s.json",
         data_path=six,
         load={"segment": (0, 5000)},
@@ -450,7 +432,7 @@ def test_session_round_trip(fits, six: Path, tmp_path: Path) -> None:
         intervals=ivs,
         app={"channel": "gyro_x", "log_axes": True},
     )
-    s = load_session(p)
+    s = sessions.load_session(p)
     assert s.data_path == str(six) and s.load == {"segment": (0, 5000)}
     assert s.models == {"gyro_x": "WN+RW", "gyro_y": "GM+WN"} and s.app["log_axes"] is True
     for c, r in fits.items():
@@ -466,39 +448,46 @@ def test_session_round_trip(fits, six: Path, tmp_path: Path) -> None:
     np.testing.assert_array_equal(s.wvs["gyro_y"].classical.variance, robust.classical.variance)
     assert [iv.to_dict() for iv in s.intervals["gyro_x"]] == [iv.to_dict() for iv in ivs["gyro_x"]]
     assert s.data_changed() is None and s.reload_log().n == 5000
-    text = session_to_json(data_path=six, fits={"gyro_z": fits["gyro_z"]}, fingerprint=False)
-    up = session_from_json(text.encode())  # an uploaded file, no path on the server
+    text = sessions.session_to_json(
+        data_path=six, fits={"gyro_z": fits["gyro_z"]}, fingerprint=False
+    )
+    up = sessions.session_from_json(text.encode())  # an uploaded file, no path on the server
     assert up.fits["gyro_z"].params == fits["gyro_z"].params and up.fingerprint is None
-    assert result_from_dict(result_to_dict(fits["gyro_z"])).params == fits["gyro_z"].params
-    assert result_from_dict(fits["gyro_z"].to_dict()).params == fits["gyro_z"].params
+    assert (
+        sessions.result_from_dict(sessions.result_to_dict(fits["gyro_z"])).params
+        == fits["gyro_z"].params
+    )
+    assert sessions.result_from_dict(fits["gyro_z"].to_dict()).params == fits["gyro_z"].params
 
 
 def test_session_detects_changed_data_and_bad_files(fits, tmp_path: Path) -> None:
     data = tmp_path / "d.csv"
     data.write_text("x\n" + "\n".join(str(v) for v in range(10)))
-    fp = file_fingerprint(data)
-    p = save_session(tmp_path / "s.json", data_path=data, fits={"x": fits["gyro_x"]})
+    fp = sessions.file_fingerprint(data)
+    p = sessions.save_session(tmp_path / "s.json", data_path=data, fits={"x": fits["gyro_x"]})
     data.write_text("x\n" + "\n".join(str(v) for v in range(11)))
-    s = load_session(p)
-    assert "changed size" in s.data_changed() and fp["size"] != file_fingerprint(data)["size"]
-    with pytest.raises(SessionError, match="changed"):
+    s = sessions.load_session(p)
+    assert (
+        "changed size" in s.data_changed() and fp["size"] != sessions.file_fingerprint(data)["size"]
+    )
+    with pytest.raises(sessions.SessionError, match="changed"):
         s.reload_log()
     assert s.reload_log(check=False).n == 11
-    with pytest.raises(SessionError, match="not load_log arguments"):
-        save_session(tmp_path / "x.json", data_path=data, load={"nonsense": 1})
-    with pytest.raises(SessionError, match="JSON"):
-        save_session(tmp_path / "x.json", data_path=data, app={"f": object()})
+    with pytest.raises(sessions.SessionError, match="not load_log arguments"):
+        sessions.save_session(tmp_path / "x.json", data_path=data, load={"nonsense": 1})
+    with pytest.raises(sessions.SessionError, match="JSON"):
+        sessions.save_session(tmp_path / "x.json", data_path=data, app={"f": object()})
     (tmp_path / "bad.json").write_text("{not json")
-    with pytest.raises(SessionError, match="cannot read"):
-        load_session(tmp_path / "bad.json")
+    with pytest.raises(sessions.SessionError, match="cannot read"):
+        sessions.load_session(tmp_path / "bad.json")
     (tmp_path / "other.json").write_text('{"schema": "other"}')
-    with pytest.raises(SessionError, match="not a GMWM session"):
-        load_session(tmp_path / "other.json")
+    with pytest.raises(sessions.SessionError, match="not a GMWM session"):
+        sessions.load_session(tmp_path / "other.json")
     doc = json.loads(p.read_text())
     doc["channels"]["x"]["fit"]["model_values"] = "WN+RW"
     (tmp_path / "unset.json").write_text(json.dumps(doc))
-    with pytest.raises(SessionError, match="channel 'x'.*unset values"):
-        load_session(tmp_path / "unset.json")
+    with pytest.raises(sessions.SessionError, match="channel 'x'.*unset values"):
+        sessions.load_session(tmp_path / "unset.json")
 
 
 # ---------------------------------------------- one datasheet table for fit and export

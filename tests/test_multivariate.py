@@ -40,6 +40,15 @@ def rw_cov(sd, corr) -> np.ndarray:
     return np.asarray(corr, float) * np.outer(sd, sd)
 
 
+def shared_rw(channels, sd: float, rho: float) -> MultiModel:
+    """WN(sigma2=1) on every channel and a shared RW: standard deviation ``sd`` on each
+    channel, correlation ``rho`` between the two."""
+    corr = [[1, rho], [rho, 1]]
+    return MultiModel(
+        channels, "WN(sigma2=1)+RW", shared=["RW"], cov={"RW": rw_cov([sd, sd], corr)}
+    )
+
+
 # -------------------------------------------------------------------------------------------
 # WCCV and the WV/WCCV matrix
 # -------------------------------------------------------------------------------------------
@@ -600,18 +609,8 @@ def test_efficient_weights_and_the_moment_covariance():
 
 def test_dependence_test_detects_shared_drift_and_not_independent_channels():
     kw = dict(B=19, seed=1)
-    dep = MultiModel(
-        ["a", "b"],
-        "WN(sigma2=1)+RW",
-        shared=["RW"],
-        cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0.8], [0.8, 1]])},
-    )
-    ind = MultiModel(
-        ["a", "b"],
-        "WN(sigma2=1)+RW",
-        shared=["RW"],
-        cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0], [0, 1]])},
-    )
+    dep = shared_rw(["a", "b"], 1e-2, 0.8)
+    ind = shared_rw(["a", "b"], 1e-2, 0)
     t_dep = eg.dependence_test(dep.simulate(2**13, rng=1), dep.cleared(), **kw)
     t_ind = eg.dependence_test(ind.simulate(2**13, rng=2), ind.cleared(), **kw)
     assert t_dep.p_value == pytest.approx(1 / 20) and t_dep.statistic > 0
@@ -627,12 +626,7 @@ def test_dependence_test_detects_shared_drift_and_not_independent_channels():
 
 
 def test_dependence_test_reports_progress_and_can_be_aborted():
-    dep = MultiModel(
-        ["a", "b"],
-        "WN(sigma2=1)+RW",
-        shared=["RW"],
-        cov={"RW": rw_cov([1e-2, 1e-2], [[1, 0.5], [0.5, 1]])},
-    )
+    dep = shared_rw(["a", "b"], 1e-2, 0.5)
     x = dep.simulate(2**11, rng=4)
     plain = eg.dependence_test(x, dep.cleared(), B=5, seed=3)
     calls = []
@@ -776,12 +770,7 @@ def test_bad_inputs_give_clear_errors():
 # command line
 # -------------------------------------------------------------------------------------------
 def test_cli_fit_channels_and_replicates(tmp_path, capsys):
-    mm = MultiModel(
-        ["gx", "gy"],
-        "WN(sigma2=1)+RW",
-        shared=["RW"],
-        cov={"RW": rw_cov([3e-2, 3e-2], [[1, 0.7], [0.7, 1]])},
-    )
+    mm = shared_rw(["gx", "gy"], 3e-2, 0.7)
     x = mm.simulate(2**14, rng=1)
     path = tmp_path / "imu.h5"
     eg.save_log(path, {"gx": x[:, 0], "gy": x[:, 1]}, 100.0, units={"gx": "deg/s", "gy": "deg/s"})

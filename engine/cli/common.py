@@ -17,6 +17,9 @@ __all__ = [
     "usage_error",
     "positive",
     "add_log_options",
+    "add_weights_option",
+    "add_bootstrap_options",
+    "bootstrap_kwargs",
     "log_kwargs",
     "stream_wv",
     "warn_fs_unknown",
@@ -159,6 +162,28 @@ def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None
             action="store_true",
             help="stream a .npy/HDF5 log larger than memory in blocks (classical WV)",
         )
+
+
+def add_weights_option(sp: argparse.ArgumentParser, help: str) -> None:
+    """Add ``--weights {ci,identity,efficient}`` (default ci) to a sub-command."""
+    sp.add_argument("--weights", default="ci", choices=["ci", "identity", "efficient"], help=help)
+
+
+def add_bootstrap_options(
+    sp: argparse.ArgumentParser, *, replicates: str, workers: str = "processes for the bootstrap"
+) -> None:
+    """Add ``-B/--bootstrap`` (100 replicates), ``--seed`` (0) and ``--workers`` (2) to a
+    sub-command; ``replicates`` and ``workers`` are the help texts, before the default."""
+    sp.add_argument(
+        "-B", "--bootstrap", type=positive(int, "-B"), default=100, help=f"{replicates} (100)"
+    )
+    sp.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
+    sp.add_argument("--workers", type=positive(int, "--workers"), default=2, help=f"{workers} (2)")
+
+
+def bootstrap_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """``B``, ``seed`` and ``workers`` from the options of :func:`add_bootstrap_options`."""
+    return {"B": args.bootstrap, "seed": args.seed, "workers": args.workers}
 
 
 def log_kwargs(args: argparse.Namespace) -> dict[str, Any]:

@@ -20,7 +20,10 @@ from typing import Any
 import numpy as np
 
 from .common import (
+    add_bootstrap_options,
     add_log_options,
+    add_weights_option,
+    bootstrap_kwargs,
     log_kwargs,
     positive,
     stream_wv,
@@ -77,28 +80,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
     ex.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
     ex.add_argument("--eff", type=float, default=0.6, help="robust WV efficiency (0.6)")
-    ex.add_argument(
-        "--weights",
-        default="ci",
-        choices=["ci", "identity", "efficient"],
-        help="weighting matrix: ci (default), identity, or efficient (two-step, V^-1)",
+    add_weights_option(
+        ex, "weighting matrix: ci (default), identity, or efficient (two-step, V^-1)"
     )
     ex.add_argument("--ci", choices=["asymptotic", "bootstrap"], help="parameter intervals")
     ex.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
-    ex.add_argument(
-        "-B",
-        "--bootstrap",
-        type=positive(int, "-B"),
-        default=100,
-        help="bootstrap replicates for --ci bootstrap (100)",
-    )
-    ex.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
-    ex.add_argument(
-        "--workers",
-        type=positive(int, "--workers"),
-        default=2,
-        help="processes for the bootstrap (2)",
-    )
+    add_bootstrap_options(ex, replicates="bootstrap replicates for --ci bootstrap")
     ex.add_argument(
         "--rostopic",
         help="rostopic entry of Kalibr/OpenVINS files (default: the bag's IMU topic when a "
@@ -213,9 +200,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
                 fits[ch],
                 method=args.ci,
                 level=args.level,
-                B=args.bootstrap,
-                seed=args.seed,
-                workers=args.workers,
+                **bootstrap_kwargs(args),
             )
     units = (
         args.units

@@ -28,13 +28,20 @@ from typing import Any
 from .._jsonutil import json_ready
 from ..fit import FitError, fit_gmwm
 from ..models import ModelError, parse_model
-from .common import CliError, load_wv, positive
+from .common import (
+    CliError,
+    add_bootstrap_options,
+    add_weights_option,
+    bootstrap_kwargs,
+    load_wv,
+    positive,
+)
 
 __all__ = ["main", "build_parser"]
 
 # Subcommands that live in their own module engine/cli/<name>.py, each with
 # ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
-_MODULE_COMMANDS = ("export", "virtual")
+_MODULE_COMMANDS = ("export", "check", "virtual")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -87,11 +94,9 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="with --shared: parametric-bootstrap test of dependence (-B)",
     )
-    fit.add_argument(
-        "--weights",
-        default="ci",
-        choices=["ci", "identity", "efficient"],
-        help="weighting matrix: ci (default, 1/(ci_high-ci_low)^2), identity, "
+    add_weights_option(
+        fit,
+        "weighting matrix: ci (default, 1/(ci_high-ci_low)^2), identity, "
         "or efficient (two-step, V^-1 from the first fit)",
     )
     fit.add_argument(
@@ -100,20 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameter intervals: asymptotic sandwich or parametric bootstrap",
     )
     fit.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
-    fit.add_argument(
-        "-B",
-        "--bootstrap",
-        type=positive(int, "-B"),
-        default=100,
-        help="bootstrap replicates (100)",
-    )
-    fit.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
-    fit.add_argument(
-        "--workers",
-        type=positive(int, "--workers"),
-        default=2,
-        help="processes for the bootstrap (2)",
-    )
+    add_bootstrap_options(fit, replicates="bootstrap replicates")
 
     sel = sub.add_parser("select", help="rank candidate models by WVIC")
     data_args(sel)
@@ -121,11 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-model", help="rank every sub-model of this model, e.g. '3*GM+WN+QN+RW+DR'"
     )
     sel.add_argument("--models", help="candidate models separated by commas")
-    sel.add_argument(
-        "--weights",
-        default="ci",
-        choices=["ci", "identity", "efficient"],
-        help="weighting matrix, the same for every candidate: ci (default, "
+    add_weights_option(
+        sel,
+        "weighting matrix, the same for every candidate: ci (default, "
         "1/(ci_high-ci_low)^2, the R package's), identity, or efficient (two-step: V from "
         "the largest candidate's ci fit, every candidate refitted with V^-1; the J-test's "
         "chi-square assumes efficient weights)",
@@ -136,19 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
         default="asymptotic",
         help="optimism term of the WVIC: asymptotic formula (default) or parametric bootstrap",
     )
-    sel.add_argument(
-        "-B",
-        "--bootstrap",
-        type=positive(int, "-B"),
-        default=100,
-        help="bootstrap replicates for --optimism bootstrap (100)",
-    )
-    sel.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
-    sel.add_argument(
-        "--workers",
-        type=positive(int, "--workers"),
-        default=2,
-        help="processes fitting the candidates (2)",
+    add_bootstrap_options(
+        sel,
+        replicates="bootstrap replicates for --optimism bootstrap",
+        workers="processes fitting the candidates",
     )
     sel.add_argument(
         "--top", type=positive(int, "--top"), help="show only the best N (all are ranked)"
@@ -240,9 +221,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             res,
             method=args.ci,
             level=args.level,
-            B=args.bootstrap,
-            seed=args.seed,
-            workers=args.workers,
+            **bootstrap_kwargs(args),
         )
     if args.json:
         d = res.to_dict()
@@ -290,9 +269,7 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
         max_model=args.max_model,
         weights=args.weights,
         optimism=args.optimism,
-        B=args.bootstrap,
-        seed=args.seed,
-        workers=args.workers,
+        **bootstrap_kwargs(args),
         progress=progress,
     )
     if sys.stderr.isatty():

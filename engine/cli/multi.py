@@ -16,7 +16,7 @@ from ..fit.replicates import fit_replicates
 from ..io import load_log
 from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
-from .common import load_wv, log_kwargs, warn_fs_unknown
+from .common import bootstrap_kwargs, load_wv, log_kwargs, warn_fs_unknown
 
 __all__ = ["cli_fit"]
 
@@ -103,7 +103,7 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     res = fit_mgmwm(wvm, model, weights=args.weights)
     test = None
     if getattr(args, "dependence_test", False):
-        test = dependence_test(wvm, model, B=args.bootstrap, seed=args.seed, workers=args.workers)
+        test = dependence_test(wvm, model, **bootstrap_kwargs(args))
     if args.json:
         d = res.to_dict()
         d["input"] = args.input

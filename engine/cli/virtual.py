@@ -21,7 +21,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .common import positive, usage_error, warn_fs_unknown
+from .common import add_weights_option, positive, usage_error, warn_fs_unknown
 
 __all__ = ["add_parser", "run"]
 
@@ -58,12 +58,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     vp.add_argument("--model", required=True, help="model of every sensor, e.g. 'GM+WN+RW'")
     vp.add_argument("--shared", help="processes shared by the sensors, e.g. WN,RW,GM")
-    vp.add_argument(
-        "--weights",
-        choices=["ci", "identity", "efficient"],
-        default="ci",
-        help="MGMWM weighting: ci (default), identity, or efficient (two-step, V^-1)",
-    )
+    add_weights_option(vp, "MGMWM weighting: ci (default), identity, or efficient (two-step, V^-1)")
     vp.add_argument("--channel", help="several LOGs: the channel of each (default: the first)")
     vp.add_argument("--channels", help="one LOG: its sensors' channels, e.g. gyro_a,gyro_b")
     target = vp.add_mutually_exclusive_group()

@@ -237,9 +237,22 @@ def kalibr_imu(
             axis = max(per_axis[key], key=lambda a: per_axis[key][a])
             values[key] = per_axis[key][axis]
             chosen[key] = chan_of[(key, axis)]
-    rate = float(update_rate) if update_rate is not None else float(fs0)
+    return KalibrImu(
+        values=values,
+        chosen=chosen,
+        per_axis=per_axis,
+        sources=sources,
+        update_rate=float(update_rate) if update_rate is not None else float(fs0),
+        rostopic=rostopic,
+        comments=_header_comments(fits, source),
+        warnings=warnings,
+    )
+
+
+def _header_comments(fits: Mapping[str, GMWMResult], source: str | None) -> list[str]:
+    """The header comments of an ``imu.yaml``: origin, channels and models, conventions."""
     models = sorted({r.model.spec() for r in fits.values()})
-    comments = [
+    return [
         "Kalibr IMU noise model from a GMWM fit (engine.export.kalibr_imu)",
         f"source: {source or 'in-memory fits'}; channels: {', '.join(fits)}; "
         f"model(s): {'; '.join(models)}",
@@ -249,16 +262,6 @@ def kalibr_imu(
         "(conservative choice). Kalibr's own advice is to inflate them further for "
         "unmodelled effects (temperature, vibration).",
     ]
-    return KalibrImu(
-        values=values,
-        chosen=chosen,
-        per_axis=per_axis,
-        sources=sources,
-        update_rate=rate,
-        rostopic=rostopic,
-        comments=comments,
-        warnings=warnings,
-    )
 
 
 def write_kalibr(

@@ -24,23 +24,18 @@ from .gmwm import GMWMResult, fit_gmwm, gmwm_objective, weight_matrix
 from .result import FitError, FitResult, ParamRecord, ParamTable, Summary
 from .start import starting_values
 
-_LAZY: dict[str, str] = {
-    "fit_replicates": "replicates",
-    "ReplicateResult": "replicates",
-    "fit_gmwfm": "gmwfm",
-    "fit_armav": "gmwfm",
-    "GMWFMResult": "gmwfm",
-    "MethodEstimate": "estimate",
-    "from_gmwm": "estimate",
-    "compare_table": "estimate",
+_LAZY: dict[str, tuple[str, ...]] = {
+    "replicates": ("fit_replicates", "ReplicateResult"),
+    "gmwfm": ("fit_gmwfm", "fit_armav", "GMWFMResult"),
+    "estimate": ("MethodEstimate", "from_gmwm", "compare_table"),
 }
 
-if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from .estimate import MethodEstimate, compare_table, from_gmwm
-    from .gmwfm import GMWFMResult, fit_armav, fit_gmwfm
-    from .replicates import ReplicateResult, fit_replicates
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of _LAZY)
+    from .estimate import MethodEstimate, compare_table, from_gmwm  # noqa: F401
+    from .gmwfm import GMWFMResult, fit_armav, fit_gmwfm  # noqa: F401
+    from .replicates import ReplicateResult, fit_replicates  # noqa: F401
 
-__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
+__getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "fit_gmwm",
@@ -53,12 +48,5 @@ __all__ = [
     "ParamRecord",
     "ParamTable",
     "Summary",
-    "fit_replicates",
-    "ReplicateResult",
-    "fit_gmwfm",
-    "fit_armav",
-    "GMWFMResult",
-    "MethodEstimate",
-    "from_gmwm",
-    "compare_table",
+    *_lazy_names,
 ]

@@ -89,6 +89,7 @@ __all__ = [
     "TC_FLAG",
     "sub_sample_message",
     "sub_sample_warnings",
+    "fitted_fields",
 ]
 
 # AR1/GM correlation times (samples) below this are flagged after every fit: one sample.
@@ -486,3 +487,34 @@ def sub_sample_warnings(fitted: Model, fs: float, unit: str = "", prefix: str = 
         if msg is not None:
             out.append(msg)
     return out
+
+
+def fitted_fields(
+    fitted: Model, wv: WaveletVariance, tc_min: float, tc_max: float
+) -> dict[str, Any]:
+    """The fields of a one-WV fit's result (GMWM, GMWFM) that follow from its fitted model.
+
+    Parameters
+    ----------
+    fitted : Model
+        The fitted model.
+    wv : WaveletVariance
+        The WV it was fitted to.
+    tc_min, tc_max : float
+        The explored range of correlation times (samples), for :func:`at_bound`.
+
+    Returns
+    -------
+    dict
+        ``model``, ``wv``, ``components`` (the implied WV of each process), ``implied``
+        (their sum), ``at_bound`` and ``warnings`` (:func:`sub_sample_warnings`).
+    """
+    comps = fitted.components(wv.tau_samples, wv.fs)
+    return {
+        "model": fitted,
+        "wv": wv,
+        "components": comps,
+        "implied": np.sum(np.array(list(comps.values())), axis=0),
+        "at_bound": at_bound(fitted, wv.fs, tc_min, tc_max),
+        "warnings": sub_sample_warnings(fitted, wv.fs, wv.unit),
+    }

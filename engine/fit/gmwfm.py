@@ -20,11 +20,10 @@ from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance
 from ._varpro import (
     NNLSProblem,
-    at_bound,
+    fitted_fields,
     grid_candidates,
     persistent_first,
     sqrt_weight,
-    sub_sample_warnings,
 )
 from .estimate import MethodEstimate
 from .gmwm import fit_gmwm, weight_matrix
@@ -364,12 +363,12 @@ def fit_gmwfm(
         [pr.from_fit(float(h[i]), nl_vals.get(i), wv.fs) for i, pr in enumerate(m.processes)],
         wv.fs,
     )
-    # labels of the fitted (ordered) model: a variance at 0 or a correlation time at an edge
-    bound = at_bound(fitted, wv.fs, prob.tc_min, prob.tc_max)
-    comps = fitted.components(wv.tau_samples, wv.fs)
-    implied = np.sum(np.array(list(comps.values())), axis=0)
+    # at_bound: labels of the fitted (ordered) model with a variance at 0 or a correlation time
+    # at an edge
+    fields = fitted_fields(fitted, wv, prob.tc_min, prob.tc_max)
+    bound = fields["at_bound"]
     with np.errstate(all="ignore"):
-        rr = a @ (fy - np.asarray(fun(np.maximum(implied, 1e-300)), float))
+        rr = a @ (fy - np.asarray(fun(np.maximum(fields["implied"], 1e-300)), float))
     objective = float(rr @ rr)
     notes = [
         f"f = {fname}, weights {wname}"
@@ -380,22 +379,17 @@ def fit_gmwfm(
     if bound:
         notes.append(f"at a bound: {', '.join(bound)}")
     return GMWFMResult(
-        model=fitted,
+        **fields,
         weights=wname,
         omega=omega,
         objective=objective,
         converged=bool(best.success),
-        at_bound=bound,
-        warnings=sub_sample_warnings(fitted, wv.fs, wv.unit),
         n_evaluations=n_eval,
         method="bounded least squares",
         message="converged" if best.success else "the least-squares search hit its budget",
         elapsed_s=time.perf_counter() - t0,
-        wv=wv,
         f=fname,
         estimator=name,
-        implied=implied,
-        components=comps,
         notes=tuple(notes),
     )
 

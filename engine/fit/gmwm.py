@@ -29,12 +29,11 @@ from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
 from ._varpro import (
     NNLSProblem,
-    at_bound,
+    fitted_fields,
     fitted_model,
     search,
     search_message,
     sqrt_weight,
-    sub_sample_warnings,
 )
 from .result import FitError, FitResult, OneWVFit, ParamTable
 
@@ -256,22 +255,14 @@ def fit_gmwm(
             extra.append(tuple(math.log(t) for t in tcs))
         _, u, converged = search(prob, extra, keep=3)
         method, msg = "grid+nelder-mead", search_message(converged)
-    fitted = fitted_model(prob, u, wv.fs)
-    comps = fitted.components(wv.tau_samples, wv.fs)
-    implied = np.sum(np.array(list(comps.values())), axis=0)
-    resid = wv.variance - implied
-    objective = float(resid @ omega @ resid)
+    fields = fitted_fields(fitted_model(prob, u, wv.fs), wv, prob.tc_min, prob.tc_max)
+    resid = wv.variance - fields["implied"]
     return GMWMResult(
-        model=fitted,
-        wv=wv,
+        **fields,
         omega=omega,
         weights=wname,
-        objective=objective,
-        implied=implied,
-        components=comps,
+        objective=float(resid @ omega @ resid),
         converged=converged,
-        at_bound=at_bound(fitted, wv.fs, prob.tc_min, prob.tc_max),
-        warnings=sub_sample_warnings(fitted, wv.fs, wv.unit),
         n_evaluations=prob.n_eval,
         method=method,
         message=msg,

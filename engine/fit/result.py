@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .._jsonutil import JsonFields
 from ..models import Model
 from ..units import param_unit
 from ..wv import WaveletVariance
@@ -37,7 +38,7 @@ class FitError(ValueError):
 
 
 @dataclass(frozen=True)
-class ParamRecord:
+class ParamRecord(JsonFields):
     """One estimated parameter with its label and unit."""
 
     process: str
@@ -47,19 +48,11 @@ class ParamRecord:
     value: float
     unit: str
 
+    json_fields = "process index label name value unit"  # to_dict()'s keys
+
     @property
     def full_name(self) -> str:
         return f"{self.label}.{self.name}"
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "process": self.process,
-            "index": self.index,
-            "label": self.label,
-            "name": self.name,
-            "value": float(self.value),
-            "unit": self.unit,
-        }
 
 
 def warning_lines(at_bound: Any, converged: bool, message: str, warnings: Any = ()) -> list[str]:

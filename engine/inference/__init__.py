@@ -22,6 +22,8 @@
 * Goodness of fit (:func:`j_test`): ``T = (nu_hat - nu)' V^-1 (nu_hat - nu)`` against a
   chi-square with ``J - p`` degrees of freedom.
 * Model selection (:func:`rank_models`, WVIC) in :mod:`engine.inference.selection`.
+* Datasheet check (:func:`check_datasheet`, :func:`read_datasheet`): a manufacturer's noise
+  model against the empirical WV, scale by scale (:mod:`engine.inference.datasheet_check`).
 """
 
 from __future__ import annotations
@@ -41,6 +43,15 @@ from .covariance import (
     wv_cov,
     wv_cov_bootstrap,
     wv_cov_data,
+)
+from .datasheet_check import (
+    DATASHEET_KEYS,
+    DatasheetCheck,
+    DatasheetError,
+    DatasheetSpec,
+    check_datasheet,
+    parse_datasheet,
+    read_datasheet,
 )
 from .intervals import ParamInterval, param_intervals
 from .jtest import JTest, j_test
@@ -67,4 +78,11 @@ __all__ = [
     "submodels",
     "SelectionResult",
     "Candidate",
+    "check_datasheet",
+    "read_datasheet",
+    "parse_datasheet",
+    "DatasheetSpec",
+    "DatasheetCheck",
+    "DatasheetError",
+    "DATASHEET_KEYS",
 ]

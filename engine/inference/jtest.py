@@ -3,11 +3,12 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from .._jsonutil import FieldsDict
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..wv import wavelet_variance
 from .asymptotic import free_params
@@ -17,17 +18,14 @@ __all__ = ["j_test", "JTest"]
 
 
 @dataclass(frozen=True)
-class JTest:
-    """Hansen's J-test of over-identifying restrictions for a GMWM fit."""
+class JTest(FieldsDict):
+    """Hansen's J-test of over-identifying restrictions for a GMWM fit (``to_dict()``: the
+    four fields)."""
 
     statistic: float
     df: int
     p_value: float
     method: str
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary: every field by name."""
-        return asdict(self)
 
 
 def j_test(

@@ -12,7 +12,7 @@ import json
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -21,6 +21,7 @@ from .log import ImuLog, LoadError, pick_channel
 
 __all__ = [
     "LoadOptions",
+    "RawLog",
     "finish_log",
     "attr_value",
     "clean_unit",
@@ -159,6 +160,16 @@ def _time_scale(name: str, t: np.ndarray, div: tuple[float, bool], notes: list[s
     return scale
 
 
+def _check_known(src: str, what: str, given: Mapping[Any, Any], names: list[str]) -> None:
+    """LoadError naming the keys of a per-channel ``what`` mapping that are not channels."""
+    unknown = [k for k in given if k not in names]
+    if unknown:
+        raise LoadError(
+            f"file '{src}': {what} given for unknown channel(s) {unknown}; "
+            f"channels: {', '.join(names)}"
+        )
+
+
 def _check_scale(src: str, scale: Any, names: list[str]) -> dict[str, float]:
     """Per-channel scale factors from a number or a {channel: factor} mapping."""
 
@@ -175,12 +186,7 @@ def _check_scale(src: str, scale: Any, names: list[str]) -> dict[str, float]:
         return f
 
     if isinstance(scale, Mapping):
-        unknown = [k for k in scale if k not in names]
-        if unknown:
-            raise LoadError(
-                f"file '{src}': scale given for unknown channel(s) {unknown}; "
-                f"channels: {', '.join(names)}"
-            )
+        _check_known(src, "scale", scale, names)
         return {str(k): num(v, f"scale[{k!r}]") for k, v in scale.items()}
     s = num(scale, "scale")
     return dict.fromkeys(names, s)
@@ -300,26 +306,46 @@ def _length(a: Any) -> int:
     return int(np.asarray(a() if callable(a) else a).shape[0])
 
 
+@dataclass
+class RawLog:
+    """What a reader found in a file, before :func:`finish_log` selects, checks and converts it.
+
+    Attributes
+    ----------
+    cols : dict
+        Channel name to an array, or to a zero-argument callable returning one (lazy HDF5).
+    units : dict
+        Channel name to its unit as written in the file.
+    fs_file : (value, where) or None
+        A sampling frequency the file states, and where (for messages).
+    time : (name, stamps, (divisor, integer)) or None
+        A time column (:func:`time_divisor` gives the divisor to seconds).
+    rows : ndarray or None
+        File line of every sample (text logs), for messages.
+    meta, notes : dict, list of str
+        Metadata for ``ImuLog.meta`` and the reader's notes.
+    """
+
+    cols: dict[str, Any] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    fs_file: tuple[Any, str] | None = None
+    time: tuple[str, np.ndarray, tuple[float, bool]] | None = None
+    rows: np.ndarray | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
 def finish_log(
-    src: str,
-    cols: dict[str, Any],
-    units: Mapping[str, str],
-    *,
-    fmt: str,
-    channel: str | int | None,
-    opts: LoadOptions,
-    fs_file: tuple[Any, str] | None = None,
-    time: tuple[str, np.ndarray, tuple[float, bool]] | None = None,
-    rows: np.ndarray | None = None,
-    meta: dict[str, Any] | None = None,
-    notes: list[str] | None = None,
+    src: str, raw: RawLog, *, fmt: str, channel: str | int | None, opts: LoadOptions
 ) -> ImuLog:
     """Select, check the time column, convert and scale the channels, resolve fs, build the log.
 
-    ``cols`` values are arrays or zero-argument callables returning arrays (lazy HDF5 reads).
+    ``raw.cols`` values are arrays or zero-argument callables returning arrays (lazy HDF5
+    reads).
     """
-    notes = notes if notes is not None else []
-    meta = {"format": fmt, **(meta or {})}
+    cols, units, fs_file, time, rows = raw.cols, raw.units, raw.fs_file, raw.time, raw.rows
+    notes = raw.notes
+    meta = {"format": fmt, **raw.meta}
     if not cols:
         raise LoadError(
             f"file '{src}' contains no numeric channel: expected 1-D numeric "
@@ -391,12 +417,7 @@ def finish_log(
     unit_map = {k: clean_unit(units.get(k, "")) for k in out}
     if opts.units is not None:
         if isinstance(opts.units, Mapping):
-            unknown = [k for k in opts.units if k not in out]
-            if unknown:
-                raise LoadError(
-                    f"file '{src}': units given for unknown channel(s) {unknown}; "
-                    f"channels: {', '.join(out)}"
-                )
+            _check_known(src, "units", opts.units, list(out))
             unit_map.update({str(k): clean_unit(v) for k, v in opts.units.items()})
         else:
             unit_map = dict.fromkeys(out, clean_unit(opts.units))

@@ -17,6 +17,7 @@ import numpy as np
 from ._assemble import (
     FS_KEYS,
     LoadOptions,
+    RawLog,
     attr_value,
     clean_unit,
     finish_log,
@@ -118,15 +119,5 @@ def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) 
                     f"file '{src}', dataset '{k}' could not be read ({exc}): the file "
                     "may be truncated or corrupt; re-export it"
                 ) from exc
-    return finish_log(
-        src,
-        cols,
-        units,
-        fmt="hdf5",
-        channel=None,
-        opts=opts,
-        fs_file=fs_file,
-        time=time,
-        meta=meta,
-        notes=notes,
-    )
+    raw = RawLog(cols, units, fs_file=fs_file, time=time, meta=meta, notes=notes)
+    return finish_log(src, raw, fmt="hdf5", channel=None, opts=opts)

@@ -32,7 +32,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
-from ._assemble import LoadOptions, check_fs, finish_log
+from ._assemble import LoadOptions, RawLog, check_fs, finish_log
 from .hdf5 import H5_EXT, read_h5
 from .log import ImuLog, LoadError
 from .npy import read_npy, read_npz
@@ -244,17 +244,9 @@ def _read_bag(path: Path, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     from .rosbag import read_imu_bag
 
     bag = read_imu_bag(path, topic=opts.topic, src=src)
-    return finish_log(
-        src,
-        bag.channels,
-        bag.units,
-        fmt=bag.format,
-        channel=channel,
-        opts=opts,
-        time=(bag.stamp_source, bag.stamps_ns, (1e9, True)),
-        meta=bag.meta,
-        notes=list(bag.notes),
-    )
+    time = (bag.stamp_source, bag.stamps_ns, (1e9, True))
+    raw = RawLog(bag.channels, bag.units, time=time, meta=bag.meta, notes=list(bag.notes))
+    return finish_log(src, raw, fmt=bag.format, channel=channel, opts=opts)
 
 
 _READERS: dict[str, Callable[..., ImuLog]] = {

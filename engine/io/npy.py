@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ._assemble import LoadOptions, attr_value, finish_log, time_divisor, units_map
+from ._assemble import LoadOptions, RawLog, attr_value, finish_log, time_divisor, units_map
 from .log import ImuLog, LoadError
 
 __all__ = ["read_npy", "read_npz", "npy_sidecar_path", "read_npy_sidecar", "write_npy_sidecar"]
@@ -47,49 +47,33 @@ def _np_load(path: Path | io.BytesIO, src: str, what: str, save_with: str) -> An
 
 def read_npy(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     a = _np_load(path, src, ".npy array of numbers", "numpy.save(path, array)")
-    notes: list[str] = []
-    time = None
+    raw = RawLog()
     if a.dtype.names and a.ndim == 1:  # structured array: one channel per field
-        cols = {}
         for name in a.dtype.names:
             div = time_divisor(name)
             if div is not None and a[name].ndim == 1:
-                time = time or (name, a[name], div)
+                raw.time = raw.time or (name, a[name], div)
             else:
-                cols.update(_columns(name, a[name], notes))
+                raw.cols.update(_columns(name, a[name], raw.notes))
     elif a.ndim in (1, 2) and not a.dtype.names:
-        cols = {"x": a} if a.ndim == 1 else _columns("array", a, notes, "col{j}")
+        raw.cols = {"x": a} if a.ndim == 1 else _columns("array", a, raw.notes, "col{j}")
     else:
         raise LoadError(
             f"file '{src}': array of shape {a.shape} is not 1-D (N,) or 2-D (N, k): "
             "save one column per channel"
         )
-    units: dict[str, str] = {}
-    fs_file = None
     side = None if isinstance(path, io.BytesIO) else read_npy_sidecar(path)
     if side is not None:  # written by `gmwm simulate -o x.npy`: fs, channel names, units
         names = side.get("channels")
+        cols = raw.cols
         if isinstance(names, list) and len(names) == len(cols) and len(set(names)) == len(names):
-            cols = dict(zip(map(str, names), cols.values(), strict=True))
+            raw.cols = dict(zip(map(str, names), cols.values(), strict=True))
         if isinstance(side.get("units"), dict):
-            units = {str(k): str(v) for k, v in side["units"].items()}
+            raw.units = {str(k): str(v) for k, v in side["units"].items()}
         if "fs_hz" in side:
-            fs_file = (side["fs_hz"], f"sidecar '{npy_sidecar_path(src).name}'")
-        meta = {k: v for k, v in side.items() if k not in ("channels", "units", "fs_hz")}
-    else:
-        meta = {}
-    return finish_log(
-        src,
-        cols,
-        units,
-        fmt="npy",
-        channel=channel,
-        opts=opts,
-        fs_file=fs_file,
-        time=time,
-        meta=meta,
-        notes=notes,
-    )
+            raw.fs_file = (side["fs_hz"], f"sidecar '{npy_sidecar_path(src).name}'")
+        raw.meta = {k: v for k, v in side.items() if k not in ("channels", "units", "fs_hz")}
+    return finish_log(src, raw, fmt="npy", channel=channel, opts=opts)
 
 
 def npy_sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -135,40 +119,25 @@ def write_npy_sidecar(
 
 
 def read_npz(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
-    cols: dict[str, np.ndarray] = {}
-    notes: list[str] = []
-    meta: dict[str, Any] = {}
-    units: dict[str, str] = {}
-    fs_file = time = None
+    raw = RawLog()
     z = _np_load(path, src, ".npz archive", "numpy.savez(path, gyro_x=..., fs=100.0)")
     with z:
         for key in z.files:
             try:
                 a = z[key]
             except ValueError:
-                notes.append(f"key '{key}' holds Python objects and was skipped")
+                raw.notes.append(f"key '{key}' holds Python objects and was skipped")
                 continue
             if key.lower() in ("fs", "fs_hz", "sample_rate") and a.size == 1:
-                fs_file = (a.item(), f"key '{key}'")
+                raw.fs_file = (a.item(), f"key '{key}'")
             elif key == "units" and a.dtype.kind in "US" and a.size == 1:
-                units = units_map(str(a.item()), src, notes)
+                raw.units = units_map(str(a.item()), src, raw.notes)
             elif a.dtype.kind in "iufb" and a.ndim == 1 and time_divisor(key) is not None:
-                time = time or (key, a, time_divisor(key))
+                raw.time = raw.time or (key, a, time_divisor(key))
             elif a.dtype.kind in "iufb" and a.ndim in (1, 2) and a.size > 1:
-                cols.update(_columns(key, a, notes))
+                raw.cols.update(_columns(key, a, raw.notes))
             elif a.ndim == 0:
-                meta[key] = attr_value(a.item())
+                raw.meta[key] = attr_value(a.item())
             else:
-                notes.append(f"key '{key}' (shape {a.shape}, dtype {a.dtype}) was skipped")
-    return finish_log(
-        src,
-        cols,
-        units,
-        fmt="npz",
-        channel=channel,
-        opts=opts,
-        fs_file=fs_file,
-        time=time,
-        meta=meta,
-        notes=notes,
-    )
+                raw.notes.append(f"key '{key}' (shape {a.shape}, dtype {a.dtype}) was skipped")
+    return finish_log(src, raw, fmt="npz", channel=channel, opts=opts)

@@ -61,10 +61,10 @@ class ImuBag:
         Header stamps (or receive times, see ``stamp_source``) in ns.
     stamp_source : str
         ``"header.stamp"`` or ``"receive time"``.
-    units : dict of str to str
-        Channel units.
     format : str
         ``"rosbag1"``, ``"rosbag2"`` (directory), ``"rosbag2-sqlite3"`` or ``"rosbag2-mcap"``.
+    units : dict of str to str
+        Channel units: sensor_msgs/Imu's, rad/s and m/s^2 (the default).
     meta : dict
         ``topic``, ``frame_id``, ``n_messages``, ``msgtype``, ``decoder``.
     notes : tuple of str
@@ -74,8 +74,8 @@ class ImuBag:
     channels: dict[str, np.ndarray]
     stamps_ns: np.ndarray
     stamp_source: str
-    units: dict[str, str]
     format: str
+    units: dict[str, str] = field(default_factory=lambda: dict(_UNITS))
     meta: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
 
@@ -361,22 +361,20 @@ def read_imu_bag(
         name: np.ascontiguousarray(col)
         for name, col in zip(IMU_CHANNELS, [*gyro.T, *acc.T], strict=True)
     }
-    meta = {
-        "topic": topic,
-        "frame_id": frame,
-        "n_messages": int(n),
-        "msgtype": msgtype,
-        "decoder": "+".join(sorted(decoders)),
-        "bag_format": fmt,
-        "imu_topics": topics,
-    }
     return ImuBag(
         channels=channels,
         stamps_ns=stamps,
         stamp_source=source,
-        units=dict(_UNITS),
         format=fmt,
-        meta=meta,
+        meta={
+            "topic": topic,
+            "frame_id": frame,
+            "n_messages": int(n),
+            "msgtype": msgtype,
+            "decoder": "+".join(sorted(decoders)),
+            "bag_format": fmt,
+            "imu_topics": topics,
+        },
         notes=tuple(notes),
     )
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ._assemble import UNIT_RE, LoadOptions, clean_unit, finish_log, time_divisor
+from ._assemble import UNIT_RE, LoadOptions, RawLog, clean_unit, finish_log, time_divisor
 from .log import ImuLog, LoadError
 
 __all__ = ["read_text"]
@@ -145,18 +145,8 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
             "near-constant step); pass fs= to set the rate explicitly"
         )
     meta = {"delimiter": {None: "whitespace", "\t": "tab"}.get(delim, delim), "header": header}
-    return finish_log(
-        src,
-        cols,
-        units,
-        fmt="text",
-        channel=channel,
-        opts=opts,
-        time=time,
-        rows=rows,
-        meta=meta,
-        notes=notes,
-    )
+    raw = RawLog(cols, units, time=time, rows=rows, meta=meta, notes=notes)
+    return finish_log(src, raw, fmt="text", channel=channel, opts=opts)
 
 
 def _looks_like_time(a: np.ndarray, strict_only: bool = False) -> bool:

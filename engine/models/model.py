@@ -40,10 +40,17 @@ _MAX_REPEAT = 20  # more AR1/GM terms than this cannot be identified from any re
 
 @dataclass(frozen=True)
 class Process:
-    """Base class of a latent process. Subclasses set ``code``, ``param_names``, ``order``.
+    """Base class of a latent process.
 
-    A subclass with a ``code`` registers itself in :data:`PROCESS_TYPES`, which is how
-    :func:`parse_model` finds it.
+    A concrete process is a frozen dataclass whose fields are its parameters, declared with
+    its rank and description as class arguments::
+
+        @dataclass(frozen=True, repr=False)
+        class WN(Process, order=3, description="white noise"):
+            sigma2: float | None = None
+
+    Its ``code`` is the class name and ``param_names`` its fields, in order; it registers
+    itself in :data:`PROCESS_TYPES`, which is how :func:`parse_model` finds it.
     """
 
     code: ClassVar[str] = ""
@@ -54,14 +61,21 @@ class Process:
     # rank in the canonical order of a model's processes (GM, AR1, QN, WN, RW, DR)
     order: ClassVar[int] = 0
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Register a concrete process (one with a ``code``) in :data:`PROCESS_TYPES`."""
+    def __init_subclass__(
+        cls, *, order: int, description: str, nonlinear: str | None = None, **kwargs: Any
+    ) -> None:
+        """Set a process's ``code``, ``param_names``, ``order``, ``description`` and
+        ``nonlinear``, and register it in :data:`PROCESS_TYPES` (in ``order``)."""
         super().__init_subclass__(**kwargs)
-        if cls.code:
-            PROCESS_TYPES[cls.code] = cls
-            ranked = sorted(PROCESS_TYPES.values(), key=lambda c: c.order)
-            PROCESS_TYPES.clear()
-            PROCESS_TYPES.update((c.code, c) for c in ranked)
+        cls.code = cls.__name__
+        # the fields (parameters): the class's own annotations other than ClassVar
+        annotations = cls.__dict__.get("__annotations__", {})
+        cls.param_names = tuple(n for n, a in annotations.items() if "ClassVar" not in str(a))
+        cls.order, cls.description, cls.nonlinear = order, description, nonlinear
+        PROCESS_TYPES[cls.code] = cls
+        ranked = sorted(PROCESS_TYPES.values(), key=lambda c: c.order)
+        PROCESS_TYPES.clear()
+        PROCESS_TYPES.update((c.code, c) for c in ranked)
 
     # ---- values -------------------------------------------------------------------------
     @property
@@ -148,12 +162,14 @@ class Process:
         raise NotImplementedError
 
     def linear_coef(self) -> float:
-        """The linear coefficient ``h`` of the current values (``basis * h`` is the WV)."""
-        raise NotImplementedError
+        """The linear coefficient ``h`` of the current values (``basis * h`` is the WV): by
+        default the last parameter (the variance-like one)."""
+        return float(self.values[-1])  # type: ignore[arg-type]
 
     def from_fit(self, h: float, nl: float | None, fs: float) -> Process:
-        """Process with values from a linear coefficient and a non-linear value."""
-        raise NotImplementedError
+        """Process with values from a linear coefficient and a non-linear value: by default
+        (a one-parameter process) the parameter is ``h``."""
+        return type(self)(float(h))
 
     def nl_value(self, fs: float) -> float | None:
         """The non-linear value in the fitter's space (correlation time in samples)."""

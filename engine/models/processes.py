@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -119,23 +118,13 @@ def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
 
 
 @dataclass(frozen=True, repr=False)
-class WN(Process):
+class WN(Process, order=3, description="white noise"):
     """White noise: iid, variance ``sigma2`` [u^2]. WV ``sigma2 / tau``."""
 
     sigma2: float | None = None
-    code: ClassVar[str] = "WN"
-    order: ClassVar[int] = 3
-    param_names: ClassVar[tuple[str, ...]] = ("sigma2",)
-    description: ClassVar[str] = "white noise"
 
     def basis(self, tau, fs, nl=None):
         return 1.0 / tau
-
-    def linear_coef(self):
-        return float(self.sigma2)
-
-    def from_fit(self, h, nl, fs):
-        return WN(float(h))
 
     def simulate(self, n, rng=None, fs=1.0):
         (s2,) = self._require()
@@ -147,23 +136,13 @@ class WN(Process):
 
 
 @dataclass(frozen=True, repr=False)
-class QN(Process):
+class QN(Process, order=2, description="quantization noise"):
     """Quantization noise ``sqrt(q2) (U_t - U_{t-1})``, ``Var U = 1``. WV ``6 q2 / tau^2``."""
 
     q2: float | None = None
-    code: ClassVar[str] = "QN"
-    order: ClassVar[int] = 2
-    param_names: ClassVar[tuple[str, ...]] = ("q2",)
-    description: ClassVar[str] = "quantization noise"
 
     def basis(self, tau, fs, nl=None):
         return 6.0 / tau**2
-
-    def linear_coef(self):
-        return float(self.q2)
-
-    def from_fit(self, h, nl, fs):
-        return QN(float(h))
 
     def simulate(self, n, rng=None, fs=1.0):
         (q2,) = self._require()
@@ -177,23 +156,13 @@ class QN(Process):
 
 
 @dataclass(frozen=True, repr=False)
-class RW(Process):
+class RW(Process, order=4, description="random walk"):
     """Random walk: cumulative sum of iid N(0, gamma2). WV ``gamma2 (tau^2 + 2) / (12 tau)``."""
 
     gamma2: float | None = None
-    code: ClassVar[str] = "RW"
-    order: ClassVar[int] = 4
-    param_names: ClassVar[tuple[str, ...]] = ("gamma2",)
-    description: ClassVar[str] = "random walk"
 
     def basis(self, tau, fs, nl=None):
         return (tau**2 + 2.0) / (12.0 * tau)
-
-    def linear_coef(self):
-        return float(self.gamma2)
-
-    def from_fit(self, h, nl, fs):
-        return RW(float(h))
 
     def simulate(self, n, rng=None, fs=1.0):
         (g2,) = self._require()
@@ -201,14 +170,10 @@ class RW(Process):
 
 
 @dataclass(frozen=True, repr=False)
-class DR(Process):
+class DR(Process, order=5, description="drift (rate ramp)"):
     """Drift ``omega * t`` (omega per sample). WV ``omega^2 tau^2 / 16``."""
 
     omega: float | None = None
-    code: ClassVar[str] = "DR"
-    order: ClassVar[int] = 5
-    param_names: ClassVar[tuple[str, ...]] = ("omega",)
-    description: ClassVar[str] = "drift (rate ramp)"
 
     def _check_value(self, name, v):
         pass  # a drift may have either sign; its WV depends on omega^2
@@ -241,16 +206,11 @@ def _simulate_ar1(n: int, phi: float, sigma2: float, rng: np.random.Generator) -
 
 
 @dataclass(frozen=True, repr=False)
-class AR1(Process):
+class AR1(Process, order=1, description="first-order autoregression", nonlinear="phi"):
     """First-order autoregression ``X_t = phi X_{t-1} + e_t``, ``Var e = sigma2``, ``|phi| < 1``."""
 
     phi: float | None = None
     sigma2: float | None = None
-    code: ClassVar[str] = "AR1"
-    order: ClassVar[int] = 1
-    param_names: ClassVar[tuple[str, ...]] = ("phi", "sigma2")
-    nonlinear: ClassVar[str | None] = "phi"
-    description: ClassVar[str] = "first-order autoregression"
 
     def _check_value(self, name, v):
         if name == "phi" and not -1.0 < v < 1.0:
@@ -264,9 +224,6 @@ class AR1(Process):
     # non-linear value: phi itself
     def basis(self, tau, fs, nl=None):
         return ar1_wv(tau, nl, 1.0)
-
-    def linear_coef(self):
-        return float(self.sigma2)
 
     def nl_value(self, fs):
         return None if self.phi is None else float(self.phi)
@@ -284,7 +241,7 @@ class AR1(Process):
 
 
 @dataclass(frozen=True, repr=False)
-class GM(Process):
+class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     """Gauss-Markov (continuous time): ``beta`` [1/s], stationary variance ``sigma2_gm``.
 
     Sampled at ``fs`` it is an AR1 with ``phi = exp(-beta/fs)`` and innovation variance
@@ -293,11 +250,6 @@ class GM(Process):
 
     beta: float | None = None
     sigma2_gm: float | None = None
-    code: ClassVar[str] = "GM"
-    order: ClassVar[int] = 0
-    param_names: ClassVar[tuple[str, ...]] = ("beta", "sigma2_gm")
-    nonlinear: ClassVar[str | None] = "beta"
-    description: ClassVar[str] = "Gauss-Markov"
 
     def _check_value(self, name, v):
         if name == "beta" and not v > 0:
@@ -309,9 +261,6 @@ class GM(Process):
     def basis(self, tau, fs, nl=None):
         phi = np.asarray(nl, dtype=float)
         return ar1_wv(tau, phi, 1.0 - phi * phi)
-
-    def linear_coef(self):
-        return float(self.sigma2_gm)
 
     def nl_value(self, fs):
         return None if self.beta is None else math.exp(-float(self.beta) / fs)

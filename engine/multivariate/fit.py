@@ -108,6 +108,30 @@ def as_wvm(data: Any, channels: Sequence[str], fs: float | None, levels: int | N
     return wvm
 
 
+def _fitted_fields(
+    fitted: MultiModel, wvm: WVMatrix, prob: MProblem, u: np.ndarray
+) -> dict[str, Any]:
+    """The fields of the result that follow from the fitted model: ``model``, ``wvm``,
+    ``components`` (implied WV matrices per process), ``implied`` (their sum), ``at_bound``
+    and ``warnings`` (AR1/GM terms faster than one sample, labelled by channel)."""
+    comps = fitted.components(wvm.tau_samples, wvm.fs)
+    warnings = [
+        w
+        for p, c in enumerate(fitted.channels)
+        for w in sub_sample_warnings(
+            fitted.models[c], wvm.fs, wvm.units[p] if p < len(wvm.units) else "", f"{c}."
+        )
+    ]
+    return {
+        "model": fitted,
+        "wvm": wvm,
+        "components": comps,
+        "implied": np.sum(np.array(list(comps.values())), axis=0),
+        "at_bound": boundary_estimates(fitted, prob, u),
+        "warnings": warnings,
+    }
+
+
 def fit_mgmwm(
     data: WVMatrix | Any,
     model: MultiModel,
@@ -200,9 +224,8 @@ def _fit(
             "tolerance; the estimate may be slightly above the minimum"
         )
     f, h, s, coupled = prob.solve(u)
-    fitted = fitted_model(model, prob, u, h, s)
-    comps = fitted.components(wvm.tau_samples, wvm.fs)
-    implied = np.sum(np.array(list(comps.values())), axis=0)
+    fields = _fitted_fields(fitted_model(model, prob, u, h, s), wvm, prob, u)
+    implied = fields["implied"]
     iu = np.triu_indices(wvm.k)
     if omega is None:
         resid = (wvm.values - implied)[:, iu[0], iu[1]]
@@ -211,23 +234,11 @@ def _fit(
     else:
         r = prob.y - np.concatenate([implied[:, p, q] for p, q in prob.pairs])
         objective = float(r @ omega @ r)
-    at_bound = boundary_estimates(fitted, prob, u)
     return MGMWMResult(
-        model=fitted,
-        wvm=wvm,
+        **fields,
         weights=wname,
         objective=objective,
-        implied=implied,
-        components=comps,
         converged=converged,
-        at_bound=at_bound,
-        warnings=[
-            w
-            for p, c in enumerate(fitted.channels)
-            for w in sub_sample_warnings(
-                fitted.models[c], wvm.fs, wvm.units[p] if p < len(wvm.units) else "", f"{c}."
-            )
-        ],
         psd_active=coupled,
         n_evaluations=prob.n_eval,
         method=method,

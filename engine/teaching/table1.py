@@ -99,11 +99,9 @@ def to_datasheet(code: str, value: float, fs: float, unit: str = "deg/s") -> flo
 
     Parameters
     ----------
-    code : {"WN", "RW", "QN", "DR"}
-    value : float
-        ``sigma2``, ``gamma2``, ``q2`` or ``omega`` (per sample).
-    fs : float
-        Sampling frequency (Hz).
+    code, value, fs
+        The process (WN, RW, QN or DR), its per-sample value and the sampling frequency (Hz),
+        as for :func:`engine.units.to_datasheet`.
     unit : str
         Signal unit (``"deg/s"`` or ``"m/s^2"``).
     """

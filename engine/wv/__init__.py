@@ -28,25 +28,18 @@ from .classical import (
 )
 from .robust import biweight_constant, robust_scale_biweight, robust_wv
 
-_LAZY: dict[str, str] = {
-    "SeriesSource": "stream",
-    "open_series": "stream",
-    "wavelet_variance_stream": "stream",
-    "WaveletCrossCovariance": "wccv",
-    "WVMatrix": "wccv",
-    "wavelet_cross_covariance": "wccv",
-    "wv_matrix": "wccv",
-    "AllanVariance": "allan",
-    "allan_variance": "allan",
+_LAZY: dict[str, tuple[str, ...]] = {
+    "stream": ("SeriesSource", "open_series", "wavelet_variance_stream"),
+    "wccv": ("WaveletCrossCovariance", "WVMatrix", "wavelet_cross_covariance", "wv_matrix"),
+    "allan": ("AllanVariance", "allan_variance"),
 }
 
-if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from .allan import AllanVariance, allan_variance
-    from .stream import SeriesSource, open_series, wavelet_variance_stream
-    from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of _LAZY)
+    from .allan import AllanVariance, allan_variance  # noqa: F401
+    from .stream import SeriesSource, open_series, wavelet_variance_stream  # noqa: F401
+    from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix  # noqa: F401
 
-__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
-
+__getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "WaveletVariance",
@@ -63,13 +56,5 @@ __all__ = [
     "cumsum_demeaned",
     "second_difference_sums",
     "sumsq_kernel",
-    "SeriesSource",
-    "open_series",
-    "wavelet_variance_stream",
-    "WaveletCrossCovariance",
-    "WVMatrix",
-    "wavelet_cross_covariance",
-    "wv_matrix",
-    "AllanVariance",
-    "allan_variance",
+    *_lazy_names,
 ]

@@ -1,13 +1,15 @@
 """The Haar WV kernel shared by the classical and robust WV, the Allan variance and the WCCV.
 
-Input checks of a series (:func:`as_series`), the de-meaned cumulative sum ``S`` with a leading
-0 (:func:`cumsum_demeaned`), and the cache-blocked sums of squared second differences
+Input checks of a series (:func:`as_series`) and of ``fs``/``alpha``
+(:func:`check_fs_alpha`), the de-meaned cumulative sum ``S`` with a leading 0
+(:func:`cumsum_demeaned`), and the cache-blocked sums of squared second differences
 ``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2`` (:func:`second_difference_sums`), whose dot products
 go through :func:`sumsq_kernel` (see :mod:`engine._blas`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -15,7 +17,13 @@ import numpy as np
 
 from .._blas import blas_threads
 
-__all__ = ["as_series", "cumsum_demeaned", "second_difference_sums", "sumsq_kernel"]
+__all__ = [
+    "as_series",
+    "check_fs_alpha",
+    "cumsum_demeaned",
+    "second_difference_sums",
+    "sumsq_kernel",
+]
 
 # Block length (samples) of the cache-blocked classical WV.  Every level of a block reads the
 # regions S[a-2^k : b-2^k], k = 0..J, which are shared between consecutive levels, so a block
@@ -58,6 +66,20 @@ def as_series(x: Any) -> np.ndarray:
             "remove or interpolate them first"
         )
     return a
+
+
+def check_fs_alpha(fs: float, alpha: float) -> None:
+    """Raise ValueError unless ``fs`` is a positive number of Hz and ``0 < alpha < 1``.
+
+    Parameters
+    ----------
+    fs, alpha : float
+        Sampling frequency (Hz) and interval level ``1 - alpha``.
+    """
+    if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs) and fs > 0):
+        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
 
 
 def cumsum_demeaned(x: np.ndarray) -> np.ndarray:

@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 from scipy import special
 
-from ._kernel import as_series, cumsum_demeaned, second_difference_sums
-from .classical import WaveletVariance, default_levels, eta3_interval
+from .._jsonutil import JsonFields, columns_table, interval_columns
+from ._kernel import as_series, check_fs_alpha, cumsum_demeaned, second_difference_sums
+from .classical import SeriesSettings, WaveletVariance, default_levels, eta3_interval
 
 __all__ = ["AllanVariance", "allan_variance"]
 
@@ -26,7 +27,7 @@ __all__ = ["AllanVariance", "allan_variance"]
 # Allan variance
 # -------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
-class AllanVariance:
+class AllanVariance(SeriesSettings, JsonFields):
     """Overlapping Allan variance of one series, with its ``1 - alpha`` interval.
 
     Attributes
@@ -37,17 +38,13 @@ class AllanVariance:
         Allan variance and its interval, in (signal unit)^2.
     n_terms : ndarray of int, shape (K,)
         Number of overlapping differences summed, ``N - 2m + 1``.
-    n : int
-        Series length (samples).
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level ``1 - alpha``.
     interval : str
         ``"chi2"`` (chi-square, Percival's eta3 degrees of freedom) or ``"rel"`` (the
         ``1/sqrt(2 (N/m - 1))`` relative error of the inertial-sensor literature).
     unit : str
         Signal unit (the AVAR is in unit^2).
+
+    ``n``, ``fs`` and ``alpha`` are :class:`~engine.wv.classical.SeriesSettings`'s.
     """
 
     tau_samples: np.ndarray
@@ -55,11 +52,13 @@ class AllanVariance:
     ci_low: np.ndarray
     ci_high: np.ndarray
     n_terms: np.ndarray
-    n: int
-    fs: float = 1.0
-    alpha: float = 0.05
     interval: str = "chi2"
     unit: str = ""
+
+    json_fields = (
+        "n fs tau_samples tau_s avar adev ci_low ci_high adev_low adev_high n_terms alpha "
+        "interval unit"
+    )
 
     @property
     def tau_s(self) -> np.ndarray:
@@ -126,41 +125,19 @@ class AllanVariance:
             unit=self.unit,
         )
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary."""
-        return {
-            "n": int(self.n),
-            "fs": float(self.fs),
-            "tau_samples": [int(v) for v in self.tau_samples],
-            "tau_s": [float(v) for v in self.tau_s],
-            "avar": [float(v) for v in self.avar],
-            "adev": [float(v) for v in self.adev],
-            "ci_low": [float(v) for v in self.ci_low],
-            "ci_high": [float(v) for v in self.ci_high],
-            "adev_low": [float(v) for v in self.adev_low],
-            "adev_high": [float(v) for v in self.adev_high],
-            "n_terms": [int(v) for v in self.n_terms],
-            "alpha": float(self.alpha),
-            "interval": self.interval,
-            "unit": self.unit,
-        }
-
     def table(self) -> str:
         """Readable table with units."""
-        u = self.unit or "u"
-        ci = f"{100 * (1 - self.alpha):g}%"
-        lines = [
+        return columns_table(
             f"Overlapping Allan deviation; N = {self.n} samples, fs = {self.fs:g} Hz, "
-            f"{ci} interval: {self.interval}",
-            f"{'m [samples]':>12} {'tau [s]':>12} {'ADEV [' + u + ']':>16} {ci + ' low':>12} "
-            f"{ci + ' high':>12} {'terms':>10}",
-        ]
-        for i in range(len(self)):
-            lines.append(
-                f"{self.tau_samples[i]:>12d} {self.tau_s[i]:>12.5g} {self.adev[i]:>16.6e} "
-                f"{self.adev_low[i]:>12.4e} {self.adev_high[i]:>12.4e} {self.n_terms[i]:>10d}"
-            )
-        return "\n".join(lines)
+            f"{100 * (1 - self.alpha):g}% interval: {self.interval}",
+            [
+                ("m [samples]", ">12d", self.tau_samples),
+                ("tau [s]", ">12.5g", self.tau_s),
+                (f"ADEV [{self.unit or 'u'}]", ">16.6e", self.adev),
+                *interval_columns(self.alpha, self.adev_low, self.adev_high),
+                ("terms", ">10d", self.n_terms),
+            ],
+        )
 
 
 def _octave_taus(n: int) -> np.ndarray:
@@ -228,10 +205,7 @@ def allan_variance(
     """
     a = as_series(x)
     n = a.size
-    if not (np.isfinite(fs) and fs > 0):
-        raise ValueError(f"fs must be a positive number of Hz, got {fs}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    check_fs_alpha(fs, alpha)
     if interval not in ("chi2", "rel"):
         raise ValueError(f"interval must be 'chi2' or 'rel', got {interval!r}")
     mmax = (n - 1) // 2

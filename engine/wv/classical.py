@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from .._jsonutil import JsonFields, columns_table, interval_columns
 from .._optim import chi2_isf
 from ..units import squared
-from ._kernel import as_series, cumsum_demeaned, second_difference_sums
+from ._kernel import as_series, check_fs_alpha, cumsum_demeaned, second_difference_sums
 from .robust import biweight_constant, robust_wv
 
 __all__ = [
@@ -36,6 +37,8 @@ __all__ = [
     "haar_coefficients",
     "eta3_interval",
     "LevelScales",
+    "SeriesSettings",
+    "level_grid",
 ]
 
 
@@ -47,9 +50,7 @@ def default_levels(n: int) -> int:
     n : int
         Series length (samples), at least 3.
     """
-    if n < 3:
-        raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
-    return int(np.floor(np.log2(n - 1)))
+    return _log2_levels(n, 3, n - 1)
 
 
 def max_levels(n: int) -> int:
@@ -65,9 +66,44 @@ def max_levels(n: int) -> int:
     n : int
         Series length (samples), at least 2.
     """
-    if n < 2:
+    return _log2_levels(n, 2, n)
+
+
+def _log2_levels(n: int, least: int, m: int) -> int:
+    """``floor(log2(m))`` (exact, integer) for a series of ``n >= least`` samples."""
+    if n < least:
         raise ValueError(f"a series of {n} samples is too short for a wavelet variance (need >= 4)")
-    return int(n).bit_length() - 1
+    return int(m).bit_length() - 1
+
+
+def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
+    """The per-level axes of a result of ``levels`` levels over ``n`` samples.
+
+    Returns
+    -------
+    dict
+        ``levels`` (1..J), ``tau_samples`` (``2^j``) and ``n_coef`` (``M_j = N - 2^j + 1``,
+        at least 0), as keyword arguments of the results' constructors.
+    """
+    lv = np.arange(1, levels + 1)
+    tau = 2**lv
+    return {"levels": lv, "tau_samples": tau, "n_coef": np.maximum(n - tau + 1, 0)}
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SeriesSettings:
+    """The length, rate and interval level an interval result carries (keyword-only fields;
+    the Allan variance, the WCCV and the WV matrix).
+
+    Attributes
+    ----------
+    n, fs, alpha : int, float, float
+        Series length (samples), sampling frequency (Hz), interval level ``1 - alpha``.
+    """
+
+    n: int
+    fs: float = 1.0
+    alpha: float = 0.05
 
 
 class LevelScales:
@@ -93,7 +129,7 @@ class LevelScales:
 
 
 @dataclass(frozen=True, eq=False)
-class WaveletVariance(LevelScales):
+class WaveletVariance(LevelScales, JsonFields):
     """Empirical Haar wavelet variance of one series, with its intervals.
 
     Attributes
@@ -132,25 +168,21 @@ class WaveletVariance(LevelScales):
     unit: str = ""
     classical: WaveletVariance | None = field(default=None, repr=False)
 
+    #: the per-level arrays (what :meth:`truncate` slices)
+    _PER_LEVEL = ("levels", "tau_samples", "variance", "ci_low", "ci_high", "n_coef")
+    #: the ``to_dict()`` keys: the ``gmwm wv --json`` object
+    json_fields = (
+        "n fs levels tau_samples tau_s variance ci_low ci_high n_coef robust eff alpha unit"
+    )
+
     def truncate(self, levels: int) -> WaveletVariance:
         """The first ``levels`` levels of this WV (no recomputation)."""
         if not 1 <= levels <= self.n_levels:
             raise ValueError(f"levels must be between 1 and {self.n_levels}, got {levels}")
         s = slice(0, levels)
-        return WaveletVariance(
-            levels=self.levels[s],
-            tau_samples=self.tau_samples[s],
-            variance=self.variance[s],
-            ci_low=self.ci_low[s],
-            ci_high=self.ci_high[s],
-            n_coef=self.n_coef[s],
-            n=self.n,
-            fs=self.fs,
-            robust=self.robust,
-            eff=self.eff,
-            alpha=self.alpha,
-            unit=self.unit,
-            classical=None if self.classical is None else self.classical.truncate(levels),
+        classical = None if self.classical is None else self.classical.truncate(levels)
+        return replace(
+            self, classical=classical, **{f: getattr(self, f)[s] for f in self._PER_LEVEL}
         )
 
     def with_fs(self, fs: float) -> WaveletVariance:
@@ -175,41 +207,20 @@ class WaveletVariance(LevelScales):
         classical = None if self.classical is None else self.classical.with_fs(fs)
         return replace(self, fs=fs, classical=classical)
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary (the ``gmwm wv --json`` object)."""
-        return {
-            "n": int(self.n),
-            "fs": float(self.fs),
-            "levels": [int(v) for v in self.levels],
-            "tau_samples": [int(v) for v in self.tau_samples],
-            "tau_s": [float(v) for v in self.tau_s],
-            "variance": [float(v) for v in self.variance],
-            "ci_low": [float(v) for v in self.ci_low],
-            "ci_high": [float(v) for v in self.ci_high],
-            "n_coef": [int(v) for v in self.n_coef],
-            "robust": bool(self.robust),
-            "eff": float(self.eff),
-            "alpha": float(self.alpha),
-            "unit": self.unit,
-        }
-
     def table(self) -> str:
         """Readable table with units."""
-        u = squared(self.unit)
         kind = f"robust (biweight, eff={self.eff:g})" if self.robust else "classical"
-        ci = f"{100 * (1 - self.alpha):g}%"
-        lines = [
+        return columns_table(
             f"Haar wavelet variance, {kind}; N = {self.n} samples, fs = {self.fs:g} Hz",
-            f"{'level':>5} {'tau [samples]':>14} {'tau [s]':>12} {'WV [' + u + ']':>16} "
-            f"{ci + ' low':>12} {ci + ' high':>12} {'M_j':>10}",
-        ]
-        for i in range(self.n_levels):
-            lines.append(
-                f"{self.levels[i]:>5d} {self.tau_samples[i]:>14d} {self.tau_s[i]:>12.5g} "
-                f"{self.variance[i]:>16.6e} {self.ci_low[i]:>12.4e} {self.ci_high[i]:>12.4e} "
-                f"{self.n_coef[i]:>10d}"
-            )
-        return "\n".join(lines)
+            [
+                ("level", ">5d", self.levels),
+                ("tau [samples]", ">14d", self.tau_samples),
+                ("tau [s]", ">12.5g", self.tau_s),
+                (f"WV [{squared(self.unit)}]", ">16.6e", self.variance),
+                *interval_columns(self.alpha, self.ci_low, self.ci_high),
+                ("M_j", ">10d", self.n_coef),
+            ],
+        )
 
     @classmethod
     def from_sums(
@@ -226,25 +237,9 @@ class WaveletVariance(LevelScales):
         ``sums[j-1] = sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2`` (``m = 2^(j-1)``, ``S`` the
         cumulative sum of the de-meaned series of ``n`` samples): ``nu_j = sums / (4^j M_j)``
         with its eta3 interval. Shared by the in-memory and the streamed WV."""
-        lv = np.arange(1, len(sums) + 1)
-        tau = 2**lv
-        m_j = n - tau + 1
-        nu = np.asarray(sums, dtype=float) / (tau.astype(float) ** 2 * m_j)
-        lo, hi = eta3_interval(nu, m_j, tau, alpha)
-        return cls(
-            levels=lv,
-            tau_samples=tau,
-            variance=nu,
-            ci_low=lo,
-            ci_high=hi,
-            n_coef=m_j,
-            n=n,
-            fs=float(fs),
-            robust=False,
-            eff=eff,
-            alpha=alpha,
-            unit=unit,
-        )
+        tau = 2.0 ** np.arange(1, len(sums) + 1)
+        nu = np.asarray(sums, dtype=float) / (tau**2 * (n - tau + 1))
+        return cls.from_arrays(nu, n=n, fs=fs, alpha=alpha, eff=eff, unit=unit)
 
     @classmethod
     def from_arrays(
@@ -274,18 +269,14 @@ class WaveletVariance(LevelScales):
             raise ValueError("variance must be a non-empty 1-D array")
         if not np.all(np.isfinite(v)) or np.any(v < 0):
             raise ValueError("variance must be finite and non-negative at every level")
-        levels = np.arange(1, v.size + 1)
-        tau = 2**levels
-        m = np.maximum(n - tau + 1, 0)
+        grid = level_grid(n, v.size)
         if ci_low is None or ci_high is None:
-            ci_low, ci_high = eta3_interval(v, m, tau, alpha)
+            ci_low, ci_high = eta3_interval(v, grid["n_coef"], grid["tau_samples"], alpha)
         return cls(
-            levels=levels,
-            tau_samples=tau,
+            **grid,
             variance=v,
             ci_low=np.asarray(ci_low, float),
             ci_high=np.asarray(ci_high, float),
-            n_coef=m,
             n=int(n),
             fs=float(fs),
             robust=robust,
@@ -383,10 +374,7 @@ def wavelet_variance(
     """
     a = as_series(x)
     n = a.size
-    if not (np.isfinite(fs) and fs > 0):
-        raise ValueError(f"fs must be a positive number of Hz, got {fs}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    check_fs_alpha(fs, alpha)
     jmax = max_levels(n)
     if levels is None:
         levels = default_levels(n)

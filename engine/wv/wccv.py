@@ -60,9 +60,17 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from .._jsonutil import JsonFields, columns_table, interval_columns
 from ..units import squared
-from ._kernel import as_series, cumsum_demeaned
-from .classical import LevelScales, WaveletVariance, default_levels, eta3_interval
+from ._kernel import as_series, check_fs_alpha, cumsum_demeaned
+from .classical import (
+    LevelScales,
+    SeriesSettings,
+    WaveletVariance,
+    default_levels,
+    eta3_interval,
+    level_grid,
+)
 
 __all__ = [
     "WaveletCrossCovariance",
@@ -89,59 +97,69 @@ def _t_quantile(alpha: float, df: np.ndarray) -> np.ndarray:
     return np.where(df > 1e6, special.ndtri(1.0 - alpha / 2.0), q)
 
 
-@dataclass(frozen=True, eq=False)
-class WaveletCrossCovariance(LevelScales):
-    """Empirical Haar WCCV (lag 0) of two series, with its asymptotic interval.
+@dataclass(frozen=True, eq=False, kw_only=True)
+class LagWindowIntervals(SeriesSettings, LevelScales, JsonFields):
+    """The per-level settings and intervals that a WCCV and a WV matrix share (keyword-only
+    fields; the entries' shapes are the subclass's).
 
     Attributes
     ----------
     levels, tau_samples : ndarray of int, shape (J,)
         Levels ``1..J`` and scales ``2^j`` (samples).
-    covariance : ndarray, shape (J,)
-        WCCV ``nu_xy_j`` in ``unit_x * unit_y``.
-    ci_low, ci_high : ndarray, shape (J,)
-        ``1 - alpha`` interval ``nu -/+ t_{1-alpha/2}(df) std_error``.
-    std_error : ndarray, shape (J,)
-        Asymptotic standard error ``sqrt(sigma2_LR / M_j)``.
-    variance_x, variance_y : ndarray, shape (J,)
-        The WV of each series (by-products of the same pass).
+    ci_low, ci_high, std_error
+        ``1 - alpha`` interval ``nu -/+ t_{1-alpha/2}(df) std_error`` and the asymptotic
+        standard error ``sqrt(sigma2_LR / M_j)`` of every entry.
     ci_method : tuple of str, length J
         ``"lag-window"`` (weighted overlapping batch means) or ``"gaussian-edf"`` per level.
     bandwidth : ndarray of int, shape (J,)
         Lag-window half-width ``2 b`` in samples (0 where the Gaussian approximation is used).
     df : ndarray, shape (J,)
-        Degrees of freedom of the Student quantile of the interval.
+        Degrees of freedom of the Student quantile of the (off-diagonal) intervals.
     n_coef : ndarray of int, shape (J,)
         ``M_j``.
-    n : int
-        Series length (samples).
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level ``1 - alpha``.
-    names : tuple of str
-        Names of the two series.
-    unit : str
-        Unit of the WCCV (e.g. ``"(deg/s)^2"``), empty when unknown.
+
+    ``n`` (samples per series), ``fs`` and ``alpha`` are :class:`SeriesSettings`'s.
     """
 
     levels: np.ndarray
     tau_samples: np.ndarray
-    covariance: np.ndarray
     ci_low: np.ndarray
     ci_high: np.ndarray
     std_error: np.ndarray
-    variance_x: np.ndarray
-    variance_y: np.ndarray
     ci_method: tuple[str, ...]
     bandwidth: np.ndarray
     df: np.ndarray
     n_coef: np.ndarray
-    n: int
-    fs: float = 1.0
-    alpha: float = 0.05
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WaveletCrossCovariance(LagWindowIntervals):
+    """Empirical Haar WCCV (lag 0) of two series, with its asymptotic interval.
+
+    Attributes
+    ----------
+    covariance : ndarray, shape (J,)
+        WCCV ``nu_xy_j`` in ``unit_x * unit_y``.
+    variance_x, variance_y : ndarray, shape (J,)
+        The WV of each series (by-products of the same pass).
+    names : tuple of str
+        Names of the two series.
+    unit : str
+        Unit of the WCCV (e.g. ``"(deg/s)^2"``), empty when unknown.
+
+    The levels, intervals (shape (J,)) and settings are :class:`LagWindowIntervals`'s.
+    """
+
+    covariance: np.ndarray
+    variance_x: np.ndarray
+    variance_y: np.ndarray
     names: tuple[str, str] = ("x", "y")
     unit: str = ""
+
+    json_fields = (
+        "names n fs alpha unit levels tau_samples tau_s covariance ci_low ci_high std_error "
+        "correlation ci_method bandwidth df n_coef"
+    )
 
     @property
     def correlation(self) -> np.ndarray:
@@ -150,50 +168,26 @@ class WaveletCrossCovariance(LevelScales):
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(den > 0, self.covariance / np.where(den > 0, den, 1.0), np.nan)
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary."""
-        return {
-            "names": list(self.names),
-            "n": int(self.n),
-            "fs": float(self.fs),
-            "alpha": float(self.alpha),
-            "unit": self.unit,
-            "levels": self.levels.tolist(),
-            "tau_samples": self.tau_samples.tolist(),
-            "tau_s": self.tau_s.tolist(),
-            "covariance": self.covariance.tolist(),
-            "ci_low": self.ci_low.tolist(),
-            "ci_high": self.ci_high.tolist(),
-            "std_error": self.std_error.tolist(),
-            "correlation": [None if not np.isfinite(v) else float(v) for v in self.correlation],
-            "ci_method": list(self.ci_method),
-            "bandwidth": self.bandwidth.tolist(),
-            "df": self.df.tolist(),
-            "n_coef": self.n_coef.tolist(),
-        }
-
     def table(self) -> str:
         """Readable table."""
-        ci = f"{100 * (1 - self.alpha):g}%"
         u = f" [{self.unit}]" if self.unit else ""
-        lines = [
+        return columns_table(
             f"Haar wavelet cross-covariance of {self.names[0]} and {self.names[1]}{u}; "
             f"N = {self.n}, fs = {self.fs:g} Hz",
-            f"{'level':>5} {'tau [s]':>11} {'WCCV':>13} {ci + ' low':>12} "
-            f"{ci + ' high':>12} {'corr':>7}  interval",
-        ]
-        rho = self.correlation
-        for i in range(self.n_levels):
-            lines.append(
-                f"{self.levels[i]:>5d} {self.tau_s[i]:>11.5g} {self.covariance[i]:>13.5e} "
-                f"{self.ci_low[i]:>12.4e} {self.ci_high[i]:>12.4e} {rho[i]:>7.3f}  "
-                f"{self.ci_method[i]}"
-            )
-        return "\n".join(lines)
+            [
+                ("level", ">5d", self.levels),
+                ("tau [s]", ">11.5g", self.tau_s),
+                ("WCCV", ">13.5e", self.covariance),
+                *interval_columns(self.alpha, self.ci_low, self.ci_high),
+                ("corr", ">7.3f", self.correlation),
+                # the method column is set off by two spaces
+                (" interval", "", [" " + m for m in self.ci_method]),
+            ],
+        )
 
 
-@dataclass(frozen=True, eq=False)
-class WVMatrix(LevelScales):
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WVMatrix(LagWindowIntervals):
     """Wavelet variances (diagonal) and cross-covariances (off-diagonal) of k channels.
 
     ``values[j - 1]`` is the k x k matrix at level j: symmetric, the WV of channel p at
@@ -205,45 +199,24 @@ class WVMatrix(LevelScales):
     ----------
     channels : tuple of str, length k
         Channel names, in matrix order.
-    levels, tau_samples : ndarray of int, shape (J,)
-        Levels and scales ``2^j`` (samples).
-    values, ci_low, ci_high, std_error : ndarray, shape (J, k, k)
-        Estimates, ``1 - alpha`` intervals (eta3 chi-square on the diagonal, normal with the
-        lag-window long-run variance off it) and asymptotic standard errors (lag-window for
-        every entry; the Gaussian EDF approximation at the top levels).
-    ci_method : tuple of str, length J
-        ``"lag-window"`` or ``"gaussian-edf"`` per level (off-diagonal intervals).
-    bandwidth : ndarray of int, shape (J,)
-        Lag-window half-width in samples (0 where the Gaussian approximation is used).
-    df : ndarray, shape (J,)
-        Degrees of freedom of the Student quantile of the off-diagonal intervals.
-    n_coef : ndarray of int, shape (J,)
-        ``M_j``.
-    n : int
-        Samples per channel.
-    fs : float
-        Sampling frequency (Hz).
-    alpha : float
-        Interval level.
+    values : ndarray, shape (J, k, k)
+        Estimates. The intervals and standard errors (:class:`LagWindowIntervals`) have the
+        same shape: eta3 chi-square intervals on the diagonal, normal with the lag-window
+        long-run variance off it; lag-window standard errors for every entry (the Gaussian
+        EDF approximation at the top levels).
     units : tuple of str, length k
         Unit of each channel (empty when unknown).
     """
 
     channels: tuple[str, ...]
-    levels: np.ndarray
-    tau_samples: np.ndarray
     values: np.ndarray
-    ci_low: np.ndarray
-    ci_high: np.ndarray
-    std_error: np.ndarray
-    ci_method: tuple[str, ...]
-    bandwidth: np.ndarray
-    df: np.ndarray
-    n_coef: np.ndarray
-    n: int
-    fs: float = 1.0
-    alpha: float = 0.05
     units: tuple[str, ...] = ()
+
+    #: the ``to_dict()`` keys; matrices as nested lists ``[level][p][q]``
+    json_fields = (
+        "channels units n fs alpha levels tau_samples tau_s values ci_low ci_high std_error "
+        "correlation ci_method bandwidth df n_coef"
+    )
 
     # ---- shape and names -----------------------------------------------------------------
     @property
@@ -267,6 +240,12 @@ class WVMatrix(LevelScales):
     def _unit(self, p: int) -> str:
         return self.units[p] if p < len(self.units) else ""
 
+    def _common(self) -> dict[str, Any]:
+        """The fields a one-channel or one-pair view shares with the matrix."""
+        return {
+            f: getattr(self, f) for f in ("levels", "tau_samples", "n_coef", "n", "fs", "alpha")
+        }
+
     # ---- views ----------------------------------------------------------------------------
     @property
     def correlation(self) -> np.ndarray:
@@ -280,15 +259,10 @@ class WVMatrix(LevelScales):
         """The WV of one channel (equal to :func:`engine.wavelet_variance` of it)."""
         p = self.index(channel)
         return WaveletVariance(
-            levels=self.levels,
-            tau_samples=self.tau_samples,
+            **self._common(),
             variance=self.values[:, p, p],
             ci_low=self.ci_low[:, p, p],
             ci_high=self.ci_high[:, p, p],
-            n_coef=self.n_coef,
-            n=self.n,
-            fs=self.fs,
-            alpha=self.alpha,
             unit=self._unit(p),
         )
 
@@ -298,8 +272,7 @@ class WVMatrix(LevelScales):
         up, uq = self._unit(p), self._unit(q)
         unit = (squared(up) if up == uq else f"{up}*{uq}") if up and uq else ""
         return WaveletCrossCovariance(
-            levels=self.levels,
-            tau_samples=self.tau_samples,
+            **self._common(),
             covariance=self.values[:, p, q],
             ci_low=self.ci_low[:, p, q],
             ci_high=self.ci_high[:, p, q],
@@ -309,10 +282,6 @@ class WVMatrix(LevelScales):
             ci_method=self.ci_method,
             bandwidth=self.bandwidth,
             df=self.df,
-            n_coef=self.n_coef,
-            n=self.n,
-            fs=self.fs,
-            alpha=self.alpha,
             names=(self.channels[p], self.channels[q]),
             unit=unit,
         )
@@ -354,31 +323,6 @@ class WVMatrix(LevelScales):
             ci_method=self.ci_method[:levels],
             **{f: getattr(self, f)[s] for f in per_level},
         )
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary; matrices as nested lists ``[level][p][q]``."""
-        rho = self.correlation
-        return {
-            "channels": list(self.channels),
-            "units": list(self.units),
-            "n": int(self.n),
-            "fs": float(self.fs),
-            "alpha": float(self.alpha),
-            "levels": self.levels.tolist(),
-            "tau_samples": self.tau_samples.tolist(),
-            "tau_s": self.tau_s.tolist(),
-            "values": self.values.tolist(),
-            "ci_low": self.ci_low.tolist(),
-            "ci_high": self.ci_high.tolist(),
-            "std_error": self.std_error.tolist(),
-            "correlation": [
-                [[float(v) if np.isfinite(v) else None for v in row] for row in lev] for lev in rho
-            ],
-            "ci_method": list(self.ci_method),
-            "bandwidth": self.bandwidth.tolist(),
-            "df": self.df.tolist(),
-            "n_coef": self.n_coef.tolist(),
-        }
 
     def table(self) -> str:
         """Readable summary: the WV of each channel and the wavelet correlation of each pair."""
@@ -489,16 +433,24 @@ def _long_run_variances(
     return acc / max(n_t, 1) / _window_norms(_R, sbin, m_used) / (scale * scale)
 
 
-def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> dict[str, Any]:
+def _compute(
+    series: list[np.ndarray],
+    levels: int,
+    alpha: float,
+    ci: bool,
+    *,
+    names: Sequence[str],
+    fs: float,
+    units: Sequence[str] = (),
+) -> WVMatrix:
     """Values, standard errors and intervals of all pairs of k series (shared code)."""
     n = series[0].size
     k = len(series)
     s = np.empty((k, n + 1))
     for p, x in enumerate(series):
         s[p] = cumsum_demeaned(x)
-    lv = np.arange(1, levels + 1)
-    tau = 2**lv
-    m_j = n - tau + 1
+    grid = level_grid(n, levels)
+    lv, tau, m_j = grid["levels"], grid["tau_samples"], grid["n_coef"]
     sums = _product_sums(s, n, levels)
     vals = sums / (tau.astype(float) ** 2 * m_j)[:, None, None]
     vals = 0.5 * (vals + np.transpose(vals, (0, 2, 1)))  # exact symmetry
@@ -529,25 +481,21 @@ def _compute(series: list[np.ndarray], levels: int, alpha: float, ci: bool) -> d
     hi = vals + z * se
     for p in range(k):
         lo[:, p, p], hi[:, p, p] = eta3_interval(vals[:, p, p], m_j, tau, alpha)
-    return {
-        "levels": lv,
-        "tau": tau,
-        "m_j": m_j,
-        "values": vals,
-        "se": se,
-        "lo": lo,
-        "hi": hi,
-        "method": tuple(method),
-        "bandwidth": bandwidth,
-        "df": df,
-    }
-
-
-def _check_common(fs: float, alpha: float) -> None:
-    if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs) and fs > 0):
-        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    return WVMatrix(
+        channels=tuple(names),
+        **grid,
+        values=vals,
+        ci_low=lo,
+        ci_high=hi,
+        std_error=se,
+        ci_method=tuple(method),
+        bandwidth=bandwidth,
+        df=df,
+        n=int(n),
+        fs=float(fs),
+        alpha=float(alpha),
+        units=tuple(units),
+    )
 
 
 def _levels(n: int, levels: int | None) -> int:
@@ -610,28 +558,10 @@ def wavelet_cross_covariance(
             f"the two series have different lengths ({a.size} and {b.size} "
             "samples): a cross-covariance needs series sampled together"
         )
-    _check_common(fs, alpha)
+    check_fs_alpha(fs, alpha)
     lv = _levels(a.size, levels)
-    r = _compute([a, b], lv, alpha, ci=True)
-    return WaveletCrossCovariance(
-        levels=r["levels"],
-        tau_samples=r["tau"],
-        covariance=r["values"][:, 0, 1],
-        ci_low=r["lo"][:, 0, 1],
-        ci_high=r["hi"][:, 0, 1],
-        std_error=r["se"][:, 0, 1],
-        variance_x=r["values"][:, 0, 0],
-        variance_y=r["values"][:, 1, 1],
-        ci_method=r["method"],
-        bandwidth=r["bandwidth"],
-        df=r["df"],
-        n_coef=r["m_j"],
-        n=int(a.size),
-        fs=float(fs),
-        alpha=float(alpha),
-        names=(str(names[0]), str(names[1])),
-        unit=unit,
-    )
+    pair = (str(names[0]), str(names[1]))
+    return replace(_compute([a, b], lv, alpha, True, names=pair, fs=fs).pair(0, 1), unit=unit)
 
 
 def _is_log(data: Any) -> bool:
@@ -770,23 +700,6 @@ def wv_matrix(
     summation order (agreement to about 1e-15 relative).
     """
     names, series, fs_v, unit_list = _gather(data, channels, fs, units)
-    _check_common(fs_v, alpha)
+    check_fs_alpha(fs_v, alpha)
     lv = _levels(series[0].size, levels)
-    r = _compute(series, lv, alpha, ci=ci)
-    return WVMatrix(
-        channels=tuple(names),
-        levels=r["levels"],
-        tau_samples=r["tau"],
-        values=r["values"],
-        ci_low=r["lo"],
-        ci_high=r["hi"],
-        std_error=r["se"],
-        ci_method=r["method"],
-        bandwidth=r["bandwidth"],
-        df=r["df"],
-        n_coef=r["m_j"],
-        n=int(series[0].size),
-        fs=float(fs_v),
-        alpha=float(alpha),
-        units=tuple(unit_list),
-    )
+    return _compute(series, lv, alpha, ci, names=names, fs=fs_v, units=unit_list)

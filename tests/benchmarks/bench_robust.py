@@ -3,79 +3,31 @@
 Prints, for a series of N samples (default 6.3e6, WN + RW + drift), best-of-``--repeat`` times of
 the classical WV, the robust WV and their ratio, measured in the same run with the BLAS pool
 limited to one thread (as the ``gmwm`` command and the app run), and the time of the previous
-robust implementation (scale about zero by a full pass per Brent evaluation, copied below) for
-reference.
+robust implementation for reference: the scale about zero by a full pass per Brent evaluation,
+which the engine keeps as :func:`engine.wv.robust_scale_biweight` (the R ``wv`` definition;
+with the BLAS pool at one thread its sums are the same ``np.dot`` as before).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 import numpy as np
 
 import engine as eg
 from engine._blas import set_blas_threads
-from engine.wv import biweight_constant, cumsum_demeaned
-
-
-def old_robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
-    """The previous robust WV of one level (scale about zero), kept for timing only."""
-    from scipy import optimize
-
-    from engine.wv.robust import gaussian_psi2_mean
-
-    c = biweight_constant(eff)
-    a_c = gaussian_psi2_mean(c)
-    w = np.asarray(w, dtype=np.float64)
-    mad = np.median(np.abs(w)) * 1.482602218505602
-    if mad <= 0:
-        mad = float(np.sqrt(np.mean(w * w)))
-    if mad <= 0:
-        return 0.0
-    w2 = w / mad
-    np.square(w2, out=w2)
-    c2 = c * c
-    r2 = np.empty_like(w2)
-    u = np.empty_like(w2)
-
-    def f(log_s2: float) -> float:
-        np.multiply(w2, math.exp(-log_s2), out=r2)
-        r2i = r2[r2 <= c2]
-        ui = u[: r2i.size]
-        np.multiply(r2i, -1.0 / c2, out=ui)
-        ui += 1.0
-        np.square(ui, out=ui)
-        np.square(ui, out=ui)
-        return float(np.dot(r2i, ui)) / w.size - a_c
-
-    step = 0.5
-    f0 = f(0.0)
-    if f0 > 0:
-        lo, hi = 0.0, step
-        while f(hi) > 0:
-            lo, hi = hi, hi + step
-    else:
-        hi, lo, f_prev = 0.0, -step, f0
-        while True:
-            f_lo = f(lo)
-            if f_lo > 0:
-                break
-            if f_lo < f_prev or lo < -80:
-                return float(np.exp(lo + step) * mad * mad)
-            hi, lo, f_prev = lo, lo - step, f_lo
-    root = optimize.brentq(f, lo, hi, xtol=1e-12)
-    return float(np.exp(root) * mad * mad)
+from engine.wv import cumsum_demeaned, robust_scale_biweight
 
 
 def old_robust_wv(x: np.ndarray, levels: int) -> np.ndarray:
+    """The previous robust WV of every level (scale about zero), kept for timing only."""
     s = cumsum_demeaned(x)
     out = np.empty(levels)
     for j in range(1, levels + 1):
         m = 1 << (j - 1)
         w = (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
-        out[j - 1] = old_robust_scale_biweight(w)
+        out[j - 1] = robust_scale_biweight(w)
     return out
 
 
