@@ -379,6 +379,9 @@ def array_files(tmp_path_factory) -> list[Path]:
         p = d / f"unit{i + 1}.h5"
         eg.save_log(p, {"gyro_x": x[:, i]}, fs=FS, units={"gyro_x": "deg/s"})
         out.append(p)
+    eg.save_log(d / "short.h5", {"gyro_x": x[:5000, 1]}, fs=FS, units={"gyro_x": "deg/s"})
+    eg.save_log(d / "fast.h5", {"gyro_x": x[:, 1]}, fs=2 * FS, units={"gyro_x": "deg/s"})
+    eg.save_log(d / "rad.h5", {"gyro_x": x[:, 1]}, fs=FS, units={"gyro_x": "rad/s"})
     both = d / "both.h5"
     eg.save_log(both, {"g1": x[:, 0], "g2": x[:, 1]}, fs=FS, units={"g1": "deg/s", "g2": "deg/s"})
     return [*out, both]
@@ -402,7 +405,16 @@ def test_cli_virtual(capsys, array_files):
                  "--format", "datasheet", "-o", "-"]) == 0  # fmt: skip
     out = capsys.readouterr().out
     assert "gyro_x" in out and "angle random walk" in out
+    # replicates of different lengths are cut to the shortest, and say so
+    short = str(Path(a).parent / "short.h5")
+    assert main(["virtual", a, short, "--model", "WN+RW", "--absolute", "--json"]) == 0
+    d3 = json.loads(capsys.readouterr().out)
+    assert d3["n"] == 5000 and d3["relative"] is False
+    assert d3["notes"] == ["the LOGs are cut to the shortest, 5000 samples"]
+    fast, rad = (str(Path(a).parent / f) for f in ("fast.h5", "rad.h5"))
     for argv, msg in [
+        ([a, fast, "--model", "WN+RW"], "different sampling rates (100, 200 Hz)"),
+        ([a, rad, "--model", "WN+RW"], "different units (deg/s, rad/s); give --units"),
         ([a, "--model", "WN"], "at least 2 sensors"),
         ([a, b, "--model", "WN+RW", "--scale", "1", "--band", "1:2"], "not allowed with"),
         ([a, b, "--model", "WN+RW", "--band", "5"], "S1:S2"),
