@@ -78,6 +78,7 @@ from .views import (
     hidden_alert,
     redraw_table,
 )
+from .virtual_view import VirtualView
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -246,6 +247,7 @@ class MultiView(pn.viewable.Viewer):
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-mdependence"]
         )
 
+        self.virtual = VirtualView(jobs)  # the optimal virtual sensor of the fit
         h = pn.pane.Markdown
         small = {"font-size": "12px", "color": "#555"}
         self.caption = h(
@@ -298,6 +300,7 @@ class MultiView(pn.viewable.Viewer):
             pn.Row(self.dep_button, self.dep_b, self.dep_cancel, sizing_mode="stretch_width"),
             self.dep_progress,
             self.dep_text,
+            self.virtual.panel,
             sizing_mode="stretch_width",
         )
         self.state.param.watch(self._on_state, "revision")
@@ -734,6 +737,7 @@ class MultiView(pn.viewable.Viewer):
                 src.data = rows
                 if same:
                     redraw_table(table)
+        self.virtual.update(result)
 
     @staticmethod
     def _legend(result: Any) -> str:

@@ -9,7 +9,10 @@
 * :mod:`.moments`: :func:`moment_covariance` and the asymptotic intervals of a fit;
 * :mod:`.result`: :class:`MGMWMResult` (on :class:`engine.fit.result.FitResult`),
   :class:`SharedEstimate`, :class:`MultiParamRecord`;
-* :mod:`.dependence`: :func:`dependence_test` (parametric bootstrap), :class:`DependenceTest`.
+* :mod:`.dependence`: :func:`dependence_test` (parametric bootstrap), :class:`DependenceTest`;
+* :mod:`.virtual`: :func:`virtual_sensor` (the optimal weighted mean of redundant sensors),
+  :class:`VirtualSensor`, :func:`optimal_weights`, :func:`virtual_model`,
+  :func:`virtual_signal`.
 
 The replicate fit (one univariate model, several recordings) is :mod:`engine.fit.replicates`.
 """
@@ -21,6 +24,13 @@ from .fit import fit_mgmwm
 from .moments import moment_covariance
 from .result import MGMWMResult, MultiParamRecord, SharedEstimate
 from .spec import SHAREABLE, MultiModel, SharedProcess
+from .virtual import (
+    VirtualSensor,
+    optimal_weights,
+    virtual_model,
+    virtual_sensor,
+    virtual_signal,
+)
 
 __all__ = [
     "SHAREABLE",
@@ -33,4 +43,9 @@ __all__ = [
     "moment_covariance",
     "DependenceTest",
     "dependence_test",
+    "VirtualSensor",
+    "optimal_weights",
+    "virtual_sensor",
+    "virtual_model",
+    "virtual_signal",
 ]

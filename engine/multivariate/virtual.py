@@ -1,0 +1,672 @@
+"""The optimal virtual sensor: the weighted mean of k redundant sensors with the smallest WV.
+
+Use of the MGMWM named by the multivariate paper (after Zhang et al., PLANS 2018, and
+Vaccaro & Zaki, Sensors 2017: a reduced-drift virtual gyroscope from an array of low-cost
+gyroscopes). k channels measure the same quantity (one axis of k IMUs); the virtual sensor is
+``v_t = sum_i w_i x_{i,t}`` with ``sum_i w_i = 1`` (so the signal itself is kept).
+
+Formula. The Haar filter is linear, so the wavelet coefficients of ``v`` are ``w' W_{j,t}``
+and its WV at level j is ``nu_v(j) = w' N(j) w``, with ``N(j)`` the k x k matrix of wavelet
+variances (diagonal) and cross-covariances (off-diagonal) at that level: the fitted model's
+(``MGMWMResult.implied``) or the data's (``WVMatrix.values``; for the data the identity is
+exact: the empirical WV of the combined series is ``w' N_hat(j) w``). Minimising
+``w' N w`` subject to ``1' w = 1`` (a Lagrange multiplier) gives
+
+    w = N^-1 1 / (1' N^-1 1),        min_w w' N w = 1 / (1' N^-1 1),
+
+with ``N = N(j)`` for one scale, or for a band of levels ``N = sum_j N(j) / a_j``:
+``a_j = 1`` (``relative=False``: the plain sum of WVs, dominated by the band's largest
+WV) or, by default, ``a_j = 1' N(j) 1 / k^2``, the plain average's WV at that level (each level
+counts by its ratio to the average, so the objective is the mean over the band of
+``nu_v(j) / nu_avg(j)``). Weights may be negative (a negatively correlated or a much noisier
+sensor). Independent sensors give inverse-WV weights; equal independent sensors give
+``1/k`` and ``nu(j)/k``; two sensors with WVs a, b and cross-covariance c give
+``w_1 = (b - c) / (a + b - 2c)`` and ``min = (ab - c^2) / (a + b - 2c)``.
+
+Assumptions: the k channels measure the same quantity with the same scale factor and
+alignment (their signals cancel out of the differences); the noise is the fitted latent
+model (processes independent of each other, shared WN/RW/AR1/GM with a k x k covariance); the
+weights are constant. The implied model of ``v`` (:func:`virtual_model`) is exact for the
+WV: a shared process contributes ``w' Sigma w`` (WN: white-noise variance; RW: gamma2; AR1 /
+GM with their common phi/beta: the innovation / stationary variance of one AR1/GM), a
+channel's own process ``w_i^2`` times its variance (QN: ``q2``; WN, RW likewise); processes
+of one kind (and, for AR1/GM, one phi) are summed into one term. An AR1/GM of one phi is
+again an AR1/GM; different phis stay separate terms (a sum of AR1s), the most persistent
+first. A drift (DR) is per channel in the MultiModel, whose WCCV of drifts is 0 (their
+signs are not identified by a WV), so the virtual drift is ``omega^2 = sum w_i^2 omega_i^2``,
+the value ``w' N w`` implies.
+
+Two intervals, both put in chi-square form as Percival's eta3 (``eta = 2 nu^2 / var``
+equivalent degrees of freedom):
+
+* sampling (``VirtualSensor.ci_low/ci_high``): where the empirical WV of the N-sample
+  combined series falls with probability ``1 - alpha`` if the fitted model is right,
+  ``[nu chi2_{a/2}(eta) / eta, nu chi2_{1-a/2}(eta) / eta]``. Its variance is
+  ``c_j' V_j c_j``, with ``V`` the model-implied Gaussian covariance of the stacked WV/WCCV
+  moments (:func:`engine.multivariate.moment_covariance`, Isserlis) and
+  ``c_pq = w_p w_q (2 - [p = q])``; it equals the univariate model-implied variance of the WV
+  of the virtual model (:func:`engine.inference.wv_cov_model`), which is what is computed.
+* confidence (``VirtualSensor.conf_low/conf_high``): the delta method. The MGMWM's
+  parameter covariance is the sandwich ``(A' W A)^-1 A' W V W A (A' W A)^-1`` (the one
+  :meth:`MGMWMResult.conf_int` uses, computed here with the analytic derivatives
+  :func:`implied_jacobian`: covariance entries and variances, and a central difference for
+  phi), and ``nu_v(j) = c_j' nu_j(theta)`` gives ``Var = (c_j' A_j) Cov (c_j' A_j)'``;
+  interval ``[eta nu / chi2_{1-a/2}(eta), eta nu / chi2_{a/2}(eta)]``. The weights are
+  taken as given (not re-estimated), and parameters on a boundary (a process with no
+  variance) are left out, so the interval is short where the fit put a process at zero.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._optim import chi2_isf
+from ..fit import FitError, GMWMResult, weight_matrix
+from ..models import Model, Process
+from ..units import squared
+from ..wv import WaveletVariance, WVMatrix
+from .spec import MultiModel
+
+__all__ = [
+    "VirtualSensor",
+    "optimal_weights",
+    "virtual_sensor",
+    "virtual_model",
+    "virtual_signal",
+    "implied_jacobian",
+]
+
+
+def optimal_weights(n: Any) -> np.ndarray:
+    """Weights summing to 1 that minimise ``w' N w``: ``N^-1 1 / (1' N^-1 1)``.
+
+    Parameters
+    ----------
+    n : array_like, shape (k, k)
+        Symmetric positive semi-definite matrix (a WV/WCCV matrix at one level or a band sum).
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        The weights, from the KKT system ``[[N, 1], [1', 0]]`` (equal to the closed form for a
+        regular ``N``; a singular ``N``, where a combination has zero WV, gives that
+        combination).
+
+    Raises
+    ------
+    ValueError
+        Not a square, finite, symmetric matrix with a positive diagonal.
+
+    Examples
+    --------
+    >>> optimal_weights([[1.0, 0.0], [0.0, 3.0]]).round(3).tolist()
+    [0.75, 0.25]
+    """
+    a = np.asarray(n, dtype=float)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] < 1:
+        raise ValueError(f"N must be a square (k, k) matrix, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError("N has non-finite entries")
+    scale = float(np.max(np.abs(a))) or 1.0
+    if not np.allclose(a, a.T, rtol=0, atol=1e-10 * scale):
+        raise ValueError("N must be symmetric (a WV/WCCV matrix)")
+    if np.any(np.diagonal(a) <= 0):
+        bad = int(np.argmin(np.diagonal(a)))
+        raise ValueError(f"N has a non-positive variance at channel {bad}: {a[bad, bad]:g}")
+    a = 0.5 * (a + a.T) / scale
+    k = a.shape[0]
+    # the KKT system of min w'Nw s.t. 1'w = 1: [[N, 1], [1', 0]] [w; -lambda/2] = [0; 1];
+    # it is regular whenever N is positive definite on {d : 1'd = 0} (also for a singular N)
+    kkt = np.zeros((k + 1, k + 1))
+    kkt[:k, :k] = a
+    kkt[:k, k] = kkt[k, :k] = 1.0
+    rhs = np.zeros(k + 1)
+    rhs[k] = 1.0
+    sol = np.linalg.lstsq(kkt, rhs, rcond=1e-13)[0]
+    w = sol[:k]
+    if not (np.all(np.isfinite(w)) and math.isclose(float(w.sum()), 1.0, abs_tol=1e-9)):
+        raise ValueError("no weights minimise w' N w: N is not positive semi-definite")
+    return w / w.sum()
+
+
+def _quad(n: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``w' N(j) w`` for every level of a (J, k, k) array."""
+    return np.einsum("p,jpq,q->j", w, n, w)
+
+
+def virtual_model(model: MultiModel, weights: Any, fs: float) -> Model:
+    """The single-channel latent model of ``w' x`` implied by a multivariate model.
+
+    Each process of ``model`` (every value set) gives ``w_g' C w_g`` (``C`` its g x g
+    covariance, or the 1 x 1 variance of a channel's own process, ``w_g`` the weights of its
+    channels) in its linear parametrisation; terms of one code and, for AR1/GM, one phi are
+    summed; AR1/GM terms with different phis stay separate, the most persistent first (the
+    module docstring gives the assumptions, e.g. for drifts).
+
+    Parameters
+    ----------
+    model : MultiModel
+        A fitted (every value set) multivariate model.
+    weights : array_like, shape (k,)
+        One weight per channel, in ``model.channels`` order.
+    fs : float
+        Sampling frequency (Hz).
+
+    Returns
+    -------
+    Model
+        Its implied WV equals ``w' model.implied(tau, fs) w`` at every scale.
+    """
+    w = _check_weights(weights, model.k)
+    parts: dict[tuple[str, float | None], list[Any]] = {}
+    for t in model.terms():
+        c, phi = model.term_values(t, fs)
+        wt = w[list(t.chans)]
+        h = float(wt @ np.asarray(c, float) @ wt)
+        key = (t.code, None if phi is None else float(phi))
+        if key not in parts:
+            parts[key] = [t.proto, 0.0, phi]
+        parts[key][1] += h
+    procs: list[Process] = []
+    for proto, h, phi in sorted(parts.values(), key=lambda v: -(v[2] or 0.0)):
+        if h > 0:
+            procs.append(proto.cleared().from_fit(max(h, 0.0), phi, fs))
+    if not procs:
+        raise ValueError("the weights give a virtual sensor with no noise at all (w' N w = 0)")
+    return Model(tuple(procs))
+
+
+def _check_weights(weights: Any, k: int) -> np.ndarray:
+    w = np.asarray(weights, dtype=float).ravel()
+    if w.size != k:
+        raise ValueError(f"give {k} weights (one per channel), got {w.size}")
+    if not np.all(np.isfinite(w)):
+        raise ValueError("the weights must be finite")
+    if not math.isclose(float(w.sum()), 1.0, rel_tol=0, abs_tol=1e-9):
+        raise ValueError(f"the weights must sum to 1 (the signal is kept), got {w.sum():.6g}")
+    return w
+
+
+def virtual_signal(data: Any, weights: Any, channels: Sequence[str] | None = None) -> np.ndarray:
+    """The combined signal ``v_t = sum_i w_i x_{i,t}``.
+
+    Parameters
+    ----------
+    data : ndarray (N, k), sequence of k series, ImuLog or mapping of name to series
+        The channels, in the weights' order (``channels`` selects them from a log/mapping).
+        Series of different lengths (separate recordings) are cut to the shortest.
+    weights : array_like, shape (k,)
+        Summing to 1 (e.g. ``VirtualSensor.weights``).
+    channels : sequence of str, optional
+        Channel names, for a log or a mapping.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    if channels is not None:
+        try:
+            cols = [np.asarray(data[c], float) for c in channels]
+        except KeyError as e:
+            raise KeyError(f"unknown channel {e.args[0]!r}") from None
+    elif isinstance(data, np.ndarray) and data.ndim == 2:
+        cols = list(np.asarray(data, float).T)
+    elif isinstance(data, Mapping):
+        cols = [np.asarray(v, float) for v in data.values()]
+    elif isinstance(getattr(data, "channels", None), Mapping):  # an ImuLog: every channel
+        cols = [np.asarray(v, float) for v in data.channels.values()]
+    else:
+        cols = [np.asarray(v, float) for v in data]
+    if any(c.ndim != 1 for c in cols):
+        raise ValueError("each channel must be a 1-D series")
+    w = _check_weights(weights, len(cols))
+    n = min(c.size for c in cols)
+    if n < 2:
+        raise ValueError(f"the series are too short ({n} samples)")
+    return np.sum([wi * c[:n] for wi, c in zip(w, cols, strict=True)], axis=0)
+
+
+@dataclass(frozen=True, eq=False)
+class VirtualSensor:
+    """The optimal virtual sensor of a fitted multivariate model (:func:`virtual_sensor`).
+
+    Attributes
+    ----------
+    channels : tuple of str, length k
+        The sensors, in the weights' order.
+    weights : ndarray (k,)
+        The optimal weights (sum 1), from the fitted model.
+    empirical_weights : ndarray (k,)
+        The same optimum computed from the empirical WV/WCCV matrix (no model).
+    levels, tau_samples : ndarray of int (J,)
+        Levels and scales (samples).
+    fs : float
+        Sampling frequency (Hz).
+    unit : str
+        The sensors' common unit (WVs are in its square).
+    target : str
+        ``"level j (tau s)"`` or ``"band j1..j2 (tau1 to tau2 s)"``, the criterion's levels.
+    target_levels : ndarray of int
+        Indices (0-based) of the criterion's levels.
+    relative : bool
+        Band levels weighted by ``1 / nu_avg(j)`` (else summed plainly).
+    implied : ndarray (J,)
+        ``w' N(j) w``: the model-implied WV of the virtual sensor.
+    ci_low, ci_high : ndarray (J,)
+        ``1 - alpha`` interval of the empirical WV of the combined series under the model
+        (sampling).
+    conf_low, conf_high : ndarray (J,)
+        ``1 - alpha`` confidence interval of the implied WV (delta method from the fit's
+        sandwich covariance; the weights taken as given).
+    sensors_implied : ndarray (J, k)
+        The model-implied WV of each sensor.
+    average_implied : ndarray (J,)
+        The model-implied WV of the plain average (weights ``1/k``).
+    empirical : ndarray (J,)
+        The empirical WV of the combined series (``w' N_hat(j) w``, exact).
+    sensors_empirical : ndarray (J, k), average_empirical : ndarray (J,)
+        The empirical WVs of each sensor and of the plain average.
+    objective, average_objective : float
+        The criterion (band sum of ``nu(j) / a_j``) of the virtual sensor and of the average.
+    sensor_objectives : ndarray (k,)
+        The criterion of each sensor alone; ``best_sensor`` the smallest's name.
+    model : Model
+        The virtual sensor's single-channel model (:func:`virtual_model`).
+    n : int
+        Samples of the series.
+    alpha : float
+        Interval level.
+    """
+
+    channels: tuple[str, ...]
+    weights: np.ndarray
+    empirical_weights: np.ndarray
+    levels: np.ndarray
+    tau_samples: np.ndarray
+    fs: float
+    unit: str
+    target: str
+    target_levels: np.ndarray
+    relative: bool
+    implied: np.ndarray
+    ci_low: np.ndarray
+    ci_high: np.ndarray
+    conf_low: np.ndarray
+    conf_high: np.ndarray
+    sensors_implied: np.ndarray
+    average_implied: np.ndarray
+    empirical: np.ndarray
+    sensors_empirical: np.ndarray
+    average_empirical: np.ndarray
+    objective: float
+    average_objective: float
+    sensor_objectives: np.ndarray
+    model: Model
+    n: int
+    alpha: float = 0.05
+
+    @property
+    def tau_s(self) -> np.ndarray:
+        """Scales in seconds."""
+        return self.tau_samples / self.fs
+
+    @property
+    def best_sensor(self) -> str:
+        """The sensor with the smallest criterion on its own."""
+        return self.channels[int(np.argmin(self.sensor_objectives))]
+
+    @property
+    def gain_vs_average(self) -> float:
+        """``objective / average_objective`` (<= 1: the optimum is never worse in the model)."""
+        return self.objective / self.average_objective
+
+    @property
+    def gain_vs_best(self) -> float:
+        """``objective / min(sensor_objectives)``."""
+        return self.objective / float(np.min(self.sensor_objectives))
+
+    def wv(self) -> WaveletVariance:
+        """The empirical WV of the combined series, with its eta3 intervals."""
+        return WaveletVariance.from_arrays(
+            np.maximum(self.empirical, 0.0), n=self.n, fs=self.fs, alpha=self.alpha, unit=self.unit
+        )
+
+    def as_fit(self) -> GMWMResult:
+        """The virtual sensor as a single-channel fit, for :func:`engine.export.export` and
+        every single-channel view: ``model`` is :attr:`model` (not refitted), ``wv`` the
+        empirical WV of the combined series, ``objective`` its ``"ci"``-weighted distance
+        to the implied WV."""
+        wv = self.wv()
+        omega, wname = weight_matrix(wv, "ci")
+        comps = self.model.components(wv.tau_samples, wv.fs)
+        implied = np.sum(np.array(list(comps.values())), axis=0)
+        r = wv.variance - implied
+        return GMWMResult(
+            model=self.model,
+            weights=wname,
+            omega=omega,
+            objective=float(r @ omega @ r),
+            method="virtual sensor: w' Sigma w of the MGMWM fit",
+            message=f"weights {', '.join(f'{w:.4g}' for w in self.weights)} on "
+            f"{', '.join(self.channels)} ({self.target})",
+            wv=wv,
+            implied=implied,
+            components=comps,
+        )
+
+    def table(self) -> str:
+        """Readable summary: weights and the Allan deviation of each sensor, the average and
+        the virtual sensor at every level."""
+        u = self.unit
+        lines = [
+            f"Optimal virtual sensor of {', '.join(self.channels)}: minimum WV over "
+            f"{self.target}{' (relative to the average)' if self.relative else ''}",
+            f"  {'channel':<18} {'weight (model)':>15} {'weight (data)':>14} {'criterion':>11}",
+        ]
+        for c, w, we, o in zip(
+            self.channels, self.weights, self.empirical_weights, self.sensor_objectives, strict=True
+        ):
+            lines.append(f"  {c:<18} {w:>15.4f} {we:>14.4f} {o:>11.4g}")
+        lines += [
+            f"  average: criterion {self.average_objective:.4g}; virtual: {self.objective:.4g} "
+            f"({self.gain_vs_average:.3f} x the average, {self.gain_vs_best:.3f} x the best "
+            f"sensor {self.best_sensor})",
+            f"  model: {self.model.spec(values=True)}",
+            "",
+            f"  Allan deviation sqrt(2 WV) [{u}]: empirical (the best sensor, the average, the "
+            f"virtual sensor), implied, its {100 * (1 - self.alpha):g}% sampling range of the "
+            "empirical and its confidence interval (delta method)",
+            f"  {'tau [s]':>10} {'best':>10} {'average':>10} {'virtual':>10} {'implied':>10} "
+            f"{'samp. low':>10} {'samp. high':>10} {'conf. low':>10} {'conf. high':>10}",
+        ]
+        b = int(np.argmin(self.sensor_objectives))
+        for i in range(self.levels.size):
+            ad = [
+                math.sqrt(2 * max(v, 0.0))
+                for v in (
+                    self.sensors_empirical[i, b],
+                    self.average_empirical[i],
+                    self.empirical[i],
+                    self.implied[i],
+                    self.ci_low[i],
+                    self.ci_high[i],
+                    self.conf_low[i],
+                    self.conf_high[i],
+                )
+            ]
+            lines.append(f"  {self.tau_s[i]:>10.4g} " + " ".join(f"{a:>10.4e}" for a in ad))
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (``gmwm virtual --json``)."""
+        return {
+            "kind": "virtual_sensor",
+            "channels": list(self.channels),
+            "weights": self.weights.tolist(),
+            "empirical_weights": self.empirical_weights.tolist(),
+            "target": self.target,
+            "target_levels": (self.target_levels + 1).tolist(),
+            "relative": self.relative,
+            "fs": self.fs,
+            "n": self.n,
+            "unit": self.unit,
+            "wv_unit": squared(self.unit) if self.unit else "",
+            "alpha": self.alpha,
+            "levels": self.levels.tolist(),
+            "tau_s": self.tau_s.tolist(),
+            "implied": self.implied.tolist(),
+            "ci_low": self.ci_low.tolist(),
+            "ci_high": self.ci_high.tolist(),
+            "conf_low": [v if math.isfinite(v) else None for v in self.conf_low.tolist()],
+            "conf_high": [v if math.isfinite(v) else None for v in self.conf_high.tolist()],
+            "empirical": self.empirical.tolist(),
+            "sensors_implied": self.sensors_implied.tolist(),
+            "sensors_empirical": self.sensors_empirical.tolist(),
+            "average_implied": self.average_implied.tolist(),
+            "average_empirical": self.average_empirical.tolist(),
+            "objective": self.objective,
+            "average_objective": self.average_objective,
+            "sensor_objectives": self.sensor_objectives.tolist(),
+            "best_sensor": self.best_sensor,
+            "gain_vs_average": self.gain_vs_average,
+            "gain_vs_best": self.gain_vs_best,
+            "model": self.model.spec(values=True),
+        }
+
+
+def target_levels(
+    tau_s: np.ndarray, scale: float | None = None, band: tuple[float, float] | None = None
+) -> tuple[np.ndarray, str]:
+    """Indices of the levels a criterion uses and a readable name.
+
+    ``scale`` (s): the level whose scale is nearest in log (within a factor 2^0.5 of a
+    level); ``band`` (s, s): the levels with ``s1 <= tau <= s2``; neither: every level.
+    """
+    tau_s = np.asarray(tau_s, float)
+    if scale is not None and band is not None:
+        raise ValueError("give a scale or a band, not both")
+    if scale is not None:
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"the scale must be > 0 s, got {scale}")
+        d = np.abs(np.log2(tau_s / scale))
+        i = int(np.argmin(d))
+        if d[i] > 0.5 + 1e-9:
+            raise ValueError(
+                f"the scale {scale:g} s is outside the WV's scales "
+                f"({tau_s[0]:g} to {tau_s[-1]:g} s)"
+            )
+        return np.array([i]), f"level {i + 1} ({tau_s[i]:g} s)"
+    if band is None:
+        sel = np.arange(tau_s.size)
+    else:
+        lo, hi = (float(v) for v in band)
+        if not (lo > 0 and hi >= lo):
+            raise ValueError(f"the band must be 0 < s1 <= s2 seconds, got {lo:g}:{hi:g}")
+        sel = np.flatnonzero((tau_s >= lo * (1 - 1e-9)) & (tau_s <= hi * (1 + 1e-9)))
+        if sel.size == 0:
+            raise ValueError(
+                f"no WV scale in the band {lo:g} to {hi:g} s (scales {tau_s[0]:g} to "
+                f"{tau_s[-1]:g} s, powers of 2 / fs)"
+            )
+    return sel, (
+        f"band levels {sel[0] + 1}..{sel[-1] + 1} ({tau_s[sel[0]]:g} to {tau_s[sel[-1]]:g} s)"
+    )
+
+
+def band_matrix(
+    n: np.ndarray, sel: np.ndarray, relative: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(sum_j N(j) / a_j, a)`` over the selected levels of a (J, k, k) array (``a_j = 1``,
+    or the plain average's WV ``1' N(j) 1 / k^2`` when ``relative``)."""
+    k = n.shape[1]
+    a = np.ones(n.shape[0])
+    if relative:
+        a = np.einsum("jpq->j", n) / k**2
+        a = np.where(a > 0, a, 1.0)
+    return np.sum(n[sel] / a[sel, None, None], axis=0), a
+
+
+def _interval(
+    nu: np.ndarray, var: np.ndarray, alpha: float, confidence: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Chi-square ``1 - alpha`` range of an estimate with mean nu and variance var
+    (``eta = 2 nu^2 / var`` degrees of freedom): where the estimate falls, ``nu chi2 / eta``,
+    or with ``confidence`` the interval of the true value, ``eta nu / chi2`` (eta3 form)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eta = np.where(var > 0, 2 * nu**2 / np.where(var > 0, var, 1.0), 1e12)
+    eta = np.clip(eta, 1e-3, 1e12)
+    q_hi, q_lo = chi2_isf(eta, alpha / 2), chi2_isf(eta, 1 - alpha / 2)
+    if confidence:
+        return eta * nu / q_hi, eta * nu / q_lo
+    return nu * q_lo / eta, nu * q_hi / eta
+
+
+def _stack(arr: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
+    """A (J, k, k) array as the MGMWM's stacked moments (pair by pair, levels inside)."""
+    return np.concatenate([arr[:, p, q] for p, q in pairs])
+
+
+def implied_jacobian(model: MultiModel, tau: np.ndarray, fs: float) -> np.ndarray:
+    """Derivatives ``(P J, n)`` of the stacked implied moments (pair by pair, levels inside,
+    as :func:`engine.multivariate.moment_covariance`) by the free parameters: every entry of a
+    shared covariance (the diagonal only for a diagonal one) and every variance of a live
+    process (analytic: ``basis x`` the entry's indicator), and the phi of a live AR1/GM
+    (central difference of its basis). Processes with no variance are left out (boundary)."""
+    k = model.k
+    pairs = [(p, q) for p in range(k) for q in range(p, k)]
+    cols = []
+    for t in model.terms():
+        c, phi = model.term_values(t, fs)
+        c = np.asarray(c, float)
+        ch = list(t.chans)
+        live = np.diagonal(c) > 0
+        if not np.any(live):
+            continue
+        b = t.proto.basis(tau, fs, phi) * np.ones_like(tau)
+        for a in range(len(ch)):
+            for d in range(a, len(ch)):
+                if not (live[a] and live[d]) or (a != d and t.diagonal):
+                    continue
+                e = np.zeros((k, k))
+                e[ch[a], ch[d]] = e[ch[d], ch[a]] = 1.0
+                cols.append(_stack(b[:, None, None] * e, pairs))
+        if t.nonlinear and phi is not None:
+            h = 1e-6 * max(1.0 - abs(phi), 1e-6)
+            db = (t.proto.basis(tau, fs, phi + h) - t.proto.basis(tau, fs, phi - h)) / (2 * h)
+            full = np.zeros((k, k))
+            full[np.ix_(ch, ch)] = c
+            cols.append(_stack(db[:, None, None] * full, pairs))
+    return np.column_stack(cols) if cols else np.zeros((len(pairs) * tau.size, 0))
+
+
+def _delta_variance(result: Any, w: np.ndarray) -> np.ndarray:
+    """Delta-method variance of ``w' N(j; theta_hat) w`` at every level: the sandwich
+    covariance of the estimator, ``(A' W A)^-1 A' W V W A (A' W A)^-1``, mapped through the
+    derivatives ``c_j' A_j`` (``A`` :func:`implied_jacobian`, ``W`` the fit's ``omega``, ``V``
+    :func:`engine.multivariate.moment_covariance`)."""
+    from .moments import moment_covariance
+
+    wvm: WVMatrix = result.wvm
+    k, nj = wvm.k, wvm.n_levels
+    pairs = [(p, q) for p in range(k) for q in range(p, k)]
+    jac = implied_jacobian(result.model, wvm.tau_samples.astype(float), wvm.fs)
+    if jac.shape[1] == 0:
+        return np.zeros(nj)
+    norms = np.linalg.norm(jac, axis=0)
+    jac = jac / np.where(norms > 0, norms, 1.0)  # scale-free columns for the pseudo-inverse
+    om = np.asarray(result.omega, float)
+    bread = np.linalg.pinv(jac.T @ om @ jac, rcond=1e-12, hermitian=True)
+    meat = jac.T @ om @ moment_covariance(result.model, wvm) @ om @ jac
+    cov = bread @ meat @ bread
+    c = np.array([w[p] * w[q] * (1.0 if p == q else 2.0) for p, q in pairs])
+    m = np.einsum("a,ajn->jn", c, jac.reshape(len(pairs), nj, -1))  # (J, n_params)
+    return np.maximum(np.einsum("jn,nm,jm->j", m, cov, m), 0.0)
+
+
+def virtual_sensor(
+    result: Any,
+    *,
+    scale: float | None = None,
+    band: tuple[float, float] | None = None,
+    relative: bool = True,
+    alpha: float = 0.05,
+    confidence: bool = True,
+) -> VirtualSensor:
+    """The optimal virtual sensor of a fitted multivariate model.
+
+    Parameters
+    ----------
+    result : MGMWMResult
+        A fit of k channels measuring the same quantity (e.g. one axis of k IMUs, with
+        shared WN/RW/AR1/GM).
+    scale : float, optional
+        Minimise the WV at this scale (s; the nearest dyadic level).
+    band : (float, float), optional
+        Minimise over the levels with ``s1 <= tau <= s2`` (s). Neither: every level.
+    relative : bool
+        Band levels weighted by ``1 / nu_avg(j)`` (default) or summed plainly.
+    alpha : float
+        Interval level ``1 - alpha``.
+    confidence : bool
+        Compute the delta-method confidence interval (the covariance of every moment of the
+        fit: about as long as the fit for 3 channels); False leaves ``conf_low/conf_high``
+        nan.
+
+    Returns
+    -------
+    VirtualSensor
+
+    Raises
+    ------
+    ValueError
+        A scale or band outside the WV's scales, a bad alpha.
+    FitError
+        ``result`` is not a multivariate fit.
+    """
+    if not hasattr(result, "wvm") or not isinstance(getattr(result, "model", None), MultiModel):
+        raise FitError(
+            f"virtual_sensor needs a multivariate fit (fit_mgmwm), got {type(result).__name__}"
+        )
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    wvm: WVMatrix = result.wvm
+    model: MultiModel = result.model
+    k = wvm.k
+    sel, name = target_levels(wvm.tau_s, scale, band)
+    imp = np.asarray(result.implied, float)
+    emp = np.asarray(wvm.values, float)
+    n_model, a = band_matrix(imp, sel, relative)
+    w = optimal_weights(n_model)
+    n_emp, _ = band_matrix(emp, sel, relative)
+    w_emp = optimal_weights(n_emp)
+    nu = _quad(imp, w)
+    vmodel = virtual_model(model, w, wvm.fs)
+    # sampling variance of w' N_hat(j) w under the model: c' V_jj c with V the moments'
+    # covariance (moment_covariance), which is the univariate Var(nu_hat_j) of the virtual
+    # model (v is one Gaussian series with spectral density w' S(f) w; Isserlis on both
+    # sides) and costs one J x J integral instead of (P J)^2
+    from ..inference.asymptotic import wv_cov_model
+
+    shape = WaveletVariance.from_arrays(np.maximum(nu, 0.0), n=wvm.n, fs=wvm.fs, alpha=alpha)
+    var = np.diagonal(wv_cov_model(vmodel, shape)).copy()
+    lo, hi = _interval(nu, var, alpha)
+    if confidence:
+        conf_lo, conf_hi = _interval(nu, _delta_variance(result, w), alpha, confidence=True)
+    else:
+        conf_lo = conf_hi = np.full(nu.shape, np.nan)
+    avg = np.full(k, 1.0 / k)
+    diag = np.einsum("jpp->jp", imp)
+    units = set(wvm.units) if wvm.units else {""}
+    return VirtualSensor(
+        channels=wvm.channels,
+        weights=w,
+        empirical_weights=w_emp,
+        levels=wvm.levels,
+        tau_samples=wvm.tau_samples,
+        fs=wvm.fs,
+        unit=units.pop() if len(units) == 1 else "",
+        target=name,
+        target_levels=sel,
+        relative=relative,
+        implied=nu,
+        ci_low=lo,
+        ci_high=hi,
+        conf_low=conf_lo,
+        conf_high=conf_hi,
+        sensors_implied=diag,
+        average_implied=_quad(imp, avg),
+        empirical=np.maximum(_quad(emp, w), 0.0),
+        sensors_empirical=np.einsum("jpp->jp", emp),
+        average_empirical=_quad(emp, avg),
+        objective=float(np.sum(nu[sel] / a[sel])),
+        average_objective=float(np.sum(_quad(imp, avg)[sel] / a[sel])),
+        sensor_objectives=np.sum(diag[sel] / a[sel, None], axis=0),
+        model=vmodel,
+        n=int(wvm.n),
+        alpha=alpha,
+    )
