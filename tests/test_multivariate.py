@@ -616,7 +616,10 @@ def test_dependence_test_detects_shared_drift_and_not_independent_channels():
     assert t_dep.p_value == pytest.approx(1 / 20) and t_dep.statistic > 0
     assert t_ind.p_value > 0.1
     assert t_dep.labels == ("RW",) and t_dep.B == 19
-    json.dumps(t_dep.to_dict())
+    d = json.loads(json.dumps(t_dep.to_dict()))  # every field but the bootstrap values
+    assert list(d) == "statistic p_value objective_independent objective_shared labels B".split()
+    assert d["labels"] == ["RW"] and d["B"] == 19 and d["p_value"] == t_dep.p_value
+    assert d["statistic"] == t_dep.statistic == d["objective_independent"] - d["objective_shared"]
     # the null model: WN/RW independent per channel, a shared GM keeps its common beta
     h0 = shared_truth().without_dependence(["GM", "RW"])
     assert [s.label for s in h0.shared] == ["WN", "GM"] and h0.shared[1].diagonal

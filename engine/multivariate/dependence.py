@@ -7,6 +7,7 @@ parametric-bootstrap distribution under the restricted model.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -60,15 +61,11 @@ class DependenceTest:
         return self.summary()._repr_html_()
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary (without the bootstrap values)."""
-        return {
-            "statistic": self.statistic,
-            "p_value": self.p_value,
-            "objective_independent": self.objective_independent,
-            "objective_shared": self.objective_shared,
-            "labels": list(self.labels),
-            "B": self.B,
-        }
+        """JSON-ready dictionary: every field by name but the bootstrap values."""
+        d = dataclasses.asdict(self)
+        del d["bootstrap"]
+        d["labels"] = list(self.labels)
+        return d
 
 
 def _boot_dependence(args: tuple) -> float | None:
