@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 import engine as eg
+from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
 
 __all__ = [
@@ -179,6 +180,10 @@ def read_source(
                 f"{p} is a folder: give the path of a log file, or of a ROS 2 bag folder "
                 "(the one holding metadata.yaml)"
             )
+        if p.is_file():  # the HDF5 library may hang or crash on a damaged file
+            with open(p, "rb") as fh:
+                if is_hdf5(fh.read(2056), p.name):
+                    check_hdf5(str(p), p.name)
         out = LoadedData(read_log(p, segment=segment), "path", p.name, str(p))
     elif source == "upload":
         if data is None or len(data) == 0:
@@ -187,6 +192,8 @@ def read_source(
             data = data.encode("utf-8")
         check_upload_size(len(data), filename)
         name = Path(filename or "upload.csv").name
+        if is_hdf5(bytes(data[:2056]), name):  # see gmwm_app.hdf5_guard
+            check_hdf5(bytes(data), name)
         lg = read_log(bytes(data), segment=segment, name=name)
         out = LoadedData(lg, "upload", name, "")
     elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path

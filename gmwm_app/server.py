@@ -11,6 +11,7 @@ import asyncio
 import contextvars
 import logging
 import sys
+import threading
 import weakref
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -20,6 +21,7 @@ from typing import Any
 import panel as pn
 
 from gmwm_app import _panel_compat as compat
+from gmwm_app import hdf5_guard
 from gmwm_app._panel_compat import building_off_loop
 from gmwm_app.app import create_app
 
@@ -134,6 +136,8 @@ def create_application(path: str | None = None) -> Any:
 
     limit_blas_once()  # a server process: see limit_blas_threads
     favour_loop_latency()  # the loop's turns between the page builds' Python
+    # the HDF5 watchdog's helper process, started now so that the first file does not wait
+    threading.Thread(target=hdf5_guard.start_helper, daemon=True, name="gmwm-guard").start()
     compat.skip_repeated_css_patch()
     factory = create_app_factory(path)
 
