@@ -165,6 +165,21 @@ def test_bootstrap_optimism_is_identical_on_dask(wn_rw_fit, dask_ex):
     assert all(np.isfinite(c.optimism) and c.optimism != 0 for c in ref.candidates)
 
 
+def test_bootstrap_j_test_is_identical_on_every_executor(wn_rw_fit, dask_ex):
+    """The bootstrap J-test's replicates are tasks too (they ran in a serial loop before)."""
+    from engine.inference import j_test
+
+    kw = {"method": "bootstrap", "B": 19, "seed": 3}
+    ref = j_test(wn_rw_fit, **kw)
+    assert j_test(wn_rw_fit, workers=2, **kw) == ref
+    with ThreadPoolExecutor(2) as ex:
+        assert j_test(wn_rw_fit, executor=ex, **kw) == ref
+    assert j_test(wn_rw_fit, executor=dask_ex, **kw) == ref
+    # p = (1 + #{T_b >= T}) / (1 + B): a multiple of 1/20, and T is the asymptotic test's T
+    assert round(ref.p_value * 20, 9) == round(ref.p_value * 20) and 0 < ref.p_value <= 1
+    assert ref.statistic == j_test(wn_rw_fit).statistic and ref.method == "bootstrap"
+
+
 def _dep_data():
     dep = MultiModel(
         ["a", "b"],

@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .._jsonutil import FieldsDict
+from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..wv import wavelet_variance
 from .asymptotic import free_params
@@ -28,6 +30,16 @@ class JTest(FieldsDict):
     method: str
 
 
+def _boot_statistic(args: tuple) -> float:
+    """J statistic of one parametric-bootstrap replicate (a task of :func:`parallel_map`)."""
+    res, vinv, seed = args
+    xb = res.model.simulate(res.wv.n, fs=res.fs, rng=np.random.default_rng(seed))
+    wvb = wavelet_variance(xb, fs=res.fs, levels=res.wv.n_levels)
+    fb = fit_gmwm(wvb, res.model.cleared(), weights=res.omega)
+    rb = wvb.variance - fb.implied
+    return float(rb @ vinv @ rb)
+
+
 def j_test(
     res: GMWMResult,
     *,
@@ -36,6 +48,7 @@ def j_test(
     B: int = 200,
     seed: int | None = 0,
     workers: int = 1,
+    executor: Executor | None = None,
     method: str = "asymptotic",
 ) -> JTest:
     """Goodness of fit: ``T = (nu_hat - nu(theta_hat))' V^-1 (nu_hat - nu(theta_hat))``.
@@ -43,10 +56,23 @@ def j_test(
     Under a correct model and efficient weights, ``T ~ chi2(J - p)`` asymptotically
     (``method="asymptotic"``). ``method="bootstrap"`` compares T with its distribution over
     parametric-bootstrap replicates refitted the same way (no chi-square assumption).
+
+    Parameters
+    ----------
+    res : GMWMResult
+        The fit.
+    v, x, B, seed
+        How V is estimated (:func:`wv_cov`), the bootstrap's replicates and base seed
+        (replicate b uses the b-th child of ``SeedSequence(seed)``).
+    workers, executor
+        Local processes, or any ``concurrent.futures.Executor`` (e.g. a Dask client's), for
+        the bootstrap replicates of V and of the statistic; the result does not depend on them.
+    method : {"asymptotic", "bootstrap"}
+        The reference distribution of T.
     """
     from scipy import stats
 
-    vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers)
+    vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers, executor=executor)
     vinv = inverse_cov(vmat)
     r = res.wv.variance - res.implied
     t = float(r @ vinv @ r)
@@ -56,14 +82,8 @@ def j_test(
     if method == "asymptotic":
         return JTest(t, df, float(stats.chi2.sf(t, df)), "asymptotic")
     if method == "bootstrap":
-        seeds = np.random.SeedSequence(seed).spawn(B)
-        stats_b = []
-        for s in seeds:
-            xb = res.model.simulate(res.wv.n, fs=res.fs, rng=np.random.default_rng(s))
-            wvb = wavelet_variance(xb, fs=res.fs, levels=res.wv.n_levels)
-            fb = fit_gmwm(wvb, res.model.cleared(), weights=res.omega)
-            rb = wvb.variance - fb.implied
-            stats_b.append(float(rb @ vinv @ rb))
+        items = [(res, vinv, s) for s in np.random.SeedSequence(seed).spawn(B)]
+        stats_b = parallel_map(_boot_statistic, items, workers, executor=executor)
         p = (1 + np.sum(np.array(stats_b) >= t)) / (1 + len(stats_b))
         return JTest(t, df, float(p), "bootstrap")
     raise ValueError(f"unknown J-test method {method!r}")
