@@ -29,7 +29,14 @@ from engine.units import param_unit
 from .data import message_of
 from .multi_figures import make_table
 from .session_view import download_button
-from .views import TOTAL_COLOR, hidden_alert, interval_band, log_figure, unit_squared
+from .views import (
+    TOTAL_COLOR,
+    hidden_alert,
+    interval_band,
+    log_figure,
+    redraw_table,
+    unit_squared,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -286,7 +293,10 @@ class VirtualView:
             }
             self.figure.yaxis.axis_label = f"WV [{unit_squared(vs.unit)}]"
             rows = self.weight_rows(vs)
+            same = len(rows["channel"]) == len(self.weight_source.data["channel"])
             self.weight_source.data = rows
+            if same:  # BokehJS keeps the old cells of a table whose row count is unchanged
+                redraw_table(self.weight_table)
             self.info.object = self.info_text(vs)
 
     @staticmethod
