@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import time
 from pathlib import Path
 from typing import Any
 
@@ -174,7 +173,7 @@ def numbers(text: str) -> list[float]:
 @pytest.mark.browser
 def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Path) -> None:
     from conftest import served_app
-    from test_app_browser import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_MS, _require_chromium
+    from test_app_browser import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_MS, Tab, _require_chromium
 
     from gmwm_app.app import live_apps
 
@@ -185,18 +184,9 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
     with served_app(app_demo_file) as (port, _thread), sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1400, "height": 1100})
-            errors: list[str] = []
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
-
-            def wait_for(predicate: Any, what: str) -> None:
-                deadline = time.time() + TIMEOUT_MS / 1000
-                while time.time() < deadline:
-                    if predicate():
-                        return
-                    page.wait_for_timeout(50)
-                raise AssertionError(f"timed out waiting for {what}")
+            # Tab: console and page errors collected in t.errors; opened once the data loads
+            t = Tab(browser.new_page(viewport={"width": 1400, "height": 1100}))
+            page, wait_for = t.open(f"http://127.0.0.1:{port}/").page, t.wait_for
 
             def table() -> dict[str, list[str]]:
                 """The weights table as shown: channel -> its cells."""
@@ -214,8 +204,6 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
                     for c, w, wd in zip(vs.channels, vs.weights, vs.empirical_weights, strict=True)
                 )
 
-            page.goto(f"http://127.0.0.1:{port}/")
-            page.get_by_text("WV levels").first.wait_for(timeout=TIMEOUT_MS)
             # the tab fits the default model of the first 3 channels (a shared RW): the view
             # shows the virtual sensor of that fit
             page.locator(".bk-tab", has_text=TITLE).first.click()
@@ -299,6 +287,6 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
             got_n, want_n = numbers(json.dumps(got)), numbers(json.dumps(want))
             assert len(got_n) == len(want_n) > 10
             np.testing.assert_allclose(got_n, want_n, rtol=1e-12)
-            assert not [e for e in errors if "favicon" not in e], errors
+            assert not [e for e in t.errors if "favicon" not in e], t.errors
         finally:
             browser.close()
