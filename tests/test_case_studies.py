@@ -68,7 +68,8 @@ def test_navchip_gmwm_beats_datasheet(navchip):
     lo, hi, nu = (np.asarray(a) for a in (wv.ci_low, wv.ci_high, wv.variance))
     n = 0.003 * math.pi / 180  # (rad/s)/sqrt(Hz), NavChip datasheet
     b = 10 / 3600 * math.pi / 180  # rad/s
-    ds = n**2 / tau_s + (0.664 * b) ** 2 / 2
+    bi_factor = math.sqrt(2 * math.log(2) / math.pi)  # IEEE Std 952 flicker floor, 0.664
+    ds = n**2 / tau_s + (bi_factor * b) ** 2 / 2
     np.testing.assert_allclose(navchip["datasheet"]["total"], ds, rtol=1e-12)
     w = 1 / (hi - lo) ** 2
     obj_ds = float(np.sum(w * (nu - ds) ** 2))

@@ -12,8 +12,10 @@ Manufacturer's values (Intersense NavChip product brief, the paper's ref. [19]; 
 are those the SMAC group's own GUI uses for this sensor, ``SMAC-Group/gui4gmwm``,
 ``gui4gmwm/app.R``): gyroscope angle random walk 0.003 (deg/s)/sqrt(Hz) (= 0.18
 deg/sqrt(h)) and in-run bias instability 10 deg/h. The datasheet model is white noise
-plus the bias-instability floor of the Allan variance, ``(0.664 B)^2`` (CONVENTIONS.md),
-i.e. ``(0.664 B)^2 / 2`` in wavelet variance (``nu2_j = AVAR(tau_j / 2) / 2``).
+plus the bias-instability floor of the Allan variance, ``(0.664 B)^2`` (CONVENTIONS.md;
+``engine.units.BI_FACTOR = sqrt(2 ln 2 / pi) = 0.6643``), i.e. ``(0.664 B)^2 / 2`` in wavelet
+variance (``nu2_j = AVAR(tau_j / 2) / 2``): ``engine.check_datasheet`` draws it and gives the
+per-scale verdicts (inside, above or below the empirical 95 % interval).
 
 Run from the repository root::
 
@@ -30,55 +32,21 @@ from typing import Any
 import numpy as np
 
 import engine as eg
+from engine.units import BI_FACTOR, DISPLAY, si_factor, to_datasheet
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data" / "derived" / "navchip_wv_av.h5"
-FIG = ROOT / "tests" / "benchmarks" / "figures" / "navchip_gyro_x.png"
+FIG = ROOT / "tests" / "benchmarks" / "figures" / "case_navchip_gyro_x.png"
 CHANNEL = "gyro_x"
 MODEL = "QN+WN+2*GM+RW+DR"  # the paper's model (sec. V)
 
 #: NavChip datasheet (the paper's ref. [19]), gyroscope
 DATASHEET_ARW_DEG_S_RTHZ = 0.003  # (deg/s)/sqrt(Hz)  (= 0.18 deg/sqrt(h))
 DATASHEET_BI_DEG_H = 10.0  # deg/h, in-run bias instability
-BI_FACTOR = 0.664  # AV floor of flicker noise: AV = (0.664 B)^2 (CONVENTIONS.md)
-
-
-def datasheet_params(fs: float) -> dict[str, float]:
-    """Convert the datasheet values to per-sample WN variance and a WV floor (rad/s units).
-
-    Kept in this one function (CONVENTIONS.md formulas), independent of the engine's
-    datasheet module, which is being rewritten: ``N = sqrt(sigma2 dt)`` so
-    ``sigma2 = N^2 fs``; the bias-instability floor of the AV is ``(0.664 B)^2`` and the
-    WV is half the AV.
-
-    Parameters
-    ----------
-    fs : float
-        Sampling frequency [Hz].
-
-    Returns
-    -------
-    dict
-        ``wn_sigma2`` [(rad/s)^2 per sample], ``bi_floor_wv`` [(rad/s)^2],
-        ``N`` [(rad/s)/sqrt(Hz)], ``B`` [rad/s].
-    """
-    d2r = math.pi / 180.0
-    n = DATASHEET_ARW_DEG_S_RTHZ * d2r
-    b = DATASHEET_BI_DEG_H / 3600.0 * d2r
-    return {
-        "wn_sigma2": n * n * fs,
-        "bi_floor_wv": (BI_FACTOR * b) ** 2 / 2.0,
-        "N": n,
-        "B": b,
-    }
-
-
-def datasheet_wv(wv: Any) -> dict[str, np.ndarray]:
-    """WV implied by the datasheet model at the WV's scales: WN, the BI floor, their sum."""
-    p = datasheet_params(wv.fs)
-    wn = eg.Model([eg.WN(sigma2=p["wn_sigma2"])]).wv(wv.tau_samples)
-    floor = np.full(wn.shape, p["bi_floor_wv"])
-    return {"WN": wn, "BI floor": floor, "total": wn + floor}
+DATASHEET = eg.DatasheetSpec.from_values(
+    {"arw": (DATASHEET_ARW_DEG_S_RTHZ, "deg/s/sqrt(Hz)"), "bi": (DATASHEET_BI_DEG_H, "deg/h")},
+    source="NavChip product brief",
+)
 
 
 def objective(wv: Any, implied: np.ndarray, omega: np.ndarray) -> float:
@@ -88,51 +56,56 @@ def objective(wv: Any, implied: np.ndarray, omega: np.ndarray) -> float:
 
 
 def run(channel: str = CHANNEL) -> dict[str, Any]:
-    """Fit the paper's model and evaluate the datasheet model on one NavChip gyroscope.
+    """Fit the paper's model and check the datasheet model on one NavChip gyroscope.
+
+    The datasheet model and its per-scale verdicts are ``engine.check_datasheet``'s: white
+    noise ``N^2 fs`` per sample plus the bias-instability floor ``(BI_FACTOR B)^2 / 2`` in WV.
 
     Returns
     -------
     dict
-        ``wv``, ``fit`` (GMWMResult), ``datasheet`` (WV arrays), ``params`` (datasheet
-        conversion), ``obj_gmwm``, ``obj_datasheet`` (same Omega), ``outside`` (bool per
-        scale: datasheet WV outside the empirical 95 % interval), ``below`` (below it).
+        ``wv``, ``fit`` (GMWMResult), ``check`` (DatasheetCheck), ``datasheet`` (WV arrays:
+        ``WN``, ``BI floor``, ``total``), ``obj_gmwm``, ``obj_datasheet`` (same Omega),
+        ``outside`` (bool per scale: datasheet WV outside the empirical 95 % interval),
+        ``below`` (below it), ``fit_outside`` (the fit outside it).
     """
     log = eg.load_log(DATA)
     wv = log.wv[channel]
     fit = eg.fit_gmwm(wv, MODEL)
-    ds = datasheet_wv(wv)
-    lo, hi = np.asarray(wv.ci_low), np.asarray(wv.ci_high)
+    chk = eg.check_datasheet(wv, DATASHEET, fit=fit)
+    ds = {**chk.components, "total": chk.datasheet_wv}
+    verdict = np.asarray(chk.verdict)
     return {
         "wv": wv,
         "fit": fit,
+        "check": chk,
         "datasheet": ds,
-        "params": datasheet_params(wv.fs),
         "obj_gmwm": fit.objective,
         "obj_datasheet": objective(wv, ds["total"], fit.omega),
-        "outside": (ds["total"] < lo) | (ds["total"] > hi),
-        "below": ds["total"] < lo,
-        "fit_outside": (fit.implied < lo) | (fit.implied > hi),
+        "outside": verdict != "inside",
+        "below": verdict == "below",
+        "fit_outside": np.asarray(chk.fit_verdict) != "inside",
     }
 
 
 def print_tables(res: dict[str, Any]) -> None:
     """Print the fitted parameters, the datasheet comparison and the scale table."""
-    wv, fit, p = res["wv"], res["fit"], res["params"]
+    wv, fit, chk = res["wv"], res["fit"], res["check"]
     fs = wv.fs
     print(fit.summary())
     print()
-    n_fit = math.sqrt(fit.params["WN.sigma2"] / fs)
-    r2d = 180.0 / math.pi
+    n_fit = to_datasheet("WN", fit.params["WN.sigma2"], fs)
+    n_ds = chk.datasheet.values["N"]
+    deg_s = si_factor("deg/s")[1]  # rad/s per deg/s
+    arw, bi = DISPLAY[("gyroscope", "N")].factor, DISPLAY[("gyroscope", "B")].factor
     print("quantity                         GMWM            datasheet [19]")
-    print(f"white noise N [(deg/s)/sqrt(Hz)]  {n_fit * r2d:.4g}       {p['N'] * r2d:.4g}")
-    print(
-        f"ARW [deg/sqrt(h)]                 {60 * n_fit * r2d:.4g}        {60 * p['N'] * r2d:.4g}"
-    )
+    print(f"white noise N [(deg/s)/sqrt(Hz)]  {n_fit / deg_s:.4g}       {n_ds / deg_s:.4g}")
+    print(f"ARW [deg/sqrt(h)]                 {n_fit * arw:.4g}        {n_ds * arw:.4g}")
     print(
         f"min implied WV [(rad/s)^2]        {np.min(fit.implied):.3g}      "
-        f"{p['bi_floor_wv']:.3g} (BI floor, B = {DATASHEET_BI_DEG_H:g} deg/h)"
+        f"{chk.datasheet.floor_wv(wv.unit):.3g} (BI floor, B = {DATASHEET_BI_DEG_H:g} deg/h)"
     )
-    bi_emp = math.sqrt(2 * np.min(wv.variance)) / BI_FACTOR * r2d * 3600
+    bi_emp = math.sqrt(2 * np.min(wv.variance)) / BI_FACTOR * bi
     print(f"bias instability from min WV [deg/h]  {bi_emp:.3g}    {DATASHEET_BI_DEG_H:g}")
     print(
         f"objective, same Omega (ci weights)  {res['obj_gmwm']:.4g}    {res['obj_datasheet']:.4g}"
