@@ -345,8 +345,9 @@ def test_real_adis16405_gyro_departs(real_data):
 
 
 def test_real_navchip_reproduces_the_case_study(real_data):
-    # README case study "NavChip gyroscope" (tests/benchmarks/case_navchip.py, its own
-    # conversion): datasheet ARW 0.003 (deg/s)/sqrt(Hz), BI 10 deg/h; below the interval at 17
+    # README case study "NavChip gyroscope" (tests/benchmarks/case_navchip.py, which now calls
+    # check_datasheet itself; these figures were first read off its own formulas): datasheet
+    # ARW 0.003 (deg/s)/sqrt(Hz), BI 10 deg/h; below the interval at 17
     # of 20 scales, above at the 3 scales 0.26-1 s; GMWM (the paper's model) outside at 8.
     log = eg.load_log(real_data / "derived" / "navchip_wv_av.h5")
     wv = log.wv["gyro_x"]
