@@ -169,6 +169,37 @@ def test_j_test_rejects_a_wrong_model():
     assert jt.p_value > 1e-3 and jt.df == wv.n_levels - 3
 
 
+def test_the_v_options_are_one_keyword_list_with_one_set_of_defaults():
+    """wv_cov, fit_efficient, param_intervals and j_test take the same VOptions keywords; a
+    misspelt one is an error that lists them (not silently ignored)."""
+    from engine.inference import V_DEFAULTS, v_options, wv_cov
+
+    x = eg.parse_model("WN(sigma2=1)+RW(gamma2=1e-4)").simulate(2**12, fs=10.0, rng=1)
+    res = eg.fit_gmwm(eg.wavelet_variance(x, fs=10.0), "WN+RW")
+    known = "the V options are v, x, B, seed, workers, executor"
+    for call in (
+        lambda: wv_cov(res, "model", bootstraps=5),
+        lambda: fit_efficient(res.wv, "WN+RW", bootstraps=5),
+        lambda: param_intervals(res, bootstraps=5),
+        lambda: j_test(res, bootstraps=5),
+    ):
+        with pytest.raises(TypeError, match=f"unknown keyword.*bootstraps: {known}"):
+            call()
+    assert list(V_DEFAULTS) == "v x B seed workers executor".split()
+    assert v_options({})["B"] == 100 and v_options({}, B=200)["B"] == 200
+    assert v_options({"B": 7}, B=200)["B"] == 7
+    # the keywords reach their use: V from the data equals wv_cov_data; B and seed pick the
+    # bootstrap replicates (the J-test's default B is 200: p is a multiple of 1/201)
+    np.testing.assert_array_equal(
+        fit_efficient(res.wv, "WN+RW", v="data", x=x).omega,
+        eg.fit_gmwm(res.wv, "WN+RW", weights=np.linalg.inv(wv_cov_data(x, res.wv))).omega,
+    )
+    p = j_test(res, method="bootstrap", seed=4).p_value
+    assert abs(p * 201 - round(p * 201)) < 1e-9
+    p19 = j_test(res, method="bootstrap", B=19, seed=4).p_value
+    assert abs(p19 * 20 - round(p19 * 20)) < 1e-9
+
+
 def test_cli_fit_with_intervals(capsys, tmp_path):
     path = tmp_path / "s.h5"
     assert (

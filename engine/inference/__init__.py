@@ -37,9 +37,12 @@ from .asymptotic import (
     wv_cov_model,
 )
 from .covariance import (
+    V_DEFAULTS,
+    VOptions,
     fit_efficient,
     inverse_cov,
     parallel_map,
+    v_options,
     wv_cov,
     wv_cov_bootstrap,
     wv_cov_data,
@@ -85,4 +88,7 @@ __all__ = [
     "DatasheetCheck",
     "DatasheetError",
     "DATASHEET_KEYS",
+    "VOptions",
+    "V_DEFAULTS",
+    "v_options",
 ]

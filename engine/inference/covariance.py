@@ -9,8 +9,9 @@ Percival & Walden), :func:`wv_cov_model` (from a fitted model, Gaussian and asym
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from concurrent.futures import Executor
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from ..models import Model
 from ..wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
 from .asymptotic import wv_cov_model
 
+if TYPE_CHECKING:  # pragma: no cover
+    from typing_extensions import Unpack
+
 __all__ = [
     "wv_cov_data",
     "wv_cov_bootstrap",
@@ -27,7 +31,69 @@ __all__ = [
     "fit_efficient",
     "inverse_cov",
     "parallel_map",
+    "VOptions",
+    "V_DEFAULTS",
+    "v_options",
 ]
+
+
+class VOptions(TypedDict, total=False):
+    """How V, the covariance of the WV, and the parametric-bootstrap replicates are computed:
+    the keywords that :func:`wv_cov`, :func:`fit_efficient`, :func:`param_intervals` and
+    :func:`j_test` share (one list, one set of defaults: :data:`V_DEFAULTS`).
+
+    Attributes
+    ----------
+    v : {"model", "bootstrap", "data"} or ndarray (J, J)
+        :func:`wv_cov_model` (default), :func:`wv_cov_bootstrap`, :func:`wv_cov_data` (needs
+        ``x``) or a given matrix (its shape is checked).
+    x : array_like
+        The raw series (``v="data"``).
+    B : int
+        Bootstrap replicates (default 100; the J-test's 200).
+    seed : int or None
+        Base seed: replicate b draws from the b-th child of ``SeedSequence(seed)`` (default 0).
+    workers : int
+        Local worker processes (default 1: in process).
+    executor : concurrent.futures.Executor
+        Runs the replicates instead of the local pool (e.g. a Dask ``Client.get_executor()``).
+        No result depends on ``workers`` or ``executor``.
+    """
+
+    v: str | np.ndarray
+    x: Any
+    B: int
+    seed: int | None
+    workers: int
+    executor: Executor | None
+
+
+#: The defaults of :class:`VOptions`.
+V_DEFAULTS: dict[str, Any] = {
+    "v": "model",
+    "x": None,
+    "B": 100,
+    "seed": 0,
+    "workers": 1,
+    "executor": None,
+}
+
+
+def v_options(options: Mapping[str, Any], **defaults: Any) -> dict[str, Any]:
+    """Every :class:`VOptions` keyword with its value: ``options`` over ``defaults`` (e.g.
+    ``B=200``) over :data:`V_DEFAULTS`.
+
+    Raises
+    ------
+    TypeError
+        An unknown keyword; the message lists the known ones.
+    """
+    unknown = sorted(set(options) - set(V_DEFAULTS))
+    if unknown:
+        raise TypeError(
+            f"unknown keyword(s) {', '.join(unknown)}: the V options are {', '.join(V_DEFAULTS)}"
+        )
+    return {**V_DEFAULTS, **defaults, **options}
 
 
 def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
@@ -105,42 +171,30 @@ def inverse_cov(v: np.ndarray) -> np.ndarray:
 
 
 def fit_efficient(
-    wv: WaveletVariance,
-    model: Model | str,
-    *,
-    v: str | np.ndarray = "model",
-    x: Any = None,
-    B: int = 100,
-    seed: int | None = 0,
-    workers: int = 1,
-    executor: Executor | None = None,
+    wv: WaveletVariance, model: Model | str, **options: Unpack[VOptions]
 ) -> GMWMResult:
     """Two-step efficient GMWM: ``weights="ci"``, then ``Omega = V^-1`` with V estimated.
 
     Parameters
     ----------
-    v : {"model", "bootstrap", "data"} or array
-        How V is estimated: from the first-step fit (analytic Gaussian or parametric
-        bootstrap), from the data (needs ``x``; diagonal), or given.
-    B, seed, workers, executor
-        The bootstrap's replicates, seed, local processes or executor (:func:`wv_cov`).
+    wv : WaveletVariance
+        The empirical WV.
+    model : Model or str
+        The model to fit.
+    **options
+        How V is estimated (:class:`VOptions`: ``v``, ``x``, ``B``, ``seed``, ``workers``,
+        ``executor``): by default from the first-step fit (``v="model"``, analytic Gaussian);
+        ``"bootstrap"`` (parametric), ``"data"`` (needs ``x``; diagonal) or a given matrix.
     """
     first = fit_gmwm(wv, model)
-    vmat = wv_cov(first, v, x=x, B=B, seed=seed, workers=workers, executor=executor)
+    vmat = wv_cov(first, **v_options(options))
     res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat))
     object.__setattr__(res, "weights", "efficient")
     return res
 
 
 def wv_cov(
-    res: GMWMResult,
-    v: str | np.ndarray,
-    *,
-    x: Any = None,
-    B: int = 100,
-    seed: int | None = 0,
-    workers: int = 1,
-    executor: Executor | None = None,
+    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[VOptions]
 ) -> np.ndarray:
     """The covariance V of a fit's WV, by name.
 
@@ -149,10 +203,12 @@ def wv_cov(
     res : GMWMResult
         The fit (its model and WV).
     v : {"model", "bootstrap", "data"} or ndarray (J, J)
-        :func:`wv_cov_model`, :func:`wv_cov_bootstrap` (``B``, ``seed``, ``workers``,
-        ``executor``),
-        :func:`wv_cov_data` (needs the raw series ``x``) or a given matrix (checked).
+        :func:`wv_cov_model`, :func:`wv_cov_bootstrap`, :func:`wv_cov_data` (needs the raw
+        series ``x``) or a given matrix (checked).
+    **options
+        The other :class:`VOptions` (``x``, ``B``, ``seed``, ``workers``, ``executor``).
     """
+    o = v_options(options)
     if isinstance(v, np.ndarray):
         if v.shape != (res.wv.n_levels,) * 2:
             raise FitError(f"V has shape {v.shape}, expected {(res.wv.n_levels,) * 2}")
@@ -161,10 +217,15 @@ def wv_cov(
         return wv_cov_model(res.model, res.wv)
     if v == "bootstrap":
         return wv_cov_bootstrap(
-            res.model, res.wv, B=B, seed=seed, workers=workers, executor=executor
+            res.model,
+            res.wv,
+            B=o["B"],
+            seed=o["seed"],
+            workers=o["workers"],
+            executor=o["executor"],
         )
     if v == "data":
-        if x is None:
+        if o["x"] is None:
             raise FitError("v='data' needs the raw series x")
-        return wv_cov_data(x, res.wv)
+        return wv_cov_data(o["x"], res.wv)
     raise FitError(f"unknown V estimator {v!r}: use 'model', 'bootstrap', 'data' or a matrix")

@@ -8,16 +8,20 @@ intervals stay inside the parameter space; or the parametric bootstrap (percenti
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import Executor
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..wv import wavelet_variance
 from .asymptotic import asymptotic_bounds
-from .covariance import parallel_map, wv_cov
+from .covariance import parallel_map, v_options, wv_cov
+
+if TYPE_CHECKING:  # pragma: no cover
+    from typing_extensions import Unpack
+
+    from .covariance import VOptions
 
 __all__ = ["param_intervals", "ParamInterval"]
 
@@ -58,13 +62,8 @@ def param_intervals(
     *,
     method: str = "asymptotic",
     level: float = 0.95,
-    v: str | np.ndarray = "model",
-    x: Any = None,
-    B: int = 100,
-    seed: int | None = 0,
-    workers: int = 1,
-    executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
+    **options: Unpack[VOptions],
 ) -> list[ParamInterval]:
     """Two-sided intervals for every parameter of a fit.
 
@@ -78,38 +77,36 @@ def param_intervals(
     level : float
         Two-sided coverage (0.95 gives the 2.5 % and 97.5 % quantiles, unlike the R packages'
         normal quantile at 1 - alpha).
-    v : {"model", "bootstrap", "data"} or array
-        Covariance of the WV for the asymptotic method.
-    B, seed : int
-        Bootstrap replicates (the bootstrap method, or ``v="bootstrap"``) and base seed:
-        replicate b draws from the b-th child of ``SeedSequence(seed)``.
-    workers : int
-        Local worker processes (1: in process).
-    executor : concurrent.futures.Executor, optional
-        Runs the replicates instead of the local pool, e.g. a Dask ``Client.get_executor()``.
-        The intervals do not depend on ``workers`` or ``executor``.
     progress : callable (done, total), optional
         Called after every bootstrap refit (the bootstrap method).
+    **options
+        :class:`VOptions`: ``v`` and ``x``, the covariance of the WV for the asymptotic
+        method; ``B`` and ``seed``, the bootstrap's replicates (the bootstrap method, or
+        ``v="bootstrap"``) and base seed; ``workers`` or ``executor``, where the replicates
+        run (the intervals do not depend on them).
     """
+    o = v_options(options)
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
     recs = res.param_records
     if method == "asymptotic":
-        vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers, executor=executor)
+        vmat = wv_cov(res, **o)
         return [
             ParamInterval(r.full_name, r.value, lo, hi, r.unit, "asymptotic", level)
             for r, (lo, hi) in zip(recs, asymptotic_bounds(res, vmat, level), strict=True)
         ]
     if method == "bootstrap":
-        seeds = np.random.SeedSequence(seed).spawn(B)
+        seeds = np.random.SeedSequence(o["seed"]).spawn(o["B"])
         omega = None if res.weights == "ci" else res.omega
         items = [
             (res.model, res.model.cleared(), res.wv.n, res.fs, res.wv.n_levels, omega, s)
             for s in seeds
         ]
-        boot = parallel_map(_boot_fit, items, workers, executor=executor, progress=progress)
+        boot = parallel_map(
+            _boot_fit, items, o["workers"], executor=o["executor"], progress=progress
+        )
         fits = [f for f in boot if f is not None]
-        if len(fits) < max(10, B // 2):
+        if len(fits) < max(10, o["B"] // 2):
             raise FitError("too many bootstrap refits failed; the model may be unidentifiable")
         out = []
         for r in recs:

@@ -3,9 +3,8 @@
 
 from __future__ import annotations
 
-from concurrent.futures import Executor
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,7 +13,12 @@ from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..wv import wavelet_variance
 from .asymptotic import free_params
-from .covariance import inverse_cov, wv_cov
+from .covariance import inverse_cov, v_options, wv_cov
+
+if TYPE_CHECKING:  # pragma: no cover
+    from typing_extensions import Unpack
+
+    from .covariance import VOptions
 
 __all__ = ["j_test", "JTest"]
 
@@ -40,17 +44,7 @@ def _boot_statistic(args: tuple) -> float:
     return float(rb @ vinv @ rb)
 
 
-def j_test(
-    res: GMWMResult,
-    *,
-    v: str | np.ndarray = "model",
-    x: Any = None,
-    B: int = 200,
-    seed: int | None = 0,
-    workers: int = 1,
-    executor: Executor | None = None,
-    method: str = "asymptotic",
-) -> JTest:
+def j_test(res: GMWMResult, *, method: str = "asymptotic", **options: Unpack[VOptions]) -> JTest:
     """Goodness of fit: ``T = (nu_hat - nu(theta_hat))' V^-1 (nu_hat - nu(theta_hat))``.
 
     Under a correct model and efficient weights, ``T ~ chi2(J - p)`` asymptotically
@@ -61,18 +55,17 @@ def j_test(
     ----------
     res : GMWMResult
         The fit.
-    v, x, B, seed
-        How V is estimated (:func:`wv_cov`), the bootstrap's replicates and base seed
-        (replicate b uses the b-th child of ``SeedSequence(seed)``).
-    workers, executor
-        Local processes, or any ``concurrent.futures.Executor`` (e.g. a Dask client's), for
-        the bootstrap replicates of V and of the statistic; the result does not depend on them.
     method : {"asymptotic", "bootstrap"}
         The reference distribution of T.
+    **options
+        :class:`VOptions`: how V is estimated (``v``, ``x``), the bootstrap's replicates
+        (``B``, default 200 here) and base seed, and where they run (``workers``,
+        ``executor``; the result does not depend on them).
     """
+    o = v_options(options, B=200)
     from scipy import stats
 
-    vmat = wv_cov(res, v, x=x, B=B, seed=seed, workers=workers, executor=executor)
+    vmat = wv_cov(res, **o)
     vinv = inverse_cov(vmat)
     r = res.wv.variance - res.implied
     t = float(r @ vinv @ r)
@@ -82,8 +75,8 @@ def j_test(
     if method == "asymptotic":
         return JTest(t, df, float(stats.chi2.sf(t, df)), "asymptotic")
     if method == "bootstrap":
-        items = [(res, vinv, s) for s in np.random.SeedSequence(seed).spawn(B)]
-        stats_b = parallel_map(_boot_statistic, items, workers, executor=executor)
+        items = [(res, vinv, s) for s in np.random.SeedSequence(o["seed"]).spawn(o["B"])]
+        stats_b = parallel_map(_boot_statistic, items, o["workers"], executor=o["executor"])
         p = (1 + np.sum(np.array(stats_b) >= t)) / (1 + len(stats_b))
         return JTest(t, df, float(p), "bootstrap")
     raise ValueError(f"unknown J-test method {method!r}")
