@@ -353,6 +353,7 @@ class SessionPanel:
         self.export_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
         # every format of the registry, from the fits of the channels fitted in this session
         self._fits: dict[str, Any] = {}  # channel -> its latest fit (this log, this fs)
+        self._fits_log: Any = None
         self._fits_of: tuple[Any, ...] = ()
         self.format_select = pn.widgets.Select(
             label="Format",
@@ -448,9 +449,9 @@ class SessionPanel:
     def _remember_fit(self) -> None:
         """Keep the latest fit of each channel of the shown log (new data forget them)."""
         s = self.state
-        of = (id(s.log), s.filename, s.fs, s.robust)
-        if of != self._fits_of:
-            self._fits, self._fits_of = {}, of
+        of = (s.fs, s.robust)  # the fits of another log, rate or WV kind are not kept
+        if s.log is not self._fits_log or of != self._fits_of:
+            self._fits, self._fits_log, self._fits_of = {}, s.log, of
         if s.result is not None and s.channel:
             self._fits[s.channel] = s.result
         elif s.channel:
