@@ -1,10 +1,15 @@
 """The installed wheel, not the checkout: build it, install it into a fresh virtual environment,
 then (from a folder outside the repository) open the bundled demo and fit it.
 
-The venv sees the base interpreter's packages (``--system-site-packages``: numpy, panel ...
-come from there, nothing is downloaded), and the wheel is installed with ``--no-deps``. The
-base interpreter may hold an editable install of this project pointing at some checkout: the
-test asserts that ``engine`` and ``gmwm_app`` are imported from the venv's copy.
+The venv sees the packages of the interpreter that runs the tests (numpy, panel ... come from
+there, nothing is downloaded): a ``.pth`` file in the venv lists that interpreter's
+site-packages folders. ``--system-site-packages`` would not do: when the tests run in a virtual
+environment (as README's test command does on a fresh machine), it exposes the *base*
+interpreter's packages, which lack the project's dependencies. The wheel is installed with
+``--no-deps``. The running interpreter may hold an editable install of this project pointing at
+some checkout; a folder named in a ``.pth`` file has its own ``.pth`` files ignored, so that
+install's finder never runs, and the test asserts that ``engine`` and ``gmwm_app`` are imported
+from the venv's copy.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import site
 import subprocess
 import sys
 import venv
@@ -88,7 +94,7 @@ def test_installed_wheel_opens_and_fits_the_bundled_demo(tmp_path: Path) -> None
     assert not any(n.startswith(("data/", "tests/")) for n in names)
 
     vdir = tmp_path / "venv"
-    venv.EnvBuilder(system_site_packages=True, with_pip=False, symlinks=True).create(vdir)
+    venv.EnvBuilder(system_site_packages=False, with_pip=False, symlinks=True).create(vdir)
     py, bindir = vdir / "bin" / "python", vdir / "bin"
     # the base interpreter's pip installs into the venv (pip --python: no pip inside the venv);
     # --force-reinstall: an editable install of this project in the base must not satisfy it
@@ -98,16 +104,19 @@ def test_installed_wheel_opens_and_fits_the_bundled_demo(tmp_path: Path) -> None
         cwd=tmp_path,
         env=env,
     )
-    site = _run(
+    venv_site = _run(
         [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
         tmp_path,
         env,
     ).strip()
     assert (bindir / "gmwm").is_file() and (bindir / "gmwm-app").is_file()  # entry points
+    # the running interpreter's packages, after the venv's own (the wheel's copy wins)
+    outer = [p for p in site.getsitepackages() if Path(p).is_dir()]
+    (Path(venv_site) / "_gmwm_test_outer_site.pth").write_text("\n".join(outer) + "\n")
 
     work = _mk(tmp_path / "elsewhere")  # a folder outside the repository
     d = json.loads(_run([str(py), "-c", CHECK], cwd=work, env=env).strip().splitlines()[-1])
-    site_dir = Path(site).resolve()
+    site_dir = Path(venv_site).resolve()
     for key in ("engine", "gmwm_app", "demo", "app_demo"):
         assert Path(d[key]).resolve().is_relative_to(site_dir), (key, d[key], site_dir)
     assert d["app_loaded"] and d["app_error"] == "", d["app_error"]
