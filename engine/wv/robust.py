@@ -27,12 +27,12 @@ Quantized logs: ties alone do not bias the estimate (white noise quantized with 
 1.5 sigma has 39 % of its level-1 coefficients exactly 0, and the estimator's limit is 0.998 of
 the classical WV), but coarse discreteness does: with a step of 2 sigma (52 % ties) the limit
 is 0.910 of it (tests/test_robust_wv.py computes both from the exact discrete law). Beyond
-about 60 % ties the scale equation has no root (the fallback above). On the ADIS16405 logs
-(steps 0.15-0.9 sigma of the sample differences) the robust/classical ratio is 0.92-1.00 at
-levels 1-2 and 0.96-1.14 at levels 3-9 (gyroscopes 0.99-1.01; the accelerometers reach
-1.06-1.14 at level 7); the accelerometers' shortfall at level 1 (0.92-0.96)
-comes mostly from their heavier tails (kurtosis 3.2-3.5), which is what the estimator is
-meant to discount. At levels with few coefficients per scale (``M_j / 2^j`` below about 10)
+about 60 % ties the scale equation has no root (the fallback above). On the six ADIS16405 logs
+(steps 0.15-0.9 sigma of the sample differences) the robust/classical ratio is 0.86-1.14 at
+levels 1-2 and 0.90-1.14 at levels 3-9 (gyroscopes 0.98-1.02 at levels 3-9; gyro_z 1.03-1.14 at
+levels 1-2; the accelerometers 0.86-0.99 at levels 1-2, mostly from their heavier tails, kurtosis
+3.2-3.5, which is what the estimator is meant to discount); ``tests/benchmarks/robust_claims.py``
+computes these ranges. At levels with few coefficients per scale (``M_j / 2^j`` below about 10)
 robust and classical WV can differ by a factor of several on such logs.
 
 Speed (:func:`robust_wv`), with the same numbers as the direct computation to about 1e-13:
