@@ -1,13 +1,14 @@
 """``gmwm batch`` (:func:`add_parser`, :func:`run`): calibrate a fleet of IMUs::
 
-    gmwm batch LOG_OR_GLOB... --model SPEC | --select MAX_MODEL -o DIR [--channels a,b,...]
+    gmwm batch LOG_OR_GLOB... --model SPEC | --max-model SPEC -o DIR [--channels a,b,...]
                [--fs HZ] [--levels J] [--weights ci|identity|efficient] [--workers N]
                [--scheduler local|ADDRESS] [--quiet] [--json]
                [--segment ...] [--scale ...] [--units ...] [--topic T]
 
 Every channel of every log is fitted (:func:`engine.batch.fit_batch`); DIR receives one JSON
 report per log and ``summary.csv``/``summary.json`` (the spread of every parameter and
-datasheet quantity across the units). ``--scheduler`` runs the logs on a Dask cluster
+datasheet quantity across the units). ``--select`` is the deprecated spelling of
+``--max-model`` (the name ``gmwm select`` uses). ``--scheduler`` runs the logs on a Dask cluster
 (:func:`add_scheduler_option` and :func:`scheduler_executor`, also used by ``gmwm study``).
 """
 
@@ -20,7 +21,14 @@ from concurrent.futures import Executor
 from contextlib import contextmanager
 from typing import Any
 
-from .common import CliError, add_log_options, log_kwargs, positive
+from .common import (
+    CliError,
+    add_deprecated_alias,
+    add_log_options,
+    check_output,
+    log_kwargs,
+    positive,
+)
 
 __all__ = ["add_parser", "run", "add_scheduler_option", "scheduler_executor"]
 
@@ -78,13 +86,15 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     what = bt.add_mutually_exclusive_group(required=True)
     what.add_argument("--model", help="model of every channel, e.g. 'GM+WN+RW'")
-    what.add_argument("--select", metavar="MAX_MODEL", help=_SELECT_HELP)
+    mm = what.add_argument("--max-model", metavar="SPEC", help=_SELECT_HELP)
+    add_deprecated_alias(what, "--select", mm)
     bt.add_argument(
         "-o",
         "--output",
         required=True,
         metavar="DIR",
-        help="directory for one JSON report per log, summary.csv and summary.json",
+        help="folder for one JSON report per log, summary.csv and summary.json (created if "
+        "missing; checked before any fit)",
     )
     bt.add_argument("--channels", help="channels separated by commas (default: all)")
     bt.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
@@ -110,6 +120,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm batch``; returns the fleet table (or the JSON-ready summary)."""
+    check_output(args.output, "-o", kind="dir")  # before the (slow) imports and any fit
     from .._parallel import ProgressLine
     from ..batch import fit_batch
 
@@ -119,7 +130,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         res = fit_batch(
             args.inputs,
             model=args.model,
-            select=args.select,
+            select=args.max_model,
             channels=channels,
             fs=args.fs,
             levels=args.levels,

@@ -1,6 +1,6 @@
 """``gmwm check`` (:func:`add_parser`, :func:`run`): a datasheet against a log::
 
-    gmwm check INPUT [--channel NAME] [--fs HZ] [--levels J] [--level 0.95]
+    gmwm check INPUT [--channel NAME] [--fs HZ] [--levels J] [--confidence 0.95]
                --datasheet "arw=0.3 deg/sqrt(h), bi=5 deg/h, rrw=2 deg/h/sqrt(h)"
                | --datasheet-file imu.yaml|report.json|datasheet.csv
                [--model SPEC] [--units U] [--json]
@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import add_log_options, load_wv, positive, usage_error
+from .common import add_confidence_option, add_log_options, alpha_of, load_wv, positive
 
 __all__ = ["add_parser", "run"]
 
@@ -32,7 +32,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ck.add_argument("--channel", help="channel name or index (default: the first)")
     ck.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
     ck.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
-    ck.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
+    add_confidence_option(ck, "the empirical WV interval the verdicts use", "--level")
     src = ck.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--datasheet",
@@ -62,11 +62,9 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..models import parse_model
     from ..units import ExportError, si_factor
 
-    if not 0 < args.level < 1:
-        raise usage_error(f"--level must be in (0, 1), got {args.level}")
     ds = parse_datasheet(args.datasheet, source="--datasheet") if args.datasheet else None
     model = parse_model(args.model) if args.model else None
-    wv, name = load_wv(args, 1.0 - args.level)
+    wv, name = load_wv(args, alpha_of(args.confidence))
     if ds is None:
         kind = None
         try:
@@ -75,7 +73,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             pass  # the check itself says the unit is needed
         ds = read_datasheet(args.datasheet_file, channel=name, kind=kind)
     fit = fit_gmwm(wv, model) if model is not None else None
-    res = check_datasheet(wv, ds, fit=fit, level=args.level)
+    res = check_datasheet(wv, ds, fit=fit, level=args.confidence)
     if args.json:
         d = res.to_dict()
         d["channel"] = name

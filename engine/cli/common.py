@@ -1,14 +1,22 @@
 """What the ``gmwm`` subcommands share: the user-error types, argument converters, the log
-options (``--segment --scale --units --topic --stream``) and the loading of one channel's WV."""
+options (``--segment --scale --units --topic --stream``), the loading of one channel's WV, the
+output check run before any work (:func:`check_output`), sample counts (:func:`sample_count`),
+the confidence option (:func:`add_confidence_option`), deprecated spellings of options
+(:func:`add_deprecated_alias`) and the queue of one-line warnings (:func:`queue_warning`)."""
 
 from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 
+from .._limits import check_sample_count
 from ..wv import WaveletVariance, wavelet_variance
 
 __all__ = [
@@ -24,6 +32,14 @@ __all__ = [
     "stream_wv",
     "warn_fs_unknown",
     "load_wv",
+    "check_output",
+    "sample_count",
+    "confidence",
+    "add_confidence_option",
+    "alpha_of",
+    "add_deprecated_alias",
+    "queue_warning",
+    "DeprecatedAlias",
 ]
 
 
@@ -247,17 +263,13 @@ def stream_wv(
 
 
 def warn_fs_unknown(args: argparse.Namespace, path: str) -> None:
-    """Queue the loud stderr warning that the sampling frequency of ``path`` is unknown (1 Hz
-    assumed); ``gmwm`` prints queued warnings with the result (an error stays one line)."""
-    msg = (
-        f"gmwm: warning: {path} does not say its sampling frequency: fs = 1 Hz ASSUMED, so "
-        "every time in seconds and every datasheet value is per sample; pass --fs HZ"
+    """Queue (:func:`queue_warning`) the loud warning that the sampling frequency of ``path``
+    is unknown (1 Hz assumed)."""
+    queue_warning(
+        args,
+        f"{path} does not say its sampling frequency: fs = 1 Hz ASSUMED, so every time in "
+        "seconds and every datasheet value is per sample; pass --fs HZ",
     )
-    queued = getattr(args, "warnings", None)
-    if queued is None:
-        queued = args.warnings = []
-    if msg not in queued:
-        queued.append(msg)
 
 
 def _loaded_name(path: Any, src: Any, side: dict[str, Any] | None) -> str:
@@ -271,3 +283,226 @@ def _loaded_name(path: Any, src: Any, side: dict[str, Any] | None) -> str:
     if isinstance(names, list) and len(names) == getattr(src, "k", 1) and column < len(names):
         return str(names[column])
     return "x" if np.load(path, mmap_mode="r").ndim == 1 else f"col{column}"
+
+
+def check_output(
+    path: str | os.PathLike[str] | None,
+    option: str,
+    *,
+    kind: Literal["file", "dir"] = "file",
+    suffixes: tuple[str, ...] = (),
+) -> None:
+    """Refuse an output path that cannot be written, before any computation.
+
+    Every subcommand that writes (``simulate -o``, ``export -o``, ``virtual -o``,
+    ``batch -o DIR``, ``study -o DIR``) calls this first, so that a typo in a folder name
+    costs a second, not the whole run.
+
+    Parameters
+    ----------
+    path : path, None or ``"-"``
+        The output as the user gave it; None (no output) and ``"-"`` (stdout) pass.
+    option : str
+        The option that gave it, for the message (``-o``).
+    kind : {"file", "dir"}
+        A file: its folder must exist and be writable, and the path must not be a folder.
+        A folder (created with its parents when missing): it must not be a file, and its
+        nearest existing ancestor must be a writable folder.
+    suffixes : tuple of str
+        File names must end with one of these (lower case), when given.
+
+    Raises
+    ------
+    UsageError
+        One line naming the option and the path as given, and what to do.
+    """
+    if path is None or str(path) == "-":
+        return
+    p = Path(path)
+    if kind == "file":
+        if p.is_dir():
+            raise usage_error(f"{option} {path} is a folder: give a file name inside it")
+        if suffixes and not str(path).lower().endswith(suffixes):
+            names = ", ".join(suffixes[:-1]) + f" or {suffixes[-1]}" if len(suffixes) > 1 else ""
+            raise usage_error(f"{option} {path}: use a {names or suffixes[0]} file name")
+        folder = p.parent
+        if not folder.is_dir():
+            raise usage_error(
+                f"{option} {path}: the folder {folder} does not exist"
+                + (" (it is a file)" if folder.exists() else "")
+                + "; create it or choose another path"
+            )
+        if p.exists() and not os.access(p, os.W_OK):
+            raise usage_error(f"{option} {path}: the file exists and is not writable")
+    else:
+        if p.exists() and not p.is_dir():
+            raise usage_error(f"{option} {path} is a file: give a folder (created if missing)")
+        folder = p
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        if not folder.is_dir():
+            raise usage_error(
+                f"{option} {path}: {folder} is a file, so the folder cannot be created"
+            )
+    if not _writable(folder):
+        raise usage_error(
+            f"{option} {path}: the folder {folder} is not writable; choose another path"
+        )
+
+
+def _writable(folder: Path) -> bool:
+    """Whether a file can be created in ``folder`` (tried, not inferred from the mode bits:
+    they do not tell about read-only mounts, ACLs or root)."""
+    try:
+        fd, name = tempfile.mkstemp(dir=folder, prefix=".gmwm-write-check-")
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(name)
+    return True
+
+
+def sample_count(option: str, *, copies: int = 1) -> Any:
+    """An argparse type: a number of samples to simulate (``100000`` or ``1e5``), checked by
+    :func:`engine._limits.check_sample_count` (integer, >= 1, within the memory limit)."""
+
+    def conv(text: str) -> int:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{option} must be a number of samples, got {text!r}"
+            ) from None
+        if not (math.isfinite(v) and v == int(v)):
+            raise argparse.ArgumentTypeError(
+                f"{option} must be a whole number of samples, got {text!r}"
+            )
+        k = int(text) if text.strip().lstrip("+").isdigit() else int(v)
+        try:
+            return check_sample_count(k, name=option, copies=copies)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    return conv
+
+
+def queue_warning(args: argparse.Namespace, msg: str) -> None:
+    """Queue a one-line warning; ``gmwm`` prints it as ``gmwm COMMAND: warning: MSG`` on
+    stderr after the result (an error stays one line), once however often it was queued."""
+    queued = getattr(args, "warnings", None)
+    if queued is None:
+        queued = args.warnings = []
+    if msg not in queued:
+        queued.append(msg)
+
+
+def confidence(option: str, example: str = "0.95") -> Callable[[str], float]:
+    """An argparse type: a number in (0, 1), e.g. 0.95 (``example`` in the message)."""
+
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{option} must be a number in (0, 1), e.g. {example}, got {text!r}"
+            ) from None
+        if not 0 < v < 1:
+            raise argparse.ArgumentTypeError(
+                f"{option} must be in (0, 1), e.g. {example}, got {text!r}"
+            )
+        return v
+
+    return conv
+
+
+def add_confidence_option(
+    sp: argparse.ArgumentParser, what: str, old: Literal["--level", "--alpha"]
+) -> argparse.Action:
+    """Add ``--confidence`` (default 0.95) to a sub-command, with its old spelling there as a
+    deprecated alias: ``--level`` (the same number) or ``--alpha`` (1 - confidence). Only the
+    command's own old spelling: elsewhere ``--level`` stays an abbreviation of ``--levels``."""
+    new = sp.add_argument(
+        "--confidence",
+        type=confidence("--confidence"),
+        default=0.95,
+        metavar="C",
+        help=f"confidence level of {what}, in (0, 1) (0.95)",
+    )
+    if old == "--level":
+        add_deprecated_alias(sp, "--level", new, type=confidence("--level"))
+        return new
+    add_deprecated_alias(
+        sp,
+        "--alpha",
+        new,
+        type=confidence("--alpha", "0.05"),
+        convert=lambda a: 1.0 - a,
+        note="1 - alpha",
+    )
+    return new
+
+
+def alpha_of(confidence: float) -> float:
+    """``1 - confidence`` rounded to 12 decimals, so that 0.95 gives the engine's ``alpha``
+    0.05 as typed (not 0.050000000000000044)."""
+    return round(1.0 - confidence, 12)
+
+
+class DeprecatedAlias(argparse.Action):
+    """An old spelling of an option: it still works (the value, converted, goes to the new
+    option's destination) and queues a one-line message naming the new option."""
+
+    def __init__(
+        self,
+        option_strings: list[str],
+        dest: str,
+        *,
+        new: str,
+        convert: Callable[[Any], Any] | None = None,
+        note: str = "",
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(option_strings, dest, **kwargs)
+        self.new, self.convert, self.note = new, convert, note
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        value = self.convert(values) if self.convert is not None else values
+        setattr(namespace, self.dest, value)
+        shown = f"{value:g}" if isinstance(value, float) else str(value)
+        queue_warning(
+            namespace,
+            f"{option_string} is deprecated: use {self.new} {shown}"
+            + (f" (= {self.note})" if self.note else ""),
+        )
+
+
+def add_deprecated_alias(
+    container: Any,
+    old: str,
+    new: argparse.Action,
+    *,
+    type: Callable[[str], Any] | None = None,
+    convert: Callable[[Any], Any] | None = None,
+    note: str = "",
+) -> argparse.Action:
+    """Keep ``old`` as a deprecated spelling of the option ``new`` (an action returned by
+    ``add_argument``); ``container`` is the parser or the mutually exclusive group that holds
+    ``new``. Hidden from ``--help``; using it queues ``OLD is deprecated: use NEW VALUE``."""
+    return container.add_argument(
+        old,
+        action=DeprecatedAlias,
+        dest=new.dest,
+        new="/".join(new.option_strings),
+        convert=convert,
+        note=note,
+        type=type if type is not None else new.type,
+        metavar=new.metavar,
+        default=argparse.SUPPRESS,
+        help=argparse.SUPPRESS,
+    )

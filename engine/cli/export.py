@@ -2,7 +2,7 @@
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
                 --format NAME (engine.export.FORMATS) -o OUT|-
-                [--ci asymptotic|bootstrap] [--weights ci|identity|efficient]
+                [--ci asymptotic|bootstrap [--confidence 0.95]] [--weights ci|identity|efficient]
                 [--fs HZ] [--levels J] [--robust] [--segment ...] [--scale ...] [--units ...]
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
                 [--inflate F] [--filter-rate HZ]
@@ -21,9 +21,11 @@ import numpy as np
 
 from .common import (
     add_bootstrap_options,
+    add_confidence_option,
     add_log_options,
     add_weights_option,
     bootstrap_kwargs,
+    check_output,
     log_kwargs,
     positive,
     stream_wv,
@@ -72,19 +74,24 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "--format",
         default="kalibr",
         choices=list(FORMATS),
-        help="; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
+        help="export format: "
+        + "; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
         + " (default kalibr)",
     )
-    ex.add_argument("-o", "--output", required=True, help="output file, or - for stdout")
+    ex.add_argument(
+        "-o", "--output", required=True, help="output file, or - for stdout (checked first)"
+    )
     ex.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
     ex.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
     ex.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
-    ex.add_argument("--eff", type=float, default=0.6, help="robust WV efficiency (0.6)")
+    ex.add_argument(
+        "--eff", type=float, default=0.6, help="efficiency of the robust WV, in (0, 0.99) (0.6)"
+    )
     add_weights_option(
         ex, "weighting matrix: ci (default), identity, or efficient (two-step, V^-1)"
     )
     ex.add_argument("--ci", choices=["asymptotic", "bootstrap"], help="parameter intervals")
-    ex.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
+    add_confidence_option(ex, "the --ci parameter intervals", "--level")
     add_bootstrap_options(ex, replicates="bootstrap replicates for --ci bootstrap")
     ex.add_argument(
         "--rostopic",
@@ -115,6 +122,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
+    check_output(args.output, "-o")  # before the (slow) imports and any fit
     from ..export import export
     from ..fit import fit_gmwm
     from ..inference import fit_efficient, param_intervals
@@ -122,8 +130,6 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..models import parse_model
     from ..wv import wavelet_variance
 
-    if not 0 < args.level < 1:
-        raise usage_error(f"--level must be in (0, 1), got {args.level}")
     if args.robust and not 0 < args.eff < 0.99:
         raise usage_error(f"--eff must be in (0, 0.99), got {args.eff}")
     model = parse_model(_small_multipliers(args.model, "--model"))
@@ -199,7 +205,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             intervals[ch] = param_intervals(
                 fits[ch],
                 method=args.ci,
-                level=args.level,
+                level=args.confidence,
                 **bootstrap_kwargs(args),
             )
     units = (

@@ -2,17 +2,23 @@
 
 ::
 
-    gmwm wv INPUT [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E] [--alpha A] [--json]
+    gmwm wv INPUT [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E]
+             [--confidence 0.95] [--json]
     gmwm fit INPUT --model SPEC [--channel NAME] [--fs HZ] [--levels J] [--robust] [--eff E]
-             [--weights ci] [--json]
+             [--weights ci] [--ci asymptotic|bootstrap] [--confidence 0.95] [--json]
     gmwm simulate --model SPEC_WITH_VALUES -n N [--fs HZ] [--seed S] -o OUT(.h5|.npy|.csv)
     gmwm study slope --reps R --seed S [--n 2.5e6,6.3e6] [--workers 2] [--scheduler ADDRESS]
-             [--out DIR] [--json]
+             [-o DIR] [--json]
     gmwm select INPUT --max-model SPEC | --models SPEC1,SPEC2 [--optimism asymptotic|bootstrap]
              [--weights ci|identity|efficient]
 
 Without ``--json`` a readable table with units is printed; with ``--json`` exactly one JSON
 object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
+Warnings (queued by the subcommands, or issued by the engine as Python warnings) are printed
+after the result as ``gmwm COMMAND: warning: ...``, one line each. An option name has one
+meaning in every subcommand (tests/test_cli_options.py holds the table); old spellings
+(``--alpha``, ``--level``, ``--out``, ``--select``, ``gmwm virtual --scale``) still work and
+print a deprecation warning naming the new option.
 """
 
 from __future__ import annotations
@@ -21,21 +27,30 @@ import argparse
 import dataclasses
 import importlib
 import json
+import math
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
 from .._jsonutil import json_ready
+from .._limits import check_sample_count
 from ..fit import FitError, fit_gmwm
 from ..models import ModelError, parse_model
 from .common import (
     CliError,
     add_bootstrap_options,
+    add_confidence_option,
+    add_deprecated_alias,
     add_weights_option,
+    alpha_of,
     bootstrap_kwargs,
+    check_output,
     load_wv,
     positive,
+    queue_warning,
+    sample_count,
 )
 
 __all__ = ["main", "build_parser"]
@@ -73,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     wv = sub.add_parser("wv", help="empirical Haar wavelet variance with intervals")
     data_args(wv)
-    wv.add_argument("--alpha", type=float, default=0.05, help="interval level 1-alpha (0.05)")
+    add_confidence_option(wv, "the WV intervals", "--alpha")
 
     fit = sub.add_parser("fit", help="fit a latent model by GMWM")
     data_args(fit)
@@ -105,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["asymptotic", "bootstrap"],
         help="parameter intervals: asymptotic sandwich or parametric bootstrap",
     )
-    fit.add_argument("--level", type=float, default=0.95, help="interval level (0.95)")
+    add_confidence_option(fit, "the --ci parameter intervals", "--level")
     add_bootstrap_options(fit, replicates="bootstrap replicates")
 
     sel = sub.add_parser("select", help="rank candidate models by WVIC")
@@ -140,8 +155,16 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--model", required=True, help="model with values, e.g. 'WN(sigma2=1e-4)+RW(gamma2=1e-9)'"
     )
-    sim.add_argument("-n", type=positive(int, "-n"), required=True, help="number of samples")
-    sim.add_argument("--fs", type=positive(float, "--fs"), default=1.0, help="Hz (default 1)")
+    sim.add_argument(
+        "-n",
+        type=sample_count("-n"),
+        required=True,
+        help="number of samples (100000 or 1e5); at most what fits in half the available "
+        "memory at 32 bytes per sample (engine._limits)",
+    )
+    sim.add_argument(
+        "--fs", type=positive(float, "--fs"), default=1.0, help="sampling frequency in Hz (1)"
+    )
     sim.add_argument("--seed", type=int, default=None, help="random seed")
     sim.add_argument("--channel", default="x", help="channel name in the output (default x)")
     sim.add_argument("--unit", default="", help="signal unit stored in the output")
@@ -182,7 +205,13 @@ def build_parser() -> argparse.ArgumentParser:
     from .batch import add_scheduler_option  # --scheduler local|ADDRESS (Dask)
 
     add_scheduler_option(st)
-    st.add_argument("--out", help="directory for study.json/.md/.txt, boxplot.png, rmse.png")
+    out = st.add_argument(
+        "-o",
+        "--output",
+        metavar="DIR",
+        help="folder for study.json/.md/.txt, boxplot.png, rmse.png (created if missing)",
+    )
+    add_deprecated_alias(st, "--out", out)
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     for name in _MODULE_COMMANDS:  # each in its own module: add_parser(sub) and run(args)
         importlib.import_module(f".{name}", __package__).add_parser(sub)
@@ -190,9 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
-    if not 0 < args.alpha < 1:
-        raise CliError(f"--alpha must be in (0, 1), got {args.alpha}")
-    wv, name = load_wv(args, args.alpha)
+    wv, name = load_wv(args, alpha_of(args.confidence))
     if args.json:
         d = wv.to_dict()
         d["channel"] = name
@@ -201,8 +228,6 @@ def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
 
 
 def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
-    if not 0 < args.level < 1:
-        raise CliError(f"--level must be in (0, 1), got {args.level}")
     if args.channels or args.more_inputs or args.shared or args.dependence_test:
         from .multi import cli_fit  # multivariate GMWM (--channels) or replicates (files)
 
@@ -224,7 +249,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         intervals = param_intervals(
             res,
             method=args.ci,
-            level=args.level,
+            level=args.confidence,
             **bootstrap_kwargs(args),
         )
     if args.json:
@@ -247,7 +272,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         return json_ready(d)
     text = f"{args.input} [{name}]\n{res.summary()}"
     if intervals is not None:
-        text += f"\n\n  {100 * args.level:g}% intervals ({args.ci}):\n"
+        text += f"\n\n  {100 * args.confidence:g}% intervals ({args.ci}):\n"
         text += "\n".join(
             f"  {iv.name:<16} {iv.value:>12.5e}  [{iv.low:.5e}, {iv.high:.5e}]  {iv.unit}"
             for iv in intervals
@@ -302,12 +327,11 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
 def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..io import save_log
 
+    out = args.output
+    check_output(out, "-o", suffixes=(".h5", ".hdf5", ".npy", ".csv"))
     model = parse_model(args.model)
     model.validate()
     x = model.simulate(args.n, fs=args.fs, rng=args.seed)
-    out = args.output
-    if not out.lower().endswith((".h5", ".hdf5", ".npy", ".csv")):
-        raise CliError(f"output {out!r}: use a .h5, .npy or .csv file name")
     attrs = {"model": model.spec(values=True), "seed": "" if args.seed is None else str(args.seed)}
     save_log(out, {args.channel: x}, args.fs, units={args.channel: args.unit}, attrs=attrs)
     also = ""
@@ -324,12 +348,17 @@ def _one_line(e: BaseException) -> str:
 
 
 def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
-    from ..teaching import run_slope_study
-
+    check_output(args.output, "-o", kind="dir")  # before the (slow) imports and any work
     try:
         n_values = [float(v) for v in args.n.split(",") if v.strip()]
     except ValueError:
         raise CliError(f"--n takes sample counts separated by commas, got {args.n!r}") from None
+    for v in n_values:  # each worker simulates one replicate at a time
+        if not math.isfinite(v):
+            raise CliError(f"--n takes sample counts, got {v}")
+        check_sample_count(int(round(v)), name="--n", copies=args.workers)
+    from ..teaching import run_slope_study
+
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     from .batch import scheduler_executor
 
@@ -343,7 +372,7 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
             progress=True,
             executor=ex,
         )
-    paths = res.save(args.out) if args.out else {}
+    paths = res.save(args.output) if args.output else {}
     if args.json:
         d = res.to_dict(raw=False)
         d["files"] = paths
@@ -375,7 +404,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         }.get(args.command)
         if handler is None:  # a subcommand in its own module (_MODULE_COMMANDS)
             handler = importlib.import_module(f".{args.command}", __package__).run
-        out = handler(args)
+        with warnings.catch_warnings(record=True) as caught:  # the engine's, e.g. PX4 range
+            out = handler(args)
+        for w in caught:
+            queue_warning(args, _one_line(w.message))
     except (CliError, LoadError, ModelError, FitError) as e:
         print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)
         return 2
@@ -385,8 +417,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:  # pragma: no cover
         print("gmwm: interrupted", file=sys.stderr)
         return 130
-    for warning in getattr(args, "warnings", ()):  # e.g. fs unknown: 1 Hz assumed
-        print(warning, file=sys.stderr)
+    for warning in getattr(args, "warnings", ()):  # e.g. fs unknown, deprecated option
+        print(f"gmwm {args.command}: warning: {warning}", file=sys.stderr)
     text = json.dumps(out, allow_nan=False) if isinstance(out, dict) else out
     try:
         print(text)

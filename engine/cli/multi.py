@@ -16,7 +16,7 @@ from ..fit.replicates import fit_replicates
 from ..io import load_log
 from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
-from .common import bootstrap_kwargs, load_wv, log_kwargs, warn_fs_unknown
+from .common import bootstrap_kwargs, load_wv, log_kwargs, queue_warning, warn_fs_unknown
 
 __all__ = ["cli_fit"]
 
@@ -59,11 +59,7 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
             wv, name = load_wv(one)
             for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
-                warn = getattr(args, "warnings", None)
-                if warn is None:
-                    warn = args.warnings = []
-                if w not in warn:
-                    warn.append(w)
+                queue_warning(args, w)
             wvs.append(wv)
             names.append(name)
         res = fit_replicates(wvs, args.model, weights=args.weights)

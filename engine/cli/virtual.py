@@ -1,18 +1,20 @@
 """``gmwm virtual`` (:func:`add_parser`, :func:`run`): the optimal virtual sensor::
 
     gmwm virtual LOG... --model SPEC [--shared WN,RW,...] [--channel NAME | --channels a,b,..]
-                 [--scale S | --band S1:S2] [--absolute] [--weights ci|identity|efficient]
-                 [--fs HZ] [--levels J] [--units U] [--alpha A]
+                 [--tau S | --band S1:S2] [--absolute] [--weights ci|identity|efficient]
+                 [--fs HZ] [--levels J] [--units U] [--confidence 0.95]
                  [--format NAME -o OUT|-] [--name CH] [--json]
 
 k sensors of one axis: several LOG files (one sensor each, channel ``--channel``, cut to the
 shortest) or one LOG with ``--channels`` (recorded together). The multivariate model
 (``--model`` for every sensor, ``--shared`` processes with a k x k covariance) is fitted by
 :func:`engine.fit_mgmwm`, then :func:`engine.virtual_sensor` gives the weights (sum 1) that
-minimise the WV at ``--scale`` seconds or over ``--band`` (default: every level, each
+minimise the WV at the scale ``--tau`` (seconds) or over ``--band`` (default: every level, each
 relative to the plain average's WV; ``--absolute``: the plain sum). ``--format`` exports the
 virtual sensor's model as one channel (``--name``, default the sensors' common channel
-name), like ``gmwm export``.
+name), like ``gmwm export``. ``--scale`` (the scale in seconds, before ``--scale`` meant the
+counts factor everywhere) and ``--alpha`` are deprecated spellings of ``--tau`` and
+``--confidence``.
 """
 
 from __future__ import annotations
@@ -21,7 +23,16 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .common import add_weights_option, positive, usage_error, warn_fs_unknown
+from .common import (
+    add_confidence_option,
+    add_deprecated_alias,
+    add_weights_option,
+    alpha_of,
+    check_output,
+    positive,
+    usage_error,
+    warn_fs_unknown,
+)
 
 __all__ = ["add_parser", "run"]
 
@@ -58,13 +69,19 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     vp.add_argument("--model", required=True, help="model of every sensor, e.g. 'GM+WN+RW'")
     vp.add_argument("--shared", help="processes shared by the sensors, e.g. WN,RW,GM")
-    add_weights_option(vp, "MGMWM weighting: ci (default), identity, or efficient (two-step, V^-1)")
+    add_weights_option(
+        vp, "weighting matrix of the MGMWM: ci (default), identity, or efficient (two-step, V^-1)"
+    )
     vp.add_argument("--channel", help="several LOGs: the channel of each (default: the first)")
     vp.add_argument("--channels", help="one LOG: its sensors' channels, e.g. gyro_a,gyro_b")
     target = vp.add_mutually_exclusive_group()
-    target.add_argument(
-        "--scale", type=positive(float, "--scale"), help="minimise the WV at this scale (s)"
+    tau = target.add_argument(
+        "--tau",
+        type=positive(float, "--tau"),
+        metavar="S",
+        help="minimise the WV at the scale tau = S seconds",
     )
+    add_deprecated_alias(target, "--scale", tau, type=positive(float, "--scale"))
     target.add_argument(
         "--band", type=_band, help="minimise the WV over the scales S1:S2 (s); default all"
     )
@@ -76,13 +93,13 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     vp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
     vp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
     vp.add_argument("--units", help="signal unit overriding the files', e.g. deg/s")
-    vp.add_argument("--alpha", type=float, default=0.05, help="interval level 1-alpha (0.05)")
+    add_confidence_option(vp, "the virtual sensor's WV interval", "--alpha")
     vp.add_argument(
         "--format",
         choices=list(FORMATS),
-        help="export the virtual sensor's model in this format (as gmwm export; needs -o)",
+        help="export format of the virtual sensor's model (as gmwm export; needs -o)",
     )
-    vp.add_argument("-o", "--output", help="--format: output file, or - for stdout")
+    vp.add_argument("-o", "--output", help="--format: output file, or - for stdout (checked first)")
     vp.add_argument("--name", help="--format: the virtual channel's name (e.g. gyro_x)")
     vp.add_argument("--json", action="store_true", help="print one JSON object")
     return vp
@@ -166,23 +183,26 @@ def _load(args: argparse.Namespace) -> tuple[dict[str, Any], float, str, list[st
 
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm virtual``; returns the text to print (or a JSON-ready dict)."""
-    from .._jsonutil import json_ready
-    from ..multivariate import MultiModel, fit_mgmwm, virtual_sensor
-    from ..wv import wv_matrix
-
-    if not 0 < args.alpha < 1:
-        raise usage_error(f"--alpha must be in (0, 1), got {args.alpha}")
     if args.format and not args.output:
         raise usage_error("--format needs -o OUT (a file, or - for stdout)")
     if args.output and not args.format:
         raise usage_error("-o needs --format NAME (the export format of the virtual sensor)")
+    check_output(args.output, "-o")  # before the (slow) imports and the fit
+    from .._jsonutil import json_ready
+    from ..multivariate import MultiModel, fit_mgmwm, virtual_sensor
+    from ..wv import wv_matrix
+
     data, fs, unit, notes, base = _load(args)
     names = list(data)
     wvm = wv_matrix(data, channels=names, fs=fs, levels=args.levels, units=[unit] * len(names))
     model = MultiModel(names, args.model, shared=args.shared or ())
     res = fit_mgmwm(wvm, model, weights=args.weights)
     vs = virtual_sensor(
-        res, scale=args.scale, band=args.band, relative=not args.absolute, alpha=args.alpha
+        res,
+        scale=args.tau,
+        band=args.band,
+        relative=not args.absolute,
+        alpha=alpha_of(args.confidence),
     )
     exported = None
     if args.format:

@@ -31,6 +31,7 @@ from typing import Any
 
 from ..fit import GMWMResult
 from ..units import ExportError
+from .common import text_lines
 from .noise import noise_for
 
 __all__ = ["RANGES", "autopilot_params", "px4_params", "ardupilot_params"]
@@ -103,10 +104,11 @@ def px4_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     lines = [f"# {c}" for c in header] + [f"# warning: {w}" for w in warn]
     lines.append("#")
     lines.append("# Vehicle-Id Component-Id Name Value Type")
+    rows = []  # tab-separated, of our names and numbers only: written as they are
     for name, v in values.items():
-        lines.append(f"# {name} [{RANGES[name][2]}]")
-        lines.append(f"1\t1\t{name}\t{v!r}\t9")
-    return "\n".join(lines) + "\n"
+        rows.append(f"# {name} [{RANGES[name][2]}]")
+        rows.append(f"1\t1\t{name}\t{v!r}\t9")
+    return text_lines(lines) + "\n".join(rows) + "\n"
 
 
 def ardupilot_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
@@ -117,4 +119,4 @@ def ardupilot_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     for name, v in values.items():
         lines.append(f"# {name} [{RANGES[name][2]}]")
         lines.append(f"{name},{v!r}")
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 from ..fit import GMWMResult
 from ..units import DatasheetRow, ExportError, datasheet_rows
-from .common import fmt_float
+from .common import csv_cells, fmt_float, text_lines
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
@@ -100,7 +100,7 @@ def datasheet_text(rows: Sequence[DatasheetRow]) -> str:
         out.append(
             f"{r.channel:<10} {r.process:<8} {r.quantity:<40} {r.value:>12.5g} {ivl:>27}  {r.unit}"
         )
-    return "\n".join(out)
+    return text_lines(out, end="")
 
 
 def datasheet_csv(rows: Sequence[DatasheetRow]) -> str:
@@ -110,16 +110,18 @@ def datasheet_csv(rows: Sequence[DatasheetRow]) -> str:
     w.writerow(["channel", "process", "quantity", "symbol", "value", "low", "high", "unit", "note"])
     for r in rows:
         w.writerow(
-            [
-                r.channel,
-                r.process,
-                r.quantity,
-                r.symbol,
-                fmt_float(r.value),
-                fmt_float(r.low),
-                fmt_float(r.high),
-                r.unit,
-                r.note,
-            ]
+            csv_cells(
+                [
+                    r.channel,
+                    r.process,
+                    r.quantity,
+                    r.symbol,
+                    fmt_float(r.value),
+                    fmt_float(r.low),
+                    fmt_float(r.high),
+                    r.unit,
+                    r.note,
+                ]
+            )
         )
     return buf.getvalue()

@@ -20,7 +20,7 @@ from typing import Any
 
 from ..fit import GMWMResult
 from ..units import DISPLAY
-from .common import yaml_float
+from .common import text_lines, yaml_float
 from .noise import noise_for
 
 __all__ = ["MGAL", "kfgins_yaml", "ros_imu_yaml"]
@@ -55,7 +55,7 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         f"  corrtime: {yaml_float(max(tcs.values()) / _HOUR)}  # [hr]",
         "  # gsstd/asstd (scale-factor std, ppm) are not estimated by GMWM: keep your config's",
     ]
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)
 
 
 def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
@@ -78,4 +78,4 @@ def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         diag = nz.xyz(kind, "sigma2")
         m = [diag[i] if i == j else 0.0 for i in range(3) for j in range(3)]
         lines.append(f"{field}: {_flow(m)}  # [{u}]")
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)

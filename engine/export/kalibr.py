@@ -18,7 +18,7 @@ from typing import Any
 from ..fit import GMWMResult
 from ..models import RW, WN, Model
 from ..units import ExportError, from_datasheet, process_values, si_factor, to_datasheet
-from .common import channel_axis, yaml_float
+from .common import channel_axis, text_lines, yaml_float, yaml_str
 
 __all__ = ["KalibrImu", "kalibr_imu", "write_kalibr", "read_kalibr", "kalibr_models"]
 
@@ -77,7 +77,7 @@ class KalibrImu:
         }
         lines = [f"# {c}" for c in self.comments]
         lines += [f"# warning: {w}" for w in self.warnings]
-        lines.append(f"rostopic: {self.rostopic}")
+        lines.append(f"rostopic: {yaml_str(self.rostopic)}")
         lines.append(f"update_rate: {yaml_float(self.update_rate)}  # Hz (the log's sampling rate)")
         lines.append("")
         for key in _KALIBR_KEYS:
@@ -93,10 +93,10 @@ class KalibrImu:
                 f"{key}: {yaml_float(self.values[key])}  # from {self.chosen.get(key, '-')}"
             )
             if axes:
-                flow = ", ".join(f"{a}: {yaml_float(v)}" for a, v in axes.items())
+                flow = ", ".join(f"{yaml_str(a)}: {yaml_float(v)}" for a, v in axes.items())
                 lines.append(f"{key}_per_axis: {{{flow}}}")
             lines.append("")
-        return "\n".join(lines).rstrip() + "\n"
+        return text_lines(lines).rstrip() + "\n"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from ..fit import GMWMResult
 from ..units import ExportError
 from . import autopilot, ins, sim, vio
+from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import kalibr_imu, read_kalibr
 from .noise import check_inflate
@@ -152,7 +153,7 @@ def export(
     intervals: Mapping[str, Sequence[ParamInterval]] | None = None,
     log: ImuLog | None = None,
     units: Mapping[str, str] | None = None,
-    source: str = "",
+    source: str | os.PathLike[str] = "",
     rostopic: str | None = None,
     allow_partial: bool = False,
     inflate: float = 1.0,
@@ -173,7 +174,10 @@ def export(
         ``"kf-gins"``, ``"ros-imu"`` (README, "Export formats").
     intervals, log, units, source, rostopic, allow_partial
         Passed to the format's writer (parameter intervals per channel, the log for the JSON
-        report, signal unit per channel, source name, Kalibr topic, partial Kalibr file).
+        report, signal unit per channel, source name (a str or a path), Kalibr topic, partial
+        Kalibr file). Every user-given string is written with its control characters escaped
+        (:func:`engine.export.common.clean_text`): a newline in a file name cannot add a line
+        (a parameter, a key) to the file.
     inflate : float
         Filter formats: every noise value (density, random walk, bias std) is the fitted value
         times ``inflate`` (variances times ``inflate**2``), written in the file's header;
@@ -192,7 +196,7 @@ def export(
         intervals=intervals,
         log=log,
         units=units,
-        source=source,
+        source=source_text(source),
         rostopic=rostopic or (log.meta.get("topic") if log is not None else None) or "/imu0",
         allow_partial=allow_partial,
         inflate=inflate,

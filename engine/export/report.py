@@ -15,7 +15,7 @@ from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import GMWMResult
 from ..units import ExportError, allan_floor, si_factor, squared
-from .common import channel_axis, fmt_float
+from .common import channel_axis, csv_cells, fmt_float, source_text
 from .datasheet import datasheet_table
 from .kalibr import kalibr_imu
 
@@ -32,7 +32,7 @@ def fit_report(
     intervals: Mapping[str, Sequence[ParamInterval]] | None = None,
     log: ImuLog | None = None,
     units: Mapping[str, str] | None = None,
-    source: str = "",
+    source: str | os.PathLike[str] = "",
     kalibr: bool = True,
 ) -> dict[str, Any]:
     """A JSON-ready report of every channel's fit.
@@ -72,7 +72,7 @@ def fit_report(
     out: dict[str, Any] = {
         "schema": "gmwm-report/1",
         "engine_version": __version__,
-        "source": source or (log.source if log is not None else ""),
+        "source": source_text(source) or (source_text(log.source) if log is not None else ""),
         "channels": chans,
     }
     if log is not None:
@@ -142,17 +142,19 @@ def curves_csv(fits: GMWMResult | Mapping[str, GMWMResult]) -> str:
                 fmt_float(res.components[lab][i]) if lab in res.components else "" for lab in labels
             ]
             w.writerow(
-                [
-                    ch,
-                    int(wv.levels[i]),
-                    int(wv.tau_samples[i]),
-                    fmt_float(wv.tau_s[i]),
-                    fmt_float(wv.variance[i]),
-                    fmt_float(wv.ci_low[i]),
-                    fmt_float(wv.ci_high[i]),
-                    fmt_float(res.implied[i]),
-                    *comp,
-                    squared(wv.unit) if wv.unit else "",
-                ]
+                csv_cells(
+                    [
+                        ch,
+                        int(wv.levels[i]),
+                        int(wv.tau_samples[i]),
+                        fmt_float(wv.tau_s[i]),
+                        fmt_float(wv.variance[i]),
+                        fmt_float(wv.ci_low[i]),
+                        fmt_float(wv.ci_high[i]),
+                        fmt_float(res.implied[i]),
+                        *comp,
+                        squared(wv.unit) if wv.unit else "",
+                    ]
+                )
             )
     return buf.getvalue()

@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..fit import GMWMResult
+from .common import text_lines
 from .noise import noise_for
 
 __all__ = ["matlab_m", "gazebo_xml"]
@@ -58,7 +59,7 @@ def matlab_m(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         f"'{'Gyroscope' if k == 'gyroscope' else 'Accelerometer'}', {v}" for k, v in made
     )
     lines.append(f"imu = imuSensor('accel-gyro', 'SampleRate', fs, {args});")
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)
 
 
 def gazebo_xml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
@@ -90,4 +91,4 @@ def gazebo_xml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         for key, v, unit in rows:
             lines.append(f"  <{name}{key}>{v!r}</{name}{key}>  <!-- [{unit}] -->")
     lines.append("</plugin>")
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)

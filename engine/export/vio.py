@@ -35,7 +35,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..fit import GMWMResult
-from .common import yaml_float
+from .common import text_lines, yaml_float, yaml_str
 from .noise import noise_for
 
 __all__ = ["openvins_yaml", "basalt_json", "orbslam3_yaml", "vins_yaml"]
@@ -66,7 +66,7 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         lines.append(f"  {kind}_noise_density: {yaml_float(n)}  # [{_ND[kind]}] N, max over axes")
         lines.append(f"  {kind}_random_walk: {yaml_float(k)}  # [{_RW[kind]}] K, max over axes")
     lines += [
-        f"  rostopic: {kw.get('rostopic') or '/imu0'}",
+        f"  rostopic: {yaml_str(kw.get('rostopic') or '/imu0')}",
         "  time_offset: 0.0  # [s] (not estimated by GMWM)",
         f"  update_rate: {yaml_float(nz.fs)}  # [Hz] the log's sampling rate",
         '  model: "kalibr"',
@@ -75,7 +75,7 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     for name in ("Tw", "R_IMUtoGYRO", "Ta", "R_IMUtoACC", "Tg"):
         lines.append(f"  {name}:")
         lines += _eye(3, "    ", zero=name == "Tg")
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)
 
 
 def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
@@ -116,7 +116,7 @@ def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         f"IMU.AccWalk: {yaml_float(nz.conservative(a, 'K'))}  # [{_RW[a]}] K",
         f"IMU.Frequency: {yaml_float(nz.fs)}  # [Hz]",
     ]
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)
 
 
 def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
@@ -136,4 +136,4 @@ def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         f"acc_w: {yaml_float(nz.conservative(a, 'K'))}  # [{_RW[a]}] accelerometer bias K",
         f"gyr_w: {yaml_float(nz.conservative(g, 'K'))}  # [{_RW[g]}] gyroscope bias K",
     ]
-    return "\n".join(lines) + "\n"
+    return text_lines(lines)

@@ -21,6 +21,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .._limits import check_sample_count
+
 __all__ = [
     "Process",
     "Model",
@@ -422,9 +424,12 @@ class Model:
     def simulate(
         self, n: int, *, fs: float = 1.0, rng: np.random.Generator | int | None = None
     ) -> np.ndarray:
-        """Simulate ``n`` samples of the sum of the processes (independent draws each)."""
-        if n < 1:
-            raise ValueError(f"n must be >= 1, got {n}")
+        """Simulate ``n`` samples of the sum of the processes (independent draws each).
+
+        ``n`` must be an integer from 1 to the memory-aware limit of
+        :func:`engine._limits.check_sample_count` (a ValueError names the argument ``n``).
+        """
+        n = check_sample_count(n)
         missing = [name for name, v in self.values().items() if v is None]
         if missing:
             raise ModelError(

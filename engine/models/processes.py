@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._limits import check_sample_count
 from .model import Process
 
 __all__ = ["WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv", "ar1_wv_pos", "TC_MIN", "TC_MAX_FACTOR"]
@@ -127,6 +128,7 @@ class WN(Process, order=3, description="white noise"):
         return 1.0 / tau
 
     def simulate(self, n, rng=None, fs=1.0):
+        n = check_sample_count(n)
         (s2,) = self._require()
         return _rng(rng).normal(0.0, math.sqrt(s2), n)
 
@@ -145,6 +147,7 @@ class QN(Process, order=2, description="quantization noise"):
         return 6.0 / tau**2
 
     def simulate(self, n, rng=None, fs=1.0):
+        n = check_sample_count(n)
         (q2,) = self._require()
         u = _rng(rng).uniform(-math.sqrt(3.0), math.sqrt(3.0), n + 1)
         return math.sqrt(q2) * np.diff(u)
@@ -165,6 +168,7 @@ class RW(Process, order=4, description="random walk"):
         return (tau**2 + 2.0) / (12.0 * tau)
 
     def simulate(self, n, rng=None, fs=1.0):
+        n = check_sample_count(n)
         (g2,) = self._require()
         return np.cumsum(_rng(rng).normal(0.0, math.sqrt(g2), n))
 
@@ -191,6 +195,7 @@ class DR(Process, order=5, description="drift (rate ramp)"):
         return DR(math.sqrt(max(h, 0.0)))
 
     def simulate(self, n, rng=None, fs=1.0):
+        n = check_sample_count(n)
         (om,) = self._require()
         # per sample, as the fit reports it (the R simulator's division by fs is a known defect)
         return om * np.arange(1, n + 1, dtype=float)
@@ -232,6 +237,7 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
         return AR1(float(nl), float(h))
 
     def simulate(self, n, rng=None, fs=1.0):
+        n = check_sample_count(n)
         phi, s2 = self._require()
         return _simulate_ar1(n, phi, s2, _rng(rng))
 
@@ -275,6 +281,7 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
         return AR1(phi, s2 * (1 - phi * phi))
 
     def simulate(self, n, rng=None, fs=1.0):
+        n = check_sample_count(n)
         return self.as_ar1(fs).simulate(n, rng)
 
     def autocovariance(self, lags, fs=1.0):

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .._limits import check_sample_count
 from ..models import Model, ModelError, Process, parse_model
 
 __all__ = ["SHAREABLE", "SharedProcess", "MultiModel"]
@@ -520,10 +521,9 @@ class MultiModel:
         ``X_t = phi X_{t-1} + e_t`` with ``e_t ~ N(0, Sigma_innovation)`` from the stationary
         distribution. Independent processes as :meth:`Process.simulate`.
         """
+        n = check_sample_count(n, channels=self.k)  # before the slow import below
         from scipy.signal import lfilter
 
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n must be a positive integer, got {n!r}")
         if not self.is_set:
             raise ModelError(
                 "cannot simulate: some values are unknown; give every channel "
