@@ -44,6 +44,7 @@ differentiating the whole projection (rule and bound) numerically.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from statistics import NormalDist
@@ -89,6 +90,9 @@ FORMAT_CONSUMERS: dict[str, str] = {
 }
 
 _POINTS_PER_OCTAVE = 6
+
+#: The sandwich covariance of each fit's free parameters (fits are immutable).
+_COV: weakref.WeakKeyDictionary[GMWMResult, np.ndarray] = weakref.WeakKeyDictionary()
 
 
 def consumer_of(consumer: str) -> str:
@@ -774,7 +778,9 @@ def _intervals(
     free = free_params(fit)
     if not free:
         return {}
-    cov = param_cov(fit, wv_cov_model(fit.model, fit.wv), free)
+    cov = _COV.get(fit)
+    if cov is None:  # a fit is immutable: its covariance is computed once
+        cov = _COV[fit] = param_cov(fit, wv_cov_model(fit.model, fit.wv), free)
     u0 = np.array(
         [TO_UNCONSTRAINED[nm](float(getattr(fit.model.processes[i], nm))) for i, nm in free]
     )
