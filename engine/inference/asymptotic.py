@@ -154,9 +154,7 @@ def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     return jac
 
 
-def param_cov(
-    res: Any, vmat: np.ndarray, free: list[tuple[int, str]] | None = None
-) -> np.ndarray:
+def param_cov(res: Any, vmat: np.ndarray, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     """The sandwich covariance ``(A' W A)^-1 A' W V W A (A' W A)^-1`` of the free parameters
     (:func:`free_params`, in that order) in their unconstrained coordinates (log of variances
     and beta, atanh of phi, omega as is).
