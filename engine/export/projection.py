@@ -52,10 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from .._optim import chi2_isf
 from ..fit import GMWMResult
-from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, ar1_wv
+from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model
 from ..units import ExportError, si_factor
+from .bound import POINTS_PER_OCTAVE, Split, columns, fine_scales, solve
 
 __all__ = [
     "CONSUMER_PARAMS",
@@ -88,8 +88,6 @@ FORMAT_CONSUMERS: dict[str, str] = {
     "kf-gins": "WN+GM",
     "ros-imu": "WN",
 }
-
-_POINTS_PER_OCTAVE = 6
 
 #: The sandwich covariance of each fit's free parameters (fits are immutable).
 _COV: weakref.WeakKeyDictionary[GMWMResult, np.ndarray] = weakref.WeakKeyDictionary()
@@ -290,236 +288,6 @@ class Projection:
         }
 
 
-# ----------------------------------------------------------------------------- the rule
-@dataclass
-class _Split:
-    wn: float  # per log sample, native unit^2
-    fast: list[tuple[str, Any]]  # processes that went to WN
-    rw_k2: float  # continuous K^2 of RW + slow GMs + drift equivalent (native)
-    slow: list[tuple[str, float, float]]  # (label, beta, sigma2_gm), most persistent first
-    gamma2: float  # RW per sample
-    omega: float  # drift per sample
-    assignment: dict[str, str]
-
-
-def _gm_of(p: Any, fs: float) -> tuple[float, float]:
-    """(phi, stationary variance) of a GM or AR1 process."""
-    if p.code == "GM":
-        return math.exp(-float(p.beta) / fs), float(p.sigma2_gm)
-    phi = float(p.phi)
-    return phi, float(p.sigma2) / (1.0 - phi * phi)
-
-
-def _split(model: Model, fs: float, fs_f: float, tau_h: float) -> _Split:
-    """Apply the rule: which fitted terms are white at the filter step, which are bias."""
-    dt_f = 1.0 / fs_f
-    m = max(fs / fs_f, 1.0)
-    sp = _Split(0.0, [], 0.0, [], 0.0, 0.0, {})
-    for lab, p in zip(model.labels, model.processes, strict=True):
-        if p.code == "WN":
-            sp.wn += float(p.sigma2)
-            sp.fast.append((lab, p))
-            sp.assignment[lab] = "WN"
-        elif p.code == "QN":
-            sp.wn += 3.0 * float(p.q2) / m
-            sp.fast.append((lab, p))
-            sp.assignment[lab] = "WN (QN's white equivalent at the filter rate, 3 q2 / m)"
-        elif p.code in ("GM", "AR1"):
-            phi, s2 = _gm_of(p, fs)
-            tc = -1.0 / (fs * math.log(phi)) if 0.0 < phi < 1.0 else 0.0
-            if tc < dt_f:
-                sp.wn += s2 * (1.0 + phi) / (1.0 - phi)
-                sp.fast.append((lab, p))
-                sp.assignment[lab] = (
-                    f"WN (T_c {tc:.3g} s < filter step {dt_f:.3g} s: white noise, "
-                    "equivalent sigma2_gm (1+phi)/(1-phi))"
-                )
-            else:
-                beta = 1.0 / tc
-                sp.slow.append((lab, beta, s2))
-                sp.rw_k2 += 2.0 * beta * s2
-                sp.assignment[lab] = f"bias (T_c {tc:.4g} s >= filter step)"
-        elif p.code == "RW":
-            sp.gamma2 += float(p.gamma2)
-            sp.rw_k2 += float(p.gamma2) * fs
-            sp.assignment[lab] = "bias"
-        elif p.code == "DR":
-            om = float(p.omega)
-            sp.omega = om
-            sp.rw_k2 += 0.75 * om * om * tau_h * fs  # RW with the drift's WV at the horizon
-            sp.assignment[lab] = "bias (random walk with the drift's WV at the horizon)"
-        else:  # pragma: no cover - every process code is handled above
-            raise ExportError(f"no projection rule for process {p.code}")
-    sp.slow.sort(key=lambda t: t[1])
-    return sp
-
-
-def _ratio(tau: np.ndarray, n: int, confidence: float | None) -> np.ndarray:
-    """Target / fitted WV: 1, or the upper limit of the eta3 interval at ``confidence``,
-    ``eta / chi2_{(1-c)/2}(eta)`` with ``eta = max((n - tau + 1) / tau, 1)`` (CONVENTIONS)."""
-    if confidence is None:
-        return np.ones_like(tau)
-    eta = np.maximum((n - tau + 1.0) / tau, 1.0)
-    return eta / chi2_isf(eta, 1.0 - (1.0 - float(confidence)) / 2.0)
-
-
-def _fine(tau: np.ndarray) -> np.ndarray:
-    """Every even scale between the band's ends up to 8 x _POINTS_PER_OCTAVE per octave."""
-    k = int(math.ceil(8 * _POINTS_PER_OCTAVE * math.log2(tau[-1] / tau[0]))) + 1
-    return np.unique(np.concatenate([tau, 2.0 * np.round(np.geomspace(tau[0], tau[-1], k) / 2)]))
-
-
-def _refine(
-    a_of: Any,
-    x: np.ndarray,
-    tau: np.ndarray,
-    target: np.ndarray,
-    fine: np.ndarray,
-    fine_target: np.ndarray,
-    ref: np.ndarray,
-) -> np.ndarray:
-    """Cutting planes: add the scales of ``fine`` where the bound fails and solve again (up
-    to 5 times); a remaining shortfall scales x up, so the bound holds at every fine scale."""
-    for _ in range(5):
-        short = fine_target / (a_of(fine) @ x)
-        if short.max() <= 1.0 + 1e-12:
-            return x
-        add = fine[short > 1.0]
-        tau = np.concatenate([tau, add])
-        target = np.concatenate([target, fine_target[short > 1.0]])
-        x2, f = _lp(a_of(tau), target, ref)
-        if not math.isfinite(f):
-            break
-        x = x2
-    short = float(np.max(fine_target / (a_of(fine) @ x)))
-    return x * max(short, 1.0) * (1.0 + 1e-12)
-
-
-def _columns(consumer: str, tau: np.ndarray, fs: float, tc: float | None) -> np.ndarray:
-    """WV per unit variance of the consumer's terms (per log sample) at scales ``tau``."""
-    cols = [1.0 / tau]
-    if consumer == "WN+RW":
-        cols.append((tau**2 + 2.0) / (12.0 * tau))
-    elif consumer == "WN+GM":
-        phi = math.exp(-1.0 / (fs * float(tc)))
-        cols.append(ar1_wv(tau, phi, 1.0 - phi * phi))
-    return np.column_stack(cols)
-
-
-def _lp(a: np.ndarray, t: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, float]:
-    """min sum_i x_i / ref_i subject to A x >= t, x >= 0 (HiGHS on the scaled x_i / ref_i).
-
-    ``ref`` holds the plain conversion's variances, so the objective is the sum of the squared
-    factors over the plain conversion (the least inflation); inf when the columns are not
-    usable (a Gauss-Markov column out of numerical range)."""
-    from scipy.optimize import linprog
-
-    if not (np.all(np.isfinite(a)) and np.all(a > 0)):
-        return np.full(a.shape[1], np.nan), math.inf
-    a_s = a * ref / t[:, None]
-    r = linprog(
-        np.ones(a.shape[1]),
-        A_ub=-a_s,
-        b_ub=-np.ones_like(t),
-        bounds=[(0, None)] * a.shape[1],
-    )
-    if r.status != 0:
-        return np.full(a.shape[1], np.nan), math.inf
-    return np.maximum(r.x, 0.0) * ref, float(r.fun)
-
-
-def _solve(
-    model: Model,
-    fs: float,
-    fs_f: float,
-    consumer: str,
-    tau: np.ndarray,
-    n: int,
-    confidence: float | None,
-    tau_h: float,
-    bound: bool,
-) -> dict[str, Any]:
-    """The projection of one model: plain and bounded variances (native unit, per sample)."""
-    sp = _split(model, fs, fs_f, tau_h)
-    out: dict[str, Any] = {"split": sp}
-    # plain conversion (per log sample)
-    plain: dict[str, float] = {"sigma2": sp.wn}
-    if consumer == "WN+RW":
-        plain["gamma2"] = sp.rw_k2 / fs
-    elif consumer == "WN+GM":
-        tc = 1.0 / sp.slow[0][1] if sp.slow else tau_h / fs
-        plain["T_c"] = tc
-        plain["sb2"] = sp.rw_k2 * tc / 2.0
-    out["plain"] = plain
-    if consumer == "WN":
-        tmodel = Model(tuple(p for _, p in sp.fast)) if sp.fast else None
-    else:
-        tmodel = model
-
-    def target_at(t: np.ndarray) -> np.ndarray:
-        base = tmodel.wv(t, fs) if tmodel is not None else np.zeros_like(t)
-        return base * _ratio(t, n, confidence)
-
-    target = target_at(tau)
-    out["target_at"] = target_at
-    out["target"] = target
-    if not bound:
-        x = [plain["sigma2"]]
-        tc = plain.get("T_c")
-        if consumer == "WN+RW":
-            x.append(plain["gamma2"])
-        elif consumer == "WN+GM":
-            x.append(plain["sb2"])
-        out["x"], out["T_c"] = np.array(x), tc
-        return out
-    # reference variances of the objective: the plain conversion, or (a term that the rule
-    # leaves at 0) the term alone matching the target at the band's shortest (WN) or longest
-    # (bias) scale
-    t_ref = 1.0 / sp.slow[0][1] if sp.slow else tau_h / fs
-    a_ref = _columns(consumer, tau[[0, -1]], fs, plain.get("T_c", t_ref))
-    ref = np.array(
-        [
-            plain["sigma2"] if plain["sigma2"] > 0 else target[0] / a_ref[0, 0],
-            *([plain.get("gamma2", plain.get("sb2", 0.0))] if consumer != "WN" else []),
-        ]
-    )
-    if consumer != "WN" and not ref[1] > 0:
-        ref[1] = target[-1] / a_ref[-1, 1]
-    if consumer != "WN+GM":
-        a = _columns(consumer, tau, fs, None)
-        x, _ = _lp(a, target, ref)
-        fine = _fine(tau)
-        x = _refine(
-            lambda t: _columns(consumer, t, fs, None), x, tau, target, fine, target_at(fine), ref
-        )
-        out["x"], out["T_c"], out["A"] = x, None, a
-        return out
-    # Gauss-Markov bias: 1-D search over log T_c of the least-inflation objective, from the
-    # band's shortest scale to ten horizons
-    from scipy.optimize import minimize_scalar
-
-    lo, hi = math.log(tau[0] / fs), math.log(10.0 * max(tau[-1], tau_h) / fs)
-
-    def obj(lt: float) -> float:
-        return _lp(_columns(consumer, tau, fs, math.exp(lt)), target, ref)[1]
-
-    grid = np.linspace(lo, hi, 16)
-    vals = [obj(g) for g in grid]
-    k = int(np.argmin(vals))
-    if not math.isfinite(vals[k]):
-        raise ExportError("no Gauss-Markov bias bounds the fitted WV over the band")
-    a_, b_ = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-    r = minimize_scalar(obj, bounds=(a_, b_), method="bounded", options={"xatol": 1e-4})
-    lt = float(r.x) if r.fun <= vals[k] else float(grid[k])
-    tc = math.exp(lt)
-    a = _columns(consumer, tau, fs, tc)
-    x, _ = _lp(a, target, ref)
-    fine = _fine(tau)
-    x = _refine(lambda t: _columns(consumer, t, fs, tc), x, tau, target, fine, target_at(fine), ref)
-    out["x"], out["T_c"], out["A"] = x, tc, a
-    return out
-
-
 def _values(sol: dict[str, Any], consumer: str, fs: float, f_si: float) -> dict[str, float]:
     """Exported values (SI) of a solution."""
     x = sol["x"]
@@ -616,14 +384,14 @@ def project(
         si_unit = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}[sensor]
     except ExportError:
         sensor, f_si, si_unit = None, 1.0, u or "u"
-    # scales: even numbers of log samples, _POINTS_PER_OCTAVE per octave
+    # scales: even numbers of log samples, POINTS_PER_OCTAVE per octave
     t0, t1 = lo_s * fs, max(hi_s * fs, lo_s * fs)
-    k = max(int(math.ceil(_POINTS_PER_OCTAVE * math.log2(t1 / t0))) + 1, 2)
+    k = max(int(math.ceil(POINTS_PER_OCTAVE * math.log2(t1 / t0))) + 1, 2)
     tau = np.unique(np.maximum(2.0 * np.round(np.geomspace(t0, t1, k) / 2.0), 2.0))
     conf = None if confidence is None else float(confidence)
     tau_h = hz * fs
-    sol = _solve(fit.model, fs, fs_f, cons, tau, n, conf, tau_h, bound)
-    sp: _Split = sol["split"]
+    sol = solve(fit.model, fs, fs_f, cons, tau, n, conf, tau_h, bound)
+    sp: Split = sol["split"]
     vals = _values(sol, cons, fs, f_si)
     plain_sol = dict(sol, x=None)
     pl = sol["plain"]
@@ -645,8 +413,8 @@ def project(
     binding: dict[str, tuple[float, str]] = {}
     if bound and "A" in sol:
         x = sol["x"]
-        fine = _fine(tau)
-        a = _columns(cons, fine, fs, sol["T_c"])
+        fine = fine_scales(tau)
+        a = columns(cons, fine, fs, sol["T_c"])
         cw = a @ x
         active = np.flatnonzero(cw <= sol["target_at"](fine) * (1.0 + 1e-3))
         comps = fit.model.components(fine, fs)
@@ -678,7 +446,7 @@ def project(
             )
         else:
             # the bias whose WV equals the target at the longest scale of the band
-            col = _columns(cons, tau[-1:], fs, sol.get("T_c") or tau[-1] / fs)[0, 1]
+            col = columns(cons, tau[-1:], fs, sol.get("T_c") or tau[-1] / fs)[0, 1]
             xb = float(sol["target"][-1] / col)
             if not xb > 0:
                 raise ExportError(
@@ -723,9 +491,9 @@ def project(
     if cons == "WN":
         notes.append("sensor_msgs/Imu covariance: the white part only (bias terms are states)")
     if bound:
-        cwv = _columns(cons, tau, fs, vals.get("T_c")) @ _x_of(vals, cons, fs, f_si)
+        cwv = columns(cons, tau, fs, vals.get("T_c")) @ _x_of(vals, cons, fs, f_si)
     else:
-        cwv = _columns(cons, tau, fs, plain.get("T_c")) @ np.asarray(plain_sol["x"])
+        cwv = columns(cons, tau, fs, plain.get("T_c")) @ np.asarray(plain_sol["x"])
     return Projection(
         channel=channel,
         consumer=cons,
@@ -796,7 +564,7 @@ def _intervals(
                 m = _with_u(fit.model, free, uu)
             except ValueError:
                 return {}
-            sol = _solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound)
+            sol = solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound)
             v = _values(sol, cons, fs, f_si)
             logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
         grad[:, k] = (np.array(logs[0]) - np.array(logs[1])) / (2 * h)
