@@ -184,7 +184,7 @@ def _fit_nk(fit) -> tuple[float, float]:
 
 def test_reader_round_trip_kalibr(tmp_path, gyro_fit):
     path = tmp_path / "imu.yaml"
-    eg.export(path, {"gyro_x": gyro_fit}, "kalibr", allow_partial=True)
+    eg.export(path, {"gyro_x": gyro_fit}, "kalibr", allow_partial=True, projection="fit")
     ds = eg.read_datasheet(path, channel="gyro_x")
     n, k = _fit_nk(gyro_fit)
     assert ds.kind == "gyroscope"

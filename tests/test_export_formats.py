@@ -75,7 +75,7 @@ def close(a: float, b: float) -> bool:
 # ----------------------------------------------------------------------------- VIO
 @pytest.mark.parametrize("inflate", [1.0, 3.5])
 def test_openvins(fits, inflate: float) -> None:
-    text = export(None, fits, "openvins", inflate=inflate, rostopic="/mybag/imu")
+    text = export(None, fits, "openvins", projection="fit", inflate=inflate, rostopic="/mybag/imu")
     d = _cv_yaml(text)["imu0"]
     assert close(d["gyroscope_noise_density"], inflate * worst(fits, GYROS, n_si))
     assert close(d["gyroscope_random_walk"], inflate * worst(fits, GYROS, k_si))
@@ -94,7 +94,7 @@ def test_openvins(fits, inflate: float) -> None:
 
 
 def test_basalt(fits) -> None:
-    d = json.loads(export(None, fits, "basalt"))
+    d = json.loads(export(None, fits, "basalt", projection="fit"))
     v = d["value0"]
     assert v["imu_update_rate"] == 100.0
     for key, chans, fn in (
@@ -109,28 +109,30 @@ def test_basalt(fits) -> None:
 
 
 def test_orbslam3_and_vins(fits) -> None:
-    o = _cv_yaml(export(None, fits, "orbslam3"))
+    o = _cv_yaml(export(None, fits, "orbslam3", projection="fit"))
     assert close(o["IMU.NoiseGyro"], worst(fits, GYROS, n_si))
     assert close(o["IMU.NoiseAcc"], worst(fits, ACCELS, n_si))
     assert close(o["IMU.GyroWalk"], worst(fits, GYROS, k_si))
     assert close(o["IMU.AccWalk"], worst(fits, ACCELS, k_si))
     assert o["IMU.Frequency"] == 100.0
-    text = export(None, fits, "vins")
+    text = export(None, fits, "vins", projection="fit")
     v = _cv_yaml(text)
-    assert close(v["gyr_n"], worst(fits, GYROS, n_si))
-    assert close(v["acc_n"], worst(fits, ACCELS, n_si))
-    assert close(v["gyr_w"], worst(fits, GYROS, k_si))
-    assert close(v["acc_w"], worst(fits, ACCELS, k_si))
-    assert "convention: continuous-time densities as in Kalibr" in text
+    # VINS: per-sample (discrete) standard deviations at the IMU rate, density x sqrt(fs)
+    r = math.sqrt(100.0)
+    assert close(v["gyr_n"], worst(fits, GYROS, n_si) * r)
+    assert close(v["acc_n"], worst(fits, ACCELS, n_si) * r)
+    assert close(v["gyr_w"], worst(fits, GYROS, k_si) * r)
+    assert close(v["acc_w"], worst(fits, ACCELS, k_si) * r)
+    assert "per-sample (discrete) standard deviations" in text
 
 
 def test_inflate_is_explicit(fits) -> None:
     with pytest.raises(ExportError, match="inflate must be a positive"):
-        export(None, fits, "openvins", inflate=0)
+        export(None, fits, "openvins", projection="fit", inflate=0)
     with pytest.raises(ExportError, match="reports the fit itself"):
-        export(None, fits, "datasheet", inflate=2)
-    k1 = yaml.safe_load(export(None, fits, "kalibr"))
-    k2 = yaml.safe_load(export(None, fits, "kalibr", inflate=2.5))
+        export(None, fits, "datasheet", projection="fit", inflate=2)
+    k1 = yaml.safe_load(export(None, fits, "kalibr", projection="fit"))
+    k2 = yaml.safe_load(export(None, fits, "kalibr", projection="fit", inflate=2.5))
     assert k2["gyroscope_noise_density"] == 2.5 * k1["gyroscope_noise_density"]
     assert k2["accelerometer_random_walk"] == 2.5 * k1["accelerometer_random_walk"]
     assert k2["update_rate"] == k1["update_rate"]
@@ -182,7 +184,7 @@ def _ardupilot(text: str) -> dict[str, float]:
 
 @pytest.mark.parametrize(("fmt", "rate"), [("px4", 100.0), ("ardupilot", 400.0)])
 def test_autopilot_params(fits, fmt: str, rate: float) -> None:
-    text = export(None, fits, fmt, filter_rate=rate)
+    text = export(None, fits, fmt, projection="fit", filter_rate=rate)
     d = (_px4 if fmt == "px4" else _ardupilot)(text)
     names = (
         ("EKF2_GYR_NOISE", "EKF2_ACC_NOISE", "EKF2_GYR_B_NOISE", "EKF2_ACC_B_NOISE")
@@ -204,16 +206,16 @@ def test_autopilot_params(fits, fmt: str, rate: float) -> None:
 
 def test_autopilot_needs_rate_and_warns_out_of_range(fits) -> None:
     with pytest.raises(ExportError, match="filter rate"):
-        export(None, fits, "px4")
+        export(None, fits, "px4", projection="fit")
     # inflate 200: EKF2_GYR_NOISE = 200 x 9.6e-4 rad/s > 0.1, its documented maximum
     with pytest.warns(UserWarning, match=r"EKF2_GYR_NOISE = .* outside .*\[0.0001, 0.1\]"):
-        text = export(None, fits, "px4", filter_rate=100.0, inflate=200.0)
+        text = export(None, fits, "px4", projection="fit", filter_rate=100.0, inflate=200.0)
     assert "# warning: EKF2_GYR_NOISE" in text
     # a tiny value goes below EK3_GBIAS_P_NSE's documented minimum 1e-5
     with pytest.warns(UserWarning, match="EK3_GBIAS_P_NSE"):
-        export(None, fits, "ardupilot", filter_rate=100.0, inflate=0.01)
-    d1 = _px4(export(None, fits, "px4", filter_rate=100.0))
-    d3 = _px4(export(None, fits, "px4", filter_rate=100.0, inflate=3.0))
+        export(None, fits, "ardupilot", projection="fit", filter_rate=100.0, inflate=0.01)
+    d1 = _px4(export(None, fits, "px4", projection="fit", filter_rate=100.0))
+    d3 = _px4(export(None, fits, "px4", projection="fit", filter_rate=100.0, inflate=3.0))
     assert all(close(d3[k], 3.0 * d1[k]) for k in d1)
 
 
@@ -221,7 +223,8 @@ def test_cli_export_inflate_and_filter_rate(fits, tmp_path, capsys) -> None:
     from engine.cli import main
 
     out = tmp_path / "ekf.params"
-    argv = ["export", str(demo_path()), "--model", "GM+WN+RW", "--format", "px4"]
+    argv = ["export", str(demo_path()), "--model", "GM+WN+RW", "--projection", "fit"]
+    argv += ["--format", "px4"]
     assert main([*argv, "-o", str(out), "--filter-rate", "250", "--inflate", "2"]) == 0
     text = out.read_text()
     assert "inflate = 2.0" in text and "filter rate 250.0 Hz" in text
@@ -256,9 +259,9 @@ def test_cli_openvins_rostopic_is_the_bags_topic(tmp_path, capsys) -> None:
     blog = eg.load_log(bag)
     bfits = {c: eg.fit_gmwm(eg.wavelet_variance(blog[c], fs=blog.fs), "WN+RW") for c in blog.names}
     units = {c: blog.units.get(c) or ("rad/s" if "gyro" in c else "m/s^2") for c in blog.names}
-    text = export(None, bfits, "kalibr", log=blog, units=units)
+    text = export(None, bfits, "kalibr", projection="fit", log=blog, units=units)
     assert yaml.safe_load(text)["rostopic"] == "/drone/imu/data"
-    assert "rostopic: /imu0" in export(None, bfits, "openvins", units=units)
+    assert "rostopic: /imu0" in export(None, bfits, "openvins", projection="fit", units=units)
 
 
 # ----------------------------------------------------------------------------- simulators, INS
@@ -279,7 +282,7 @@ def sq_si(r: eg.GMWMResult) -> float:
 
 
 def test_matlab(fits) -> None:
-    text = export(None, fits, "matlab", inflate=1.5)
+    text = export(None, fits, "matlab", projection="fit", inflate=1.5)
     assert re.search(r"^fs = 100\.0;", text, flags=re.MULTILINE)
     assert (
         "imuSensor('accel-gyro', 'SampleRate', fs, 'Gyroscope', gyro, 'Accelerometer', accel)"
@@ -297,22 +300,24 @@ def test_matlab(fits) -> None:
 def test_gazebo_rotors(fits) -> None:
     import xml.etree.ElementTree as ET
 
-    text = export(None, fits, "gazebo", inflate=2.0)
+    text = export(None, fits, "gazebo", projection="fit", inflate=2.0)
     root = ET.fromstring(text[text.index("<plugin") :])
     v = {e.tag: float(e.text) for e in root}
     for s, chans in (("gyroscope", GYROS), ("accelerometer", ACCELS)):
         assert close(v[f"{s}NoiseDensity"], 2.0 * worst(fits, chans, n_si))
         assert close(v[f"{s}RandomWalk"], 2.0 * worst(fits, chans, sq_si))  # GM, not RW
+        assert v[f"{s}BiasRandomWalk"] == v[f"{s}RandomWalk"]  # RotorS's spelling too
         assert close(v[f"{s}BiasCorrelationTime"], worst(fits, chans, tc))  # not inflated
         assert v[f"{s}TurnOnBiasSigma"] == 0.0
-    assert len(v) == 8
+    assert len(v) == 10
+    assert 'filename="libgazebo_imu_plugin.so"' in text  # the file PX4-classic loads
     wn_rw = {c: eg.fit_gmwm(fits[c].wv, "WN+RW") for c in ("gyro_x", "accel_x")}
     with pytest.raises(ExportError, match="GM term"):
-        export(None, wn_rw, "gazebo")
+        export(None, wn_rw, "gazebo", projection="fit")
 
 
 def test_kfgins(fits) -> None:
-    d = yaml.safe_load(export(None, fits, "kf-gins"))["imunoise"]
+    d = yaml.safe_load(export(None, fits, "kf-gins", projection="fit"))["imunoise"]
     deg = math.pi / 180
     for key, chans, f, factor in (
         ("arw", GYROS, n_si, 60 / deg),  # rad/s/sqrt(Hz) -> deg/sqrt(h)
@@ -326,7 +331,7 @@ def test_kfgins(fits) -> None:
 
 
 def test_ros_imu_covariance(fits) -> None:
-    d = yaml.safe_load(export(None, fits, "ros-imu", inflate=3.0))
+    d = yaml.safe_load(export(None, fits, "ros-imu", projection="fit", inflate=3.0))
     assert d["orientation_covariance"][0] == -1.0
     for key, chans in (
         ("angular_velocity_covariance", GYROS),
@@ -340,7 +345,7 @@ def test_ros_imu_covariance(fits) -> None:
 
 def test_every_registered_filter_format_records_inflate(fits) -> None:
     filt = ["kalibr", "openvins", "basalt", "orbslam3", "vins", "px4", "ardupilot", "matlab"]
-    filt += ["gazebo", "kf-gins", "ros-imu"]
+    filt += ["gazebo", "gz-sim", "kf-gins", "ros-imu"]
     assert set(filt) | {"json", "csv", "datasheet", "datasheet-csv"} == set(eg.export.FORMATS)
     for f in filt:
         assert "inflate = 1.25" in export(None, fits, f, inflate=1.25, filter_rate=100.0), f

@@ -5,7 +5,9 @@
                 [--ci asymptotic|bootstrap [--confidence 0.95]] [--weights ci|identity|efficient]
                 [--fs HZ] [--levels J] [--robust] [--segment ...] [--scale ...] [--units ...]
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
-                [--inflate F] [--filter-rate HZ]
+                [--inflate F] [--filter-rate HZ] [--projection bound|plain|fit]
+                [--horizon S] [--bound-band S1:S2] [--bound-confidence C] [--no-intervals]
+                [--vehicle-id ID] [--scale-factor-std PPM]
 
 The log options and the streamed WV are shared with the other subcommands
 (:mod:`engine.cli.common`). Errors are raised as :class:`~engine.cli.common.UsageError` (or the
@@ -26,6 +28,7 @@ from .common import (
     add_weights_option,
     bootstrap_kwargs,
     check_output,
+    confidence,
     log_kwargs,
     positive,
     stream_wv,
@@ -111,6 +114,48 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="px4/ardupilot: the rate (Hz) the EKF predicts at (required by those formats)",
     )
     ex.add_argument(
+        "--projection",
+        choices=["bound", "plain", "fit"],
+        default="bound",
+        help="filter formats: bound (default) projects each fit onto the consumer's noise "
+        "model and over-bounds its WV from the filter step to the horizon with the least "
+        "inflation; plain: the projection rule alone; fit: the fit's own terms, one by one",
+    )
+    ex.add_argument(
+        "--horizon",
+        type=positive(float, "--horizon"),
+        help="longest WV scale (s) the bound covers (default: the log length)",
+    )
+    ex.add_argument(
+        "--bound-band",
+        metavar="S1:S2",
+        help="filter formats: the WV scales S1:S2 (s) the bound covers (default: two filter "
+        "steps to the horizon)",
+    )
+    ex.add_argument(
+        "--bound-confidence",
+        type=confidence("--bound-confidence"),
+        metavar="C",
+        help="filter formats: bound the upper limit of the fitted WV's interval at this "
+        "confidence level (e.g. 0.95) instead of the WV itself",
+    )
+    ex.add_argument(
+        "--no-intervals",
+        action="store_true",
+        help="filter formats: skip the 95 %% intervals of the exported values (faster)",
+    )
+    ex.add_argument(
+        "--vehicle-id",
+        type=positive(int, "--vehicle-id"),
+        default=1,
+        help="px4: the MAVLink system id of the .params lines (default 1)",
+    )
+    ex.add_argument(
+        "--scale-factor-std",
+        type=positive(float, "--scale-factor-std"),
+        help="kf-gins: gsstd/asstd in ppm (not identified by GMWM; default 1000)",
+    )
+    ex.add_argument(
         "--partial",
         action="store_true",
         help="Kalibr: allow a file with only gyroscope or only accelerometer keys",
@@ -130,6 +175,16 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..models import parse_model
     from ..wv import wavelet_variance
 
+    band = None
+    if args.bound_band:
+        try:
+            band = tuple(float(v) for v in args.bound_band.replace(",", ":").split(":"))
+        except ValueError:
+            band = ()
+        if len(band) != 2 or not 0 < band[0] <= band[1]:
+            raise usage_error(
+                f"--bound-band takes S1:S2 in seconds with 0 < S1 <= S2, got {args.bound_band!r}"
+            )
     if args.robust and not 0 < args.eff < 0.99:
         raise usage_error(f"--eff must be in (0, 0.99), got {args.eff}")
     model = parse_model(_small_multipliers(args.model, "--model"))
@@ -226,6 +281,13 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         allow_partial=args.partial,
         inflate=args.inflate,
         filter_rate=args.filter_rate,
+        projection=args.projection,
+        horizon_s=args.horizon,
+        band=band,
+        confidence=args.bound_confidence,
+        ci=None if args.no_intervals else "asymptotic",
+        vehicle_id=args.vehicle_id,
+        scale_factor_std_ppm=args.scale_factor_std,
     )
     if out is None:
         return text.rstrip("\n")

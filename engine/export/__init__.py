@@ -9,6 +9,8 @@
   with the explicit ``inflate`` factor) for the filter formats:
 * :mod:`.vio` (OpenVINS, Basalt, ORB-SLAM3, VINS), :mod:`.autopilot` (PX4 EKF2, ArduPilot
   EKF3), :mod:`.sim` (MATLAB, Gazebo/RotorS), :mod:`.ins` (KF-GINS, ``sensor_msgs/Imu``);
+* :mod:`.projection`: :func:`project` (a fit onto a filter's noise model, over-bounded, with
+  intervals), used by every filter format;
 * :mod:`.registry`: the formats by name (:data:`FORMATS`) and :func:`export`.
 """
 
@@ -23,6 +25,7 @@ from .common import channel_axis
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu, kalibr_models, read_kalibr, write_kalibr
 from .noise import ImuNoise, imu_noise
+from .projection import FORMAT_CONSUMERS, ProjectedParam, Projection, project
 from .registry import FORMATS, Format, export, register
 from .report import curves_csv, fit_report, write_report
 
@@ -49,6 +52,10 @@ __all__ = [
     "BI_FACTOR",
     "ImuNoise",
     "imu_noise",
+    "project",
+    "Projection",
+    "ProjectedParam",
+    "FORMAT_CONSUMERS",
 ]
 
 

@@ -19,7 +19,11 @@ density K grows by variance ``K^2 dt_f`` per step, i.e. std ``(K sqrt(f_f)) dt_f
 with N and K the SI densities of :mod:`engine.units` (max over axes: one number per sensor).
 Each value is checked against the parameter's documented range (PX4 parameter reference and
 ArduPilot full parameter list, :data:`RANGES`); a value outside gets a warning (in the file and
-as a Python warning), since the autopilot clips or refuses it.
+as a Python warning): the ground station flags it, and the EKF then runs with a noise the
+autopilot's developers did not tune for. ArduPilot's EKF3 steps once per 12 ms of IMU data
+(``EKF_TARGET_DT``, about 80-83 Hz), not at the 400 Hz loop rate: give that as the filter
+rate. The PX4 file's vehicle (system) id is ``vehicle_id`` (default 1): QGroundControl loads
+only the lines of the connected vehicle's id.
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ RANGES: dict[str, tuple[str, str, str, float, float]] = {
     "EK3_GYRO_P_NSE": ("gyroscope", "N", "rad/s", 0.0001, 0.1),
     "EK3_ACC_P_NSE": ("accelerometer", "N", "m/s^2", 0.01, 1.0),
     "EK3_GBIAS_P_NSE": ("gyroscope", "K", "rad/s^2", 0.00001, 0.001),
-    "EK3_ABIAS_P_NSE": ("accelerometer", "K", "m/s^3", 0.00001, 0.005),
+    "EK3_ABIAS_P_NSE": ("accelerometer", "K", "m/s^3", 0.00001, 0.02),
 }
 
 
@@ -74,12 +78,18 @@ def autopilot_params(
             "(filter_rate=..., CLI --filter-rate): its noise parameters are per filter step"
         )
     fr = float(fr)
-    nz = noise_for(fits, f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters", kw)
+    label = f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters"
+    nz = noise_for(fits, label, kw, consumer="px4" if prefix == "EKF2_" else "ardupilot")
     header = [
         *nz.header,
         f"filter rate {fr!r} Hz: value = density x sqrt(filter rate) (N in rad/s/sqrt(Hz) "
         "or m/s^2/sqrt(Hz); K in rad/s^2/sqrt(Hz) or m/s^3/sqrt(Hz)), max over axes",
     ]
+    if prefix == "EK3_":
+        header.append(
+            "EKF3 predicts once per 12 ms of IMU data (about 80-83 Hz), not at the 400 Hz "
+            "loop rate: export with --filter-rate 83 unless your EKF3 runs otherwise"
+        )
     values: dict[str, float] = {}
     warn: list[str] = list(nz.warnings)
     for name, (kind, q, unit, lo, hi) in RANGES.items():
@@ -89,8 +99,9 @@ def autopilot_params(
         values[name] = v
         if not lo <= v <= hi:
             msg = (
-                f"{name} = {v:.6g} {unit} is outside its documented range [{lo:g}, {hi:g}]: "
-                "the autopilot clips or refuses it; check the filter rate and units"
+                f"{name} = {v:.6g} {unit} is outside its documented range [{lo:g}, {hi:g}] "
+                "(the ground station flags it; the EKF runs with it untuned): check the filter "
+                "rate and units"
             )
             warn.append(msg)
             warnings.warn(msg, UserWarning, stacklevel=3)
@@ -99,7 +110,12 @@ def autopilot_params(
 
 def px4_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """PX4 EKF2 noise parameters as a QGroundControl ``.params`` file (``#`` comments, then
-    ``vehicle-id<TAB>component-id<TAB>name<TAB>value<TAB>type`` with type 9 = float)."""
+    ``vehicle-id<TAB>component-id<TAB>name<TAB>value<TAB>type`` with type 9 = float); the
+    vehicle id is ``kw["vehicle_id"]`` (default 1)."""
+    vid = kw.get("vehicle_id")
+    vid = 1 if vid is None else vid
+    if isinstance(vid, bool) or not isinstance(vid, int) or not 1 <= vid <= 255:
+        raise ExportError(f"vehicle_id must be a MAVLink system id 1..255, got {vid!r}")
     values, header, warn = autopilot_params(fits, "EKF2_", **kw)
     lines = [f"# {c}" for c in header] + [f"# warning: {w}" for w in warn]
     lines.append("#")
@@ -107,7 +123,7 @@ def px4_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     rows = []  # tab-separated, of our names and numbers only: written as they are
     for name, v in values.items():
         rows.append(f"# {name} [{RANGES[name][2]}]")
-        rows.append(f"1\t1\t{name}\t{v!r}\t9")
+        rows.append(f"{vid}\t1\t{name}\t{v!r}\t9")
     return text_lines(lines) + "\n".join(rows) + "\n"
 
 

@@ -36,8 +36,9 @@ def _flow(vals: list[float]) -> str:
 def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
     one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
-    nz = noise_for(fits, "KF-GINS imunoise", kw)
+    nz = noise_for(fits, "KF-GINS imunoise", kw, consumer="kf-gins")
     nz.need("T_c", "the KF-GINS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
+    ss = float(kw.get("scale_factor_std_ppm") or 1000.0)
 
     g, a = "gyroscope", "accelerometer"
     tcs = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
@@ -53,7 +54,12 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         f"  gbstd: {_flow(nz.xyz(g, 'sigma_gm', DISPLAY[(g, 'B')].factor))}  # [deg/hr]",
         f"  abstd: {_flow(nz.xyz(a, 'sigma_gm', 1.0 / MGAL))}  # [mGal]",
         f"  corrtime: {yaml_float(max(tcs.values()) / _HOUR)}  # [hr]",
-        "  # gsstd/asstd (scale-factor std, ppm) are not estimated by GMWM: keep your config's",
+        f"  gsstd: {_flow([ss] * 3)}  # [ppm] scale-factor std: NOT estimated by GMWM (a "
+        "placeholder: set it from your IMU's datasheet)",
+        f"  asstd: {_flow([ss] * 3)}  # [ppm] scale-factor std: NOT estimated by GMWM (a "
+        "placeholder: set it from your IMU's datasheet)",
+        "  # KF-GINS requires gsstd/asstd. Its corrtime drives the Gauss-Markov model of the",
+        "  # scale-factor states too (one corrtime for gyro/accel biases and scale factors).",
     ]
     return text_lines(lines)
 
@@ -61,7 +67,7 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """``sensor_msgs/Imu`` covariance fields (YAML): diagonal per-sample WN variances in SI
     (``inflate**2`` applied), ``orientation_covariance[0] = -1``."""
-    nz = noise_for(fits, "sensor_msgs/Imu covariances", kw, allow_partial=True)
+    nz = noise_for(fits, "sensor_msgs/Imu covariances", kw, allow_partial=True, consumer="ros-imu")
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines.append(
         f"# per-sample variance of the white noise at {nz.fs:g} Hz, sigma2_WN = N^2 fs (SI), "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -310,8 +311,9 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a Kalibr ``imu.yaml`` (path, or the YAML text itself) into a dict.
 
     Reads the flat ``key: value`` layout of Kalibr IMU files, with flow mappings/lists
-    (``{x: 1.0, y: 2.0}``); indented blocks (nested mappings) are skipped. No YAML library
-    is needed.
+    (``{x: 1.0, y: 2.0}``), and the first ``imuN:`` block of Kalibr's nested output and of an
+    OpenVINS ``kalibr_imu_chain.yaml`` (``%YAML:1.0``) as if its keys were top-level; other
+    indented blocks are skipped. No YAML library is needed.
 
     Raises
     ------
@@ -327,10 +329,31 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
         except (OSError, UnicodeDecodeError) as exc:
             raise ExportError(f"cannot read Kalibr file '{source}': {exc}") from exc
     out: dict[str, Any] = {}
+    block, block_indent, used_block = "", 0, ""
     for i, raw in enumerate(text.splitlines(), start=1):
         line = _strip_comment(raw).rstrip()
-        if not line.strip() or line.strip() == "---" or line[0] in " \t-":
+        if not line.strip() or line.strip() == "---" or line.startswith("%"):
             continue
+        if line[0] in " \t-":
+            # the first imuN: block of Kalibr's imu-chain output or OpenVINS's
+            # kalibr_imu_chain.yaml: its direct key: value lines count as top-level keys
+            ind = len(line) - len(line.lstrip())
+            if not block or line.lstrip().startswith("-"):
+                continue
+            if block_indent == 0:
+                block_indent = ind
+            if ind != block_indent or used_block not in ("", block):
+                continue
+            used_block = block
+            line = line.strip()
+        else:
+            key0, _, val0 = line.partition(":")
+            block = (
+                key0.strip() if re.fullmatch(r"imu\d+", key0.strip()) and not val0.strip() else ""
+            )
+            block_indent = 0
+            if block:
+                continue
         key, sep, val = line.partition(":")
         if not sep or not key.strip():
             raise ExportError(f"Kalibr YAML line {i}: {raw.strip()!r} is not 'key: value'")

@@ -1,9 +1,18 @@
-"""The numbers every filter export needs, per sensor and axis, in SI, from the one datasheet
-table (:mod:`engine.units`): white-noise density N and random walk K (the Kalibr extraction of
-:func:`~engine.export.kalibr.kalibr_imu`), the model's bias-instability (Allan floor) B, and
-the most persistent Gauss-Markov term (correlation time T_c, stationary std sigma_gm,
-driving-noise density sqrt(q)). :func:`imu_noise` multiplies every noise value (never a time)
-by the explicit ``inflate`` factor and says so in the header it returns.
+"""The numbers every filter export needs, per sensor and axis, in SI: white-noise density N,
+bias random walk K, the model's bias-instability (Allan floor) B, and a Gauss-Markov bias
+(correlation time T_c, stationary std sigma_gm, driving-noise density sqrt(q)).
+
+:func:`imu_noise` takes them, by ``projection``:
+
+* ``"bound"`` (the filter formats' default): the fit projected onto the consumer's noise model
+  and over-bounded (:func:`~engine.export.projection.project`), with intervals;
+* ``"plain"``: the same rule without the bound;
+* ``"fit"``: the fit's own terms converted one by one (the Kalibr extraction of
+  :func:`~engine.export.kalibr.kalibr_imu`, the most persistent GM term), as before the
+  projection existed.
+
+It multiplies every noise value (never a time) by the explicit ``inflate`` factor and says so
+in the header it returns.
 """
 
 from __future__ import annotations
@@ -17,8 +26,12 @@ from ..fit import GMWMResult
 from ..units import ExportError, datasheet_rows, si_factor
 from .common import channel_axis
 from .kalibr import kalibr_imu
+from .projection import Projection, consumer_of, project
 
-__all__ = ["ImuNoise", "imu_noise", "noise_for", "check_inflate", "SENSORS"]
+__all__ = ["ImuNoise", "imu_noise", "noise_for", "check_inflate", "SENSORS", "PROJECTIONS"]
+
+#: The values of ``projection``.
+PROJECTIONS = ("bound", "plain", "fit")
 
 #: Sensor kinds in file order, with their SI signal unit.
 SENSORS = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
@@ -47,8 +60,11 @@ class ImuNoise:
         Sampling frequency of the log (Hz).
     inflate : float
     header : list of str
-        Comment lines: source, channels, models, inflate.
+        Comment lines: source, channels, models, projection and bound, each value with its
+        interval, inflate.
     warnings : list of str
+    projections : dict of str to Projection
+        Per channel (empty with ``projection="fit"``).
     """
 
     values: dict[str, dict[str, dict[str, float]]]
@@ -56,6 +72,7 @@ class ImuNoise:
     inflate: float
     header: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    projections: dict[str, Projection] = field(default_factory=dict)
 
     def conservative(self, kind: str, quantity: str) -> float:
         """Largest value over the axes (the file value of a one-number key)."""
@@ -93,17 +110,133 @@ def imu_noise(
     source: str = "",
     fmt: str = "",
     allow_partial: bool = False,
+    projection: str = "fit",
+    consumer: str = "WN+RW",
+    fs_filter: float | None = None,
+    horizon_s: float | None = None,
+    band: Any = None,
+    confidence: float | None = None,
+    ci: str | None = "asymptotic",
 ) -> ImuNoise:
-    """Gather N, K, sigma2, B and the GM numbers per sensor and axis in SI (see
-    :class:`ImuNoise`); N and K as :func:`~engine.export.kalibr.kalibr_imu` extracts them
-    (K from the GM driving noise when a model has no RW, with a warning).
+    """Gather N, K, sigma2, B and the Gauss-Markov numbers per sensor and axis in SI (see
+    :class:`ImuNoise` and the module docstring for ``projection``).
+
+    Parameters
+    ----------
+    projection : {"bound", "plain", "fit"}
+    consumer : str
+        The consumer's noise model or format (:func:`~engine.export.projection.consumer_of`).
+    fs_filter, horizon_s, band, confidence, ci
+        Passed to :func:`~engine.export.projection.project`.
 
     Raises
     ------
     ExportError
-        As :func:`~engine.export.kalibr.kalibr_imu`, or a bad ``inflate``.
+        As :func:`~engine.export.kalibr.kalibr_imu` or
+        :func:`~engine.export.projection.project`, or a bad ``inflate`` or ``projection``.
     """
     f = check_inflate(inflate)
+    if projection not in PROJECTIONS:
+        raise ExportError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
+    if projection == "fit":
+        return _fit_noise(fits, units, f, source, fmt, allow_partial)
+    cons = consumer_of(consumer)
+    if not fits:
+        raise ExportError("no fitted channel to export")
+    fss = {ch: r.fs for ch, r in fits.items()}
+    fs0 = next(iter(fss.values()))
+    if any(not math.isclose(v, fs0, rel_tol=1e-9) for v in fss.values()):
+        raise ExportError(
+            f"the channels have different sampling frequencies {fss}: the filter files take "
+            "one rate"
+        )
+    vals: dict[str, dict[str, dict[str, float]]] = {}
+    projs: dict[str, Projection] = {}
+    warnings: list[str] = []
+    chan_of: dict[tuple[str, str], str] = {}
+    for ch, res in fits.items():
+        unit = (units or {}).get(ch, res.wv.unit) or ""
+        kind, f_si = si_factor(unit, ch)
+        ax = channel_axis(ch)
+        if (kind, ax) in chan_of:
+            raise ExportError(
+                f"two {kind} channels map to axis {ax!r} ({chan_of[(kind, ax)]}, {ch}): "
+                "export one of them"
+            )
+        chan_of[(kind, ax)] = ch
+        p = project(
+            res,
+            cons,
+            fs_filter=fs_filter,
+            horizon_s=horizon_s,
+            band=band,
+            confidence=confidence,
+            bound=projection == "bound",
+            channel=ch,
+            unit=unit,
+            ci=ci,
+        )
+        projs[ch] = p
+        warnings += p.warnings
+        d = vals.setdefault(kind, {})
+        n = p.value("N")
+        d.setdefault("N", {})[ax] = n * f
+        d.setdefault("sigma2", {})[ax] = n * n * res.fs * f * f
+        if "K" in p.params:
+            d.setdefault("K", {})[ax] = p.value("K") * f
+        if "T_c" in p.params:
+            tc, sb = p.value("T_c"), p.value("sigma_b")
+            d.setdefault("T_c", {})[ax] = tc
+            d.setdefault("sigma_gm", {})[ax] = sb * f
+            d.setdefault("sqrt(q)", {})[ax] = math.sqrt(2.0 / tc) * sb * f
+        rows = datasheet_rows(res.model, res.fs, unit, channel=ch, n_levels=res.wv.n_levels)
+        d.setdefault("B", {})[ax] = (
+            _row(rows, "model", "bias instability (Allan floor, SI)", "B") * f
+        )
+    if len(vals) < 2 and not allow_partial:
+        raise ExportError(
+            f"the filter file needs gyroscope and accelerometer noise; the fits give only "
+            f"{' and '.join(vals)} ({', '.join(fits)}). Add the other channels, or allow a "
+            "partial file (allow_partial=True, CLI --partial)"
+        )
+    models = sorted({r.model.spec() for r in fits.values()})
+    p0 = next(iter(projs.values()))
+    what = (
+        "projected onto the consumer's noise model by the rule and over-bounded "
+        "(engine.export.projection; --projection plain: the rule alone, fit: the fit's own terms)"
+        if projection == "bound"
+        else "projected onto the consumer's noise model by the rule, not bounded "
+        "(--projection plain)"
+    )
+    header = [
+        f"{fmt or 'IMU noise'} from a GMWM fit (engine.export, gmwm export)",
+        f"source: {source or 'in-memory fits'}; channels: {', '.join(fits)}; "
+        f"model(s): {'; '.join(models)}; log rate {fs0:g} Hz",
+        f"consumer model {cons}, filter rate {p0.fs_filter:g} Hz: {what}",
+        "rule: an AR1/GM faster than the filter step is white noise (its WN equivalent joins "
+        "N); slower GM, RW and drift form the consumer's bias; file values are the max over "
+        "axes where the consumer takes one number",
+    ]
+    for p in projs.values():
+        header += p.header_lines()
+    header.append(
+        f"inflate = {f!r}: every noise value below is the projected value x {f!r} "
+        "(variances x inflate^2; times and rates unchanged)"
+    )
+    return ImuNoise(vals, float(fs0), f, header, warnings, projs)
+
+
+def _fit_noise(
+    fits: Mapping[str, GMWMResult],
+    units: Mapping[str, str] | None,
+    f: float,
+    source: str,
+    fmt: str,
+    allow_partial: bool,
+) -> ImuNoise:
+    """``projection="fit"``: N and K as :func:`~engine.export.kalibr.kalibr_imu` extracts
+    them (K from the GM driving noise when a model has no RW, with a warning), the most
+    persistent GM term's numbers."""
     kal = kalibr_imu(fits, units=units, source=source, allow_partial=allow_partial)
     vals: dict[str, dict[str, dict[str, float]]] = {}
     for key, axes in kal.per_axis.items():
@@ -136,6 +269,7 @@ def imu_noise(
         f"{fmt or 'IMU noise'} from a GMWM fit (engine.export, gmwm export)",
         f"source: {source or 'in-memory fits'}; channels: {', '.join(fits)}; "
         f"model(s): {'; '.join(models)}; log rate {kal.update_rate:g} Hz",
+        "projection fit: the fit's own terms converted one by one (no projection, no bound)",
         f"inflate = {f!r}: every noise value below is the fitted value x {f!r} "
         "(variances x inflate^2; times and rates unchanged)",
     ]
@@ -147,8 +281,12 @@ def noise_for(
     fmt: str,
     options: Mapping[str, Any],
     allow_partial: bool = False,
+    consumer: str = "WN+RW",
+    fs_filter: float | None = None,
 ) -> ImuNoise:
-    """:func:`imu_noise` with a writer's options (``units``, ``inflate``, ``source``)."""
+    """:func:`imu_noise` with a writer's options (``units``, ``inflate``, ``source``,
+    ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``; ``filter_rate`` unless
+    ``fs_filter`` is given)."""
     return imu_noise(
         fits,
         units=options.get("units"),
@@ -156,4 +294,11 @@ def noise_for(
         source=options.get("source", ""),
         fmt=fmt,
         allow_partial=allow_partial,
+        projection=options.get("projection") or "bound",
+        consumer=consumer,
+        fs_filter=fs_filter if fs_filter is not None else options.get("filter_rate"),
+        horizon_s=options.get("horizon_s"),
+        band=options.get("band"),
+        confidence=options.get("confidence"),
+        ci=options.get("ci", "asymptotic"),
     )

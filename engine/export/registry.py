@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING, Any
 from ..fit import GMWMResult
 from ..units import ExportError
 from . import autopilot, ins, sim, vio
-from .common import source_text
+from .common import channel_axis, source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
-from .kalibr import kalibr_imu, read_kalibr
-from .noise import check_inflate
+from .kalibr import KalibrImu, kalibr_imu, read_kalibr
+from .noise import check_inflate, noise_for
 from .report import curves_csv, fit_report
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -36,7 +36,8 @@ class Format:
     """An export format: ``writer(fits, **options) -> text``; ``reader(path or text)``.
 
     The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
-    ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``.
+    ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
+    ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``.
     """
 
     name: str
@@ -57,22 +58,53 @@ def register(fmt: Format) -> Format:
 
 
 def _kalibr(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    kal = kalibr_imu(
-        fits,
-        units=kw.get("units"),
-        rostopic=kw.get("rostopic") or "/imu0",
-        source=kw.get("source", ""),
-        allow_partial=kw.get("allow_partial", False),
-    )
     f = check_inflate(kw.get("inflate", 1.0))
-    kal = dataclasses.replace(
-        kal,
-        values={k: v * f for k, v in kal.values.items()},
-        per_axis={k: {a: v * f for a, v in d.items()} for k, d in kal.per_axis.items()},
-        comments=[
-            *kal.comments,
-            f"inflate = {f!r}: every noise value below is the fitted value x {f!r}",
-        ],
+    if (kw.get("projection") or "bound") == "fit":
+        kal = kalibr_imu(
+            fits,
+            units=kw.get("units"),
+            rostopic=kw.get("rostopic") or "/imu0",
+            source=kw.get("source", ""),
+            allow_partial=kw.get("allow_partial", False),
+        )
+        kal = dataclasses.replace(
+            kal,
+            values={k: v * f for k, v in kal.values.items()},
+            per_axis={k: {a: v * f for a, v in d.items()} for k, d in kal.per_axis.items()},
+            comments=[
+                *kal.comments,
+                "projection fit: the fit's own WN and RW terms (no projection, no bound)",
+                f"inflate = {f!r}: every noise value below is the fitted value x {f!r}",
+            ],
+        )
+        return kal.to_yaml()
+    nz = noise_for(
+        fits, "Kalibr imu.yaml", kw, allow_partial=kw.get("allow_partial", False), consumer="kalibr"
+    )
+    per_axis: dict[str, dict[str, float]] = {}
+    chosen: dict[str, str] = {}
+    values: dict[str, float] = {}
+    for ch, p in nz.projections.items():
+        kind = p.sensor or ""
+        ax = channel_axis(ch)
+        per_axis.setdefault(f"{kind}_noise_density", {})[ax] = nz.values[kind]["N"][ax]
+        per_axis.setdefault(f"{kind}_random_walk", {})[ax] = nz.values[kind]["K"][ax]
+    for key, axes in per_axis.items():
+        ax = max(axes, key=lambda a: axes[a])
+        values[key] = axes[ax]
+        kind = key.split("_")[0]
+        chosen[key] = next(
+            c for c, p in nz.projections.items() if p.sensor == kind and channel_axis(c) == ax
+        )
+    kal = KalibrImu(
+        values=values,
+        chosen=chosen,
+        per_axis=per_axis,
+        sources={},
+        update_rate=nz.fs,
+        rostopic=kw.get("rostopic") or "/imu0",
+        comments=nz.header,
+        warnings=nz.warnings,
     )
     return kal.to_yaml()
 
@@ -139,7 +171,10 @@ register(
     )
 )
 register(Format("matlab", "MATLAB gyroparams/accelparams .m", sim.matlab_m, None, ".m"))
-register(Format("gazebo", "Gazebo/RotorS IMU plugin (GM bias)", sim.gazebo_xml, None, ".xml"))
+register(
+    Format("gazebo", "Gazebo classic PX4/RotorS IMU plugin (GM bias)", sim.gazebo_xml, None, ".xml")
+)
+register(Format("gz-sim", "gz-sim SDF <imu> <noise> (GM bias)", sim.gz_sim_sdf, None, ".sdf"))
 register(Format("kf-gins", "KF-GINS imunoise (GM bias)", ins.kfgins_yaml, None, ".yaml"))
 register(Format("ros-imu", "sensor_msgs/Imu covariances", ins.ros_imu_yaml, None, ".yaml"))
 register(Format("vins", "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w", vio.vins_yaml, None, ".yaml"))
@@ -158,6 +193,13 @@ def export(
     allow_partial: bool = False,
     inflate: float = 1.0,
     filter_rate: float | None = None,
+    projection: str = "bound",
+    horizon_s: float | None = None,
+    band: Sequence[float] | None = None,
+    confidence: float | None = None,
+    ci: str | None = "asymptotic",
+    vehicle_id: int = 1,
+    scale_factor_std_ppm: float | None = None,
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -186,7 +228,20 @@ def export(
         Kalibr/OpenVINS ``rostopic``; default: the bag's IMU topic when ``log`` came from a
         bag, else ``/imu0``.
     filter_rate : float, optional
-        PX4/ArduPilot: the rate (Hz) the EKF predicts at (required by those formats).
+        PX4/ArduPilot: the rate (Hz) the EKF predicts at (required by those formats); the
+        other filter formats: the filter's step for the projection (default the log's rate).
+    projection : {"bound", "plain", "fit"}
+        Filter formats: ``"bound"`` (default) projects each fit onto the consumer's noise model
+        and over-bounds it (:func:`engine.export.projection.project`); ``"plain"`` the rule
+        without the bound; ``"fit"`` the fit's own terms converted one by one (no projection).
+    horizon_s, band, confidence, ci
+        The bound's horizon (s, default the log length), its WV scales (s), the confidence of
+        the fitted WV's upper limit to bound (default: the WV itself), the intervals
+        (``"asymptotic"`` or None); :func:`engine.export.projection.project`.
+    vehicle_id : int
+        PX4: the MAVLink system id of the ``.params`` lines (default 1).
+    scale_factor_std_ppm : float, optional
+        KF-GINS: ``gsstd``/``asstd`` (not identified by GMWM; default 1000 ppm).
     """
     f = FORMATS.get(fmt)
     if f is None:
@@ -201,6 +256,13 @@ def export(
         allow_partial=allow_partial,
         inflate=inflate,
         filter_rate=filter_rate,
+        projection=projection,
+        horizon_s=horizon_s,
+        band=band,
+        confidence=confidence,
+        ci=ci,
+        vehicle_id=vehicle_id,
+        scale_factor_std_ppm=scale_factor_std_ppm,
     )
     if path is not None:
         Path(path).write_text(text)

@@ -1,7 +1,7 @@
 """Visual-inertial estimators: OpenVINS ``kalibr_imu_chain.yaml``, Basalt calibration JSON,
 ORB-SLAM3 settings and VINS-Mono/Fusion config keys.
 
-All four take continuous-time densities in SI: the white-noise density
+OpenVINS, Basalt and ORB-SLAM3 take continuous-time densities in SI: the white-noise density
 ``N = sqrt(sigma2 / fs)`` and the random-walk density ``K = sqrt(gamma2 fs)`` of
 :mod:`engine.units` (CONVENTIONS, "Units and datasheet conversions"), as gathered by
 :func:`~engine.export.noise.imu_noise`. Where a format takes one number per sensor it gets the
@@ -23,14 +23,18 @@ Sources of the keys' meaning:
   ``IMU.Frequency: 200.0``: the Kalibr EuRoC densities; ``ImuTypes.cc`` multiplies them by
   ``sqrt(freq)``);
 * VINS-Mono/Fusion: ``config/euroc/euroc_mono_imu_config.yaml`` (``acc_n``, ``gyr_n``,
-  ``acc_w``, ``gyr_w``). Their comments call them "measurement noise standard deviation" and
-  "bias random work noise standard deviation" and the EuRoC values are the Kalibr densities
-  inflated by hand; we write the Kalibr convention (N and K) and say so in the file.
+  ``acc_w``, ``gyr_w``). ``integration_base.h`` puts ``ACC_N^2`` and ``GYR_N^2`` into the
+  per-sample measurement-noise covariance and ``ACC_W^2 dt^2``/``GYR_W^2 dt^2`` into the bias
+  increment of one step: per-sample (discrete) standard deviations at the IMU rate. So
+  ``acc_n = N sqrt(fs)`` (the std of white noise of density N sampled at fs) and
+  ``acc_w = K sqrt(fs)`` (a random walk of density K grows by ``K sqrt(dt)`` per step,
+  ``= acc_w dt``): about 10x the Kalibr densities at 100 Hz.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -56,7 +60,7 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     identity ``T_i_b``/``Tw``/``R_IMUtoGYRO``/``Ta``/``R_IMUtoACC``, zero ``Tg``, the four Kalibr
     densities (max over axes, SI), ``rostopic`` (``kw["rostopic"]``), ``time_offset: 0.0``,
     ``update_rate`` (the log's rate) and ``model: "kalibr"``."""
-    nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", kw)
+    nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", kw, consumer="openvins")
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     lines += ["", "imu0:", "  T_i_b:  # IMU to body: identity (not estimated by GMWM)"]
@@ -84,7 +88,7 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     ``accel_bias_std`` = K in SI; an axis that was not fitted gets the max over the fitted
     axes. JSON has no comments: ``gmwm_export`` (a sibling of ``value0``, which Basalt does
     not read) holds the header and units. Merge ``value0``'s keys into the calib file."""
-    nz = noise_for(fits, "Basalt calibration JSON", kw)
+    nz = noise_for(fits, "Basalt calibration JSON", kw, consumer="basalt")
     v0: dict[str, Any] = {"imu_update_rate": nz.fs}
     units: dict[str, str] = {"imu_update_rate": "Hz"}
     for kind, short in (("accelerometer", "accel"), ("gyroscope", "gyro")):
@@ -104,36 +108,47 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 
 def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """ORB-SLAM3 settings lines (``%YAML:1.0``): ``IMU.NoiseGyro``/``IMU.NoiseAcc`` = N,
-    ``IMU.GyroWalk``/``IMU.AccWalk`` = K (max over axes, SI), ``IMU.Frequency`` [Hz]."""
-    nz = noise_for(fits, "ORB-SLAM3 IMU settings", kw)
+    ``IMU.GyroWalk``/``IMU.AccWalk`` = K (max over axes, SI), ``IMU.Frequency`` [Hz] as an
+    integer (the legacy settings parser reads it with ``(int)``; a non-integer rate is rounded
+    with a warning)."""
+    nz = noise_for(fits, "ORB-SLAM3 IMU settings", kw, consumer="orbslam3")
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
+    freq = round(nz.fs)
+    if abs(freq - nz.fs) > 1e-9 * nz.fs:
+        lines.append(
+            f"# warning: the log rate {nz.fs!r} Hz is not an integer; IMU.Frequency is an "
+            f"integer in ORB-SLAM3: written as {freq}"
+        )
     g, a = "gyroscope", "accelerometer"
     lines += [
         f"IMU.NoiseGyro: {yaml_float(nz.conservative(g, 'N'))}  # [{_ND[g]}] N",
         f"IMU.NoiseAcc: {yaml_float(nz.conservative(a, 'N'))}  # [{_ND[a]}] N",
         f"IMU.GyroWalk: {yaml_float(nz.conservative(g, 'K'))}  # [{_RW[g]}] K",
         f"IMU.AccWalk: {yaml_float(nz.conservative(a, 'K'))}  # [{_RW[a]}] K",
-        f"IMU.Frequency: {yaml_float(nz.fs)}  # [Hz]",
+        f"IMU.Frequency: {freq}  # [Hz] an integer (ORB-SLAM3's legacy parser)",
     ]
     return text_lines(lines)
 
 
 def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    """VINS-Mono/Fusion IMU keys (``%YAML:1.0``): ``acc_n``/``gyr_n`` = N, ``acc_w``/``gyr_w``
-    = K (max over axes, SI): the Kalibr continuous-time convention, stated in the file."""
-    nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", kw)
+    """VINS-Mono/Fusion IMU keys (``%YAML:1.0``): per-sample (discrete) standard deviations at
+    the log's rate, ``acc_n``/``gyr_n`` = ``N sqrt(fs)`` and ``acc_w``/``gyr_w`` =
+    ``K sqrt(fs)`` (max over axes, SI; module docstring), stated in the file."""
+    nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", kw, consumer="vins")
+    r = math.sqrt(nz.fs)
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     lines.append(
-        "# convention: continuous-time densities as in Kalibr (acc_n = N, acc_w = K); "
-        "VINS's EuRoC config uses hand-inflated values: scale with --inflate if needed"
+        f"# convention: VINS uses these as per-sample (discrete) standard deviations at the IMU "
+        f"rate (integration_base.h): acc_n = N sqrt(fs), acc_w = K sqrt(fs) with fs = "
+        f"{nz.fs:g} Hz (x{r:.4g} the Kalibr densities); re-export if the IMU rate differs"
     )
     g, a = "gyroscope", "accelerometer"
     lines += [
-        f"acc_n: {yaml_float(nz.conservative(a, 'N'))}  # [{_ND[a]}] accelerometer N",
-        f"gyr_n: {yaml_float(nz.conservative(g, 'N'))}  # [{_ND[g]}] gyroscope N",
-        f"acc_w: {yaml_float(nz.conservative(a, 'K'))}  # [{_RW[a]}] accelerometer bias K",
-        f"gyr_w: {yaml_float(nz.conservative(g, 'K'))}  # [{_RW[g]}] gyroscope bias K",
+        f"acc_n: {yaml_float(nz.conservative(a, 'N') * r)}  # [m/s^2] accelerometer N sqrt(fs)",
+        f"gyr_n: {yaml_float(nz.conservative(g, 'N') * r)}  # [rad/s] gyroscope N sqrt(fs)",
+        f"acc_w: {yaml_float(nz.conservative(a, 'K') * r)}  # [m/s^3] accelerometer K sqrt(fs)",
+        f"gyr_w: {yaml_float(nz.conservative(g, 'K') * r)}  # [rad/s^2] gyroscope K sqrt(fs)",
     ]
     return text_lines(lines)

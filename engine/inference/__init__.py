@@ -33,6 +33,7 @@ from .asymptotic import (
     free_params,
     frequency_grid,
     jacobian,
+    param_cov,
     spectral_density,
     wv_cov_model,
 )
@@ -75,6 +76,7 @@ __all__ = [
     "jacobian",
     "free_params",
     "asymptotic_bounds",
+    "param_cov",
     "j_test",
     "JTest",
     "rank_models",

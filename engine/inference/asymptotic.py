@@ -21,6 +21,7 @@ __all__ = [
     "wv_cov_model",
     "free_params",
     "jacobian",
+    "param_cov",
     "asymptotic_bounds",
 ]
 
@@ -153,6 +154,31 @@ def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     return jac
 
 
+def param_cov(res: Any, vmat: np.ndarray, free: list[tuple[int, str]] | None = None) -> np.ndarray:
+    """The sandwich covariance ``(A' W A)^-1 A' W V W A (A' W A)^-1`` of the free parameters
+    (:func:`free_params`, in that order) in their unconstrained coordinates (log of variances
+    and beta, atanh of phi, omega as is).
+
+    Parameters
+    ----------
+    res : GMWMResult
+        The fit (model, WV, Omega, at_bound).
+    vmat : ndarray (J, J)
+        Covariance of the WV.
+    free : list of (process index, parameter name), optional
+        Default :func:`free_params` of ``res``.
+
+    Returns
+    -------
+    ndarray (p, p)
+    """
+    free = free_params(res) if free is None else free
+    a = jacobian(res, free)
+    w = res.omega
+    bread = np.linalg.pinv(a.T @ w @ a)
+    return bread @ a.T @ w @ vmat @ w @ a @ bread
+
+
 def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[float, float]]:
     """Wald bounds of every parameter (in ``res.param_records`` order) at two-sided ``level``.
 
@@ -173,10 +199,7 @@ def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[fl
     from scipy import stats
 
     free = free_params(res)
-    a = jacobian(res, free)
-    w = res.omega
-    bread = np.linalg.pinv(a.T @ w @ a)
-    cov = bread @ a.T @ w @ vmat @ w @ a @ bread
+    cov = param_cov(res, vmat, free)
     se = np.sqrt(np.maximum(np.diagonal(cov), 0.0))
     z = stats.norm.ppf(0.5 + level / 2)
     u0 = _u0(res.model, free)

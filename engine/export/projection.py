@@ -1,0 +1,578 @@
+"""From a fitted GMWM model to the noise model a navigation filter assumes: projection,
+over-bound and the uncertainty of every exported number (:func:`project`).
+
+API::
+
+    project(fit, consumer, *, fs_filter=None, horizon_s=None, band=None, confidence=None,
+            bound=True, channel="", unit=None, ci="asymptotic", level=0.95) -> Projection
+
+``consumer`` is a consumer model (``"WN+RW"``: white noise + bias random walk; ``"WN+GM"``:
+white noise + first-order Gauss-Markov bias; ``"WN"``: white noise only) or a format name of
+:data:`FORMAT_CONSUMERS`. :class:`Projection` holds per parameter (``N`` [u/sqrt(Hz)],
+``K`` [u/s/sqrt(Hz)], ``sigma_b`` [u], ``T_c`` [s], SI when the unit is known) the exported
+value, the plain conversion, the factor between them, the binding scale and what it bounds,
+and the 95 % interval; :attr:`Projection.per_sample` gives the same numbers per filter step.
+
+**The rule** (one rule for every filter format, the CLI and the app):
+
+* an AR1/GM whose correlation time is shorter than the filter's step ``1/fs_filter`` is white
+  noise: its white-noise equivalent ``sigma2_gm (1 + phi) / (1 - phi)`` (per log sample, its
+  spectrum at DC) joins WN; QN joins WN as the white noise with its WV at the filter's first
+  scale (``3 q2 / m``, m log samples per filter step; above QN's WV at every longer scale);
+* slower AR1/GM terms, RW and drift form the consumer's bias: a random walk (``WN+RW``) whose
+  PSD ``K^2 = sum 2 beta sigma2_gm + gamma2 fs`` bounds each GM's PSD (drift: the RW with its WV
+  at the horizon), or a Gauss-Markov bias (``WN+GM``) with the most persistent slow term's
+  correlation time and the summed driving noise; ``WN`` consumers (``sensor_msgs/Imu``) take
+  only the white part (the bias belongs to the estimator's states);
+* a term the consumer needs positive that comes out 0 is set with a warning (never a silent 0),
+  or refused with the reason when nothing in the fit can set it.
+
+That is the **plain conversion**. **The bound** (``bound=True``, the filter formats' default)
+then chooses the consumer's parameters so that its WV (Haar, CONVENTIONS) is at least the
+fitted model's, or its upper ``confidence`` limit (eta3: ``eta / chi2_{(1-c)/2}(eta)`` times
+the fitted WV), at every scale ``tau`` of ``band`` (default from two filter steps to the
+horizon, default the log length), with the least inflation: the consumer's WV is linear in
+its variances, so a linear programme minimises the summed ratio consumer WV / target over the
+scales (``scipy.optimize.linprog``); a Gauss-Markov bias adds a 1-D search over ``T_c``. At the
+optimum the bound is tight at the binding scales, which each parameter reports.
+
+The 95 % intervals come from the asymptotic (sandwich) covariance of the fit's parameters
+(:func:`engine.inference.param_cov`) by the delta method on the log of each exported value,
+differentiating the whole projection (rule and bound) numerically.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from statistics import NormalDist
+from typing import Any
+
+import numpy as np
+
+from ..fit import GMWMResult
+from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model
+from ..units import ExportError, si_factor
+from .bound import POINTS_PER_OCTAVE, Split, columns, fine_scales, solve
+
+__all__ = [
+    "CONSUMER_PARAMS",
+    "FORMAT_CONSUMERS",
+    "ProjectedParam",
+    "Projection",
+    "project",
+    "consumer_of",
+]
+
+#: Consumer noise models and the parameters they take.
+CONSUMER_PARAMS: dict[str, tuple[str, ...]] = {
+    "WN+RW": ("N", "K"),
+    "WN+GM": ("N", "sigma_b", "T_c"),
+    "WN": ("N",),
+}
+
+#: The consumer model of each filter format.
+FORMAT_CONSUMERS: dict[str, str] = {
+    "kalibr": "WN+RW",
+    "openvins": "WN+RW",
+    "basalt": "WN+RW",
+    "orbslam3": "WN+RW",
+    "vins": "WN+RW",
+    "px4": "WN+RW",
+    "ardupilot": "WN+RW",
+    "matlab": "WN+RW",
+    "gazebo": "WN+GM",
+    "gz-sim": "WN+GM",
+    "kf-gins": "WN+GM",
+    "ros-imu": "WN",
+}
+
+#: The sandwich covariance of each fit's free parameters (fits are immutable).
+_COV: weakref.WeakKeyDictionary[GMWMResult, np.ndarray] = weakref.WeakKeyDictionary()
+
+
+def consumer_of(consumer: str) -> str:
+    """The consumer model (a key of :data:`CONSUMER_PARAMS`) of a model or format name."""
+    c = consumer.strip()
+    if c.upper() in CONSUMER_PARAMS:
+        return c.upper()
+    if c.lower() in FORMAT_CONSUMERS:
+        return FORMAT_CONSUMERS[c.lower()]
+    raise ExportError(
+        f"unknown consumer {consumer!r}: use a consumer model ({', '.join(CONSUMER_PARAMS)}) "
+        f"or a filter format ({', '.join(FORMAT_CONSUMERS)})"
+    )
+
+
+@dataclass(frozen=True)
+class ProjectedParam:
+    """One exported parameter.
+
+    Attributes
+    ----------
+    name : str
+        ``N``, ``K``, ``sigma_b`` or ``T_c``.
+    value : float
+        The exported value (bounded unless the projection is plain), before ``--inflate``.
+    plain : float
+        The plain conversion (the rule without the bound).
+    unit : str
+    factor : float
+        ``value / plain`` (nan when the plain value is 0).
+    binding_tau_s : float
+        The WV scale (s) at which the bound is tight for this parameter (nan: not binding).
+    binds : str
+        The fitted term that dominates the target WV at that scale (``GM_1``), or why the
+        value was set otherwise.
+    low, high : float
+        Its interval at ``level`` (nan when not computed or not identified).
+    level : float
+    """
+
+    name: str
+    value: float
+    plain: float
+    unit: str
+    factor: float = math.nan
+    binding_tau_s: float = math.nan
+    binds: str = ""
+    low: float = math.nan
+    high: float = math.nan
+    level: float = 0.95
+
+    def describe(self) -> str:
+        """``K = 1.2e-05 rad/s^2/sqrt(Hz) [9e-06, 1.6e-05] x3.1: bounds GM_1 at tau = 82 s``."""
+        iv = (
+            f" [{self.low:.4g}, {self.high:.4g}] ({100 * self.level:g} %)"
+            if math.isfinite(self.low) and math.isfinite(self.high)
+            else ""
+        )
+        s = f"{self.name} = {self.value:.6g} {self.unit}{iv}"
+        if math.isfinite(self.factor):
+            s += f"; x{self.factor:.3g} over the plain conversion {self.plain:.6g}"
+        if math.isfinite(self.binding_tau_s):
+            s += f"; binding at tau = {self.binding_tau_s:.4g} s ({self.binds})"
+        elif self.binds:
+            s += f"; {self.binds}"
+        return s
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (NaN as None)."""
+
+        def f(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        return {
+            "name": self.name,
+            "value": f(self.value),
+            "plain": f(self.plain),
+            "unit": self.unit,
+            "factor": f(self.factor),
+            "binding_tau_s": f(self.binding_tau_s),
+            "binds": self.binds,
+            "low": f(self.low),
+            "high": f(self.high),
+            "level": self.level,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Projection:
+    """A fitted model projected onto a consumer's noise model (and bounded).
+
+    Attributes
+    ----------
+    channel : str
+    consumer : str
+        ``WN+RW``, ``WN+GM`` or ``WN``.
+    sensor : str or None
+        ``gyroscope``, ``accelerometer`` or None (unknown unit: values in the log's unit).
+    unit : str
+        The signal unit of the values (``rad/s``, ``m/s^2`` or the log's).
+    fs, fs_filter : float
+        Log and filter rates (Hz).
+    band : (float, float)
+        WV scales (s) over which the bound holds.
+    horizon_s : float
+    confidence : float or None
+        None: the bound is against the fitted WV; else its upper limit at this level.
+    bounded : bool
+        False: the plain conversion.
+    params : dict of str to ProjectedParam
+    assignment : dict of str to str
+        Where each fitted term went and why.
+    tau_s, fitted_wv, target_wv, consumer_wv : ndarray
+        The scales of the band (s) and the WVs there (unit^2): fitted model, bound target,
+        exported consumer model.
+    notes, warnings : list of str
+    """
+
+    channel: str
+    consumer: str
+    sensor: str | None
+    unit: str
+    fs: float
+    fs_filter: float
+    band: tuple[float, float]
+    horizon_s: float
+    confidence: float | None
+    bounded: bool
+    params: dict[str, ProjectedParam]
+    assignment: dict[str, str]
+    tau_s: np.ndarray
+    fitted_wv: np.ndarray
+    target_wv: np.ndarray
+    consumer_wv: np.ndarray
+    notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def value(self, name: str) -> float:
+        """The exported value of parameter ``name``."""
+        return self.params[name].value
+
+    @property
+    def per_sample(self) -> dict[str, float]:
+        """Per filter step (``dt_f = 1/fs_filter``): ``sigma_N`` = ``N sqrt(fs_filter)``
+        (std of the white noise averaged over a step), ``sigma_K`` = ``K / sqrt(fs_filter)``
+        (std of the bias random walk's increment per step), ``phi_b`` = ``exp(-dt_f / T_c)``
+        and ``sigma_b`` for a Gauss-Markov bias."""
+        out = {"sigma_N": self.value("N") * math.sqrt(self.fs_filter)}
+        if "K" in self.params:
+            out["sigma_K"] = self.value("K") / math.sqrt(self.fs_filter)
+        if "T_c" in self.params:
+            out["phi_b"] = math.exp(-1.0 / (self.fs_filter * self.value("T_c")))
+            out["sigma_b"] = self.value("sigma_b")
+        return out
+
+    def header_lines(self) -> list[str]:
+        """Comment lines: what was projected, bounded, and each value with its interval."""
+        how = (
+            "plain conversion (no bound)"
+            if not self.bounded
+            else (
+                f"bounded: its WV >= the fitted model's "
+                f"{'WV' if self.confidence is None else f'upper {100 * self.confidence:g} % limit'}"
+                f" at every scale tau = {self.band[0]:.4g} .. {self.band[1]:.4g} s "
+                "with the least inflation"
+            )
+        )
+        lines = [
+            f"{self.channel}: projected onto {self.consumer} at filter rate "
+            f"{self.fs_filter:g} Hz; {how}",
+            "  " + "; ".join(f"{k} -> {v}" for k, v in self.assignment.items()),
+        ]
+        lines += [f"  {p.describe()}" for p in self.params.values()]
+        lines += [f"  note: {n}" for n in self.notes]
+        return lines
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        return {
+            "channel": self.channel,
+            "consumer": self.consumer,
+            "sensor": self.sensor,
+            "unit": self.unit,
+            "fs": self.fs,
+            "fs_filter": self.fs_filter,
+            "band_s": list(self.band),
+            "horizon_s": self.horizon_s,
+            "confidence": self.confidence,
+            "bounded": self.bounded,
+            "params": {k: p.to_dict() for k, p in self.params.items()},
+            "per_sample": self.per_sample,
+            "assignment": dict(self.assignment),
+            "notes": list(self.notes),
+            "warnings": list(self.warnings),
+        }
+
+
+def _values(sol: dict[str, Any], consumer: str, fs: float, f_si: float) -> dict[str, float]:
+    """Exported values (SI) of a solution."""
+    x = sol["x"]
+    v = {"N": math.sqrt(max(x[0], 0.0) / fs) * f_si}
+    if consumer == "WN+RW":
+        v["K"] = math.sqrt(max(x[1], 0.0) * fs) * f_si
+    elif consumer == "WN+GM":
+        v["sigma_b"] = math.sqrt(max(x[1], 0.0)) * f_si
+        v["T_c"] = float(sol["T_c"])
+    return v
+
+
+def _with_u(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
+    procs = list(model.processes)
+    for (i, name), ui in zip(free, u, strict=True):
+        procs[i] = procs[i].with_values(**{name: FROM_UNCONSTRAINED[name](float(ui))})
+    return Model(tuple(procs))
+
+
+def project(
+    fit: GMWMResult,
+    consumer: str,
+    *,
+    fs_filter: float | None = None,
+    horizon_s: float | None = None,
+    band: Sequence[float] | None = None,
+    confidence: float | None = None,
+    bound: bool = True,
+    channel: str = "",
+    unit: str | None = None,
+    ci: str | None = "asymptotic",
+    level: float = 0.95,
+) -> Projection:
+    """Project a fitted model onto a consumer's noise model and bound it (module docstring).
+
+    Parameters
+    ----------
+    fit : GMWMResult
+        One channel's fit.
+    consumer : str
+        ``"WN+RW"``, ``"WN+GM"``, ``"WN"``, or a format name (:data:`FORMAT_CONSUMERS`).
+    fs_filter : float, optional
+        The rate (Hz) the filter steps at; default the log's rate.
+    horizon_s : float, optional
+        Longest WV scale (s) of the bound; default the log length ``n / fs``.
+    band : (float, float), optional
+        WV scales (s) of the bound; default ``(2 / fs_filter, horizon_s)``.
+    confidence : float, optional
+        Bound the upper ``confidence`` limit of the fitted WV instead of the WV (e.g. 0.95).
+    bound : bool
+        False: the plain conversion (no bound).
+    channel : str
+        Channel name for messages.
+    unit : str, optional
+        The signal unit (default ``fit.wv.unit``); a known gyroscope/accelerometer unit gives
+        SI values, another unit the log's own.
+    ci : {"asymptotic", None}
+        The intervals of the exported values (delta method on the sandwich covariance); None
+        skips them.
+    level : float
+        Interval level.
+
+    Returns
+    -------
+    Projection
+
+    Raises
+    ------
+    ExportError
+        Unknown consumer, bad rates or band, or a parameter the consumer needs that nothing in
+        the fit can set.
+    """
+    cons = consumer_of(consumer)
+    fs = float(fit.fs)
+    fs_f = fs if fs_filter is None else float(fs_filter)
+    if not (math.isfinite(fs_f) and fs_f > 0):
+        raise ExportError(f"fs_filter must be a positive rate in Hz, got {fs_filter!r}")
+    n = int(fit.wv.n)
+    hz = n / fs if horizon_s is None else float(horizon_s)
+    if not (math.isfinite(hz) and hz > 0):
+        raise ExportError(f"horizon_s must be a positive time in s, got {horizon_s!r}")
+    lo_s, hi_s = (2.0 / fs_f, hz) if band is None else (float(band[0]), float(band[1]))
+    lo_s = max(lo_s, 2.0 / fs)
+    if not (math.isfinite(lo_s) and math.isfinite(hi_s) and 0 < lo_s <= hi_s):
+        raise ExportError(
+            f"band must be two WV scales in s with {2.0 / fs:g} <= low <= high, got "
+            f"{band!r} (horizon {hz:g} s)"
+        )
+    if confidence is not None and not 0 < float(confidence) < 1:
+        raise ExportError(f"confidence must be in (0, 1), got {confidence!r}")
+    u = (unit if unit is not None else fit.wv.unit) or ""
+    try:
+        sensor, f_si = si_factor(u, channel)
+        si_unit = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}[sensor]
+    except ExportError:
+        sensor, f_si, si_unit = None, 1.0, u or "u"
+    # scales: even numbers of log samples, POINTS_PER_OCTAVE per octave
+    t0, t1 = lo_s * fs, max(hi_s * fs, lo_s * fs)
+    k = max(int(math.ceil(POINTS_PER_OCTAVE * math.log2(t1 / t0))) + 1, 2)
+    tau = np.unique(np.maximum(2.0 * np.round(np.geomspace(t0, t1, k) / 2.0), 2.0))
+    conf = None if confidence is None else float(confidence)
+    tau_h = hz * fs
+    sol = solve(fit.model, fs, fs_f, cons, tau, n, conf, tau_h, bound)
+    sp: Split = sol["split"]
+    vals = _values(sol, cons, fs, f_si)
+    plain_sol = dict(sol, x=None)
+    pl = sol["plain"]
+    plain_x = [pl["sigma2"]] + (
+        [pl["gamma2"]] if cons == "WN+RW" else [pl["sb2"]] if cons == "WN+GM" else []
+    )
+    plain_sol["x"], plain_sol["T_c"] = np.array(plain_x), pl.get("T_c")
+    plain = _values(plain_sol, cons, fs, f_si)
+    warnings: list[str] = []
+    notes: list[str] = []
+    where = f"{channel or 'channel'} ({fit.model.spec()})"
+    units = {
+        "N": f"{si_unit}/sqrt(Hz)",
+        "K": f"{si_unit}/s/sqrt(Hz)",
+        "sigma_b": si_unit,
+        "T_c": "s",
+    }
+    # binding scales
+    binding: dict[str, tuple[float, str]] = {}
+    if bound and "A" in sol:
+        x = sol["x"]
+        fine = fine_scales(tau)
+        a = columns(cons, fine, fs, sol["T_c"])
+        cw = a @ x
+        active = np.flatnonzero(cw <= sol["target_at"](fine) * (1.0 + 1e-3))
+        comps = fit.model.components(fine, fs)
+        names = ["N", "K" if cons == "WN+RW" else "sigma_b"]
+        for i in range(min(len(x), 2)):
+            if x[i] <= 0 or active.size == 0:
+                continue
+            share = x[i] * a[active, i] / cw[active]
+            j = int(active[int(np.argmax(share))])
+            dom = max(comps, key=lambda lab: comps[lab][j])
+            binding[names[i]] = (float(fine[j] / fs), f"bounds {dom}")
+        if cons == "WN+GM" and "sigma_b" in binding:
+            binding["T_c"] = (binding["sigma_b"][0], "least-inflation search over T_c")
+    # zero terms the consumer needs positive
+    reasons: dict[str, str] = {}
+    if vals["N"] <= 0:
+        raise ExportError(
+            f"{where}: the white-noise density comes out 0 (no WN, QN or fast GM term, and "
+            "the bound needs none): the consumer needs N > 0; fit a model with WN"
+        )
+    bias = "K" if cons == "WN+RW" else "sigma_b" if cons == "WN+GM" else None
+    if bias is not None and vals[bias] <= 0:
+        if plain[bias] > 0:
+            vals[bias] = plain[bias]
+            reasons[bias] = "plain conversion kept: the bound needs no bias within the band"
+            notes.append(
+                f"{bias}: the white noise alone bounds the fitted WV up to {hi_s:.4g} s; the "
+                f"plain conversion {plain[bias]:.4g} is kept (the consumer needs {bias} > 0)"
+            )
+        else:
+            # the bias whose WV equals the target at the longest scale of the band
+            col = columns(cons, tau[-1:], fs, sol.get("T_c") or tau[-1] / fs)[0, 1]
+            xb = float(sol["target"][-1] / col)
+            if not xb > 0:
+                raise ExportError(
+                    f"{where}: no term of the fit sets the consumer's bias ({bias}) and the "
+                    "fitted WV is 0 at the horizon: fit a model with RW or a slow GM"
+                )
+            vals[bias] = math.sqrt(xb * fs) * f_si if bias == "K" else math.sqrt(xb) * f_si
+            if cons == "WN+GM":
+                vals["T_c"] = float(sol.get("T_c") or tau[-1] / fs)
+            reasons[bias] = "set from the fitted WV at the horizon (no bias term in the fit)"
+            warnings.append(
+                f"{where}: the fit has no bias term (RW, slow GM, drift) and the consumer "
+                f"needs {bias} > 0: {bias} = {vals[bias]:.4g} {units[bias]} is the bias whose "
+                f"WV equals the fitted WV at tau = {tau[-1] / fs:.4g} s (it does not lower the "
+                "WV inside the band)"
+            )
+    # intervals (delta method in log of each value, on the sandwich covariance)
+    ivs: dict[str, tuple[float, float]] = {}
+    if ci is not None:
+        if ci != "asymptotic":
+            raise ExportError(f"ci must be 'asymptotic' or None, got {ci!r}")
+        ivs = _intervals(fit, cons, fs, fs_f, tau, n, conf, tau_h, bound, f_si, vals, level)
+    params: dict[str, ProjectedParam] = {}
+    for name in CONSUMER_PARAMS[cons]:
+        v, p0 = vals[name], plain[name]
+        bt, what = binding.get(name, (math.nan, reasons.get(name, "")))
+        if not bound and not what:
+            what = "plain conversion"
+        lo, hi = ivs.get(name, (math.nan, math.nan))
+        params[name] = ProjectedParam(
+            name,
+            float(v),
+            float(p0),
+            units[name],
+            float(v / p0) if p0 > 0 else math.nan,
+            bt,
+            what,
+            lo,
+            hi,
+            level,
+        )
+    if cons == "WN":
+        notes.append("sensor_msgs/Imu covariance: the white part only (bias terms are states)")
+    if bound:
+        cwv = columns(cons, tau, fs, vals.get("T_c")) @ _x_of(vals, cons, fs, f_si)
+    else:
+        cwv = columns(cons, tau, fs, plain.get("T_c")) @ np.asarray(plain_sol["x"])
+    return Projection(
+        channel=channel,
+        consumer=cons,
+        sensor=sensor,
+        unit=si_unit,
+        fs=fs,
+        fs_filter=fs_f,
+        band=(float(tau[0] / fs), float(tau[-1] / fs)),
+        horizon_s=hz,
+        confidence=None if confidence is None else float(confidence),
+        bounded=bound,
+        params=params,
+        assignment=dict(sp.assignment),
+        tau_s=tau / fs,
+        fitted_wv=fit.model.wv(tau, fs) * f_si**2,
+        target_wv=sol["target"] * f_si**2,
+        consumer_wv=cwv * f_si**2,
+        notes=notes,
+        warnings=warnings,
+    )
+
+
+def _x_of(vals: dict[str, float], cons: str, fs: float, f_si: float) -> np.ndarray:
+    """Per-sample variances (native unit) of exported values."""
+    x = [(vals["N"] / f_si) ** 2 * fs]
+    if cons == "WN+RW":
+        x.append((vals["K"] / f_si) ** 2 / fs)
+    elif cons == "WN+GM":
+        x.append((vals["sigma_b"] / f_si) ** 2)
+    return np.array(x)
+
+
+def _intervals(
+    fit: GMWMResult,
+    cons: str,
+    fs: float,
+    fs_f: float,
+    tau: np.ndarray,
+    n: int,
+    confidence: float | None,
+    tau_h: float,
+    bound: bool,
+    f_si: float,
+    vals: dict[str, float],
+    level: float,
+) -> dict[str, tuple[float, float]]:
+    """Delta-method intervals of the log of each exported value."""
+    from ..inference import free_params, param_cov, wv_cov_model
+
+    free = free_params(fit)
+    if not free:
+        return {}
+    cov = _COV.get(fit)
+    if cov is None:  # a fit is immutable: its covariance is computed once
+        cov = _COV[fit] = param_cov(fit, wv_cov_model(fit.model, fit.wv), free)
+    u0 = np.array(
+        [TO_UNCONSTRAINED[nm](float(getattr(fit.model.processes[i], nm))) for i, nm in free]
+    )
+    names = [k for k in CONSUMER_PARAMS[cons] if vals.get(k, 0) > 0]
+    grad = np.zeros((len(names), len(free)))
+    for k in range(len(free)):
+        h = 1e-4 * max(1.0, abs(u0[k]))
+        logs = []
+        for sgn in (1.0, -1.0):
+            uu = u0.copy()
+            uu[k] += sgn * h
+            try:
+                m = _with_u(fit.model, free, uu)
+            except ValueError:
+                return {}
+            sol = solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound)
+            v = _values(sol, cons, fs, f_si)
+            logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
+        grad[:, k] = (np.array(logs[0]) - np.array(logs[1])) / (2 * h)
+    z = NormalDist().inv_cdf(0.5 + level / 2)
+    out = {}
+    for i, nm in enumerate(names):
+        if not np.all(np.isfinite(grad[i])):
+            continue
+        se = math.sqrt(max(float(grad[i] @ cov @ grad[i]), 0.0))
+        out[nm] = (vals[nm] * math.exp(-z * se), vals[nm] * math.exp(z * se))
+    return out
