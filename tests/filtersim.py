@@ -65,6 +65,8 @@ __all__ = [
     "folk_inflation",
     "local_bound",
     "projected_noise",
+    "FilterCases",
+    "filter_cases",
     "ENGINE_PROJECTION",
     "split_truth",
     "bias_prior_var",
@@ -292,6 +294,53 @@ def projected_noise(
     noise = FilterNoise(proj.value("N"), proj.value("K"), "(b) engine projection")
     info = {f"{k}_binding_tau_s": p.binding_tau_s for k, p in proj.params.items()}
     return noise, info
+
+
+@dataclass
+class FilterCases:
+    """One channel's truth and the filter numbers of the cases of issue 23.
+
+    ``truth`` is the full fit (the simulated sensor); ``cases`` maps a key to the numbers:
+    ``"a"`` the plain conversion of the ``WN+RW`` fit (what the Kalibr export writes), ``"b"``
+    the full fit projected and bounded (:func:`projected_noise`), ``"c"`` the folk 10x of
+    ``"a"``, ``"a0"`` the plain conversion of the full fit's own WN and RW terms.
+    """
+
+    channel: str
+    fs: float
+    truth_fit: eg.GMWMResult
+    plain_fit: eg.GMWMResult
+    cases: dict[str, FilterNoise]
+    bound_info: dict[str, float]
+
+    @property
+    def truth(self) -> eg.Model:
+        """The simulated sensor model (the full fit)."""
+        return self.truth_fit.model
+
+
+def filter_cases(
+    x: np.ndarray, fs: float, channel: str = "", model: str = "2*GM+WN+RW"
+) -> FilterCases:
+    """Fit ``model`` and ``WN+RW`` to one channel ``x`` (log units) and build the cases."""
+    wv = eg.wavelet_variance(x, fs=fs)
+    full = eg.fit_gmwm(wv, model)
+    wnrw = eg.fit_gmwm(wv, "WN+RW")
+    a = plain_wn_rw(wnrw.model, fs, "(a) plain WN+RW")
+    b, info = projected_noise(full)
+    return FilterCases(
+        channel=channel,
+        fs=fs,
+        truth_fit=full,
+        plain_fit=wnrw,
+        cases={
+            "a": a,
+            "b": b,
+            "c": folk_inflation(a, 10.0).scaled(1.0, "(c) folk 10x"),
+            "a0": plain_wn_rw(full.model, fs, f"(a0) WN, RW of {model}"),
+        },
+        bound_info=info,
+    )
 
 
 # ------------------------------------------------------------------------------------------
