@@ -71,6 +71,7 @@ __all__ = [
     "split_truth",
     "bias_prior_var",
     "nees_band",
+    "filter_covariance",
     "run_monte_carlo",
 ]
 
@@ -440,6 +441,54 @@ class Consistency:
         return np.array(out)
 
 
+def filter_covariance(
+    noise: FilterNoise, fs: float, n: int, m: int, fix_sigma: float, pb0: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[float, float]]]:
+    """The filter's covariance at epochs ``0 .. n`` and its gain at each fix.
+
+    A fix of the integral at epoch 0 (``P_0 = diag(fix_sigma^2, pb0)``) and after every ``m``
+    steps. Between fixes, in closed form: with ``F^i = [[1, -i dt], [0, 1]]`` and
+    ``Q = diag(q1, q2)``, ``P_{k+i} = F^i P_k F^i' + sum_{l<i} F^l Q F^l'`` where the sum is
+    ``[[i q1 + q2 dt^2 S2, -q2 dt S1], [., i q2]]``, ``S1 = i(i-1)/2``,
+    ``S2 = (i-1) i (2i-1)/6``. At a fix, the Kalman update with ``H = [1, 0]``.
+
+    Returns
+    -------
+    p11, p12, p22 : ndarray
+        The covariance's entries per epoch (posterior at fix epochs).
+    gains : list of (float, float)
+        The Kalman gain at each fix after epoch 0, in order.
+    """
+    dt = 1.0 / fs
+    q1, q2 = noise.N**2 * dt, noise.K**2 * dt
+    rr = fix_sigma**2
+    p11 = np.empty(n + 1)
+    p12 = np.empty(n + 1)
+    p22 = np.empty(n + 1)
+    P = (rr, 0.0, pb0)
+    p11[0], p12[0], p22[0] = P
+    gains: list[tuple[float, float]] = []
+    for start in range(0, n, m):
+        stop = min(start + m, n)
+        i = np.arange(1, stop - start + 1, dtype=float)
+        a, b, c = P
+        s1, s2 = i * (i - 1) / 2.0, (i - 1) * i * (2 * i - 1) / 6.0
+        seg11 = a - 2 * i * dt * b + i * i * dt * dt * c + i * q1 + q2 * dt * dt * s2
+        seg12 = b - i * dt * c - q2 * dt * s1
+        seg22 = c + i * q2
+        if stop - start == m:  # a fix at the segment's end
+            s = seg11[-1] + rr
+            gains.append((seg11[-1] / s, seg12[-1] / s))
+            seg22[-1] -= seg12[-1] ** 2 / s
+            seg12[-1] -= seg11[-1] * seg12[-1] / s
+            seg11[-1] -= seg11[-1] ** 2 / s
+        p11[start + 1 : stop + 1] = seg11
+        p12[start + 1 : stop + 1] = seg12
+        p22[start + 1 : stop + 1] = seg22
+        P = (float(seg11[-1]), float(seg12[-1]), float(seg22[-1]))
+    return p11, p12, p22, gains
+
+
 def _simulate_batch(
     processes: list[eg.Process], runs: int, n: int, fs: float, rng: np.random.Generator
 ) -> np.ndarray:
@@ -502,39 +551,10 @@ def run_monte_carlo(
     if not 1 <= groups <= runs:
         raise ValueError(f"run_monte_carlo: groups must be in 1..runs={runs}, got {groups}")
     dt = 1.0 / fs
-    q1, q2 = noise.N**2 * dt, noise.K**2 * dt
-    rr = fix_sigma**2
     pb0 = bias_prior_var(truth, fs)
     white, bias = split_truth(truth, fs)
 
-    # covariance per epoch 0..n (closed form between fixes; the same for every run)
-    p11 = np.empty(n + 1)
-    p12 = np.empty(n + 1)
-    p22 = np.empty(n + 1)
-    P = (rr, 0.0, pb0)
-    p11[0], p12[0], p22[0] = P
-    gains: list[tuple[float, float]] = []
-    for start in range(0, n, m):
-        stop = min(start + m, n)
-        i = np.arange(1, stop - start + 1, dtype=float)
-        a, b, c = P
-        s1, s2 = i * (i - 1) / 2.0, (i - 1) * i * (2 * i - 1) / 6.0
-        seg11 = a - 2 * i * dt * b + i * i * dt * dt * c + i * q1 + q2 * dt * dt * s2
-        seg12 = b - i * dt * c - q2 * dt * s1
-        seg22 = c + i * q2
-        if stop - start == m:  # a fix at the segment's end
-            s = seg11[-1] + rr
-            k1, k2 = seg11[-1] / s, seg12[-1] / s
-            gains.append((k1, k2))
-            seg22[-1] -= seg12[-1] ** 2 / s
-            seg12[-1] -= seg11[-1] * seg12[-1] / s
-            seg11[-1] -= seg11[-1] ** 2 / s
-        p11[start + 1 : stop + 1], p12[start + 1 : stop + 1], p22[start + 1 : stop + 1] = (
-            seg11,
-            seg12,
-            seg22,
-        )
-        P = (float(seg11[-1]), float(seg12[-1]), float(seg22[-1]))
+    p11, p12, p22, gains = filter_covariance(noise, fs, n, m, fix_sigma, pb0)
     det = p11 * p22 - p12 * p12
     if np.any(det <= 0) or np.any(p11 <= 0):
         raise ValueError(
