@@ -129,7 +129,7 @@ def load_log(
             return _guarded(_read_bag, p, src, channel, opts, "bag")
         raise LoadError(
             f"'{src}' is a directory, not a log file: pass the path of a file "
-            "(or of a ROS 2 bag directory with a metadata.yaml)"
+            "(or of a ROS 2 bag folder: the directory holding metadata.yaml)"
         )
     with open_regular(p, src, error=LoadError) as fh:  # no FIFO, device, socket: see _files
         head = fh.read(16)
