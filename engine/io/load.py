@@ -114,7 +114,9 @@ def load_log(
     Raises
     ------
     LoadError
-        Missing/empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
+        Missing file, not a regular file (a FIFO, device, socket: refused before any read),
+        a file whose loading needs more memory than is available (estimated before parsing),
+        empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
         fewer than 4 samples, unknown channel, invalid ``fs`` or ``scale``, a time column
         with gaps under ``segment="stop"``.
     """
