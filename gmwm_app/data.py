@@ -171,20 +171,15 @@ def read_source(
     elif source == "path":
         if not path or not str(path).strip():
             raise ValueError("no path given: type the path of a log file on the server")
-        p = Path(str(path).strip()).expanduser()
-        check_path(p)  # only the configured folders (gmwm-app --data-dir), checked first
+        given = str(path).strip()  # messages name the path as the user gave it
+        p = check_path(given)  # only the configured folders (gmwm-app --data-dir), first
         if not p.exists():  # so that nothing is said about files outside them
-            raise ValueError(f"no such file on the server: {p}")
-        if p.is_dir() and not (p / "metadata.yaml").is_file():  # a ROS 2 bag is a folder
-            raise ValueError(
-                f"{p} is a folder: give the path of a log file, or of a ROS 2 bag folder "
-                "(the one holding metadata.yaml)"
-            )
+            raise ValueError(f"no such file on the server: '{given}'")
         if p.is_file():  # the HDF5 library may hang or crash on a damaged file
-            with open(p, "rb") as fh:
+            with open(p, "rb") as fh:  # (not a FIFO or a device: the loader refuses those)
                 if is_hdf5(fh.read(2056), p.name):
-                    check_hdf5(str(p), p.name)
-        out = LoadedData(read_log(p, segment=segment), "path", p.name, str(p))
+                    check_hdf5(str(p), given)
+        out = LoadedData(read_log(p, segment=segment, name=given), "path", p.name, str(p))
     elif source == "upload":
         if data is None or len(data) == 0:
             raise ValueError(f"the uploaded file {filename or ''} is empty".replace("  ", " "))

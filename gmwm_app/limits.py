@@ -82,7 +82,10 @@ def current() -> ServerLimits:
 
 
 def check_path(path: str | os.PathLike[str]) -> Path:
-    """``path`` resolved, if it lies in a configured folder; else ValueError saying which."""
+    """``path`` (``~`` expanded), if it lies in a configured folder; else ValueError.
+
+    The message names the path as given and lists no folder of the server (a page's user
+    learns nothing of the server's files from it)."""
     p = Path(path).expanduser()
     lim = _LIMITS
     if lim.data_dirs is None:
@@ -90,10 +93,10 @@ def check_path(path: str | os.PathLike[str]) -> Path:
     r = p.resolve()
     if r in lim.allowed_files or any(r.is_relative_to(d) for d in lim.data_dirs):
         return p
-    dirs = ", ".join(str(d) for d in lim.data_dirs) or "none"
     raise ValueError(
-        f"{p} is outside the folders this server may read ({dirs}): copy the file "
-        "into one of them, upload it, or start gmwm-app with --data-dir FOLDER"
+        f"'{os.fspath(path)}' is outside the folders this server may read: only files under "
+        "the server's data folders can be opened by path; upload the file instead (or, on "
+        "the server, start gmwm-app with --data-dir FOLDER)"
     )
 
 

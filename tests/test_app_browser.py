@@ -179,7 +179,8 @@ def test_bad_upload_shows_a_message_and_the_app_keeps_working(
     message = t.page.get_by_text("is not a number").first
     message.wait_for(timeout=TIMEOUT_MS)
     text = message.inner_text()
-    assert "bad_log.csv" in text and "line 3" in text and "'oops'" in text
+    assert "bad_log.csv" in text and "line 3, column 2 of 2 ('gyro_x')" in text
+    assert "oops" not in text  # the file's content is never quoted
     # the session goes on: the demo is still loaded and WN can be added
     t.click_button("+ WN")
     t.wait_for(lambda: "sigma2" in t.table_text(), "the WN row after a bad upload")

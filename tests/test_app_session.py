@@ -173,7 +173,8 @@ def test_paths_limited_to_data_folders(app_demo: Path, tmp_path: Path, no_limits
     s = AppState()
     assert s.load_path(ok), s.error
     assert not s.load_path(out)
-    assert "outside the folders this server may read" in s.error and str(inside) in s.error
+    assert "outside the folders this server may read" in s.error and "upload" in s.error
+    assert str(inside) not in s.error and str(tmp_path) not in s.error.replace(str(out), "")
     assert not s.load_path(inside / ".." / "log.h5")  # no escape with ..
     assert not s.load_path(tmp_path / "nothing.h5")  # outside: refused before existence
     assert "outside the folders" in s.error and "no such file" not in s.error

@@ -175,7 +175,7 @@ def test_missing_server_path(app_state: AppState, tmp_path: Path) -> None:
     assert not s.load_path(tmp_path / "nope.h5")
     assert "no such file" in s.error and snapshot(s) == before
     assert not s.load_path(tmp_path)
-    assert "folder" in s.error
+    assert "is a directory, not a log file" in s.error  # the engine's message
     assert not s.load_path("")
     assert "no path" in s.error
 

@@ -74,7 +74,8 @@ def test_the_fleet_spread_matches_the_truths_spread(batch):
 
 def test_each_log_has_its_report_and_a_bad_log_its_error(batch, fleet, tmp_path):
     bad = batch.failed[0]
-    assert "LoadError" in bad.error and "oops" in bad.error and not bad.fits
+    assert "LoadError" in bad.error and "line 3, column 2 of 2" in bad.error and not bad.fits
+    assert "oops" not in bad.error  # the file's content is never quoted
     files = batch.save(tmp_path / "out")
     assert sorted(p.rsplit("/", 1)[1] for p in files["reports"].values()) == [
         f"unit{k}.json" for k in range(6)

@@ -197,7 +197,7 @@ def bad_files(tmp_path: Path) -> dict[str, Path]:
     [
         ("missing", [], "no such file"),
         ("empty", [], "empty"),
-        ("text", [], "abc"),
+        ("text", [], "line 4, column 1 of 1 ('gyro_x'): a value that is not a number"),
         ("binary", [], "text"),
         ("nan", [], "NaN"),
         ("short", [], "4"),

@@ -119,3 +119,29 @@ def test_processes_register_in_canonical_order():
     assert list(PROCESS_TYPES) == ["GM", "AR1", "QN", "WN", "RW", "DR"]
     assert all(PROCESS_TYPES[c].code == c for c in PROCESS_TYPES)
     assert eg.parse_model("DR+RW+WN+QN+AR1").spec() == "AR1+QN+WN+RW+DR"
+
+
+_LONG = 15_000  # a pasted string of the issue's size (10-20 KB)
+
+
+@pytest.mark.parametrize(
+    ("spec", "bad"),
+    [
+        ("WN+" + "X" * _LONG, "unknown process 'XXXX"),  # the bad token
+        ("WN+(" * (_LONG // 4), "unbalanced '('"),
+        ("WN+GM(beta=0.1, " + "q" * _LONG + "=1)", "GM has no parameter 'qqqq"),
+        ("9" * 5000 + "*WN", "the multiplier in '9999"),  # not int(): 5000 digits raise
+        ("WN+RW(gamma2=" + "z" * _LONG + ")", "RW.gamma2: 'zzzz"),
+        ("WN+ +" + "RW" * (_LONG // 2), "empty term"),
+        ("WN+RW(1)" * (_LONG // 8) + "+QQ", "cannot read the term 'RW(1)WN'"),
+    ],
+)
+def test_parse_errors_do_not_echo_a_long_model_whole(spec: str, bad: str) -> None:
+    """The message names the bad token and quotes at most 60 characters of any piece, with
+    its length; it stays short (was: the 15 KB string echoed whole)."""
+    with pytest.raises(eg.ModelError) as exc:
+        eg.parse_model(spec)
+    msg = str(exc.value)
+    assert bad in msg and len(msg) < 400, (len(msg), msg[:500])
+    assert "characters)" in msg  # the long piece's length is said
+    assert "\n" not in msg

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._files import read_regular
 from ..fit import GMWMResult
 from ..models import RW, WN, Model
 from ..units import ExportError, from_datasheet, process_values, si_factor, to_datasheet
@@ -322,12 +323,13 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
     """
     text = str(source)
     if isinstance(source, os.PathLike) or (
-        "\n" not in text and ":" not in text.split("/")[0] and Path(text).is_file()
+        "\n" not in text and ":" not in text.split("/")[0] and Path(text).exists()
     ):
+        raw = read_regular(source, error=ExportError)  # no FIFO or device: engine._files
         try:
-            text = Path(source).read_text()
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ExportError(f"cannot read Kalibr file '{source}': {exc}") from exc
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise ExportError(f"Kalibr file '{source}' is not UTF-8 text") from None
     out: dict[str, Any] = {}
     block, block_indent, used_block = "", 0, ""
     for i, raw in enumerate(text.splitlines(), start=1):
@@ -356,7 +358,7 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
                 continue
         key, sep, val = line.partition(":")
         if not sep or not key.strip():
-            raise ExportError(f"Kalibr YAML line {i}: {raw.strip()!r} is not 'key: value'")
+            raise ExportError(f"Kalibr YAML line {i} is not 'key: value': fix or remove it")
         val = val.strip()
         if val.startswith("{") and val.endswith("}"):
             items = [it for it in val[1:-1].split(",") if it.strip()]
@@ -364,7 +366,9 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
             for it in items:
                 k, s2, v = it.partition(":")
                 if not s2:
-                    raise ExportError(f"Kalibr YAML line {i}: {it.strip()!r} is not 'key: value'")
+                    raise ExportError(
+                        f"Kalibr YAML line {i}: an item of its {{...}} map is not 'key: value'"
+                    )
                 d[k.strip()] = _yscalar(v)
             out[key.strip()] = d
         elif val.startswith("[") and val.endswith("]"):

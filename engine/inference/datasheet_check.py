@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._files import read_regular
 from ..models import QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
@@ -424,10 +425,11 @@ def read_datasheet(
 
     p = Path(source)
     where = str(p)
+    raw = read_regular(p, where, error=DatasheetError)  # no FIFO or device: engine._files
     try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasheetError(f"cannot read datasheet file '{p}': {exc}") from exc
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise DatasheetError(f"datasheet file '{p}' is not UTF-8 text") from None
     suffix = p.suffix.lower()
     if suffix == ".json":
         try:

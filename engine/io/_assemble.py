@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import check_memory
 from .log import ImuLog, LoadError, pick_channel
 
 __all__ = [
@@ -31,6 +32,8 @@ __all__ = [
     "ordered_names",
     "FS_KEYS",
     "UNIT_RE",
+    "array_memory_need",
+    "check_array_memory",
 ]
 
 _TIME_RE = re.compile(r"(time|t|timestamp|stamp|sec|seconds)(?:_(s|ms|us|ns))?|(ms|us|ns)")
@@ -94,6 +97,30 @@ def ordered_names(names: list[str], units: Mapping[str, str]) -> list[str]:
     """Names in the order of the file's ``units`` map first (gyro_x..accel_z), then as found."""
     first = [k for k in units if k in names]
     return first + [k for k in names if k not in first]
+
+
+def array_memory_need(shape: tuple[int, ...], dtype: np.dtype) -> int:
+    """Peak memory (bytes) of reading an array of ``shape`` and ``dtype`` and making channels of
+    it (:func:`finish_log`): the array, plus the float64 copy of integer, boolean or
+    long-double data (or of each field of a structured array), else plus the contiguous copies
+    of the columns of a 2-D ``(N, k)`` array. Measured with tracemalloc in
+    tests/test_io_safety.py."""
+    dtype = np.dtype(dtype)
+    count = math.prod(int(d) for d in shape)
+    raw = count * dtype.itemsize
+    if dtype.names:
+        return raw + count * len(dtype.names) * 8
+    if dtype.kind in "iub" or (dtype.kind == "f" and dtype.itemsize > 8):
+        return raw + count * 8
+    return 2 * raw if len(shape) == 2 and min(shape) > 1 else raw
+
+
+def check_array_memory(need: int, src: str, what: str) -> None:
+    """LoadError when reading arrays that need ``need`` bytes (:func:`array_memory_need`)
+    cannot fit in the available memory (see :func:`engine._files.check_memory`)."""
+    fix = "load one channel (channel=) of an HDF5 file, or compute the WV of a .npy/HDF5 log "
+    fix += "in blocks (wavelet_variance_stream)"
+    check_memory(need, src, what=what, fix=fix, error=LoadError)
 
 
 def _where(i: int, rows: np.ndarray | None) -> str:

@@ -18,7 +18,9 @@ from ._assemble import (
     FS_KEYS,
     LoadOptions,
     RawLog,
+    array_memory_need,
     attr_value,
+    check_array_memory,
     clean_unit,
     finish_log,
     ordered_names,
@@ -109,6 +111,9 @@ def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) 
                 fs_file = (attr_value(ds_attrs[key]), f"attribute '{key}' of dataset '{k}'")
                 break
         n = found[names[0]][0] if names else 0
+        need = sum(array_memory_need((found[k][0],), found[k][2].dtype) for k in names)
+        need += next((array_memory_need((n,), ds.dtype) for _, ds, _ in times), 0)
+        check_array_memory(need, src, f"{len(names)} dataset column(s) of {n} samples")
         time = next(((nm, ds[...], div) for nm, ds, div in times if ds.shape[0] == n), None)
         cols: dict[str, Any] = {}
         for k in names:

@@ -32,6 +32,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
+from .._files import open_regular
 from ._assemble import LoadOptions, RawLog, check_fs, finish_log
 from .hdf5 import H5_EXT, read_h5
 from .log import ImuLog, LoadError
@@ -75,7 +76,9 @@ def load_log(
         through a temporary file: the bag library reads paths only.)
     name : str, optional
         For content: the file's name (e.g. ``"run1.h5"``), whose extension hints at the format
-        and which error messages name (default ``"<upload>"``). Ignored for a path.
+        and which error messages name (default ``"<upload>"``). For a path: how messages and
+        :attr:`ImuLog.source` name the file (default: the path as given; a server names the
+        path as its user typed it).
     channel : str or int, optional
         Keep only this channel (name, or index into :attr:`ImuLog.names`).
     fs : float, optional
@@ -111,30 +114,27 @@ def load_log(
     Raises
     ------
     LoadError
-        Missing/empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
+        Missing file, not a regular file (a FIFO, device, socket: refused before any read),
+        a file whose loading needs more memory than is available (estimated before parsing),
+        empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
         fewer than 4 samples, unknown channel, invalid ``fs`` or ``scale``, a time column
         with gaps under ``segment="stop"``.
     """
     if isinstance(path, (bytes, bytearray, memoryview)) or hasattr(path, "read"):
         return _load_content(path, name, channel, fs, segment, scale, units, topic)
-    src = str(path)
+    src = str(path) if name is None else str(name)
     p = Path(path)
     fs_user = None if fs is None else check_fs(fs, src, "fs", "pass fs in Hz, e.g. fs=100")
     opts = LoadOptions(fs_user=fs_user, segment=segment, scale=scale, units=units, topic=topic)
-    if not p.exists():
-        raise LoadError(f"no such file: '{src}' (check the path)")
     if p.is_dir():
-        if (p / "metadata.yaml").is_file():
+        if (p / "metadata.yaml").exists():  # its files are checked by the bag reader
             return _guarded(_read_bag, p, src, channel, opts, "bag")
         raise LoadError(
             f"'{src}' is a directory, not a log file: pass the path of a file "
-            "(or of a ROS 2 bag directory with a metadata.yaml)"
+            "(or of a ROS 2 bag folder: the directory holding metadata.yaml)"
         )
-    try:
-        with open(p, "rb") as fh:
-            head = fh.read(16)
-    except OSError as exc:
-        raise LoadError(f"cannot read file '{src}' ({exc.strerror}): check permissions") from exc
+    with open_regular(p, src, error=LoadError) as fh:  # no FIFO, device, socket: see _files
+        head = fh.read(16)
     fmt = _sniff(head, p.suffix, src)
     return _guarded(_READERS[fmt], p, src, channel, opts, fmt)
 
@@ -232,9 +232,12 @@ def _guarded(
         raise
     except _CORRUPT as exc:
         what = {"text": "text", "npy": ".npy", "npz": ".npz", "hdf5": "HDF5", "bag": "ROS bag"}
+        why = type(exc).__name__
+        if fmt in ("npy", "npz", "hdf5"):  # the library speaks of the file's structure
+            why += ": " + " ".join(str(exc).split())[:200]
+        # (text and bag errors may quote the file's lines or paths: their type only)
         raise LoadError(
-            f"file '{src}' could not be read as {what.get(fmt, fmt)} "
-            f"({type(exc).__name__}: {' '.join(str(exc).split())[:200]}): it may be "
+            f"file '{src}' could not be read as {what.get(fmt, fmt)} ({why}): it may be "
             "truncated or corrupt; check it or export it again"
         ) from exc
 

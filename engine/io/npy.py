@@ -11,11 +11,21 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
-from ._assemble import LoadOptions, RawLog, attr_value, finish_log, time_divisor, units_map
+from .._files import open_regular
+from ._assemble import (
+    LoadOptions,
+    RawLog,
+    array_memory_need,
+    attr_value,
+    check_array_memory,
+    finish_log,
+    time_divisor,
+    units_map,
+)
 from .log import ImuLog, LoadError
 
 __all__ = ["read_npy", "read_npz", "npy_sidecar_path", "read_npy_sidecar", "write_npy_sidecar"]
@@ -34,19 +44,44 @@ def _columns(
     return {fmt.format(key=key, j=j): a[:, j] for j in range(a.shape[1])}
 
 
-def _np_load(path: Path | io.BytesIO, src: str, what: str, save_with: str) -> Any:
+def _np_load(fh: IO[bytes], src: str, what: str, save_with: str) -> Any:
     """``np.load`` without pickles; a file it cannot read is a LoadError saying how to
     re-save it."""
     try:
-        return np.load(path, allow_pickle=False)
+        return np.load(fh, allow_pickle=False)
     except Exception as exc:
         raise LoadError(
             f"file '{src}' is not a readable {what} ({exc}): re-save it with {save_with}"
         ) from exc
 
 
+def _open(path: Path | io.BytesIO, src: str) -> IO[bytes]:
+    """The file (a regular one: see :func:`engine._files.open_regular`) or the content."""
+    return path if isinstance(path, io.BytesIO) else open_regular(path, src, error=LoadError)
+
+
+def _npy_header(fh: IO[bytes]) -> tuple[tuple[int, ...], np.dtype] | None:
+    """``(shape, dtype)`` from the header of the ``.npy`` data at ``fh``'s position, or None
+    when it cannot be read (``np.load`` then says why)."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(fh)
+        read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}[version]
+        shape, _, dtype = read(fh)
+    except Exception:  # noqa: BLE001 - a damaged header: np.load reports it
+        return None
+    return tuple(shape), dtype
+
+
 def read_npy(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
-    a = _np_load(path, src, ".npy array of numbers", "numpy.save(path, array)")
+    with _open(path, src) as fh:
+        head = _npy_header(fh)
+        if head is not None:
+            shape, dtype = head
+            what = f"an array of shape {shape} and dtype {dtype}"
+            check_array_memory(array_memory_need(shape, dtype), src, what)
+        fh.seek(0)
+        a = _np_load(fh, src, ".npy array of numbers", "numpy.save(path, array)")
     raw = RawLog()
     if a.dtype.names and a.ndim == 1:  # structured array: one channel per field
         for name in a.dtype.names:
@@ -118,26 +153,39 @@ def write_npy_sidecar(
     return side
 
 
+def _npz_memory_need(z: Any) -> int:
+    """Peak memory (bytes) of reading every array of an open ``.npz`` archive."""
+    need = 0
+    for info in z.zip.infolist():
+        with z.zip.open(info) as m:
+            head = _npy_header(m)
+        need += info.file_size if head is None else array_memory_need(*head)
+    return need
+
+
 def read_npz(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     raw = RawLog()
-    z = _np_load(path, src, ".npz archive", "numpy.savez(path, gyro_x=..., fs=100.0)")
-    with z:
-        for key in z.files:
-            try:
-                a = z[key]
-            except ValueError:
-                raw.notes.append(f"key '{key}' holds Python objects and was skipped")
-                continue
-            if key.lower() in ("fs", "fs_hz", "sample_rate") and a.size == 1:
-                raw.fs_file = (a.item(), f"key '{key}'")
-            elif key == "units" and a.dtype.kind in "US" and a.size == 1:
-                raw.units = units_map(str(a.item()), src, raw.notes)
-            elif a.dtype.kind in "iufb" and a.ndim == 1 and time_divisor(key) is not None:
-                raw.time = raw.time or (key, a, time_divisor(key))
-            elif a.dtype.kind in "iufb" and a.ndim in (1, 2) and a.size > 1:
-                raw.cols.update(_columns(key, a, raw.notes))
-            elif a.ndim == 0:
-                raw.meta[key] = attr_value(a.item())
-            else:
-                raw.notes.append(f"key '{key}' (shape {a.shape}, dtype {a.dtype}) was skipped")
+    with _open(path, src) as fh:
+        z = _np_load(fh, src, ".npz archive", "numpy.savez(path, gyro_x=..., fs=100.0)")
+        with z:
+            check_array_memory(_npz_memory_need(z), src, f"{len(z.files)} array(s)")
+            for key in z.files:
+                try:
+                    a = z[key]
+                except ValueError:
+                    raw.notes.append(f"key '{key}' holds Python objects and was skipped")
+                    continue
+                if key.lower() in ("fs", "fs_hz", "sample_rate") and a.size == 1:
+                    raw.fs_file = (a.item(), f"key '{key}'")
+                elif key == "units" and a.dtype.kind in "US" and a.size == 1:
+                    raw.units = units_map(str(a.item()), src, raw.notes)
+                elif a.dtype.kind in "iufb" and a.ndim == 1 and time_divisor(key) is not None:
+                    raw.time = raw.time or (key, a, time_divisor(key))
+                elif a.dtype.kind in "iufb" and a.ndim in (1, 2) and a.size > 1:
+                    raw.cols.update(_columns(key, a, raw.notes))
+                elif a.ndim == 0:
+                    raw.meta[key] = attr_value(a.item())
+                else:
+                    shape = f"shape {a.shape}, dtype {a.dtype}"
+                    raw.notes.append(f"key '{key}' ({shape}) was skipped")
     return finish_log(src, raw, fmt="npz", channel=channel, opts=opts)

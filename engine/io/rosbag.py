@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import check_regular
 from .log import LoadError
 
 __all__ = ["ImuBag", "read_imu_bag", "imu_topics", "write_imu_bag", "IMU_CHANNELS", "mcap_profile"]
@@ -81,8 +82,12 @@ class ImuBag:
 
 
 def _bag_paths(path: Path, src: str) -> tuple[list[Path], str]:
-    if path.is_dir():
+    if path.is_dir():  # a ROS 2 bag: metadata.yaml and the files it lists, all regular
+        for q in sorted(path.iterdir()):
+            if not q.is_dir():
+                check_regular(q, f"{src}/{q.name}", error=LoadError)
         return [path], "rosbag2"
+    check_regular(path, src, error=LoadError)
     ext = path.suffix.lower()
     if ext == ".bag":
         return [path], "rosbag1"
@@ -150,9 +155,9 @@ def _open(paths: list[Path], src: str) -> Any:
         reader = hl.AnyReader(paths)
         reader.open()
     except Exception as exc:  # rosbags raises many types for corrupt input
-        raise LoadError(
-            f"file '{src}' is not a readable ROS bag ({type(exc).__name__}: "
-            f"{' '.join(str(exc).split())[:300]}): the bag is damaged or incomplete "
+        raise LoadError(  # the library's text is not shown: it quotes paths and YAML lines
+            f"file '{src}' is not a readable ROS bag ({type(exc).__name__}): the bag is "
+            "damaged or incomplete, or its metadata.yaml does not describe it "
             "(a recording that was not closed cleanly can be repaired with "
             "'rosbag reindex' / 'ros2 bag reindex')"
         ) from exc

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import open_regular, read_regular
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult, weight_matrix
@@ -154,7 +155,7 @@ def file_fingerprint(path: str | os.PathLike[str], *, chunk: int = 1 << 20) -> d
         st = q.stat()
         size += st.st_size
         mtime = max(mtime, st.st_mtime)
-        with open(q, "rb") as fh:
+        with open_regular(q, error=SessionError) as fh:  # no FIFO or device: engine._files
             h.update(fh.read(chunk))
             if st.st_size > 2 * chunk:
                 fh.seek(st.st_size - chunk)
@@ -326,10 +327,7 @@ def load_session(path: str | os.PathLike[str]) -> Session:
         Unreadable file, not JSON, another schema, or invalid content (the message says
         which channel and what).
     """
-    try:
-        text = Path(path).read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SessionError(f"cannot read session file '{path}': {exc}") from exc
+    text = read_regular(path, error=SessionError)  # no FIFO or device: engine._files
     return session_from_json(text, source=str(path))
 
 

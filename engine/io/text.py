@@ -9,11 +9,13 @@ comment. Errors name the line (1-based, as in an editor) and the column.
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._files import check_memory, open_regular
 from ._assemble import UNIT_RE, LoadOptions, RawLog, clean_unit, finish_log, time_divisor
 from .log import ImuLog, LoadError
 
@@ -65,8 +67,45 @@ def _decode(raw: bytes, src: str) -> str:
         return text
 
 
+#: Peak memory of :func:`read_text` (bytes), measured with tracemalloc over CSV/TSV/whitespace
+#: files of 1 to 12 columns (tests/test_io_safety.py): per byte of the file (the bytes, the
+#: decoded text, the stripped lines), per line (two str objects and a list slot each, the line
+#: number) and per value (the float64 result and the parser's buffer).
+PEAK_PER_BYTE, PEAK_PER_LINE, PEAK_PER_VALUE = 3.5, 110, 16
+_SAMPLE = 1 << 16  # bytes read first to estimate the lines and values of a file
+
+
+def text_memory_need(size: int, sample: bytes) -> int:
+    """Estimated peak memory (bytes) of reading a text log of ``size`` bytes that starts with
+    ``sample``: ``PEAK_PER_BYTE * size + PEAK_PER_LINE * lines + PEAK_PER_VALUE * values``,
+    with the lines and values per byte of ``sample`` extrapolated to the file."""
+    if not sample:
+        return int(PEAK_PER_BYTE * size)
+    lines = sample.count(b"\n") + (not sample.endswith(b"\n"))
+    delim = next((d for d in (b"\t", b";", b",") if d in sample), None)
+    values = sample.count(delim) + lines if delim else len(sample.split())
+    per = size / len(sample)
+    return int(PEAK_PER_BYTE * size + per * (PEAK_PER_LINE * lines + PEAK_PER_VALUE * values))
+
+
+def _read(path: Path | io.BytesIO, src: str) -> bytes:
+    """The bytes of a text log, once its parsing is known to fit in the available memory."""
+    if isinstance(path, io.BytesIO):  # content already in memory: the rest of the peak
+        raw = path.getvalue()
+        need = text_memory_need(len(raw), raw[:_SAMPLE]) - len(raw)
+        check_memory(need, src, what="to parse it as text", error=LoadError)
+        return raw
+    with open_regular(path, src, error=LoadError) as fh:
+        size = os.fstat(fh.fileno()).st_size
+        sample = fh.read(_SAMPLE)
+        need = text_memory_need(size, sample)
+        what = f"to parse {size / 1e6:.3g} MB of text"
+        check_memory(need, src, what=what, fix="convert it to .npy or HDF5", error=LoadError)
+        return sample + fh.read()
+
+
 def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
-    raw = path.getvalue() if isinstance(path, io.BytesIO) else path.read_bytes()
+    raw = _read(path, src)
     text = _decode(raw, src)
     contents: list[str] = []
     linenos: list[int] = []
@@ -111,8 +150,8 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
             units[name] = clean_unit(unit)
         contents, linenos = contents[1:], linenos[1:]
         if not contents:
-            raise LoadError(
-                f"file '{src}' has a header ({', '.join(names)}) but no data rows: "
+            raise LoadError(  # the header is not named: it may not be a header at all
+                f"file '{src}' has a header line ({len(names)} column(s)) but no data rows: "
                 "check that the logger wrote samples"
             )
     else:
@@ -124,8 +163,8 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
         )
         if data.shape[1] != len(names):
             raise ValueError("header and data column counts differ")
-    except ValueError as exc:
-        _diagnose(src, contents, linenos, delim, names, exc)
+    except ValueError:
+        _diagnose(src, contents, linenos, delim, names, header)
     cols = {name: data[:, j] for j, name in enumerate(names)}
     time = None
     for name in names:  # a named time column (the first one gives fs)
@@ -156,29 +195,45 @@ def _looks_like_time(a: np.ndarray, strict_only: bool = False) -> bool:
     return strict_only or bool(np.mean(np.abs(d - np.median(d)) <= 0.1 * np.median(d)) >= 0.99)
 
 
+def _row_problem(fields: list[str], k: int) -> str | int | None:
+    """What is wrong with a row of ``fields``: a sentence (its length), the index of its first
+    field that is not a number, or None (k numbers)."""
+    if len(fields) != k:
+        return f"{len(fields)} value(s) where {k} were expected"
+    return next((j for j, f in enumerate(fields) if _num(f) is None), None)
+
+
 def _diagnose(
     src: str,
     contents: list[str],
     linenos: list[int],
     delim: str | None,
     names: list[str],
-    exc: Exception,
+    header: bool,
 ) -> None:
-    """Find the first ragged row or non-number after np.loadtxt failed, and raise."""
+    """Find the first ragged row or non-number after np.loadtxt failed, and raise.
+
+    The message names the line and the column by number; it never quotes the file (which may
+    be anything, e.g. a server's /etc/passwd given by path). The header's column names are
+    given only when a row of numbers follows it (then it is a log's header).
+    """
     k = len(names)
-    for line, ln in zip(contents, linenos, strict=True):
-        fields = _split(line, delim)
-        if len(fields) != k:
-            raise LoadError(
-                f"file '{src}', line {ln}: {len(fields)} value(s) where {k} were expected "
-                f"(columns: {', '.join(names)}): give every row one value per column, "
-                "or remove the line"
-            )
-        for j, s in enumerate(fields):
-            if _num(s) is None:
-                what = "an empty field" if not s else f"{s!r}"
-                raise LoadError(
-                    f"file '{src}', column '{names[j]}', line {ln}: {what} is not a "
-                    "number: fix the value or remove the line"
-                )
-    raise LoadError(f"file '{src}' could not be parsed as numbers ({exc}): check the format")
+    problems = ((i, _row_problem(_split(c, delim), k)) for i, c in enumerate(contents))
+    i, problem = next(((i, p) for i, p in problems if p is not None), (0, None))
+    if problem is None:
+        raise LoadError(f"file '{src}' could not be parsed as numbers: check its format")
+    known = (
+        not header
+        or i > 0
+        or any(_row_problem(_split(c, delim), k) is None for c in contents[1:10_000])
+    )
+    where = f"file '{src}', line {linenos[i]}"
+    if isinstance(problem, str):
+        cols = f" (columns: {', '.join(names)})" if known and header else ""
+        raise LoadError(
+            f"{where}: {problem}{cols}: give every row one value per column, or remove the line"
+        )
+    field = _split(contents[i], delim)[problem]
+    what = "an empty field" if not field else "a value that is not a number"
+    col = f"column {problem + 1} of {k}" + (f" ('{names[problem]}')" if known else "")
+    raise LoadError(f"{where}, {col}: {what}: fix the value or remove the line")

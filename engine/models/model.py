@@ -103,7 +103,7 @@ class Process:
         for name, v in kwargs.items():
             if name not in vals:
                 raise ValueError(
-                    f"{self.code} has no parameter {name!r}; "
+                    f"{self.code} has no parameter {_shown(name)}; "
                     f"its parameters are {', '.join(self.param_names)}"
                 )
             vals[name] = v
@@ -244,6 +244,18 @@ FROM_UNCONSTRAINED = {
     "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
     "omega": float,
 }
+
+
+_ECHO = 60  # characters of a user's model text quoted in a message
+
+
+def _shown(text: str) -> str:
+    """A piece of a model specification as messages quote it: whole when short, else its first
+    :data:`_ECHO` characters and its length (a pasted 20 KB string is not echoed back)."""
+    t = text.strip()
+    if len(t) <= _ECHO:
+        return repr(t)
+    return f"{t[:_ECHO]!r}... ({len(t)} characters)"
 
 
 class ModelError(ValueError):
@@ -469,14 +481,14 @@ def _split_top(spec: str) -> list[str]:
         elif ch == ")":
             depth -= 1
             if depth < 0:
-                raise ModelError(f"unbalanced ')' in model {spec!r}")
+                raise ModelError(f"unbalanced ')' in model {_shown(spec)}")
         if ch == "+" and depth == 0:
             parts.append("".join(cur))
             cur = []
         else:
             cur.append(ch)
     if depth != 0:
-        raise ModelError(f"unbalanced '(' in model {spec!r}")
+        raise ModelError(f"unbalanced '(' in model {_shown(spec)}")
     parts.append("".join(cur))
     return parts
 
@@ -485,7 +497,7 @@ def _parse_number(text: str, where: str) -> float:
     try:
         return float(text)
     except ValueError:
-        raise ModelError(f"{where}: {text.strip()!r} is not a number") from None
+        raise ModelError(f"{where}: {_shown(text)} is not a number") from None
 
 
 def parse_model(spec: str | Model | Process) -> Model:
@@ -509,25 +521,26 @@ def parse_model(spec: str | Model | Process) -> Model:
     procs: list[Process] = []
     for term in _split_top(spec):
         if not term.strip():
-            raise ModelError(f"empty term in model {spec!r} (a '+' too many?)")
+            raise ModelError(f"empty term in model {_shown(spec)} (a '+' too many?)")
         m = _TERM.match(term)
         if not m:
             raise ModelError(
-                f"cannot read the term {term.strip()!r} in model {spec!r}; "
+                f"cannot read the term {_shown(term)} in model {_shown(spec)}; "
                 "write terms like WN, 2*GM or GM(beta=0.1, sigma2_gm=1e-4)"
             )
         code = m.group("code").upper()
         code = _ALIASES.get(code, code)
         if code not in PROCESS_TYPES:
             raise ModelError(
-                f"unknown process {m.group('code')!r} in model {spec!r}; "
+                f"unknown process {_shown(m.group('code'))} in model {_shown(spec)}; "
                 f"known processes: {', '.join(PROCESS_TYPES)}"
             )
         cls = PROCESS_TYPES[code]
-        k = int(m.group("k") or 1) * int(m.group("k2") or 1)
-        if not 1 <= k <= _MAX_REPEAT:
+        digits = (m.group("k") or "1", m.group("k2") or "1")
+        k = 0 if max(map(len, digits)) > 6 else int(digits[0]) * int(digits[1])
+        if not 1 <= k <= _MAX_REPEAT:  # (a 5000-digit multiplier is not converted to int)
             raise ModelError(
-                f"the multiplier in {term.strip()!r} must be between 1 and {_MAX_REPEAT}"
+                f"the multiplier in {_shown(term)} must be between 1 and {_MAX_REPEAT}"
             )
         p = cls()
         args = m.group("args")
@@ -540,11 +553,13 @@ def parse_model(spec: str | Model | Process) -> Model:
                     continue
                 if "=" in a:
                     name, val = (s.strip() for s in a.split("=", 1))
-                    named[name] = _parse_number(val, f"{code}.{name}")
+                    short = len(name) <= _ECHO
+                    where = f"{code}.{name}" if short else f"{code} parameter {_shown(name)}"
+                    named[name] = _parse_number(val, where)
                 else:
                     if named:
                         raise ModelError(
-                            f"in {term.strip()!r} a positional value follows a named one"
+                            f"in {_shown(term)} a positional value follows a named one"
                         )
                     pos.append(_parse_number(a, code))
             try:

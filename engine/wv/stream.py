@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import open_regular
 from ._kernel import sumsq_kernel
 from .classical import WaveletVariance, default_levels
 
@@ -137,7 +138,7 @@ class _NpySource(SeriesSource):
 
     def read(self, start: int, stop: int, out: np.ndarray) -> np.ndarray:
         if self._fh is None:
-            self._fh = open(self.path, "rb", buffering=0)  # noqa: SIM115 - closed by close()
+            self._fh = open_regular(self.path)  # closed by close()
         isz = self.dtype.itemsize
         contiguous = self.k == 1 or self.fortran
         per = 1 if contiguous else self.k
@@ -323,9 +324,7 @@ def open_series(
         return source
     if isinstance(source, (str, os.PathLike)):
         p = Path(source)
-        if not p.is_file():
-            raise ValueError(f"no such file: '{p}' (check the path)")
-        with open(p, "rb") as fh:
+        with open_regular(p) as fh:  # no FIFO, device or directory: see engine._files
             head = fh.read(8)
         if head.startswith(b"\x89HDF\r\n\x1a\n"):
             return _h5_source(p, dataset, column, fs)
