@@ -86,9 +86,15 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
                 # einsum, not BLAS: on a loaded machine a threaded BLAS spins on these small
                 # products (100x slower); the flops are negligible either way
                 integ[a, b] += np.einsum("jf,lf->jl", ga, g[b])
-        for a in range(ns):
-            for b in range(a + 1, ns):
-                integ[b, a] = integ[a, b].T
+    # f = 0, the periodic trapezoid rule's first node, which frequency_grid leaves out: G_j s is
+    # finite there and non-zero only for a random walk (per unit gamma2, m^2 / 4, m = 2^(j-1))
+    g0 = [4.0 ** np.arange(nj) / 4 if u.code == "RW" else np.zeros(nj) for u in units]
+    for a in range(ns):
+        for b in range(a, ns):
+            integ[a, b] += (0.5 / f.size) * np.outer(g0[a], g0[b])
+    for a in range(ns):
+        for b in range(a + 1, ns):
+            integ[b, a] = integ[a, b].T
     pairs = [(p, q) for p in range(k) for q in range(p, k)]
     npairs = len(pairs)
     v = np.zeros((npairs * nj, npairs * nj))
