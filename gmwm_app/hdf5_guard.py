@@ -89,7 +89,8 @@ def _serve(conn: Connection) -> None:  # pragma: no cover - runs in the helper p
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         try:
-            source = conn.recv()
+            kind = conn.recv()  # "path" (then the path) or "bytes" (then the content)
+            source = conn.recv() if kind == "path" else conn.recv_bytes()
         except (EOFError, OSError, KeyboardInterrupt):
             return
         try:
@@ -131,7 +132,9 @@ def start_helper() -> None:
         _helper()
 
 
-def check_hdf5(source: str | bytes, name: str, timeout: float | None = None) -> None:
+def check_hdf5(
+    source: str | bytes | bytearray | memoryview, name: str, timeout: float | None = None
+) -> None:
     """Refuse an HDF5 file whose metadata the HDF5 library cannot read in ``timeout`` seconds
     or on which it crashes, without risking this process.
 
@@ -139,8 +142,8 @@ def check_hdf5(source: str | bytes, name: str, timeout: float | None = None) -> 
 
     Parameters
     ----------
-    source : str or bytes
-        A path or the file's content.
+    source : str or bytes-like
+        A path or the file's content (sent to the helper as a buffer, not copied here).
     name : str
         The file name, for the message.
     timeout : float, optional
@@ -155,7 +158,12 @@ def check_hdf5(source: str | bytes, name: str, timeout: float | None = None) -> 
     with _LOCK:
         _, conn = _helper()
         try:
-            conn.send(source)
+            if isinstance(source, str):
+                conn.send("path")
+                conn.send(source)
+            else:  # the buffer itself: no pickled copy of a large upload
+                conn.send("bytes")
+                conn.send_bytes(source)
             if not conn.poll(timeout):
                 stop_helper()
                 raise ValueError(
