@@ -26,14 +26,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from gmwm_app.limits import UPLOAD_CHUNK_BYTES
+
 __all__ = ["main", "build_parser", "is_loopback", "read_password_file", "server_options"]
 
 #: The address served on when ``--address`` is not given: this machine only.
 DEFAULT_ADDRESS = "localhost"
 #: Largest websocket message the server accepts (bytes): two upload chunks. An upload arrives
-#: in chunks of ``gmwm_app.upload.CHUNK_BYTES`` (one message each); every other message a page
-#: sends is small. Tornado refuses a larger message before buffering it.
-MAX_MESSAGE_BYTES = 16_000_000
+#: in chunks of ``UPLOAD_CHUNK_BYTES`` (one message each); every other message a page sends is
+#: small. Tornado refuses a larger message before buffering it.
+MAX_MESSAGE_BYTES = 2 * UPLOAD_CHUNK_BYTES
 
 
 class UsageError(ValueError):
