@@ -1,4 +1,4 @@
-"""Opening a user's file safely: regular files only, and only what fits in memory.
+"""Opening a user's file safely: regular files only.
 
 Every reader of the engine opens the files it is given through here (the loaders of
 :mod:`engine.io`, the streamed readers of :mod:`engine.wv.stream`, ``read_datasheet``, sessions),
@@ -10,9 +10,8 @@ keep no checks of their own:
   not a file. :func:`open_regular` opens with ``O_NONBLOCK`` and checks the opened descriptor
   with ``fstat`` (so a FIFO put in place after a check cannot block either), then clears
   ``O_NONBLOCK`` for ordinary reads;
-* a file that cannot fit in memory: :func:`check_memory` compares a reader's estimate of what
-  it needs with the memory the system has available (``MemAvailable`` of ``/proc/meminfo``,
-  else ``sysconf(SC_AVPHYS_PAGES)``), before anything is parsed.
+* a file that cannot fit in memory is refused by the readers before anything is parsed, with
+  :func:`engine._limits.check_memory` (the one place that knows the memory available).
 
 Messages name the file as the caller gave it (``src``) and never quote its content.
 """
@@ -23,13 +22,13 @@ import os
 import stat
 from typing import BinaryIO
 
+from ._limits import check_memory
+
 __all__ = [
     "file_kind",
     "check_regular",
     "open_regular",
     "read_regular",
-    "available_memory",
-    "check_memory",
 ]
 
 _KINDS = (
@@ -148,67 +147,3 @@ def read_regular(
     with open_regular(path, src, error=error) as fh:
         check_memory(int(factor * os.fstat(fh.fileno()).st_size), src, error=error)
         return fh.read()
-
-
-def available_memory() -> int | None:
-    """Memory (bytes) the system can give this process without swapping, or None if unknown.
-
-    ``MemAvailable`` of ``/proc/meminfo`` (Linux: free memory plus reclaimable caches), else
-    ``sysconf("SC_AVPHYS_PAGES") * sysconf("SC_PAGE_SIZE")`` (free pages only).
-    """
-    try:
-        with open("/proc/meminfo", "rb") as f:
-            for line in f:
-                if line.startswith(b"MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def check_memory(
-    need: int,
-    src: str,
-    *,
-    what: str = "",
-    fix: str = "",
-    error: type[Exception] = ValueError,
-) -> None:
-    """Refuse, before parsing, a file whose loading needs more memory than is available.
-
-    Parameters
-    ----------
-    need : int
-        The reader's estimate of the memory (bytes) that loading the file takes at its peak.
-    src : str
-        The file as the user gave it, for the message.
-    what : str, optional
-        What the estimate counts, for the message (e.g. ``"3 channels x 2e9 samples"``).
-    fix : str, optional
-        What else the user can do, appended to "free memory or use a machine with more"
-        (e.g. ``"load one channel (channel=)"``).
-    error : exception type
-        Raised with the message.
-
-    Raises
-    ------
-    error
-        ``need`` is larger than :func:`available_memory` (nothing is checked when that is
-        unknown).
-    """
-    avail = available_memory()
-    if avail is None or need <= avail:
-        return
-    detail = f" ({what})" if what else ""
-    raise error(
-        f"'{src}' is too large to load: it needs about {_mb(need)} of memory{detail}, and "
-        f"{_mb(avail)} are available: free memory or use a machine with more"
-        + (f", or {fix}" if fix else "")
-    )
-
-
-def _mb(n: float) -> str:
-    return f"{n / 1e9:.3g} GB" if n >= 1e9 else f"{n / 1e6:.3g} MB"

@@ -1,4 +1,5 @@
-"""Limits on the work a call may ask for: the number of samples a simulation may hold.
+"""Limits on the work a call may ask for: the samples a simulation may hold, the memory a file
+may take to load.
 
 A simulation of ``n`` samples holds the result and one process's draw at a time, plus the
 temporaries of a cumulative sum or a recursive filter: about :data:`BYTES_PER_SAMPLE` bytes
@@ -20,6 +21,7 @@ __all__ = [
     "MEMORY_FRACTION",
     "MAX_SAMPLES",
     "available_memory",
+    "check_memory",
     "max_samples",
     "check_sample_count",
 ]
@@ -35,21 +37,21 @@ MAX_SAMPLES = 2**40
 
 
 def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation now, or None when unknown.
+    """Memory (bytes) the system can give this process without swapping, or None if unknown.
 
-    Linux: ``MemAvailable`` of ``/proc/meminfo`` (what the kernel can give without swapping);
-    elsewhere the physical memory (``os.sysconf``), an upper bound.
+    ``MemAvailable`` of ``/proc/meminfo`` (Linux: free memory plus reclaimable caches), else
+    ``sysconf("SC_AVPHYS_PAGES") * sysconf("SC_PAGE_SIZE")`` (free pages only).
     """
     try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
+        with open("/proc/meminfo", "rb") as f:
+            for line in f:
+                if line.startswith(b"MemAvailable:"):
                     return int(line.split()[1]) * 1024
     except (OSError, ValueError, IndexError):
         pass
     try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, OSError, ValueError):
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
         return None
 
 
@@ -124,3 +126,48 @@ def check_sample_count(n: object, *, name: str = "n", channels: int = 1, copies:
             f"use {name} <= {limit}"
         )
     return k
+
+
+def check_memory(
+    need: int,
+    src: str,
+    *,
+    what: str = "",
+    fix: str = "",
+    error: type[Exception] = ValueError,
+) -> None:
+    """Refuse, before parsing, a file whose loading needs more memory than is available.
+
+    Parameters
+    ----------
+    need : int
+        The reader's estimate of the memory (bytes) that loading the file takes at its peak.
+    src : str
+        The file as the user gave it, for the message.
+    what : str, optional
+        What the estimate counts, for the message (e.g. ``"3 channels x 2e9 samples"``).
+    fix : str, optional
+        What else the user can do, appended to "free memory or use a machine with more"
+        (e.g. ``"load one channel (channel=)"``).
+    error : exception type
+        Raised with the message.
+
+    Raises
+    ------
+    error
+        ``need`` is larger than :func:`available_memory` (nothing is checked when that is
+        unknown).
+    """
+    avail = available_memory()
+    if avail is None or need <= avail:
+        return
+    detail = f" ({what})" if what else ""
+    raise error(
+        f"'{src}' is too large to load: it needs about {_mb(need)} of memory{detail}, and "
+        f"{_mb(avail)} are available: free memory or use a machine with more"
+        + (f", or {fix}" if fix else "")
+    )
+
+
+def _mb(n: float) -> str:
+    return f"{n / 1e9:.3g} GB" if n >= 1e9 else f"{n / 1e6:.3g} MB"

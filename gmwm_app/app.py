@@ -39,7 +39,6 @@ import panel as pn  # noqa: E402
 
 from gmwm_app._panel_compat import light_text_updates  # noqa: E402
 from gmwm_app.jobs import Jobs  # noqa: E402
-from gmwm_app.limits import current as current_limits  # noqa: E402
 from gmwm_app.model_panel import ModelPanel  # noqa: E402
 from gmwm_app.selection_view import SelectionView, jtest_badge  # noqa: E402
 from gmwm_app.session_view import SessionPanel, download_button  # noqa: E402
@@ -47,6 +46,7 @@ from gmwm_app.state import (  # noqa: E402
     AppState,
     format_value,
 )
+from gmwm_app.upload import BoundedFileDropper  # noqa: E402
 from gmwm_app.views import (  # noqa: E402
     FitTables,
     WVFigures,
@@ -153,15 +153,11 @@ class GMWMApp:
             label="Load the demo log", color="default", sizing_mode="stretch_width"
         )
         self.demo_button.on_click(self._on_demo)
-        self.upload = pn.widgets.FileDropper(
-            multiple=False,
-            max_file_size=f"{max(1, int(current_limits().max_upload_mb))}MB",
-            chunk_size=8_000_000,
-            layout="compact",
-            sizing_mode="stretch_width",
-            height=90,
+        self.upload = BoundedFileDropper(  # limited while it arrives: gmwm_app.upload
+            multiple=False, layout="compact", sizing_mode="stretch_width", height=90
         )
         self.upload.param.watch(self._on_upload, "value")
+        self.upload.param.watch(self._on_upload_refused, "refused")
         self.path_input = pn.widgets.TextInput(
             label="Log file on the server",
             placeholder="/path/to/log.h5 (press Enter)",
@@ -492,6 +488,8 @@ class GMWMApp:
     def _load_failed(self, message: str, err: BaseException) -> None:
         self.state.report_error(f"{message}: {err}")
         self.session_panel.failed(err)  # time gaps: offer the longest segment
+        if self.upload.value:
+            self.upload.value = {}  # free a refused upload's bytes (a retry keeps its own)
 
     def _settled(self) -> None:
         self.ready = True
@@ -545,6 +543,11 @@ class GMWMApp:
             f"Reading {name}",
             partial(self.state.read_and_warm, "upload", data=data, filename=name),
         )
+
+    def _on_upload_refused(self, event: Any) -> None:
+        if event.new:
+            self.state.report_error(event.new)
+            self.upload.refused = ""  # the same refusal again is reported again
 
     def _on_path(self, _event: Any = None) -> None:
         path = (self.path_input.value_input or self.path_input.value or "").strip()

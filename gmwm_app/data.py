@@ -187,9 +187,11 @@ def read_source(
             data = data.encode("utf-8")
         check_upload_size(len(data), filename)
         name = Path(filename or "upload.csv").name
+        # no copies of the content (an upload may be 200 MB): the guard sends it as a
+        # buffer, the loader reads it in place (bytes) through io.BytesIO
         if is_hdf5(bytes(data[:2056]), name):  # see gmwm_app.hdf5_guard
-            check_hdf5(bytes(data), name)
-        lg = read_log(bytes(data), segment=segment, name=name)
+            check_hdf5(data, name)
+        lg = read_log(data, segment=segment, name=name)
         out = LoadedData(lg, "upload", name, "")
     elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path
         from engine.teaching import get_scenario, simulate_scenario

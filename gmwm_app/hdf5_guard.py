@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import io
 import multiprocessing
+import os
+import signal
 import threading
 from multiprocessing.connection import Connection
 from typing import Any
@@ -37,7 +39,7 @@ TIMEOUT_S = 15.0
 HEAD = 4096
 
 _LOCK = threading.Lock()
-_HELPER: dict[str, Any] = {}  # "proc", "conn"
+_HELPER: dict[str, Any] = {}  # "proc", "conn", "pid" (the process that started it)
 
 
 def is_hdf5(head: bytes, name: str = "") -> bool:
@@ -81,10 +83,15 @@ def walk_hdf5(source: str | bytes) -> int:
 
 
 def _serve(conn: Connection) -> None:  # pragma: no cover - runs in the helper process
+    # Ctrl+C in the server's terminal reaches the whole process group: the server stops and
+    # closes the pipe (EOF below ends the helper); a KeyboardInterrupt here would only print
+    # a traceback of the helper's wait
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         try:
-            source = conn.recv()
-        except EOFError:
+            kind = conn.recv()  # "path" (then the path) or "bytes" (then the content)
+            source = conn.recv() if kind == "path" else conn.recv_bytes()
+        except (EOFError, OSError, KeyboardInterrupt):
             return
         try:
             conn.send(("ok", walk_hdf5(source)))
@@ -93,6 +100,8 @@ def _serve(conn: Connection) -> None:  # pragma: no cover - runs in the helper p
 
 
 def _helper() -> tuple[Any, Connection]:
+    if _HELPER.get("pid") != os.getpid():  # started by the parent of a forked server process
+        _HELPER.clear()  # (its helper and pipe belong to that parent: not touched here)
     proc = _HELPER.get("proc")
     if proc is None or not proc.is_alive():
         ctx = multiprocessing.get_context("spawn")
@@ -100,12 +109,15 @@ def _helper() -> tuple[Any, Connection]:
         proc = ctx.Process(target=_serve, args=(child,), daemon=True, name="gmwm-hdf5-guard")
         proc.start()
         child.close()
-        _HELPER.update(proc=proc, conn=parent)
+        _HELPER.update(proc=proc, conn=parent, pid=os.getpid())
     return proc, _HELPER["conn"]
 
 
 def stop_helper() -> None:
     """Stop the helper process (it is started again by the next check)."""
+    if _HELPER.pop("pid", None) != os.getpid():
+        _HELPER.clear()
+        return
     proc, conn = _HELPER.pop("proc", None), _HELPER.pop("conn", None)
     if conn is not None:
         conn.close()
@@ -120,7 +132,9 @@ def start_helper() -> None:
         _helper()
 
 
-def check_hdf5(source: str | bytes, name: str, timeout: float | None = None) -> None:
+def check_hdf5(
+    source: str | bytes | bytearray | memoryview, name: str, timeout: float | None = None
+) -> None:
     """Refuse an HDF5 file whose metadata the HDF5 library cannot read in ``timeout`` seconds
     or on which it crashes, without risking this process.
 
@@ -128,8 +142,8 @@ def check_hdf5(source: str | bytes, name: str, timeout: float | None = None) -> 
 
     Parameters
     ----------
-    source : str or bytes
-        A path or the file's content.
+    source : str or bytes-like
+        A path or the file's content (sent to the helper as a buffer, not copied here).
     name : str
         The file name, for the message.
     timeout : float, optional
@@ -144,7 +158,12 @@ def check_hdf5(source: str | bytes, name: str, timeout: float | None = None) -> 
     with _LOCK:
         _, conn = _helper()
         try:
-            conn.send(source)
+            if isinstance(source, str):
+                conn.send("path")
+                conn.send(source)
+            else:  # the buffer itself: no pickled copy of a large upload
+                conn.send("bytes")
+                conn.send_bytes(source)
             if not conn.poll(timeout):
                 stop_helper()
                 raise ValueError(

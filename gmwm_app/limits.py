@@ -15,16 +15,21 @@ from pathlib import Path
 
 __all__ = [
     "DEFAULT_MAX_UPLOAD_MB",
+    "UPLOAD_CHUNK_BYTES",
     "ServerLimits",
     "configure",
     "current",
     "default_data_dirs",
     "check_path",
     "check_upload_size",
+    "upload_refusal",
 ]
 
 #: Upload limit (MB) when none is configured.
 DEFAULT_MAX_UPLOAD_MB = 200.0
+#: An upload reaches the server in chunks of this many bytes, one websocket message each
+#: (:class:`gmwm_app.upload.BoundedFileDropper`); ``gmwm-app`` refuses larger messages.
+UPLOAD_CHUNK_BYTES = 8_000_000
 
 _REPO = Path(__file__).resolve().parents[1]
 
@@ -100,13 +105,21 @@ def check_path(path: str | os.PathLike[str]) -> Path:
     )
 
 
+def upload_refusal(name: str, n_bytes: int, at_least: bool = False) -> str:
+    """The message refusing an upload of ``n_bytes`` (``at_least``: its size is not known yet,
+    only that it is larger) named ``name``."""
+    lim = _LIMITS
+    what = f"the uploaded file {name}" if name else "the uploaded file"
+    mb = f"{n_bytes / 1e6:.1f}" if n_bytes >= 1e6 else f"{n_bytes / 1e6:.3g}"
+    size = f"over {mb} MB" if at_least else f"{mb} MB"
+    return (
+        f"{what} is {size}, more than this server accepts ({lim.max_upload_mb:g} MB): put it "
+        "in a data folder of the server and load it by path, or start gmwm-app with a larger "
+        "--max-upload-mb"
+    )
+
+
 def check_upload_size(n_bytes: int, name: str = "") -> None:
     """ValueError when an upload of ``n_bytes`` is larger than the configured limit."""
-    lim = _LIMITS
-    if n_bytes > lim.max_upload_bytes:
-        what = f"the uploaded file {name}" if name else "the uploaded file"
-        raise ValueError(
-            f"{what} is {n_bytes / 1e6:.1f} MB, more than this server accepts "
-            f"({lim.max_upload_mb:g} MB): put it in a data folder of the server "
-            "and load it by path, or start gmwm-app with a larger --max-upload-mb"
-        )
+    if n_bytes > _LIMITS.max_upload_bytes:
+        raise ValueError(upload_refusal(name, n_bytes))

@@ -136,12 +136,17 @@ def create_application(path: str | None = None) -> Any:
 
     limit_blas_once()  # a server process: see limit_blas_threads
     favour_loop_latency()  # the loop's turns between the page builds' Python
-    # the HDF5 watchdog's helper process, started now so that the first file does not wait
-    threading.Thread(target=hdf5_guard.start_helper, daemon=True, name="gmwm-guard").start()
     compat.skip_repeated_css_patch()
     factory = create_app_factory(path)
 
     class OffLoopHandler(FunctionHandler):
+        def on_server_loaded(self, server_context: Any) -> None:
+            # the HDF5 watchdog's helper process, started now so that the first file does not
+            # wait; in every server process (--num-procs forks before this), never before a
+            # fork (a thread of the parent could hold the guard's lock in the child)
+            threading.Thread(target=hdf5_guard.start_helper, daemon=True, name="gmwm-guard").start()
+            super().on_server_loaded(server_context)
+
         async def on_session_created(self, session_context: Any) -> None:
             await super().on_session_created(session_context)
             if not compat.supported():  # another Panel: built on the loop (modify_document)

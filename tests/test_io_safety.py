@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 import engine._files as files
+import engine._limits as _limits
 from engine.cli.main import main as gmwm
 from engine.inference.datasheet_check import read_datasheet
 from engine.io import LoadError, load_log, load_session
@@ -277,11 +278,11 @@ def _peak(fn: Callable[[], Any]) -> int:
 
 def _refused_at(monkeypatch: pytest.MonkeyPatch, path: Path, need: int, **kw: Any) -> None:
     """The load is refused with ``need - 1`` bytes available and goes on with ``need``."""
-    monkeypatch.setattr(files, "available_memory", lambda: need - 1)
+    monkeypatch.setattr(_limits, "available_memory", lambda: need - 1)
     with pytest.raises(LoadError, match="is too large to load: it needs about") as exc:
         load_log(path, **kw)
     assert str(path) in str(exc.value) and "available: free memory" in str(exc.value)
-    monkeypatch.setattr(files, "available_memory", lambda: need)
+    monkeypatch.setattr(_limits, "available_memory", lambda: need)
     assert load_log(path, **kw).n > 0
 
 
@@ -343,7 +344,7 @@ def test_too_large_in_the_cli_and_the_stream_still_works(
 ) -> None:
     x = np.random.default_rng(4).normal(size=20_000)
     np.save(tmp_path / "x.npy", x)
-    monkeypatch.setattr(files, "available_memory", lambda: 100_000)  # 0.1 MB
+    monkeypatch.setattr(_limits, "available_memory", lambda: 100_000)  # 0.1 MB
     assert gmwm(["wv", str(tmp_path / "x.npy"), "--fs", "100"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "needs about 0.16 MB of memory" in err, err

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import check_memory
+from .._limits import check_memory
 from .log import ImuLog, LoadError, pick_channel
 
 __all__ = [
@@ -117,7 +117,7 @@ def array_memory_need(shape: tuple[int, ...], dtype: np.dtype) -> int:
 
 def check_array_memory(need: int, src: str, what: str) -> None:
     """LoadError when reading arrays that need ``need`` bytes (:func:`array_memory_need`)
-    cannot fit in the available memory (see :func:`engine._files.check_memory`)."""
+    cannot fit in the available memory (see :func:`engine._limits.check_memory`)."""
     fix = "load one channel (channel=) of an HDF5 file, or compute the WV of a .npy/HDF5 log "
     fix += "in blocks (wavelet_variance_stream)"
     check_memory(need, src, what=what, fix=fix, error=LoadError)

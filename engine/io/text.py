@@ -9,13 +9,16 @@ comment. Errors name the line (1-based, as in an editor) and the column.
 from __future__ import annotations
 
 import io
+import itertools
 import os
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._files import check_memory, open_regular
+from .._files import open_regular
+from .._limits import check_memory
 from ._assemble import UNIT_RE, LoadOptions, RawLog, clean_unit, finish_log, time_divisor
 from .log import ImuLog, LoadError
 
@@ -48,7 +51,18 @@ def _split_header(line: str, delim: str | None) -> list[str]:
     return out
 
 
-def _decode(raw: bytes, src: str) -> str:
+#: Bytes decoded at a time (cut at a line end): the text is never held whole as a str.
+BLOCK_BYTES = 1 << 18
+#: Rows parsed by one np.loadtxt call.
+CHUNK_ROWS = 16384
+
+
+def _encoding(raw: bytes, src: str) -> str:
+    """The encoding of a text log (``utf-8-sig`` or ``latin-1``); LoadError for binary data.
+
+    Checked block by block (line ends never fall inside a UTF-8 sequence), so no decoded copy
+    of the whole file is made.
+    """
     not_text = LoadError(
         f"file '{src}' is not a text file (binary data, or an encoding other than "
         "UTF-8/Latin-1): expected CSV/TSV text, .npy/.npz or HDF5; check the "
@@ -57,35 +71,117 @@ def _decode(raw: bytes, src: str) -> str:
     if b"\x00" in raw[:65536]:
         raise not_text
     try:
-        return raw.decode("utf-8-sig")
+        for k, block in enumerate(_blocks(raw)):
+            block.decode("utf-8-sig" if k == 0 else "utf-8")
+        return "utf-8-sig"
     except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-        sample = text[:65536]
+        sample = bytes(raw[:65536]).decode("latin-1")
         ctrl = sum(1 for c in sample if ord(c) < 32 and c not in "\t\r\n\f" or 127 <= ord(c) < 160)
         if ctrl > 0.01 * len(sample):
             raise not_text from None
-        return text
+        return "latin-1"
 
 
-#: Peak memory of :func:`read_text` (bytes), measured with tracemalloc over CSV/TSV/whitespace
-#: files of 1 to 12 columns (tests/test_io_safety.py): per byte of the file (the bytes, the
-#: decoded text, the stripped lines), per line (two str objects and a list slot each, the line
-#: number) and per value (the float64 result and the parser's buffer).
-PEAK_PER_BYTE, PEAK_PER_LINE, PEAK_PER_VALUE = 3.5, 110, 16
+def _blocks(raw: bytes) -> Iterator[bytes]:
+    """``raw`` in pieces of about :data:`BLOCK_BYTES`, each ending at a line end (``\\n``)."""
+    start, n = 0, len(raw)
+    while start < n:
+        cut = raw.find(b"\n", min(start + BLOCK_BYTES, n) - 1)
+        end = n if cut < 0 else cut + 1
+        yield raw[start:end]
+        start = end
+
+
+def _content_lines(raw: bytes, encoding: str) -> Iterator[tuple[int, str]]:
+    """(1-based line number, content) of the lines that hold something besides a ``#``
+    comment and blanks, decoded a block at a time."""
+    lineno = 0
+    for k, block in enumerate(_blocks(raw)):
+        text = block.decode(encoding if k == 0 else encoding.replace("-sig", ""))
+        for line in text.splitlines():
+            lineno += 1
+            s = line.split("#", 1)[0].strip()
+            if s:
+                yield lineno, s
+
+
+def _last_content(raw: bytes, encoding: str) -> str:
+    """The last content line of ``raw`` (see :func:`_content_lines`), read from the end."""
+    end = len(raw)
+    while end > 0:
+        start = max(0, end - BLOCK_BYTES)
+        if start > 0:  # from a line end on, so that no line is cut
+            cut = raw.rfind(b"\n", 0, start)
+            start = 0 if cut < 0 else cut + 1
+        text = raw[start:end].decode(encoding if start == 0 else encoding.replace("-sig", ""))
+        for line in reversed(text.splitlines()):
+            s = line.split("#", 1)[0].strip()
+            if s:
+                return s
+        end = start
+    return ""
+
+
+def _parse_rows(
+    rows: Iterator[tuple[int, str]], delim: str | None, k: int, capacity: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``(k, n)`` float64 values (one contiguous row per column) and the line numbers of
+    the data rows (int32 unless a file has 2**31 lines), parsed :data:`CHUNK_ROWS` lines at a
+    time into arrays of ``capacity`` rows (grown if needed). ValueError as np.loadtxt's."""
+    cap = max(int(capacity), 1)
+    out = np.empty((k, cap))
+    lines_of = np.empty(cap, dtype=np.int32 if cap < 2**31 - CHUNK_ROWS else np.int64)
+    n = 0
+    while True:
+        chunk = list(itertools.islice(rows, CHUNK_ROWS))
+        if not chunk:
+            break
+        block = np.loadtxt(
+            [c for _, c in chunk],
+            delimiter=delim,
+            dtype=np.float64,
+            ndmin=2,
+            comments=None,
+            quotechar='"',
+        )
+        if block.shape[1] != k:
+            raise ValueError("header and data column counts differ")
+        m = block.shape[0]
+        if n + m > cap:  # grow (the first chunks' size is a guess; see read_text)
+            cap = max(2 * cap, n + m)
+            grown = np.empty((k, cap))
+            grown[:, :n] = out[:, :n]
+            out = grown
+            lines_of = np.resize(lines_of.astype(np.int64), cap)
+        out[:, n : n + m] = block.T
+        lines_of[n : n + m] = [ln for ln, _ in chunk]
+        n += m
+    return out[:, :n], lines_of[:n]
+
+
+#: Peak memory of loading a text log (bytes), measured with tracemalloc over CSV/TSV/whitespace
+#: files of 1 to 12 columns and 5e4 to 2e5 rows (tests/test_io_safety.py): per byte of the file
+#: (its bytes, held while the rows are parsed block by block), per line (its line number), per
+#: value (the float64 column and the log's checks), plus a fixed part (one chunk of
+#: :data:`CHUNK_ROWS` rows as text and the parser's buffer).
+PEAK_PER_BYTE, PEAK_PER_LINE, PEAK_PER_VALUE, PEAK_FIXED = 1.5, 4, 10, 8_000_000
 _SAMPLE = 1 << 16  # bytes read first to estimate the lines and values of a file
 
 
 def text_memory_need(size: int, sample: bytes) -> int:
     """Estimated peak memory (bytes) of reading a text log of ``size`` bytes that starts with
-    ``sample``: ``PEAK_PER_BYTE * size + PEAK_PER_LINE * lines + PEAK_PER_VALUE * values``,
-    with the lines and values per byte of ``sample`` extrapolated to the file."""
+    ``sample``: ``PEAK_PER_BYTE * size + PEAK_PER_LINE * lines + PEAK_PER_VALUE * values +
+    PEAK_FIXED``, with the lines and values per byte of ``sample`` extrapolated to the file."""
     if not sample:
-        return int(PEAK_PER_BYTE * size)
+        return int(PEAK_PER_BYTE * size) + PEAK_FIXED
     lines = sample.count(b"\n") + (not sample.endswith(b"\n"))
     delim = next((d for d in (b"\t", b";", b",") if d in sample), None)
     values = sample.count(delim) + lines if delim else len(sample.split())
     per = size / len(sample)
-    return int(PEAK_PER_BYTE * size + per * (PEAK_PER_LINE * lines + PEAK_PER_VALUE * values))
+    return (
+        int(PEAK_PER_BYTE * size + per * (PEAK_PER_LINE * lines + PEAK_PER_VALUE * values))
+        + PEAK_FIXED
+    )
 
 
 def _read(path: Path | io.BytesIO, src: str) -> bytes:
@@ -106,40 +202,48 @@ def _read(path: Path | io.BytesIO, src: str) -> bytes:
 
 def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
     raw = _read(path, src)
-    text = _decode(raw, src)
-    contents: list[str] = []
-    linenos: list[int] = []
-    for i, line in enumerate(text.splitlines(), start=1):
-        s = line.split("#", 1)[0].strip()
-        if s:
-            contents.append(s)
-            linenos.append(i)
-    if not contents:
+    # No whole-file copies (an upload may be 200 MB): the bytes are decoded a block at a
+    # time, rows parsed in chunks into one array per column (what the log keeps); at the
+    # peak, the file's bytes plus its values plus one chunk's text.
+    encoding = _encoding(raw, src)
+    lines = _content_lines(raw, encoding)
+    head = list(itertools.islice(lines, 2))
+    lines.close()  # (its decoded block)
+    if not head:
         raise LoadError(
             f"file '{src}' is empty (no data rows, only blank or '#' comment "
             "lines): check that the logger wrote samples"
         )
-    probe = contents[min(1, len(contents) - 1)]
+    probe = head[min(1, len(head) - 1)][1]
     delim = next((d for d in ("\t", ";", ",") if d in probe), None)
     notes: list[str] = []
-    if delim == ";" and "," in probe:  # European CSV: 1,5;2,3
-        contents = [c.replace(",", ".") for c in contents]
+    euro = delim == ";" and "," in probe  # European CSV: 1,5;2,3
+    if euro:
         notes.append("semicolon-separated with decimal commas")
-    if delim is not None and contents[-1].endswith(delim):  # trailing delimiter on every row
-        contents = [c.rstrip(delim).rstrip() for c in contents]
-        keep = [i for i, c in enumerate(contents) if c]  # a row of delimiters only: blank
-        contents, linenos = [contents[i] for i in keep], [linenos[i] for i in keep]
-        if not contents:
-            raise LoadError(
-                f"file '{src}' holds only delimiters, no values: check that the "
-                "logger wrote samples"
-            )
-    first = _split(contents[0], delim)
+    trailing = delim is not None and _last_content(raw, encoding).endswith(delim)
+
+    def content_rows() -> Iterator[tuple[int, str]]:
+        for ln, c in _content_lines(raw, encoding):
+            if euro:
+                c = c.replace(",", ".")
+            if trailing:  # trailing delimiter on every row
+                c = c.rstrip(delim).rstrip()
+                if not c:  # a row of delimiters only: blank
+                    continue
+            yield ln, c
+
+    rows_it = content_rows()
+    first_row = next(rows_it, None)
+    if first_row is None:
+        raise LoadError(
+            f"file '{src}' holds only delimiters, no values: check that the logger wrote samples"
+        )
+    first = _split(first_row[1], delim)
     header = any(_num(f) is None for f in first)
     names: list[str] = []
     units: dict[str, str] = {}
     if header:
-        for j, tok in enumerate(_split_header(contents[0], delim)):
+        for j, tok in enumerate(_split_header(first_row[1], delim)):
             m = UNIT_RE.fullmatch(tok)
             name, unit = (m.group(1).strip(), m.group(2)) if m else (tok.strip(), "")
             name = name or f"col{j}"
@@ -148,24 +252,23 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
                 name = f"{name}_{j}"
             names.append(name)
             units[name] = clean_unit(unit)
-        contents, linenos = contents[1:], linenos[1:]
-        if not contents:
+        second = next(rows_it, None)
+        if second is None:
             raise LoadError(  # the header is not named: it may not be a header at all
                 f"file '{src}' has a header line ({len(names)} column(s)) but no data rows: "
                 "check that the logger wrote samples"
             )
+        data_rows = itertools.chain([second], rows_it)
     else:
         names = [f"col{j}" for j in range(len(first))]
-    rows = np.asarray(linenos)
+        data_rows = itertools.chain([first_row], rows_it)
     try:
-        data = np.loadtxt(
-            contents, delimiter=delim, dtype=np.float64, ndmin=2, comments=None, quotechar='"'
-        )
-        if data.shape[1] != len(names):
-            raise ValueError("header and data column counts differ")
-    except ValueError:
-        _diagnose(src, contents, linenos, delim, names, header)
-    cols = {name: data[:, j] for j, name in enumerate(names)}
+        # every row ends with a line feed but maybe the last (old Mac files: grown as needed)
+        values, rows = _parse_rows(data_rows, delim, len(names), raw.count(b"\n") + 1)
+    except ValueError:  # walk the rows again (lazily) for the line at fault
+        skip = 1 if header else 0
+        _diagnose(src, lambda: itertools.islice(content_rows(), skip, None), delim, names, header)
+    cols = {name: values[j] for j, name in enumerate(names)}  # contiguous: no copy later
     time = None
     for name in names:  # a named time column (the first one gives fs)
         div = time_divisor(name, units.get(name, ""))
@@ -205,35 +308,45 @@ def _row_problem(fields: list[str], k: int) -> str | int | None:
 
 def _diagnose(
     src: str,
-    contents: list[str],
-    linenos: list[int],
+    data_rows: Callable[[], Iterator[tuple[int, str]]],
     delim: str | None,
     names: list[str],
     header: bool,
 ) -> None:
-    """Find the first ragged row or non-number after np.loadtxt failed, and raise.
+    """Find the first ragged row or non-number after the parser failed, and raise.
 
-    The message names the line and the column by number; it never quotes the file (which may
-    be anything, e.g. a server's /etc/passwd given by path). The header's column names are
-    given only when a row of numbers follows it (then it is a log's header).
+    ``data_rows()`` walks the data rows (line number, content) again, lazily. The message names
+    the line and the column by number; it never quotes the file (which may be anything, e.g. a
+    server's /etc/passwd given by path). The header's column names are given only when a row
+    of numbers follows it (then it is a log's header).
     """
     k = len(names)
-    problems = ((i, _row_problem(_split(c, delim), k)) for i, c in enumerate(contents))
-    i, problem = next(((i, p) for i, p in problems if p is not None), (0, None))
-    if problem is None:
+    found = next(
+        (
+            (i, ln, c, p)
+            for i, (ln, c) in enumerate(data_rows())
+            if (p := _row_problem(_split(c, delim), k)) is not None
+        ),
+        None,
+    )
+    if found is None:
         raise LoadError(f"file '{src}' could not be parsed as numbers: check its format")
+    i, ln, content, problem = found
     known = (
         not header
         or i > 0
-        or any(_row_problem(_split(c, delim), k) is None for c in contents[1:10_000])
+        or any(
+            _row_problem(_split(c, delim), k) is None
+            for _, c in itertools.islice(data_rows(), 1, 10_000)
+        )
     )
-    where = f"file '{src}', line {linenos[i]}"
+    where = f"file '{src}', line {ln}"
     if isinstance(problem, str):
         cols = f" (columns: {', '.join(names)})" if known and header else ""
         raise LoadError(
             f"{where}: {problem}{cols}: give every row one value per column, or remove the line"
         )
-    field = _split(contents[i], delim)[problem]
+    field = _split(content, delim)[problem]
     what = "an empty field" if not field else "a value that is not a number"
     col = f"column {problem + 1} of {k}" + (f" ('{names[problem]}')" if known else "")
     raise LoadError(f"{where}, {col}: {what}: fix the value or remove the line")

@@ -278,10 +278,23 @@ def as_seconds(t: Any, scale: float = 1.0) -> np.ndarray:
         return (a.astype(np.int64) - np.int64(a[0])).astype(np.float64) / scale
     if a.dtype.kind not in "fb":
         raise ValueError(f"time stamps must be numbers, got dtype {a.dtype}")
-    a = a.astype(np.float64)
-    fin = np.flatnonzero(np.isfinite(a))
-    t0 = a[fin[0]] if fin.size else 0.0
-    return (a - t0) / scale
+    a = a.astype(np.float64, copy=False)
+    fin = np.isfinite(a)
+    t0 = a[int(fin.argmax())] if fin.any() else 0.0  # the first finite stamp
+    del fin
+    out = a - t0  # in place below: one N-sized array (a long log's stamps are 100s of MB)
+    if scale != 1:
+        out /= scale
+    return out
+
+
+def _std_in_place(x: np.ndarray) -> float:
+    """``np.std(x)`` (the same operations: mean, deviations, squares, their mean) computed in
+    ``x`` itself, which it overwrites: no N-sized temporary."""
+    mean = x.mean()
+    np.subtract(x, mean, out=x)
+    np.multiply(x, x, out=x)
+    return math.sqrt(x.sum() / x.size)
 
 
 def check_time(
@@ -330,7 +343,8 @@ def check_time(
         d = np.diff(ts)
         fin = np.isfinite(ts)
         pos = d[d > 0]
-        med = float(np.median(pos)) if pos.size else math.nan
+        med = float(np.median(pos, overwrite_input=True)) if pos.size else math.nan  # (a copy)
+        del pos
         bad_stamp = ~fin
         # classify every step (between sample i and i + 1)
         invalid = ~(fin[:-1] & fin[1:])
@@ -339,7 +353,8 @@ def check_time(
         gap = ~invalid & (d > gap_factor * med) if math.isfinite(med) else np.zeros_like(invalid)
     brk = invalid | backward | duplicate | gap
     regular = d[~brk]
-    jitter = float(np.std(regular) / med) if regular.size > 1 and med > 0 else 0.0
+    jitter = float(_std_in_place(regular) / med) if regular.size > 1 and med > 0 else 0.0
+    del regular
 
     events: list[TimeEvent] = []
     counts = {k: 0 for k in _KINDS}
