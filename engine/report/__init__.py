@@ -67,8 +67,14 @@ def report(
     >>> import engine as eg
     >>> html = eg.report(eg.demo_path(), "demo.html", model="GM+WN+RW")  # doctest: +SKIP
     """
-    if output is not None and Path(output).suffix.lower() not in (".html", ".htm"):
-        raise ReportError(f"output {str(output)!r}: a report is an HTML file; end it in .html")
+    if output is not None:  # before the fits: a bad path fails at once
+        out = Path(output)
+        if out.suffix.lower() not in (".html", ".htm"):
+            raise ReportError(f"output {str(output)!r}: a report is an HTML file; end it in .html")
+        if not out.parent.is_dir():
+            raise ReportError(
+                f"output {str(output)!r}: folder '{out.parent}' does not exist; create it first"
+            )
     page = render_html(gather_report(source, **options), static=static, title=title)
     if output is not None:
         Path(output).write_text(page, encoding="utf-8")
