@@ -37,6 +37,7 @@ SUBPACKAGES: tuple[str, ...] = (
     "teaching",
     "demo",
     "batch",
+    "report",
 )
 _EAGER = {"models": models, "wv": wv, "fit": fit, "units": units}
 

@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from ._parallel import executor_workers, parallel_map
 from .fit import FitError, GMWMResult, fit_gmwm
 from .models import ModelError, parse_model
 from .units import datasheet_rows
+
+if TYPE_CHECKING:  # pragma: no cover - engine.io is imported on use (it costs h5py)
+    from .io import ImuLog
 
 __all__ = ["LogFit", "FleetRow", "BatchResult", "fit_log", "fit_batch", "fleet_summary"]
 
@@ -125,7 +128,7 @@ def _check_choice(model: Any, select: Any) -> None:
 
 
 def fit_log(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | ImuLog,
     *,
     model: str | None = None,
     select: str | None = None,
@@ -139,8 +142,9 @@ def fit_log(
 
     Parameters
     ----------
-    path : path
-        A log :func:`engine.io.load_log` reads (or a WV summary file).
+    path : path or ImuLog
+        A log :func:`engine.io.load_log` reads (or a WV summary file), or a log already
+        loaded (then ``fs`` and ``load_options`` must be left out: they were the loader's).
     model : str, optional
         The model of every channel, e.g. ``"GM+WN+RW"``.
     select : str, optional
@@ -164,13 +168,18 @@ def fit_log(
         fails (:class:`engine.io.LoadError`, :class:`engine.fit.FitError` ...).
     """
     from .export import export
-    from .io import load_log, pick_channel
+    from .io import ImuLog, load_log, pick_channel
     from .wv import wavelet_variance
 
     _check_choice(model, select)
     t0 = time.perf_counter()
-    src = str(path)
-    log = load_log(src, fs=fs, **dict(load_options or {}))
+    if isinstance(path, ImuLog):
+        if fs is not None or load_options:
+            raise TypeError("fit_log(): fs and load_options apply to a path, not to a loaded log")
+        log, src = path, path.source
+    else:
+        src = str(path)
+        log = load_log(src, fs=fs, **dict(load_options or {}))
     names = [pick_channel(src, log.names, c) for c in channels] if channels else log.names
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}

@@ -83,6 +83,7 @@ COMMANDS = {
     ],
     "batch": ["batch", DEMO, DEMO, "--max-model", "3*GM+WN+QN+RW+DR", "--quiet", "-o"],
     "study": ["study", "slope", "--reps", "200", "-o"],
+    "report": ["report", DEMO, "--max-model", "3*GM+WN+QN+RW+DR", "-o"],
 }
 FILE_CASES = ("missing folder", "unwritable folder", "folder given as file", "folder inside a file")
 DIR_CASES = ("folder inside a file", "unwritable dir output")
@@ -96,6 +97,8 @@ def test_unwritable_output_fails_before_any_computation(cmd, tmp_path, capsys) -
         path, words = bad[case]
         if cmd == "simulate" and case == "folder given as file":
             words = "is a folder"
+        if cmd == "report":  # an HTML file (its suffix is checked too)
+            path = path[: -len(".h5")] + ".html" if path.endswith(".h5") else path
         t0 = time.perf_counter()
         code = main([*COMMANDS[cmd], path])
         took = time.perf_counter() - t0

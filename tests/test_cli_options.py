@@ -69,6 +69,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--seed": ("seed", r"seed"),
     "--segment": ("segment", r"^time column with gaps"),
     "--shared": ("shared", r"^processes shared by"),
+    "--static": ("static", r"^PNG figures instead of interactive"),
     "--stream": ("stream", r"^stream a \.npy/HDF5 log"),
     "--tau": ("tau", r"^minimise the WV at the scale tau = S seconds$"),
     "--top": ("top", r"^show only the best N"),
@@ -122,7 +123,7 @@ def test_every_option_has_one_meaning() -> None:
     assert set(seen) == set(MEANINGS)  # no stale row
     # the clashes of the issue are gone: a counts factor wherever --scale is an option
     assert "virtual" not in seen["--scale"] and "--level" not in seen and "--alpha" not in seen
-    assert seen["-o"] == {"simulate", "export", "virtual", "batch", "study"}
+    assert seen["-o"] == {"simulate", "export", "virtual", "batch", "study", "report"}
 
 
 @pytest.mark.parametrize(("cmd", "old"), list(DEPRECATED))

@@ -79,6 +79,7 @@ def test_python_blocks_run_as_written_in_order():
 def test_shell_examples_run_as_written(tmp_path):
     sh = [c for c in blocks("sh") if c.strip()]
     assert sh, "the README has no runnable gmwm example"
+    outs = []
     for code in sh:
         lines = [ln for ln in code.splitlines() if ln.strip() and not ln.startswith("#")]
         assert all(ln.startswith("gmwm ") for ln in lines), code
@@ -96,9 +97,11 @@ def test_shell_examples_run_as_written(tmp_path):
         )
         assert p.returncode == 0 and p.stderr == "", p.stderr[-3000:]
         assert "Traceback" not in p.stdout
-    out = p.stdout
+        outs.append(p.stdout)
+    out = "".join(outs)  # every block's output (the checks below are of the first blocks)
     assert "sim.npy.json" in out and "fs = 100 Hz" in out and "(deg/s)^2" in out
     assert "candidates ranked, best 3 shown" in out
+    assert "wrote report.html (interactive" in out and (tmp_path / "report.html").is_file()
 
 
 def test_synopsis_names_only_options_that_exist():

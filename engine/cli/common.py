@@ -294,7 +294,7 @@ def check_output(
 ) -> None:
     """Refuse an output path that cannot be written, before any computation.
 
-    Every subcommand that writes (``simulate -o``, ``export -o``, ``virtual -o``,
+    Every subcommand that writes (``simulate -o``, ``export -o``, ``virtual -o``, ``report -o``,
     ``batch -o DIR``, ``study -o DIR``) calls this first, so that a typo in a folder name
     costs a second, not the whole run.
 
@@ -416,11 +416,12 @@ def confidence(option: str, example: str = "0.95") -> Callable[[str], float]:
 
 
 def add_confidence_option(
-    sp: argparse.ArgumentParser, what: str, old: Literal["--level", "--alpha"]
+    sp: argparse.ArgumentParser, what: str, old: Literal["--level", "--alpha"] | None = None
 ) -> argparse.Action:
     """Add ``--confidence`` (default 0.95) to a sub-command, with its old spelling there as a
-    deprecated alias: ``--level`` (the same number) or ``--alpha`` (1 - confidence). Only the
-    command's own old spelling: elsewhere ``--level`` stays an abbreviation of ``--levels``."""
+    deprecated alias: ``--level`` (the same number) or ``--alpha`` (1 - confidence); None for a
+    command that never had another spelling. Only the command's own old spelling: elsewhere
+    ``--level`` stays an abbreviation of ``--levels``."""
     new = sp.add_argument(
         "--confidence",
         type=confidence("--confidence"),
@@ -428,6 +429,8 @@ def add_confidence_option(
         metavar="C",
         help=f"confidence level of {what}, in (0, 1) (0.95)",
     )
+    if old is None:
+        return new
     if old == "--level":
         add_deprecated_alias(sp, "--level", new, type=confidence("--level"))
         return new

@@ -57,7 +57,7 @@ __all__ = ["main", "build_parser"]
 
 # Subcommands that live in their own module engine/cli/<name>.py, each with
 # ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
-_MODULE_COMMANDS = ("export", "check", "virtual", "batch")
+_MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -395,6 +395,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         set_blas_threads(1)
     try:
         args = build_parser().parse_args(argv)
+        args.argv = list(sys.argv[1:] if argv is None else argv)  # as given (gmwm report)
         handler = {
             "wv": _cmd_wv,
             "fit": _cmd_fit,

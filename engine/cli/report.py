@@ -1,0 +1,104 @@
+"""``gmwm report`` (:func:`add_parser`, :func:`run`): a calibration report of one IMU log::
+
+    gmwm report INPUT -o report.html [--model SPEC | --max-model SPEC] [--channels a,b,...]
+                [--datasheet VALUES | --datasheet-file FILE] [--format kalibr] [--static]
+                [--fs HZ] [--levels J] [--weights ci|identity|efficient] [--confidence 0.95]
+                [--segment ...] [--scale ...] [--units ...] [--topic T]
+
+One self-contained HTML file (:func:`engine.report`): the log, per channel the Allan deviation,
+the WV with the fit, its decomposition and residuals, the PSD, the parameters and datasheet
+quantities with intervals, the J-test and every warning, the datasheet check, the export file,
+and how it was made. ``--static`` draws PNG figures (matplotlib) instead of interactive ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+from typing import Any
+
+from .common import (
+    add_confidence_option,
+    add_log_options,
+    add_weights_option,
+    check_output,
+    log_kwargs,
+    positive,
+    usage_error,
+)
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``report`` sub-command to the ``gmwm`` sub-parsers."""
+    from ..report import DEFAULT_SELECT
+
+    rp = sub.add_parser(
+        "report",
+        help="calibration report of one log: one self-contained HTML file (plots, "
+        "parameters with intervals, datasheet check, export numbers)",
+    )
+    rp.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
+    rp.add_argument("-o", "--output", required=True, help="output file: the HTML report (.html)")
+    what = rp.add_mutually_exclusive_group()
+    what.add_argument("--model", help="model of every channel, e.g. 'GM+WN+RW'")
+    what.add_argument(
+        "--max-model",
+        metavar="SPEC",
+        help=f"per channel, the WVIC-best sub-model of this model (default {DEFAULT_SELECT})",
+    )
+    rp.add_argument("--channels", help="channels separated by commas (default: all)")
+    src = rp.add_mutually_exclusive_group()
+    src.add_argument(
+        "--datasheet",
+        help="KEY=VALUE UNIT items separated by commas, as gmwm check takes them "
+        "('arw=0.3 deg/sqrt(h), bi=5 deg/h'): the datasheet values to check",
+    )
+    src.add_argument(
+        "--datasheet-file", help="Kalibr imu.yaml, gmwm JSON report or datasheet CSV to check"
+    )
+    rp.add_argument(
+        "--format",
+        default="kalibr",
+        help="export format whose file the report includes (default kalibr; 'none': none)",
+    )
+    rp.add_argument("--static", action="store_true", help="PNG figures instead of interactive")
+    rp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
+    rp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
+    add_weights_option(
+        rp, "weighting matrix: ci (default), identity, or efficient (two-step, V^-1)"
+    )
+    add_confidence_option(rp, "the parameter intervals")
+    add_log_options(rp, stream=False)
+    return rp
+
+
+def run(args: argparse.Namespace) -> dict[str, Any] | str:
+    """Run ``gmwm report``; returns one line saying what was written."""
+    check_output(args.output, "-o", suffixes=(".html", ".htm"))  # before any import or fit
+    from ..export import FORMATS
+    from ..report import report
+
+    fmt = None if args.format.lower() == "none" else args.format
+    if fmt is not None and fmt not in FORMATS:
+        raise usage_error(f"--format {fmt!r}: use one of {', '.join(FORMATS)} or none")
+    channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+    page = report(
+        args.input,
+        args.output,
+        static=args.static,
+        model=args.model,
+        select=args.max_model,
+        channels=channels,
+        fs=args.fs,
+        levels=args.levels,
+        weights=args.weights,
+        level=args.confidence,
+        datasheet=args.datasheet_file or args.datasheet,
+        export_format=fmt,
+        load_options=log_kwargs(args),
+        command_line=shlex.join(["gmwm", *args.argv]),
+    )
+    kind = "static" if args.static else "interactive"
+    return f"wrote {args.output} ({kind}, {len(page.encode('utf-8')) / 1e6:.2f} MB)"

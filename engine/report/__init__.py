@@ -1,0 +1,91 @@
+"""Calibration reports: one self-contained HTML file per IMU log.
+
+* :mod:`.data`: :func:`gather_report` computes what the report shows (pure numerics, every
+  number from the engine's own operations) into a :class:`CalibrationReport`;
+* :mod:`.figures`: the figures as data (curves, bands, points);
+* :mod:`.render`: :func:`render_html` draws them, Bokeh with inline resources (interactive)
+  or matplotlib PNGs (``static=True``), in a Jinja2 page;
+* :func:`report`: both steps, and the file.
+
+``engine.report`` is both this package and the function :func:`report` (as ``engine.export``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import types
+from pathlib import Path
+from typing import Any
+
+from .data import DEFAULT_SELECT, CalibrationReport, ChannelReport, gather_report
+from .render import ReportError, render_html
+
+__all__ = [
+    "report",
+    "gather_report",
+    "render_html",
+    "CalibrationReport",
+    "ChannelReport",
+    "ReportError",
+    "DEFAULT_SELECT",
+]
+
+
+def report(
+    source: Any,
+    output: str | os.PathLike[str] | None = None,
+    *,
+    static: bool = False,
+    title: str | None = None,
+    **options: Any,
+) -> str:
+    """A calibration report of one IMU log as one self-contained HTML page.
+
+    Parameters
+    ----------
+    source : path or ImuLog
+        The log, or a log already loaded.
+    output : path, optional
+        Where to write the page (``.html``/``.htm``); the page is returned either way.
+    static : bool
+        PNG figures (matplotlib) instead of interactive Bokeh plots, for archiving.
+    title : str, optional
+        Page title.
+    **options
+        The keywords of :func:`gather_report`: ``model`` or ``select``, ``channels``, ``fs``,
+        ``levels``, ``weights``, ``level``, ``datasheet``, ``export_format``,
+        ``load_options``, ``command_line``.
+
+    Returns
+    -------
+    str
+        The HTML page.
+
+    Examples
+    --------
+    >>> import engine as eg
+    >>> html = eg.report(eg.demo_path(), "demo.html", model="GM+WN+RW")  # doctest: +SKIP
+    """
+    if output is not None:  # before the fits: a bad path fails at once
+        out = Path(output)
+        if out.suffix.lower() not in (".html", ".htm"):
+            raise ReportError(f"output {str(output)!r}: a report is an HTML file; end it in .html")
+        if not out.parent.is_dir():
+            raise ReportError(
+                f"output {str(output)!r}: folder '{out.parent}' does not exist; create it first"
+            )
+    page = render_html(gather_report(source, **options), static=static, title=title)
+    if output is not None:
+        Path(output).write_text(page, encoding="utf-8")
+    return page
+
+
+class _ReportModule(types.ModuleType):
+    """``engine.report`` is both this package and :func:`report` (see ``engine.export``)."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> str:
+        return report(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _ReportModule

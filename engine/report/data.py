@@ -1,0 +1,503 @@
+"""What a calibration report shows, computed: :func:`gather_report` (pure numerics, no plotting).
+
+Every number comes from the engine's own operations, called as ``gmwm fit --json --ci
+asymptotic`` calls them, so that the report and the command agree to the last digit:
+
+* the fits: :func:`engine.batch.fit_log` (one model, or the WVIC-best sub-model, per channel);
+* the overlapping Allan deviation and its 95 % interval:
+  :meth:`engine.wv.AllanVariance.from_wv` (``AVAR(2^(j-1)) = 2 nu2_j``, exact);
+* the IEEE Std 952 slope guides: the lines of slope :data:`engine.teaching.slope.SLOPES` read
+  at :data:`~engine.teaching.slope.READ_TAU` through the fitted datasheet value (N, K, Q, R),
+  and the bias-instability floor (:func:`engine.units.allan_floor`);
+* the Welch PSD (:func:`scipy.signal.welch`) and the model's PSD from the processes' spectral
+  densities (:func:`engine.inference.asymptotic.spectral_density`), both averaged over the same
+  logarithmic frequency bands;
+* the parameter intervals (:func:`engine.inference.param_intervals`), the datasheet rows
+  (:func:`engine.units.datasheet_rows`), the J-test (:func:`engine.inference.j_test`);
+* the datasheet check (:func:`engine.inference.check_datasheet`) and the export text
+  (:func:`engine.export.export`).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import math
+import os
+import platform
+import warnings as _warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._jsonutil import json_ready
+from .._version import __version__
+from ..fit import FitError, GMWMResult
+from ..io import ImuLog, load_log
+from ..units import DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
+from ..wv import AllanVariance
+
+__all__ = [
+    "DEFAULT_SELECT",
+    "SlopeGuide",
+    "Spectrum",
+    "ChannelReport",
+    "CalibrationReport",
+    "file_sha256",
+    "welch_psd",
+    "gather_report",
+]
+
+#: The maximal model whose WVIC-best sub-model is fitted when no model is given.
+DEFAULT_SELECT = "2*GM+WN+QN+RW+DR"
+
+#: Frequency bands per decade of the displayed PSD (the Welch estimate averaged over each).
+PSD_BANDS_PER_DECADE = 24
+
+
+@dataclass(frozen=True)
+class SlopeGuide:
+    """An IEEE Std 952 line on the Allan deviation: ``ADEV(T) = value (T / read_tau_s)^slope``.
+
+    ``code`` is the process (``WN``, ``RW``, ``QN``, ``DR``) or ``BI`` (the floor, slope 0,
+    ``value`` = the model's minimum ADEV, ``symbol`` ``B`` = value / BI_FACTOR).
+    """
+
+    code: str
+    symbol: str
+    slope: float
+    read_tau_s: float
+    value: float
+    unit: str
+    datasheet_value: float  # N, K, Q, R (= value) or B (= value / BI_FACTOR)
+
+    def adev(self, t: np.ndarray) -> np.ndarray:
+        """The line at averaging times ``t`` [s]."""
+        return self.value * (np.asarray(t, float) / self.read_tau_s) ** self.slope
+
+
+@dataclass(frozen=True, eq=False)
+class Spectrum:
+    """One-sided PSD [unit^2/Hz] of a channel and of its fitted model, band-averaged.
+
+    ``f`` (Hz) are the band centres (mean frequency of the Welch bins in the band),
+    ``welch`` the Welch estimate, ``model`` the model's PSD and ``components`` each process's
+    (deterministic drift has none), all averaged over the same Welch bins; ``nperseg`` the
+    Welch segment length.
+    """
+
+    f: np.ndarray
+    welch: np.ndarray
+    model: np.ndarray
+    components: dict[str, np.ndarray]
+    nperseg: int
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelReport:
+    """Everything the report shows of one channel (``error``: why it has no fit)."""
+
+    name: str
+    unit: str
+    fit: GMWMResult | None = None
+    error: str = ""
+    allan: AllanVariance | None = None
+    guides: list[SlopeGuide] = field(default_factory=list)
+    spectrum: Spectrum | None = None
+    intervals: list[Any] = field(default_factory=list)
+    rows: list[DatasheetRow] = field(default_factory=list)
+    jtest: Any = None
+    notes: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    check: Any = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the fit (as ``gmwm fit --json``), intervals, datasheet rows, J-test,
+        Allan deviation, slope guides, warnings, notes and the datasheet check."""
+        d: dict[str, Any] = {"channel": self.name, "unit": self.unit, "error": self.error}
+        if self.fit is not None:
+            d["fit"] = self.fit.to_dict()
+        d["intervals"] = [iv.to_dict() for iv in self.intervals]
+        d["datasheet"] = [r.to_dict() for r in self.rows]
+        d["j_test"] = self.jtest.to_dict() if self.jtest is not None else None
+        d["allan"] = self.allan.to_dict() if self.allan is not None else None
+        d["slope_guides"] = [g.__dict__ for g in self.guides]
+        if self.spectrum is not None:
+            d["psd"] = {"f": self.spectrum.f, "welch": self.spectrum.welch}
+            d["psd"].update(model=self.spectrum.model, nperseg=self.spectrum.nperseg)
+        d["warnings"], d["notes"] = list(self.warnings), dict(self.notes)
+        d["datasheet_check"] = self.check.to_dict() if self.check is not None else None
+        return json_ready(d)
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationReport:
+    """A calibration report of one log: :func:`gather_report`'s result.
+
+    Attributes
+    ----------
+    log : dict
+        File (as given), name, size, sha256, format, channels, fs and its source, samples,
+        duration, units, time-column report, notes, sensor and description.
+    channels : dict of str to ChannelReport
+    export : dict
+        ``format`` and ``text`` (the export file), or ``error``; empty without a format.
+    datasheet : str
+        The datasheet as given (values or file), ``""`` without one.
+    provenance : dict
+        Versions, model or selection, weights, interval method, command line, date.
+    warnings : list of str
+        Warnings about the whole log (unknown fs, Python warnings raised while fitting).
+    """
+
+    log: dict[str, Any]
+    channels: dict[str, ChannelReport]
+    export: dict[str, str]
+    datasheet: str
+    provenance: dict[str, Any]
+    warnings: list[str]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (schema ``gmwm-calibration-report/1``)."""
+        return json_ready(
+            {
+                "schema": "gmwm-calibration-report/1",
+                "log": self.log,
+                "channels": {k: c.to_dict() for k, c in self.channels.items()},
+                "export": self.export,
+                "datasheet": self.datasheet,
+                "provenance": self.provenance,
+                "warnings": self.warnings,
+            }
+        )
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def welch_psd(
+    x: np.ndarray, fs: float, fit: GMWMResult | None = None, *, bands: int = PSD_BANDS_PER_DECADE
+) -> Spectrum:
+    """Welch PSD of a series and the PSD of a fitted model, averaged over log-spaced bands.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The series (N >= 16); the segments are de-meaned (``detrend="constant"``).
+    fs : float
+        Sampling frequency (Hz).
+    fit : GMWMResult, optional
+        Its model's one-sided PSD ``2 S(f / fs) / fs`` [unit^2/Hz], with ``S`` the two-sided
+        density in cycles/sample of :func:`engine.inference.asymptotic.spectral_density`.
+    bands : int
+        Bands per decade; each band's value is the mean over the Welch bins it holds (bins
+        of one band at low frequency stay single).
+
+    Returns
+    -------
+    Spectrum
+        Segment length ``2^floor(log2(N / 8))`` (at most 2^18): eight segments with Hann
+        windows and 50 % overlap, so the lowest frequency is about ``8 fs / N``.
+    """
+    from scipy.signal import welch
+
+    from ..inference.asymptotic import spectral_density
+
+    a = np.asarray(x, float)
+    if a.size < 16:
+        raise ValueError(f"the PSD needs at least 16 samples, got {a.size}")
+    nperseg = int(min(2 ** int(math.log2(a.size / 8)), 2**18))
+    f, p = welch(a, fs=fs, nperseg=nperseg)
+    f, p = f[1:], p[1:]  # the zero frequency (the mean, removed)
+    comps: dict[str, np.ndarray] = {}
+    if fit is not None:
+        for lab, proc in zip(fit.model.labels, fit.model.processes, strict=True):
+            s = 2.0 * spectral_density(proc, f / fs, fs) / fs
+            if np.any(s > 0):
+                comps[lab] = s
+    edges = np.geomspace(f[0], f[-1] * (1 + 1e-12), int(np.ceil(bands * np.log10(f[-1] / f[0]))))
+    idx = np.clip(np.searchsorted(edges, f, side="right") - 1, 0, None)
+    keep = np.unique(idx)
+    count = np.bincount(idx)[keep]
+
+    def band(v: np.ndarray) -> np.ndarray:
+        return np.bincount(idx, weights=v)[keep] / count
+
+    comps = {k: band(v) for k, v in comps.items()}
+    total = np.sum(list(comps.values()), axis=0) if comps else np.full(keep.size, np.nan)
+    return Spectrum(band(f), band(p), total, comps, nperseg)
+
+
+def slope_guides(fit: GMWMResult, rows: Sequence[DatasheetRow]) -> list[SlopeGuide]:
+    """The IEEE slope lines of a fit's QN, WN, RW and DR terms and its Allan floor."""
+    from ..teaching.slope import READ_TAU, SLOPES
+    from ..units import BI_FACTOR
+
+    sym = {"QN": "Q", "WN": "N", "RW": "K", "DR": "R"}
+    out: list[SlopeGuide] = []
+    for lab, proc in zip(fit.model.labels, fit.model.processes, strict=True):
+        code = proc.code
+        if code not in sym:
+            continue
+        row = next(r for r in rows if r.process == lab and r.symbol == sym[code])
+        out.append(
+            SlopeGuide(
+                code, sym[code], SLOPES[code], READ_TAU[code], row.value, row.unit, row.value
+            )
+        )
+    fl = allan_floor(fit.model, fit.fs, fit.wv.n_levels)
+    if not fl["at_edge"] and math.isfinite(fl["adev_min"]):
+        unit = fit.wv.unit or "u"
+        b = fl["bias_instability"]  # adev_min / BI_FACTOR
+        out.append(SlopeGuide("BI", "B", 0.0, fl["T_s"], b * BI_FACTOR, unit, b))
+    return out
+
+
+def _log_info(log: ImuLog, source: str) -> dict[str, Any]:
+    meta = log.meta
+    info: dict[str, Any] = {
+        "file": source,
+        "name": Path(source).name,
+        "format": meta.get("format"),
+        "channels": log.names,
+        "fs": log.fs,
+        "fs_source": log.fs_source,
+        "n": log.n,
+        "duration_s": log.duration_s,
+        "units": {ch: log.units.get(ch, "") for ch in log.names},
+        "time_report": meta.get("time_report"),
+        "segment": meta.get("segment"),
+        "notes": list(meta.get("notes", [])),
+        "sensor": meta.get("sensor", ""),
+        "description": meta.get("description", ""),
+    }
+    if os.path.isfile(source):
+        info["size_bytes"] = os.path.getsize(source)
+        info["sha256"] = file_sha256(source)
+    return info
+
+
+def _dist_version(name: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "not installed"
+
+
+def _versions() -> dict[str, str]:
+    import h5py
+    import scipy
+
+    return {
+        "gmwm engine": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "bokeh": _dist_version("bokeh"),
+        "jinja2": _dist_version("jinja2"),
+        "scipy": scipy.__version__,
+        "h5py": h5py.__version__,
+    }
+
+
+def _channel(
+    log: ImuLog,
+    name: str,
+    fit: GMWMResult,
+    *,
+    level: float,
+    datasheet: Any,
+) -> ChannelReport:
+    """The numbers of one fitted channel; a step that cannot be done leaves a note."""
+    from ..inference import j_test, param_intervals
+    from ..inference.datasheet_check import DatasheetError, check_datasheet, read_datasheet
+
+    wv = fit.wv
+    notes: dict[str, str] = {}
+    intervals: list[Any] = []
+    try:
+        intervals = param_intervals(fit, method="asymptotic", level=level)
+    except (FitError, ValueError, np.linalg.LinAlgError) as e:
+        notes["intervals"] = str(e)
+    rows = datasheet_rows(
+        fit.model,
+        fit.fs,
+        wv.unit,
+        channel=name,
+        intervals={iv.name: (iv.low, iv.high) for iv in intervals},
+        n_levels=wv.n_levels,
+    )
+    jt = None
+    try:
+        jt = j_test(fit)
+    except (FitError, ValueError, np.linalg.LinAlgError) as e:
+        notes["j_test"] = str(e)
+    allan = AllanVariance.from_wv(wv) if not wv.robust else None
+    spectrum = None
+    if log.is_summary:
+        notes["psd"] = "a WV summary file holds no samples: no PSD"
+    else:
+        spectrum = welch_psd(log[name], log.fs, fit)
+    check = None
+    if datasheet is not None:
+        try:
+            kind = si_factor(wv.unit, name)[0]
+        except ExportError as e:
+            notes["datasheet_check"] = str(e)
+        else:
+            try:
+                ds = (
+                    read_datasheet(datasheet, channel=name, kind=kind)
+                    if isinstance(datasheet, Path)
+                    else datasheet
+                )
+                check = check_datasheet(wv, ds, fit=fit, level=level)
+            except DatasheetError as e:
+                notes["datasheet_check"] = str(e)
+    warn = list(fit.warnings)
+    if fit.at_bound:
+        warn.append(f"at a bound: {', '.join(fit.at_bound)}")
+    if not fit.converged:
+        warn.append(fit.message)
+    return ChannelReport(
+        name,
+        wv.unit,
+        fit,
+        "",
+        allan,
+        slope_guides(fit, rows),
+        spectrum,
+        intervals,
+        rows,
+        jt,
+        notes,
+        warn,
+        check,
+    )
+
+
+def gather_report(
+    source: str | os.PathLike[str] | ImuLog,
+    *,
+    model: str | None = None,
+    select: str | None = None,
+    channels: Sequence[str] | None = None,
+    fs: float | None = None,
+    levels: int | None = None,
+    weights: str = "ci",
+    level: float = 0.95,
+    datasheet: str | os.PathLike[str] | Any | None = None,
+    export_format: str | None = "kalibr",
+    load_options: dict[str, Any] | None = None,
+    command_line: str = "",
+) -> CalibrationReport:
+    """Load a log, fit every channel and compute everything a calibration report shows.
+
+    Parameters
+    ----------
+    source : path or ImuLog
+        The log (any format :func:`engine.load_log` reads), or a log already loaded.
+    model : str, optional
+        The model of every channel (``"GM+WN+RW"``). Without ``model`` and ``select``, each
+        channel gets the WVIC-best sub-model of :data:`DEFAULT_SELECT`.
+    select : str, optional
+        Per channel, the WVIC-best sub-model of this maximal model.
+    channels : sequence of str, optional
+        Channels to report (default: all).
+    fs, levels, weights, load_options
+        As :func:`engine.batch.fit_log` (``fs`` and ``load_options`` only with a path).
+    level : float
+        Interval level of the parameter intervals and the datasheet check (0.95).
+    datasheet : str, path or DatasheetSpec, optional
+        Datasheet values (``"arw=0.3 deg/sqrt(h), bi=5 deg/h"``), a datasheet file (Kalibr
+        ``imu.yaml``, gmwm JSON report, datasheet CSV) or a DatasheetSpec: checked against
+        every channel of its sensor kind (the other channels say why they were not).
+    export_format : str or None
+        An :data:`engine.export.FORMATS` name whose text the report includes (default
+        ``"kalibr"``); None for none.
+    command_line : str
+        How the report was asked for, shown under "How it was made".
+
+    Returns
+    -------
+    CalibrationReport
+        Channels that cannot be fitted are in it with their error, never dropped.
+
+    Raises
+    ------
+    engine.io.LoadError, engine.fit.FitError, engine.models.ModelError
+        The log cannot be read, or no channel can be fitted.
+    """
+    from ..batch import fit_log
+    from ..export import export
+    from ..inference.datasheet_check import DatasheetSpec, parse_datasheet
+
+    if not 0 < level < 1:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if model is None and select is None:
+        select = DEFAULT_SELECT
+    ds: Any = None
+    ds_text = ""
+    if isinstance(datasheet, DatasheetSpec):
+        ds, ds_text = datasheet, datasheet.describe()
+    elif datasheet is not None:
+        if os.path.exists(datasheet):
+            ds, ds_text = Path(datasheet), f"file {datasheet}"
+        else:
+            ds, ds_text = parse_datasheet(str(datasheet), source="datasheet"), str(datasheet)
+    if isinstance(source, ImuLog):
+        if fs is not None or load_options:
+            raise TypeError("gather_report(): fs and load_options apply to a path, not to a log")
+        log = source
+    else:
+        log = load_log(str(source), fs=fs, **dict(load_options or {}))
+    src = log.source or str(source)
+    with _warnings.catch_warnings(record=True) as caught:
+        _warnings.simplefilter("always")
+        lf = fit_log(
+            log, model=model, select=select, channels=channels, levels=levels, weights=weights
+        )
+        chans: dict[str, ChannelReport] = {}
+        for ch in list(lf.fits) + list(lf.channel_errors):
+            if ch in lf.fits:
+                chans[ch] = _channel(log, ch, lf.fits[ch], level=level, datasheet=ds)
+            else:
+                chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=lf.channel_errors[ch])
+        chans = {ch: chans[ch] for ch in log.names if ch in chans}
+    log_warnings = [f"{w.category.__name__}: {w.message}" for w in caught]
+    if log.fs_source == "default":
+        log_warnings.insert(
+            0,
+            f"{src} does not say its sampling frequency: fs = 1 Hz ASSUMED, so every time in "
+            "seconds and every datasheet value is per sample",
+        )
+    exp: dict[str, str] = {}
+    if export_format:
+        exp["format"] = export_format
+        try:
+            exp["text"] = export(None, lf.fits, export_format, log=log, allow_partial=True)
+        except (ExportError, ValueError) as e:
+            exp["error"] = str(e)
+    provenance = {
+        "versions": _versions(),
+        "model": model or "",
+        "select": select or "",
+        "models": {ch: c.fit.model.spec(values=True) for ch, c in chans.items() if c.fit},
+        "weights": weights,
+        "intervals": f"asymptotic sandwich, {100 * level:g} % two-sided",
+        "j_test": "asymptotic chi-square, V from the fitted model",
+        "wv": "classical Haar WV (MODWT), eta3 95 % intervals",
+        "command_line": command_line,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    return CalibrationReport(_log_info(log, src), chans, exp, ds_text, provenance, log_warnings)
