@@ -108,7 +108,7 @@ def test_hostile_names_add_no_line_and_no_key(clean_fits, fmt: str) -> None:
             comment = "%" if suffix == ".m" else "#"
             data = [ln for ln in lines if not ln.startswith(comment)]
             assert data == [ln for ln in ref.splitlines() if not ln.startswith(comment)]
-        elif suffix == ".xml":
+        elif suffix in (".xml", ".sdf"):  # Gazebo plugin block, gz-sim SDF <imu>
             got = ET.fromstring(f"<r>{text}</r>")
             want = ET.fromstring(f"<r>{ref}</r>")
             assert [e.tag for e in got.iter()] == [e.tag for e in want.iter()]

@@ -117,22 +117,52 @@ def test_adis_bound_holds_binds_and_does_not_blow_up(adis) -> None:
     assert g.value("K") < pr.value("K") and g.value("N") > 0
 
 
-def test_least_inflation_against_a_brute_force_grid(adis) -> None:
-    """min (N/N0)^2 + (K/K0)^2 subject to the WV bound: the LP's optimum equals a grid search
-    (for each N on a fine grid the least K is max over scales of the shortfall / RW's WV)."""
-    r = adis["2*GM+WN+RW"]
+@pytest.fixture(scope="module")
+def adis_accel() -> eg.GMWMResult:
+    if not ADIS.exists():
+        pytest.skip("real ADIS16405 log not available")
+    log = eg.load_log(ADIS)
+    return eg.fit_gmwm(eg.wavelet_variance(log["accel_x"], fs=log.fs), "2*GM+WN+RW")
+
+
+@pytest.mark.parametrize("channel", ["gyro_x", "accel_x"])
+def test_least_inflation_against_a_brute_force_grid(adis, adis_accel, channel) -> None:
+    """The least inflation is the least geometric-mean ratio consumer WV / fitted WV over the
+    band's scales (6 per octave, even samples) among the WN + RW whose WV bounds the fitted
+    WV: the engine's optimum equals a grid search (for each N on a fine grid the least K is
+    the max over scales of the shortfall / RW's WV). Values in the log's unit (``unit=""``).
+
+    The first objective (the sum of squared factors over the plain conversion) fails here: on
+    accel_x its K was x9 the WN+RW fit's and its geometric-mean ratio 12.2 against the
+    optimum's 1.25 (gyro_x: 1.447 against 1.437)."""
+    r = adis["2*GM+WN+RW"] if channel == "gyro_x" else adis_accel
     fs = r.fs
-    p = project(r, "WN+RW", ci=None, horizon_s=2000.0)
-    n0, k0 = p.params["N"].plain, p.params["K"].plain
-    tau = np.unique(2 * np.round(np.geomspace(p.band[0] * fs, p.band[1] * fs, 3000) / 2))
-    target = r.model.wv(tau, fs) * DEG**2
-    best = math.inf
-    for n in np.linspace(0.5, 2.0, 3001) * n0:
+    p = project(r, "WN+RW", ci=None, horizon_s=2000.0, unit="")
+    lo, hi = p.band[0] * fs, p.band[1] * fs
+    tau = np.unique(2 * np.round(np.geomspace(lo, hi, 3000) / 2))
+    target = r.model.wv(tau, fs)
+    k = int(math.ceil(6 * math.log2(hi / lo))) + 1
+    t_obj = np.unique(2 * np.round(np.geomspace(lo, hi, k) / 2))
+    w_obj = r.model.wv(t_obj, fs)
+
+    def geo(s2: float, g2: float) -> float:
+        return math.exp(np.mean(np.log((wn_wv(s2, t_obj) + rw_wv(g2, t_obj)) / w_obj)))
+
+    best, arg = math.inf, (0.0, 0.0)
+    n0 = p.params["N"].plain
+    for n in np.linspace(0.5, 3.0, 5001) * n0:
         short = target - wn_wv(n * n * fs, tau)
-        k2 = max(float(np.max(short / rw_wv(1.0 / fs, tau))), 0.0)
-        best = min(best, (n / n0) ** 2 + k2 / k0**2)
-    got = (p.value("N") / n0) ** 2 + (p.value("K") / k0) ** 2
-    assert got <= best * (1 + 1e-3) and got >= best * (1 - 1e-3)
+        g2 = max(float(np.max(short / rw_wv(1.0, tau))), 0.0)
+        g = geo(n * n * fs, g2)
+        if g < best:
+            best, arg = g, (n, math.sqrt(g2 * fs))
+    got = geo(p.value("N") ** 2 * fs, p.value("K") ** 2 / fs)
+    # the guarantee: the exported WV is at least the fitted WV at every scale of the band
+    cw = wn_wv(p.value("N") ** 2 * fs, tau) + rw_wv(p.value("K") ** 2 / fs, tau)
+    assert np.min(cw / target) >= 1 - 1e-4
+    assert got <= best * (1 + 1e-3) and got >= best * (1 - 1e-3), (got, best)
+    assert math.isclose(p.value("N"), arg[0], rel_tol=2e-3)
+    assert math.isclose(p.value("K"), arg[1], rel_tol=2e-2)
 
 
 def test_gm_consumer_bound_and_confidence(adis) -> None:
