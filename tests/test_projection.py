@@ -281,3 +281,63 @@ def test_cli_export_projection_options(tmp_path, capsys) -> None:
     assert "upper 95 % limit" in out and re.search(r"tau = 0\.02 \.\. 100 s", out)
     assert main([*argv, "--bound-band", "5:1"]) == 2
     assert "--bound-band" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ JSON report
+def test_json_report_carries_the_projections_with_intervals_and_factors(demo_fits) -> None:
+    """Issue 23 item 3: the JSON report holds, per channel and requested consumer, every
+    exported value with its plain conversion, factor, binding scale and 95 % interval; the
+    values are ``project``'s and their WV bounds the fitted WV (checked with this file's
+    formulas, not the engine's)."""
+    fits = {c: demo_fits[c] for c in ("gyro_x", "accel_x")}
+    rep = json.loads(export(None, fits, "json"))  # default: WN+RW
+    assert rep["projection"]["mode"] == "bound" and rep["projection"]["consumers"] == ["WN+RW"]
+    for ch, r in fits.items():
+        d = rep["channels"][ch]["projections"]["WN+RW"]
+        p = project(r, "WN+RW", channel=ch)
+        assert d["consumer"] == "WN+RW" and d["bounded"] is True
+        assert d["unit"] == ("rad/s" if ch.startswith("gyro") else "m/s^2")
+        for name in ("N", "K"):
+            q = d["params"][name]
+            assert q["value"] == p.value(name)  # the engine's projection, to the bit
+            assert q["low"] < q["value"] < q["high"] and q["level"] == 0.95
+            # delta method on the log: the interval is symmetric in log
+            assert math.isclose(q["high"] / q["value"], q["value"] / q["low"], rel_tol=1e-9)
+            assert math.isclose(q["factor"], q["value"] / q["plain"], rel_tol=1e-12)
+            assert q["binding_tau_s"] is not None and q["binds"]
+        # the bound in the report's own numbers (SI -> the log's unit)
+        f = 1.0 if r.wv.unit in ("rad/s", "m/s^2") else (DEG if ch.startswith("gyro") else 9.80665)
+        fs = r.fs
+        lo, hi = d["band_s"]
+        tau = np.unique(2 * np.round(np.geomspace(lo * fs, hi * fs, 2000) / 2))
+        n_, k_ = d["params"]["N"]["value"] / f, d["params"]["K"]["value"] / f
+        cw = wn_wv(n_**2 * fs, tau) + rw_wv(k_**2 / fs, tau)
+        assert np.min(cw / r.model.wv(tau, fs)) >= 1 - 1e-4
+        assert d["inflation"]["geometric_mean"] >= 1.0
+    # several consumers, by model or format name; plain; none with projection="fit"
+    rep = json.loads(export(None, fits, "json", consumers=["kf-gins", "ros-imu"], ci=None))
+    g = rep["channels"]["gyro_x"]["projections"]
+    assert set(g) == {"kf-gins", "ros-imu"}
+    assert (
+        set(g["kf-gins"]["params"]) == {"N", "sigma_b", "T_c"} and g["ros-imu"]["consumer"] == "WN"
+    )
+    assert g["kf-gins"]["params"]["T_c"]["value"] > 0 and g["kf-gins"]["params"]["N"]["low"] is None
+    plain = json.loads(export(None, fits, "json", projection="plain", ci=None))
+    q = plain["channels"]["gyro_x"]["projections"]["WN+RW"]["params"]["K"]
+    assert q["value"] == q["plain"] and q["factor"] == 1.0
+    none = json.loads(export(None, fits, "json", projection="fit"))
+    assert none["channels"]["gyro_x"]["projections"] == {}
+    with pytest.raises(ExportError, match="unknown consumer"):
+        export(None, fits, "json", consumers=["nonsense"])
+
+
+def test_cli_json_report_consumers(capsys) -> None:
+    from engine.cli import main
+
+    argv = ["export", str(demo_path()), "--model", "GM+WN+RW", "--channels", "gyro_x"]
+    argv += ["--format", "json", "-o", "-", "--no-intervals", "--partial"]
+    assert main([*argv, "--consumer", "kalibr", "--consumer", "WN+GM"]) == 0
+    d = json.loads(capsys.readouterr().out)["channels"]["gyro_x"]["projections"]
+    assert set(d) == {"kalibr", "WN+GM"} and d["kalibr"]["params"]["K"]["value"] > 0
+    assert main([*argv, "--consumer", "nonsense"]) == 2
+    assert "unknown consumer 'nonsense'" in capsys.readouterr().err
