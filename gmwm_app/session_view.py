@@ -27,6 +27,7 @@ import panel as pn
 from engine.export import FORMATS, export
 from engine.io import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
+from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size
 from gmwm_app.state import AppState, demo_path
 
@@ -42,6 +43,7 @@ __all__ = [
     "RestorePlan",
     "export_text",
     "export_fits",
+    "fit_units",
     "is_gap_error",
     "SessionPanel",
 ]
@@ -240,6 +242,12 @@ def export_text(state: AppState, fmt: str) -> str:
     return export(None, fits, fmt, units=units, source=src)
 
 
+def fit_units(state: AppState, fits: Mapping[str, Any]) -> dict[str, str]:
+    """The loaded log's unit of each fitted channel (channels without one are left out)."""
+    log = state.log
+    return {ch: u for ch in fits if (u := (log.units or {}).get(ch) if log else None)}
+
+
 def export_fits(
     state: AppState,
     fits: Mapping[str, Any],
@@ -271,7 +279,7 @@ def export_fits(
     if not fits:
         raise ValueError("no fit yet: add processes to the model first")
     log = state.log
-    units = {ch: u for ch in fits if (u := (log.units or {}).get(ch) if log else None)}
+    units = fit_units(state, fits)
     topic = (log.meta.get("topic") if log is not None else None) or None
     return export(
         None,
@@ -371,7 +379,8 @@ class SessionPanel:
             self._export_format, "imu.yaml", "Download in this format", "default"
         )
         self.fits_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
-        for w in (self.format_select, self.inflate_input, self.rate_input):
+        self.preview = ExportPreview()  # the consumer's model before the download
+        for w in (self.format_select, self.inflate_input, self.rate_input, self.preview.toggle):
             w.param.watch(self._on_format, "value")
         self.gap_report = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.longest_button = pn.widgets.Button(
@@ -400,6 +409,7 @@ class SessionPanel:
                 self.export_note,
                 self.format_select,
                 pn.Row(self.inflate_input, self.rate_input, margin=0),
+                self.preview.panel(),
                 self.format_download,
                 self.fits_note,
                 pn.layout.Divider(),
@@ -468,6 +478,13 @@ class SessionPanel:
         self.fits_note.object = (
             f"Channels fitted in this session: **{names}**. Filter formats need a gyroscope "
             "and an accelerometer: show another channel and fit it to add it."
+        )
+        self.preview.update(
+            self._fits,
+            key,
+            channel=self.state.channel or "",
+            units=fit_units(self.state, self._fits),
+            filter_rate=self.rate_input.value if self.rate_input.visible else None,
         )
 
     # callbacks -------------------------------------------------------------------------------

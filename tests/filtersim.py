@@ -38,8 +38,9 @@ the truth it depends on which terms one calls bias (a 0.3 s GM is neither the fi
 noise nor its random walk), so it is kept for the sanity checks, not for the table.
 
 Case (b), the projected and bounded numbers, comes from the engine's projection
-(``engine.export.projection.project``, issue 23 items 1-2) when the engine has it, else from
-:func:`local_bound`, a minimal local PSD bound that stands in for it (:func:`projected_noise`).
+(``engine.export.projection.project``, issue 23 items 1-2; :func:`projected_noise`).
+:func:`local_bound`, a minimal PSD bound written before the engine had one, is kept as an
+independent reference (tested as a PSD bound; not used for case (b)).
 """
 
 from __future__ import annotations
@@ -52,11 +53,7 @@ import numpy as np
 from scipy.stats import chi2
 
 import engine as eg
-
-try:  # the engine's projection (issue 23, items 1-2); absent until that work is merged
-    from engine.export.projection import project as _engine_project
-except ImportError:
-    _engine_project = None
+from engine.export.projection import project
 
 __all__ = [
     "FilterNoise",
@@ -67,7 +64,6 @@ __all__ = [
     "projected_noise",
     "FilterCases",
     "filter_cases",
-    "ENGINE_PROJECTION",
     "split_truth",
     "bias_prior_var",
     "nees_band",
@@ -151,7 +147,7 @@ def folk_inflation(noise: FilterNoise, factor: float = 10.0) -> FilterNoise:
 
 
 # ------------------------------------------------------------------------------------------
-# case (b) until the engine's projection exists: a minimal local PSD bound
+# a minimal local PSD bound (the reference written before the engine's projection)
 # ------------------------------------------------------------------------------------------
 def _ar1_form(p: eg.Process, fs: float) -> tuple[float, float]:
     """``(phi, stationary variance)`` of an AR1 or GM term."""
@@ -177,8 +173,9 @@ def local_bound(
     label: str = "local PSD bound",
     grid: int = 21,
 ) -> tuple[FilterNoise, dict[str, float]]:
-    """Case (b), a stand-in for the engine's projection: WN + RW numbers whose spectrum is at
-    least the fitted model's at every frequency, with the least worst-case WV inflation.
+    """A reference WN + RW bound, independent of the engine's projection: numbers whose
+    spectrum is at least the fitted model's at every frequency, with the least geometric-mean
+    WV inflation.
 
     The rule (per-sample, discrete PSDs at ``fs``, ``c = cos(omega)``):
 
@@ -267,31 +264,23 @@ def local_bound(
     }
 
 
-#: True when case (b) comes from the engine's projection, False when from :func:`local_bound`.
-ENGINE_PROJECTION: bool = _engine_project is not None
-
-
 def projected_noise(
     fit: eg.GMWMResult, horizon_s: float | None = None
 ) -> tuple[FilterNoise, dict[str, float]]:
     """Case (b): the fit projected onto WN + RW and over-bounded, in the log's unit.
 
-    The engine's ``project(fit, "WN+RW", bound=True)`` when available (``ENGINE_PROJECTION``),
-    else :func:`local_bound` of the fitted model. ``horizon_s`` defaults to the log length.
+    The engine's ``project(fit, "WN+RW", bound=True)``; ``horizon_s`` defaults to the log
+    length.
 
     Returns
     -------
     FilterNoise, dict
-        The numbers and what bound them (``binding_tau_s`` per parameter for the engine's
-        projection; :func:`local_bound`'s summary otherwise).
+        The numbers and what bound them (``binding_tau_s`` per parameter).
     """
     fs = float(fit.fs)
     hz = fit.wv.n / fs if horizon_s is None else float(horizon_s)
-    if _engine_project is None:
-        noise, info = local_bound(fit.model, fs, hz, label="(b) local PSD bound")
-        return noise, info
     # unit "": the values stay in the log's own unit, the filter's unit
-    proj = _engine_project(fit, "WN+RW", horizon_s=hz, bound=True, unit="", ci=None)
+    proj = project(fit, "WN+RW", horizon_s=hz, bound=True, unit="", ci=None)
     noise = FilterNoise(proj.value("N"), proj.value("K"), "(b) engine projection")
     info = {f"{k}_binding_tau_s": p.binding_tau_s for k, p in proj.params.items()}
     return noise, info

@@ -33,6 +33,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--channel": ("channel", r"channel"),
     "--channels": ("channels", r"channels"),
     "--ci": ("ci", r"^parameter intervals"),
+    "--consumer": ("consumer", r"^JSON report: project each fit onto"),
     "--confidence": ("confidence", r"^confidence level of .*, in \(0, 1\) \(0\.95\)$"),
     "--datasheet": ("datasheet", r"^KEY=VALUE UNIT items"),
     "--datasheet-file": ("datasheet_file", r"Kalibr imu\.yaml"),

@@ -31,6 +31,7 @@ from filtersim import (
 from scipy.stats import chi2
 
 import engine as eg
+from engine.export.projection import project
 
 FS = 100.0
 Z = 4.0  # standard errors of every Monte Carlo band
@@ -194,6 +195,10 @@ def test_adis_projected_and_bounded_is_consistent_below_10x(adis, channel):
     K, and the filter consistent: NEES about 1 (an over-bound may be slightly below, never
     above), most epochs inside the band, the error inside 2 sigma about 95 % of the time."""
     fc = adis[channel]
+    # case (b) is the engine's projection, the numbers the filter formats write
+    proj = project(fc.truth_fit, "WN+RW", bound=True, unit="", ci=None)
+    assert fc.cases["b"].label == "(b) engine projection"
+    assert (fc.cases["b"].N, fc.cases["b"].K) == (proj.value("N"), proj.value("K"))
     fn, fk = fc.cases["b"].factors_over(fc.cases["a"])
     assert fn < 10 and fk < 10, (fn, fk)
     b = _run(fc, "b")

@@ -16,7 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from filtersim import filter_cases
 from scipy import integrate, stats
+
+import engine as eg
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -126,3 +129,35 @@ def test_adis_ranges_as_readme_says(real_data: Path) -> None:
     assert f"(gyroscopes {_range(*g['gyro levels 3-9'])})" in text
     # the README numbers name their script
     assert re.search(r"These numbers come from `tests/benchmarks/robust_claims.py`", text)
+
+
+# ------------------------------------------------------------------ "From a fit to a filter"
+def _filter_section() -> str:
+    start = README.index("### From a fit to a filter")
+    return README[start : README.index("\n### ", start + 1)]
+
+
+def test_projection_example_as_readme_says(real_data: Path) -> None:
+    """README's worked example is ``tests/benchmarks/projection_example.py``'s output, line by
+    line (the fitted models, where each term went, every exported value with its interval,
+    factor and binding scale), recomputed here on the real ADIS16405 log."""
+    example = _load("projection_example")
+    text = _filter_section()
+    lines = example.report_lines(example.example(real_data / "adis16405_imu1.h5"))
+    missing = [ln for ln in lines if ln and ln not in text]
+    assert not missing, missing
+    assert "python tests/benchmarks/projection_example.py" in text
+
+
+def test_filter_table_factors_as_readme_says(real_data: Path) -> None:
+    """The N/N_a and K/K_a columns of README's bench_filter tables (the fits and the engine's
+    projection, cheap to recompute; the Monte Carlo columns come from the benchmark run that
+    the text names)."""
+    log = eg.load_log(real_data / "adis16405_imu1.h5")
+    text = _filter_section()
+    for ch in ("gyro_x", "accel_x"):
+        fc = filter_cases(log[ch], float(log.fs), ch)
+        b = fc.cases["b"]
+        fn, fk = b.factors_over(fc.cases["a"])
+        row = f"| (b) engine projection | {b.N:.3g} | {b.K:.3g} | {fn:.2f} | {fk:.2f} |"
+        assert text.count(row) == 3, (ch, row)  # one row per fix interval

@@ -7,7 +7,7 @@
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
                 [--inflate F] [--filter-rate HZ] [--projection bound|plain|fit]
                 [--horizon S] [--bound-band S1:S2] [--bound-confidence C] [--no-intervals]
-                [--vehicle-id ID] [--scale-factor-std PPM]
+                [--vehicle-id ID] [--scale-factor-std PPM] [--consumer NAME ...]
 
 The log options and the streamed WV are shared with the other subcommands
 (:mod:`engine.cli.common`). Errors are raised as :class:`~engine.cli.common.UsageError` (or the
@@ -119,7 +119,16 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         default="bound",
         help="filter formats: bound (default) projects each fit onto the consumer's noise "
         "model and over-bounds its WV from the filter step to the horizon with the least "
-        "inflation; plain: the projection rule alone; fit: the fit's own terms, one by one",
+        "inflation; plain: the projection rule alone; fit: the fit's own terms, one by one "
+        "(the JSON report: its projections, none with fit)",
+    )
+    ex.add_argument(
+        "--consumer",
+        action="append",
+        metavar="NAME",
+        help="JSON report: project each fit onto this consumer noise model (WN+RW, WN+GM, WN) "
+        "or filter format's (kalibr, kf-gins ...), with each value's interval and factor; "
+        "repeat for several (default: WN+RW)",
     )
     ex.add_argument(
         "--horizon",
@@ -288,6 +297,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         ci=None if args.no_intervals else "asymptotic",
         vehicle_id=args.vehicle_id,
         scale_factor_std_ppm=args.scale_factor_std,
+        consumers=args.consumer,
     )
     if out is None:
         return text.rstrip("\n")

@@ -31,10 +31,20 @@ That is the **plain conversion**. **The bound** (``bound=True``, the filter form
 then chooses the consumer's parameters so that its WV (Haar, CONVENTIONS) is at least the
 fitted model's, or its upper ``confidence`` limit (eta3: ``eta / chi2_{(1-c)/2}(eta)`` times
 the fitted WV), at every scale ``tau`` of ``band`` (default from two filter steps to the
-horizon, default the log length), with the least inflation: the consumer's WV is linear in
-its variances, so a linear programme minimises the summed ratio consumer WV / target over the
-scales (``scipy.optimize.linprog``); a Gauss-Markov bias adds a 1-D search over ``T_c``. At the
-optimum the bound is tight at the binding scales, which each parameter reports.
+horizon, default the log length), with the least inflation: the least geometric-mean ratio
+consumer WV / target over the band's scales (:mod:`engine.export.bound`: the integral over
+log-scale of the log excess, minimised exactly at a vertex of the feasible set); a
+Gauss-Markov bias adds a 1-D search over ``T_c``. :attr:`Projection.inflation` reports that
+geometric mean and the largest ratio over the band.
+
+**Reported factor and binding scale.** ``factor`` is ``value / plain``: the bounded value over
+the plain conversion of the rule. It is below 1 when the plain conversion over-bounds (a slow
+GM's random walk ``K^2 = 2 beta sigma2_gm`` bounds its PSD at every frequency, and its WV lies
+far above the GM's at scales beyond ``T_c``), above 1 when the bound needs more than the rule
+gives (a fast GM's white equivalent is below its WV near ``T_c``). At the optimum the bound is
+tight (consumer WV = target) at one or two scales; ``binding_tau_s`` is the tight scale where
+the parameter contributes the largest share of the consumer's WV (where lowering it alone
+breaks the bound first), and ``binds`` names the fitted term with the largest WV there.
 
 The 95 % intervals come from the asymptotic (sandwich) covariance of the fit's parameters
 (:func:`engine.inference.param_cov`) by the delta method on the log of each exported value,
@@ -246,6 +256,22 @@ class Projection:
             out["sigma_b"] = self.value("sigma_b")
         return out
 
+    @property
+    def inflation(self) -> dict[str, float]:
+        """The consumer's WV over the bound's target across the band: ``geometric_mean`` (the
+        objective the bound minimises) and ``max``, with ``max_tau_s`` where the largest sits
+        (nan when the target is 0 over the band)."""
+        ok = self.target_wv > 0
+        if not np.any(ok):
+            return {"geometric_mean": math.nan, "max": math.nan, "max_tau_s": math.nan}
+        r = self.consumer_wv[ok] / self.target_wv[ok]
+        j = int(np.argmax(r))
+        return {
+            "geometric_mean": float(np.exp(np.mean(np.log(r)))),
+            "max": float(r[j]),
+            "max_tau_s": float(self.tau_s[ok][j]),
+        }
+
     def header_lines(self) -> list[str]:
         """Comment lines: what was projected, bounded, and each value with its interval."""
         how = (
@@ -255,7 +281,9 @@ class Projection:
                 f"bounded: its WV >= the fitted model's "
                 f"{'WV' if self.confidence is None else f'upper {100 * self.confidence:g} % limit'}"
                 f" at every scale tau = {self.band[0]:.4g} .. {self.band[1]:.4g} s "
-                "with the least inflation"
+                "with the least inflation (WV over target: geometric mean "
+                f"x{self.inflation['geometric_mean']:.3g}, largest "
+                f"x{self.inflation['max']:.3g} at tau = {self.inflation['max_tau_s']:.4g} s)"
             )
         )
         lines = [
@@ -282,6 +310,7 @@ class Projection:
             "bounded": self.bounded,
             "params": {k: p.to_dict() for k, p in self.params.items()},
             "per_sample": self.per_sample,
+            "inflation": {k: (v if math.isfinite(v) else None) for k, v in self.inflation.items()},
             "assignment": dict(self.assignment),
             "notes": list(self.notes),
             "warnings": list(self.warnings),
@@ -463,6 +492,13 @@ def project(
                 f"WV equals the fitted WV at tau = {tau[-1] / fs:.4g} s (it does not lower the "
                 "WV inside the band)"
             )
+    elif bias is not None and not plain[bias] > 0:
+        warnings.append(
+            f"{where}: the fit has no bias term (RW, slow GM, drift) and the consumer needs "
+            f"{bias} > 0: {bias} = {vals[bias]:.4g} {units[bias]} is the least-inflation "
+            f"bound's, which trades a little white noise for a bias over the band "
+            f"{tau[0] / fs:.4g} .. {tau[-1] / fs:.4g} s (no fitted term sets it)"
+        )
     # intervals (delta method in log of each value, on the sandwich covariance)
     ivs: dict[str, tuple[float, float]] = {}
     if ci is not None:

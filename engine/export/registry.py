@@ -37,7 +37,8 @@ class Format:
 
     The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
     ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
-    ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``.
+    ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``,
+    ``consumers``.
     """
 
     name: str
@@ -124,6 +125,13 @@ def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         log=kw.get("log"),
         units=kw.get("units"),
         source=kw.get("source", ""),
+        consumers=kw.get("consumers"),
+        projection=kw.get("projection") or "bound",
+        filter_rate=kw.get("filter_rate"),
+        horizon_s=kw.get("horizon_s"),
+        band=kw.get("band"),
+        confidence=kw.get("confidence"),
+        ci=kw.get("ci", "asymptotic"),
     )
     return json.dumps(rep, indent=1, allow_nan=False) + "\n"
 
@@ -200,6 +208,7 @@ def export(
     ci: str | None = "asymptotic",
     vehicle_id: int = 1,
     scale_factor_std_ppm: float | None = None,
+    consumers: Sequence[str] | None = None,
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -242,6 +251,10 @@ def export(
         PX4: the MAVLink system id of the ``.params`` lines (default 1).
     scale_factor_std_ppm : float, optional
         KF-GINS: ``gsstd``/``asstd`` (not identified by GMWM; default 1000 ppm).
+    consumers : sequence of str, optional
+        JSON report: the consumer models or filter formats each fit is projected onto, with
+        each value's interval and factor (default ``("WN+RW",)``; ``projection="fit"``:
+        none); the filter formats use their own consumer.
     """
     f = FORMATS.get(fmt)
     if f is None:
@@ -263,6 +276,7 @@ def export(
         ci=ci,
         vehicle_id=vehicle_id,
         scale_factor_std_ppm=scale_factor_std_ppm,
+        consumers=consumers,
     )
     if path is not None:
         Path(path).write_text(text)

@@ -1,5 +1,6 @@
 """Reports: :func:`fit_report` (JSON of every channel's fit, its intervals, datasheet rows,
-Allan floor and Kalibr numbers) and :func:`curves_csv` (the empirical and implied WV curves)."""
+Allan floor, its projections onto filter noise models and Kalibr numbers) and
+:func:`curves_csv` (the empirical and implied WV curves)."""
 
 from __future__ import annotations
 
@@ -18,12 +19,16 @@ from ..units import ExportError, allan_floor, si_factor, squared
 from .common import channel_axis, csv_cells, fmt_float, source_text
 from .datasheet import datasheet_table
 from .kalibr import kalibr_imu
+from .projection import consumer_of, project
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
     from ..io import ImuLog
 
-__all__ = ["fit_report", "write_report", "curves_csv"]
+__all__ = ["fit_report", "write_report", "curves_csv", "DEFAULT_REPORT_CONSUMERS"]
+
+#: The projections a report carries when none are requested.
+DEFAULT_REPORT_CONSUMERS: tuple[str, ...] = ("WN+RW",)
 
 
 def fit_report(
@@ -34,19 +39,73 @@ def fit_report(
     units: Mapping[str, str] | None = None,
     source: str | os.PathLike[str] = "",
     kalibr: bool = True,
+    consumers: Sequence[str] | None = None,
+    projection: str = "bound",
+    filter_rate: float | None = None,
+    horizon_s: float | None = None,
+    band: Sequence[float] | None = None,
+    confidence: float | None = None,
+    ci: str | None = "asymptotic",
 ) -> dict[str, Any]:
     """A JSON-ready report of every channel's fit.
+
+    Parameters
+    ----------
+    fits : mapping of channel name to GMWMResult
+    intervals : mapping, optional
+        Parameter intervals per channel (:func:`engine.inference.param_intervals`).
+    log : ImuLog, optional
+        The log (its rate, length, units, time report).
+    units : mapping, optional
+        Signal unit per channel (default each WV's unit).
+    source : str or path
+        Source name.
+    kalibr : bool
+        Add the Kalibr numbers.
+    consumers : sequence of str, optional
+        The filter noise models or filter formats to project each fit onto
+        (:func:`engine.export.projection.project`; default :data:`DEFAULT_REPORT_CONSUMERS`,
+        the WN + RW of Kalibr/OpenVINS/PX4 ...). Duplicates of one consumer model are kept
+        under each requested name.
+    projection : {"bound", "plain", "fit"}
+        ``"bound"`` (default): projected and over-bounded; ``"plain"``: the rule alone;
+        ``"fit"``: no projections (the report of the fit alone).
+    filter_rate, horizon_s, band, confidence, ci
+        The projection's filter rate (Hz, default the log's), horizon (s), band (s),
+        confidence of the bounded WV limit and intervals (``"asymptotic"`` or None).
 
     Returns
     -------
     dict
         ``schema`` (``"gmwm-report/1"``), ``engine_version``, ``source``, ``log`` (fs, n,
-        units, time report and notes when ``log`` is given), and ``channels``: per channel the
-        unit, sensor kind and axis, the fit (:meth:`GMWMResult.to_dict`), its intervals, the
-        datasheet rows and the Allan floor; ``kalibr`` (or the reason it is missing).
-        NaN values are ``null``.
+        units, time report and notes when ``log`` is given), ``projection`` (mode, consumers
+        and options), and ``channels``: per channel the unit, sensor kind and axis, the fit
+        (:meth:`GMWMResult.to_dict`), its intervals, the datasheet rows, the Allan floor and
+        ``projections`` (per requested consumer :meth:`Projection.to_dict`: each value with
+        its plain conversion, factor, binding scale, interval and level; or ``{"error":
+        reason}``); ``kalibr`` (or the reason it is missing). NaN values are ``null``.
+
+    Raises
+    ------
+    ExportError
+        An unknown consumer or projection mode.
     """
+    if projection not in ("bound", "plain", "fit"):
+        raise ExportError(f"projection must be 'bound', 'plain' or 'fit', got {projection!r}")
+    cons = list(DEFAULT_REPORT_CONSUMERS if consumers is None else consumers)
+    if projection == "fit":
+        cons = []
+    for c in cons:  # unknown names fail here, before any work
+        consumer_of(c)
     units = dict(units or {})
+    opts: dict[str, Any] = {
+        "filter_rate": filter_rate,
+        "horizon_s": horizon_s,
+        "band_s": None if band is None else [float(v) for v in band],
+        "confidence": confidence,
+        "ci": ci,
+        "bound": projection == "bound",
+    }
     chans: dict[str, Any] = {}
     for ch, res in fits.items():
         unit = units.get(ch, res.wv.unit) or ""
@@ -68,11 +127,13 @@ def fit_report(
                 )
             ],
             "allan_floor": allan_floor(res.model, res.fs, res.wv.n_levels),
+            "projections": {c: _projection(res, c, ch, unit, opts) for c in cons},
         }
     out: dict[str, Any] = {
         "schema": "gmwm-report/1",
         "engine_version": __version__,
         "source": source_text(source) or (source_text(log.source) if log is not None else ""),
+        "projection": {"mode": projection, "consumers": cons, **opts},
         "channels": chans,
     }
     if log is not None:
@@ -95,6 +156,28 @@ def fit_report(
         except ExportError as e:
             out["kalibr"] = {"error": str(e)}
     return json_ready(out)
+
+
+def _projection(
+    res: GMWMResult, consumer: str, channel: str, unit: str, opts: Mapping[str, Any]
+) -> dict[str, Any]:
+    """One channel's projection as a dictionary, or ``{"error": reason}``."""
+    try:
+        p = project(
+            res,
+            consumer,
+            fs_filter=opts["filter_rate"],
+            horizon_s=opts["horizon_s"],
+            band=opts["band_s"],
+            confidence=opts["confidence"],
+            bound=opts["bound"],
+            channel=channel,
+            unit=unit,
+            ci=opts["ci"],
+        )
+    except ExportError as e:
+        return {"error": str(e)}
+    return p.to_dict()
 
 
 def write_report(

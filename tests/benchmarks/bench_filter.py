@@ -8,8 +8,8 @@ one-axis filter (``tests/filtersim.py``: integral and bias states, 100 Hz, an ab
 integral every T_fix seconds) is given only N and K:
 
 * (a) the plain conversion of the ``WN+RW`` fit (the Kalibr export's numbers);
-* (b) the full fit projected onto WN + RW and over-bounded (the engine's projection when the
-  engine has it, else the local PSD bound of ``filtersim.local_bound``; the table says which);
+* (b) the full fit projected onto WN + RW and over-bounded by the engine's projection
+  (``engine.export.projection.project``, the numbers the filter formats write);
 * (c) the folk 10x inflation of (a);
 * (a0) for reference, the full fit's own WN and RW terms (N = 0: the exports before issue 23).
 
@@ -31,7 +31,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 from conftest import real_data_dir  # noqa: E402
-from filtersim import ENGINE_PROJECTION, filter_cases, run_monte_carlo  # noqa: E402
+from filtersim import filter_cases, run_monte_carlo  # noqa: E402
 
 import engine as eg  # noqa: E402
 
@@ -54,7 +54,7 @@ def main() -> None:
     t_all = time.perf_counter()
     print(
         f"{args.log.name}, {args.runs} runs of {args.minutes:g} min at {fs:g} Hz; case (b): "
-        + ("engine projection" if ENGINE_PROJECTION else "LOCAL PSD BOUND (stand-in)")
+        "engine projection"
     )
     for ch, (fix_sigma, iunit) in CHANNELS.items():
         fc = filter_cases(log[ch], fs, ch)
