@@ -35,6 +35,7 @@ def preview_projections(
     *,
     units: Mapping[str, str] | None = None,
     filter_rate: float | None = None,
+    bound: bool = True,
 ) -> dict[str, Projection]:
     """The projection of each fit onto ``fmt``'s consumer model, as the export computes it.
 
@@ -47,6 +48,8 @@ def preview_projections(
         The signal units (default each WV's).
     filter_rate : float, optional
         The filter's rate (Hz; default the log's).
+    bound : bool
+        Over-bound the projection (the export's default); False: the projection rule alone.
 
     Returns
     -------
@@ -65,6 +68,7 @@ def preview_projections(
             r,
             fmt,
             fs_filter=filter_rate,
+            bound=bound,
             channel=ch,
             unit=(units or {}).get(ch, r.wv.unit) or "",
         )
@@ -159,9 +163,12 @@ class ExportPreview:
         channel: str = "",
         units: Mapping[str, str] | None = None,
         filter_rate: float | None = None,
+        projection: str = "bound",
     ) -> None:
-        """Recompute (when shown and changed) and redraw; an error becomes the note."""
-        key = (tuple((c, id(r)) for c, r in fits.items()), fmt, filter_rate, channel)
+        """Recompute (when shown and changed) and redraw; an error becomes the note.
+        ``projection`` is the export's (``"fit"``: the file writes the fit's own terms, and
+        nothing is projected)."""
+        key = (tuple((c, id(r)) for c, r in fits.items()), fmt, filter_rate, channel, projection)
         if not self.toggle.value:
             self.note.object, self.table.object, self.plot_box.visible = "", "", False
             self._key = None
@@ -177,8 +184,16 @@ class ExportPreview:
         if not fits:
             self.note.object = "Fit a channel to see what the filter will assume."
             return
+        if projection == "fit":
+            self.note.object = (
+                f"The {fmt} file writes the fit's own terms one by one: nothing is projected "
+                "or bounded."
+            )
+            return
         try:
-            self.projections = preview_projections(fits, fmt, units=units, filter_rate=filter_rate)
+            self.projections = preview_projections(
+                fits, fmt, units=units, filter_rate=filter_rate, bound=projection == "bound"
+            )
         except (ExportError, ValueError) as e:
             self.note.object = f"Cannot project the fits for {fmt}: {e}"
             return

@@ -222,10 +222,12 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
     return True
 
 
-def export_text(state: AppState, fmt: str) -> str:
+def export_text(state: AppState, fmt: str, *, projection: str = "bound") -> str:
     """The Kalibr ``imu.yaml`` (``fmt="kalibr"``) or datasheet (``"datasheet"``) of the fit.
 
-    One channel (the shown one); the Kalibr file is partial (that axis only).
+    One channel (the shown one); the Kalibr file is partial (that axis only). ``projection``:
+    how a filter format maps the fit onto its noise model (``engine.export``: ``"bound"``, the
+    default, ``"plain"`` or ``"fit"``, the fit's own terms).
 
     Raises
     ------
@@ -238,7 +240,15 @@ def export_text(state: AppState, fmt: str) -> str:
     units = {state.channel: state.unit} if state.unit else None
     src = state.filename
     if fmt == "kalibr":
-        return export(None, fits, "kalibr", units=units, source=src, allow_partial=True)
+        return export(
+            None,
+            fits,
+            "kalibr",
+            units=units,
+            source=src,
+            allow_partial=True,
+            projection=projection,
+        )
     return export(None, fits, fmt, units=units, source=src)
 
 
@@ -255,6 +265,7 @@ def export_fits(
     *,
     inflate: float = 1.0,
     filter_rate: float | None = None,
+    projection: str = "bound",
 ) -> str:
     """The fits of several channels of the loaded log in any export format.
 
@@ -270,6 +281,9 @@ def export_fits(
         Filter formats: the noise values times this factor (written in the file).
     filter_rate : float, optional
         PX4/ArduPilot: the EKF prediction rate in Hz.
+    projection : {"bound", "plain", "fit"}
+        Filter formats: the fit projected onto the consumer's noise model and over-bounded
+        (default), projected only, or the fit's own terms one by one (``engine.export``).
 
     Raises
     ------
@@ -291,7 +305,16 @@ def export_fits(
         allow_partial=fmt == "kalibr",
         inflate=inflate,
         filter_rate=filter_rate,
+        projection=projection,
     )
+
+
+#: The app's choices of how a filter file maps the fit onto its consumer's model.
+PROJECTIONS = {
+    "Projected and bounded (default)": "bound",
+    "Projected only": "plain",
+    "The fit's own terms": "fit",
+}
 
 
 def is_gap_error(err: BaseException | str) -> bool:
@@ -375,12 +398,21 @@ class SessionPanel:
         self.rate_input = pn.widgets.FloatInput(
             label="Filter rate (Hz)", value=None, start=0.0, width=140, visible=False
         )
+        self.projection_select = pn.widgets.Select(
+            label="Filter numbers", options=PROJECTIONS, value="bound", sizing_mode="stretch_width"
+        )
         self.format_download = download_button(
             self._export_format, "imu.yaml", "Download in this format", "default"
         )
         self.fits_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
         self.preview = ExportPreview()  # the consumer's model before the download
-        for w in (self.format_select, self.inflate_input, self.rate_input, self.preview.toggle):
+        for w in (
+            self.format_select,
+            self.inflate_input,
+            self.rate_input,
+            self.projection_select,
+            self.preview.toggle,
+        ):
             w.param.watch(self._on_format, "value")
         self.gap_report = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         self.longest_button = pn.widgets.Button(
@@ -409,6 +441,7 @@ class SessionPanel:
                 self.export_note,
                 self.format_select,
                 pn.Row(self.inflate_input, self.rate_input, margin=0),
+                self.projection_select,
                 self.preview.panel(),
                 self.format_download,
                 self.fits_note,
@@ -485,6 +518,7 @@ class SessionPanel:
             channel=self.state.channel or "",
             units=fit_units(self.state, self._fits),
             filter_rate=self.rate_input.value if self.rate_input.visible else None,
+            projection=self.projection_select.value,
         )
 
     # callbacks -------------------------------------------------------------------------------
@@ -499,7 +533,7 @@ class SessionPanel:
     def _export(self, fmt: str) -> io.StringIO:
         s = self.state
         try:
-            return io.StringIO(export_text(s, fmt))
+            return io.StringIO(export_text(s, fmt, projection=self.projection_select.value))
         except ValueError as e:
             s.report_error(f"Could not export ({fmt}): {e}")
             return io.StringIO(f"# could not export: {e}\n")
@@ -517,6 +551,7 @@ class SessionPanel:
                     key,
                     inflate=float(self.inflate_input.value or 1.0),
                     filter_rate=rate,
+                    projection=self.projection_select.value,
                 )
         except ValueError as e:
             s.report_error(f"Could not export ({key}): {e}")

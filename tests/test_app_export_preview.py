@@ -108,3 +108,27 @@ def test_preview_functions_on_their_own(app_demo: Path) -> None:
         preview_projections(
             {"g": eg.fit_gmwm(eg.wavelet_variance(log["gyro_x"], fs=log.fs), "RW")}, "ros-imu"
         )
+
+
+def test_projection_choice_reaches_the_preview_and_the_file(app_demo: Path) -> None:
+    """The menu's "Filter numbers" choice: projected only (the engine's bound=False) in the
+    preview and the file; the fit's own terms (projection="fit") project nothing."""
+    from gmwm_app.app import create_app
+
+    app = create_app().gmwm_app
+    sp, s = app.session_panel, app.state
+    pv = sp.preview
+    gyro, accel = _fit_two(app)
+    sp.format_select.value = "kalibr"
+    pv.toggle.value = True
+    sp.projection_select.value = "plain"
+    want = project(gyro, "kalibr", channel="gyro_x", unit=s.log.units["gyro_x"], bound=False)
+    assert pv.projections["gyro_x"].value("N") == want.value("N")
+    d = yaml.safe_load(sp.format_download.callback().getvalue())
+    assert d["gyroscope_noise_density"] == want.value("N")
+    sp.projection_select.value = "fit"
+    assert pv.projections == {} and "nothing is projected" in pv.note.object
+    d = yaml.safe_load(sp.format_download.callback().getvalue())
+    # the fit's own white noise: N = sqrt(sigma2 / fs), deg -> rad
+    n_fit = math.sqrt(gyro.params["WN.sigma2"] / s.fs) * math.pi / 180
+    assert d["gyroscope_noise_density"] == pytest.approx(n_fit, rel=1e-9)

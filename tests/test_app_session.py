@@ -136,7 +136,8 @@ def test_exports_of_the_fit(app_state: AppState) -> None:
     with pytest.raises(ValueError, match="no fit"):
         sv.export_text(s, "kalibr")
     assert s.set_model("GM+WN+RW")
-    y = sv.export_text(s, "kalibr")
+    # the fit's own terms (the engine's projection="fit", the app's third choice)
+    y = sv.export_text(s, "kalibr", projection="fit")
     assert "gyroscope_noise_density:" in y and "gyro_x" in y
     wn = s.result.params["WN.sigma2"]
     import yaml
@@ -146,6 +147,18 @@ def test_exports_of_the_fit(app_state: AppState) -> None:
     assert doc["gyroscope_noise_density"] == pytest.approx(
         np.sqrt(wn / s.fs) * np.pi / 180, rel=1e-9
     )
+    # by default the app writes what the engine's export writes by default: the projected and
+    # over-bounded numbers, never below the fit's own white noise density here
+    from engine.export import export
+
+    y_bound = sv.export_text(s, "kalibr")
+    fits = {s.channel: s.result}
+    ref = export(
+        None, fits, "kalibr", units={s.channel: s.unit}, source=s.filename, allow_partial=True
+    )
+    assert y_bound == ref
+    assert yaml.safe_load(y_bound)["gyroscope_noise_density"] >= doc["gyroscope_noise_density"]
+    assert "projected" in y_bound.lower() or "bound" in y_bound.lower()
     ds = sv.export_text(s, "datasheet")
     assert "gyro_x" in ds and "correlation time" in ds
     # the on-screen datasheet table shows the download's rows (one table: engine.units)
