@@ -222,8 +222,11 @@ def _monte_carlo(name: str, reps: int = 8, n: int = 1 << 14) -> dict:
         out["conf_inside"].append((tv >= vs.conf_low) & (tv <= vs.conf_high))
         sel = vs.target_levels
         a = vs.average_empirical[sel]
-        out["ratio_emp"].append(np.mean(emp[sel] / a))
-        out["weights"].append(vs.weights)
+        # the data's gain of the fitted optimum (the empirical WV of its combined series)
+        wf = vs.fitted_weights
+        emp_fit = np.einsum("p,jpq,q->j", wf, wvm.values, wf)
+        out["ratio_emp"].append(np.mean(emp_fit[sel] / a))
+        out["weights"].append(vs.fitted_weights)  # the fitted optimum (before shrinkage)
         out["tau"] = wvm.tau_samples
         out["vs"] = vs
     return out
@@ -274,9 +277,15 @@ def test_virtual_sensor_of_a_fit_scale_band_and_export(tmp_path):
     assert one.tau_s[j] == pytest.approx(0.64)
     n = res.implied[j]
     w1 = (n[1, 1] - n[0, 1]) / (n[0, 0] + n[1, 1] - 2 * n[0, 1])
-    np.testing.assert_allclose(one.weights, [w1, 1 - w1], rtol=1e-10)
+    np.testing.assert_allclose(one.fitted_weights, [w1, 1 - w1], rtol=1e-10)
     # at its scale the optimum is below the average and every sensor, in the model
-    assert one.implied[j] <= one.average_implied[j] and one.implied[j] <= n.diagonal().min()
+    opt = one.fitted_weights @ n @ one.fitted_weights
+    assert opt <= one.average_implied[j] and opt <= n.diagonal().min()
+    assert one.fitted_objective == pytest.approx(opt / one.average_implied[j])
+    # the weights used are between the average and the optimum, and no worse in the model
+    lam = one.shrinkage
+    assert 0 <= lam <= 1 and one.implied[j] <= one.average_implied[j]
+    np.testing.assert_allclose(one.weights, 0.5 + lam * (one.fitted_weights - 0.5), atol=1e-12)
     band = eg.virtual_sensor(res, band=(0.1, 2.0), relative=False)
     sel = band.target_levels
     assert band.objective == pytest.approx(np.sum(band.implied[sel]))
@@ -455,7 +464,7 @@ def test_adis_virtual_gyro_weights_and_gains(adis_virtual):
     emp = eg.wavelet_variance(v, fs=FS).variance
     np.testing.assert_allclose(emp, vs.empirical, rtol=1e-9)
     # data weights (no model) agree with the model's to a few percent
-    np.testing.assert_allclose(vs.empirical_weights, vs.weights, atol=0.05)
+    np.testing.assert_allclose(vs.empirical_weights, vs.fitted_weights, atol=0.05)
     # the empirical virtual gyro is below each sensor at every scale up to 100 s
     short = vs.tau_s <= 100
     assert np.all(vs.empirical[short, None] < vs.sensors_empirical[short])
