@@ -770,8 +770,10 @@ def virtual_sensor(
     ``A`` the average's). When ``D_in`` is within its own noise (below the ``1 -
     fallback_level`` point of ``D_in`` for an optimal average, or below ``S``) the plain
     average is used (``fallback`` says why). ``gain_vs_average`` is the expected
-    out-of-sample criterion of the weights used, ``A - lambda D``, over ``A`` (1 for the
-    average).
+    out-of-sample criterion of the weights used, ``A - lambda D`` plus the winner's curse of
+    weights that passed the test (:func:`_selection_bias`, by simulation of the weights'
+    error around the shrunk optimum), over ``A``; when that is not below 1 the average is
+    used, and the gain is 1.
 
     Parameters
     ----------
@@ -851,6 +853,13 @@ def virtual_sensor(
     expected = avg_obj - 2 * lam * (gap - excess) + lam * lam * gap
     if shrink and lam > 0:  # the weights passed the test: correct for the selection
         expected += _selection_bias(lam * u, n_model, cov_d, excess, threshold)
+        if expected >= avg_obj:
+            fallback = (
+                f"the shrunk weights' expected criterion out of sample ({expected / avg_obj:.4g}"
+                " x the average's, the selection of passing weights counted) is not below the "
+                "plain average's"
+            )
+            lam, w, expected = 0.0, avg.copy(), avg_obj
     nu = _quad(imp, w)
     vmodel = virtual_model(model, w, wvm.fs)
     # sampling variance of w' N_hat(j) w under the model: c' V_jj c with V the moments'
