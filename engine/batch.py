@@ -78,6 +78,12 @@ class LogFit:
         """True when at least one channel was fitted."""
         return not self.error
 
+    @property
+    def warnings(self) -> list[str]:
+        """The fits' warnings (e.g. an AR1/GM faster than one sample), each as
+        ``"SOURCE [CHANNEL]: WARNING"``."""
+        return [f"{self.source} [{ch}]: {w}" for ch, r in self.fits.items() for w in r.warnings]
+
     def status(self) -> dict[str, Any]:
         """JSON-ready status: source, ok, error, channels fitted and their models."""
         return json_ready(
@@ -89,6 +95,7 @@ class LogFit:
                 "n": self.n,
                 "models": {ch: r.model.spec(values=True) for ch, r in self.fits.items()},
                 "channel_errors": dict(self.channel_errors),
+                "warnings": {ch: list(r.warnings) for ch, r in self.fits.items() if r.warnings},
                 "elapsed_s": self.elapsed_s,
             }
         )
@@ -387,6 +394,11 @@ class BatchResult:
         return [lf for lf in self.logs if not lf.ok]
 
     @property
+    def warnings(self) -> list[str]:
+        """Every fitted log's :attr:`LogFit.warnings`, in the order of the logs."""
+        return [w for lf in self.fitted for w in lf.warnings]
+
+    @property
     def rows(self) -> list[FleetRow]:
         """:func:`fleet_summary` of the fitted logs."""
         return fleet_summary(self.fitted)
@@ -416,6 +428,7 @@ class BatchResult:
                 "elapsed_s": self.elapsed_s,
                 "logs": [lf.status() for lf in self.logs],
                 "summary": [r.to_dict() for r in self.rows],
+                "warnings": self.warnings,
             }
         )
 

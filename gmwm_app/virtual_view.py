@@ -113,7 +113,8 @@ class VirtualView:
         self.weight_source, self.weight_table = make_table(
             [
                 ("channel", "channel", 120, None),
-                ("weight", "w (model) [1]", 95, NumberFormatter(format="0.0000")),
+                ("weight", "w [1]", 80, NumberFormatter(format="0.0000")),
+                ("weight_fitted", "w (model) [1]", 95, NumberFormatter(format="0.0000")),
                 ("weight_data", "w (data) [1]", 95, NumberFormatter(format="0.0000")),
                 ("adev", "Allan dev.", 95, sci),
                 ("unit", "unit", 70, None),
@@ -302,7 +303,8 @@ class VirtualView:
     @staticmethod
     def weight_rows(vs: eg.VirtualSensor) -> dict[str, list[Any]]:
         """Table rows: each channel, the plain average and the virtual sensor, with their
-        weights and their Allan deviation ``sqrt(2 WV)`` at the criterion's first level."""
+        weights (used, and the fitted model's optimum before shrinkage) and their Allan
+        deviation ``sqrt(2 WV)`` at the criterion's first level."""
         j = int(vs.target_levels[0])
         k = len(vs.channels)
         names = [*vs.channels, "plain average", "virtual sensor"]
@@ -310,6 +312,7 @@ class VirtualView:
         return {
             "channel": names,
             "weight": [*vs.weights, 1.0 / k, 1.0],
+            "weight_fitted": [*vs.fitted_weights, 1.0 / k, 1.0],
             "weight_data": [*vs.empirical_weights, 1.0 / k, 1.0],
             "adev": [math.sqrt(2 * max(v, 0.0)) for v in wv],
             "unit": [vs.unit or "u"] * (k + 2),
@@ -317,12 +320,25 @@ class VirtualView:
 
     @staticmethod
     def info_text(vs: eg.VirtualSensor) -> str:
-        """The criterion and the gains, in words."""
+        """The criterion, the gains out of sample, the shrinkage or the fallback to the plain
+        average (and why), and the virtual model's warnings, in words."""
         rel = " (each scale relative to the average's WV)" if vs.relative else ""
+        if vs.fell_back:
+            how = f"The weights are **the plain average**: {html.escape(vs.fallback)}. "
+        else:
+            how = (
+                f"The weights are the model's optimum shrunk towards the average (lambda = "
+                f"{vs.shrinkage:.3f}: the share of its departure from the average kept). "
+            )
+        warn = "".join(
+            f" Warning: {html.escape(w)}." for w in vs.warnings if w.startswith("virtual.")
+        )
         return (
-            f"Criterion: {html.escape(vs.target)}{rel}. In the model the virtual sensor's "
-            f"criterion is **{vs.gain_vs_average:.3f} x the plain average's** and "
-            f"**{vs.gain_vs_best:.3f} x the best channel's** ({html.escape(vs.best_sensor)}). "
+            f"Criterion: {html.escape(vs.target)}{rel}. {how}Out of sample (on new data) the "
+            f"virtual sensor's criterion is expected at **{vs.gain_vs_average:.3f} x the plain "
+            f"average's** and **{vs.gain_vs_best:.3f} x the best channel's** "
+            f"({html.escape(vs.best_sensor)}); the model's optimum in sample: "
+            f"{vs.fitted_gain:.3f} x (optimistic). "
             f"Allan deviation column: at {vs.tau_s[int(vs.target_levels[0])]:g} s. "
             f"Model of the virtual sensor ({html.escape(vs.model.spec())}): "
             + ", ".join(
@@ -331,4 +347,5 @@ class VirtualView:
                 for name, v in zip(p.param_names, p.values, strict=True)
             )
             + "."
+            + warn
         )

@@ -75,6 +75,10 @@ def test_view_shows_the_engine_virtual_sensor_of_the_fit(app: Any, array_log: Pa
     assert rows["adev"][3] == pytest.approx(math.sqrt(2 * vs.empirical[j]))
     # negatively correlated, unequal sensors: the optimum beats the average in the model
     assert vs.gain_vs_average < 0.85 and "x the plain average" in vv.info.object
+    # the gain shown is the one out of sample, with the shrinkage of the weights
+    assert f"**{vs.gain_vs_average:.3f} x the plain average's**" in vv.info.object
+    assert "Out of sample" in vv.info.object and f"lambda = {vs.shrinkage:.3f}" in vv.info.object
+    np.testing.assert_allclose(rows["weight_fitted"][:2], vs.fitted_weights, rtol=1e-12)
     # the figure: every sensor, the average, the virtual sensor's WV and interval
     d = vv.virtual_source.data
     np.testing.assert_allclose(d["implied"], vs.implied, rtol=1e-12)
@@ -96,7 +100,7 @@ def test_scale_band_and_export(app: Any, array_log: Path) -> None:
     assert vs.tau_s[j] == pytest.approx(0.64) and vv.error == ""
     n = v.result.implied[j]
     w1 = (n[1, 1] - n[0, 1]) / (n[0, 0] + n[1, 1] - 2 * n[0, 1])
-    np.testing.assert_allclose(vs.weights, [w1, 1 - w1], rtol=1e-10)
+    np.testing.assert_allclose(vs.fitted_weights, [w1, 1 - w1], rtol=1e-10)
     tags = list(vv.weight_table.tags)
     vv.target_input.value = "0.1:2"
     # same rows, new weights: the table model changes so that BokehJS redraws its cells

@@ -195,3 +195,29 @@ def test_cli_scheduler_local_runs_on_a_dask_local_cluster(fleet, tmp_path, capsy
     for a, b in zip(on_dask["summary"], local["summary"], strict=True):
         for k in ("mean", "min", "max", "sd"):
             assert math.isclose(a[k], b[k], rel_tol=1e-12), (a, b)
+
+
+def test_cli_batch_surfaces_the_sub_sample_warning_on_the_adis_fleet(real_data, tmp_path, capsys):
+    # the six ADIS16405 units fitted with GM+WN+RW: the GM lands below one sample (the gyros'
+    # filter correlates neighbouring samples; WN takes nothing), which every front end must
+    # say: a `gmwm batch: warning:` line per unit, and the JSON's "warnings" list
+    logs = [str(real_data / f"adis16405_imu{k}.h5") for k in range(1, 7)]
+    argv = ["batch", *logs, "--model", "GM+WN+RW", "--channels", "gyro_x", "--workers", "1"]
+    assert main([*argv, "-o", str(tmp_path / "j"), "--quiet", "--json"]) == 0
+    cap = capsys.readouterr()
+    d = json.loads(cap.out)
+    assert len(d["warnings"]) == 6
+    for path, w, status in zip(logs, d["warnings"], d["logs"], strict=True):
+        assert w.startswith(f"{path} [gyro_x]: GM: correlation time ")
+        assert "shorter than one sample" in w and "WN-equivalent sigma2" in w
+        assert status["warnings"]["gyro_x"] == [w.split(" [gyro_x]: ", 1)[1]]
+        assert f"gmwm batch: warning: {w}" in cap.err.splitlines()
+    # each log's own JSON report carries its fit's warning too
+    rep = json.loads((tmp_path / "j" / "adis16405_imu1.json").read_text())
+    assert "shorter than one sample" in json.dumps(rep)
+    # the text table: the same warning lines on stderr, one per unit
+    assert main([*argv, "-o", str(tmp_path / "t"), "--quiet"]) == 0
+    cap = capsys.readouterr()
+    lines = [ln for ln in cap.err.splitlines() if ln.startswith("gmwm batch: warning: ")]
+    assert len(lines) == 6 and all("[gyro_x]: GM: correlation time" in ln for ln in lines)
+    assert "fleet of 6 log(s): 6 fitted" in cap.out

@@ -28,6 +28,7 @@ from .common import (
     check_output,
     log_kwargs,
     positive,
+    queue_warning,
 )
 
 __all__ = ["add_parser", "run", "add_scheduler_option", "scheduler_executor"]
@@ -146,6 +147,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             print(f"gmwm: batch: {lf.source}: {lf.error}", file=sys.stderr)
         for ch, err in lf.channel_errors.items():
             print(f"gmwm: batch: {lf.source} [{ch}]: {err}", file=sys.stderr)
+    for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
+        queue_warning(args, w)
     if not res.fitted:
         raise CliError(
             f"no log could be fitted ({len(res.failed)} failed; see {files['summary_json']})"

@@ -30,6 +30,7 @@ from .common import (
     alpha_of,
     check_output,
     positive,
+    queue_warning,
     usage_error,
     warn_fs_unknown,
 )
@@ -204,6 +205,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         relative=not args.absolute,
         alpha=alpha_of(args.confidence),
     )
+    for w in vs.warnings:  # the fit's and the virtual model's (e.g. a GM faster than one sample)
+        queue_warning(args, w)
     exported = None
     if args.format:
         from ..export import export

@@ -67,9 +67,18 @@ import numpy as np
 
 from .._optim import chi2_isf
 from ..fit import FitError, GMWMResult, weight_matrix
+from ..fit._varpro import sub_sample_warnings
 from ..models import Model, Process
 from ..units import squared
 from ..wv import WaveletVariance, WVMatrix
+from .delta import (
+    delta_variance,
+    implied_jacobian,
+    kept_share,
+    parameter_covariance,
+    selection_bias,
+    weight_noise,
+)
 from .spec import MultiModel
 
 __all__ = [
@@ -79,6 +88,7 @@ __all__ = [
     "virtual_model",
     "virtual_signal",
     "implied_jacobian",
+    "weight_noise",
 ]
 
 
@@ -240,7 +250,10 @@ class VirtualSensor:
     channels : tuple of str, length k
         The sensors, in the weights' order.
     weights : ndarray (k,)
-        The optimal weights (sum 1), from the fitted model.
+        The weights of the virtual sensor (sum 1): the fitted model's optimum shrunk towards
+        the plain average by ``shrinkage`` (the average itself when it fell back).
+    fitted_weights : ndarray (k,)
+        The fitted model's optimum ``M^-1 1 / (1' M^-1 1)`` (in sample).
     empirical_weights : ndarray (k,)
         The same optimum computed from the empirical WV/WCCV matrix (no model).
     levels, tau_samples : ndarray of int (J,)
@@ -256,7 +269,7 @@ class VirtualSensor:
     relative : bool
         Band levels weighted by ``1 / nu_avg(j)`` (else summed plainly).
     implied : ndarray (J,)
-        ``w' N(j) w``: the model-implied WV of the virtual sensor.
+        ``w' N(j) w``: the model-implied WV of the virtual sensor (in sample).
     ci_low, ci_high : ndarray (J,)
         ``1 - alpha`` interval of the empirical WV of the combined series under the model
         (sampling).
@@ -272,19 +285,39 @@ class VirtualSensor:
     sensors_empirical : ndarray (J, k), average_empirical : ndarray (J,)
         The empirical WVs of each sensor and of the plain average.
     objective, average_objective : float
-        The criterion (band sum of ``nu(j) / a_j``) of the virtual sensor and of the average.
+        The criterion (band sum of ``nu(j) / a_j``) of the virtual sensor and of the average,
+        in the fitted model (in sample).
     sensor_objectives : ndarray (k,)
         The criterion of each sensor alone; ``best_sensor`` the smallest's name.
+    fitted_objective : float
+        The in-sample criterion of ``fitted_weights`` (optimistic by ``2 excess``).
+    expected_objective : float
+        The expected criterion of ``weights`` out of sample (on a new realisation, or under
+        the true model): ``A - 2 lambda (D_in - S) + lambda^2 D_in`` (:func:`virtual_sensor`).
+    excess : float
+        ``S``: the expected excess criterion of estimated weights over the optimum
+        (:func:`weight_noise`).
+    noise_threshold : float
+        The fallback test's critical in-sample improvement (:func:`weight_noise`'s ``q``).
+    shrinkage : float
+        ``lambda`` in [0, 1]: the share of the fitted optimum's departure from the average
+        that is kept (0: the plain average).
+    fallback : str
+        Why the plain average is used (``""`` when it is not).
     model : Model
         The virtual sensor's single-channel model (:func:`virtual_model`).
     n : int
         Samples of the series.
     alpha : float
         Interval level.
+    warnings : tuple of str
+        The fit's warnings (e.g. an AR1/GM faster than one sample, by channel) and the
+        virtual model's (``virtual.GM_1 ...``).
     """
 
     channels: tuple[str, ...]
     weights: np.ndarray
+    fitted_weights: np.ndarray
     empirical_weights: np.ndarray
     levels: np.ndarray
     tau_samples: np.ndarray
@@ -306,9 +339,16 @@ class VirtualSensor:
     objective: float
     average_objective: float
     sensor_objectives: np.ndarray
+    fitted_objective: float
+    expected_objective: float
+    excess: float
+    noise_threshold: float
+    shrinkage: float
+    fallback: str
     model: Model
     n: int
     alpha: float = 0.05
+    warnings: tuple[str, ...] = ()
 
     @property
     def tau_s(self) -> np.ndarray:
@@ -321,14 +361,27 @@ class VirtualSensor:
         return self.channels[int(np.argmin(self.sensor_objectives))]
 
     @property
+    def fell_back(self) -> bool:
+        """True when the virtual sensor is the plain average (``fallback`` says why)."""
+        return bool(self.fallback)
+
+    @property
     def gain_vs_average(self) -> float:
-        """``objective / average_objective`` (<= 1: the optimum is never worse in the model)."""
-        return self.objective / self.average_objective
+        """The out-of-sample gain: ``expected_objective / average_objective`` (1 when it fell
+        back to the average; the expected criterion of ``weights`` on new data relative to
+        the plain average's)."""
+        return self.expected_objective / self.average_objective
+
+    @property
+    def fitted_gain(self) -> float:
+        """The in-sample gain of the fitted optimum, ``fitted_objective / average_objective``
+        (optimistic: :attr:`gain_vs_average` is the one that holds out of sample)."""
+        return self.fitted_objective / self.average_objective
 
     @property
     def gain_vs_best(self) -> float:
-        """``objective / min(sensor_objectives)``."""
-        return self.objective / float(np.min(self.sensor_objectives))
+        """``expected_objective / min(sensor_objectives)`` (out of sample)."""
+        return self.expected_objective / float(np.min(self.sensor_objectives))
 
     def wv(self) -> WaveletVariance:
         """The empirical WV of the combined series, with its eta3 intervals."""
@@ -357,6 +410,7 @@ class VirtualSensor:
             wv=wv,
             implied=implied,
             components=comps,
+            warnings=sub_sample_warnings(self.model, wv.fs, wv.unit),
         )
 
     def table(self) -> str:
@@ -366,16 +420,32 @@ class VirtualSensor:
         lines = [
             f"Optimal virtual sensor of {', '.join(self.channels)}: minimum WV over "
             f"{self.target}{' (relative to the average)' if self.relative else ''}",
-            f"  {'channel':<18} {'weight (model)':>15} {'weight (data)':>14} {'criterion':>11}",
+            f"  {'channel':<18} {'weight':>10} {'weight (model)':>15} {'weight (data)':>14} "
+            f"{'criterion':>11}",
         ]
-        for c, w, we, o in zip(
-            self.channels, self.weights, self.empirical_weights, self.sensor_objectives, strict=True
+        for c, w, wf, we, o in zip(
+            self.channels,
+            self.weights,
+            self.fitted_weights,
+            self.empirical_weights,
+            self.sensor_objectives,
+            strict=True,
         ):
-            lines.append(f"  {c:<18} {w:>15.4f} {we:>14.4f} {o:>11.4g}")
+            lines.append(f"  {c:<18} {w:>10.4f} {wf:>15.4f} {we:>14.4f} {o:>11.4g}")
+        if self.fell_back:
+            how = f"  weights: the plain average: {self.fallback}"
+        else:
+            how = (
+                f"  weights: the model's optimum shrunk towards the average (lambda = "
+                f"{self.shrinkage:.3f}, the share of its departure from 1/{len(self.channels)} "
+                "that is kept)"
+            )
         lines += [
-            f"  average: criterion {self.average_objective:.4g}; virtual: {self.objective:.4g} "
-            f"({self.gain_vs_average:.3f} x the average, {self.gain_vs_best:.3f} x the best "
-            f"sensor {self.best_sensor})",
+            how,
+            f"  gain out of sample: {self.gain_vs_average:.3f} x the average's criterion, "
+            f"{self.gain_vs_best:.3f} x the best sensor {self.best_sensor}'s (the model's "
+            f"optimum in sample: {self.fitted_gain:.3f}, optimistic by 2 x the estimated "
+            f"weights' expected excess {self.excess / self.average_objective:.3g})",
             f"  model: {self.model.spec(values=True)}",
             "",
             f"  Allan deviation sqrt(2 WV) [{u}]: empirical (the best sensor, the average, the "
@@ -408,6 +478,10 @@ class VirtualSensor:
             "kind": "virtual_sensor",
             "channels": list(self.channels),
             "weights": self.weights.tolist(),
+            "fitted_weights": self.fitted_weights.tolist(),
+            "shrinkage": self.shrinkage,
+            "fell_back": self.fell_back,
+            "fallback": self.fallback,
             "empirical_weights": self.empirical_weights.tolist(),
             "target": self.target,
             "target_levels": (self.target_levels + 1).tolist(),
@@ -433,9 +507,15 @@ class VirtualSensor:
             "average_objective": self.average_objective,
             "sensor_objectives": self.sensor_objectives.tolist(),
             "best_sensor": self.best_sensor,
+            "fitted_objective": self.fitted_objective,
+            "expected_objective": self.expected_objective,
+            "excess": self.excess,
+            "noise_threshold": self.noise_threshold,
             "gain_vs_average": self.gain_vs_average,
+            "fitted_gain": self.fitted_gain,
             "gain_vs_best": self.gain_vs_best,
             "model": self.model.spec(values=True),
+            "warnings": list(self.warnings),
         }
 
 
@@ -506,68 +586,6 @@ def _interval(
     return nu * q_lo / eta, nu * q_hi / eta
 
 
-def _stack(arr: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
-    """A (J, k, k) array as the MGMWM's stacked moments (pair by pair, levels inside)."""
-    return np.concatenate([arr[:, p, q] for p, q in pairs])
-
-
-def implied_jacobian(model: MultiModel, tau: np.ndarray, fs: float) -> np.ndarray:
-    """Derivatives ``(P J, n)`` of the stacked implied moments (pair by pair, levels inside,
-    as :func:`engine.multivariate.moment_covariance`) by the free parameters: every entry of a
-    shared covariance (the diagonal only for a diagonal one) and every variance of a live
-    process (analytic: ``basis x`` the entry's indicator), and the phi of a live AR1/GM
-    (central difference of its basis). Processes with no variance are left out (boundary)."""
-    k = model.k
-    pairs = [(p, q) for p in range(k) for q in range(p, k)]
-    cols = []
-    for t in model.terms():
-        c, phi = model.term_values(t, fs)
-        c = np.asarray(c, float)
-        ch = list(t.chans)
-        live = np.diagonal(c) > 0
-        if not np.any(live):
-            continue
-        b = t.proto.basis(tau, fs, phi) * np.ones_like(tau)
-        for a in range(len(ch)):
-            for d in range(a, len(ch)):
-                if not (live[a] and live[d]) or (a != d and t.diagonal):
-                    continue
-                e = np.zeros((k, k))
-                e[ch[a], ch[d]] = e[ch[d], ch[a]] = 1.0
-                cols.append(_stack(b[:, None, None] * e, pairs))
-        if t.nonlinear and phi is not None:
-            h = 1e-6 * max(1.0 - abs(phi), 1e-6)
-            db = (t.proto.basis(tau, fs, phi + h) - t.proto.basis(tau, fs, phi - h)) / (2 * h)
-            full = np.zeros((k, k))
-            full[np.ix_(ch, ch)] = c
-            cols.append(_stack(db[:, None, None] * full, pairs))
-    return np.column_stack(cols) if cols else np.zeros((len(pairs) * tau.size, 0))
-
-
-def _delta_variance(result: Any, w: np.ndarray) -> np.ndarray:
-    """Delta-method variance of ``w' N(j; theta_hat) w`` at every level: the sandwich
-    covariance of the estimator, ``(A' W A)^-1 A' W V W A (A' W A)^-1``, mapped through the
-    derivatives ``c_j' A_j`` (``A`` :func:`implied_jacobian`, ``W`` the fit's ``omega``, ``V``
-    :func:`engine.multivariate.moment_covariance`)."""
-    from .moments import moment_covariance
-
-    wvm: WVMatrix = result.wvm
-    k, nj = wvm.k, wvm.n_levels
-    pairs = [(p, q) for p in range(k) for q in range(p, k)]
-    jac = implied_jacobian(result.model, wvm.tau_samples.astype(float), wvm.fs)
-    if jac.shape[1] == 0:
-        return np.zeros(nj)
-    norms = np.linalg.norm(jac, axis=0)
-    jac = jac / np.where(norms > 0, norms, 1.0)  # scale-free columns for the pseudo-inverse
-    om = np.asarray(result.omega, float)
-    bread = np.linalg.pinv(jac.T @ om @ jac, rcond=1e-12, hermitian=True)
-    meat = jac.T @ om @ moment_covariance(result.model, wvm) @ om @ jac
-    cov = bread @ meat @ bread
-    c = np.array([w[p] * w[q] * (1.0 if p == q else 2.0) for p, q in pairs])
-    m = np.einsum("a,ajn->jn", c, jac.reshape(len(pairs), nj, -1))  # (J, n_params)
-    return np.maximum(np.einsum("jn,nm,jm->j", m, cov, m), 0.0)
-
-
 def virtual_sensor(
     result: Any,
     *,
@@ -576,8 +594,27 @@ def virtual_sensor(
     relative: bool = True,
     alpha: float = 0.05,
     confidence: bool = True,
+    shrink: bool = True,
+    fallback_level: float = 0.05,
 ) -> VirtualSensor:
     """The optimal virtual sensor of a fitted multivariate model.
+
+    The weights that minimise the fitted model's criterion (``fitted_weights``) are noisy
+    estimates, and their in-sample gain is optimistic: the expected excess criterion ``S`` of
+    estimated weights (:func:`weight_noise`, delta method from the fit's sandwich
+    covariance) is counted twice (the in-sample criterion is ``S`` below the optimum, the
+    out-of-sample one ``S`` above). With ``u = w_fit - 1/k`` and the in-sample improvement
+    over the plain average ``D_in = u' M u``, the improvement of the true optimum is
+    estimated by ``D = D_in - S`` and the weights are shrunk towards the average,
+    ``w = 1/k + lambda u`` with ``lambda = 1 - S / D_in`` (positive-part James-Stein; it
+    minimises the expected out-of-sample criterion ``A - 2 lambda D + lambda^2 (D + S)``,
+    ``A`` the average's). When ``D_in`` is within its own noise (below the ``1 -
+    fallback_level`` point of ``D_in`` for an optimal average, or below ``S``) the plain
+    average is used (``fallback`` says why). ``gain_vs_average`` is the expected
+    out-of-sample criterion of the weights used, ``A - lambda D`` plus the winner's curse of
+    weights that passed the test (:func:`selection_bias`, by simulation of the weights'
+    error around the shrunk optimum), over ``A``; when that is not below 1 the average is
+    used, and the gain is 1.
 
     Parameters
     ----------
@@ -593,9 +630,16 @@ def virtual_sensor(
     alpha : float
         Interval level ``1 - alpha``.
     confidence : bool
-        Compute the delta-method confidence interval (the covariance of every moment of the
-        fit: about as long as the fit for 3 channels); False leaves ``conf_low/conf_high``
-        nan.
+        Give the delta-method confidence interval of the implied WV (False leaves
+        ``conf_low/conf_high`` nan; the fit's covariance is computed either way, for the
+        out-of-sample gain: about as long as the fit for 3 channels).
+    shrink : bool
+        Shrink towards (or fall back to) the average (default); False uses the fitted
+        optimum as it is (``gain_vs_average`` is then its out-of-sample gain, the in-sample
+        one plus ``2 S``).
+    fallback_level : float
+        The fallback test's level: the probability that the weights leave the average when
+        the average is the optimum.
 
     Returns
     -------
@@ -604,7 +648,7 @@ def virtual_sensor(
     Raises
     ------
     ValueError
-        A scale or band outside the WV's scales, a bad alpha.
+        A scale or band outside the WV's scales, a bad alpha or fallback_level.
     FitError
         ``result`` is not a multivariate fit.
     """
@@ -614,6 +658,8 @@ def virtual_sensor(
         )
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    if not 0 < fallback_level < 1:
+        raise ValueError(f"fallback_level must be in (0, 1), got {fallback_level}")
     wvm: WVMatrix = result.wvm
     model: MultiModel = result.model
     k = wvm.k
@@ -621,9 +667,40 @@ def virtual_sensor(
     imp = np.asarray(result.implied, float)
     emp = np.asarray(wvm.values, float)
     n_model, a = band_matrix(imp, sel, relative)
-    w = optimal_weights(n_model)
+    w_fit = optimal_weights(n_model)
     n_emp, _ = band_matrix(emp, sel, relative)
     w_emp = optimal_weights(n_emp)
+    avg = np.full(k, 1.0 / k)
+    deriv, cov = parameter_covariance(result)
+    excess, threshold, cov_d = weight_noise(deriv, cov, n_model, sel, a, w_fit, fallback_level)
+    u = w_fit - avg
+    gap = max(float(u @ n_model @ u), 0.0)  # in-sample improvement over the average
+    avg_obj = float(avg @ n_model @ avg)
+    fallback = ""
+    if not shrink:
+        lam = 1.0
+    elif gap <= max(threshold, excess):
+        lam = 0.0
+        fallback = (
+            f"the estimated improvement over the plain average ({100 * gap / avg_obj:.3g} % of "
+            f"its criterion in sample) is within its own noise (below "
+            f"{100 * max(threshold, excess) / avg_obj:.3g} %, what estimated weights show "
+            f"{100 * (1 - fallback_level):g} % of the time when the average is the optimum)"
+        )
+    else:
+        lam = float(kept_share(gap, excess, threshold))
+    w = avg + lam * u
+    w = w / w.sum()
+    expected = avg_obj - 2 * lam * (gap - excess) + lam * lam * gap
+    if shrink and lam > 0:  # the weights passed the test: correct for the selection
+        expected += selection_bias(lam * u, n_model, cov_d, excess, threshold)
+        if expected >= avg_obj:
+            fallback = (
+                f"the shrunk weights' expected criterion out of sample ({expected / avg_obj:.4g}"
+                " x the average's, the selection of passing weights counted) is not below the "
+                "plain average's"
+            )
+            lam, w, expected = 0.0, avg.copy(), avg_obj
     nu = _quad(imp, w)
     vmodel = virtual_model(model, w, wvm.fs)
     # sampling variance of w' N_hat(j) w under the model: c' V_jj c with V the moments'
@@ -636,20 +713,25 @@ def virtual_sensor(
     var = np.diagonal(wv_cov_model(vmodel, shape)).copy()
     lo, hi = _interval(nu, var, alpha)
     if confidence:
-        conf_lo, conf_hi = _interval(nu, _delta_variance(result, w), alpha, confidence=True)
+        conf_lo, conf_hi = _interval(nu, delta_variance(deriv, cov, w), alpha, confidence=True)
     else:
         conf_lo = conf_hi = np.full(nu.shape, np.nan)
-    avg = np.full(k, 1.0 / k)
     diag = np.einsum("jpp->jp", imp)
     units = set(wvm.units) if wvm.units else {""}
+    unit = units.pop() if len(units) == 1 else ""
+    warnings = [
+        *getattr(result, "warnings", ()),
+        *sub_sample_warnings(vmodel, wvm.fs, unit, "virtual."),
+    ]
     return VirtualSensor(
         channels=wvm.channels,
         weights=w,
+        fitted_weights=w_fit,
         empirical_weights=w_emp,
         levels=wvm.levels,
         tau_samples=wvm.tau_samples,
         fs=wvm.fs,
-        unit=units.pop() if len(units) == 1 else "",
+        unit=unit,
         target=name,
         target_levels=sel,
         relative=relative,
@@ -664,9 +746,16 @@ def virtual_sensor(
         sensors_empirical=np.einsum("jpp->jp", emp),
         average_empirical=_quad(emp, avg),
         objective=float(np.sum(nu[sel] / a[sel])),
-        average_objective=float(np.sum(_quad(imp, avg)[sel] / a[sel])),
+        average_objective=avg_obj,
         sensor_objectives=np.sum(diag[sel] / a[sel, None], axis=0),
+        fitted_objective=float(w_fit @ n_model @ w_fit),
+        expected_objective=float(expected),
+        excess=excess,
+        noise_threshold=threshold,
+        shrinkage=lam,
+        fallback=fallback,
         model=vmodel,
         n=int(wvm.n),
         alpha=alpha,
+        warnings=tuple(warnings),
     )

@@ -69,7 +69,10 @@ def table(out: dict[str, Any]) -> str:
     lines = [head + " |", "|---" * (3 + len(idx)) + "|"]
     for p, c in enumerate(vs.channels):
         cells = [f"{adev_deg_h(vs.sensors_empirical[i, p]):.3g}" for i in idx]
-        lines.append(f"| {c} | {vs.weights[p]:.3f} | {vs2.weights[p]:.3f} | " + " | ".join(cells))
+        lines.append(
+            f"| {c} | {vs.fitted_weights[p]:.3f} | {vs2.fitted_weights[p]:.3f} | "
+            + " | ".join(cells)
+        )
     rows = [
         ("plain average", "1/6", "1/6", vs.average_empirical),
         ("**virtual (every level)**", "", "", vs.empirical),
@@ -111,8 +114,8 @@ def plot(out: dict[str, Any], path: Path) -> None:
     ax.legend(fontsize=7)
     ax.set_title(f"ADIS16405 gyro X, six replicates: {MODEL}, shared WN, RW, GM", fontsize=9)
     x = np.arange(len(vs.channels))
-    bx.bar(x - 0.2, vs.weights, 0.4, color="C3", label="every level")
-    bx.bar(x + 0.2, out["scale"].weights, 0.4, color="C2", label="at 81.92 s")
+    bx.bar(x - 0.2, vs.fitted_weights, 0.4, color="C3", label="every level")
+    bx.bar(x + 0.2, out["scale"].fitted_weights, 0.4, color="C2", label="at 81.92 s")
     bx.axhline(1 / 6, color="C0", ls="--", lw=1, label="average 1/6")
     bx.set_xticks(x, [c.replace("IMU ", "") for c in vs.channels])
     bx.set_xlabel("replicate")
@@ -139,7 +142,11 @@ def main(argv: list[str] | None = None) -> None:
     print(vs.table())
     print()
     print(vs2.table().splitlines()[0])
-    print(f"  weights {np.round(vs2.weights, 3)}; gain vs average {vs2.gain_vs_average:.3f}")
+    print(
+        f"  fitted weights {np.round(vs2.fitted_weights, 3)}, used {np.round(vs2.weights, 3)} "
+        f"(lambda {vs2.shrinkage:.3f}{'; fell back: ' + vs2.fallback if vs2.fell_back else ''}); "
+        f"gain vs average {vs2.gain_vs_average:.3f} out of sample, {vs2.fitted_gain:.3f} in sample"
+    )
     print()
     print(table(out))
     print(f"figure: {fig_path}")
