@@ -67,6 +67,7 @@ def test_scenario_truth_is_in_datasheet_units():
     assert sorted(accel.truth) == ["K", "N", "Q", "R"]
 
 
+@pytest.mark.slow
 def test_every_method_reads_white_noise_density_in_its_units():
     """A pure-WN log (one replicate, fixed seed): every method's N within 10 % of the truth,
     avar's within 25 %.
@@ -89,6 +90,7 @@ def test_every_method_reads_white_noise_density_in_its_units():
         assert n_est == pytest.approx(n_true, rel=tol), f"{meth}: N = {n_est:g}, truth {n_true:g}"
 
 
+@pytest.mark.slow
 def test_every_method_reads_random_walk_density_in_its_units():
     """A pure-RW log (fixed seed): the fitted methods' K within 10 % of the truth, the
     read-offs' (IEEE, analyzer) and avar's within a factor 2.
