@@ -78,7 +78,12 @@ def _message(e: BaseException) -> str:
 # pure helpers (tested without a browser)
 # -----------------------------------------------------------------------------------------
 def ranking_data(sel: Any) -> dict[str, Any]:
-    """The ranked table's columns from a ``SelectionResult`` (empty columns for None)."""
+    """The ranked table's columns from a ``SelectionResult`` (empty columns for None).
+
+    ``note`` says why a candidate was not fitted, or that an AR1/GM of it is faster than one
+    sample (white noise in disguise: ranked as its WN twin, or kept when the fold is rejected),
+    or that it is a WN twin added to rank such a candidate (``Candidate.note``).
+    """
     cands = list(sel.candidates) if sel is not None else []
 
     def num(attr: str) -> np.ndarray:
@@ -92,7 +97,7 @@ def ranking_data(sel: Any) -> dict[str, Any]:
         "optimism": num("optimism"),
         "criterion": num("criterion"),
         "j_p_value": num("j_p_value"),
-        "note": [f"not fitted: {c.error}" if c.error else "" for c in cands],
+        "note": [c.note for c in cands],
     }
 
 
@@ -114,7 +119,8 @@ def jtest_badge(inf: Inference | None, pending: bool = False) -> str:
     verdict = "fits" if p >= 0.05 else "doubtful fit" if p >= 0.01 else "rejected"
     return (
         f'<span class="gmwm-jtest" style="{style.format(color)}" title="Goodness of fit: '
-        f'J-test of the fitted WV against chi-square(J - p)">'
+        "efficient J-test (the model refitted with V^-1 on the levels with M_j / 2^j at least "
+        '4, whatever the weights of the fit) against chi-square(levels - p)">'
         f"J-test: p = {format_value(p, 3)} ({verdict}), T = {format_value(jt.statistic)} "
         f"[1], df = {jt.df}</span>"
     )
@@ -232,10 +238,10 @@ class SelectionView(pn.viewable.Viewer):
             "objective": "objective [1]",
             "optimism": "optimism [1]",
             "criterion": "WVIC [1]",
-            "j_p_value": "J-test p",
+            "j_p_value": "J-test p (efficient)",
             "note": "note",
         }
-        widths = {"rank": 45, "model": 170, "n_params": 35, "note": 160}
+        widths = {"rank": 45, "model": 170, "n_params": 35, "j_p_value": 120, "note": 330}
         cols = [
             TableColumn(
                 field=c,
@@ -287,7 +293,10 @@ class SelectionView(pn.viewable.Viewer):
             pn.pane.Bokeh(self.table, sizing_mode="stretch_width", margin=(5, 10)),
             h(
                 "Click a row to load that model into the builder (Fit tab) and refit. Click a "
-                "column title to sort.",
+                "column title to sort. J-test p: the efficient J-test of each candidate (refitted "
+                "with Omega = V^-1, V from the largest candidate, on the levels with M_j / 2^j "
+                ">= 4), calibrated whatever the weights. A candidate whose AR1/GM is faster than "
+                "one sample is white noise in disguise: it is ranked as its WN twin (note).",
                 margin=(0, 10),
                 styles={"font-size": "12px", "color": "#555"},
             ),
@@ -325,9 +334,9 @@ class SelectionView(pn.viewable.Viewer):
         if value is not None:
             self.jobs.locked(lambda: self.progress.param.update(value=value))
             what = (
-                f"Fitted {total} candidates; computing the WV covariance and the WVIC"
+                f"Fitted every candidate and its J-test; computing the WVIC ({total} fits)"
                 if done == total
-                else f"Fitting candidate {done} of {total}"
+                else f"Fit {done} of {total} (the candidates, then their J-test refits)"
             )
             self.jobs.locked(lambda: setattr(self.status, "object", f"⏳ {what} ..."))
 

@@ -13,15 +13,41 @@ distance between the model-implied WV and an independent new empirical WV:
   over parametric-bootstrap replicates from the largest candidate.
 
 One V (from the largest candidate's fit, by default the analytic Gaussian one) serves all
-candidates, so every criterion is on the same scale. Reference: Guerrier & Molinari, "Wavelet
-variance based model selection" (WVIC), and the GMWM model-selection work of the SMAC group.
+candidates, so every criterion is on the same scale.
+
+The J-test of every candidate is the calibrated one of :func:`engine.inference.j_test`
+(:func:`engine.inference.jtest.efficient_j`): the candidate refitted with ``Omega = V^-1`` on
+the levels with at least ``ETA_MIN`` equivalent degrees of freedom, whatever the ranking's
+weights, with the one V above.
+
+White noise in disguise: an AR1/GM whose correlation time is below one sample has the WV of
+white noise at every Haar scale, so a candidate with such a term (e.g. ``3*GM`` whose third GM
+is the white noise relabelled) is the same model in effect as its *WN twin*: the candidate with
+that term folded into WN (and a term fitted at zero variance dropped). It does not compete as
+a different model: it is ranked as its twin, immediately after it (the twin is fitted and added
+when it is not a candidate), and the table says so (``sub_sample``, ``twin``, ``as_twin``).
+The WVIC cannot tell them apart by itself: near ``phi = 0`` the implied WV hardly moves with
+the correlation time, so the asymptotic optimism counts the term's two parameters as about one
+and the disguised candidate wins by its extra freedom (``3*GM`` first on a 2*GM+WN+RW log).
+
+The exception is a term faster than one sample that is *not* white noise in effect: a sensor
+whose filter correlates neighbouring samples (the ADIS16405 gyros: lag-1 autocorrelation 0.17)
+is fitted far better with it than with WN (objective 10.7 against 938). The candidate then keeps
+its own rank when the distance test of the fold, ``J(twin) - J(candidate)`` (both efficient J
+statistics with the one V) against ``chi2(df_twin - df_candidate)``, rejects the twin at
+:data:`DISGUISE_LEVEL` (``twin_p``); the table still flags the term.
+
+Reference: Guerrier & Molinari, "Wavelet variance based model selection" (WVIC), and the GMWM
+model-selection work of the SMAC group.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import math
+import textwrap
 import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import Executor
@@ -31,12 +57,34 @@ from typing import Any
 import numpy as np
 
 from ..fit import FitError, GMWMResult, fit_gmwm
-from ..models import Model, ModelError, parse_model
+from ..fit._varpro import TC_FLAG
+from ..models import AR1, GM, WN, Model, ModelError, parse_model
 from ..wv import WaveletVariance, wavelet_variance
 from .asymptotic import free_params, jacobian
 from .covariance import inverse_cov, parallel_map, wv_cov
+from .jtest import ETA_MIN, efficient_j
 
-__all__ = ["submodels", "rank_models", "SelectionResult", "Candidate"]
+__all__ = [
+    "submodels",
+    "rank_models",
+    "SelectionResult",
+    "Candidate",
+    "wn_twin",
+    "JTEST_NOTE",
+    "DISGUISE_LEVEL",
+]
+
+#: A candidate with an AR1/GM faster than one sample keeps its own rank only when the distance
+#: test of folding that term into WN rejects the fold at this level (a small level: under a
+#: model without such a term the top-ranked structure must not carry one).
+DISGUISE_LEVEL = 1e-3
+
+#: What the J column of a ranking is (the table's last line; the app and README say the same).
+JTEST_NOTE = (
+    "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V from the "
+    f"largest candidate, on the levels with M_j / 2^j >= {ETA_MIN:g}) against chi2(levels - p), "
+    "whatever the ranking's weights"
+)
 
 
 def submodels(max_model: Model | str) -> list[Model]:
@@ -60,9 +108,59 @@ def submodels(max_model: Model | str) -> list[Model]:
     return out
 
 
+def _correlation_time(p: AR1 | GM, fs: float) -> float:
+    """Correlation time of a fitted AR1/GM in samples (``-1 / log(phi)``)."""
+    phi = float((p if isinstance(p, AR1) else p.as_ar1(fs)).phi)
+    return -1.0 / math.log(phi) if 0.0 < phi < 1.0 else (math.inf if phi >= 1.0 else 0.0)
+
+
+def wn_twin(fitted: Model, fs: float) -> tuple[Model, list[str]]:
+    """The model in effect of a fit whose AR1/GM terms may be white noise in disguise.
+
+    Every AR1/GM whose correlation time is below one sample (``TC_FLAG``) is folded into WN
+    (one WN term, added if the model has none); one fitted at zero variance is dropped.
+
+    Parameters
+    ----------
+    fitted : Model
+        A fitted model (every value set).
+    fs : float
+        Sampling frequency (Hz): a GM's beta is in 1/s.
+
+    Returns
+    -------
+    twin, labels
+        The twin's structure (values cleared) and the labels of the folded terms with their
+        correlation times (e.g. ``["GM_3 (0.17 samples)"]``); ``(fitted structure, [])`` when
+        there is none.
+    """
+    keep, labels, to_wn = [], [], False
+    for lab, q in zip(fitted.labels, fitted.processes, strict=True):
+        if isinstance(q, (AR1, GM)) and q.is_set:
+            tc = _correlation_time(q, fs)
+            if tc < TC_FLAG:
+                labels.append(f"{lab} ({tc:.2g} samples)")
+                to_wn = to_wn or q.linear_coef() > 0
+                continue
+        keep.append(q.cleared())
+    if not labels:
+        return fitted.cleared(), []
+    if to_wn and not any(isinstance(q, WN) for q in keep):
+        keep.append(WN())
+    return Model(tuple(keep)), labels
+
+
 @dataclass(frozen=True)
 class Candidate:
-    """One ranked candidate."""
+    """One ranked candidate.
+
+    ``sub_sample`` lists its AR1/GM terms faster than one sample and ``twin`` the model with
+    those terms folded into WN (:func:`wn_twin`); both are empty for an ordinary candidate.
+    ``twin_p`` is the p-value of the distance test of the fold and ``as_twin`` whether the
+    candidate is ranked as its twin (white noise in effect: ``twin_p >= DISGUISE_LEVEL``).
+    ``added`` is True for a WN twin that was not among the candidates and was fitted to rank
+    one that is.
+    """
 
     model: str
     n_params: int
@@ -74,6 +172,24 @@ class Candidate:
     j_p_value: float
     result: GMWMResult | None = field(default=None, repr=False, compare=False)
     error: str = ""
+    sub_sample: tuple[str, ...] = ()
+    twin: str = ""
+    added: bool = False
+    twin_p: float = math.nan
+    as_twin: bool = False
+
+    @property
+    def note(self) -> str:
+        """One line for the table: not fitted, white noise in disguise, or an added twin."""
+        if self.error:
+            return f"not fitted: {self.error}"
+        if self.twin:
+            head = f"{', '.join(self.sub_sample)} < 1 sample"
+            tp = f"{self.twin_p:.2g}" if math.isfinite(self.twin_p) else "n/a"
+            if self.as_twin:
+                return f"{head}: WN in effect (p = {tp}), ranked as {self.twin}"
+            return f"{head}: not WN in effect (vs {self.twin}: p = {tp})"
+        return "WN twin (added)" if self.added else ""
 
     def to_dict(self) -> dict[str, Any]:
         d = {
@@ -88,8 +204,13 @@ class Candidate:
                 "j_df",
                 "j_p_value",
                 "error",
+                "twin",
+                "twin_p",
+                "as_twin",
+                "added",
             )
         }
+        d["sub_sample"] = list(self.sub_sample)
         if self.result is not None:
             d["params"] = [r.to_dict() for r in self.result.param_records]
         return {
@@ -111,22 +232,23 @@ class SelectionResult:
         return self.candidates[0]
 
     def table(self) -> str:
-        """Readable ranked table."""
+        """Readable ranked table, with a last line saying which test the J column is."""
         lines = [
             f"WVIC ranking ({len(self.candidates)} candidates, {self.optimism} optimism, "
             f"weights {self.weights}, {self.elapsed_s:.2f} s)",
             f"{'rank':>4} {'model':<22} {'p':>3} {'objective':>12} {'optimism':>10} "
-            f"{'WVIC':>12} {'J-test p':>9}",
+            f"{'WVIC':>12} {'J-test p':>9}  note",
         ]
         for i, c in enumerate(self.candidates, 1):
             if c.error:
-                lines.append(f"{i:>4} {c.model:<22} {c.n_params:>3}  not fitted: {c.error}")
+                lines.append(f"{i:>4} {c.model:<22} {c.n_params:>3}  {c.note}")
                 continue
             jp = f"{c.j_p_value:9.3g}" if math.isfinite(c.j_p_value) else f"{'n/a':>9}"
             lines.append(
                 f"{i:>4} {c.model:<22} {c.n_params:>3} {c.objective:>12.5g} "
-                f"{c.optimism:>10.4g} {c.criterion:>12.5g} {jp}"
+                f"{c.optimism:>10.4g} {c.criterion:>12.5g} {jp}  {c.note}".rstrip()
             )
+        lines += textwrap.wrap(JTEST_NOTE, 100)
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -222,36 +344,64 @@ def rank_models(
     if not uniq:
         raise ModelError("no candidate models to rank")
     efficient = isinstance(weights, str) and weights == "efficient"
-    total = 2 * len(uniq) if efficient else len(uniq)
+    n_uniq = len(uniq)
+    rounds = 2 if efficient else 1
+    total = (rounds + 1) * n_uniq  # the fits, then one J-test refit per candidate
+    Fits = list[tuple[Model, GMWMResult | None, str]]
 
-    def fit_all(w: str | np.ndarray, done: int) -> list[tuple[Model, GMWMResult | None, str]]:
-        out: list[tuple[Model, GMWMResult | None, str]] = []
-        for i, m in enumerate(uniq):
+    def fit_all(models: list[Model], w: str | np.ndarray, done: int | None) -> Fits:
+        out: Fits = []
+        for i, m in enumerate(models):
             try:
                 m.validate(wv.n_levels)
                 out.append((m, fit_gmwm(wv, m, weights=w), ""))
             except (FitError, ModelError) as e:
                 out.append((m, None, str(e)))
-            if progress is not None:
+            if progress is not None and done is not None:
                 progress(done + i + 1, total)
         return out
 
-    def largest_fit(
-        fits: list[tuple[Model, GMWMResult | None, str]],
-    ) -> tuple[list[GMWMResult], GMWMResult]:
+    def largest_fit(fits: Fits) -> tuple[list[GMWMResult], GMWMResult]:
         ok = [r for _, r, _ in fits if r is not None]
         if not ok:
             raise FitError("no candidate could be fitted: " + "; ".join(e for *_, e in fits))
         return ok, max(ok, key=lambda r: (r.model.n_params, -r.objective))
 
-    fitted = fit_all("ci" if efficient else weights, 0)
+    fitted = fit_all(uniq, "ci" if efficient else weights, 0)
     ok, largest = largest_fit(fitted)
     vmat = wv_cov(largest, v, B=B, seed=seed, workers=workers, executor=executor)
-    vinv = inverse_cov(vmat)
     if efficient:  # second step: one Omega = V^-1 for every candidate
-        weights = vinv
-        fitted = fit_all(vinv, len(uniq))
+        weights = inverse_cov(vmat)
+        fitted = fit_all(uniq, weights, n_uniq)
         ok, largest = largest_fit(fitted)
+
+    # white noise in disguise: a candidate with an AR1/GM faster than one sample is ranked as
+    # its WN twin, which is fitted (with the same weights) when it is not a candidate; a
+    # twin's own fit may fold a term in turn (each twin has fewer AR1/GM terms: this ends)
+    twins: dict[str, tuple[str, tuple[str, ...]]] = {}
+    known = {m.spec() for m in uniq}
+
+    def flag(entries: Fits) -> list[Model]:
+        new: list[Model] = []
+        for m, r, _ in entries:
+            if r is None:
+                continue
+            tw, labels = wn_twin(r.model, wv.fs)
+            if labels and tw.processes:
+                twins[m.spec()] = (tw.spec(), tuple(labels))
+                if tw.spec() not in known:
+                    known.add(tw.spec())
+                    new.append(tw)
+        return new
+
+    added: set[str] = set()
+    new_twins = flag(fitted)
+    while new_twins:
+        extra = fit_all(new_twins, weights, None)
+        fitted += extra
+        added |= {m.spec() for m in new_twins}
+        new_twins = flag(extra)
+    ok = [r for _, r, _ in fitted if r is not None]
 
     boot_opt: dict[str, float] = {}
     if optimism == "bootstrap":
@@ -277,8 +427,10 @@ def rank_models(
     elif optimism != "asymptotic":
         raise ValueError(f"unknown optimism {optimism!r}: use 'asymptotic' or 'bootstrap'")
 
-    cands = []
-    for m, r, err in fitted:
+    cands: list[Candidate] = []
+    for i, (m, r, err) in enumerate(fitted):
+        tw, labels = twins.get(m.spec(), ("", ()))
+        extra_fields = {"sub_sample": labels, "twin": tw, "added": m.spec() in added}
         if r is None:
             cands.append(
                 Candidate(
@@ -292,25 +444,65 @@ def rank_models(
                     math.nan,
                     None,
                     err,
+                    **extra_fields,
                 )
             )
             continue
         opt = boot_opt[m.spec()] if optimism == "bootstrap" else _asymptotic_optimism(r, vmat)
-        resid = wv.variance - r.implied
-        jstat = float(resid @ vinv @ resid)
-        df = wv.n_levels - len(free_params(r))
-        jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
+        try:  # the calibrated J-test: efficient refit on the levels with enough coefficients
+            jstat, df, _, _ = efficient_j(wv, r.model, vmat)
+            jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
+        except (FitError, ModelError, np.linalg.LinAlgError):
+            jstat, df, jp = math.nan, 0, math.nan
+        if progress is not None and i < n_uniq:
+            progress(rounds * n_uniq + i + 1, total)
         cands.append(
-            Candidate(m.spec(), m.n_params, r.objective, opt, r.objective + opt, jstat, df, jp, r)
+            Candidate(
+                m.spec(),
+                m.n_params,
+                r.objective,
+                opt,
+                r.objective + opt,
+                jstat,
+                df,
+                jp,
+                r,
+                **extra_fields,
+            )
         )
+
+    # a candidate with a term in disguise ranks as its twin, immediately after it, unless the
+    # distance test rejects the fold (resolved through twins of twins)
+    by_spec = {c.model: c for c in cands}
+    for k, c in enumerate(cands):
+        t = by_spec.get(c.twin) if c.twin else None
+        if t is None or t.result is None:
+            continue
+        tp = math.nan
+        if math.isfinite(c.j_stat) and math.isfinite(t.j_stat):
+            tp = float(stats.chi2.sf(t.j_stat - c.j_stat, max(t.j_df - c.j_df, 1)))
+        cands[k] = dataclasses.replace(c, twin_p=tp, as_twin=not tp < DISGUISE_LEVEL)
+    by_spec = {c.model: c for c in cands}
+
+    def rank_criterion(c: Candidate) -> float:
+        seen = set()
+        while c.as_twin and c.model not in seen:
+            seen.add(c.model)
+            c = by_spec[c.twin]
+        return c.criterion
+
+    eff = {c.model: rank_criterion(c) for c in cands}
 
     # candidates whose extra terms are fitted at zero tie with the smaller model: within a
     # relative 1e-6 of each other, the one with fewer parameters ranks first
     def order(a: Candidate, b: Candidate) -> int:
-        if abs(a.criterion - b.criterion) > 1e-6 * max(abs(a.criterion), abs(b.criterion)):
-            return -1 if a.criterion < b.criterion else 1
-        return (a.n_params > b.n_params) - (a.n_params < b.n_params) or (
-            (a.model > b.model) - (a.model < b.model)
+        ca, cb = eff[a.model], eff[b.model]
+        if abs(ca - cb) > 1e-6 * max(abs(ca), abs(cb)):
+            return -1 if ca < cb else 1
+        return (
+            (a.as_twin > b.as_twin) - (a.as_twin < b.as_twin)
+            or (a.n_params > b.n_params) - (a.n_params < b.n_params)
+            or ((a.model > b.model) - (a.model < b.model))
         )
 
     cands.sort(key=functools.cmp_to_key(order))
