@@ -40,6 +40,7 @@ import panel as pn  # noqa: E402
 from gmwm_app._panel_compat import light_text_updates  # noqa: E402
 from gmwm_app.jobs import Jobs  # noqa: E402
 from gmwm_app.model_panel import ModelPanel  # noqa: E402
+from gmwm_app.report_download import report_file, report_filename  # noqa: E402
 from gmwm_app.selection_view import SelectionView, jtest_badge  # noqa: E402
 from gmwm_app.session_view import SessionPanel, download_button  # noqa: E402
 from gmwm_app.state import (  # noqa: E402
@@ -194,6 +195,10 @@ class GMWMApp:
         self.download = download_button(
             self._export_json, "gmwm_fit.json", "Download fit (JSON)", "primary"
         )
+        # the calibration report of the session's fit (engine.report, not refitted)
+        self.report_download = download_button(
+            self._export_report, "gmwm_report.html", "Download report (HTML)"
+        )
         # plot images are made in the browser by BokehJS (PlotView.export), like the toolbar's
         # save tool, but in either format whatever the plot's output backend
         self.png_button = pn.widgets.Button(
@@ -265,6 +270,7 @@ class GMWMApp:
             *self.model_panel.sidebar(),
             h("### Export", margin=(0, 10)),
             self.download,
+            self.report_download,
             pn.Row(self.png_button, self.svg_button, margin=(0, 5)),
             h(
                 "The plot toolbar's save tool also saves a PNG; each plot's toolbar zooms "
@@ -602,6 +608,10 @@ class GMWMApp:
 
     def _export_json(self) -> io.StringIO:
         return io.StringIO(self.state.export_json())
+
+    def _export_report(self) -> io.StringIO:
+        self.report_download.filename = report_filename(self.state)
+        return report_file(self.state)
 
 
 def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn.viewable.Viewable:

@@ -63,6 +63,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--scale-factor-std": ("scale_factor_std", r"kf-gins"),
     "--quiet": ("quiet", r"no progress line"),
     "--reps": ("reps", r"^replicates per log length"),
+    "--report": ("report", r"^write the fleet acceptance report"),
     "--robust": ("robust", r"^robust \(Tukey biweight\) WV$"),
     "--rostopic": ("rostopic", r"^rostopic entry"),
     "--scale": ("scale", r"^scale factor for raw counts"),  # counts, everywhere
@@ -71,6 +72,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--segment": ("segment", r"^time column with gaps"),
     "--shared": ("shared", r"^processes shared by"),
     "--static": ("static", r"^PNG figures instead of interactive"),
+    "--spec": ("spec", r"^with --report: an acceptance limit"),
     "--stream": ("stream", r"^stream a \.npy/HDF5 log"),
     "--tau": ("tau", r"^minimise the WV at the scale tau = S seconds$"),
     "--top": ("top", r"^show only the best N"),

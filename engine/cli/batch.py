@@ -1,8 +1,9 @@
 """``gmwm batch`` (:func:`add_parser`, :func:`run`): calibrate a fleet of IMUs::
 
-    gmwm batch LOG_OR_GLOB... --model SPEC | --max-model SPEC -o DIR [--channels a,b,...]
-               [--fs HZ] [--levels J] [--weights ci|identity|efficient] [--workers N]
-               [--scheduler local|ADDRESS] [--quiet] [--json]
+    gmwm batch LOG_OR_GLOB... --model SPEC | --max-model SPEC (-o DIR | --report FILE.html)
+               [--channels a,b,...] [--fs HZ] [--levels J] [--weights ci|identity|efficient]
+               [--workers N] [--scheduler local|ADDRESS] [--quiet] [--json]
+               [--datasheet VALUES | --datasheet-file FILE] [--spec 'KEY<=VALUE UNIT' ...]
                [--segment ...] [--scale ...] [--units ...] [--topic T]
 
 Every channel of every log is fitted (:func:`engine.batch.fit_batch`); DIR receives one JSON
@@ -10,6 +11,11 @@ report per log and ``summary.csv``/``summary.json`` (the spread of every paramet
 datasheet quantity across the units). ``--select`` is the deprecated spelling of
 ``--max-model`` (the name ``gmwm select`` uses). ``--scheduler`` runs the logs on a Dask cluster
 (:func:`add_scheduler_option` and :func:`scheduler_executor`, also used by ``gmwm study``).
+
+``--report FILE.html`` writes the fleet acceptance report (:func:`engine.report.fleet_report`:
+a row per unit, verdicts against ``--spec`` limits and/or ``--datasheet``, outliers, every
+unit's own section); the logs are fitted once for both outputs (:func:`add_report_options`,
+:func:`run_fleet`).
 """
 
 from __future__ import annotations
@@ -29,9 +35,17 @@ from .common import (
     log_kwargs,
     positive,
     queue_warning,
+    usage_error,
 )
 
-__all__ = ["add_parser", "run", "add_scheduler_option", "scheduler_executor"]
+__all__ = [
+    "add_parser",
+    "run",
+    "add_scheduler_option",
+    "scheduler_executor",
+    "add_report_options",
+    "run_fleet",
+]
 
 _SELECT_HELP = "per channel, the WVIC-best sub-model of this model, e.g. '2*GM+WN+RW+DR'"
 _EXIT = (
@@ -92,10 +106,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     bt.add_argument(
         "-o",
         "--output",
-        required=True,
         metavar="DIR",
         help="folder for one JSON report per log, summary.csv and summary.json (created if "
-        "missing; checked before any fit)",
+        "missing; checked before any fit); -o, --report or both",
     )
     bt.add_argument("--channels", help="channels separated by commas (default: all)")
     bt.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
@@ -116,20 +129,57 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     bt.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     bt.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     add_log_options(bt, stream=False)
+    add_report_options(bt)
     return bt
 
 
-def run(args: argparse.Namespace) -> dict[str, Any] | str:
-    """Run ``gmwm batch``; returns the fleet table (or the JSON-ready summary)."""
-    check_output(args.output, "-o", kind="dir")  # before the (slow) imports and any fit
-    from .._parallel import ProgressLine
-    from ..batch import fit_batch
+def add_report_options(bt: argparse.ArgumentParser) -> None:
+    """``--report FILE.html`` (the fleet acceptance report) and what it checks."""
+    g = bt.add_argument_group("fleet acceptance report")
+    g.add_argument(
+        "--report",
+        metavar="FILE.html",
+        help="write the fleet acceptance report: one self-contained HTML file (a row per "
+        "unit, pass/fail, outliers, overlaid Allan deviations, each unit's own section)",
+    )
+    src = g.add_mutually_exclusive_group()
+    src.add_argument(
+        "--datasheet",
+        help="KEY=VALUE UNIT items separated by commas, as gmwm check takes them "
+        "('arw=0.3 deg/sqrt(h), bi=5 deg/h'): with --report, checked on every unit",
+    )
+    src.add_argument(
+        "--datasheet-file",
+        help="with --report: Kalibr imu.yaml, gmwm JSON report or datasheet CSV to check",
+    )
+    g.add_argument(
+        "--spec",
+        action="append",
+        default=[],
+        metavar="'KEY<=VALUE UNIT'",
+        help="with --report: an acceptance limit, e.g. 'arw<=0.3 deg/sqrt(h)' (keys and units "
+        "as --datasheet's; repeat the option for more)",
+    )
 
-    channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
-    bar = None if args.quiet else ProgressLine(0, sys.stderr, "gmwm batch", "logs")
-    with scheduler_executor(args) as ex:
-        res = fit_batch(
+
+def run_fleet(
+    args: argparse.Namespace,
+    channels: list[str] | None,
+    executor: Executor | None,
+    progress: Any,
+) -> Any:
+    """Fit the fleet and write ``--report``; returns the batch's :class:`BatchResult`."""
+    import shlex
+
+    from ..inference.datasheet_check import DatasheetError
+    from ..report import ReportError, gather_fleet, render_fleet_html
+
+    try:
+        fleet = gather_fleet(
             args.inputs,
+            datasheet=args.datasheet_file or args.datasheet,
+            spec=args.spec,
+            level=0.95,
             model=args.model,
             select=args.max_model,
             channels=channels,
@@ -138,10 +188,56 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             weights=args.weights,
             load_options=log_kwargs(args),
             workers=args.workers,
-            executor=ex,
-            progress=bar,
+            executor=executor,
+            progress=progress,
+            command_line=shlex.join(["gmwm", *getattr(args, "argv", [])]),
         )
-    files = res.save(args.output)
+        page = render_fleet_html(fleet)
+    except (DatasheetError, ReportError) as e:
+        raise CliError(str(e)) from None
+    with open(args.report, "w", encoding="utf-8") as f:
+        f.write(page)
+    print(
+        f"gmwm: batch: wrote {args.report} ({len(fleet.units)} units, "
+        f"{len(page.encode('utf-8')) / 1e6:.2f} MB)",
+        file=sys.stderr,
+    )
+    return fleet.batch
+
+
+def run(args: argparse.Namespace) -> dict[str, Any] | str:
+    """Run ``gmwm batch``; returns the fleet table (or the JSON-ready summary)."""
+    if args.output is None and args.report is None:
+        raise usage_error("give -o DIR (JSON reports and summaries), --report FILE.html, or both")
+    if args.report is None and (args.spec or args.datasheet or args.datasheet_file):
+        raise usage_error("--spec, --datasheet and --datasheet-file apply to --report FILE.html")
+    if args.output is not None:  # before the (slow) imports and any fit
+        check_output(args.output, "-o", kind="dir")
+    if args.report is not None:
+        check_output(args.report, "--report", suffixes=(".html", ".htm"))
+    from .._parallel import ProgressLine
+    from ..batch import fit_batch
+
+    channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
+    bar = None if args.quiet else ProgressLine(0, sys.stderr, "gmwm batch", "logs")
+    with scheduler_executor(args) as ex:
+        if args.report is not None:
+            res = run_fleet(args, channels, ex, bar)
+        else:
+            res = fit_batch(
+                args.inputs,
+                model=args.model,
+                select=args.max_model,
+                channels=channels,
+                fs=args.fs,
+                levels=args.levels,
+                weights=args.weights,
+                load_options=log_kwargs(args),
+                workers=args.workers,
+                executor=ex,
+                progress=bar,
+            )
+    files = res.save(args.output) if args.output is not None else {}
     for lf in res.logs:
         if lf.error:
             print(f"gmwm: batch: {lf.source}: {lf.error}", file=sys.stderr)
@@ -150,14 +246,15 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
         queue_warning(args, w)
     if not res.fitted:
-        raise CliError(
-            f"no log could be fitted ({len(res.failed)} failed; see {files['summary_json']})"
-        )
+        see = files.get("summary_json") or args.report
+        raise CliError(f"no log could be fitted ({len(res.failed)} failed; see {see})")
     if args.json:
         d = res.to_dict()
-        d["files"] = files
+        d["files"] = {**files, **({"report": args.report} if args.report else {})}
         return d
-    return (
-        f"{res.table()}\n\nwrote {len(files['reports'])} report(s), summary.csv and "
-        f"summary.json to {args.output}"
-    )
+    wrote = [f"the fleet report {args.report}"] if args.report else []
+    if files:
+        wrote.append(
+            f"{len(files['reports'])} report(s), summary.csv and summary.json to {args.output}"
+        )
+    return f"{res.table()}\n\nwrote {' and '.join(wrote)}"

@@ -26,7 +26,7 @@ import math
 import os
 import platform
 import warnings as _warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,6 +47,7 @@ __all__ = [
     "ChannelReport",
     "CalibrationReport",
     "file_sha256",
+    "software_versions",
     "welch_psd",
     "gather_report",
 ]
@@ -295,7 +296,9 @@ def _dist_version(name: str) -> str:
         return "not installed"
 
 
-def _versions() -> dict[str, str]:
+def software_versions() -> dict[str, str]:
+    """Versions of the engine, Python and the libraries whose numbers or drawing a report
+    shows (numpy, scipy, h5py, bokeh, jinja2): its "How it was made" table."""
     import h5py
     import scipy
 
@@ -347,7 +350,7 @@ def _channel(
     if log.is_summary:
         notes["psd"] = "a WV summary file holds no samples: no PSD"
     else:
-        spectrum = welch_psd(log[name], log.fs, fit)
+        spectrum = welch_psd(log[name], fit.fs, fit)  # the fit's fs (an app session may set it)
     check = None
     if datasheet is not None:
         try:
@@ -400,6 +403,7 @@ def gather_report(
     export_format: str | None = "kalibr",
     load_options: dict[str, Any] | None = None,
     command_line: str = "",
+    fits: Mapping[str, GMWMResult] | None = None,
 ) -> CalibrationReport:
     """Load a log, fit every channel and compute everything a calibration report shows.
 
@@ -427,6 +431,10 @@ def gather_report(
         ``"kalibr"``); None for none.
     command_line : str
         How the report was asked for, shown under "How it was made".
+    fits : mapping of str to GMWMResult, optional
+        Fits already made of channels of ``source`` (an app session's, a batch's): reported
+        as they are, nothing is refitted; ``model``, ``select``, ``channels``, ``levels`` and
+        ``weights`` must then be left out (they were the fits').
 
     Returns
     -------
@@ -437,6 +445,8 @@ def gather_report(
     ------
     engine.io.LoadError, engine.fit.FitError, engine.models.ModelError
         The log cannot be read, or no channel can be fitted.
+    TypeError
+        ``fits`` with fitting options, or naming a channel the log does not have.
     """
     from ..batch import fit_log
     from ..export import export
@@ -444,7 +454,17 @@ def gather_report(
 
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
-    if model is None and select is None:
+    if fits is not None:
+        given = {"model": model, "select": select, "channels": channels, "levels": levels}
+        clash = [k for k, v in given.items() if v is not None] + (["weights"] * (weights != "ci"))
+        if clash:
+            raise TypeError(
+                f"gather_report(): {', '.join(clash)} cannot be given with fits= (the fits "
+                "were made with their own)"
+            )
+        if not fits:
+            raise TypeError("gather_report(): fits= is empty; give at least one channel's fit")
+    elif model is None and select is None:
         select = DEFAULT_SELECT
     ds: Any = None
     ds_text = ""
@@ -462,17 +482,29 @@ def gather_report(
     else:
         log = load_log(str(source), fs=fs, **dict(load_options or {}))
     src = log.source or str(source)
+    if fits is not None:
+        unknown = [ch for ch in fits if ch not in log.names]
+        if unknown:
+            raise TypeError(
+                f"gather_report(): fits= names channel(s) {unknown} that {src} does not have "
+                f"(it has {', '.join(log.names)})"
+            )
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
-        lf = fit_log(
-            log, model=model, select=select, channels=channels, levels=levels, weights=weights
-        )
+        if fits is not None:
+            fitted, channel_errors = dict(fits), {}
+            weights = ", ".join(dict.fromkeys(f.weights for f in fitted.values()))
+        else:
+            lf = fit_log(
+                log, model=model, select=select, channels=channels, levels=levels, weights=weights
+            )
+            fitted, channel_errors = lf.fits, lf.channel_errors
         chans: dict[str, ChannelReport] = {}
-        for ch in list(lf.fits) + list(lf.channel_errors):
-            if ch in lf.fits:
-                chans[ch] = _channel(log, ch, lf.fits[ch], level=level, datasheet=ds)
+        for ch in list(fitted) + list(channel_errors):
+            if ch in fitted:
+                chans[ch] = _channel(log, ch, fitted[ch], level=level, datasheet=ds)
             else:
-                chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=lf.channel_errors[ch])
+                chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=channel_errors[ch])
         chans = {ch: chans[ch] for ch in log.names if ch in chans}
     log_warnings = [f"{w.category.__name__}: {w.message}" for w in caught]
     if log.fs_source == "default":
@@ -485,13 +517,14 @@ def gather_report(
     if export_format:
         exp["format"] = export_format
         try:
-            exp["text"] = export(None, lf.fits, export_format, log=log, allow_partial=True)
+            exp["text"] = export(None, fitted, export_format, log=log, allow_partial=True)
         except (ExportError, ValueError) as e:
             exp["error"] = str(e)
     provenance = {
-        "versions": _versions(),
+        "versions": software_versions(),
         "model": model or "",
         "select": select or "",
+        "fits_given": fits is not None,
         "models": {ch: c.fit.model.spec(values=True) for ch, c in chans.items() if c.fit},
         "weights": weights,
         "intervals": f"asymptotic sandwich, {100 * level:g} % two-sided",

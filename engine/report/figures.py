@@ -7,6 +7,7 @@ outputs show the same curves.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,7 +15,15 @@ import numpy as np
 from ..units import squared
 from .data import ChannelReport
 
-__all__ = ["Layer", "FigureSpec", "channel_figures", "check_figure", "PALETTE"]
+__all__ = [
+    "Layer",
+    "FigureSpec",
+    "channel_figures",
+    "check_figure",
+    "fleet_adev_figure",
+    "spread_figure",
+    "PALETTE",
+]
 
 #: Colours of the data, the model and the processes (Bokeh's Category10).
 PALETTE = (
@@ -34,8 +43,9 @@ _DATA, _MODEL = "#1f77b4", "#d62728"
 
 @dataclass(frozen=True, eq=False)
 class Layer:
-    """One drawn thing: ``kind`` is ``line``, ``dashed``, ``points`` or ``band`` (``y`` to
-    ``y2``); ``label`` goes in the legend (``""``: none)."""
+    """One drawn thing: ``kind`` is ``line``, ``dashed``, ``points``, ``band`` (``y`` to
+    ``y2``) or ``errorbar`` (a vertical bar from ``y`` to ``y2`` at each ``x``); ``label`` goes
+    in the legend (``""``: none)."""
 
     kind: str
     x: np.ndarray
@@ -47,8 +57,9 @@ class Layer:
 
 @dataclass(frozen=True, eq=False)
 class FigureSpec:
-    """A log-log figure: ``key`` (unique in the report), axes, layers; ``x_range_of`` names the
-    figure whose x-range this one shares (the residual strip under its WV)."""
+    """A figure, log-log unless said: ``key`` (unique in the report), axes, layers;
+    ``x_range_of`` names the figure whose x-range this one shares (the residual strip under
+    its WV); ``x_ticks`` labels the x positions (the units of a fleet's spread plots)."""
 
     key: str
     title: str
@@ -57,6 +68,9 @@ class FigureSpec:
     layers: list[Layer] = field(default_factory=list)
     height: int = 330
     x_range_of: str = ""
+    log_x: bool = True
+    log_y: bool = True
+    x_ticks: tuple[tuple[float, str], ...] = ()
 
 
 def _fine(t: np.ndarray) -> np.ndarray:
@@ -64,13 +78,14 @@ def _fine(t: np.ndarray) -> np.ndarray:
     return np.geomspace(t[0], t[-1], 16 * max(t.size - 1, 1) + 1)
 
 
-def channel_figures(ch: ChannelReport) -> list[FigureSpec]:
-    """Allan deviation, WV with the fit and its decomposition, residual strip, PSD."""
+def channel_figures(ch: ChannelReport, prefix: str = "") -> list[FigureSpec]:
+    """Allan deviation, WV with the fit and its decomposition, residual strip, PSD (keys
+    ``<prefix><channel>-adev`` ...)."""
     fit = ch.fit
     if fit is None:
         return []
     u = ch.unit or "u"
-    key = ch.name
+    key = prefix + ch.name
     out: list[FigureSpec] = []
     wv = fit.wv
     if ch.allan is not None:
@@ -160,7 +175,7 @@ def channel_figures(ch: ChannelReport) -> list[FigureSpec]:
     return out
 
 
-def check_figure(ch: ChannelReport) -> FigureSpec | None:
+def check_figure(ch: ChannelReport, prefix: str = "") -> FigureSpec | None:
     """The datasheet check: empirical ADEV and interval, datasheet and GMWM model, and the
     scales where the datasheet is outside the interval."""
     c = ch.check
@@ -181,9 +196,75 @@ def check_figure(ch: ChannelReport) -> FigureSpec | None:
             Layer("points", t[out], c.datasheet_adev[out], "datasheet outside", "#000000")
         )
     return FigureSpec(
-        f"{ch.name}-check",
+        f"{prefix}{ch.name}-check",
         f"{ch.name}: datasheet check",
         "averaging time T [s]",
         f"ADEV [{ch.unit}]",
         layers,
+    )
+
+
+def fleet_adev_figure(
+    key: str, channel: str, unit: str, curves: Sequence[tuple[str, ChannelReport]]
+) -> FigureSpec:
+    """Every unit's overlapping Allan deviation of one channel, overlaid (points and line, a
+    colour per unit); ``curves`` are ``(unit name, its ChannelReport)``."""
+    layers = []
+    for i, (name, ch) in enumerate(curves):
+        av = ch.allan
+        if av is None:
+            continue
+        c = PALETTE[i % len(PALETTE)]
+        layers.append(Layer("line", av.tau_s, av.adev, name, c))
+        layers.append(Layer("points", av.tau_s, av.adev, "", c))
+    return FigureSpec(
+        key,
+        f"{channel}: overlapping Allan deviation of every unit",
+        "averaging time T [s]",
+        f"ADEV [{unit or 'u'}]",
+        layers,
+        height=360,
+    )
+
+
+def spread_figure(
+    key: str,
+    title: str,
+    y_label: str,
+    names: Sequence[str],
+    values: Sequence[tuple[float, float, float, bool]],
+    limit: float | None = None,
+) -> FigureSpec:
+    """One term across the units: per unit (x = 1, 2 ... labelled by ``names``) its value and
+    interval ``(value, low, high, outlier)``, outliers in red, the median dashed and the
+    acceptance ``limit`` (if any) as a green line. Missing units have a NaN value."""
+    x = np.arange(1.0, len(names) + 1.0)
+    v = np.array([t[0] for t in values], float)
+    lo = np.array([t[1] for t in values], float)
+    hi = np.array([t[2] for t in values], float)
+    out = np.array([t[3] for t in values], bool)
+    ok = np.isfinite(v)
+    iv = ok & np.isfinite(lo) & np.isfinite(hi)
+    edge = np.array([0.5, len(names) + 0.5])
+    layers = []
+    if iv.any():
+        layers.append(Layer("errorbar", x[iv], lo[iv], "interval", _DATA, hi[iv]))
+    layers.append(Layer("points", x[ok & ~out], v[ok & ~out], "unit", _DATA))
+    if (ok & out).any():
+        layers.append(Layer("points", x[ok & out], v[ok & out], "outlier (|z| > 3.5)", _MODEL))
+    if ok.any():
+        med = float(np.median(v[ok]))
+        layers.append(Layer("dashed", edge, np.array([med, med]), "median", "#7f7f7f"))
+    if limit is not None:
+        layers.append(Layer("line", edge, np.array([limit, limit]), "limit", "#2ca02c"))
+    return FigureSpec(
+        key,
+        title,
+        "unit",
+        y_label,
+        layers,
+        height=240,
+        log_x=False,
+        log_y=False,
+        x_ticks=tuple((float(i), n) for i, n in zip(x, names, strict=True)),
     )

@@ -24,24 +24,89 @@ from collections.abc import Callable
 from typing import Any
 
 from .data import CalibrationReport
-from .figures import FigureSpec, channel_figures, check_figure
+from .figures import (
+    FigureSpec,
+    channel_figures,
+    check_figure,
+    fleet_adev_figure,
+    spread_figure,
+)
+from .fleet import MIN_UNITS_Z, OUTLIER_Z, FleetReport
 
-__all__ = ["ReportError", "render_html", "figure_specs"]
+__all__ = ["ReportError", "render_html", "render_fleet_html", "figure_specs", "fleet_figure_specs"]
 
 
 class ReportError(ValueError):
     """A report that cannot be made as asked (the message says what to do)."""
 
 
-def figure_specs(rep: CalibrationReport) -> dict[str, FigureSpec]:
-    """Every figure of the report by key (``gyro_x-adev``, ``gyro_x-wv`` ...), in page order."""
+def figure_specs(rep: CalibrationReport, prefix: str = "") -> dict[str, FigureSpec]:
+    """Every figure of the report by key (``<prefix>gyro_x-adev``, ``<prefix>gyro_x-wv`` ...),
+    in page order."""
     out: dict[str, FigureSpec] = {}
     for ch in rep.channels.values():
-        specs = channel_figures(ch)
-        chk = check_figure(ch)
+        specs = channel_figures(ch, prefix)
+        chk = check_figure(ch, prefix)
         for s in [*specs, *([chk] if chk is not None else [])]:
             out[s.key] = s
     return out
+
+
+def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
+    """The fleet's figures by key: per channel the overlaid Allan deviations
+    (``fleet-<channel>-adev``) and one spread plot per noise term
+    (``fleet-<channel>-<k>``, k the column's index), then every unit's own figures
+    (``<anchor>-<channel>-adev`` ...)."""
+    from ..units import DISPLAY
+
+    out: dict[str, FigureSpec] = {}
+    names = [u.name for u in fleet.units]
+    for ch, cols in fleet.columns.items():
+        curves = [
+            (u.name, u.report.channels[ch])
+            for u in fleet.units
+            if u.report is not None and ch in u.report.channels
+        ]
+        unit = next((c.unit for _, c in curves if c.fit is not None), "")
+        out[f"fleet-{ch}-adev"] = fleet_adev_figure(f"fleet-{ch}-adev", ch, unit, curves)
+        for k, col in enumerate(cols):
+            values = []
+            for u in fleet.units:
+                t = next((t for t in u.terms.get(ch, []) if t.column == col), None)
+                if t is None:
+                    values.append((math.nan, math.nan, math.nan, False))
+                else:
+                    values.append((t.value, t.low, t.high, t.outlier))
+            limit = None
+            for lim in fleet.limits:
+                d = DISPLAY.get((lim.kind, lim.symbol))
+                if (
+                    d is not None
+                    and (d.symbol, d.unit) == col[1:]
+                    and _kind_of(fleet, ch) == lim.kind
+                ):
+                    limit = lim.si * d.factor
+            key = f"fleet-{ch}-{k}"
+            title = f"{ch}: {col[0]} {col[1]} across the units"
+            out[key] = spread_figure(key, title, f"{col[1]} [{col[2]}]", names, values, limit)
+    for u in fleet.units:
+        if u.report is not None:
+            out.update(figure_specs(u.report, f"{u.anchor}-"))
+    return out
+
+
+def _kind_of(fleet: FleetReport, channel: str) -> str | None:
+    """The sensor kind of a channel (from the first unit that has it fitted)."""
+    from ..units import ExportError, si_factor
+
+    for u in fleet.units:
+        c = u.report.channels.get(channel) if u.report is not None else None
+        if c is not None and c.fit is not None:
+            try:
+                return si_factor(c.unit, channel)[0]
+            except ExportError:
+                return None
+    return None
 
 
 # ----------------------------------------------------------------------------- Bokeh
@@ -56,8 +121,8 @@ def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
             kw["x_range"] = figs[s.x_range_of].x_range
         p = figure(
             title=s.title,
-            x_axis_type="log",
-            y_axis_type="log",
+            x_axis_type="log" if s.log_x else "linear",
+            y_axis_type="log" if s.log_y else "linear",
             x_axis_label=s.x_label,
             y_axis_label=s.y_label,
             height=s.height,
@@ -75,12 +140,18 @@ def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
             leg = {"legend_label": layer.label} if layer.label else {}
             if layer.kind == "band":
                 p.varea("x", "y", "y2", source=src, color=layer.color, fill_alpha=0.18, **leg)
+            elif layer.kind == "errorbar":
+                p.segment("x", "y", "x", "y2", source=src, color=layer.color, line_width=2, **leg)
             elif layer.kind == "points":
                 hover.append(p.scatter("x", "y", source=src, color=layer.color, size=7, **leg))
             else:
                 dash = "dashed" if layer.kind == "dashed" else "solid"
                 w = 1.5 if layer.kind == "dashed" else 2.2
                 p.line("x", "y", source=src, color=layer.color, line_width=w, line_dash=dash, **leg)
+        if s.x_ticks:
+            p.xaxis.ticker = [t for t, _ in s.x_ticks]
+            p.xaxis.major_label_overrides = {t: n for t, n in s.x_ticks}
+            p.x_range.range_padding = 0.1
         if hover:
             p.add_tools(
                 HoverTool(
@@ -98,13 +169,20 @@ def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
 
 def _interactive(specs: dict[str, FigureSpec]) -> tuple[dict[str, str], str, str]:
     """(div per figure key, the figures' script, the inline BokehJS) of the figures."""
+    from bokeh.core.templates import CSS_RESOURCES, JS_RESOURCES
     from bokeh.embed import components
     from bokeh.resources import Resources
 
     if not specs:
         return {}, "", ""
     script, divs = components(_bokeh_figures(specs))
-    resources = Resources(mode="inline", components=["bokeh"]).render()
+    # BokehJS inline, and no file: Resources' js_files/css_files also list the external files
+    # of every model class loaded in this process (Panel's widgets, when the app renders the
+    # report), which the report's core figures never use and an offline page cannot fetch
+    core = Resources(mode="inline", components=["bokeh"])
+    resources = CSS_RESOURCES.render(css_raw=core.css_raw, css_files=[]) + JS_RESOURCES.render(
+        js_raw=core.js_raw, js_files=[], hashes=core.hashes
+    )
     return dict(divs), script, resources
 
 
@@ -124,14 +202,18 @@ def _static(specs: dict[str, FigureSpec]) -> dict[str, str]:
         ax = fig.add_subplot()
         bottom = 0.15 if s.height > 200 else 0.27  # fixed margins: a layout engine costs seconds
         fig.subplots_adjust(left=0.09, right=0.7, bottom=bottom, top=1 - bottom * 0.75)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        ax.set_xscale("log" if s.log_x else "linear")
+        ax.set_yscale("log" if s.log_y else "linear")
+        if s.x_ticks:
+            ax.set_xticks([t for t, _ in s.x_ticks], [n for _, n in s.x_ticks], fontsize=6)
         for layer in s.layers:
             lab = layer.label or None
             if layer.kind == "band":
                 ax.fill_between(
                     layer.x, layer.y, layer.y2, color=layer.color, alpha=0.18, label=lab
                 )
+            elif layer.kind == "errorbar":
+                ax.vlines(layer.x, layer.y, layer.y2, color=layer.color, lw=2, label=lab)
             elif layer.kind == "points":
                 ax.plot(layer.x, layer.y, "o", color=layer.color, ms=4, label=lab)
             else:
@@ -192,6 +274,22 @@ def _json_script(d: dict[str, Any]) -> str:
     return text
 
 
+def _figures(specs: dict[str, FigureSpec], static: bool) -> tuple[dict[str, Any], str, str]:
+    """(markup per figure key, the Bokeh script, the inline BokehJS): PNG ``<img>`` tags
+    when ``static`` (no script, no BokehJS), else Bokeh divs."""
+    from markupsafe import Markup
+
+    if static:
+        images = _static(specs)
+        figures = {
+            k: Markup('<img class="fig" alt="{}" src="{}">').format(specs[k].title, v)
+            for k, v in images.items()
+        }
+        return figures, "", ""
+    divs, script, resources = _interactive(specs)
+    return {k: Markup(v) for k, v in divs.items()}, script, resources
+
+
 def render_html(rep: CalibrationReport, *, static: bool = False, title: str | None = None) -> str:
     """The report as one self-contained HTML page.
 
@@ -212,16 +310,7 @@ def render_html(rep: CalibrationReport, *, static: bool = False, title: str | No
     from markupsafe import Markup
 
     specs = figure_specs(rep)
-    script = resources = ""
-    if static:
-        images = _static(specs)
-        figures = {
-            k: Markup('<img class="fig" alt="{}" src="{}">').format(specs[k].title, v)
-            for k, v in images.items()
-        }
-    else:
-        divs, script, resources = _interactive(specs)
-        figures = {k: Markup(v) for k, v in divs.items()}
+    figures, script, resources = _figures(specs, static)
     by_channel: dict[str, list[str]] = {ch: [] for ch in rep.channels}
     for key in specs:
         by_channel[key.rsplit("-", 1)[0]].append(key)
@@ -237,4 +326,66 @@ def render_html(rep: CalibrationReport, *, static: bool = False, title: str | No
         bokeh_resources=Markup(resources),
         bokeh_script=Markup(script),
         data_json=Markup(_json_script(rep.to_dict())),
+    )
+
+
+def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | None = None) -> str:
+    """The fleet acceptance report as one self-contained HTML page.
+
+    The acceptance table (a row per unit, its verdict and why), per channel the table of
+    every unit's noise terms with their intervals (outliers marked), the overlaid Allan
+    deviations and a spread plot per term, then every unit's own section (the calibration
+    report's log table, channels and export, with anchors ``#unit-<k>`` and
+    ``#unit-<k>-ch-<channel>``).
+
+    Parameters
+    ----------
+    fleet : FleetReport
+        From :func:`engine.report.fleet.gather_fleet`.
+    static : bool
+        Figures as PNG images (matplotlib) instead of interactive Bokeh plots.
+    title : str, optional
+        Page title (default: ``"Fleet acceptance report: <n> units"``).
+
+    Raises
+    ------
+    ReportError
+        ``static=True`` without matplotlib.
+    """
+    from markupsafe import Markup
+
+    specs = fleet_figure_specs(fleet)
+    figures, script, resources = _figures(specs, static)
+    unit_keys: dict[str, dict[str, list[str]]] = {}
+    for u in fleet.units:
+        if u.report is None:
+            continue
+        keys: dict[str, list[str]] = {ch: [] for ch in u.report.channels}
+        pre = f"{u.anchor}-"
+        for key in specs:
+            if key.startswith(pre):
+                keys[key[len(pre) :].rsplit("-", 1)[0]].append(key)
+        unit_keys[u.anchor] = keys
+    cells = {
+        ch: {u.anchor: {t.column: t for t in u.terms.get(ch, [])} for u in fleet.units}
+        for ch in fleet.columns
+    }
+    spread = {
+        ch: [f"fleet-{ch}-{k}" for k in range(len(cols))] for ch, cols in fleet.columns.items()
+    }
+    page = _environment().get_template("fleet.html.jinja")
+    render: Callable[..., str] = page.render
+    return render(
+        title=title or f"Fleet acceptance report: {len(fleet.units)} units",
+        fleet=fleet,
+        figures=figures,
+        unit_keys=unit_keys,
+        cells=cells,
+        spread=spread,
+        static=static,
+        outlier_z=OUTLIER_Z,
+        min_units_z=MIN_UNITS_Z,
+        bokeh_resources=Markup(resources),
+        bokeh_script=Markup(script),
+        data_json=Markup(_json_script(fleet.to_dict())),
     )
