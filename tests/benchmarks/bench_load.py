@@ -522,9 +522,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['cpu_per_session']:.2f} s/session{err}",
             flush=True,
         )
-        print(
-            "       single page: HTML %.2f s, document %.2f s, first data %.2f s" % r["ref_parts"]
-        )
+        h, d, w = r["ref_parts"]
+        print(f"       single page: HTML {h:.2f} s, document {d:.2f} s, first data {w:.2f} s")
     c = asyncio.run(measure_clicks(args.click_n, args.num_procs, args.clicks, args.timeout))
     print(
         f"click '+ GM'/remove -> component_0 redrawn: idle median {c['idle_med'] * 1e3:.0f} ms; "
