@@ -31,6 +31,7 @@ __all__ = [
     "limit_blas_threads",
     "limit_blas_once",
     "favour_loop_latency",
+    "build_document",
 ]
 
 log = logging.getLogger(__name__)
@@ -106,12 +107,55 @@ _VALIDATED = threading.Event()
 
 
 def _validate_first(doc: Any) -> bool:
-    """Validate ``doc`` if it is the first page document of the process; whether it was."""
+    """Validate ``doc`` if it is the first page document of the process; whether it was.
+
+    Bokeh validates a document after the handlers ran, on the loop (a walk of every model
+    with its checks, 0.1-0.2 s). Every page of the process has the same models (the build
+    does not depend on the URL: the data arrive later), so validating the first finds what
+    validating each would.
+    """
     if _VALIDATED.is_set():
         return False
     doc.validate()
     _VALIDATED.set()
     return True
+
+
+def build_document(build: Callable[[Any], Any], doc: Any) -> None:
+    """Build a session's page into ``doc`` in this (worker) thread, as Panel's ``run_app``
+    does for a function handler on the loop; ``build(doc)`` is Panel's build of the page.
+
+    Without Panel's patch of Bokeh's global ``curdoc()`` stack (shared by all threads: a build
+    in a thread would leave another session's document in Bokeh's global state); the current
+    document is Panel's context variable, which is per thread. The document belongs to this
+    thread while it is built (Panel applies model changes directly only on the document's
+    thread); Panel's ``initialize_document`` gives it to the loop's after. The document's
+    model graph is recomputed once, at the end (frozen during the build: Panel adds roots and
+    attaches callbacks one by one, 8-10 walks of the whole document per page otherwise), and
+    only the process's first page document is validated (:func:`_validate_first`); Bokeh's
+    validation on the loop is skipped for it.
+
+    Raises
+    ------
+    RuntimeError
+        The build produced an empty document (``doc`` is cleared on any failure, so that
+        the page can be built again on the loop).
+    """
+    with building_off_loop(doc), doc.models.freeze():
+        try:
+            build(doc)  # the page factory and its document (Panel's build)
+        except BaseException:
+            doc.clear()  # built again on the loop
+            raise
+    doc.config.update(
+        reconnect_session=pn.config.reconnect is True,
+        notifications=None,
+        notify_connection_status=False,
+    )
+    if not doc.roots:
+        raise RuntimeError("the page factory produced an empty document")
+    _validate_first(doc)
+    doc.validate = _no_validation
 
 
 def _build_pool() -> ThreadPoolExecutor:
@@ -125,7 +169,7 @@ def _build_pool() -> ThreadPoolExecutor:
 def create_application(path: str | None = None) -> Any:
     """The Bokeh application of the app for ``pn.serve``: each page is built off the loop.
 
-    Opening a page builds a Bokeh document of about a thousand models, 0.3-1 s of Python.
+    Opening a page builds a Bokeh document of about 430 models, 0.3-1 s of Python.
     Panel builds it in the server's event loop, so a burst of page opens would hold every
     other session for the sum of their builds. Here the build (the page factory and the
     document's models) runs in a worker thread while the session is being created (Bokeh
@@ -171,34 +215,7 @@ def create_application(path: str | None = None) -> Any:
                 log.exception("building the page off the loop failed; building it on the loop")
 
         def _build(self, doc: Any, app: Any) -> None:
-            # what Panel's run_app does for a function handler, without its patch of Bokeh's
-            # global curdoc() stack (shared by all threads: a build in a thread would leave
-            # another session's document in Bokeh's global state); the current document is
-            # Panel's context variable, which is per thread. The document belongs to this
-            # thread while it is built (Panel applies model changes directly only on the
-            # document's thread); Panel's initialize_document gives it to the loop's after.
-            # frozen: Bokeh recomputes the document's model graph once, at the end, instead
-            # of at every root Panel adds and every callback it attaches (8-10 walks of the
-            # whole document per page)
-            with building_off_loop(doc), doc.models.freeze():
-                try:
-                    self._func(doc)  # the page factory and its document (Panel's build)
-                except BaseException:
-                    doc.clear()  # built again on the loop
-                    raise
-            doc.config.update(
-                reconnect_session=pn.config.reconnect is True,
-                notifications=None,
-                notify_connection_status=False,
-            )
-            if not doc.roots:
-                raise RuntimeError("the page factory produced an empty document")
-            # Bokeh validates the document after the handlers ran, on the loop (a walk of
-            # every model with its checks, 0.1-0.2 s). Every page of the process has the same
-            # models (the build does not depend on the URL: the data arrive later), so the
-            # first one is validated here, and no page on the loop
-            _validate_first(doc)
-            doc.validate = _no_validation
+            build_document(self._func, doc)
             # the stylesheet patch Panel's page handler would do on the loop, done here
             try:
                 compat.patch_css_off_loop(doc, app)
