@@ -21,12 +21,16 @@ from bokeh.models import (
     ColumnDataSource,
     DataRange1d,
     DataTable,
+    GlyphRenderer,
     HoverTool,
     Legend,
     LegendItem,
+    Line,
     SaveTool,
+    Scatter,
     Span,
     TableColumn,
+    VArea,
 )
 from bokeh.plotting import figure
 
@@ -43,16 +47,21 @@ __all__ = [
     "wv_data",
     "FitTables",
     "N_COMPONENTS",
+    "N_INITIAL_COMPONENTS",
     "component_color",
     "unit_squared",
     "model_grid",
     "parameter_rows",
     "datasheet_rows",
     "fit_summary",
+    "add_renderer",
 ]
 
 #: Size of the pool of component renderers (a model with more processes draws the first ones).
 N_COMPONENTS = 12
+#: Component renderers built with the page; the pool grows up to :data:`N_COMPONENTS` when a
+#: model has more processes (8 models each: a page opens faster with fewer).
+N_INITIAL_COMPONENTS = 6
 #: Minimum legend label width (px); the residual strip has a legend as wide, so the two
 #: plot frames line up on the shared x axis.
 LEGEND_LABEL_WIDTH = 175
@@ -149,7 +158,7 @@ class WVFigures:
         The pooled line renderers and their legend items.
     """
 
-    def __init__(self, n_components: int = N_COMPONENTS) -> None:
+    def __init__(self, n_components: int = N_INITIAL_COMPONENTS) -> None:
         # names: handles for browser tests and benchmarks (Bokeh's get_model_by_name)
         self.emp = ColumnDataSource(_empty_wv(), name="empirical")
         self.alt = ColumnDataSource(_empty_wv(), name="classical")
@@ -189,47 +198,46 @@ class WVFigures:
         p.xgrid.minor_grid_line_alpha = 0.6
 
         # classical WV drawn beside the robust one (robust mode only)
-        alt_band = interval_band(p, self.alt, color=CLASSICAL_COLOR, alpha=0.12)
-        alt_line = p.line(
-            "tau_s",
-            "variance",
-            source=self.alt,
-            line_color=CLASSICAL_COLOR,
-            line_width=1.5,
-            line_dash="dashed",
+        # every glyph without selected/muted looks of its own (add_renderer): this plot has
+        # no selection tool and its legend hides curves
+        alt_band = interval_band(p, self.alt, color=CLASSICAL_COLOR, alpha=0.12, plain=True)
+        alt_line = add_renderer(
+            p,
+            self.alt,
+            Line(
+                x="tau_s",
+                y="variance",
+                line_color=CLASSICAL_COLOR,
+                line_width=1.5,
+                line_dash="dashed",
+            ),
         )
-        alt_pts = p.scatter(
-            "tau_s",
-            "variance",
-            source=self.alt,
-            marker="square",
-            size=6,
-            line_color=CLASSICAL_COLOR,
-            fill_color="white",
+        alt_pts = add_renderer(
+            p,
+            self.alt,
+            Scatter(
+                x="tau_s",
+                y="variance",
+                marker="square",
+                size=6,
+                line_color=CLASSICAL_COLOR,
+                fill_color="white",
+            ),
         )
         # empirical WV and its interval
-        band = interval_band(p, self.emp)
-        emp_line, emp_pts = empirical_curve(p, self.emp, "variance", 1.5, 7)
+        band = interval_band(p, self.emp, plain=True)
+        emp_line, emp_pts = empirical_curve(p, self.emp, "variance", 1.5, 7, plain=True)
         # the axes follow the data, not the model curves (a tiny RW at short scales would
         # otherwise squash the plot, and dragging a what-if slider would make it jump)
         p.x_range.renderers = [emp_line, alt_line]
         p.y_range.renderers = [band, emp_line, alt_band]
 
         # model: one pooled renderer per component, then the total on top
-        self.comp_renderers = []
-        for src in self.comps:
-            r = p.line(
-                "tau_s",
-                "wv",
-                source=src,
-                line_width=2.2,
-                line_dash="dashed",
-                line_alpha=0.95,
-                visible=False,
-            )
-            self.comp_renderers.append(r)
-        total = p.line(
-            "tau_s", "wv", source=self.total, line_color=TOTAL_COLOR, line_width=3, line_alpha=0.9
+        self.comp_renderers = [self._component_renderer(p, src) for src in self.comps]
+        total = add_renderer(
+            p,
+            self.total,
+            Line(x="tau_s", y="wv", line_color=TOTAL_COLOR, line_width=3, line_alpha=0.9),
         )
         self.total_renderer = total
 
@@ -239,10 +247,7 @@ class WVFigures:
             label=value("classical WV"), renderers=[alt_line, alt_pts, alt_band], visible=False
         )
         self.total_item = LegendItem(label=value("model (total)"), renderers=[total], visible=False)
-        self.comp_items = [
-            LegendItem(label=value(f"component {i + 1}"), renderers=[r], visible=False)
-            for i, r in enumerate(self.comp_renderers)
-        ]
+        self.comp_items = [self._component_item(i, r) for i, r in enumerate(self.comp_renderers)]
         self.legend = Legend(
             items=[self.emp_item, self.band_item, self.alt_item, self.total_item, *self.comp_items],
             location="top_left",
@@ -286,8 +291,8 @@ class WVFigures:
         )
         r.title.text_font_size = "13px"
         r.yaxis.axis_label = "empirical / model [1]"
-        rband = interval_band(r, self.resid, "lo", "hi")
-        rline, ratio_pts = empirical_curve(r, self.resid, "ratio", 1, 6)
+        rband = interval_band(r, self.resid, "lo", "hi", plain=True)
+        rline, ratio_pts = empirical_curve(r, self.resid, "ratio", 1, 6, plain=True)
         # linear ratio axis that follows the points (the interval at the longest scales is
         # orders of magnitude wide and would flatten them)
         r.y_range.renderers = [ratio_pts]
@@ -386,6 +391,36 @@ class WVFigures:
                 )
         self._update_model(state)
 
+    @staticmethod
+    def _component_renderer(p: Any, src: ColumnDataSource) -> GlyphRenderer:
+        line = Line(x="tau_s", y="wv", line_width=2.2, line_dash="dashed", line_alpha=0.95)
+        return add_renderer(p, src, line, visible=False)
+
+    @staticmethod
+    def _component_item(i: int, r: GlyphRenderer) -> LegendItem:
+        return LegendItem(label=value(f"component {i + 1}"), renderers=[r], visible=False)
+
+    def _grow_components(self, n: int) -> None:
+        """Make the pool of component renderers hold ``n`` (at most :data:`N_COMPONENTS`)."""
+        n = min(n, N_COMPONENTS)
+        if n <= len(self.comps):
+            return
+        new_src, new_r, new_items = [], [], []
+        for i in range(len(self.comps), n):
+            src = ColumnDataSource(dict(_EMPTY_CURVE), name=f"component_{i}")
+            r = self._component_renderer(self.figure, src)
+            new_src.append(src)
+            new_r.append(r)
+            new_items.append(self._component_item(i, r))
+        self.comps += new_src
+        self.comp_renderers += new_r
+        self.comp_items += new_items
+        # the total stays on top of the components
+        rs = [r for r in self.figure.renderers if r is not self.total_renderer]
+        self.figure.renderers = [*rs, self.total_renderer]
+        self.legend.items = [*self.legend.items, *new_items]
+        self.model_hover.renderers = [*self.model_hover.renderers, *new_r]
+
     def _update_model(self, state: AppState) -> None:
         wv = state.wv
         model = state.display_model()
@@ -409,6 +444,7 @@ class WVFigures:
         self.total_item.visible = True
         names = dict(zip(model.labels, model.processes, strict=True))
         items = list(comps.items())
+        self._grow_components(len(items))
         for i, (src, r, item) in enumerate(
             zip(self.comps, self.comp_renderers, self.comp_items, strict=True)
         ):
@@ -550,6 +586,7 @@ def interval_band(
     y2: str = "ci_high",
     color: str = BAND_COLOR,
     alpha: float = 0.25,
+    plain: bool = False,
 ) -> Any:
     """Shade an interval between the columns ``y1`` and ``y2`` over ``tau_s``.
 
@@ -563,17 +600,57 @@ def interval_band(
         Lower and upper bound columns.
     color, alpha
         Fill colour and opacity.
+    plain : bool
+        The glyph only, without its selected and muted looks (:func:`add_renderer`): for a
+        plot without selection tools whose legend hides.
 
     Returns
     -------
     GlyphRenderer
         The area's renderer.
     """
+    if plain:
+        glyph = VArea(x="tau_s", y1=y1, y2=y2, fill_color=color, fill_alpha=alpha)
+        return add_renderer(p, source, glyph)
     return p.varea(x="tau_s", y1=y1, y2=y2, source=source, fill_color=color, fill_alpha=alpha)
 
 
+def add_renderer(p: Any, source: ColumnDataSource, glyph: Any, **kw: Any) -> GlyphRenderer:
+    """Draw ``glyph`` from ``source`` on the plot ``p``, without looks of its own for selected,
+    unselected or muted data (Bokeh's ``"auto"``: BokehJS derives them when it needs them).
+
+    ``figure.line`` and the other glyph methods add two copies of each glyph (the unselected
+    and the muted looks) as models of the page: two of every three glyph models of the Fit
+    tab's plots, which have no selection tool and whose legends hide curves, never mute them,
+    so that the copies were never drawn. Fewer models: a page is built and sent faster.
+
+    Parameters
+    ----------
+    p : bokeh.plotting.figure
+        The plot.
+    source : ColumnDataSource
+        The data.
+    glyph : bokeh.models.Glyph
+        The glyph (e.g. ``Line(x="tau_s", y="wv", line_color=...)``).
+    **kw
+        More renderer settings (``visible``, ``name``).
+
+    Returns
+    -------
+    GlyphRenderer
+        The renderer, added to ``p.renderers``.
+    """
+    return p.add_glyph(source, glyph, **kw)
+
+
 def empirical_curve(
-    p: Any, source: ColumnDataSource, y: str, line_width: float, size: float, **points_kw: Any
+    p: Any,
+    source: ColumnDataSource,
+    y: str,
+    line_width: float,
+    size: float,
+    plain: bool = False,
+    **points_kw: Any,
 ) -> tuple[Any, Any]:
     """Draw an empirical curve over ``tau_s``: a line through its points.
 
@@ -587,6 +664,9 @@ def empirical_curve(
         The value column.
     line_width, size
         Width of the line and size of the points.
+    plain : bool
+        The glyphs only, without their selected and muted looks (:func:`add_renderer`): for a
+        plot without selection tools whose legend hides (no ``points_kw`` then).
     **points_kw
         More settings of the points (e.g. their selection look).
 
@@ -595,6 +675,14 @@ def empirical_curve(
     tuple
         The line's and the points' renderers.
     """
+    if plain:
+        if points_kw:
+            raise TypeError(f"plain points take no more settings, got {sorted(points_kw)}")
+        line = Line(x="tau_s", y=y, line_color=EMPIRICAL_COLOR, line_width=line_width)
+        pts = Scatter(
+            x="tau_s", y=y, size=size, line_color=EMPIRICAL_COLOR, fill_color=EMPIRICAL_COLOR
+        )
+        return add_renderer(p, source, line), add_renderer(p, source, pts)
     line = p.line("tau_s", y, source=source, line_color=EMPIRICAL_COLOR, line_width=line_width)
     pts = p.scatter(
         "tau_s",
