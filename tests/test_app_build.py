@@ -156,3 +156,25 @@ def test_component_pool_grows_on_demand(app: Any) -> None:
     # never more than N_COMPONENTS renderers (the first ones drawn), as before
     v._grow_components(N_COMPONENTS + 5)
     assert len(v.comps) == len(v.comp_renderers) == len(v.comp_items) == N_COMPONENTS
+
+
+def test_document_serialized_ahead_for_the_first_pull(app_demo: Path) -> None:
+    from bokeh.models import Div
+
+    ids = []
+    for change in (False, True):
+        doc, _app = _build_page()
+        server.serialize_ahead(doc)
+        before = dict(server.PULLS)
+        if change:  # a change after the build: the pull must see it
+            doc.add_root(Div(text="added after the build", name="gmwm-late-root"))
+        first = doc.to_json()
+        roots = [r["id"] for r in first.content["roots"]]
+        assert roots == [r.id for r in doc.roots]
+        assert ("gmwm-late-root" in str(first.content)) is change
+        kind = "fresh" if change else "ahead"
+        assert server.PULLS[kind] == before[kind] + 1
+        assert doc.to_json() is not first  # later calls are Bokeh's own
+        assert "to_json" not in vars(doc) and not doc.callbacks._change_callbacks
+        ids.append(roots)
+    assert len(ids[1]) == len(ids[0]) + 1
