@@ -343,6 +343,11 @@ class GMWMApp:
             main=main,
             sidebar_width=360,
             header_background="#1F4E8C",
+            # no header spinner: Panel's shows whether *any* session of the process is busy
+            # (pn.state.busy), so that each callback of one session sent two changes to every
+            # open page (30 open pages: 60 messages per click); the session's own loading
+            # indicators and status line show its work
+            busy_indicator=None,
         )
 
     def view(self) -> pn.template.BootstrapTemplate:

@@ -20,6 +20,7 @@ from typing import Any
 
 import panel as pn
 from bokeh.document import Document
+from bokeh.document.events import SessionCallbackAdded, SessionCallbackRemoved
 
 from gmwm_app import _panel_compat as compat
 from gmwm_app import hdf5_guard
@@ -179,7 +180,8 @@ def serialize_ahead(doc: Any) -> None:
     changed: list[Any] = []
 
     def on_change(event: Any) -> None:
-        changed.append(event)
+        if not isinstance(event, SessionCallbackAdded | SessionCallbackRemoved):
+            changed.append(event)  # (session callbacks are not part of the document's JSON)
 
     def to_json(*, deferred: bool = True) -> Any:
         del doc.to_json  # from now on Bokeh's own

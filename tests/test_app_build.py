@@ -178,3 +178,18 @@ def test_document_serialized_ahead_for_the_first_pull(app_demo: Path) -> None:
         assert "to_json" not in vars(doc) and not doc.callbacks._change_callbacks
         ids.append(roots)
     assert len(ids[1]) == len(ids[0]) + 1
+
+
+def test_a_callback_of_one_session_changes_no_other_page(app_demo: Path) -> None:
+    import panel as pn
+
+    docs = [_build_page()[0] for _ in range(2)]
+    events: list[Any] = []
+    for d in docs:
+        d.on_change(lambda event: events.append(event))
+    # what Panel does around every callback of any session (pn.state.busy is per process)
+    pn.state._add_busy_event("gmwm-test")
+    assert pn.state.busy
+    pn.state._remove_busy_event("gmwm-test")
+    assert not pn.state.busy
+    assert events == []  # no page shows the process's busy state (was 2 changes per page)
