@@ -11,7 +11,7 @@ objects built on first opening with the session state and its job runner
 Responsiveness: reading a file and computing a WV run as jobs in a worker thread (the event
 loop, and so every other session, stays free) with a loading indicator; the data a URL names
 are read while the browser is still loading the page; a fit takes milliseconds and runs
-inline; every redraw replaces ColumnDataSource data in place (``views.WVFigures``,
+inline; every redraw replaces ColumnDataSource data in place (``wv_figures.WVFigures``,
 ``FitTables``). Serving (pages built off the loop, BLAS limits) is :mod:`gmwm_app.server`.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
@@ -49,10 +49,10 @@ from gmwm_app.state import (  # noqa: E402
 )
 from gmwm_app.views import (  # noqa: E402
     FitTables,
-    WVFigures,
     fit_summary,
     hidden_alert,
 )
+from gmwm_app.wv_figures import WVFigures  # noqa: E402
 
 __all__ = ["GMWMApp", "create_app", "live_apps"]
 

@@ -177,9 +177,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         self._lock = threading.Lock()
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
-        # data installs of this session: a new load is a new value even when the log object
-        # is the same (the demo log is shared by the sessions: gmwm_app.data.read_demo)
-        self.loads = 0
+        self.loads = 0  # data installs: a reload of the (shared) demo log is a new load
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
 
     # ---------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ from gmwm_app import _panel_compat as compat
 from gmwm_app import data, server
 from gmwm_app.app import live_apps
 from gmwm_app.state import AppState
-from gmwm_app.views import N_COMPONENTS, N_INITIAL_COMPONENTS
+from gmwm_app.wv_figures import N_COMPONENTS, N_INITIAL_COMPONENTS
 
 #: Bokeh models of a page's initial document: 342 measured (Panel 1.9.4, Bokeh 3.9.2, the
 #: Fit tab and the sidebar; the other tabs are placeholders until shown). It was 434 before
