@@ -1,10 +1,11 @@
 """GMWM browser app (Panel + Bokeh): load an IMU log, build a latent model live, read the fit.
 
 Layers: :mod:`gmwm_app.state` (session state, no widgets; with :mod:`~gmwm_app.data`,
-:mod:`~gmwm_app.query` and :mod:`~gmwm_app.whatif`), :mod:`gmwm_app.views` (Bokeh figures and
-tables updated in place), the tabs (``*_view`` modules, Viewers of the state and of the
-session's :mod:`~gmwm_app.jobs`), :mod:`gmwm_app.app` (``create_app()`` per browser session)
-and :mod:`gmwm_app.server` (serving). Start it with ``gmwm-app`` or ``python -m gmwm_app``.
+:mod:`~gmwm_app.query` and :mod:`~gmwm_app.whatif`), :mod:`gmwm_app.views` and
+:mod:`~gmwm_app.wv_figures` (Bokeh figures and tables updated in place), the tabs (``*_view``
+modules, Viewers of the state and of the session's :mod:`~gmwm_app.jobs`), :mod:`gmwm_app.app`
+(``create_app()`` per browser session) and :mod:`gmwm_app.server` (serving). Start it with
+``gmwm-app`` or ``python -m gmwm_app``.
 """
 
 from __future__ import annotations

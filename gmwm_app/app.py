@@ -11,7 +11,7 @@ objects built on first opening with the session state and its job runner
 Responsiveness: reading a file and computing a WV run as jobs in a worker thread (the event
 loop, and so every other session, stays free) with a loading indicator; the data a URL names
 are read while the browser is still loading the page; a fit takes milliseconds and runs
-inline; every redraw replaces ColumnDataSource data in place (``views.WVFigures``,
+inline; every redraw replaces ColumnDataSource data in place (``wv_figures.WVFigures``,
 ``FitTables``). Serving (pages built off the loop, BLAS limits) is :mod:`gmwm_app.server`.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
@@ -50,10 +50,10 @@ from gmwm_app.state import (  # noqa: E402
 from gmwm_app.upload import BoundedFileDropper  # noqa: E402
 from gmwm_app.views import (  # noqa: E402
     FitTables,
-    WVFigures,
     fit_summary,
     hidden_alert,
 )
+from gmwm_app.wv_figures import WVFigures  # noqa: E402
 
 __all__ = ["GMWMApp", "create_app", "live_apps"]
 
@@ -345,6 +345,11 @@ class GMWMApp:
             main=main,
             sidebar_width=360,
             header_background="#1F4E8C",
+            # no header spinner: Panel's shows whether *any* session of the process is busy
+            # (pn.state.busy), so that each callback of one session sent two changes to every
+            # open page (30 open pages: 60 messages per click); the session's own loading
+            # indicators and status line show its work
+            busy_indicator=None,
         )
 
     def view(self) -> pn.template.BootstrapTemplate:

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 import time
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +41,9 @@ __all__ = [
     "unit_of",
     "message_of",
     "wv_matrix_of",
+    "read_demo",
+    "shared_wvs",
+    "clear_shared",
 ]
 
 
@@ -67,6 +72,63 @@ def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> Any:
     from engine.io import load_log
 
     return load_log(path, **options)
+
+
+# The demo log and the WVs computed of it are shared by every session of the process: a
+# class opening the app at once would otherwise read the same file and compute the same WV
+# once per page (about 0.2 s of a worker thread and 10 MB each). The shared log's arrays are
+# read-only, so that no session can change another's data; each session gets its own WV
+# cache (a copy of the shared one), to which it adds what it computes.
+_SHARED_LOCK = threading.Lock()
+_SHARED_DEMO: dict[tuple[str, int, int], Any] = {}  # (path, mtime_ns, size) -> ImuLog
+_SHARED_WVS: weakref.WeakKeyDictionary[Any, dict] = weakref.WeakKeyDictionary()
+
+
+def read_demo(path: str | os.PathLike[str]) -> Any:
+    """The demo log at ``path``, read once per process while the file is unchanged.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The demo log (``gmwm_app.state.demo_path()``).
+
+    Returns
+    -------
+    ImuLog
+        The log shared by every session (its arrays are read-only); :func:`shared_wvs`
+        holds the WVs computed of it.
+    """
+    p = Path(path)
+    st = p.stat()
+    key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
+    with _SHARED_LOCK:
+        hit = _SHARED_DEMO.get(key)
+    if hit is not None:
+        return hit
+    lg = read_log(p)
+    for arr in lg.channels.values():
+        if isinstance(arr, np.ndarray):
+            arr.flags.writeable = False
+    with _SHARED_LOCK:
+        if key not in _SHARED_DEMO:  # another thread may have read it meanwhile
+            _SHARED_DEMO.clear()  # one demo at a time (a changed file replaces it)
+            _SHARED_DEMO[key] = lg
+            _SHARED_WVS[lg] = {}
+        return _SHARED_DEMO[key]
+
+
+def shared_wvs(lg: Any) -> dict[tuple[str, float, bool], eg.WaveletVariance] | None:
+    """A copy of the WVs shared with every session for ``lg`` (None: ``lg`` is not shared)."""
+    with _SHARED_LOCK:
+        wvs = _SHARED_WVS.get(lg)
+        return None if wvs is None else dict(wvs)
+
+
+def clear_shared() -> None:
+    """Forget the shared demo log and its WVs (the next session reads the file again)."""
+    with _SHARED_LOCK:
+        _SHARED_DEMO.clear()
+        _SHARED_WVS.clear()
 
 
 @dataclass
@@ -166,8 +228,8 @@ def read_source(
                 f"the demo log {p} is missing: run `python data/make_demo.py` "
                 "in the repository, or load a file"
             )
-        lg = read_log(p)
-        out = LoadedData(lg, "demo", p.name, str(p))
+        lg = read_demo(p)
+        out = LoadedData(lg, "demo", p.name, str(p), wv_cache=shared_wvs(lg) or {})
     elif source == "path":
         if not path or not str(path).strip():
             raise ValueError("no path given: type the path of a log file on the server")
@@ -229,8 +291,12 @@ def precompute(
     try:
         f = float(fs) if fs else float(lg.fs)
         if wv_from_cache(loaded.wv_cache, ch, f, robust) is None:
-            store_wv(loaded.wv_cache, ch, f, robust, compute_wv(lg, ch, f, robust))
+            wv = compute_wv(lg, ch, f, robust)
+            store_wv(loaded.wv_cache, ch, f, robust, wv)
             loaded.computations += 1
+            with _SHARED_LOCK:  # a shared log: the next sessions find this WV computed
+                if lg in _SHARED_WVS:
+                    store_wv(_SHARED_WVS[lg], ch, f, robust, wv)
     except Exception:  # reported when installed
         pass
 

@@ -19,6 +19,8 @@ from functools import partial
 from typing import Any
 
 import panel as pn
+from bokeh.document import Document
+from bokeh.document.events import SessionCallbackAdded, SessionCallbackRemoved
 
 from gmwm_app import _panel_compat as compat
 from gmwm_app import hdf5_guard
@@ -31,6 +33,9 @@ __all__ = [
     "limit_blas_threads",
     "limit_blas_once",
     "favour_loop_latency",
+    "build_document",
+    "serialize_ahead",
+    "PULLS",
 ]
 
 log = logging.getLogger(__name__)
@@ -102,6 +107,95 @@ def _no_validation() -> None:
     """Stands for ``Document.validate`` on documents already validated off the loop."""
 
 
+_VALIDATED = threading.Event()
+
+
+def _validate_first(doc: Any) -> bool:
+    """Validate ``doc`` if it is the first page document of the process; whether it was.
+
+    Bokeh validates a document after the handlers ran, on the loop (a walk of every model
+    with its checks, 0.1-0.2 s). Every page of the process has the same models (the build
+    does not depend on the URL: the data arrive later), so validating the first finds what
+    validating each would.
+    """
+    if _VALIDATED.is_set():
+        return False
+    doc.validate()
+    _VALIDATED.set()
+    return True
+
+
+def build_document(build: Callable[[Any], Any], doc: Any) -> None:
+    """Build a session's page into ``doc`` in this (worker) thread, as Panel's ``run_app``
+    does for a function handler on the loop; ``build(doc)`` is Panel's build of the page.
+
+    Without Panel's patch of Bokeh's global ``curdoc()`` stack (shared by all threads: a build
+    in a thread would leave another session's document in Bokeh's global state); the current
+    document is Panel's context variable, which is per thread. The document belongs to this
+    thread while it is built (Panel applies model changes directly only on the document's
+    thread); Panel's ``initialize_document`` gives it to the loop's after. The document's
+    model graph is recomputed once, at the end (frozen during the build: Panel adds roots and
+    attaches callbacks one by one, 8-10 walks of the whole document per page otherwise), and
+    only the process's first page document is validated (:func:`_validate_first`); Bokeh's
+    validation on the loop is skipped for it.
+
+    Raises
+    ------
+    RuntimeError
+        The build produced an empty document (``doc`` is cleared on any failure, so that
+        the page can be built again on the loop).
+    """
+    with building_off_loop(doc), doc.models.freeze():
+        try:
+            build(doc)  # the page factory and its document (Panel's build)
+        except BaseException:
+            doc.clear()  # built again on the loop
+            raise
+    doc.config.update(
+        reconnect_session=pn.config.reconnect is True,
+        notifications=None,
+        notify_connection_status=False,
+    )
+    if not doc.roots:
+        raise RuntimeError("the page factory produced an empty document")
+    _validate_first(doc)
+    doc.validate = _no_validation
+
+
+#: How the first pulls of page documents were answered: "ahead" with the JSON serialised in
+#: the build thread, "fresh" serialised on the loop (the document changed in between).
+PULLS: dict[str, int] = {"ahead": 0, "fresh": 0}
+
+
+def serialize_ahead(doc: Any) -> None:
+    """Serialise ``doc`` now, in the build thread, for its session's first pull.
+
+    The browser pulls the whole document once, over the websocket, and Bokeh serialises it
+    then, on the server loop (``Document.to_json``, about 0.1-0.15 s per page here): during a
+    burst of page opens, a click of another session waited behind a queue of these. The JSON
+    made here answers that first pull, unless the document changed in between (any change
+    event: then it is serialised again, on the loop, as Bokeh does); later calls are Bokeh's.
+    """
+    serialized = Document.to_json(doc)
+    changed: list[Any] = []
+
+    def on_change(event: Any) -> None:
+        if not isinstance(event, SessionCallbackAdded | SessionCallbackRemoved):
+            changed.append(event)  # (session callbacks are not part of the document's JSON)
+
+    def to_json(*, deferred: bool = True) -> Any:
+        del doc.to_json  # from now on Bokeh's own
+        doc.remove_on_change(on_change)
+        if changed or not deferred:
+            PULLS["fresh"] += 1
+            return Document.to_json(doc, deferred=deferred)
+        PULLS["ahead"] += 1
+        return serialized
+
+    doc.on_change(on_change)
+    doc.to_json = to_json
+
+
 def _build_pool() -> ThreadPoolExecutor:
     global _BUILD_POOL
     if _BUILD_POOL is None:
@@ -113,7 +207,7 @@ def _build_pool() -> ThreadPoolExecutor:
 def create_application(path: str | None = None) -> Any:
     """The Bokeh application of the app for ``pn.serve``: each page is built off the loop.
 
-    Opening a page builds a Bokeh document of about a thousand models, 0.3-1 s of Python.
+    Opening a page builds a Bokeh document of about 430 models, 0.3-1 s of Python.
     Panel builds it in the server's event loop, so a burst of page opens would hold every
     other session for the sum of their builds. Here the build (the page factory and the
     document's models) runs in a worker thread while the session is being created (Bokeh
@@ -164,34 +258,13 @@ def create_application(path: str | None = None) -> Any:
                 log.exception("building the page off the loop failed; building it on the loop")
 
         def _build(self, doc: Any, app: Any) -> None:
-            # what Panel's run_app does for a function handler, without its patch of Bokeh's
-            # global curdoc() stack (shared by all threads: a build in a thread would leave
-            # another session's document in Bokeh's global state); the current document is
-            # Panel's context variable, which is per thread. The document belongs to this
-            # thread while it is built (Panel applies model changes directly only on the
-            # document's thread); Panel's initialize_document gives it to the loop's after.
-            with building_off_loop(doc):
-                try:
-                    self._func(doc)  # the page factory and its document (Panel's build)
-                except BaseException:
-                    doc.clear()  # built again on the loop
-                    raise
-            doc.config.update(
-                reconnect_session=pn.config.reconnect is True,
-                notifications=None,
-                notify_connection_status=False,
-            )
-            if not doc.roots:
-                raise RuntimeError("the page factory produced an empty document")
-            # Bokeh validates the document after the handlers ran, on the loop (a walk of
-            # every model, ~0.1 s): done here instead, and skipped there for this document
-            doc.validate()
-            doc.validate = _no_validation
+            build_document(self._func, doc)
             # the stylesheet patch Panel's page handler would do on the loop, done here
             try:
                 compat.patch_css_off_loop(doc, app)
             except Exception:  # the handler patches them on the loop, as usual
                 log.exception("patching the page's stylesheets off the loop failed")
+            serialize_ahead(doc)  # the browser's pull of the document, answered off the loop
             _PREBUILT.add(doc)
 
         def modify_document(self, doc: Any) -> None:

@@ -385,7 +385,7 @@ class SessionPanel:
         # every format of the registry, from the fits of the channels fitted in this session
         self._fits: dict[str, Any] = {}  # channel -> its latest fit (this log, this fs)
         self._fits_log: Any = None
-        self._fits_of: tuple[Any, ...] = ()
+        self._fits_of: tuple[Any, ...] = ()  # (load, fs, robust) of the kept fits
         self.format_select = pn.widgets.Select(
             label="Format",
             options={f"{f.description} ({k})": k for k, f in FORMATS.items()},
@@ -492,7 +492,9 @@ class SessionPanel:
     def _remember_fit(self) -> None:
         """Keep the latest fit of each channel of the shown log (new data forget them)."""
         s = self.state
-        of = (s.fs, s.robust)  # the fits of another log, rate or WV kind are not kept
+        # the fits of another load (even of the same, shared, demo log), rate or WV kind are
+        # not kept
+        of = (s.loads, s.fs, s.robust)
         if s.log is not self._fits_log or of != self._fits_of:
             self._fits, self._fits_log, self._fits_of = {}, s.log, of
         if s.result is not None and s.channel:

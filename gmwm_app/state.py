@@ -177,6 +177,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         self._lock = threading.Lock()
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
+        self.loads = 0  # data installs: a reload of the (shared) demo log is a new load
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
 
     # ---------------------------------------------------------------------------------
@@ -388,6 +389,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
                 msgs.append(f"the model {model.spec()} was cleared: {fit}")
             with self._lock:
                 self._log = lg
+                self.loads += 1
                 self._wv_cache = cache
                 self.wv_computations += computed + loaded.computations
             fs_src = "user" if fs is not None and f != f_file else fs_source(lg)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -125,6 +126,15 @@ def app_demo_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if real.exists():
         return real
     return write_small_demo(tmp_path_factory.mktemp("app_demo") / "demo_imu.h5")
+
+
+@pytest.fixture(autouse=True)
+def _fresh_shared_demo() -> None:
+    """Each test reads the demo log itself (the app shares it across sessions of a process,
+    :func:`gmwm_app.data.read_demo`): a test's WV count must not depend on earlier tests."""
+    data = sys.modules.get("gmwm_app.data")
+    if data is not None:
+        data.clear_shared()
 
 
 @pytest.fixture

@@ -18,13 +18,13 @@ import engine as eg
 from gmwm_app import state as state_mod
 from gmwm_app.state import AppState
 from gmwm_app.views import (
-    WVFigures,
     datasheet_rows,
     fit_summary,
     model_grid,
     parameter_rows,
 )
 from gmwm_app.whatif import SliderSpec
+from gmwm_app.wv_figures import WVFigures
 
 CHANNELS = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
 
