@@ -298,7 +298,8 @@ def implied_adev_curves(result: SlopeResult) -> dict[str, dict[str, np.ndarray]]
     """Model-implied Allan deviation of each method (and the truth) over the measured span.
 
     ``ADEV(m) = sqrt(2 nu2(2m))`` with ``nu2`` the implied Haar WV at scale ``2m`` samples
-    (CONVENTIONS); the slope method's bias-instability floor adds ``(0.664 B)^2`` to the AVAR.
+    (``docs/conventions.md``); the slope method's bias-instability floor adds ``(0.664 B)^2``
+    to the AVAR.
 
     Returns
     -------

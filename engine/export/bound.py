@@ -86,7 +86,8 @@ def split_terms(model: Model, fs: float, fs_f: float, tau_h: float) -> Split:
 
 def target_ratio(tau: np.ndarray, n: int, confidence: float | None) -> np.ndarray:
     """Target / fitted WV: 1, or the upper limit of the eta3 interval at ``confidence``,
-    ``eta / chi2_{(1-c)/2}(eta)`` with ``eta = max((n - tau + 1) / tau, 1)`` (CONVENTIONS)."""
+    ``eta / chi2_{(1-c)/2}(eta)`` with ``eta = max((n - tau + 1) / tau, 1)``
+    (``docs/conventions.md``)."""
     if confidence is None:
         return np.ones_like(tau)
     eta = np.maximum((n - tau + 1.0) / tau, 1.0)

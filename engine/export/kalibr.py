@@ -3,7 +3,7 @@ and random walks in SI, per axis and the conservative choice over axes); :func:`
 and :func:`kalibr_models` read one back into models that simulate the sensor.
 
 ``*_noise_density`` is N and ``*_random_walk`` is K of :data:`engine.units.QUANTITIES`
-(CONVENTIONS, "Units and datasheet conversions"), in rad/s and m/s^2.
+(docs/conventions.md, "Units and datasheet conversions"), in rad/s and m/s^2.
 """
 
 from __future__ import annotations

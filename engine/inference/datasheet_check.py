@@ -9,7 +9,7 @@ empirical ``level`` interval; :func:`read_datasheet` loads a Kalibr ``imu.yaml``
 JSON report, a datasheet CSV (``gmwm export --format json | datasheet-csv``) or a saved
 :meth:`DatasheetSpec.to_dict` into the same object.
 
-The datasheet model (CONVENTIONS, "Units and datasheet conversions"), ``dt = 1/fs``, signal
+The datasheet model (docs/conventions.md, "Units and datasheet conversions"), ``dt = 1/fs``, signal
 unit ``u``, ``tau`` in samples:
 
 * white noise ``WN(sigma2 = N^2 / dt)``: WV ``sigma2 / tau`` (N from ARW/VRW);
