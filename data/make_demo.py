@@ -30,7 +30,8 @@ HERE = Path(__file__).resolve().parent
 #: Where the demo is written: the package data folder of ``engine.demo``.
 OUT_DIR = HERE.parent / "engine" / "demo"
 
-# Per-sample parameters (CONVENTIONS): gyro ARW about 0.3 deg/sqrt(h), RRW about 10 deg/h/sqrt(h)
+# Per-sample parameters (docs/conventions.md): gyro ARW about 0.3 deg/sqrt(h),
+# RRW about 10 deg/h/sqrt(h)
 TRUTH = {
     "gyro_x": "GM(beta=0.01, sigma2_gm=9e-6)+GM(beta=0.5, sigma2_gm=1.6e-5)"
     "+WN(sigma2=2.5e-3)+RW(gamma2=2.1e-11)",

@@ -2,11 +2,12 @@
 
 Every datasheet number of the project (the ``gmwm fit`` text and JSON, ``gmwm export``, the
 app's datasheet table and its download, the Monte Carlo study, the slope method) comes from
-:data:`QUANTITIES` and :data:`DISPLAY` below, so one quantity has one name, one symbol and one
-unit spelling everywhere.
+the quantities each process class declares (:attr:`engine.models.Process.quantities`, gathered
+in :data:`QUANTITIES`) and :data:`DISPLAY` below, so one quantity has one name, one symbol and
+one unit spelling everywhere.
 
-Conversions (CONVENTIONS, "Units and datasheet conversions"), ``dt = 1/fs``, signal unit ``u``
-(``u`` itself when the unit is unknown), per-sample parameters:
+Conversions (``docs/conventions.md``, "Units and datasheet conversions"), ``dt = 1/fs``,
+signal unit ``u`` (``u`` itself when the unit is unknown), per-sample parameters:
 
 ====  ========  ===================================  ==================  ======================
 code  symbol    forward                              inverse             unit
@@ -31,7 +32,7 @@ Why these unit spellings (dimensional analysis; ``[x]`` is the unit of x):
   ``N^2 / dt``, so ``[N] = u sqrt(s) = u/sqrt(Hz)``; Allan variance ``N^2 / T`` is u^2.
 * RW: the rate integrates a white noise of density K, whose increment over dt has variance
   ``gamma2 = K^2 dt``, so ``[K] = u/sqrt(s)``. Written per second per root hertz,
-  ``u/sqrt(s) = (u/s) sqrt(s) = u/s/sqrt(Hz)``: the spelling of CONVENTIONS and Kalibr
+  ``u/sqrt(s) = (u/s) sqrt(s) = u/s/sqrt(Hz)``: the spelling of the conventions page and Kalibr
   (``rad/s^2/sqrt(Hz)``, ``m/s^3/sqrt(Hz)``), chosen here. The old ``u/sqrt(s)`` of
   ``units.datasheet`` and the slope method was the same dimension in another spelling.
   Allan variance ``K^2 T / 3`` is u^2.
@@ -61,6 +62,9 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from ._quantity import Quantity, per_s, squared, times_s
+from .models import PROCESS_TYPES
 
 if TYPE_CHECKING:  # pragma: no cover
     from .models import Model, Process
@@ -99,39 +103,6 @@ _DEG = math.pi / 180.0
 class ExportError(ValueError):
     """A fit cannot be converted or exported as asked (unknown unit, missing process ...);
     the message says how to fix it."""
-
-
-# --------------------------------------------------------------------------- unit spelling
-def squared(unit: str) -> str:
-    """``(deg/s)^2`` for ``deg/s``, ``g^2`` for ``g``, ``u^2`` when the unit is unknown.
-
-    The one spelling of a squared unit (CLI, JSON, app: the app only prints ``^2`` as ``²``).
-    """
-    u = unit or "u"
-    return f"({u})^2" if any(c in u for c in "/* ^") else f"{u}^2"
-
-
-def per_s(unit: str) -> str:
-    """``unit / s`` simplified: ``deg/s`` -> ``deg/s^2``, ``m/s^2`` -> ``m/s^3``, ``g/s``."""
-    u = unit or "u"
-    if u.endswith("/s"):
-        return u + "^2"
-    m = re.fullmatch(r"(.*)/s\^(\d)", u)
-    if m:
-        return f"{m.group(1)}/s^{int(m.group(2)) + 1}"
-    return f"{u}/s"
-
-
-def times_s(unit: str) -> str:
-    """``unit * s`` simplified: ``deg/s`` -> ``deg``, ``m/s^2`` -> ``m/s``, ``g`` -> ``g*s``."""
-    u = unit or "u"
-    if u.endswith("/s"):
-        return u[:-2]
-    m = re.fullmatch(r"(.*)/s\^(\d)", u)
-    if m:
-        k = int(m.group(2)) - 1
-        return f"{m.group(1)}/s" + (f"^{k}" if k > 1 else "")
-    return f"{u}*s"
 
 
 def param_unit(code: str, name: str, unit: str = "") -> str:
@@ -220,29 +191,6 @@ def si_factor(unit: str, channel: str = "") -> tuple[str, float]:
 
 # --------------------------------------------------------------------------- the table
 @dataclass(frozen=True)
-class Quantity:
-    """One datasheet quantity of a process.
-
-    ``forward(params, fs)`` maps the process's per-sample parameters (a dict by parameter
-    name; AR1 is first mapped to GM) to the datasheet value, ``inverse(value, fs)`` gives the
-    parameter ``param`` back (None when the quantity is not invertible alone); ``unit(u)`` is
-    the unit for a signal in ``u``; ``si`` says whether an SI row is printed; ``magnitude``
-    that the sign is not identified by the WV (rows report ``|value|``).
-    """
-
-    code: str
-    symbol: str
-    name: str
-    param: str
-    forward: Callable[[Mapping[str, float], float], float]
-    inverse: Callable[[float, float], float] | None
-    unit: Callable[[str], str]
-    si: bool = True
-    magnitude: bool = False
-    accel_name: str = ""
-
-
-@dataclass(frozen=True)
 class Display:
     """A datasheet display unit of a quantity: ``value = factor x (value in SI)``."""
 
@@ -252,100 +200,11 @@ class Display:
     factor: float
 
 
-def _sqrt0(x: float) -> float:
-    return math.sqrt(max(x, 0.0))
-
-
-#: Per process code, its quantities in print order (CONVENTIONS, units).
+#: Per code, its quantities in print order: those of each process class
+#: (:attr:`engine.models.Process.quantities`; an AR1 shares the GM's) and the bias
+#: instability ``BI`` (a quantity of the whole model, read from its Allan floor).
 QUANTITIES: dict[str, tuple[Quantity, ...]] = {
-    "WN": (
-        Quantity(
-            "WN",
-            "N",
-            "white noise density",
-            "sigma2",
-            lambda p, fs: _sqrt0(p["sigma2"] / fs),
-            lambda v, fs: v * v * fs,
-            lambda u: f"{u}/sqrt(Hz)",
-        ),
-    ),
-    "QN": (
-        Quantity(
-            "QN",
-            "Q",
-            "quantization",
-            "q2",
-            lambda p, fs: _sqrt0(p["q2"]) / fs,
-            lambda v, fs: (v * fs) ** 2,
-            times_s,
-        ),
-    ),
-    "RW": (
-        Quantity(
-            "RW",
-            "K",
-            "rate random walk",
-            "gamma2",
-            lambda p, fs: _sqrt0(p["gamma2"] * fs),
-            lambda v, fs: v * v / fs,
-            lambda u: f"{per_s(u)}/sqrt(Hz)",
-            accel_name="acceleration random walk",
-        ),
-    ),
-    "DR": (
-        Quantity(
-            "DR",
-            "R",
-            "rate ramp",
-            "omega",
-            lambda p, fs: p["omega"] * fs,
-            lambda v, fs: v / fs,
-            per_s,
-            magnitude=True,
-            accel_name="acceleration ramp",
-        ),
-    ),
-    "GM": (
-        Quantity(
-            "GM",
-            "T_c",
-            "correlation time",
-            "beta",
-            lambda p, fs: 1.0 / p["beta"],
-            lambda v, fs: 1.0 / v,
-            lambda u: "s",
-            si=False,
-        ),
-        Quantity(
-            "GM",
-            "sigma_gm",
-            "stationary std",
-            "sigma2_gm",
-            lambda p, fs: _sqrt0(p["sigma2_gm"]),
-            lambda v, fs: v * v,
-            lambda u: u,
-            si=False,
-        ),
-        Quantity(
-            "GM",
-            "q",
-            "driving-noise PSD",
-            "",
-            lambda p, fs: 2.0 * p["beta"] * p["sigma2_gm"],
-            None,
-            lambda u: f"{squared(u)}/s",
-            si=False,
-        ),
-        Quantity(
-            "GM",
-            "sqrt(q)",
-            "driving-noise density",
-            "",
-            lambda p, fs: _sqrt0(2.0 * p["beta"] * p["sigma2_gm"]),
-            None,
-            lambda u: f"{per_s(u)}/sqrt(Hz)",
-        ),
-    ),
+    **{cls.quantities[0].code: cls.quantities for cls in PROCESS_TYPES.values()},
     "BI": (
         Quantity(
             "BI",
@@ -373,7 +232,8 @@ DISPLAY: dict[tuple[str, str], Display] = {
 
 
 def _quantity(code: str, symbol: str) -> Quantity:
-    for q in QUANTITIES.get("GM" if code == "AR1" else code, ()):
+    cls = PROCESS_TYPES.get(code)
+    for q in cls.quantities if cls is not None else QUANTITIES.get(code, ()):
         if q.symbol == symbol:
             return q
     raise ValueError(f"no datasheet quantity {symbol!r} for process {code!r}")
@@ -382,16 +242,6 @@ def _quantity(code: str, symbol: str) -> Quantity:
 def quantity_name(q: Quantity, kind: str | None) -> str:
     """The quantity's name for a sensor kind (``acceleration random walk`` on accelerometers)."""
     return q.accel_name if kind == "accelerometer" and q.accel_name else q.name
-
-
-def _gm_params(code: str, params: Mapping[str, float], fs: float) -> dict[str, float]:
-    """GM parameters of an AR1 with phi in (0, 1); the parameters themselves otherwise."""
-    if code != "AR1":
-        return dict(params)
-    phi, s2 = params["phi"], params["sigma2"]
-    if not 0 < phi < 1:
-        raise ValueError(f"AR1 phi = {phi} outside (0, 1) has no correlation time")
-    return {"beta": -math.log(phi) * fs, "sigma2_gm": s2 / (1.0 - phi * phi)}
 
 
 def to_datasheet(code: str, value: float, fs: float, symbol: str | None = None) -> float:
@@ -407,10 +257,10 @@ def to_datasheet(code: str, value: float, fs: float, symbol: str | None = None) 
     symbol : str, optional
         The quantity (default: the process's first, N, Q, K or R).
     """
-    qs = QUANTITIES.get(code)
-    if not qs or code in ("GM", "BI"):
+    cls = PROCESS_TYPES.get(code)
+    if cls is None or len(cls.param_names) != 1:
         raise ValueError(f"no one-parameter datasheet conversion for {code!r}")
-    q = qs[0] if symbol is None else _quantity(code, symbol)
+    q = cls.quantities[0] if symbol is None else _quantity(code, symbol)
     return float(q.forward({q.param: value}, fs))
 
 
@@ -427,29 +277,26 @@ def from_datasheet(code: str, value: float, fs: float, symbol: str | None = None
 
 def process_values(process: Process, fs: float) -> dict[str, float]:
     """Datasheet values ``{symbol: value}`` of a process with every value set (AR1 as GM)."""
-    params = dict(zip(process.param_names, process.values, strict=True))
-    gm = _gm_params(process.code, params, fs)
-    qs = QUANTITIES["GM" if process.code == "AR1" else process.code]
-    return {q.symbol: float(q.forward(gm, fs)) for q in qs}
+    params = process.datasheet_params(fs)
+    if params is None:
+        nl = process.nonlinear
+        raise ValueError(
+            f"{process.code} {nl} = {getattr(process, str(nl))} outside (0, 1) has no "
+            "correlation time"
+        )
+    return {q.symbol: float(q.forward(params, fs)) for q in process.quantities}
 
 
 def process_from_values(code: str, values: Mapping[str, float], fs: float) -> Process:
     """The per-sample process of datasheet values (inverse of :func:`process_values`).
 
-    ``values`` holds N (WN), Q (QN), K (RW), R (DR) or ``T_c`` and ``sigma_gm`` (GM, AR1).
+    ``values`` holds N (WN), Q (QN), K (RW), R (DR) or ``T_c`` and ``sigma_gm`` (GM, AR1):
+    :meth:`engine.models.Process.from_datasheet` of the process ``code``.
     """
-    from .models import processes as pr
-
-    if code in ("GM", "AR1"):
-        beta = _quantity("GM", "T_c").inverse(values["T_c"], fs)  # type: ignore[misc]
-        s2 = _quantity("GM", "sigma_gm").inverse(values["sigma_gm"], fs)  # type: ignore[misc]
-        if code == "GM":
-            return pr.GM(beta=beta, sigma2_gm=s2)
-        phi = math.exp(-beta / fs)
-        return pr.AR1(phi=phi, sigma2=s2 * (1.0 - phi * phi))
-    q = QUANTITIES[code][0]
-    cls = {"WN": pr.WN, "QN": pr.QN, "RW": pr.RW, "DR": pr.DR}[code]
-    return cls(q.inverse(values[q.symbol], fs))  # type: ignore[misc]
+    cls = PROCESS_TYPES.get(code)
+    if cls is None:
+        raise ValueError(f"unknown process {code!r}; known: {', '.join(PROCESS_TYPES)}")
+    return cls.from_datasheet(dict(values), fs)
 
 
 # --------------------------------------------------------------------------- rows
@@ -615,36 +462,34 @@ def datasheet_rows(
                 )
 
     for lab, p in zip(model.labels, model.processes, strict=True):
-        params = dict(zip(p.param_names, p.values, strict=True))
-        if any(v is None for v in params.values()):
+        if not p.is_set:
             continue
-        code = p.code
-        if code == "AR1" and not 0 < params["phi"] < 1:
+        params = p.datasheet_params(fs)
+        if params is None:  # an AR1 with phi outside (0, 1): no correlation time
+            nl = str(p.nonlinear)
             rows.append(
                 DatasheetRow(
                     channel,
                     lab,
-                    "AR1 coefficient (no correlation time: phi outside (0, 1))",
-                    "phi",
-                    float(params["phi"]),
+                    f"{p.code} coefficient (no correlation time: {nl} outside (0, 1))",
+                    nl,
+                    float(getattr(p, nl)),
                     "1",
                 )
             )
             continue
-        gm = _gm_params(code, params, fs)
-        for q in QUANTITIES["GM" if code == "AR1" else code]:
-            value = float(q.forward(gm, fs))
+        own = {n: ivs[f"{lab}.{n}"] for n in p.param_names if f"{lab}.{n}" in ivs}
+        divs = p.datasheet_intervals(own, fs)
+        for q in p.quantities:
+            value = float(q.forward(params, fs))
             iv: tuple[float, float] = (math.nan, math.nan)
-            if code == "AR1" and q.symbol == "T_c":
-                iv = _map_iv(
-                    ivs.get(f"{lab}.phi"),
-                    lambda ph: -1.0 / (fs * math.log(ph)) if 0 < ph < 1 else math.nan,
-                )
-            elif code != "AR1" and q.param:
-                piv = ivs.get(f"{lab}.{q.param}")
+            if q.param:
+                piv = divs.get(q.param)
                 if q.magnitude:
                     piv = _abs_iv(piv)
-                iv = _map_iv(piv, lambda x, q=q, gm=gm: float(q.forward({**gm, q.param: x}, fs)))
+                iv = _map_iv(
+                    piv, lambda x, q=q, gm=params: float(q.forward({**gm, q.param: x}, fs))
+                )
             if q.magnitude:
                 value = abs(value)
             note = "q = 2 beta sigma2_gm" if q.symbol == "q" else ""

@@ -13,6 +13,7 @@ from typing import Any
 import panel as pn
 from bokeh.models import CustomJSTickFormatter
 
+import engine as eg
 from gmwm_app.state import PROCESS_CODES, PROCESS_NAMES, AppState
 from gmwm_app.views import component_color
 from gmwm_app.whatif import SliderSpec
@@ -21,15 +22,6 @@ __all__ = ["ModelPanel", "N_POOL"]
 
 #: Process rows created up front (more are added if a model grows beyond).
 N_POOL = 8
-
-_PROCESS_HELP = {
-    "WN": "white noise: WV falls as 1/τ (angle/velocity random walk)",
-    "QN": "quantization noise: WV falls as 1/τ²",
-    "RW": "random walk: WV rises as τ (rate random walk)",
-    "DR": "drift (rate ramp): WV rises as τ²",
-    "AR1": "first-order autoregression (per sample phi, sigma2)",
-    "GM": "Gauss-Markov: a bump at its correlation time 1/beta (bias instability)",
-}
 
 
 #: The weights choice of the fit (label, value of ``AppState.weights``).
@@ -63,7 +55,7 @@ class ModelPanel:
                 label=f"+ {code}",
                 color="primary",
                 variant="outline",
-                description=f"Add {_PROCESS_HELP[code]}",
+                description=f"Add {eg.PROCESS_TYPES[code].help}",
                 width=82,
                 margin=(3, 3),
             )

@@ -227,7 +227,9 @@ def covariance_rows(result: Any) -> dict[str, list[Any]]:
     for lab, est in result.shared.items():
         name = lab if lab == est.code else f"{lab} ({est.code})"
         if est.nl is not None:
-            name += f", {est.nl_name} = {format_value(est.nl)}{' 1/s' if est.code == 'GM' else ''}"
+            name += (
+                f", {est.nl_name} = {format_value(est.nl)}{' 1/s' if est.nl_name == 'beta' else ''}"
+            )
         rho = est.corr
         g = est.channels
         units = [_channel_unit(result.wvm, c) for c in g]

@@ -95,7 +95,7 @@ log = logging.getLogger(__name__)
 #: The per-channel model shown first (the demo gyros: a bias instability, white noise and a
 #: rate random walk) and the processes shared by every channel at first.
 DEFAULT_SPEC = "GM+WN+RW"
-DEFAULT_SHARED = ("RW",)
+DEFAULT_SHARED = (eg.RW.code,)
 #: Shared-process controls created up front (one per shareable label of the model).
 N_SHARE_POOL = 6
 #: Wait (ms) after a change before a fit starts, on a server (a burst costs one fit).

@@ -38,15 +38,14 @@ __all__ = [
     "regions_text",
 ]
 
-CODE_ORDER = ("QN", "WN", "BI", "GM", "AR1", "RW", "DR")
-#: Colour of each process's region (and of its slope line).
-REGION_COLORS = {
-    "QN": "#9467BD",
-    "WN": "#1F77B4",
-    "BI": "#FF7F0E",
-    "RW": "#2CA02C",
-    "DR": "#8C564B",
-}
+#: Rows of the comparison table by Allan-deviation slope: QN, WN, the bias-like terms (the
+#: floor BI, then GM and AR1, which have no single slope), RW, DR.
+CODE_ORDER = tuple(
+    sorted(["BI", *eg.PROCESS_TYPES], key=lambda c: eg.SLOPES.get(c, 0.0))  # stable: BI first
+)
+#: Colour of each slope-method term's region (and of its slope line): the process's own colour,
+#: orange for the bias-instability floor.
+REGION_COLORS = {c: eg.PROCESS_TYPES[c].color if c != "BI" else "#FF7F0E" for c in eg.SLOPES}
 
 #: Methods in the table and on the plot: column name -> (MethodEstimate.method, colour, dash).
 METHODS: dict[str, tuple[str, str, str]] = {
@@ -299,7 +298,8 @@ def implied_adev_curves(result: SlopeResult) -> dict[str, dict[str, np.ndarray]]
     """Model-implied Allan deviation of each method (and the truth) over the measured span.
 
     ``ADEV(m) = sqrt(2 nu2(2m))`` with ``nu2`` the implied Haar WV at scale ``2m`` samples
-    (CONVENTIONS); the slope method's bias-instability floor adds ``(0.664 B)^2`` to the AVAR.
+    (``docs/conventions.md``); the slope method's bias-instability floor adds ``(0.664 B)^2``
+    to the AVAR.
 
     Returns
     -------

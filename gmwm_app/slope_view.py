@@ -78,12 +78,10 @@ log = logging.getLogger(__name__)
 TITLE = "Slope method"
 
 #: The processes of the slope method: label of the chooser -> code.
+_SLOPE_TEXT = {-1.0: "−1", -0.5: "−½", 0.5: "+½", 1.0: "+1"}
 PROCESS_CHOICES: dict[str, str] = {
-    "WN  slope −½": "WN",
-    "QN  slope −1": "QN",
-    "bias instability  floor": "BI",
-    "RW  slope +½": "RW",
-    "DR  slope +1": "DR",
+    (f"{c}  slope {_SLOPE_TEXT[s]}" if c != "BI" else "bias instability  floor"): c
+    for c, s in sorted(eg.SLOPES.items(), key=lambda cs: cs[0] != eg.WN.code)  # WN first
 }
 
 TRUTH_COLOR = "#2E7D32"
@@ -153,7 +151,7 @@ class SlopeView(pn.viewable.Viewer):
         self.process = pn.widgets.RadioButtonGroup(
             label="Process",
             options=PROCESS_CHOICES,
-            value="WN",
+            value=eg.WN.code,
             color="default",
             variant="outline",
             margin=(22, 10, 5, 10),

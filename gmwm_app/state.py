@@ -61,18 +61,11 @@ log = logging.getLogger(__name__)
 #: WV/WCCV matrices kept in a session's WV cache (multi-channel view).
 N_WV_MATRICES = 4
 
-#: Process codes in the order of the add buttons.
-PROCESS_CODES: tuple[str, ...] = ("WN", "QN", "RW", "DR", "AR1", "GM")
+#: Process codes in the order of the add buttons: the engine's processes, in its order.
+PROCESS_CODES: tuple[str, ...] = tuple(eg.PROCESS_TYPES)
 
-#: Readable names of the processes (for the process list).
-PROCESS_NAMES: dict[str, str] = {
-    "WN": "white noise",
-    "QN": "quantization noise",
-    "RW": "random walk",
-    "DR": "drift",
-    "AR1": "AR(1)",
-    "GM": "Gauss-Markov",
-}
+#: Readable names of the processes (for the process list): each process's own.
+PROCESS_NAMES: dict[str, str] = {c: cls.display_name for c, cls in eg.PROCESS_TYPES.items()}
 
 #: Sources a session can load from.
 SOURCES: tuple[str, ...] = ("demo", "upload", "path", "scenario")
@@ -609,7 +602,8 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             for name in p.param_names:
                 full = f"{lab}.{name}"
                 v = vals.get(full)
-                transform = "log10(1-x)" if (p.code, name) == ("AR1", "phi") else "log10"
+                # an AR coefficient near 1 is read on 1 - phi; variances and rates on a log
+                transform = "log10(1-x)" if name == "phi" else "log10"
                 if v is None or v == 0 or (transform == "log10(1-x)" and v >= 1):
                     v = guesses[full]
                 x = SliderSpec.position_of(transform, v)

@@ -54,7 +54,6 @@ EMPIRICAL_COLOR = "#222222"
 BAND_COLOR = "#6C8EBF"
 CLASSICAL_COLOR = "#8C8C8C"
 TOTAL_COLOR = "#D62728"
-_FIXED_COLORS = {"WN": "#1F77B4", "QN": "#9467BD", "RW": "#2CA02C", "DR": "#8C564B"}
 _CORRELATED_COLORS = (
     "#FF7F0E",
     "#E377C2",
@@ -70,11 +69,15 @@ _CORRELATED_COLORS = (
 def component_color(label: str) -> str:
     """Colour of a process curve, stable per label (``WN`` blue, ``GM_1`` orange, ...)."""
     code, _, idx = label.partition("_")
-    if code in _FIXED_COLORS:
-        return _FIXED_COLORS[code]
+    cls = eg.PROCESS_TYPES.get(code)
+    if cls is not None and cls.color:
+        return cls.color  # a kind that appears once has its own colour
     k = int(idx) - 1 if idx.isdigit() else 0
-    if code == "AR1":
-        k += 4  # AR1 and GM never mix, but keep their colours apart anyway
+    # a kind that repeats (GM, AR1) takes the palette, each kind from its own offset (AR1 and
+    # GM never mix, but keep their colours apart anyway)
+    repeating = [c for c, t in eg.PROCESS_TYPES.items() if not t.color]
+    if code in repeating:
+        k += 4 * repeating.index(code)
     return _CORRELATED_COLORS[k % len(_CORRELATED_COLORS)]
 
 

@@ -5,7 +5,7 @@ accelerometer) and the sensor's bias. The filter propagates at the sensor rate `
 measured rate, and an absolute fix of the integral (known noise ``fix_sigma``) arrives every
 ``t_fix_s`` seconds. The filter knows the sensor noise only through two numbers, the ones a
 filter file carries: the white-noise density ``N`` and the bias random-walk density ``K``
-(continuous time, CONVENTIONS: ``N = sqrt(sigma2 / fs)``, ``K = sqrt(gamma2 * fs)``).
+(continuous time, docs/conventions.md: ``N = sqrt(sigma2 / fs)``, ``K = sqrt(gamma2 * fs)``).
 
 Truth. The platform is static (true rate 0, true integral 0), so the filter's estimate *is* its
 error; the filter is linear, so the error does not depend on the trajectory. The sensor error
@@ -15,10 +15,11 @@ step) are the measurement noise; the others (RW, DR, AR1/GM of one step or slowe
 bias, which the bias state's error is measured against. The angle error does not depend on this
 split; the two-state NEES does (see :func:`split_truth`).
 
-Discretisation. With the per-sample model of CONVENTIONS (WN of variance ``sigma2`` per sample,
-RW of increment variance ``gamma2``), ``x_{k+1} = F x_k + w_k`` with ``F = [[1, -dt], [0, 1]]``
-and ``Q = diag(sigma2 dt^2, gamma2) = diag(N^2 dt, K^2 dt)`` is exact: when the truth is that
-WN + RW and the filter has its numbers, the filter's covariance is the error's covariance.
+Discretisation. With the per-sample model of docs/conventions.md (WN of variance ``sigma2``
+per sample, RW of increment variance ``gamma2``), ``x_{k+1} = F x_k + w_k`` with
+``F = [[1, -dt], [0, 1]]`` and ``Q = diag(sigma2 dt^2, gamma2) = diag(N^2 dt, K^2 dt)`` is
+exact: when the truth is that WN + RW and the filter has its numbers, the filter's covariance
+is the error's covariance.
 
 Speed. The covariance does not depend on the data (linear, time-invariant, fixed fix times), so
 it is computed once per step in closed form between fixes; the M runs' errors are a batch
@@ -133,8 +134,8 @@ def _terms(model: eg.Model, code: str) -> list[eg.Process]:
 def plain_wn_rw(model: eg.Model, fs: float, label: str = "plain WN+RW") -> FilterNoise:
     """Case (a): the plain conversion of a fit's WN and RW terms (other terms ignored).
 
-    ``N = sqrt(sigma2 / fs)``, ``K = sqrt(gamma2 * fs)`` (CONVENTIONS), what the Kalibr-style
-    exports write; a missing term counts as 0.
+    ``N = sqrt(sigma2 / fs)``, ``K = sqrt(gamma2 * fs)`` (docs/conventions.md), what the
+    Kalibr-style exports write; a missing term counts as 0.
     """
     s2 = sum(float(p.sigma2) for p in _terms(model, "WN"))
     g2 = sum(float(p.gamma2) for p in _terms(model, "RW"))

@@ -158,7 +158,7 @@ def test_avsm_reads_the_ieee_coefficients_on_exact_curves(truth, region, rtol):
     est = avsm(exact_av(model, FS), {truth.code: region})
     assert est.method == "AVSM"
     assert est.params == pytest.approx(model.values(), rel=rtol)
-    # the line's reading is the datasheet coefficient (CONVENTIONS, units)
+    # the line's reading is the datasheet coefficient (docs/conventions.md, units)
     ds = {r["symbol"]: r for r in eg.datasheet(model, FS)}
     reading = est.details["lines"][truth.code]["reading"]
     key = {"WN": "N", "QN": "Q", "DR": "R", "RW": "K"}[truth.code]

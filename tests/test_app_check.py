@@ -1,6 +1,6 @@
 """The "Datasheet check" tab: browser-free tests of the view.
 
-The drawn numbers must be the formulas' (CONVENTIONS.md): white noise ``sigma2 = N^2 fs`` with
+The drawn numbers must be the formulas' (docs/conventions.md): white noise ``sigma2 = N^2 fs`` with
 N = ARW / 60 in (deg/s)/sqrt(Hz), WV ``sigma2 / tau``, the bias-instability floor
 ``(0.664 B)^2 / 2``, Allan deviation ``sqrt(2 WV)``; the empirical curve is the session's WV and
 the GMWM curve the Fit tab's fit.

@@ -249,7 +249,7 @@ def test_scenario_from_a_link_gets_its_naive_regions_and_model(app_demo: Path) -
 
 
 def test_pure_helpers_curves_and_table_rows() -> None:
-    # WN + DR: AVAR(T) = N^2/T + R^2 T^2/2 exactly (CONVENTIONS), for the truth curve
+    # WN + DR: AVAR(T) = N^2/T + R^2 T^2/2 exactly (docs/conventions.md), for the truth curve
     fs, s2, om = 50.0, 2e-3, 3e-6
     truth = eg.parse_model(f"WN(sigma2={s2})+DR(omega={om})")
     n = 4096

@@ -1,7 +1,7 @@
 """Key numbers of the README case studies (tests/benchmarks/case_navchip.py, case_array.py).
 
 Expectations are independent of the code under test: the datasheet WV and the weights are
-rebuilt here from CONVENTIONS.md formulas and the stored intervals; the fitted WV is
+rebuilt here from docs/conventions.md formulas and the stored intervals; the fitted WV is
 recomputed from the fitted parameters with the closed-form Haar WVs.
 """
 

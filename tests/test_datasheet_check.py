@@ -1,6 +1,6 @@
 """Datasheet check (engine.inference.datasheet_check, ``gmwm check``).
 
-Expected values are computed here from CONVENTIONS.md's formulas (``sigma2 = N^2 fs``,
+Expected values are computed here from docs/conventions.md's formulas (``sigma2 = N^2 fs``,
 ``gamma2 = K^2 / fs``, ``q2 = (Q fs)^2``, Haar WVs ``sigma2/tau``,
 ``gamma2 (tau^2 + 2) / (12 tau)``, ``6 q2 / tau^2``, bias-instability floor
 ``(0.664 B)^2 / 2``), not by the code under test.

@@ -89,7 +89,7 @@ def profile_min_brute(wv, spec, axes) -> float:
 
 
 def test_ar1_wn_reaches_global_minimum_near_unit_root():
-    """The R packages can stop at phi = 0.10 when the minimum is near 0.99 (CONVENTIONS)."""
+    """The R packages can stop at phi = 0.10 when the minimum is near 0.99 (docs/conventions.md)."""
     m = eg.parse_model("AR1(phi=0.99, sigma2=1e-2)+WN(sigma2=1.0)")
     wv = eg.wavelet_variance(m.simulate(2**16, rng=3))
     res = eg.fit_gmwm(wv, "AR1+WN")

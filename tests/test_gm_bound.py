@@ -24,7 +24,8 @@ FS = 100.0
 
 
 def wn_equivalent(q: eg.Process, fs: float) -> float:
-    """Long-scale WN level of an AR1/GM (CONVENTIONS: the AR1 WV tends to sigma2/(1-phi)^2/tau)."""
+    """Long-scale WN level of an AR1/GM (docs/conventions.md: the AR1 WV tends to
+    sigma2/(1-phi)^2/tau)."""
     if isinstance(q, eg.GM):
         phi = math.exp(-q.beta / fs)
         return q.sigma2_gm * (1 + phi) / (1 - phi)

@@ -2,7 +2,7 @@
 on simulated fits and on the real ADIS16405 log, and the filter formats that use it (every
 file parses and has the consumer's keys; each consumer-convention fix).
 
-The expected numbers are computed here from the fit's parameters with the CONVENTIONS
+The expected numbers are computed here from the fit's parameters with the docs/conventions.md
 formulas (WN ``sigma2 / tau``, RW ``gamma2 (tau^2 + 2) / (12 tau)``, the AR1 formula through
 the autocovariance identity), not with the code under test."""
 

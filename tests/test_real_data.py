@@ -90,7 +90,8 @@ def test_wv_summaries_load_and_fit(shared, name):
 
 
 def test_navchip_summary_wv_agrees_with_eta3_of_its_own_values(shared):
-    """The stored intervals follow CONVENTIONS' eta3 with J = floor(log2 N) - 1 levels."""
+    """The stored intervals follow the eta3 of docs/conventions.md with J = floor(log2 N) - 1
+    levels."""
     log = eg.load_log(shared / "derived" / "navchip_wv_av.h5")
     wv = log.wv["gyro_x"]
     assert wv.n_levels == int(np.floor(np.log2(wv.n))) - 1

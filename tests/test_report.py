@@ -174,7 +174,7 @@ def test_log_facts_and_allan(demo_report):
 
 def test_slope_guides_read_the_datasheet_values(demo_report):
     """The IEEE guides pass through N at T = 1 s, K at T = 3 s (N = sqrt(sigma2/fs),
-    K = sqrt(gamma2 fs): CONVENTIONS), with slopes -1/2 and +1/2; the floor is flat at
+    K = sqrt(gamma2 fs): docs/conventions.md), with slopes -1/2 and +1/2; the floor is flat at
     0.664 B."""
     ch = demo_report.channels["gyro_x"]
     p, fs = ch.fit.params, ch.fit.fs

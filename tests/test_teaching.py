@@ -86,7 +86,7 @@ def test_simulation_is_deterministic_and_carries_the_truth() -> None:
     assert not np.array_equal(x, c[sc.channel])
     assert eg.parse_model(a.meta["truth"][sc.channel]).values() == sc.model.values()
     assert a.meta["scenario"] == "qn_wn" and a.meta["description"] == sc.why
-    # QN + WN: the sample variance is 2 q2 + sigma2 (CONVENTIONS), within 4 standard errors
+    # QN + WN: the sample variance is 2 q2 + sigma2 (docs/conventions.md), within 4 standard errors
     v = 2 * 4e-4 + 1e-3
     assert abs(np.var(x) - v) < 4 * v * math.sqrt(2 / sc.n) * 2
 

@@ -1,4 +1,4 @@
-"""Datasheet conversions (CONVENTIONS, Units) and the processes' unconstrained transforms."""
+"""Datasheet conversions (docs/conventions.md, Units) and the unconstrained transforms."""
 
 from __future__ import annotations
 
@@ -126,7 +126,8 @@ def test_forward_then_inverse_returns_the_process(proc, fs):
 
 
 def test_one_parameter_conversions_follow_conventions():
-    """CONVENTIONS: N = sqrt(sigma2 dt), K = sqrt(gamma2 / dt), Q = sqrt(q2) dt, R = omega / dt."""
+    """docs/conventions.md: N = sqrt(sigma2 dt), K = sqrt(gamma2 / dt), Q = sqrt(q2) dt,
+    R = omega / dt."""
     fs, dt = 250.0, 1 / 250.0
     assert units.to_datasheet("WN", 4e-4, fs) == pytest.approx(math.sqrt(4e-4 * dt), rel=1e-14)
     assert units.to_datasheet("RW", 1e-12, fs) == pytest.approx(math.sqrt(1e-12 / dt), rel=1e-14)

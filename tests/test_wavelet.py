@@ -111,7 +111,7 @@ def test_eta3_interval_formula():
 
 @pytest.mark.parametrize("spec", ["WN(sigma2=1)", "RW(gamma2=1)", "AR1(phi=0.9, sigma2=1)"])
 def test_interval_coverage_is_at_least_nominal(spec):
-    """eta3 (CONVENTIONS) is a conservative equivalent-degrees-of-freedom choice.
+    """eta3 (docs/conventions.md) is a conservative equivalent-degrees-of-freedom choice.
 
     Monte Carlo, 300 series of 4096 samples: coverage at every level at least nominal, less
     the binomial noise (SE about 1.3 points).

@@ -380,12 +380,6 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
     return res.table() + ("\n\nwrote " + ", ".join(paths.values()) if paths else "")
 
 
-def _cmd_export(args: argparse.Namespace) -> dict[str, Any] | str:
-    from .export import cmd_export
-
-    return cmd_export(args)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``gmwm`` console script; returns the exit status."""
     from .._blas import set_blas_threads

@@ -56,5 +56,5 @@ def demo_dir() -> Path:
 
 def demo_truth() -> dict[str, Any]:
     """The demo's truth: ``fs_hz``, ``n_samples``, ``seed``, ``units``, ``offsets`` and
-    ``models`` (one model string with per-sample values per channel, see CONVENTIONS)."""
+    ``models`` (one model string with per-sample values per channel, see docs/conventions.md)."""
     return json.loads((files(__name__) / DEMO_TRUTH).read_text(encoding="utf-8"))

@@ -39,7 +39,6 @@ from ..units import ExportError
 __all__ = [
     "POINTS_PER_OCTAVE",
     "Split",
-    "gm_of",
     "split_terms",
     "target_ratio",
     "fine_scales",
@@ -66,61 +65,29 @@ class Split:
     assignment: dict[str, str]
 
 
-def gm_of(p: Any, fs: float) -> tuple[float, float]:
-    """(phi, stationary variance) of a GM or AR1 process."""
-    if p.code == "GM":
-        return math.exp(-float(p.beta) / fs), float(p.sigma2_gm)
-    phi = float(p.phi)
-    return phi, float(p.sigma2) / (1.0 - phi * phi)
-
-
 def split_terms(model: Model, fs: float, fs_f: float, tau_h: float) -> Split:
     """Apply the rule: which fitted terms are white at the filter step, which are bias."""
-    dt_f = 1.0 / fs_f
-    m = max(fs / fs_f, 1.0)
     sp = Split(0.0, [], 0.0, [], 0.0, 0.0, {})
     for lab, p in zip(model.labels, model.processes, strict=True):
-        if p.code == "WN":
-            sp.wn += float(p.sigma2)
+        t = p.filter_terms(fs, fs_f, tau_h)  # each process's own rule
+        sp.wn += t.white
+        if t.fast:
             sp.fast.append((lab, p))
-            sp.assignment[lab] = "WN"
-        elif p.code == "QN":
-            sp.wn += 3.0 * float(p.q2) / m
-            sp.fast.append((lab, p))
-            sp.assignment[lab] = "WN (QN's white equivalent at the filter rate, 3 q2 / m)"
-        elif p.code in ("GM", "AR1"):
-            phi, s2 = gm_of(p, fs)
-            tc = -1.0 / (fs * math.log(phi)) if 0.0 < phi < 1.0 else 0.0
-            if tc < dt_f:
-                sp.wn += s2 * (1.0 + phi) / (1.0 - phi)
-                sp.fast.append((lab, p))
-                sp.assignment[lab] = (
-                    f"WN (T_c {tc:.3g} s < filter step {dt_f:.3g} s: white noise, "
-                    "equivalent sigma2_gm (1+phi)/(1-phi))"
-                )
-            else:
-                beta = 1.0 / tc
-                sp.slow.append((lab, beta, s2))
-                sp.rw_k2 += 2.0 * beta * s2
-                sp.assignment[lab] = f"bias (T_c {tc:.4g} s >= filter step)"
-        elif p.code == "RW":
-            sp.gamma2 += float(p.gamma2)
-            sp.rw_k2 += float(p.gamma2) * fs
-            sp.assignment[lab] = "bias"
-        elif p.code == "DR":
-            om = float(p.omega)
-            sp.omega = om
-            sp.rw_k2 += 0.75 * om * om * tau_h * fs  # RW with the drift's WV at the horizon
-            sp.assignment[lab] = "bias (random walk with the drift's WV at the horizon)"
-        else:  # pragma: no cover - every process code is handled above
-            raise ExportError(f"no projection rule for process {p.code}")
+        if t.slow is not None:
+            sp.slow.append((lab, *t.slow))
+        sp.rw_k2 += t.rw_k2
+        sp.gamma2 += t.gamma2
+        if t.omega is not None:
+            sp.omega = t.omega
+        sp.assignment[lab] = t.assignment
     sp.slow.sort(key=lambda t: t[1])
     return sp
 
 
 def target_ratio(tau: np.ndarray, n: int, confidence: float | None) -> np.ndarray:
     """Target / fitted WV: 1, or the upper limit of the eta3 interval at ``confidence``,
-    ``eta / chi2_{(1-c)/2}(eta)`` with ``eta = max((n - tau + 1) / tau, 1)`` (CONVENTIONS)."""
+    ``eta / chi2_{(1-c)/2}(eta)`` with ``eta = max((n - tau + 1) / tau, 1)``
+    (``docs/conventions.md``)."""
     if confidence is None:
         return np.ones_like(tau)
     eta = np.maximum((n - tau + 1.0) / tau, 1.0)

@@ -3,7 +3,7 @@ and random walks in SI, per axis and the conservative choice over axes); :func:`
 and :func:`kalibr_models` read one back into models that simulate the sensor.
 
 ``*_noise_density`` is N and ``*_random_walk`` is K of :data:`engine.units.QUANTITIES`
-(CONVENTIONS, "Units and datasheet conversions"), in rad/s and m/s^2.
+(docs/conventions.md, "Units and datasheet conversions"), in rad/s and m/s^2.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import Any
 from .._files import read_regular
 from ..fit import GMWMResult
 from ..models import RW, WN, Model
-from ..units import ExportError, from_datasheet, process_values, si_factor, to_datasheet
+from ..units import ExportError, process_values, si_factor, to_datasheet
 from .common import channel_axis, text_lines, yaml_float, yaml_str
 
 __all__ = ["KalibrImu", "kalibr_imu", "write_kalibr", "read_kalibr", "kalibr_models"]
@@ -172,19 +172,19 @@ def kalibr_imu(
         vals = res.model.values()
         labels = res.model.labels
         procs = res.model.processes
-        wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == "WN"]
+        wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == WN.code]
         if not wn:
             raise ExportError(
                 f"the model of {ch!r} ({res.model.spec()}) has no WN term: the "
                 "noise density needs one; fit a model with WN"
             )
-        nd = to_datasheet("WN", vals[f"{wn[0]}.sigma2"], res.fs) * f_si
-        rw = [lab for lab, p in zip(labels, procs, strict=True) if p.code == "RW"]
+        nd = to_datasheet(WN.code, vals[f"{wn[0]}.sigma2"], res.fs) * f_si
+        rw = [lab for lab, p in zip(labels, procs, strict=True) if p.code == RW.code]
         if rw:
-            rwd = to_datasheet("RW", vals[f"{rw[0]}.gamma2"], res.fs) * f_si
+            rwd = to_datasheet(RW.code, vals[f"{rw[0]}.gamma2"], res.fs) * f_si
             src_rw = f"{ch}: {rw[0]}"
         else:
-            gm = [(lab, p) for lab, p in zip(labels, procs, strict=True) if p.code in ("GM", "AR1")]
+            gm = [(lab, p) for lab, p in zip(labels, procs, strict=True) if p.nonlinear]
             if not gm:
                 raise ExportError(
                     f"the model of {ch!r} ({res.model.spec()}) has neither RW nor "
@@ -419,8 +419,8 @@ def kalibr_models(
                     raise ExportError(
                         f"Kalibr file: {key} of {name} = {v!r} is not a non-negative number"
                     )
-            out[name] = WN(from_datasheet("WN", float(n), fs)) + RW(
-                from_datasheet("RW", float(k), fs)
+            out[name] = WN.from_datasheet({"N": float(n)}, fs) + RW.from_datasheet(
+                {"K": float(k)}, fs
             )
     if not out:
         raise ExportError("Kalibr file has no gyroscope_* or accelerometer_* noise keys")

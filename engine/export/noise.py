@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..fit import GMWMResult
+from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
 from .common import channel_axis
 from .kalibr import kalibr_imu
@@ -250,12 +251,12 @@ def _fit_noise(
         rows = datasheet_rows(res.model, res.fs, unit, channel=ch, n_levels=res.wv.n_levels)
         d = vals.setdefault(kind, {})
         labels, procs = res.model.labels, res.model.processes
-        wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == "WN"][0]
+        wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == WN.code][0]
         d.setdefault("sigma2", {})[ax] = res.model.values()[f"{wn}.sigma2"] * f_si**2 * f * f
         d.setdefault("B", {})[ax] = (
             _row(rows, "model", "bias instability (Allan floor, SI)", "B") * f
         )
-        gm = [lab for lab, p in zip(labels, procs, strict=True) if p.code in ("GM", "AR1")]
+        gm = [lab for lab, p in zip(labels, procs, strict=True) if p.nonlinear]
         if gm:
             tc = _row(rows, gm[0], "correlation time", "T_c")
             if math.isfinite(tc) and tc > 0:

@@ -28,7 +28,7 @@ and the 95 % interval; :attr:`Projection.per_sample` gives the same numbers per 
   or refused with the reason when nothing in the fit can set it.
 
 That is the **plain conversion**. **The bound** (``bound=True``, the filter formats' default)
-then chooses the consumer's parameters so that its WV (Haar, CONVENTIONS) is at least the
+then chooses the consumer's parameters so that its WV (Haar, docs/conventions.md) is at least the
 fitted model's, or its upper ``confidence`` limit (eta3: ``eta / chi2_{(1-c)/2}(eta)`` times
 the fitted WV), at every scale ``tau`` of ``band`` (default from two filter steps to the
 horizon, default the log length), with the least inflation: the least geometric-mean ratio

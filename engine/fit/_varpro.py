@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 
 from .._optim import nelder_mead, nnls
-from ..models import AR1, GM, TC_MAX_FACTOR, TC_MIN, Model, Process, ar1_wv_pos
+from ..models import TC_MAX_FACTOR, TC_MIN, WN, Model, Process, ar1_wv_pos
 from ..units import param_unit
 from ..wv import WaveletVariance
 from .result import FitError
@@ -178,7 +178,8 @@ class NNLSProblem:
         for i, pr in enumerate(model.processes):
             if pr.nonlinear is None:
                 self.x_fixed[:, i] = pr.basis(self.tau, self.fs)
-        self.is_gm = [isinstance(pr, GM) for pr in model.processes]
+        # basis = basis_scale(phi) x (AR1 WV per unit innovation): 1 for AR1, 1 - phi^2 for GM
+        self.scale_of = [pr.basis_scale if pr.nonlinear else None for pr in model.processes]
         self.n_eval = 0
         self._passive: np.ndarray | None = None
 
@@ -199,7 +200,7 @@ class NNLSProblem:
     def phi_of(self, i: int, u: float) -> float:
         """phi from the search coordinate of process i."""
         pr = self.model.processes[i]
-        if isinstance(pr, AR1) and u < -50:
+        if pr.phi_can_vanish and u < -50:
             return 0.0
         tc = math.exp(min(max(u, self.lo), self.hi))
         return math.exp(-1.0 / tc)
@@ -214,7 +215,8 @@ class NNLSProblem:
         for i, phi in zip(self.nl_idx, phis, strict=True):
             if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
                 col = ar1_wv_pos(self.tau, phi)
-                x[:, i] = col * (1.0 - phi * phi) if self.is_gm[i] else col
+                scale = self.scale_of[i](phi)  # type: ignore[misc]
+                x[:, i] = col if scale == 1.0 else col * scale
             else:
                 x[:, i] = self.model.processes[i].basis(self.tau, self.fs, phi)
         return x
@@ -369,7 +371,7 @@ def search(
 # the fitted model
 # -------------------------------------------------------------------------------------------
 def _phi(q: Process, fs: float) -> float:
-    return q.phi if isinstance(q, AR1) else math.exp(-q.beta / fs)
+    return float(q.nl_value(fs))  # type: ignore[arg-type]
 
 
 def persistent_first(procs: Sequence[Process], fs: float) -> Model:
@@ -468,12 +470,11 @@ def sub_sample_message(label: str, q: Process, fs: float, unit: str = "") -> str
             f"{head}: its variance is 0 (absent from the fit), so its {q.nonlinear} means "
             "nothing; drop it"
         )
-    ar = q if isinstance(q, AR1) else q.as_ar1(fs)
-    equiv = ar.sigma2 / (1.0 - ar.phi) ** 2
+    equiv = q.white_equivalent(fs)
     return (
         f"{head}: white noise in disguise, with neighbouring samples correlated (e.g. by the "
         f"sensor's filter), not a physical correlation time; its WN-equivalent sigma2 = "
-        f"{equiv:.4g} {param_unit('WN', 'sigma2', unit)} (N = {math.sqrt(equiv / fs):.4g} "
+        f"{equiv:.4g} {param_unit(WN.code, 'sigma2', unit)} (N = {math.sqrt(equiv / fs):.4g} "
         f"{unit or 'u'}/sqrt(Hz)) belongs to the noise density (add it to WN's)"
     )
 

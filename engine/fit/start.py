@@ -46,14 +46,11 @@ def starting_values(model: Model, wv: WaveletVariance) -> dict[str, float]:
     for k, i in enumerate(nl):
         lab, p = model.labels[i], model.processes[i]
         phi = math.exp(-1.0 / float(tcs[k]))
-        if p.code == "GM":
-            out[f"{lab}.beta"] = -math.log(phi) * wv.fs
-        else:
-            out[f"{lab}.phi"] = phi
+        out[f"{lab}.{p.nonlinear}"] = p.nl_from_phi(phi, wv.fs)
     pos = wv.variance > 0
     for lab, p in zip(model.labels, model.processes, strict=True):
         if p.nonlinear is not None:
-            nlv = math.exp(-out[f"{lab}.beta"] / wv.fs) if p.code == "GM" else out[f"{lab}.phi"]
+            nlv = p.phi_from_nl(out[f"{lab}.{p.nonlinear}"], wv.fs)
         else:
             nlv = None
         basis = np.asarray(p.basis(tau, wv.fs, nlv), float)
@@ -61,5 +58,6 @@ def starting_values(model: Model, wv: WaveletVariance) -> dict[str, float]:
         h = 0.5 * float(np.min(wv.variance[ok] / basis[ok])) if np.any(ok) else 1e-12
         h = max(h, 1e-300)
         name = p.param_names[-1] if p.nonlinear else p.param_names[0]
-        out[f"{lab}.{name}"] = math.sqrt(h) if p.code == "DR" else h
+        # the parameter of the linear coefficient h (a drift's omega is its square root)
+        out[f"{lab}.{name}"] = float(getattr(p.from_fit(h, nlv, wv.fs), name))
     return out

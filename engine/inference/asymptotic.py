@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..fit.result import FitError
-from ..models import AR1, DR, FROM_UNCONSTRAINED, GM, QN, RW, TO_UNCONSTRAINED, WN, Model, Process
+from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, Process
 from ..wv import WaveletVariance
 from ._closed_form import closed_form_c
 
@@ -28,22 +28,11 @@ __all__ = [
 
 
 def spectral_density(p: Process, f: np.ndarray, fs: float) -> np.ndarray:
-    """Two-sided spectral density on f in cycles/sample (0 < f <= 1/2); RW generalised."""
-    sin2 = np.sin(np.pi * f) ** 2
-    if isinstance(p, WN):
-        return np.full_like(f, float(p.sigma2))
-    if isinstance(p, QN):
-        return 4.0 * float(p.q2) * sin2
-    if isinstance(p, RW):
-        return float(p.gamma2) / (4.0 * sin2)
-    if isinstance(p, DR):
-        return np.zeros_like(f)  # deterministic: no first-order contribution to Cov(nu_hat)
-    if isinstance(p, (AR1, GM)):
-        ar = p if isinstance(p, AR1) else p.as_ar1(fs)
-        phi, s2 = float(ar.phi), float(ar.sigma2)
-        # 1 - 2 phi cos w + phi^2 = (1 - phi)^2 + 4 phi sin^2(w/2), stable near phi = 1
-        return s2 / ((1.0 - phi) ** 2 + 4.0 * phi * sin2)
-    raise TypeError(f"no spectral density for {p.code}")  # pragma: no cover
+    """Two-sided spectral density on f in cycles/sample (0 < f <= 1/2); RW generalised.
+
+    The process's own :meth:`engine.models.Process.psd`.
+    """
+    return p.psd(f, fs)
 
 
 def frequency_grid(levels: int, model: Model, fs: float) -> tuple[np.ndarray, np.ndarray]:
@@ -57,12 +46,11 @@ def frequency_grid(levels: int, model: Model, fs: float) -> tuple[np.ndarray, np
     """
     need = 2 ** (levels + 1)
     for p in model.processes:
-        if isinstance(p, (AR1, GM)):
-            ar = p if isinstance(p, AR1) else p.as_ar1(fs)
-            if 0 < float(ar.phi) < 1:
-                # a few correlation times, but no more than 8x the longest scale: beyond the
-                # series' span a near-unit-root AR1 acts as a random walk
-                need = max(need, int(min(-16.0 / math.log(float(ar.phi)), 2.0 ** (levels + 4))))
+        ar = p.psd_terms(fs).ar
+        if ar is not None and 0 < ar[0] < 1:
+            # a few correlation times, but no more than 8x the longest scale: beyond the
+            # series' span a near-unit-root AR1 acts as a random walk
+            need = max(need, int(min(-16.0 / math.log(ar[0]), 2.0 ** (levels + 4))))
     f_nodes = 1 << int(math.ceil(math.log2(need)))
     f = np.arange(1, f_nodes + 1) / (2.0 * f_nodes)
     w = np.full(f_nodes, 1.0 / f_nodes)  # 2 / (2F): the mirrored node counts twice
@@ -88,23 +76,22 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
     """
     if not model.is_set:
         raise FitError("wv_cov_model needs a model with every value set (a fitted model)")
-    q2 = sigma2 = gamma2 = 0.0
+    # S = q2 x + sigma2 + gamma2 / x + sum s / y(phi): the processes' spectral pieces
+    poly = {1: 0.0, 0: 0.0, -1: 0.0}
     ar: list[tuple[float, float]] = []
     for p in model.processes:
         if p.linear_coef() == 0:
             continue  # fitted at zero: contributes nothing (its phi/beta is arbitrary)
-        if isinstance(p, WN):
-            sigma2 += float(p.sigma2)
-        elif isinstance(p, QN):
-            q2 += float(p.q2)
-        elif isinstance(p, RW):
-            gamma2 += float(p.gamma2)
-        elif isinstance(p, (AR1, GM)):
-            a = p if isinstance(p, AR1) else p.as_ar1(wv.fs)
-            ar.append((float(a.phi), float(a.sigma2)))
-        elif not isinstance(p, DR):  # a drift is deterministic: no first-order contribution
-            raise TypeError(f"wv_cov_model has no covariance for {p.code}")  # pragma: no cover
-    c = closed_form_c(wv.n_levels, q2, sigma2, gamma2, ar)
+        terms = p.psd_terms(wv.fs)  # a drift has none: no first-order contribution
+        for power, coef in terms.poly.items():
+            if power not in poly:  # pragma: no cover - no process has such a spectrum yet
+                raise TypeError(
+                    f"wv_cov_model has no closed form for {p.code}'s spectral term x^{power}"
+                )
+            poly[power] += coef
+        if terms.ar is not None:
+            ar.append(terms.ar)
+    c = closed_form_c(wv.n_levels, poly[1], poly[0], poly[-1], ar)
     m_j = wv.n_coef.astype(float)
     return 2.0 * c / np.maximum.outer(m_j, m_j)
 

@@ -9,7 +9,7 @@ empirical ``level`` interval; :func:`read_datasheet` loads a Kalibr ``imu.yaml``
 JSON report, a datasheet CSV (``gmwm export --format json | datasheet-csv``) or a saved
 :meth:`DatasheetSpec.to_dict` into the same object.
 
-The datasheet model (CONVENTIONS, "Units and datasheet conversions"), ``dt = 1/fs``, signal
+The datasheet model (docs/conventions.md, "Units and datasheet conversions"), ``dt = 1/fs``, signal
 unit ``u``, ``tau`` in samples:
 
 * white noise ``WN(sigma2 = N^2 / dt)``: WV ``sigma2 / tau`` (N from ARW/VRW);
@@ -51,7 +51,6 @@ from ..units import (
     DISPLAY,
     QUANTITIES,
     ExportError,
-    from_datasheet,
     quantity_name,
     si_factor,
     squared,
@@ -92,7 +91,8 @@ DATASHEET_KEYS: dict[str, str] = {
     "q": "Q",
     "qn": "Q",
 }
-_CODE = {"N": "WN", "K": "RW", "B": "BI", "Q": "QN"}
+#: Datasheet symbol -> its quantity (N of WN, K of RW, Q of QN, B of the model's floor).
+_QUANTITY = {q.symbol: q for qs in QUANTITIES.values() for q in qs}
 _ORDER = ("N", "K", "B", "Q")
 _KEY_KIND = {
     "arw": "gyroscope",
@@ -120,7 +120,7 @@ def _unit_table() -> dict[str, dict[str, tuple[str, str, float]]]:
     """Per symbol: canonical unit -> (kind, spelling, factor to SI), from engine.units."""
     table: dict[str, dict[str, tuple[str, str, float]]] = {s: {} for s in _ORDER}
     for sym in _ORDER:
-        q = QUANTITIES[_CODE[sym]][0]
+        q = _QUANTITY[sym]
         for u in _SIGNAL_UNITS:
             kind, f = si_factor(u)
             spelled = q.unit(u)
@@ -242,9 +242,7 @@ class DatasheetSpec:
         """The GMWM processes of the datasheet (WN, RW, QN; per sample, in ``unit``), or None."""
         vals = self.in_unit(unit)
         cls = {"N": WN, "K": RW, "Q": QN}
-        procs = [
-            cls[s](from_datasheet(_CODE[s], vals[s], fs)) for s in ("Q", "N", "K") if s in vals
-        ]
+        procs = [cls[s].from_datasheet({s: vals[s]}, fs) for s in ("Q", "N", "K") if s in vals]
         return Model(procs) if procs else None
 
     def floor_wv(self, unit: str) -> float:
@@ -258,7 +256,7 @@ class DatasheetSpec:
         for s in _ORDER:
             if s not in self.values:
                 continue
-            q = QUANTITIES[_CODE[s]][0]
+            q = _QUANTITY[s]
             v = self.values[s]
             d = DISPLAY.get((self.kind, s))
             out.append(
@@ -393,7 +391,7 @@ def _from_kalibr(d: Mapping[str, Any], kind: str | None, channel: str | None, wh
             raise DatasheetError(f"{where}: {key} = {v!r} is not a non-negative number")
         vals[sym], given[sym] = (
             float(v),
-            f"{float(v):g} {QUANTITIES[_CODE[sym]][0].unit(_SI_UNIT[kind])}",
+            f"{float(v):g} {_QUANTITY[sym].unit(_SI_UNIT[kind])}",
         )
     return DatasheetSpec(kind, vals, given, where)
 

@@ -17,14 +17,17 @@ import math
 import re
 from collections import Counter
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
 from .._limits import check_sample_count
+from .._quantity import Quantity
 
 __all__ = [
     "Process",
+    "PsdTerms",
+    "FilterTerms",
     "Model",
     "parse_model",
     "ModelError",
@@ -37,6 +40,52 @@ __all__ = [
 # process registers itself here when its class is created (engine.models.processes)
 PROCESS_TYPES: dict[str, type[Process]] = {}
 _UNIQUE = ("WN", "QN", "RW", "DR")
+
+#: Behaviour every concrete process must implement (checked when its class is created).
+BEHAVIOUR = ("basis", "simulate", "psd_terms", "filter_terms")
+#: ... and, for a process with a non-linear parameter (AR1, GM), these too.
+NONLINEAR_BEHAVIOUR = ("phi_from_nl", "nl_from_phi", "basis_scale")
+#: ... and, for a process that channels may share (multivariate models), this one.
+SHARED_BEHAVIOUR = ("simulate_shared",)
+#: Class attributes every concrete process must give (non-empty).
+DESCRIPTIVE = ("description", "display_name", "help", "quantities")
+
+
+class PsdTerms(NamedTuple):
+    """A process's two-sided spectral density, in cycles/sample, as pieces of
+    ``x = |1 - e^(2 pi i f)|^2 = 4 sin^2(pi f)``:
+
+    ``S(f) = sum_p poly[p] x^p + s / ((1 - phi)^2 + phi x)`` with ``(phi, s) = ar``.
+
+    QN is ``q2 x``, WN ``sigma2``, RW (generalised) ``gamma2 / x``, an AR1 (phi, s) the last
+    term (``|1 - phi z|^2 = (1 - phi)^2 + phi x``, stable near phi = 1); a drift has none.
+    The closed-form WV covariance (``engine.inference._closed_form``) works on these pieces.
+    """
+
+    poly: dict[int, float]
+    ar: tuple[float, float] | None = None
+
+
+class FilterTerms(NamedTuple):
+    """What one fitted process contributes to a filter's WN+RW / WN+GM model (the rule of
+    ``engine.export.bound.split_terms``).
+
+    ``white``: white-noise variance per log sample (a term white at the filter step);
+    ``rw_k2``: continuous random-walk density ``K^2`` [u^2/s]; ``gamma2``: RW per sample;
+    ``omega``: the drift per sample (None for other processes); ``slow``: ``(beta, sigma2_gm)``
+    of a bias GM (None otherwise); ``fast``: the term goes to the white part;
+    ``assignment``: what the rule did, in words.
+    """
+
+    white: float = 0.0
+    rw_k2: float = 0.0
+    gamma2: float = 0.0
+    omega: float | None = None
+    slow: tuple[float, float] | None = None
+    fast: bool = False
+    assignment: str = ""
+
+
 _MAX_REPEAT = 20  # more AR1/GM terms than this cannot be identified from any real log
 
 
@@ -53,6 +102,14 @@ class Process:
 
     Its ``code`` is the class name and ``param_names`` its fields, in order; it registers
     itself in :data:`PROCESS_TYPES`, which is how :func:`parse_model` finds it.
+
+    A process owns its behaviour, so that adding a process means adding one class: its WV
+    (:meth:`basis`), simulator, spectral density (:meth:`psd_terms`, :meth:`psd`), the rule
+    that projects it onto a filter's model (:meth:`filter_terms`), its datasheet quantities
+    (:attr:`quantities`, :meth:`datasheet_params`, :meth:`from_datasheet`), its names
+    (:attr:`display_name`, :attr:`help`) and, when it has them, its Allan-variance slope
+    (:attr:`allan_slope`, :attr:`read_tau`). Creating a class without one of them raises
+    ``TypeError`` (:data:`BEHAVIOUR`, :data:`DESCRIPTIVE`).
     """
 
     code: ClassVar[str] = ""
@@ -62,22 +119,63 @@ class Process:
     description: ClassVar[str] = ""
     # rank in the canonical order of a model's processes (GM, AR1, QN, WN, RW, DR)
     order: ClassVar[int] = 0
+    #: Short name shown next to a label (``"white noise"``, ``"AR(1)"``).
+    display_name: ClassVar[str] = ""
+    #: One line on what the process does to the WV (the app's tooltips).
+    help: ClassVar[str] = ""
+    #: Fixed colour of its curves, or ``""`` for a kind that repeats (AR1, GM: a palette).
+    color: ClassVar[str] = ""
+    #: Datasheet quantities in print order (AR1 is reported as the GM it samples).
+    quantities: ClassVar[tuple[Quantity, ...]] = ()
+    #: Log-log slope of its Allan deviation (IEEE Std 952), None when it has no single slope.
+    allan_slope: ClassVar[float | None] = None
+    #: Averaging time T [s] at which the slope line reads the coefficient (``N`` at T = 1 s).
+    read_tau: ClassVar[float | None] = None
+    #: May several channels share it (one covariance matrix of its linear coefficient)?
+    shareable: ClassVar[bool] = False
+    #: Deterministic (a drift): no first-order contribution to the WV's covariance.
+    deterministic: ClassVar[bool] = False
+    #: May the fitter set phi to 0 (an AR1 then is white); a GM's phi = exp(-beta/fs) may not.
+    phi_can_vanish: ClassVar[bool] = False
 
     def __init_subclass__(
-        cls, *, order: int, description: str, nonlinear: str | None = None, **kwargs: Any
+        cls,
+        *,
+        order: int,
+        description: str,
+        nonlinear: str | None = None,
+        **kwargs: Any,
     ) -> None:
         """Set a process's ``code``, ``param_names``, ``order``, ``description`` and
-        ``nonlinear``, and register it in :data:`PROCESS_TYPES` (in ``order``)."""
+        ``nonlinear``, check that it implements every behaviour (:data:`BEHAVIOUR`,
+        :data:`DESCRIPTIVE`), and register it in :data:`PROCESS_TYPES` (in ``order``)."""
         super().__init_subclass__(**kwargs)
         cls.code = cls.__name__
         # the fields (parameters): the class's own annotations other than ClassVar
         annotations = cls.__dict__.get("__annotations__", {})
         cls.param_names = tuple(n for n, a in annotations.items() if "ClassVar" not in str(a))
         cls.order, cls.description, cls.nonlinear = order, description, nonlinear
+        missing = cls.missing_behaviour()
+        if missing:
+            raise TypeError(
+                f"process {cls.code} does not implement {', '.join(missing)}: a process owns "
+                "its behaviour (see engine.models.Process)"
+            )
         PROCESS_TYPES[cls.code] = cls
         ranked = sorted(PROCESS_TYPES.values(), key=lambda c: c.order)
         PROCESS_TYPES.clear()
         PROCESS_TYPES.update((c.code, c) for c in ranked)
+
+    @classmethod
+    def missing_behaviour(cls) -> list[str]:
+        """Names of the behaviour methods and class attributes a process class lacks."""
+        need = list(BEHAVIOUR)
+        if cls.nonlinear is not None:
+            need += NONLINEAR_BEHAVIOUR
+        if cls.shareable:
+            need += SHARED_BEHAVIOUR
+        out = [n for n in need if getattr(cls, n) is getattr(Process, n)]
+        return out + [n for n in DESCRIPTIVE if not getattr(cls, n)]
 
     # ---- values -------------------------------------------------------------------------
     @property
@@ -174,8 +272,122 @@ class Process:
         return type(self)(float(h))
 
     def nl_value(self, fs: float) -> float | None:
-        """The non-linear value in the fitter's space (correlation time in samples)."""
-        return None
+        """The non-linear value in the fitter's space: the AR1 coefficient ``phi`` of the
+        process sampled at ``fs`` (AR1: ``phi``; GM: ``exp(-beta / fs)``); None for a process
+        without a non-linear parameter or when the value is unknown."""
+        if self.nonlinear is None:
+            return None
+        v = getattr(self, self.nonlinear)
+        return None if v is None else self.phi_from_nl(float(v), fs)
+
+    def phi_from_nl(self, nl: float, fs: float) -> float:
+        """The fitter's ``phi`` of a value of the non-linear parameter (AR1, GM only)."""
+        raise NotImplementedError
+
+    def nl_from_phi(self, phi: float, fs: float) -> float:
+        """The non-linear parameter's value of a fitter's ``phi`` (inverse of
+        :meth:`phi_from_nl`; AR1, GM only)."""
+        raise NotImplementedError
+
+    def basis_scale(self, phi: float) -> float:
+        """``basis(tau, fs, phi) / ar1_wv(tau, phi, 1)`` for a process with a non-linear
+        parameter: 1 when the linear coefficient is the innovation variance (AR1),
+        ``1 - phi^2`` when it is the stationary variance (GM). The fit's hot path uses it."""
+        raise NotImplementedError
+
+    # ---- spectrum ----------------------------------------------------------------------------
+    def psd_terms(self, fs: float) -> PsdTerms:
+        """The spectral density in pieces (:class:`PsdTerms`); every value must be set."""
+        raise NotImplementedError
+
+    def psd(self, f: np.ndarray, fs: float) -> np.ndarray:
+        """Two-sided spectral density on ``f`` in cycles/sample (``0 < f <= 1/2``) [u^2 per
+        cycle/sample]; a random walk's is the generalised ``gamma2 / (4 sin^2(pi f))``, a
+        drift's is 0 (deterministic).
+
+        ``S(f) = sum_p c_p x^p + s / ((1 - phi)^2 + phi x)``, ``x = 4 sin^2(pi f)``
+        (:meth:`psd_terms`). The one-sided density in u^2/Hz is ``2 S(f / fs) / fs``.
+        """
+        f = np.asarray(f, dtype=float)
+        terms = self.psd_terms(fs)
+        x = 4.0 * np.sin(np.pi * f) ** 2
+        out = np.zeros_like(f)
+        for p, c in terms.poly.items():
+            out = out + (c * x**p if p >= 0 else c / x ** (-p))
+        if terms.ar is not None:
+            phi, s = terms.ar
+            out = out + s / ((1.0 - phi) ** 2 + phi * x)
+        return out
+
+    def white_equivalent(self, fs: float) -> float:
+        """Variance per sample of the white noise with the process's density at f = 0,
+        ``S(0)`` (an AR1 ``sigma2 / (1 - phi)^2``; inf for a random walk, 0 for QN)."""
+        terms = self.psd_terms(fs)
+        if any(p < 0 and c > 0 for p, c in terms.poly.items()):
+            return math.inf
+        out = float(terms.poly.get(0, 0.0))
+        if terms.ar is not None:
+            phi, s = terms.ar
+            out += s / (1.0 - phi) ** 2
+        return out
+
+    # ---- projection onto a filter's model ------------------------------------------------------
+    def filter_terms(self, fs: float, fs_filter: float, horizon: float) -> FilterTerms:
+        """What the process adds to a filter's WN+RW / WN+GM model (:class:`FilterTerms`).
+
+        Parameters
+        ----------
+        fs : float
+            Sampling frequency of the log (Hz).
+        fs_filter : float
+            The filter's rate (Hz); a term whose correlation time is below its step is white.
+        horizon : float
+            Horizon in log samples at which a drift's WV is matched by a random walk.
+        """
+        raise NotImplementedError
+
+    # ---- datasheet ---------------------------------------------------------------------------
+    def datasheet_params(self, fs: float) -> dict[str, float] | None:
+        """Parameters in the parametrisation of :attr:`quantities` (an AR1 as the GM it
+        samples), or None when the process has no datasheet form (an AR1 with phi outside
+        (0, 1)). Every value must be set."""
+        return dict(zip(self.param_names, self._require(), strict=True))
+
+    def datasheet_intervals(
+        self, intervals: dict[str, tuple[float, float]], fs: float
+    ) -> dict[str, tuple[float, float]]:
+        """Intervals of the process's parameters (by name) mapped to the parameters of
+        :meth:`datasheet_params`; the same by default."""
+        return dict(intervals)
+
+    @classmethod
+    def from_datasheet(cls, values: dict[str, float], fs: float) -> Process:
+        """The per-sample process of datasheet values ``{symbol: value}``; by default (one
+        parameter) from its first quantity (N, Q, K, R)."""
+        q = cls.quantities[0]
+        if q.inverse is None:  # pragma: no cover - every one-parameter quantity inverts
+            raise ValueError(f"{q.symbol} of {cls.code} is not invertible alone")
+        return cls(q.inverse(values[q.symbol], fs))
+
+    # ---- multivariate ------------------------------------------------------------------------
+    def simulate_shared(
+        self, z: np.ndarray, root: np.ndarray, phi: float | None, rng: np.random.Generator
+    ) -> np.ndarray:
+        """Simulate the process shared by ``k`` channels from correlated normals.
+
+        Parameters
+        ----------
+        z : ndarray, shape (n, k)
+            Rows drawn from ``N(0, C)``, ``C`` the term's coefficient matrix (the linear
+            coefficient of every channel and their covariances).
+        root : ndarray, shape (k, k)
+            ``root @ root.T = C`` (to draw a stationary start).
+        phi : float or None
+            The fitter's ``phi`` (AR1, GM), else None.
+        rng : numpy.random.Generator
+            For the stationary start of an AR1/GM.
+        """
+        raise NotImplementedError
 
     # ---- model-implied WV and simulation ------------------------------------------------------
     def wv(self, tau: np.ndarray, fs: float = 1.0) -> np.ndarray:

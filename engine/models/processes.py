@@ -9,8 +9,11 @@ variance-like parameter) times a *basis* WV curve; AR1 and GM also have one non-
 parameter (phi, beta) that shapes their basis. The fitter solves for ``h`` by non-negative
 least squares and searches the non-linear parameters (variable projection).
 
+Each class also owns the rest of its behaviour (spectral density, projection onto a filter's
+model, datasheet quantities, names): see :class:`engine.models.Process`.
+
 Reference: Guerrier et al. (2013), "Wavelet variance based estimation for composite
-stochastic processes", JASA; CONVENTIONS.md, "Latent processes and their Haar WV".
+stochastic processes", JASA; ``docs/conventions.md``, "Latent processes and their Haar WV".
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._limits import check_sample_count
-from .model import Process
+from .._quantity import Quantity, per_s, sqrt0, squared, times_s
+from .model import FilterTerms, Process, PsdTerms
 
 __all__ = ["WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv", "ar1_wv_pos", "TC_MIN", "TC_MAX_FACTOR"]
 
@@ -118,11 +122,115 @@ def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
 
 
+# Datasheet quantities of a GM (an AR1 is reported as the GM it samples); conversions in
+# engine.units' module docstring and docs/conventions.md, "Units and datasheet conversions".
+_GM_QUANTITIES = (
+    Quantity(
+        "GM",
+        "T_c",
+        "correlation time",
+        "beta",
+        lambda p, fs: 1.0 / p["beta"],
+        lambda v, fs: 1.0 / v,
+        lambda u: "s",
+        si=False,
+    ),
+    Quantity(
+        "GM",
+        "sigma_gm",
+        "stationary std",
+        "sigma2_gm",
+        lambda p, fs: sqrt0(p["sigma2_gm"]),
+        lambda v, fs: v * v,
+        lambda u: u,
+        si=False,
+    ),
+    Quantity(
+        "GM",
+        "q",
+        "driving-noise PSD",
+        "",
+        lambda p, fs: 2.0 * p["beta"] * p["sigma2_gm"],
+        None,
+        lambda u: f"{squared(u)}/s",
+        si=False,
+    ),
+    Quantity(
+        "GM",
+        "sqrt(q)",
+        "driving-noise density",
+        "",
+        lambda p, fs: sqrt0(2.0 * p["beta"] * p["sigma2_gm"]),
+        None,
+        lambda u: f"{per_s(u)}/sqrt(Hz)",
+    ),
+)
+
+
+def _ar_filter_terms(phi: float, s2: float, fs: float, fs_filter: float) -> FilterTerms:
+    """The filter rule of an AR1/GM with coefficient ``phi`` and stationary variance ``s2``:
+    white noise when its correlation time is below the filter step (equivalent variance
+    ``s2 (1 + phi) / (1 - phi)``), else a bias GM (beta = 1 / T_c) whose random-walk density
+    is ``2 beta s2``."""
+    dt_f = 1.0 / fs_filter
+    tc = -1.0 / (fs * math.log(phi)) if 0.0 < phi < 1.0 else 0.0
+    if tc < dt_f:
+        return FilterTerms(
+            white=s2 * (1.0 + phi) / (1.0 - phi),
+            fast=True,
+            assignment=(
+                f"WN (T_c {tc:.3g} s < filter step {dt_f:.3g} s: white noise, "
+                "equivalent sigma2_gm (1+phi)/(1-phi))"
+            ),
+        )
+    beta = 1.0 / tc
+    return FilterTerms(
+        rw_k2=2.0 * beta * s2, slow=(beta, s2), assignment=f"bias (T_c {tc:.4g} s >= filter step)"
+    )
+
+
+def _ar_shared(z: np.ndarray, x0: np.ndarray, phi: float, innovation_factor: float) -> np.ndarray:
+    """An AR1 per column: innovations ``z * innovation_factor``, start ``x0`` (stationary)."""
+    from scipy.signal import lfilter  # lazy: scipy.signal takes 0.3 s to import
+
+    innov = z if innovation_factor == 1.0 else z * innovation_factor
+    return lfilter([1.0], [1.0, -phi], innov, axis=0, zi=(phi * x0)[None, :])[0]
+
+
 @dataclass(frozen=True, repr=False)
 class WN(Process, order=3, description="white noise"):
     """White noise: iid, variance ``sigma2`` [u^2]. WV ``sigma2 / tau``."""
 
     sigma2: float | None = None
+
+    display_name = "white noise"
+    help = "white noise: WV falls as 1/τ (angle/velocity random walk)"
+    color = "#1F77B4"
+    allan_slope = -0.5
+    read_tau = 1.0
+    shareable = True
+    quantities = (
+        Quantity(
+            "WN",
+            "N",
+            "white noise density",
+            "sigma2",
+            lambda p, fs: sqrt0(p["sigma2"] / fs),
+            lambda v, fs: v * v * fs,
+            lambda u: f"{u}/sqrt(Hz)",
+        ),
+    )
+
+    def psd_terms(self, fs):
+        (s2,) = self._require()
+        return PsdTerms({0: s2})
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        (s2,) = self._require()
+        return FilterTerms(white=s2, fast=True, assignment=self.code)
+
+    def simulate_shared(self, z, root, phi, rng):
+        return z
 
     def basis(self, tau, fs, nl=None):
         return 1.0 / tau
@@ -142,6 +250,37 @@ class QN(Process, order=2, description="quantization noise"):
     """Quantization noise ``sqrt(q2) (U_t - U_{t-1})``, ``Var U = 1``. WV ``6 q2 / tau^2``."""
 
     q2: float | None = None
+
+    display_name = "quantization noise"
+    help = "quantization noise: WV falls as 1/τ²"
+    color = "#9467BD"
+    allan_slope = -1.0
+    read_tau = math.sqrt(3.0)
+    quantities = (
+        Quantity(
+            "QN",
+            "Q",
+            "quantization",
+            "q2",
+            lambda p, fs: sqrt0(p["q2"]) / fs,
+            lambda v, fs: (v * fs) ** 2,
+            times_s,
+        ),
+    )
+
+    def psd_terms(self, fs):
+        (q2,) = self._require()
+        return PsdTerms({1: q2})
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        # white equivalent at the filter rate: the filter averages m = fs / fs_f log samples
+        (q2,) = self._require()
+        m = max(fs / fs_filter, 1.0)
+        return FilterTerms(
+            white=3.0 * q2 / m,
+            fast=True,
+            assignment="WN (QN's white equivalent at the filter rate, 3 q2 / m)",
+        )
 
     def basis(self, tau, fs, nl=None):
         return 6.0 / tau**2
@@ -164,6 +303,36 @@ class RW(Process, order=4, description="random walk"):
 
     gamma2: float | None = None
 
+    display_name = "random walk"
+    help = "random walk: WV rises as τ (rate random walk)"
+    color = "#2CA02C"
+    allan_slope = 0.5
+    read_tau = 3.0
+    shareable = True
+    quantities = (
+        Quantity(
+            "RW",
+            "K",
+            "rate random walk",
+            "gamma2",
+            lambda p, fs: sqrt0(p["gamma2"] * fs),
+            lambda v, fs: v * v / fs,
+            lambda u: f"{per_s(u)}/sqrt(Hz)",
+            accel_name="acceleration random walk",
+        ),
+    )
+
+    def psd_terms(self, fs):
+        (g2,) = self._require()
+        return PsdTerms({-1: g2})
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        (g2,) = self._require()
+        return FilterTerms(rw_k2=g2 * fs, gamma2=g2, assignment="bias")
+
+    def simulate_shared(self, z, root, phi, rng):
+        return np.cumsum(z, axis=0)
+
     def basis(self, tau, fs, nl=None):
         return (tau**2 + 2.0) / (12.0 * tau)
 
@@ -178,6 +347,38 @@ class DR(Process, order=5, description="drift (rate ramp)"):
     """Drift ``omega * t`` (omega per sample). WV ``omega^2 tau^2 / 16``."""
 
     omega: float | None = None
+
+    display_name = "drift"
+    help = "drift (rate ramp): WV rises as τ²"
+    color = "#8C564B"
+    allan_slope = 1.0
+    read_tau = math.sqrt(2.0)
+    deterministic = True
+    quantities = (
+        Quantity(
+            "DR",
+            "R",
+            "rate ramp",
+            "omega",
+            lambda p, fs: p["omega"] * fs,
+            lambda v, fs: v / fs,
+            per_s,
+            magnitude=True,
+            accel_name="acceleration ramp",
+        ),
+    )
+
+    def psd_terms(self, fs):
+        self._require()
+        return PsdTerms({})  # deterministic: no first-order contribution to Cov(nu_hat)
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        (om,) = self._require()
+        return FilterTerms(
+            rw_k2=0.75 * om * om * horizon * fs,  # RW with the drift's WV at the horizon
+            omega=om,
+            assignment="bias (random walk with the drift's WV at the horizon)",
+        )
 
     def _check_value(self, name, v):
         pass  # a drift may have either sign; its WV depends on omega^2
@@ -217,6 +418,12 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
     phi: float | None = None
     sigma2: float | None = None
 
+    display_name = "AR(1)"
+    help = "first-order autoregression (per sample phi, sigma2)"
+    shareable = True
+    phi_can_vanish = True
+    quantities = _GM_QUANTITIES  # reported as the GM it samples
+
     def _check_value(self, name, v):
         if name == "phi" and not -1.0 < v < 1.0:
             raise ValueError(f"AR1.phi must be in (-1, 1), got {v}")
@@ -230,11 +437,51 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
     def basis(self, tau, fs, nl=None):
         return ar1_wv(tau, nl, 1.0)
 
-    def nl_value(self, fs):
-        return None if self.phi is None else float(self.phi)
+    def phi_from_nl(self, nl, fs):
+        return float(nl)
+
+    def nl_from_phi(self, phi, fs):
+        return float(phi)
+
+    def basis_scale(self, phi):
+        return 1.0
 
     def from_fit(self, h, nl, fs):
         return AR1(float(nl), float(h))
+
+    def psd_terms(self, fs):
+        phi, s2 = self._require()
+        return PsdTerms({}, (phi, s2))
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        phi, s2 = self._require()
+        return _ar_filter_terms(phi, s2 / (1.0 - phi * phi), fs, fs_filter)
+
+    def datasheet_params(self, fs):
+        phi, s2 = self._require()
+        if not 0 < phi < 1:
+            return None
+        return {"beta": -math.log(phi) * fs, "sigma2_gm": s2 / (1.0 - phi * phi)}
+
+    def datasheet_intervals(self, intervals, fs):
+        # beta = -ln(phi) fs is monotone in phi alone; sigma2_gm depends on both parameters
+        iv = intervals.get("phi")
+        if iv is None:
+            return {}
+        fn = lambda ph: -math.log(ph) * fs if 0 < ph < 1 else math.nan  # noqa: E731
+        return {"beta": (fn(iv[0]), fn(iv[1]))}
+
+    @classmethod
+    def from_datasheet(cls, values, fs):
+        gm = GM.from_datasheet(values, fs)
+        phi = math.exp(-gm.beta / fs)
+        return AR1(phi=phi, sigma2=gm.sigma2_gm * (1.0 - phi * phi))
+
+    def simulate_shared(self, z, root, phi, rng):
+        # c is the innovation covariance; the stationary one is c / (1 - phi^2)
+        shrink = math.sqrt(1.0 - phi * phi)
+        x0 = rng.standard_normal(z.shape[1]) @ root.T
+        return _ar_shared(z, x0 / shrink, phi, 1.0)
 
     def simulate(self, n, rng=None, fs=1.0):
         n = check_sample_count(n)
@@ -257,6 +504,11 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     beta: float | None = None
     sigma2_gm: float | None = None
 
+    display_name = "Gauss-Markov"
+    help = "Gauss-Markov: a bump at its correlation time 1/beta (bias instability)"
+    shareable = True
+    quantities = _GM_QUANTITIES
+
     def _check_value(self, name, v):
         if name == "beta" and not v > 0:
             raise ValueError(f"GM.beta must be > 0 (1/s), got {v}")
@@ -268,8 +520,35 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
         phi = np.asarray(nl, dtype=float)
         return ar1_wv(tau, phi, 1.0 - phi * phi)
 
-    def nl_value(self, fs):
-        return None if self.beta is None else math.exp(-float(self.beta) / fs)
+    def phi_from_nl(self, nl, fs):
+        return math.exp(-float(nl) / fs)
+
+    def nl_from_phi(self, phi, fs):
+        return -math.log(phi) * fs
+
+    def basis_scale(self, phi):
+        return 1.0 - phi * phi
+
+    def psd_terms(self, fs):
+        ar = self.as_ar1(fs)
+        return PsdTerms({}, (float(ar.phi), float(ar.sigma2)))
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        beta, s2 = self._require()
+        return _ar_filter_terms(math.exp(-beta / fs), s2, fs, fs_filter)
+
+    @classmethod
+    def from_datasheet(cls, values, fs):
+        t_c, sigma_gm = cls.quantities[0], cls.quantities[1]
+        return GM(
+            beta=t_c.inverse(values["T_c"], fs), sigma2_gm=sigma_gm.inverse(values["sigma_gm"], fs)
+        )
+
+    def simulate_shared(self, z, root, phi, rng):
+        # c is the stationary covariance; the innovations' is c (1 - phi^2)
+        shrink = math.sqrt(1.0 - phi * phi)
+        x0 = rng.standard_normal(z.shape[1]) @ root.T
+        return _ar_shared(z, x0, phi, shrink)
 
     def from_fit(self, h, nl, fs):
         return GM(-math.log(float(nl)) * fs, float(h))

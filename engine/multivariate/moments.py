@@ -14,7 +14,7 @@ import numpy as np
 
 from ..fit import FitError
 from ..fit.result import ParamTable
-from ..models import Model, Process
+from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, Process
 from ..wv import WVMatrix
 from .spec import MultiModel, phi_of_nl
 
@@ -47,7 +47,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     ndarray, shape (P J, P J)
         ``P = k (k + 1) / 2`` pairs.
     """
-    from ..inference.asymptotic import frequency_grid, spectral_density
+    from ..inference.asymptotic import frequency_grid
 
     if not model.is_set:
         raise FitError("moment_covariance needs a model with every value set (a fitted model)")
@@ -55,7 +55,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     shapes: dict[tuple[str, float | None], list[Any]] = {}
     for t in model.terms():
         c, phi = model.term_values(t, fs)
-        if t.code == "DR" or not np.any(c != 0):
+        if t.proto.deterministic or not np.any(c != 0):
             continue  # deterministic, or absent
         key = (t.code, None if phi is None else float(phi))
         if key not in shapes:
@@ -79,7 +79,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
             sin2 = sin_m * sin_m
             gains[j] = sin2 * sin2 * base * inv_m2[j]
             sin_m, cos_m = 2.0 * sin_m * cos_m, 1.0 - 2.0 * sin2
-        g = [gains * spectral_density(u, fc, fs) for u in units]
+        g = [gains * u.psd(fc, fs) for u in units]
         for a in range(ns):
             ga = g[a] * wc
             for b in range(a, ns):
@@ -88,7 +88,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
                 integ[a, b] += np.einsum("jf,lf->jl", ga, g[b])
     # f = 0, the periodic trapezoid rule's first node, which frequency_grid leaves out: G_j s is
     # finite there and non-zero only for a random walk (per unit gamma2, m^2 / 4, m = 2^(j-1))
-    g0 = [4.0 ** np.arange(nj) / 4 if u.code == "RW" else np.zeros(nj) for u in units]
+    g0 = [u.psd_terms(fs).poly.get(-1, 0.0) * (4.0 ** np.arange(nj) / 4) for u in units]
     for a in range(ns):
         for b in range(a, ns):
             integ[a, b] += (0.5 / f.size) * np.outer(g0[a], g0[b])
@@ -185,7 +185,7 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
             return float(st.to_unconstrained(fs)[co])
         cov, nl = st
         if co == "nl":
-            return math.log(nl) if t.code == "GM" else math.atanh(nl)
+            return TO_UNCONSTRAINED[str(t.proto.nonlinear)](nl)
         a, b = co
         return math.log(cov[a, a]) if a == b else float(cov[a, b])
 
@@ -201,7 +201,7 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
                 continue
             cov, nl = st[ti]
             if co == "nl":
-                nl = math.exp(ui) if t.code == "GM" else math.tanh(ui)
+                nl = FROM_UNCONSTRAINED[str(t.proto.nonlinear)](ui)
             else:
                 a, b = co
                 cov = cov.copy()
@@ -211,7 +211,7 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
         for ti, t in enumerate(terms):
             if t.shared:
                 c, nl = st[ti]
-                phi = phi_of_nl(t.code, nl, fs) if t.nonlinear else None
+                phi = phi_of_nl(t.proto, nl, fs) if t.nonlinear else None
             else:
                 p = st[ti]
                 c, phi = np.array([[p.linear_coef()]]), p.nl_value(fs)
@@ -244,7 +244,7 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
                 v[co] = u0[j] + sgn * z * se[j]
                 ends.append(float(p.from_unconstrained(v, fs).values[co]))
         elif co == "nl":
-            back = math.exp if t.code == "GM" else math.tanh
+            back = FROM_UNCONSTRAINED[str(t.proto.nonlinear)]
             ends = [back(u0[j] - z * se[j]), back(u0[j] + z * se[j])]
         else:
             a, b = co

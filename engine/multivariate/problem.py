@@ -28,7 +28,7 @@ import numpy as np
 
 from ..fit import FitError, fit_gmwm
 from ..fit._varpro import local
-from ..models import AR1, TC_MAX_FACTOR, TC_MIN, Model, ModelError
+from ..models import TC_MAX_FACTOR, TC_MIN, Model, ModelError
 from ..wv import WVMatrix
 from ._cone import ConeLSQ
 from .spec import MultiModel, SharedProcess, find_label, nl_of_phi, phi_of_nl
@@ -114,7 +114,7 @@ class MProblem:
 
     # -- non-linear coordinates: log correlation time in samples (as the univariate fit) --
     def phi_of(self, ti: int, u: float) -> float:
-        if isinstance(self.terms[ti].proto, AR1) and u < -50:
+        if self.terms[ti].proto.phi_can_vanish and u < -50:
             return 0.0
         tc = math.exp(min(max(u, math.log(self.tc_min)), math.log(self.tc_max)))
         return math.exp(-1.0 / tc)
@@ -196,7 +196,7 @@ def fitted_model(
         phi = phis.get(ti)
         if t.shared:
             cov = s[ti]
-            nl = None if phi is None else nl_of_phi(t.code, phi, fs)
+            nl = None if phi is None else nl_of_phi(t.proto, phi, fs)
             shared.append(
                 SharedProcess(
                     t.label, tuple(model.channels[i] for i in t.chans), None, nl, t.diagonal
@@ -296,7 +296,7 @@ def search(
     for ti in prob.slots:
         t = prob.terms[ti]
         if t.shared:
-            phi = phi_of_nl(t.code, model.shared_process(t.label).nl, fs)
+            phi = phi_of_nl(t.proto, model.shared_process(t.label).nl, fs)
         else:
             phi = t.proto.nl_value(fs) if getattr(t.proto, t.proto.nonlinear) is not None else None
         user.append(phi)

@@ -25,27 +25,30 @@ from typing import Any
 import numpy as np
 
 from .._limits import check_sample_count
-from ..models import Model, ModelError, Process, parse_model
+from ..models import PROCESS_TYPES, Model, ModelError, Process, parse_model
 
 __all__ = ["SHAREABLE", "SharedProcess", "MultiModel"]
 
-SHAREABLE = ("WN", "RW", "AR1", "GM")
-"""Process codes that may be shared by several channels (QN and DR are per channel only)."""
+SHAREABLE = tuple(code for code, cls in PROCESS_TYPES.items() if cls.shareable)
+"""Process codes that may be shared by several channels (QN and DR are per channel only): the
+processes whose class says so (:attr:`engine.models.Process.shareable`)."""
 
 
 # -------------------------------------------------------------------------------------------
 # model specification
 # -------------------------------------------------------------------------------------------
-def phi_of_nl(code: str, nl: float | None, fs: float) -> float | None:
-    """Fitter-space value (phi) of a user-space non-linear value (AR1 phi, GM beta [1/s])."""
+def phi_of_nl(proto: Process, nl: float | None, fs: float) -> float | None:
+    """Fitter-space value (phi) of a user-space non-linear value (AR1 phi, GM beta [1/s]) of a
+    process like ``proto`` (:meth:`engine.models.Process.phi_from_nl`)."""
     if nl is None:
         return None
-    return math.exp(-float(nl) / fs) if code == "GM" else float(nl)
+    return proto.phi_from_nl(float(nl), fs)
 
 
-def nl_of_phi(code: str, phi: float, fs: float) -> float:
-    """User-space value of a fitter-space phi: GM beta [1/s] ``-log(phi) fs``, AR1 phi."""
-    return -math.log(phi) * fs if code == "GM" else float(phi)
+def nl_of_phi(proto: Process, phi: float, fs: float) -> float:
+    """User-space value of a fitter-space phi (GM beta [1/s] ``-log(phi) fs``, AR1 phi) of a
+    process like ``proto`` (:meth:`engine.models.Process.nl_from_phi`)."""
+    return proto.nl_from_phi(phi, fs)
 
 
 def find_label(m: Model, label: str) -> int | None:
@@ -460,10 +463,10 @@ class MultiModel:
                 raise ModelError(f"{lab} is not shared; shared: {', '.join(sorted(known))}")
         keep: list[SharedProcess] = []
         for s in self.shared:
-            code = self.models[s.channels[0]].processes[self.index(s.label, s.channels[0])].code
+            proc = self.models[s.channels[0]].processes[self.index(s.label, s.channels[0])]
             if s.label not in labels:
                 keep.append(SharedProcess(s.label, s.channels, diagonal=s.diagonal))
-            elif code in ("AR1", "GM"):
+            elif proc.nonlinear is not None:  # AR1, GM
                 keep.append(SharedProcess(s.label, s.channels, diagonal=True))
         return MultiModel(self.channels, {c: m.cleared() for c, m in self.models.items()}, keep)
 
@@ -477,7 +480,7 @@ class MultiModel:
                     f"no covariance for the shared {t.label}: give cov="
                     f"{{'{t.label}': ...}} or fit the model first"
                 )
-            phi = phi_of_nl(t.code, sp.nl, fs) if t.nonlinear else None
+            phi = phi_of_nl(t.proto, sp.nl, fs) if t.nonlinear else None
             if t.nonlinear and phi is None:
                 raise ModelError(f"no {t.proto.nonlinear} for the shared {t.label}")
             return np.asarray(sp.cov, float), phi
@@ -519,11 +522,10 @@ class MultiModel:
 
         Shared WN: iid N(0, Sigma) vectors; shared RW: their cumulative sum; shared AR1/GM:
         ``X_t = phi X_{t-1} + e_t`` with ``e_t ~ N(0, Sigma_innovation)`` from the stationary
-        distribution. Independent processes as :meth:`Process.simulate`.
+        distribution (each process's :meth:`Process.simulate_shared`). Independent processes
+        as :meth:`Process.simulate`.
         """
-        n = check_sample_count(n, channels=self.k)  # before the slow import below
-        from scipy.signal import lfilter
-
+        n = check_sample_count(n, channels=self.k)
         if not self.is_set:
             raise ModelError(
                 "cannot simulate: some values are unknown; give every channel "
@@ -539,19 +541,7 @@ class MultiModel:
             vals, vecs = np.linalg.eigh(c)
             root = vecs * np.sqrt(np.clip(vals, 0.0, None))  # root @ root.T = c
             z = g.standard_normal((n, len(t.chans))) @ root.T  # rows ~ N(0, c)
-            if t.code == "WN":
-                comp = z
-            elif t.code == "RW":
-                comp = np.cumsum(z, axis=0)
-            else:
-                # AR1: c is the innovation covariance, the stationary one is c / (1 - phi^2);
-                # GM: c is the stationary covariance, the innovations' is c (1 - phi^2)
-                shrink = math.sqrt(1.0 - phi * phi)
-                innov = z if t.code == "AR1" else z * shrink
-                x0 = g.standard_normal(len(t.chans)) @ root.T
-                if t.code == "AR1":
-                    x0 = x0 / shrink
-                comp = lfilter([1.0], [1.0, -phi], innov, axis=0, zi=(phi * x0)[None, :])[0]
+            comp = t.proto.simulate_shared(z, root, phi, g)
             x[:, list(t.chans)] += comp
         return x
 

@@ -6,12 +6,13 @@ asymptotic`` calls them, so that the report and the command agree to the last di
 * the fits: :func:`engine.batch.fit_log` (one model, or the WVIC-best sub-model, per channel);
 * the overlapping Allan deviation and its 95 % interval:
   :meth:`engine.wv.AllanVariance.from_wv` (``AVAR(2^(j-1)) = 2 nu2_j``, exact);
-* the IEEE Std 952 slope guides: the lines of slope :data:`engine.teaching.slope.SLOPES` read
-  at :data:`~engine.teaching.slope.READ_TAU` through the fitted datasheet value (N, K, Q, R),
-  and the bias-instability floor (:func:`engine.units.allan_floor`);
+* the IEEE Std 952 slope guides: the lines of each process's slope
+  (:attr:`engine.models.Process.allan_slope`) read at its :attr:`~engine.models.Process.read_tau`
+  through the fitted datasheet value (N, K, Q, R), and the bias-instability floor
+  (:func:`engine.units.allan_floor`);
 * the Welch PSD (:func:`scipy.signal.welch`) and the model's PSD from the processes' spectral
-  densities (:func:`engine.inference.asymptotic.spectral_density`), both averaged over the same
-  logarithmic frequency bands;
+  densities (:meth:`engine.models.Process.psd`), both averaged over the same logarithmic
+  frequency bands;
 * the parameter intervals (:func:`engine.inference.param_intervals`), the datasheet rows
   (:func:`engine.units.datasheet_rows`), the J-test (:func:`engine.inference.j_test`);
 * the datasheet check (:func:`engine.inference.check_datasheet`) and the export text
@@ -37,7 +38,7 @@ from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
 from ..io import ImuLog, load_log
-from ..units import DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
+from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
 from ..wv import AllanVariance
 
 __all__ = [
@@ -198,7 +199,7 @@ def welch_psd(
         Sampling frequency (Hz).
     fit : GMWMResult, optional
         Its model's one-sided PSD ``2 S(f / fs) / fs`` [unit^2/Hz], with ``S`` the two-sided
-        density in cycles/sample of :func:`engine.inference.asymptotic.spectral_density`.
+        density in cycles/sample of each process (:meth:`engine.models.Process.psd`).
     bands : int
         Bands per decade; each band's value is the mean over the Welch bins it holds (bins
         of one band at low frequency stay single).
@@ -211,8 +212,6 @@ def welch_psd(
     """
     from scipy.signal import welch
 
-    from ..inference.asymptotic import spectral_density
-
     a = np.asarray(x, float)
     if a.size < 16:
         raise ValueError(f"the PSD needs at least 16 samples, got {a.size}")
@@ -222,7 +221,7 @@ def welch_psd(
     comps: dict[str, np.ndarray] = {}
     if fit is not None:
         for lab, proc in zip(fit.model.labels, fit.model.processes, strict=True):
-            s = 2.0 * spectral_density(proc, f / fs, fs) / fs
+            s = 2.0 * proc.psd(f / fs, fs) / fs
             if np.any(s > 0):
                 comps[lab] = s
     edges = np.geomspace(f[0], f[-1] * (1 + 1e-12), int(np.ceil(bands * np.log10(f[-1] / f[0]))))
@@ -240,19 +239,15 @@ def welch_psd(
 
 def slope_guides(fit: GMWMResult, rows: Sequence[DatasheetRow]) -> list[SlopeGuide]:
     """The IEEE slope lines of a fit's QN, WN, RW and DR terms and its Allan floor."""
-    from ..teaching.slope import READ_TAU, SLOPES
-    from ..units import BI_FACTOR
-
-    sym = {"QN": "Q", "WN": "N", "RW": "K", "DR": "R"}
     out: list[SlopeGuide] = []
     for lab, proc in zip(fit.model.labels, fit.model.processes, strict=True):
-        code = proc.code
-        if code not in sym:
-            continue
-        row = next(r for r in rows if r.process == lab and r.symbol == sym[code])
+        if proc.allan_slope is None or proc.read_tau is None:
+            continue  # no single slope (AR1, GM)
+        sym = proc.quantities[0].symbol
+        row = next(r for r in rows if r.process == lab and r.symbol == sym)
         out.append(
             SlopeGuide(
-                code, sym[code], SLOPES[code], READ_TAU[code], row.value, row.unit, row.value
+                proc.code, sym, proc.allan_slope, proc.read_tau, row.value, row.unit, row.value
             )
         )
     fl = allan_floor(fit.model, fit.fs, fit.wv.n_levels)

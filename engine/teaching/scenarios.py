@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..io import ImuLog
-from ..models import Model, parse_model
+from ..models import DR, GM, PROCESS_TYPES, QN, RW, WN, Model, parse_model
+from .slope import SLOPES
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "simulate_scenario", "gmwm_spec"]
 
@@ -102,11 +103,12 @@ def gmwm_spec(codes: list[str] | tuple[str, ...]) -> str:
     str
         A model spec in the engine's order, e.g. ``["WN", "BI"] -> "GM+WN"``.
     """
-    order = ("BI", "QN", "WN", "RW", "DR")
-    bad = [c for c in codes if c not in order]
+    bad = [c for c in codes if c not in SLOPES]
     if bad:
-        raise ValueError(f"unknown process {bad[0]!r}: use QN, WN, BI, RW or DR")
-    return "+".join("GM" if c == "BI" else c for c in order if c in set(codes))
+        *first, last = SLOPES
+        raise ValueError(f"unknown process {bad[0]!r}: use {', '.join(first)} or {last}")
+    # the bias-instability floor is modelled by a GM; a Model prints in the engine's order
+    return Model(tuple(GM() if c == "BI" else PROCESS_TYPES[c]() for c in set(codes))).spec()
 
 
 _S = [
@@ -118,7 +120,7 @@ _S = [
         fs=100.0,
         seed=4101,
         unit="deg/s",
-        regions=(("WN", 0.01, 1.0), ("BI", 1.0, 20.0)),
+        regions=((WN.code, 0.01, 1.0), ("BI", 1.0, 20.0)),
         why=(
             "The Gauss-Markov bump already lifts the Allan deviation where the curve still "
             "looks like a -1/2 slope, so the white-noise line drawn there is too high; the "
@@ -133,7 +135,7 @@ _S = [
         fs=100.0,
         seed=4102,
         unit="deg/s",
-        regions=(("QN", 0.01, 0.02), ("WN", 0.01, 5.0)),
+        regions=((QN.code, 0.01, 0.02), (WN.code, 0.01, 5.0)),
         why=(
             "Quantization noise only shows at the first one or two averaging times, where the "
             "white noise is as strong, so the -1 line through them reads white noise as "
@@ -148,7 +150,7 @@ _S = [
         fs=100.0,
         seed=4103,
         unit="deg/s",
-        regions=(("WN", 0.01, 1.0), ("RW", 10.0, 400.0), ("DR", 300.0, 1e9)),
+        regions=((WN.code, 0.01, 1.0), (RW.code, 10.0, 400.0), (DR.code, 300.0, 1e9)),
         why=(
             "Where the curve rises at +1/2 the drift already adds to it, so the random-walk "
             "line is too high; the +1 line through the last points rests on a handful of "
@@ -163,7 +165,7 @@ _S = [
         fs=100.0,
         seed=4104,
         unit="deg/s",
-        regions=(("WN", 0.01, 1.0), ("RW", 20.0, 1e9)),
+        regions=((WN.code, 0.01, 1.0), (RW.code, 20.0, 1e9)),
         why=(
             "The random walk only dominates the last octaves, each averaged over a few "
             "clusters: the +1/2 line read there scatters widely from log to log and the "

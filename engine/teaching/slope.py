@@ -5,7 +5,8 @@ These are the *other* estimators of a latent error model, kept for comparison an
 * :func:`allan_variance`: overlapping Allan variance and deviation with intervals. With
   ``m`` the averaging time in samples and ``S`` the cumulative sum of the de-meaned series,
   ``AVAR(m) = sum_t (S_{t+2m} - 2 S_{t+m} + S_t)^2 / (2 m^2 (N - 2m + 1))``, which is exactly
-  twice the Haar wavelet variance at scale ``tau = 2m`` (CONVENTIONS: ``nu2_j = AVAR(2^(j-1))/2``).
+  twice the Haar wavelet variance at scale ``tau = 2m``
+  (``docs/conventions.md``: ``nu2_j = AVAR(2^(j-1))/2``).
   The divisor counts the ``N - 2m + 1`` terms actually summed (the R ``avar`` package sums one
   term fewer than its divisor counts; that defect is not reproduced).
 * :func:`avsm`: the Allan variance slope method as IEEE Std 952 reads it: a line of fixed
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..fit.estimate import MethodEstimate, model_components
-from ..models import Model, Process
+from ..models import PROCESS_TYPES, RW, WN, Model, Process
 from ..units import BI_FACTOR, QUANTITIES, process_from_values
 from ..wv import (
     WaveletVariance,
@@ -39,15 +40,24 @@ from ..wv.allan import AllanVariance, allan_variance
 
 __all__ = ["avsm", "avsm_auto", "SLOPES", "READ_TAU"]
 
-#: Slopes of the log-log Allan *deviation* of each process (IEEE Std 952, annex C).
-SLOPES: dict[str, float] = {"QN": -1.0, "WN": -0.5, "BI": 0.0, "RW": 0.5, "DR": 1.0}
+#: The slope method's terms that are processes: those with one Allan-deviation slope.
+_SLOPED = [cls for cls in PROCESS_TYPES.values() if cls.allan_slope is not None]
 
-#: Averaging time (s) at which the fixed-slope line equals the datasheet coefficient:
-#: ``ADEV^2 = 3Q^2/T^2`` (Q at sqrt 3 s), ``N^2/T`` (N at 1 s), ``K^2 T/3`` (K at 3 s),
-#: ``R^2 T^2/2`` (R at sqrt 2 s).
-READ_TAU: dict[str, float] = {"QN": math.sqrt(3.0), "WN": 1.0, "RW": 3.0, "DR": math.sqrt(2.0)}
+#: Slopes of the log-log Allan *deviation* of each term (IEEE Std 952, annex C): each process's
+#: :attr:`~engine.models.Process.allan_slope` (QN -1, WN -1/2, RW +1/2, DR +1) and the bias
+#: instability ``BI`` (a floor, slope 0; not a process of the model), in slope order.
+SLOPES: dict[str, float] = dict(
+    sorted(
+        {**{c.code: float(c.allan_slope) for c in _SLOPED}, "BI": 0.0}.items(), key=lambda kv: kv[1]
+    )  # type: ignore[arg-type]
+)
 
-_AVSM_ORDER = ("QN", "WN", "BI", "RW", "DR")
+#: Averaging time (s) at which the fixed-slope line equals the datasheet coefficient (each
+#: process's :attr:`~engine.models.Process.read_tau`): ``ADEV^2 = 3Q^2/T^2`` (Q at sqrt 3 s),
+#: ``N^2/T`` (N at 1 s), ``K^2 T/3`` (K at 3 s), ``R^2 T^2/2`` (R at sqrt 2 s).
+READ_TAU: dict[str, float] = {c.code: float(c.read_tau) for c in _SLOPED}  # type: ignore[arg-type]
+
+_AVSM_ORDER = tuple(SLOPES)
 
 
 # -------------------------------------------------------------------------------------------
@@ -250,7 +260,7 @@ def avsm_auto(
         ]
     else:
         notes = ["automatic read-off of the Allan deviation curve at 1 s (N) and 3 s (K)"]
-    for code in ("WN", "RW"):
+    for code in (WN.code, RW.code):
         slope = SLOPES[code]
         if read == "line":
             i = int(np.argmin(np.abs(local - slope)))

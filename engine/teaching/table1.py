@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..models import DR, QN, RW, WN, Model
+from ..models import DR, PROCESS_TYPES, QN, RW, WN, Model
 from ..units import DISPLAY, QUANTITIES, si_factor
 from ..units import from_datasheet as units_from_datasheet
 from ..units import to_datasheet as units_to_datasheet
@@ -52,22 +52,29 @@ TABLE_I: dict[str, dict[str, Any]] = {
     "gyro": {
         "unit": "deg/s",
         "label": "Gyro",
-        "params": (("WN", "sigma", 1.57e-1, "deg/sqrt(h)"), ("RW", "gamma", 1.34, "deg/h/sqrt(h)")),
+        "params": (
+            (WN.code, "sigma", 1.57e-1, "deg/sqrt(h)"),
+            (RW.code, "gamma", 1.34, "deg/h/sqrt(h)"),
+        ),
     },
     "accel": {
         "unit": "m/s^2",
         "label": "Accel",
         "params": (
-            ("QN", "Q", 1.79e-6, "m/s"),
-            ("WN", "sigma", 4.70e-2, "m/s/sqrt(h)"),
-            ("RW", "gamma", 4.35e1, "m/s/h/sqrt(h)"),
-            ("DR", "omega", 4.14e1, "m/s/h^2"),
+            (QN.code, "Q", 1.79e-6, "m/s"),
+            (WN.code, "sigma", 4.70e-2, "m/s/sqrt(h)"),
+            (RW.code, "gamma", 4.35e1, "m/s/h/sqrt(h)"),
+            (DR.code, "omega", 4.14e1, "m/s/h^2"),
         ),
     },
 }
 
 
-PARAM_OF = {"QN": "QN.q2", "WN": "WN.sigma2", "RW": "RW.gamma2", "DR": "DR.omega"}
+#: Per Table I process, the unique name of its parameter in a one-of-a-kind model.
+PARAM_OF = {
+    c: f"{c}.{PROCESS_TYPES[c].param_names[0]}"
+    for c in dict.fromkeys(code for s in TABLE_I.values() for code, *_ in s["params"])
+}
 
 
 # -------------------------------------------------------------------------------------------
@@ -118,10 +125,9 @@ def table1_model(sensor: str, fs: float = STUDY_FS) -> Model:
     (QN + WN + RW + DR, m/s^2), with per-sample parameters at ``fs``."""
     if sensor not in TABLE_I:
         raise ValueError(f"unknown sensor {sensor!r}: use 'gyro' or 'accel'")
-    cls = {"WN": WN, "RW": RW, "QN": QN, "DR": DR}
     return Model(
         tuple(
-            cls[c](from_datasheet(c, v, fs, TABLE_I[sensor]["unit"]))
+            PROCESS_TYPES[c](from_datasheet(c, v, fs, TABLE_I[sensor]["unit"]))
             for c, _, v, _ in TABLE_I[sensor]["params"]
         )
     )
@@ -158,16 +164,16 @@ def typical_regions(sensor: str, n: int, fs: float = STUDY_FS) -> dict[str, tupl
         raise ValueError(f"a log of {n} samples is too short for the slope method's regions")
     if sensor == "gyro":
         wn_hi = min(10.0, float(tau[-6]))
-        return {"WN": (float(tau[0]), wn_hi), "RW": (float(tau[-3]), float(tau[-1]))}
+        return {WN.code: (float(tau[0]), wn_hi), RW.code: (float(tau[-3]), float(tau[-1]))}
     if sensor == "accel":
         dr = (float(tau[-2]), float(tau[-1]))
         rw_pts = tau[(tau >= 30.0) & (tau <= 300.0) & (tau < dr[0])]
         if rw_pts.size == 0:
             rw_pts = tau[-3:-2]
         return {
-            "QN": (float(tau[0]), float(tau[1])),
-            "WN": (0.015, 1.1),
-            "RW": (float(rw_pts[0]), float(rw_pts[-1])),
-            "DR": dr,
+            QN.code: (float(tau[0]), float(tau[1])),
+            WN.code: (0.015, 1.1),
+            RW.code: (float(rw_pts[0]), float(rw_pts[-1])),
+            DR.code: dr,
         }
     raise ValueError(f"unknown sensor {sensor!r}: use 'gyro' or 'accel'")

@@ -85,7 +85,7 @@ def check_fs_alpha(fs: float, alpha: float) -> None:
 def cumsum_demeaned(x: np.ndarray) -> np.ndarray:
     """Cumulative sum of ``x - mean(x)`` in float64, with a leading 0 (length N + 1).
 
-    The mean is removed before summing (CONVENTIONS: a cumulative sum of a series with an
+    The mean is removed before summing (docs/conventions.md: a cumulative sum of a series with an
     offset loses digits on long logs).  Two passes, one float64 array of extra memory.
     """
     s = np.empty(x.size + 1, dtype=np.float64)

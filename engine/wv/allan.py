@@ -2,7 +2,8 @@
 
 With ``m`` the averaging time in samples and ``S`` the cumulative sum of the de-meaned series,
 ``AVAR(m) = sum_t (S_{t+2m} - 2 S_{t+m} + S_t)^2 / (2 m^2 (N - 2m + 1))``, which is exactly
-twice the Haar wavelet variance at scale ``tau = 2m`` (CONVENTIONS: ``nu2_j = AVAR(2^(j-1))/2``).
+twice the Haar wavelet variance at scale ``tau = 2m``
+(``docs/conventions.md``: ``nu2_j = AVAR(2^(j-1))/2``).
 The divisor counts the ``N - 2m + 1`` terms actually summed (the R ``avar`` package sums one
 term fewer than its divisor counts; that defect is not reproduced).
 """

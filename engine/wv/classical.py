@@ -3,7 +3,7 @@
 The kernel (checks, cumulative sum, block sums) is :mod:`engine.wv._kernel`; the biweight
 scale estimator of the robust WV is :mod:`engine.wv.robust`.
 
-Conventions (see ``CONVENTIONS.md``): level ``j = 1..J``, scale ``tau_j = 2^j`` samples,
+Conventions (see ``docs/conventions.md``): level ``j = 1..J``, scale ``tau_j = 2^j`` samples,
 ``M_j = N - 2^j + 1`` boundary-free coefficients,
 
     W_{j,t} = (sum of the latest 2^(j-1) samples - sum of the 2^(j-1) before them) / 2^j,

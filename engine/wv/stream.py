@@ -6,7 +6,7 @@ sum is bitwise the same up to the last digits of the mean) while holding only a 
 memory, whatever the length of the log.
 
 Approach (``S`` the cumulative sum of the de-meaned series, ``S_0 = 0``, ``m = 2^(j-1)``,
-block length ``B`` a power of two; see CONVENTIONS, "Speed techniques"):
+block length ``B`` a power of two; see ``docs/conventions.md``, "The Haar wavelet variance"):
 
 1. **Mean pass.** One pass over the samples: block sums combined with ``math.fsum``, and a
    NaN/Inf check.

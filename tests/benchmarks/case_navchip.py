@@ -12,7 +12,7 @@ Manufacturer's values (Intersense NavChip product brief, the paper's ref. [19]; 
 are those the SMAC group's own GUI uses for this sensor, ``SMAC-Group/gui4gmwm``,
 ``gui4gmwm/app.R``): gyroscope angle random walk 0.003 (deg/s)/sqrt(Hz) (= 0.18
 deg/sqrt(h)) and in-run bias instability 10 deg/h. The datasheet model is white noise
-plus the bias-instability floor of the Allan variance, ``(0.664 B)^2`` (CONVENTIONS.md;
+plus the bias-instability floor of the Allan variance, ``(0.664 B)^2`` (docs/conventions.md;
 ``engine.units.BI_FACTOR = sqrt(2 ln 2 / pi) = 0.6643``), i.e. ``(0.664 B)^2 / 2`` in wavelet
 variance (``nu2_j = AVAR(tau_j / 2) / 2``): ``engine.check_datasheet`` draws it and gives the
 per-scale verdicts (inside, above or below the empirical 95 % interval).
