@@ -58,7 +58,7 @@ import numpy as np
 
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..fit._varpro import TC_FLAG
-from ..models import AR1, GM, WN, Model, ModelError, parse_model
+from ..models import WN, Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
 from .asymptotic import free_params, jacobian
 from .covariance import inverse_cov, parallel_map, wv_cov
@@ -108,9 +108,12 @@ def submodels(max_model: Model | str) -> list[Model]:
     return out
 
 
-def _correlation_time(p: AR1 | GM, fs: float) -> float:
-    """Correlation time of a fitted AR1/GM in samples (``-1 / log(phi)``)."""
-    phi = float((p if isinstance(p, AR1) else p.as_ar1(fs)).phi)
+def _correlation_time(p: Process, fs: float) -> float:
+    """Correlation time in samples (``-1 / log(phi)``) of a fitted process with a non-linear
+    parameter (AR1, GM: :meth:`~engine.models.Process.nl_value` is its ``phi`` at ``fs``)."""
+    phi = p.nl_value(fs)
+    if phi is None:
+        raise ValueError(f"{p.code} has no correlation time")
     return -1.0 / math.log(phi) if 0.0 < phi < 1.0 else (math.inf if phi >= 1.0 else 0.0)
 
 
@@ -136,7 +139,7 @@ def wn_twin(fitted: Model, fs: float) -> tuple[Model, list[str]]:
     """
     keep, labels, to_wn = [], [], False
     for lab, q in zip(fitted.labels, fitted.processes, strict=True):
-        if isinstance(q, (AR1, GM)) and q.is_set:
+        if q.nonlinear is not None and q.is_set:  # an AR1/GM: it has a correlation time
             tc = _correlation_time(q, fs)
             if tc < TC_FLAG:
                 labels.append(f"{lab} ({tc:.2g} samples)")
@@ -145,7 +148,7 @@ def wn_twin(fitted: Model, fs: float) -> tuple[Model, list[str]]:
         keep.append(q.cleared())
     if not labels:
         return fitted.cleared(), []
-    if to_wn and not any(isinstance(q, WN) for q in keep):
+    if to_wn and not any(q.code == WN.code for q in keep):
         keep.append(WN())
     return Model(tuple(keep)), labels
 
