@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -76,7 +76,15 @@ def _log2_levels(n: int, least: int, m: int) -> int:
     return int(m).bit_length() - 1
 
 
-def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
+class LevelGrid(TypedDict):
+    """The per-level axes of :func:`level_grid` (keyword arguments of the results)."""
+
+    levels: np.ndarray
+    tau_samples: np.ndarray
+    n_coef: np.ndarray
+
+
+def level_grid(n: int, levels: int) -> LevelGrid:
     """The per-level axes of a result of ``levels`` levels over ``n`` samples.
 
     Returns
@@ -87,7 +95,7 @@ def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
     """
     lv = np.arange(1, levels + 1)
     tau = 2**lv
-    return {"levels": lv, "tau_samples": tau, "n_coef": np.maximum(n - tau + 1, 0)}
+    return LevelGrid(levels=lv, tau_samples=tau, n_coef=np.maximum(n - tau + 1, 0))
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
