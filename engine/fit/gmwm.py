@@ -250,8 +250,9 @@ def fit_gmwm(
         # starting values from the user's model, if any
         extra = []
         given = [m.processes[i].nl_value(wv.fs) for i in prob.nl_idx]
-        if all(v is not None and 0 < v < 1 for v in given):
-            tcs = sorted((-1.0 / math.log(v) for v in given), reverse=True)
+        usable = [v for v in given if v is not None and 0 < v < 1]
+        if len(usable) == len(given):
+            tcs = sorted((-1.0 / math.log(v) for v in usable), reverse=True)
             extra.append(tuple(math.log(t) for t in tcs))
         _, u, converged = search(prob, extra, keep=3)
         method, msg = "grid+nelder-mead", search_message(converged)

@@ -216,6 +216,7 @@ class FitResult:
             ParamRecord(p.code, idx, lab, name, float(v), param_unit(p.code, name, self.unit))
             for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True)
             for name, v in zip(p.param_names, p.values, strict=True)
+            if v is not None  # a fitted model: every value is set
         ]
 
     @property
