@@ -12,6 +12,7 @@ same methods: ``conf_int(alpha)`` (a labelled :class:`ParamTable`), ``summary()`
 from __future__ import annotations
 
 import html
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -209,7 +210,7 @@ class FitResult:
 
     # shared
     @property
-    def param_records(self) -> list[ParamRecord]:
+    def param_records(self) -> Sequence[ParamRecord]:
         """Parameters with process code, index among its kind, label, name, value and unit."""
         m = self.model
         return [

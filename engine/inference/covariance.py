@@ -37,7 +37,17 @@ __all__ = [
 ]
 
 
-class VOptions(TypedDict, total=False):
+class _ReplicateOptions(TypedDict, total=False):
+    """The :class:`VOptions` other than ``v`` (what :func:`wv_cov` takes besides ``v``)."""
+
+    x: Any
+    B: int
+    seed: int | None
+    workers: int
+    executor: Executor | None
+
+
+class VOptions(_ReplicateOptions, total=False):
     """How V, the covariance of the WV, and the parametric-bootstrap replicates are computed:
     the keywords that :func:`wv_cov`, :func:`fit_efficient`, :func:`param_intervals` and
     :func:`j_test` share (one list, one set of defaults: :data:`V_DEFAULTS`).
@@ -61,11 +71,6 @@ class VOptions(TypedDict, total=False):
     """
 
     v: str | np.ndarray
-    x: Any
-    B: int
-    seed: int | None
-    workers: int
-    executor: Executor | None
 
 
 #: The defaults of :class:`VOptions`.
@@ -194,7 +199,7 @@ def fit_efficient(
 
 
 def wv_cov(
-    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[VOptions]
+    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[_ReplicateOptions]
 ) -> np.ndarray:
     """The covariance V of a fit's WV, by name.
 

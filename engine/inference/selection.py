@@ -110,7 +110,9 @@ def submodels(max_model: Model | str) -> list[Model]:
 
 def _correlation_time(p: AR1 | GM, fs: float) -> float:
     """Correlation time of a fitted AR1/GM in samples (``-1 / log(phi)``)."""
-    phi = float((p if isinstance(p, AR1) else p.as_ar1(fs)).phi)
+    phi = p.nl_value(fs)  # AR1: phi; GM: exp(-beta / fs), the phi of its AR1 form
+    if phi is None:
+        raise ValueError(f"{p.code} has no value for {p.nonlinear}: the model is not fitted")
     return -1.0 / math.log(phi) if 0.0 < phi < 1.0 else (math.inf if phi >= 1.0 else 0.0)
 
 
@@ -274,7 +276,7 @@ def _boot_pair(args: tuple) -> tuple[np.ndarray, list[np.ndarray | None]]:
     model, specs, n, fs, levels, weights, seed = args
     x = model.simulate(n, fs=fs, rng=np.random.default_rng(seed))
     wv = wavelet_variance(x, fs=fs, levels=levels)
-    fits = []
+    fits: list[np.ndarray | None] = []
     for spec in specs:
         try:
             fits.append(fit_gmwm(wv, spec, weights=weights).implied)
@@ -414,7 +416,7 @@ def rank_models(
         ]
         pairs = parallel_map(_boot_pair, items, workers, executor=executor)
         nus = np.array([p[0] for p in pairs])
-        for k, r in enumerate(ok):
+        for k, fit_k in enumerate(ok):
             rows = [
                 (nu, f[k])
                 for nu, f in zip(nus, (p[1] for p in pairs), strict=True)
@@ -423,14 +425,18 @@ def rank_models(
             a = np.array([x for x, _ in rows])
             b = np.array([y for _, y in rows])
             c = (a - a.mean(0)).T @ (b - b.mean(0)) / (len(rows) - 1)
-            boot_opt[r.model.spec()] = float(2.0 * np.trace(r.omega @ c))
+            boot_opt[fit_k.model.spec()] = float(2.0 * np.trace(fit_k.omega @ c))
     elif optimism != "asymptotic":
         raise ValueError(f"unknown optimism {optimism!r}: use 'asymptotic' or 'bootstrap'")
 
     cands: list[Candidate] = []
     for i, (m, r, err) in enumerate(fitted):
         tw, labels = twins.get(m.spec(), ("", ()))
-        extra_fields = {"sub_sample": labels, "twin": tw, "added": m.spec() in added}
+        extra_fields: dict[str, Any] = {
+            "sub_sample": labels,
+            "twin": tw,
+            "added": m.spec() in added,
+        }
         if r is None:
             cands.append(
                 Candidate(
