@@ -326,6 +326,15 @@ def rank_models(
         cost more than it saves).
     progress : callable, optional
         Called as ``progress(done, total)`` after each candidate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = eg.parse_model("WN(1e-2) + RW(1e-6)").simulate(2**14, rng=np.random.default_rng(1))
+    >>> ranking = eg.rank_models(eg.wavelet_variance(x, fs=100.0), ["WN", "WN + RW"])
+    >>> ranking.best.model
+    'WN+RW'
     """
     from scipy import stats
 

@@ -658,6 +658,15 @@ class Model:
 
         ``n`` must be an integer from 1 to the memory-aware limit of
         :func:`engine._limits.check_sample_count` (a ValueError names the argument ``n``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> import engine as eg
+        >>> m = eg.parse_model("WN(1e-2) + RW(1e-6)")
+        >>> x = m.simulate(2**12, rng=np.random.default_rng(1))
+        >>> x.shape, round(float(np.var(np.diff(x))), 3)  # 2 sigma2 + gamma2
+        ((4096,), 0.02)
         """
         n = check_sample_count(n)
         missing = [name for name, v in self.values().items() if v is None]
@@ -731,6 +740,15 @@ def parse_model(spec: str | Model | Process) -> Model:
     ------
     ModelError
         With the offending term and what is accepted.
+
+    Examples
+    --------
+    >>> import engine as eg
+    >>> m = eg.parse_model("WN + RW + 2*GM")
+    >>> m.labels
+    ['GM_1', 'GM_2', 'WN', 'RW']
+    >>> eg.parse_model("WN(1e-2) + RW(1e-6)").values()
+    {'WN.sigma2': 0.01, 'RW.gamma2': 1e-06}
     """
     if isinstance(spec, Model):
         return spec
