@@ -7,9 +7,12 @@ import dataclasses
 import math
 import re
 from collections.abc import Iterable, Sequence
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 __all__ = [
     "json_ready",
@@ -74,18 +77,29 @@ class FieldsDict:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary: every field by name."""
-        return dataclasses.asdict(self)  # type: ignore[call-overload]
+        # the mixin's classes are dataclasses, which the type of ``self`` cannot say
+        return dataclasses.asdict(cast("DataclassInstance", self))
+
+
+def _placement(spec: str) -> str:
+    """The alignment and width that open a format spec (``">12"`` of ``">12.4e"``)."""
+    m = re.match(r"[<>^]?\d*", spec)
+    return m.group() if m else ""
+
+
+#: One column of :func:`columns_table`: (heading, format spec, one value per row).
+Column = tuple[str, str, "Sequence[Any] | np.ndarray"]
 
 
 def interval_columns(
-    alpha: float, low: Sequence[float], high: Sequence[float]
-) -> list[tuple[str, str, Sequence[float]]]:
+    alpha: float, low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray
+) -> list[Column]:
     """The two :func:`columns_table` columns of a ``1 - alpha`` interval, e.g. ``95% low``."""
     ci = f"{100 * (1 - alpha):g}%"
     return [(ci + " low", ">12.4e", low), (ci + " high", ">12.4e", high)]
 
 
-def columns_table(title: str, columns: Sequence[tuple[str, str, Sequence[Any]]]) -> str:
+def columns_table(title: str, columns: Sequence[Column]) -> str:
     """A plain-text table: a title line, a header line and one line per row.
 
     Parameters
@@ -97,7 +111,7 @@ def columns_table(title: str, columns: Sequence[tuple[str, str, Sequence[Any]]])
         width also place the heading; every ``values`` has one entry per row. Columns are
         separated by one space.
     """
-    head = " ".join(format(h, re.match(r"[<>^]?\d*", spec).group()) for h, spec, _ in columns)
+    head = " ".join(format(h, _placement(spec)) for h, spec, _ in columns)
     rows = zip(*(v for _, _, v in columns), strict=True)
     body = [" ".join(format(v, c[1]) for v, c in zip(row, columns, strict=True)) for row in rows]
     return "\n".join([title, head, *body])

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import operator
 import os
+from typing import SupportsIndex
 
 __all__ = [
     "BYTES_PER_SAMPLE",
@@ -101,10 +102,10 @@ def check_sample_count(n: object, *, name: str = "n", channels: int = 1, copies:
         than :data:`MEMORY_FRACTION` of the available memory; the message gives the largest
         accepted count.
     """
-    if isinstance(n, bool):
+    if isinstance(n, bool) or not isinstance(n, SupportsIndex):
         raise ValueError(f"{name} must be a whole number of samples, got {n!r}")
     try:
-        k = operator.index(n)  # type: ignore[arg-type]
+        k = operator.index(n)
     except TypeError:
         raise ValueError(f"{name} must be a whole number of samples, got {n!r}") from None
     if k < 1:

@@ -224,6 +224,8 @@ def _fit_channel(wv: Any, model: str | None, select: str | None, weights: str) -
         if best.result is None:  # pragma: no cover - rank_models raises when nothing fits
             raise FitError(f"no sub-model of {select} could be fitted: {best.error}")
         return best.result
+    if model is None:
+        raise ModelError("give a model to fit (model=) or a maximal model to select from (select=)")
     if weights == "efficient":
         from .inference import fit_efficient
 

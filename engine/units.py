@@ -59,6 +59,7 @@ import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -366,13 +367,18 @@ def _map_iv(iv: tuple[float, float] | None, fn: Callable[[float], float]) -> tup
     return (min(a, b), max(a, b))
 
 
+def _forward_at(q: Quantity, name: str, params: Mapping[str, float], fs: float, x: float) -> float:
+    """``q`` of ``params`` with the parameter ``name`` set to ``x`` (an interval's end)."""
+    return float(q.forward({**params, name: x}, fs))
+
+
 def _abs_iv(iv: tuple[float, float] | None) -> tuple[float, float] | None:
     if iv is None:
         return None
     lo, hi = iv
     if lo <= 0 <= hi:
         return 0.0, max(abs(lo), abs(hi))
-    return tuple(sorted((abs(lo), abs(hi))))  # type: ignore[return-value]
+    return min(abs(lo), abs(hi)), max(abs(lo), abs(hi))
 
 
 def datasheet_rows(
@@ -487,9 +493,7 @@ def datasheet_rows(
                 piv = divs.get(q.param)
                 if q.magnitude:
                     piv = _abs_iv(piv)
-                iv = _map_iv(
-                    piv, lambda x, q=q, gm=params: float(q.forward({**gm, q.param: x}, fs))
-                )
+                iv = _map_iv(piv, partial(_forward_at, q, q.param, params, fs))
             if q.magnitude:
                 value = abs(value)
             note = "q = 2 beta sigma2_gm" if q.symbol == "q" else ""

@@ -47,8 +47,8 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-def positive(kind: type, name: str):
-    def conv(text: str):
+def positive(kind: type[int] | type[float], name: str) -> Callable[[str], float]:
+    def conv(text: str) -> float:
         try:
             v = kind(text)
         except ValueError:

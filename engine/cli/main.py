@@ -32,7 +32,7 @@ import os
 import sys
 import warnings
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from .._jsonutil import json_ready
 from .._limits import check_sample_count
@@ -61,7 +61,7 @@ _MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report")
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)
+    def error(self, message: str) -> NoReturn:  # one line, exit 2 (argparse's own convention)
         raise CliError(f"{self.prog}: {message}")
 
 
@@ -343,7 +343,7 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}{also}"
 
 
-def _one_line(e: BaseException) -> str:
+def _one_line(e: BaseException | str) -> str:
     return " ".join(str(e).split())
 
 

@@ -96,17 +96,17 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         )
     model = MultiModel(names, args.model, shared=shared or ())
     wvm = wv_matrix(log, channels=names, levels=args.levels)
-    res = fit_mgmwm(wvm, model, weights=args.weights)
+    mres = fit_mgmwm(wvm, model, weights=args.weights)
     test = None
     if getattr(args, "dependence_test", False):
         test = dependence_test(wvm, model, **bootstrap_kwargs(args))
     if args.json:
-        d = res.to_dict()
+        d = mres.to_dict()
         d["input"] = args.input
         if test is not None:
             d["dependence_test"] = test.to_dict()
         return json_ready(d)
-    text = f"{args.input} [{', '.join(names)}]\n{res.summary()}"
+    text = f"{args.input} [{', '.join(names)}]\n{mres.summary()}"
     if test is not None:
         text += f"\n\n  {test.summary()}"
     return text

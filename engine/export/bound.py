@@ -106,7 +106,9 @@ def columns(consumer: str, tau: np.ndarray, fs: float, tc: float | None) -> np.n
     if consumer == "WN+RW":
         cols.append((tau**2 + 2.0) / (12.0 * tau))
     elif consumer == "WN+GM":
-        phi = math.exp(-1.0 / (fs * float(tc)))
+        if tc is None:
+            raise ValueError("columns: the WN+GM consumer needs tc, its correlation time [s]")
+        phi = math.exp(-1.0 / (fs * tc))
         cols.append(ar1_wv(tau, phi, 1.0 - phi * phi))
     return np.column_stack(cols)
 
@@ -230,13 +232,12 @@ def solve(
     out["target_at"] = target_at
     out["target"] = target
     if not bound:
-        x = [plain["sigma2"]]
-        tc = plain.get("T_c")
+        given = [plain["sigma2"]]
         if consumer == "WN+RW":
-            x.append(plain["gamma2"])
+            given.append(plain["gamma2"])
         elif consumer == "WN+GM":
-            x.append(plain["sb2"])
-        out["x"], out["T_c"] = np.array(x), tc
+            given.append(plain["sb2"])
+        out["x"], out["T_c"] = np.array(given), plain.get("T_c")
         return out
     fine = fine_scales(tau)
     ft = target_at(fine)

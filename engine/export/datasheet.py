@@ -74,7 +74,7 @@ def datasheet_table(
     rows: list[DatasheetRow] = []
     for ch, res in fits.items():
         unit = (units or {}).get(ch, res.wv.unit) or ""
-        ivs = _intervals_map((intervals or {}).get(ch))  # type: ignore[union-attr]
+        ivs = _intervals_map((intervals or {}).get(ch))
         rows += datasheet_rows(
             res.model,
             res.fs,

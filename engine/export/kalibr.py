@@ -169,7 +169,7 @@ def kalibr_imu(
         unit = (units or {}).get(ch, res.wv.unit) or ""
         kind, f_si = si_factor(unit, ch)
         axis = channel_axis(ch)
-        vals = res.model.values()
+        vals = res.params  # by unique name, every value set
         labels = res.model.labels
         procs = res.model.processes
         wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == WN.code]
@@ -332,8 +332,8 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
             raise ExportError(f"Kalibr file '{source}' is not UTF-8 text") from None
     out: dict[str, Any] = {}
     block, block_indent, used_block = "", 0, ""
-    for i, raw in enumerate(text.splitlines(), start=1):
-        line = _strip_comment(raw).rstrip()
+    for i, src in enumerate(text.splitlines(), start=1):
+        line = _strip_comment(src).rstrip()
         if not line.strip() or line.strip() == "---" or line.startswith("%"):
             continue
         if line[0] in " \t-":

@@ -252,7 +252,7 @@ def _fit_noise(
         d = vals.setdefault(kind, {})
         labels, procs = res.model.labels, res.model.processes
         wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == WN.code][0]
-        d.setdefault("sigma2", {})[ax] = res.model.values()[f"{wn}.sigma2"] * f_si**2 * f * f
+        d.setdefault("sigma2", {})[ax] = res.params[f"{wn}.sigma2"] * f_si**2 * f * f
         d.setdefault("B", {})[ax] = (
             _row(rows, "model", "bias instability (Allan floor, SI)", "B") * f
         )

@@ -179,7 +179,7 @@ class NNLSProblem:
             if pr.nonlinear is None:
                 self.x_fixed[:, i] = pr.basis(self.tau, self.fs)
         # basis = basis_scale(phi) x (AR1 WV per unit innovation): 1 for AR1, 1 - phi^2 for GM
-        self.scale_of = [pr.basis_scale if pr.nonlinear else None for pr in model.processes]
+        self.scale_of = {i: pr.basis_scale for i, pr in enumerate(model.processes) if pr.nonlinear}
         self.n_eval = 0
         self._passive: np.ndarray | None = None
 
@@ -205,7 +205,7 @@ class NNLSProblem:
         tc = math.exp(min(max(u, self.lo), self.hi))
         return math.exp(-1.0 / tc)
 
-    def phis_of(self, u: np.ndarray) -> tuple[float, ...]:
+    def phis_of(self, u: np.ndarray | Sequence[float]) -> tuple[float, ...]:
         """phi of every AR1/GM term from the search coordinates."""
         return tuple(self.phi_of(i, float(ui)) for i, ui in zip(self.nl_idx, u, strict=True))
 
@@ -215,7 +215,7 @@ class NNLSProblem:
         for i, phi in zip(self.nl_idx, phis, strict=True):
             if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
                 col = ar1_wv_pos(self.tau, phi)
-                scale = self.scale_of[i](phi)  # type: ignore[misc]
+                scale = self.scale_of[i](phi)
                 x[:, i] = col if scale == 1.0 else col * scale
             else:
                 x[:, i] = self.model.processes[i].basis(self.tau, self.fs, phi)
@@ -371,7 +371,10 @@ def search(
 # the fitted model
 # -------------------------------------------------------------------------------------------
 def _phi(q: Process, fs: float) -> float:
-    return float(q.nl_value(fs))  # type: ignore[arg-type]
+    phi = q.nl_value(fs)
+    if phi is None:
+        raise ValueError(f"{q.code} has no value for {q.nonlinear}: the model is not fitted")
+    return phi
 
 
 def persistent_first(procs: Sequence[Process], fs: float) -> Model:

@@ -97,7 +97,7 @@ class GMWFMResult(OneWVFit, FitResult):
         return MethodEstimate(
             method=self.estimator,
             model=self.model,
-            params=self.model.values(),
+            params={k: v for k, v in self.model.values().items() if v is not None},  # all set
             tau_samples=np.asarray(self.wv.tau_samples),
             implied=self.implied,
             components=self.components,

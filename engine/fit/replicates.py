@@ -189,15 +189,13 @@ def fit_replicates(
                 fr: GMWMResult = fit_gmwm(wv, m.cleared(), weights=w)
             except (FitError, ModelError):  # pragma: no cover - a degenerate replicate
                 continue
-            tcs = [
-                -1.0 / math.log(q.nl_value(fs0))
-                for q in fr.model.processes
-                if q.nonlinear and 0 < q.nl_value(fs0) < 1
-            ]
+            phis = [q.nl_value(fs0) for q in fr.model.processes if q.nonlinear]
+            tcs = [-1.0 / math.log(v) for v in phis if v is not None and 0 < v < 1]
             if len(tcs) == prob.k:
                 starts.append(np.log(np.array(sorted(tcs, reverse=True))))
         if m.is_set:
-            tcs = [-1.0 / math.log(q.nl_value(fs0)) for q in m.processes if q.nonlinear]
+            phis = [q.nl_value(fs0) for q in m.processes if q.nonlinear]
+            tcs = [-1.0 / math.log(v) for v in phis if v is not None]  # m is set: none is None
             starts.append(np.log(np.array(sorted(tcs, reverse=True))))
         _, u, converged = search(prob, starts, keep=4)
         method, msg = "grid+nelder-mead", search_message(converged)

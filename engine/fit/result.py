@@ -12,6 +12,7 @@ same methods: ``conf_int(alpha)`` (a labelled :class:`ParamTable`), ``summary()`
 from __future__ import annotations
 
 import html
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -209,13 +210,14 @@ class FitResult:
 
     # shared
     @property
-    def param_records(self) -> list[ParamRecord]:
+    def param_records(self) -> Sequence[ParamRecord]:
         """Parameters with process code, index among its kind, label, name, value and unit."""
         m = self.model
         return [
             ParamRecord(p.code, idx, lab, name, float(v), param_unit(p.code, name, self.unit))
             for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True)
             for name, v in zip(p.param_names, p.values, strict=True)
+            if v is not None  # a fitted model: every value is set
         ]
 
     @property

@@ -41,7 +41,7 @@ def starting_values(model: Model, wv: WaveletVariance) -> dict[str, float]:
     """
     tau = wv.tau_samples.astype(float)
     nl = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
-    tcs = np.geomspace(tau[-1] / 4, max(tau[0], 2.0), len(nl)) if nl else []
+    tcs = np.geomspace(tau[-1] / 4, max(tau[0], 2.0), len(nl)) if nl else np.zeros(0)
     out: dict[str, float] = {}
     for k, i in enumerate(nl):
         lab, p = model.labels[i], model.processes[i]

@@ -37,7 +37,17 @@ __all__ = [
 ]
 
 
-class VOptions(TypedDict, total=False):
+class _ReplicateOptions(TypedDict, total=False):
+    """The :class:`VOptions` other than ``v`` (what :func:`wv_cov` takes besides ``v``)."""
+
+    x: Any
+    B: int
+    seed: int | None
+    workers: int
+    executor: Executor | None
+
+
+class VOptions(_ReplicateOptions, total=False):
     """How V, the covariance of the WV, and the parametric-bootstrap replicates are computed:
     the keywords that :func:`wv_cov`, :func:`fit_efficient`, :func:`param_intervals` and
     :func:`j_test` share (one list, one set of defaults: :data:`V_DEFAULTS`).
@@ -61,11 +71,6 @@ class VOptions(TypedDict, total=False):
     """
 
     v: str | np.ndarray
-    x: Any
-    B: int
-    seed: int | None
-    workers: int
-    executor: Executor | None
 
 
 #: The defaults of :class:`VOptions`.
@@ -185,6 +190,15 @@ def fit_efficient(
         How V is estimated (:class:`VOptions`: ``v``, ``x``, ``B``, ``seed``, ``workers``,
         ``executor``): by default from the first-step fit (``v="model"``, analytic Gaussian);
         ``"bootstrap"`` (parametric), ``"data"`` (needs ``x``; diagonal) or a given matrix.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = eg.parse_model("WN(1e-2) + RW(1e-6)").simulate(2**14, rng=np.random.default_rng(1))
+    >>> res = eg.fit_efficient(eg.wavelet_variance(x, fs=100.0), "WN + RW")
+    >>> res.weights, {k: f"{v:.2e}" for k, v in res.params.items()}
+    ('efficient', {'WN.sigma2': '9.91e-03', 'RW.gamma2': '6.78e-07'})
     """
     first = fit_gmwm(wv, model)
     vmat = wv_cov(first, **v_options(options))
@@ -194,7 +208,7 @@ def fit_efficient(
 
 
 def wv_cov(
-    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[VOptions]
+    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[_ReplicateOptions]
 ) -> np.ndarray:
     """The covariance V of a fit's WV, by name.
 

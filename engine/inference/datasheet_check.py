@@ -37,7 +37,7 @@ import json
 import math
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -243,7 +243,7 @@ class DatasheetSpec:
         vals = self.in_unit(unit)
         cls = {"N": WN, "K": RW, "Q": QN}
         procs = [cls[s].from_datasheet({s: vals[s]}, fs) for s in ("Q", "N", "K") if s in vals]
-        return Model(procs) if procs else None
+        return Model(tuple(procs)) if procs else None
 
     def floor_wv(self, unit: str) -> float:
         """The WV of the bias-instability floor, ``(BI_FACTOR B)^2 / 2`` [unit^2] (0 without B)."""
@@ -330,7 +330,7 @@ def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec
 
 
 # --------------------------------------------------------------------------- files
-def _from_rows(rows: list[Mapping[str, Any]], kind: str | None, where: str) -> DatasheetSpec:
+def _from_rows(rows: Sequence[Mapping[str, Any]], kind: str | None, where: str) -> DatasheetSpec:
     """First row per symbol N/K/Q/B whose unit is a unit of that symbol."""
     vals: dict[str, float] = {}
     given: dict[str, str] = {}
@@ -362,7 +362,9 @@ def _pick(names: list[str], channel: str | None, where: str) -> str:
     return names[0]
 
 
-def _from_kalibr(d: Mapping[str, Any], kind: str | None, channel: str | None, where: str):
+def _from_kalibr(
+    d: Mapping[str, Any], kind: str | None, channel: str | None, where: str
+) -> DatasheetSpec:
     from ..export.common import channel_axis
 
     kinds = [k for k in _SI_UNIT if f"{k}_noise_density" in d or f"{k}_random_walk" in d]
@@ -442,7 +444,7 @@ def read_datasheet(
             vals = d.get("values")
             if not isinstance(vals, Mapping):
                 raise DatasheetError(f"{where}: key 'values' missing or not an object")
-            rows = []
+            rows: list[dict[str, Any]] = []
             for s, vu in vals.items():
                 if not isinstance(vu, list) or len(vu) != 2:
                     raise DatasheetError(f"{where}: values.{s} is not [value, unit]")
@@ -453,10 +455,10 @@ def read_datasheet(
             if not isinstance(chans, Mapping) or not chans:
                 raise DatasheetError(f"{where}: key 'channels' missing or empty")
             ch = _pick(list(chans), channel, where)
-            rows = chans[ch].get("datasheet") if isinstance(chans[ch], Mapping) else None
-            if not isinstance(rows, list):
+            stored = chans[ch].get("datasheet") if isinstance(chans[ch], Mapping) else None
+            if not isinstance(stored, list):
                 raise DatasheetError(f"{where}: channels.{ch}.datasheet missing")
-            return _from_rows(rows, kind, f"{where} [{ch}]")
+            return _from_rows(stored, kind, f"{where} [{ch}]")
         raise DatasheetError(
             f"{where}: unknown JSON (schema {d.get('schema')!r}); expected a gmwm report "
             "(gmwm-report/1) or a datasheet (gmwm-datasheet/1)"

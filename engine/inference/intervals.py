@@ -84,6 +84,17 @@ def param_intervals(
         method; ``B`` and ``seed``, the bootstrap's replicates (the bootstrap method, or
         ``v="bootstrap"``) and base seed; ``workers`` or ``executor``, where the replicates
         run (the intervals do not depend on them).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = eg.parse_model("WN(1e-2) + RW(1e-6)").simulate(2**12, rng=np.random.default_rng(1))
+    >>> res = eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0), "WN + RW")
+    >>> for p in eg.param_intervals(res):
+    ...     print(f"{p.name}: {p.low:.2e} <= {p.value:.2e} <= {p.high:.2e} {p.unit}")
+    WN.sigma2: 9.62e-03 <= 1.00e-02 <= 1.05e-02 u^2
+    RW.gamma2: 4.56e-07 <= 1.27e-06 <= 3.53e-06 u^2
     """
     o = v_options(options)
     if not 0 < level < 1:

@@ -175,6 +175,16 @@ def j_test(res: GMWMResult, *, method: str = "asymptotic", **options: Unpack[VOp
         Too few levels for the model's parameters.
     ValueError
         An unknown ``method``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = eg.parse_model("WN(1e-2) + RW(1e-6)").simulate(2**14, rng=np.random.default_rng(1))
+    >>> res = eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0), "WN + RW")
+    >>> jt = eg.j_test(res)
+    >>> jt.df, round(jt.statistic, 2), round(jt.p_value, 2)  # the right model: no rejection
+    (9, 9.89, 0.36)
     """
     o = v_options(options, B=200)
     if method not in ("asymptotic", "bootstrap"):

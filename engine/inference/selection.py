@@ -277,7 +277,7 @@ def _boot_pair(args: tuple) -> tuple[np.ndarray, list[np.ndarray | None]]:
     model, specs, n, fs, levels, weights, seed = args
     x = model.simulate(n, fs=fs, rng=np.random.default_rng(seed))
     wv = wavelet_variance(x, fs=fs, levels=levels)
-    fits = []
+    fits: list[np.ndarray | None] = []
     for spec in specs:
         try:
             fits.append(fit_gmwm(wv, spec, weights=weights).implied)
@@ -327,6 +327,15 @@ def rank_models(
         cost more than it saves).
     progress : callable, optional
         Called as ``progress(done, total)`` after each candidate.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = eg.parse_model("WN(1e-2) + RW(1e-6)").simulate(2**14, rng=np.random.default_rng(1))
+    >>> ranking = eg.rank_models(eg.wavelet_variance(x, fs=100.0), ["WN", "WN + RW"])
+    >>> ranking.best.model
+    'WN+RW'
     """
     from scipy import stats
 
@@ -417,7 +426,7 @@ def rank_models(
         ]
         pairs = parallel_map(_boot_pair, items, workers, executor=executor)
         nus = np.array([p[0] for p in pairs])
-        for k, r in enumerate(ok):
+        for k, fit_k in enumerate(ok):
             rows = [
                 (nu, f[k])
                 for nu, f in zip(nus, (p[1] for p in pairs), strict=True)
@@ -426,14 +435,18 @@ def rank_models(
             a = np.array([x for x, _ in rows])
             b = np.array([y for _, y in rows])
             c = (a - a.mean(0)).T @ (b - b.mean(0)) / (len(rows) - 1)
-            boot_opt[r.model.spec()] = float(2.0 * np.trace(r.omega @ c))
+            boot_opt[fit_k.model.spec()] = float(2.0 * np.trace(fit_k.omega @ c))
     elif optimism != "asymptotic":
         raise ValueError(f"unknown optimism {optimism!r}: use 'asymptotic' or 'bootstrap'")
 
     cands: list[Candidate] = []
     for i, (m, r, err) in enumerate(fitted):
         tw, labels = twins.get(m.spec(), ("", ()))
-        extra_fields = {"sub_sample": labels, "twin": tw, "added": m.spec() in added}
+        extra_fields: dict[str, Any] = {
+            "sub_sample": labels,
+            "twin": tw,
+            "added": m.spec() in added,
+        }
         if r is None:
             cands.append(
                 Candidate(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -81,7 +82,7 @@ def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) 
                 for j in range(obj.shape[1 - int(rows_first)]):
                     found[f"{name}[{j}]"] = (
                         obj.shape[int(rows_first)],
-                        (lambda j=j: obj[j, :]) if rows_first else (lambda j=j: obj[:, j]),
+                        partial(obj.__getitem__, np.s_[j, :] if rows_first else np.s_[:, j]),
                         obj,
                     )
                     units[f"{name}[{j}]"] = unit or units.get(f"{name}[{j}]", "")

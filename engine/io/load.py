@@ -119,6 +119,13 @@ def load_log(
         empty/binary/malformed file, non-numbers, ragged rows, NaN/Inf samples,
         fewer than 4 samples, unknown channel, invalid ``fs`` or ``scale``, a time column
         with gaps under ``segment="stop"``.
+
+    Examples
+    --------
+    >>> import engine as eg
+    >>> log = eg.load_log(eg.demo_path())
+    >>> log.fs, log.n, list(log.channels)[:3]
+    (100.0, 200000, ['gyro_x', 'gyro_y', 'gyro_z'])
     """
     if isinstance(path, (bytes, bytearray, memoryview)) or hasattr(path, "read"):
         return _load_content(path, name, channel, fs, segment, scale, units, topic)

@@ -175,12 +175,13 @@ def read_npz(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions)
                 except ValueError:
                     raw.notes.append(f"key '{key}' holds Python objects and was skipped")
                     continue
+                divisor = time_divisor(key)
                 if key.lower() in ("fs", "fs_hz", "sample_rate") and a.size == 1:
                     raw.fs_file = (a.item(), f"key '{key}'")
                 elif key == "units" and a.dtype.kind in "US" and a.size == 1:
                     raw.units = units_map(str(a.item()), src, raw.notes)
-                elif a.dtype.kind in "iufb" and a.ndim == 1 and time_divisor(key) is not None:
-                    raw.time = raw.time or (key, a, time_divisor(key))
+                elif a.dtype.kind in "iufb" and a.ndim == 1 and divisor is not None:
+                    raw.time = raw.time or (key, a, divisor)
                 elif a.dtype.kind in "iufb" and a.ndim in (1, 2) and a.size > 1:
                     raw.cols.update(_columns(key, a, raw.notes))
                 elif a.ndim == 0:

@@ -464,8 +464,8 @@ def write_imu_bag(
         plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}.get(storage)
         if plugin is None:
             raise ValueError(f"storage must be 'sqlite3' or 'mcap', got {storage!r}")
-        with Writer2(p, version=9, storage_plugin=plugin) as w:
-            conn = w.add_connection(topic, mtype, typestore=ts)
+        with Writer2(p, version=9, storage_plugin=plugin) as w2:
+            conn = w2.add_connection(topic, mtype, typestore=ts)
             for i in range(len(st)):
-                w.write(conn, int(rt[i]), ts.serialize_cdr(message(i), mtype))
+                w2.write(conn, int(rt[i]), ts.serialize_cdr(message(i), mtype))
     return p

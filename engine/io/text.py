@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import itertools
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -92,7 +92,7 @@ def _blocks(raw: bytes) -> Iterator[bytes]:
         start = end
 
 
-def _content_lines(raw: bytes, encoding: str) -> Iterator[tuple[int, str]]:
+def _content_lines(raw: bytes, encoding: str) -> Generator[tuple[int, str], None, None]:
     """(1-based line number, content) of the lines that hold something besides a ``#``
     comment and blanks, decoded a block at a time."""
     lineno = 0
@@ -287,8 +287,8 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
             "near-constant step); pass fs= to set the rate explicitly"
         )
     meta = {"delimiter": {None: "whitespace", "\t": "tab"}.get(delim, delim), "header": header}
-    raw = RawLog(cols, units, time=time, rows=rows, meta=meta, notes=notes)
-    return finish_log(src, raw, fmt="text", channel=channel, opts=opts)
+    parsed = RawLog(cols, units, time=time, rows=rows, meta=meta, notes=notes)
+    return finish_log(src, parsed, fmt="text", channel=channel, opts=opts)
 
 
 def _looks_like_time(a: np.ndarray, strict_only: bool = False) -> bool:

@@ -17,7 +17,7 @@ import math
 import re
 from collections import Counter
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -138,6 +138,11 @@ class Process:
     #: May the fitter set phi to 0 (an AR1 then is white); a GM's phi = exp(-beta/fs) may not.
     phi_can_vanish: ClassVar[bool] = False
 
+    if TYPE_CHECKING:
+        # the constructor of a concrete process: the dataclass generates it from the fields,
+        # which are its parameters (positional in ``param_names`` order, or named)
+        def __init__(self, *values: float | None, **named: float | None) -> None: ...
+
     def __init_subclass__(
         cls,
         *,
@@ -212,13 +217,14 @@ class Process:
         return type(self)()
 
     def _require(self) -> tuple[float, ...]:
-        if not self.is_set:
-            missing = [n for n, v in zip(self.param_names, self.values, strict=True) if v is None]
+        vals = self.values
+        missing = [n for n, v in zip(self.param_names, vals, strict=True) if v is None]
+        if missing:
             raise ValueError(
                 f"{self.code} has no value for {', '.join(missing)}; "
                 f"give it, e.g. {self.code}({missing[0]}=...)"
             )
-        return tuple(float(v) for v in self.values)  # type: ignore[arg-type]
+        return tuple(float(v) for v in vals if v is not None)
 
     def __post_init__(self) -> None:
         for name, v in zip(self.param_names, self.values, strict=True):
@@ -264,7 +270,7 @@ class Process:
     def linear_coef(self) -> float:
         """The linear coefficient ``h`` of the current values (``basis * h`` is the WV): by
         default the last parameter (the variance-like one)."""
-        return float(self.values[-1])  # type: ignore[arg-type]
+        return self._require()[-1]
 
     def from_fit(self, h: float, nl: float | None, fs: float) -> Process:
         """Process with values from a linear coefficient and a non-linear value: by default
@@ -652,6 +658,15 @@ class Model:
 
         ``n`` must be an integer from 1 to the memory-aware limit of
         :func:`engine._limits.check_sample_count` (a ValueError names the argument ``n``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> import engine as eg
+        >>> m = eg.parse_model("WN(1e-2) + RW(1e-6)")
+        >>> x = m.simulate(2**12, rng=np.random.default_rng(1))
+        >>> x.shape, round(float(np.var(np.diff(x))), 3)  # 2 sigma2 + gamma2
+        ((4096,), 0.02)
         """
         n = check_sample_count(n)
         missing = [name for name, v in self.values().items() if v is None]
@@ -686,7 +701,9 @@ _ALIASES = {
 
 
 def _split_top(spec: str) -> list[str]:
-    parts, depth, cur = [], 0, []
+    parts: list[str] = []
+    cur: list[str] = []
+    depth = 0
     for ch in spec:
         if ch == "(":
             depth += 1
@@ -723,6 +740,15 @@ def parse_model(spec: str | Model | Process) -> Model:
     ------
     ModelError
         With the offending term and what is accepted.
+
+    Examples
+    --------
+    >>> import engine as eg
+    >>> m = eg.parse_model("WN + RW + 2*GM")
+    >>> m.labels
+    ['GM_1', 'GM_2', 'WN', 'RW']
+    >>> eg.parse_model("WN(1e-2) + RW(1e-6)").values()
+    {'WN.sigma2': 0.01, 'RW.gamma2': 1e-06}
     """
     if isinstance(spec, Model):
         return spec

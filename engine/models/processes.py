@@ -390,7 +390,8 @@ class DR(Process, order=5, description="drift (rate ramp)"):
         return tau**2 / 16.0
 
     def linear_coef(self):
-        return float(self.omega) ** 2
+        (omega,) = self._require()
+        return omega**2
 
     def from_fit(self, h, nl, fs):
         return DR(math.sqrt(max(h, 0.0)))
@@ -530,8 +531,8 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
         return 1.0 - phi * phi
 
     def psd_terms(self, fs):
-        ar = self.as_ar1(fs)
-        return PsdTerms({}, (float(ar.phi), float(ar.sigma2)))
+        phi, sigma2 = self.as_ar1(fs)._require()
+        return PsdTerms({}, (phi, sigma2))
 
     def filter_terms(self, fs, fs_filter, horizon):
         beta, s2 = self._require()
@@ -540,6 +541,8 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     @classmethod
     def from_datasheet(cls, values, fs):
         t_c, sigma_gm = cls.quantities[0], cls.quantities[1]
+        if t_c.inverse is None or sigma_gm.inverse is None:  # pragma: no cover - both invert
+            raise ValueError(f"T_c and sigma_gm of {cls.code} must both be invertible")
         return GM(
             beta=t_c.inverse(values["T_c"], fs), sigma2_gm=sigma_gm.inverse(values["sigma_gm"], fs)
         )

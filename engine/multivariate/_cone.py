@@ -288,7 +288,7 @@ class ConeLSQ:
             gm = np.empty((g, g))
             for a in range(g):
                 for b in range(a, g):
-                    ci = self.col_of.get((ti, a, b), self.col_of.get((ti, b, a)))
+                    ci = self.col_of[(ti, a, b) if (ti, a, b) in self.col_of else (ti, b, a)]
                     gm[a, b] = gm[b, a] = grad[ci] if a == b else 0.5 * grad[ci]
             gs = gm * np.outer(d, d)
             sm = np.zeros((g, g))
@@ -348,7 +348,9 @@ class ConeLSQ:
             v[idx] = sm[ia, ib]
         m = float(np.sum(nn) + sum(cn[4] for cn in cones))
 
-        def barrier(v: np.ndarray, deriv: bool):
+        def barrier(
+            v: np.ndarray, deriv: bool
+        ) -> tuple[float, np.ndarray | None, np.ndarray | None]:
             """Barrier value (inf outside), and with deriv its gradient and Hessian."""
             if np.any(v[nn] <= 0):
                 return math.inf, None, None

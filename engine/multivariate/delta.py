@@ -163,7 +163,7 @@ def weight_noise(
     return m1, float(m2 / m1 * chi2_isf(m1 * m1 / m2, level)), cov_d
 
 
-def kept_share(gap: np.ndarray, excess: float, threshold: float) -> np.ndarray:
+def kept_share(gap: float | np.ndarray, excess: float, threshold: float) -> np.ndarray:
     """``lambda`` of :func:`virtual_sensor`: 0 when the in-sample improvement ``gap`` is within
     its noise (``<= max(threshold, excess)``), else ``1 - excess / gap``."""
     gap = np.asarray(gap, float)

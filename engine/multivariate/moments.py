@@ -101,11 +101,11 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     for a in range(ns):
         for b in range(ns):
             ca, cb = cmats[a], cmats[b]
-            t = np.array(
+            prod = np.array(
                 [[ca[p, r] * cb[q, s] + ca[p, s] * cb[q, r] for r, s in pairs] for p, q in pairs]
             )
-            if np.any(t != 0):
-                v += np.kron(t, integ[a, b])
+            if np.any(prod != 0):
+                v += np.kron(prod, integ[a, b])
     m_j = wvm.n_coef.astype(float)
     v /= np.tile(np.maximum.outer(m_j, m_j), (npairs, npairs))
     return 0.5 * (v + v.T)

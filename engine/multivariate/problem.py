@@ -61,11 +61,13 @@ class MProblem:
         self.pairs = [(p, q) for p in range(self.k) for q in range(p, self.k)]
         self.y = np.concatenate([wvm.values[:, p, q] for p, q in self.pairs])
         if omega is None:
-            self.sw: np.ndarray | None = np.sqrt(
-                np.concatenate([w[:, p, q] for p, q in self.pairs])
-            )
+            if w is None:
+                raise ValueError("MProblem needs weights: w (per level and pair) or omega (full)")
+            sw = np.sqrt(np.concatenate([w[:, p, q] for p, q in self.pairs]))
+            # diagonal weights (sw) or a full omega's root (a_full): exactly one is set
+            self.sw: np.ndarray | None = sw
             self.a_full: np.ndarray | None = None
-            self.b = self.sw * self.y
+            self.b = sw * self.y
         else:
             self.sw = None
             vals, vecs = np.linalg.eigh(0.5 * (omega + omega.T))
@@ -124,10 +126,14 @@ class MProblem:
         return math.log(-1.0 / math.log(phi))
 
     def bases(self, u: np.ndarray) -> list[np.ndarray]:
-        out = list(self.fixed)
-        for ti, ui in zip(self.slots, u, strict=True):
-            out[ti] = self.terms[ti].proto.basis(self.tau, self.fs, self.phi_of(ti, float(ui)))
-        return out  # type: ignore[return-value]
+        """The WV basis of every term: fixed, or at the coordinates ``u`` of the AR1/GM slots."""
+        nl = {ti: float(ui) for ti, ui in zip(self.slots, u, strict=True)}
+        return [
+            fixed
+            if fixed is not None
+            else self.terms[ti].proto.basis(self.tau, self.fs, self.phi_of(ti, nl[ti]))
+            for ti, fixed in enumerate(self.fixed)
+        ]
 
     # -- inner problem ---------------------------------------------------------------------
     def design(self, bases: list[np.ndarray]) -> np.ndarray:
@@ -135,7 +141,10 @@ class MProblem:
         x = np.zeros((self.y.size, len(self.cols)))
         for ci, (ti, _, _, pi) in enumerate(self.cols):
             x[pi * self.nj : (pi + 1) * self.nj, ci] = bases[ti]
-        return self.sw[:, None] * x if self.a_full is None else self.a_full @ x
+        if self.a_full is not None:
+            return self.a_full @ x
+        assert self.sw is not None, "diagonal weights are set when a_full is not"
+        return self.sw[:, None] * x
 
     def _assemble(self, c: np.ndarray) -> tuple[dict[int, float], dict[int, np.ndarray]]:
         h: dict[int, float] = {}
@@ -298,7 +307,7 @@ def search(
         if t.shared:
             phi = phi_of_nl(t.proto, model.shared_process(t.label).nl, fs)
         else:
-            phi = t.proto.nl_value(fs) if getattr(t.proto, t.proto.nonlinear) is not None else None
+            phi = t.proto.nl_value(fs)  # None when the value is unknown
         user.append(phi)
     if all(v is not None and 0 < v < 1 for v in user):
         starts.append(np.array([u_from(v) for v in user]))
@@ -316,7 +325,7 @@ def search(
         best_u[si] = min(vals)[1]
     starts.append(best_u)
     step = float(grid[1] - grid[0])
-    results = []
+    results: list[tuple[float, np.ndarray, bool]] = []
     for st in starts:
         if any(np.max(np.abs(st - r[1])) < 1e-9 for r in results):
             continue

@@ -126,6 +126,8 @@ class MGMWMResult(FitResult):
     range; ``method`` is ``"closed-form"`` (no AR1/GM) or ``"profiled nelder-mead"``.
     """
 
+    # not a Model: FitResult's Model-typed field is narrowed to another class (a known
+    # substitution break; FitResult generic in its model type would state it)
     model: MultiModel  # type: ignore[assignment]
     wvm: WVMatrix
     implied: np.ndarray
@@ -195,7 +197,7 @@ class MGMWMResult(FitResult):
         return self.shared[label].corr
 
     @property
-    def param_records(self) -> list[MultiParamRecord]:  # type: ignore[override]
+    def param_records(self) -> list[MultiParamRecord]:
         """Every estimate, shared processes first (their beta/phi, then the upper triangle of
         their covariance), then each channel's own; unique names ``channel.label.name`` for
         independent processes, ``label.cov[a,b]`` (a <= b) and ``label.beta``/``.phi`` for
@@ -232,6 +234,8 @@ class MGMWMResult(FitResult):
             m = self.model.models[c]
             idx = m.indices[m.labels.index(t.label)]
             for name, v in zip(t.proto.param_names, t.proto.values, strict=True):
+                if v is None:  # a fitted model: every value is set
+                    continue
                 unit = param_unit(t.code, name, self._unit(c))
                 out.append(MultiParamRecord(t.code, idx, t.label, name, float(v), unit, (c,)))
         return out

@@ -325,12 +325,13 @@ class MultiModel:
                             f"covariance of the shared {lab} has {d:g}"
                         )
             nl_v = nl.get(lab, sp.nl)
-            if procs[0].nonlinear is not None:
-                given = {getattr(p, p.nonlinear) for p in procs} - {None}
+            nl_name = procs[0].nonlinear  # the channels' processes of one label share a class
+            if nl_name is not None:
+                given = {getattr(p, nl_name) for p in procs} - {None}
                 if (
                     nl_v is None
                     and len(given) == 1
-                    and all(getattr(p, p.nonlinear) is not None for p in procs)
+                    and all(getattr(p, nl_name) is not None for p in procs)
                 ):
                     nl_v = next(iter(given))
                 elif nl_v is None and len(given) > 1:
@@ -340,7 +341,7 @@ class MultiModel:
                     )
                 if nl_v is not None:
                     try:
-                        procs[0].cleared().with_values(**{procs[0].nonlinear: float(nl_v)})
+                        procs[0].cleared().with_values(**{nl_name: float(nl_v)})
                     except ValueError as e:
                         raise ModelError(f"shared {lab}: {e}") from None
             elif nl_v is not None:

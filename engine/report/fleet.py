@@ -583,7 +583,7 @@ def gather_fleet(
         units.append(unit)
     ds_text = ""
     if isinstance(ds, DatasheetSpec):
-        ds_text = ds.describe() if datasheet is ds else str(datasheet)
+        ds_text = ds.describe() if isinstance(datasheet, DatasheetSpec) else str(datasheet)
     elif ds is not None:
         ds_text = f"file {datasheet}"
     provenance = {

@@ -111,7 +111,8 @@ def _kind_of(fleet: FleetReport, channel: str) -> str | None:
 
 # ----------------------------------------------------------------------------- Bokeh
 def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
-    from bokeh.models import ColumnDataSource, HoverTool
+    from bokeh.models import ColumnDataSource, DataRange1d, HoverTool
+    from bokeh.models.renderers import DataRenderer
     from bokeh.plotting import figure
 
     figs: dict[str, Any] = {}
@@ -131,7 +132,7 @@ def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
             name=key,
             **kw,
         )
-        hover = []
+        hover: list[DataRenderer] = []
         for layer in s.layers:
             data = {"x": layer.x, "y": layer.y}
             if layer.y2 is not None:
@@ -151,7 +152,8 @@ def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
         if s.x_ticks:
             p.xaxis.ticker = [t for t, _ in s.x_ticks]
             p.xaxis.major_label_overrides = {t: n for t, n in s.x_ticks}
-            p.x_range.range_padding = 0.1
+            if isinstance(p.x_range, DataRange1d):  # figure()'s default range
+                p.x_range.range_padding = 0.1
         if hover:
             p.add_tools(
                 HoverTool(
@@ -207,13 +209,16 @@ def _static(specs: dict[str, FigureSpec]) -> dict[str, str]:
         if s.x_ticks:
             ax.set_xticks([t for t, _ in s.x_ticks], [n for _, n in s.x_ticks], fontsize=6)
         for layer in s.layers:
-            lab = layer.label or None
-            if layer.kind == "band":
-                ax.fill_between(
-                    layer.x, layer.y, layer.y2, color=layer.color, alpha=0.18, label=lab
-                )
-            elif layer.kind == "errorbar":
-                ax.vlines(layer.x, layer.y, layer.y2, color=layer.color, lw=2, label=lab)
+            lab = layer.label or "_nolegend_"  # matplotlib's label for no legend entry
+            if layer.kind in ("band", "errorbar"):
+                if layer.y2 is None:
+                    raise ValueError(f"figure {key!r}: a {layer.kind} layer needs y2")
+                if layer.kind == "band":
+                    ax.fill_between(
+                        layer.x, layer.y, layer.y2, color=layer.color, alpha=0.18, label=lab
+                    )
+                else:
+                    ax.vlines(layer.x, layer.y, layer.y2, color=layer.color, lw=2, label=lab)
             elif layer.kind == "points":
                 ax.plot(layer.x, layer.y, "o", color=layer.color, ms=4, label=lab)
             else:

@@ -40,22 +40,36 @@ from ..wv.allan import AllanVariance, allan_variance
 
 __all__ = ["avsm", "avsm_auto", "SLOPES", "READ_TAU"]
 
-#: The slope method's terms that are processes: those with one Allan-deviation slope.
-_SLOPED = [cls for cls in PROCESS_TYPES.values() if cls.allan_slope is not None]
+
+def _sloped() -> dict[str, tuple[float, float]]:
+    """The slope method's terms that are processes (those with one Allan-deviation slope):
+    ``{code: (allan_slope, read_tau)}``."""
+    out = {}
+    for cls in PROCESS_TYPES.values():
+        if cls.allan_slope is None:
+            continue
+        if cls.read_tau is None:
+            raise TypeError(f"process {cls.code} has an allan_slope but no read_tau")
+        out[cls.code] = (cls.allan_slope, cls.read_tau)
+    return out
+
+
+_SLOPED = _sloped()
 
 #: Slopes of the log-log Allan *deviation* of each term (IEEE Std 952, annex C): each process's
 #: :attr:`~engine.models.Process.allan_slope` (QN -1, WN -1/2, RW +1/2, DR +1) and the bias
 #: instability ``BI`` (a floor, slope 0; not a process of the model), in slope order.
 SLOPES: dict[str, float] = dict(
     sorted(
-        {**{c.code: float(c.allan_slope) for c in _SLOPED}, "BI": 0.0}.items(), key=lambda kv: kv[1]
-    )  # type: ignore[arg-type]
+        {**{code: slope for code, (slope, _) in _SLOPED.items()}, "BI": 0.0}.items(),
+        key=lambda kv: kv[1],
+    )
 )
 
 #: Averaging time (s) at which the fixed-slope line equals the datasheet coefficient (each
 #: process's :attr:`~engine.models.Process.read_tau`): ``ADEV^2 = 3Q^2/T^2`` (Q at sqrt 3 s),
 #: ``N^2/T`` (N at 1 s), ``K^2 T/3`` (K at 3 s), ``R^2 T^2/2`` (R at sqrt 2 s).
-READ_TAU: dict[str, float] = {c.code: float(c.read_tau) for c in _SLOPED}  # type: ignore[arg-type]
+READ_TAU: dict[str, float] = {code: tau for code, (_, tau) in _SLOPED.items()}
 
 _AVSM_ORDER = tuple(SLOPES)
 
@@ -67,7 +81,14 @@ def _as_allan(data: Any, fs: float | None, unit: str) -> AllanVariance:
     if isinstance(data, AllanVariance):
         return data
     if isinstance(data, WaveletVariance):
-        return AllanVariance.from_wv(data if not data.robust else data.classical)
+        classical = data.classical if data.robust else data
+        if classical is None:
+            raise ValueError(
+                "data: this robust WaveletVariance carries no classical WV (it was built from "
+                "stored values); the slope method reads the Allan variance, so give the series "
+                "or a classical WaveletVariance"
+            )
+        return AllanVariance.from_wv(classical)
     return allan_variance(data, fs=1.0 if fs is None else fs, unit=unit)
 
 
@@ -102,7 +123,7 @@ def _slope_estimate(
     return MethodEstimate(
         method=method,
         model=model,
-        params=model.values(),
+        params={k: v for k, v in model.values().items() if v is not None},  # all set
         tau_samples=tau,
         implied=implied,
         components=comps,

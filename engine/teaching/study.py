@@ -233,7 +233,7 @@ def run_slope_study(
         for r in range(reps)
     ]
     stream = sys.stderr if progress is True else (progress or None)
-    bar = ProgressLine(len(tasks), stream, label="gmwm study slope")  # type: ignore[arg-type]
+    bar = ProgressLine(len(tasks), stream, label="gmwm study slope")
     est: dict[int, dict[str, dict[str, dict[str, np.ndarray]]]] = {
         n: {
             s: {m: {c: np.full(reps, np.nan) for c, *_ in TABLE_I[s]["params"]} for m in methods}

@@ -203,6 +203,15 @@ def allan_variance(
     cumulative sum (leading 0) of the de-meaned series: O(N) per averaging time, one float64
     copy of the series as extra memory. At octave averaging times it equals ``2 x`` the Haar
     WV of :func:`engine.wavelet_variance` (to rounding; the sums are the same).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = np.random.default_rng(0).normal(0.0, 0.1, 2**12)
+    >>> av = eg.allan_variance(x, fs=100.0)
+    >>> print(f"{av.tau_s[0]:.2f} s: {av.avar[0]:.2e}")  # sigma2 / m at m = 1 sample
+    0.01 s: 9.99e-03
     """
     a = as_series(x)
     n = a.size

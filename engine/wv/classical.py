@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -76,7 +76,15 @@ def _log2_levels(n: int, least: int, m: int) -> int:
     return int(m).bit_length() - 1
 
 
-def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
+class LevelGrid(TypedDict):
+    """The per-level axes of :func:`level_grid` (keyword arguments of the results)."""
+
+    levels: np.ndarray
+    tau_samples: np.ndarray
+    n_coef: np.ndarray
+
+
+def level_grid(n: int, levels: int) -> LevelGrid:
     """The per-level axes of a result of ``levels`` levels over ``n`` samples.
 
     Returns
@@ -87,7 +95,7 @@ def level_grid(n: int, levels: int) -> dict[str, np.ndarray]:
     """
     lv = np.arange(1, levels + 1)
     tau = 2**lv
-    return {"levels": lv, "tau_samples": tau, "n_coef": np.maximum(n - tau + 1, 0)}
+    return LevelGrid(levels=lv, tau_samples=tau, n_coef=np.maximum(n - tau + 1, 0))
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -371,6 +379,17 @@ def wavelet_variance(
     Classical WV: one cumulative sum of the de-meaned series (float64), then for each level
     ``sum_t (S_t - 2 S_{t-m} + S_{t-2m})^2 / (4^j M_j)``, computed in cache-sized blocks:
     O(N J) flops, one float64 copy of the series as extra memory.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> x = np.random.default_rng(0).normal(0.0, 0.1, 2**12)  # white noise, sigma2 = 0.01
+    >>> wv = eg.wavelet_variance(x, fs=100.0)
+    >>> wv.n_levels, int(wv.tau_samples[0])
+    (11, 2)
+    >>> print(f"{wv.variance[0]:.2e}")  # sigma2 / tau = 0.01 / 2
+    5.00e-03
     """
     a = as_series(x)
     n = a.size

@@ -56,6 +56,7 @@ from collections.abc import Callable
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 
 from .._blas import blas_threads
 from ._kernel import sumsq_kernel
@@ -209,8 +210,9 @@ def _poly_table(c: float) -> np.ndarray:
     from numpy.polynomial import polynomial as P
 
     one_u = np.array([1.0, 0.0, -1.0 / c**2])  # 1 - r^2/c^2
-    psi = P.polymul([0.0, 1.0], P.polymul(one_u, one_u))
-    dpsi = P.polymul(one_u, [1.0, 0.0, -5.0 / c**2])
+    # float arrays: NumPy's stubs type the product of two untyped arrays as never returning
+    psi: npt.NDArray[np.float64] = P.polymul([0.0, 1.0], P.polymul(one_u, one_u))
+    dpsi: npt.NDArray[np.float64] = P.polymul(one_u, [1.0, 0.0, -5.0 / c**2])
     rows = [
         psi,
         dpsi,
@@ -472,7 +474,7 @@ def _binomials() -> np.ndarray:
 
 def _power_means(
     sums: np.ndarray, band: np.ndarray, n_coef: int, c: float, table: np.ndarray
-) -> Callable[[float, float], float]:
+) -> Callable[[float, float], np.ndarray]:
     """``means(d, rho)`` of the six sums at r = (y - d)/rho, from the core's power sums and
     the band; raises _OutOfRegion outside the trust region."""
     binom = _binomials()

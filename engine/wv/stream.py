@@ -155,7 +155,7 @@ class _NpySource(SeriesSource):
             else:
                 pos = self.offset + a * self.k * isz
             self._fh.seek(pos)
-            view = memoryview(self._raw)[:nbytes]
+            view = self._raw.data[:nbytes]
             got = 0
             while got < nbytes:
                 r = self._fh.readinto(view[got:])
@@ -202,6 +202,8 @@ class _ArraySource(SeriesSource):
             raise ValueError(f"'{name}' of shape {shape} is not 1-D or 2-D (N, k)")
         self.arr, self.column, self.n, self.dtype = arr, column, int(shape[0]), dtype
         self.fs, self.unit, self.name, self._owner = fs, unit, name, owner
+        # buffer of the stored type when it differs from the output's (h5py's read_direct)
+        self._raw: np.ndarray | None = None
 
     def clone(self) -> _ArraySource:
         new = object.__new__(_ArraySource)
@@ -218,7 +220,7 @@ class _ArraySource(SeriesSource):
             if self.dtype == out.dtype:
                 read_direct(out, source_sel=sel, dest_sel=np.s_[0:cnt])
             else:  # read the stored type, convert with NumPy (HDF5's conversion is slower)
-                raw = getattr(self, "_raw", None)
+                raw = self._raw
                 if raw is None or raw.size < cnt:
                     raw = self._raw = np.empty(cnt, dtype=self.dtype.newbyteorder("="))
                 read_direct(raw, source_sel=sel, dest_sel=np.s_[0:cnt])

@@ -601,7 +601,7 @@ def _gather(
                 raise ValueError(
                     f"{len(channels)} channel names for an array with {arr.shape[1]} columns"
                 )
-            mapping = dict(zip(channels, mapping.values(), strict=True))
+            mapping = dict(zip(map(str, channels), mapping.values(), strict=True))
     names = list(mapping)
     if channels is None:
         chosen = names
