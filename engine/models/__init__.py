@@ -1,6 +1,7 @@
 """Latent-process models: the processes (WN, QN, RW, DR, AR1, GM) and their sums (``Model``).
 
-``engine.models.model`` holds the :class:`Process` interface, :class:`Model` and the parser;
+``engine.models.model`` holds the :class:`Process` interface, :class:`Model` and the parser
+(the spectral side of the interface in ``engine.models.spectrum``);
 ``engine.models.processes`` the concrete processes, which register themselves on import.
 """
 

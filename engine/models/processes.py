@@ -25,7 +25,8 @@ import numpy as np
 
 from .._limits import check_sample_count
 from .._quantity import Quantity, per_s, sqrt0, squared, times_s
-from .model import FilterTerms, Process, PsdTerms
+from .model import Process
+from .spectrum import FilterTerms, PsdTerms
 
 __all__ = ["WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv", "ar1_wv_pos", "TC_MIN", "TC_MAX_FACTOR"]
 
