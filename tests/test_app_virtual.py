@@ -201,11 +201,18 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
                 return rows
 
             def shows(vs: eg.VirtualSensor) -> bool:
-                """The table shows the weights of ``vs`` as the view formats them (0.0000)."""
+                """The table shows the weights of ``vs`` as the view formats them (0.0000): the
+                weights used, the fitted model's optimum, the data's own."""
                 rows = table()
                 return all(
-                    rows.get(c, [""])[:2] == [f"{w:.4f}", f"{wd:.4f}"]
-                    for c, w, wd in zip(vs.channels, vs.weights, vs.empirical_weights, strict=True)
+                    rows.get(c, [""])[:3] == [f"{w:.4f}", f"{wf:.4f}", f"{wd:.4f}"]
+                    for c, w, wf, wd in zip(
+                        vs.channels,
+                        vs.weights,
+                        vs.fitted_weights,
+                        vs.empirical_weights,
+                        strict=True,
+                    )
                 )
 
             # the tab fits the default model of the first 3 channels (a shared RW): the view
@@ -229,7 +236,7 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
             assert rows["plain average"][:2] == ["0.3333"] * 2
             assert rows["virtual sensor"][:2] == ["1.0000"] * 2
             unit = ref.unit
-            assert unit and {r[3] for r in rows.values()} == {unit}
+            assert unit and {r[4] for r in rows.values()} == {unit}
             shown = [float(rows[c][0]) for c in chans]
             assert math.fsum(ref.weights) == pytest.approx(1.0, abs=1e-12)
             assert abs(math.fsum(shown) - 1.0) <= 0.5e-4 * len(chans)  # rounded to 4 decimals
@@ -248,7 +255,10 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
             # one scale: recomputed in the worker, the page shows the new weights
             criterion("10")
             ref10 = eg.virtual_sensor(fit, relative=True, confidence=False, scale=10.0)
-            assert [f"{w:.4f}" for w in ref10.weights] != [f"{w:.4f}" for w in ref.weights]
+            # (the weights used may both be the plain average: the fitted optimum follows)
+            assert [f"{w:.4f}" for w in ref10.fitted_weights] != [
+                f"{w:.4f}" for w in ref.fitted_weights
+            ]
             wait_for(lambda: shows(ref10), "the weights at 10 s")
             assert page.get_by_text(f"Criterion: {ref10.target}").count() == 1
             # a bad criterion: a message, an empty table, no traceback
