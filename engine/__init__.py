@@ -33,11 +33,11 @@ SUBPACKAGES: tuple[str, ...] = (
     "inference",
     "multivariate",
     "io",
-    "export",
+    "formats",
     "teaching",
     "demo",
     "batch",
-    "report",
+    "reporting",
 )
 _EAGER = {"models": models, "wv": wv, "fit": fit, "units": units}
 

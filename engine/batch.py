@@ -174,7 +174,7 @@ def fit_log(
         With ``error == ""``; raises on a log that cannot be loaded or whose every channel
         fails (:class:`engine.io.LoadError`, :class:`engine.fit.FitError` ...).
     """
-    from .export import export
+    from .formats import export
     from .io import ImuLog, load_log, pick_channel
     from .wv import wavelet_variance
 

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import panel as pn
 
-from engine.export import FORMATS, export
+from engine.formats import FORMATS, export
 from engine.io import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.export_preview import ExportPreview
@@ -276,7 +276,7 @@ def export_fits(
     fits : mapping of channel to GMWMResult
         The fits to export (the filter formats need a gyroscope and an accelerometer).
     fmt : str
-        A name of :data:`engine.export.FORMATS`.
+        A name of :data:`engine.formats.FORMATS`.
     inflate : float
         Filter formats: the noise values times this factor (written in the file).
     filter_rate : float, optional

@@ -14,7 +14,7 @@ import pytest
 import engine as eg
 from engine.cli import main
 from engine.demo import demo_path
-from engine.export import (
+from engine.formats import (
     BI_FACTOR,
     ExportError,
     channel_axis,
@@ -542,11 +542,12 @@ def test_fit_and_export_datasheet_print_the_same_names_and_units(capsys, channel
 
 
 def test_engine_export_is_the_function_after_importing_the_package(fits) -> None:
-    """``import engine.export`` makes ``engine.export`` the package; it stays callable."""
-    import engine.export
+    """``engine.export`` is the function, also once the formats package is imported."""
+    import engine.formats
 
+    assert eg.export is engine.formats.export and callable(eg.export)
     text = eg.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
-    assert text == engine.export.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
+    assert text == engine.formats.export(None, {"gyro_x": fits["gyro_x"]}, "datasheet-csv")
     assert text.splitlines()[0].startswith("channel,process,quantity,symbol,value")
-    assert {"kalibr", "json", "csv", "datasheet", "datasheet-csv"} <= set(engine.export.FORMATS)
-    assert engine.export.FORMATS["kalibr"].reader is engine.export.read_kalibr
+    assert {"kalibr", "json", "csv", "datasheet", "datasheet-csv"} <= set(engine.formats.FORMATS)
+    assert engine.formats.FORMATS["kalibr"].reader is engine.formats.read_kalibr

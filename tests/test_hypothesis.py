@@ -25,7 +25,7 @@ from hypothesis.extra import numpy as hnp
 
 import engine as eg
 from engine.cli import main
-from engine.export import ExportError, read_kalibr, si_factor
+from engine.formats import ExportError, read_kalibr, si_factor
 from engine.fit import FitError
 from engine.io import ImuLog, LoadError, SessionError, check_time, load_log, load_session
 from engine.models import ModelError, parse_model

@@ -26,14 +26,7 @@ def test_every_public_name_comes_from_one_subpackage_and_resolves():
         # a name two subpackages export is one object (re-exported), never two meanings
         assert all(o is objs[0] for o in objs), (name, pkgs)
         got = getattr(eg, name)
-        if name in eg.SUBPACKAGES:
-            # ``export`` is also a subpackage: once ``engine.export`` is imported the attribute is
-            # the package, which is callable and does what the function does
-            assert got is objs[0] or (
-                got is importlib.import_module(f"engine.{name}") and callable(got)
-            )
-        else:
-            assert got is objs[0], name
+        assert got is objs[0], name
 
 
 def test_the_names_users_had_are_still_there():

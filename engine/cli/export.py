@@ -1,7 +1,7 @@
 """``gmwm export`` (:func:`add_parser`, :func:`run`)::
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
-                --format NAME (engine.export.FORMATS) -o OUT|-
+                --format NAME (engine.formats.FORMATS) -o OUT|-
                 [--ci asymptotic|bootstrap [--confidence 0.95]] [--weights ci|identity|efficient]
                 [--fs HZ] [--levels J] [--robust] [--segment ...] [--scale ...] [--units ...]
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
@@ -55,7 +55,7 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..export.registry import FORMATS
+    from ..formats.registry import FORMATS
 
     ex = sub.add_parser(
         "export",
@@ -177,7 +177,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
     check_output(args.output, "-o")  # before the (slow) imports and any fit
-    from ..export import export
+    from ..formats import export
     from ..fit import fit_gmwm
     from ..inference import fit_efficient, param_intervals
     from ..io import load_log, pick_channel

@@ -363,7 +363,7 @@ def _pick(names: list[str], channel: str | None, where: str) -> str:
 
 
 def _from_kalibr(d: Mapping[str, Any], kind: str | None, channel: str | None, where: str):
-    from ..export.common import channel_axis
+    from ..formats.common import channel_axis
 
     kinds = [k for k in _SI_UNIT if f"{k}_noise_density" in d or f"{k}_random_walk" in d]
     if not kinds:
@@ -419,7 +419,7 @@ def read_datasheet(
     DatasheetError
         Unreadable file, unknown format, missing or bad key (the message names file and key).
     """
-    from ..export.kalibr import read_kalibr
+    from ..formats.kalibr import read_kalibr
 
     p = Path(source)
     where = str(p)

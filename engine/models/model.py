@@ -68,7 +68,7 @@ class PsdTerms(NamedTuple):
 
 class FilterTerms(NamedTuple):
     """What one fitted process contributes to a filter's WN+RW / WN+GM model (the rule of
-    ``engine.export.bound.split_terms``).
+    ``engine.formats.bound.split_terms``).
 
     ``white``: white-noise variance per log sample (a term white at the filter step);
     ``rw_k2``: continuous random-walk density ``K^2`` [u^2/s]; ``gamma2``: RW per sample;

@@ -390,7 +390,7 @@ class VirtualSensor:
         )
 
     def as_fit(self) -> GMWMResult:
-        """The virtual sensor as a single-channel fit, for :func:`engine.export.export` and
+        """The virtual sensor as a single-channel fit, for :func:`engine.formats.export` and
         every single-channel view: ``model`` is :attr:`model` (not refitted), ``wv`` the
         empirical WV of the combined series, ``objective`` its ``"ci"``-weighted distance
         to the implied WV."""

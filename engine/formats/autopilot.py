@@ -69,7 +69,7 @@ def autopilot_params(
     Raises
     ------
     ExportError
-        No ``filter_rate``, or the errors of :func:`~engine.export.noise.imu_noise`.
+        No ``filter_rate``, or the errors of :func:`~engine.formats.noise.imu_noise`.
     """
     fr = kw.get("filter_rate")
     if fr is None or not (math.isfinite(float(fr)) and float(fr) > 0):

@@ -64,7 +64,7 @@ def fit_report(
         Add the Kalibr numbers.
     consumers : sequence of str, optional
         The filter noise models or filter formats to project each fit onto
-        (:func:`engine.export.projection.project`; default :data:`DEFAULT_REPORT_CONSUMERS`,
+        (:func:`engine.formats.projection.project`; default :data:`DEFAULT_REPORT_CONSUMERS`,
         the WN + RW of Kalibr/OpenVINS/PX4 ...). Duplicates of one consumer model are kept
         under each requested name.
     projection : {"bound", "plain", "fit"}

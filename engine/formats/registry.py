@@ -227,7 +227,7 @@ def export(
         Passed to the format's writer (parameter intervals per channel, the log for the JSON
         report, signal unit per channel, source name (a str or a path), Kalibr topic, partial
         Kalibr file). Every user-given string is written with its control characters escaped
-        (:func:`engine.export.common.clean_text`): a newline in a file name cannot add a line
+        (:func:`engine.formats.common.clean_text`): a newline in a file name cannot add a line
         (a parameter, a key) to the file.
     inflate : float
         Filter formats: every noise value (density, random walk, bias std) is the fitted value
@@ -241,12 +241,12 @@ def export(
         other filter formats: the filter's step for the projection (default the log's rate).
     projection : {"bound", "plain", "fit"}
         Filter formats: ``"bound"`` (default) projects each fit onto the consumer's noise model
-        and over-bounds it (:func:`engine.export.projection.project`); ``"plain"`` the rule
+        and over-bounds it (:func:`engine.formats.projection.project`); ``"plain"`` the rule
         without the bound; ``"fit"`` the fit's own terms converted one by one (no projection).
     horizon_s, band, confidence, ci
         The bound's horizon (s, default the log length), its WV scales (s), the confidence of
         the fitted WV's upper limit to bound (default: the WV itself), the intervals
-        (``"asymptotic"`` or None); :func:`engine.export.projection.project`.
+        (``"asymptotic"`` or None); :func:`engine.formats.projection.project`.
     vehicle_id : int
         PX4: the MAVLink system id of the ``.params`` lines (default 1).
     scale_factor_std_ppm : float, optional

@@ -255,7 +255,7 @@ def _header_comments(fits: Mapping[str, GMWMResult], source: str | None) -> list
     """The header comments of an ``imu.yaml``: origin, channels and models, conventions."""
     models = sorted({r.model.spec() for r in fits.values()})
     return [
-        "Kalibr IMU noise model from a GMWM fit (engine.export.kalibr_imu)",
+        "Kalibr IMU noise model from a GMWM fit (engine.formats.kalibr_imu)",
         f"source: {source or 'in-memory fits'}; channels: {', '.join(fits)}; "
         f"model(s): {'; '.join(models)}",
         "noise_density = sqrt(sigma2_WN / fs) (continuous-time white noise density), "

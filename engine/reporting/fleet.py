@@ -1,5 +1,5 @@
 """Fleet acceptance: :func:`gather_fleet` fits a batch of logs and computes what a fleet
-report shows (pure numerics; :func:`engine.report.render.render_fleet_html` draws it).
+report shows (pure numerics; :func:`engine.reporting.render.render_fleet_html` draws it).
 
 Per unit (log), in the worker that fits it (:func:`engine.inference.parallel_map`: in process,
 local processes or any ``concurrent.futures.Executor``, like :func:`engine.batch.fit_batch`):

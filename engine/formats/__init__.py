@@ -1,4 +1,7 @@
-"""Exports of GMWM fits for navigation filters and reports.
+"""The export formats of GMWM fits (navigation filters, simulators, reports) and the projection.
+
+``engine.export`` (:func:`.registry.export`) is the function users call; this package holds
+the formats it writes.
 
 * :mod:`.datasheet`: :func:`datasheet_table` (rows of the one datasheet table,
   :mod:`engine.units`), :func:`datasheet_text`, :func:`datasheet_csv`;
@@ -15,10 +18,6 @@
 """
 
 from __future__ import annotations
-
-import sys
-import types
-from typing import Any
 
 from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
 from .common import channel_axis
@@ -58,14 +57,3 @@ __all__ = [
     "FORMAT_CONSUMERS",
 ]
 
-
-class _ExportModule(types.ModuleType):
-    """``engine.export`` is both this package and the function :func:`export`: importing the
-    package makes ``engine.export`` the module (Python sets the parent's attribute), so the
-    module is callable and ``engine.export(path, fits, fmt)`` works either way."""
-
-    def __call__(self, *args: Any, **kwargs: Any) -> str:
-        return export(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _ExportModule

@@ -32,7 +32,7 @@ then chooses the consumer's parameters so that its WV (Haar, docs/conventions.md
 fitted model's, or its upper ``confidence`` limit (eta3: ``eta / chi2_{(1-c)/2}(eta)`` times
 the fitted WV), at every scale ``tau`` of ``band`` (default from two filter steps to the
 horizon, default the log length), with the least inflation: the least geometric-mean ratio
-consumer WV / target over the band's scales (:mod:`engine.export.bound`: the integral over
+consumer WV / target over the band's scales (:mod:`engine.formats.bound`: the integral over
 log-scale of the log excess, minimised exactly at a vertex of the feasible set); a
 Gauss-Markov bias adds a 1-D search over ``T_c``. :attr:`Projection.inflation` reports that
 geometric mean and the largest ratio over the band.
