@@ -56,4 +56,3 @@ __all__ = [
     "ProjectedParam",
     "FORMAT_CONSUMERS",
 ]
-

@@ -137,4 +137,3 @@ def fleet_report(
     if output is not None:
         Path(output).write_text(page, encoding="utf-8")
     return page
-
