@@ -38,6 +38,7 @@ SUBPACKAGES: tuple[str, ...] = (
     "demo",
     "batch",
     "reporting",
+    "session",
 )
 _EAGER = {"models": models, "wv": wv, "fit": fit, "units": units}
 

@@ -1,7 +1,7 @@
 """Calibrating a fleet: fit every channel of many logs, one report per log, and the spread of
 every parameter across the units.
 
-:func:`fit_batch` maps :func:`fit_log` over the logs with :func:`engine.inference.parallel_map`
+:func:`fit_batch` maps :func:`fit_log` over the logs with :func:`engine._parallel.parallel_map`
 (in process, on local processes, or on any ``concurrent.futures.Executor``: a Dask cluster's
 ``Client.get_executor()`` spreads a lab's logs over many machines). A log that cannot be read
 or fitted is a result, not a failure of the batch: its error is kept and the other logs
@@ -225,7 +225,7 @@ def _fit_channel(wv: Any, model: str | None, select: str | None, weights: str) -
             raise FitError(f"no sub-model of {select} could be fitted: {best.error}")
         return best.result
     if weights == "efficient":
-        from .inference import fit_efficient
+        from .fit import fit_efficient
 
         return fit_efficient(wv, parse_model(model))
     return fit_gmwm(wv, parse_model(model), weights=weights)

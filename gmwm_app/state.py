@@ -495,7 +495,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         m = start if start is not None else model.cleared()
         try:
             if self.weights == "efficient":
-                from engine.inference import fit_efficient
+                from engine.fit import fit_efficient
 
                 return fit_efficient(wv, m)
             return eg.fit_gmwm(wv, m, weights=self.weights)

@@ -557,7 +557,7 @@ def test_demo_path_default(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_weights_switch_refits_with_efficient_weights(app_state: AppState, app_demo: Path) -> None:
     # the demo's accel_x is QN+WN+RW+DR (engine/demo/demo_imu_truth.json)
-    from engine.inference import fit_efficient
+    from engine.fit import fit_efficient
 
     s = app_state
     assert s.select_channel("accel_x") and s.set_model("QN+WN+RW+DR"), s.error

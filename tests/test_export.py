@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 import engine as eg
+from engine import session as sessions
 from engine.cli import main
 from engine.demo import demo_path
 from engine.formats import (
     BI_FACTOR,
     ExportError,
-    channel_axis,
     curves_csv,
     datasheet_csv,
     datasheet_table,
@@ -31,7 +31,7 @@ from engine.formats import (
     write_kalibr,
 )
 from engine.inference import param_intervals
-from engine.io import session as sessions
+from engine.io.log import channel_axis
 from engine.units import allan_floor
 
 FS = 100.0

@@ -65,3 +65,39 @@ def test_structure_has_no_cycle_no_private_import_no_big_module():
     spec.loader.exec_module(mod)
     cycles, private, big = mod.analyse()
     assert (cycles, private, big) == ([], [], [])
+
+
+def _structure_check():
+    spec = importlib.util.spec_from_file_location(
+        "structure_check", ROOT / "tests" / "structure_check.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_packages_run_one_way_through_the_layers():
+    # every import, inside functions and under TYPE_CHECKING too (issue 20: the old tree had
+    # fit.gmwm -> inference.asymptotic and io.session -> fit/inference: 3 findings)
+    assert _structure_check().layer_violations() == []
+
+
+def test_a_back_edge_between_packages_is_a_finding():
+    sc = _structure_check()
+    graph = {
+        "engine.fit.gmwm": {"engine.inference.asymptotic", "engine.wv.classical", "engine._optim"},
+        "engine.inference.asymptotic": {"engine.fit.result"},
+        "engine.wv.classical": {"engine._blas"},
+        "engine._optim": {"engine._limits"},
+        "engine.fit.result": set(),
+        "engine._blas": set(),
+        "engine._limits": set(),
+        "engine.formats.kalibr": {"engine.multivariate.fit"},  # same layer: a finding too
+        "engine.multivariate.fit": set(),
+        "engine.newpkg.mod": set(),
+    }
+    found = sc.layer_violations(graph)
+    assert len(found) == 3, found
+    assert found[0].startswith("engine.newpkg: not in LAYERS")
+    assert any(f.startswith("engine.fit.gmwm imports engine.inference.asymptotic") for f in found)
+    assert any(f.startswith("engine.formats.kalibr imports engine.multivariate.fit") for f in found)

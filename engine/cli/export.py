@@ -177,9 +177,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
     check_output(args.output, "-o")  # before the (slow) imports and any fit
-    from ..fit import fit_gmwm
+    from ..fit import fit_efficient, fit_gmwm
     from ..formats import export
-    from ..inference import fit_efficient, param_intervals
+    from ..inference import param_intervals
     from ..io import load_log, pick_channel
     from ..models import parse_model
     from ..wv import wavelet_variance

@@ -237,7 +237,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     model = parse_model(args.model)
     wv, name = load_wv(args)
     if args.weights == "efficient":
-        from ..inference import fit_efficient
+        from ..fit import fit_efficient
 
         res = fit_efficient(wv, model)
     else:

@@ -19,10 +19,10 @@ the formats it writes.
 
 from __future__ import annotations
 
+from ..io.kalibr import read_kalibr
 from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
-from .common import channel_axis
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
-from .kalibr import KalibrImu, kalibr_imu, kalibr_models, read_kalibr, write_kalibr
+from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr
 from .noise import ImuNoise, imu_noise
 from .projection import FORMAT_CONSUMERS, ProjectedParam, Projection, project
 from .registry import FORMATS, Format, export, register
@@ -32,7 +32,6 @@ __all__ = [
     "ExportError",
     "DatasheetRow",
     "si_factor",
-    "channel_axis",
     "datasheet_table",
     "datasheet_text",
     "datasheet_csv",

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..fit import GMWMResult
+from ..io.log import channel_axis
 from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
-from .common import channel_axis
 from .kalibr import kalibr_imu
 from .projection import Projection, consumer_of, project
 

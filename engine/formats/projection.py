@@ -577,7 +577,7 @@ def _intervals(
     level: float,
 ) -> dict[str, tuple[float, float]]:
     """Delta-method intervals of the log of each exported value."""
-    from ..inference import free_params, param_cov, wv_cov_model
+    from ..fit.asymptotic import free_params, param_cov, wv_cov_model
 
     free = free_params(fit)
     if not free:

@@ -16,11 +16,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..fit import GMWMResult
+from ..io.kalibr import read_kalibr
+from ..io.log import channel_axis
 from ..units import ExportError
 from . import autopilot, ins, sim, vio
-from .common import channel_axis, source_text
+from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
-from .kalibr import KalibrImu, kalibr_imu, read_kalibr
+from .kalibr import KalibrImu, kalibr_imu
 from .noise import check_inflate, noise_for
 from .report import curves_csv, fit_report
 

@@ -45,6 +45,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._files import read_regular
+from ..io.kalibr import read_kalibr
+from ..io.log import channel_axis
 from ..models import QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
@@ -363,8 +365,6 @@ def _pick(names: list[str], channel: str | None, where: str) -> str:
 
 
 def _from_kalibr(d: Mapping[str, Any], kind: str | None, channel: str | None, where: str):
-    from ..formats.common import channel_axis
-
     kinds = [k for k in _SI_UNIT if f"{k}_noise_density" in d or f"{k}_random_walk" in d]
     if not kinds:
         raise DatasheetError(f"{where}: no gyroscope_* or accelerometer_* noise keys")
@@ -419,7 +419,6 @@ def read_datasheet(
     DatasheetError
         Unreadable file, unknown format, missing or bad key (the message names file and key).
     """
-    from ..formats.kalibr import read_kalibr
 
     p = Path(source)
     where = str(p)

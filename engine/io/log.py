@@ -7,6 +7,7 @@ another. :func:`pick_channel` resolves a channel given by name, index or digit s
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from ..wv.classical import WaveletVariance
 
-__all__ = ["LoadError", "ImuLog", "pick_channel"]
+__all__ = ["LoadError", "ImuLog", "pick_channel", "channel_axis"]
 
 
 class LoadError(ValueError):
@@ -107,3 +108,14 @@ def pick_channel(src: str, names: list[str], channel: str | int) -> str:
         f"file '{src}' has no channel {channel!r}; available channels: {shown}. "
         "Pass one of these names or an integer index"
     )
+
+
+def channel_axis(name: str) -> str:
+    """Axis letter of a channel name (``gyro_x`` -> ``x``, ``imu/acc[1]`` -> ``y``), else the
+    name itself."""
+    n = name.strip().lower()
+    m = re.search(r"\[(\d)\]$", n)
+    if m and int(m.group(1)) < 3:
+        return "xyz"[int(m.group(1))]
+    m = re.search(r"(?:^|[^a-z])([xyz])$", n) or re.search(r"([xyz])$", n)
+    return m.group(1) if m else name

@@ -59,7 +59,7 @@ class PsdTerms(NamedTuple):
 
     QN is ``q2 x``, WN ``sigma2``, RW (generalised) ``gamma2 / x``, an AR1 (phi, s) the last
     term (``|1 - phi z|^2 = (1 - phi)^2 + phi x``, stable near phi = 1); a drift has none.
-    The closed-form WV covariance (``engine.inference._closed_form``) works on these pieces.
+    The closed-form WV covariance (``engine.fit._closed_form``) works on these pieces.
     """
 
     poly: dict[int, float]

@@ -707,7 +707,7 @@ def virtual_sensor(
     # covariance (moment_covariance), which is the univariate Var(nu_hat_j) of the virtual
     # model (v is one Gaussian series with spectral density w' S(f) w; Isserlis on both
     # sides) and costs one J x J integral instead of (P J)^2
-    from ..inference.asymptotic import wv_cov_model
+    from ..fit.asymptotic import wv_cov_model
 
     shape = WaveletVariance.from_arrays(np.maximum(nu, 0.0), n=wvm.n, fs=wvm.fs, alpha=alpha)
     var = np.diagonal(wv_cov_model(vmodel, shape)).copy()

@@ -1,7 +1,7 @@
 """Fleet acceptance: :func:`gather_fleet` fits a batch of logs and computes what a fleet
 report shows (pure numerics; :func:`engine.reporting.render.render_fleet_html` draws it).
 
-Per unit (log), in the worker that fits it (:func:`engine.inference.parallel_map`: in process,
+Per unit (log), in the worker that fits it (:func:`engine._parallel.parallel_map`: in process,
 local processes or any ``concurrent.futures.Executor``, like :func:`engine.batch.fit_batch`):
 the log is loaded once, fitted by :func:`engine.batch.fit_log` (the batch's own numbers) and
 its calibration report gathered from those fits (:func:`~.data.gather_report` with ``fits=``,

@@ -1,9 +1,10 @@
-"""Covariance of the wavelet variance, and the efficient (two-step) GMWM.
+"""Covariance of the wavelet variance, the weights of the efficient (two-step) GMWM.
 
 ``V = Cov(nu_hat)`` across levels, three ways: :func:`wv_cov_data` (from the data, diagonal,
 Percival & Walden), :func:`wv_cov_model` (from a fitted model, Gaussian and asymptotic, full),
 :func:`wv_cov_bootstrap` (parametric bootstrap); :func:`wv_cov` picks one by name for a fit.
-:func:`fit_efficient` refits with ``Omega = V^-1`` (the GMWM paper, Corollary 1).
+``fit_gmwm(..., weights="efficient")`` refits with ``Omega = V^-1`` (the GMWM paper,
+Corollary 1); this module sits below :mod:`engine.fit.gmwm` so that the fit can do it.
 """
 
 from __future__ import annotations
@@ -11,15 +12,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from concurrent.futures import Executor
-from typing import TYPE_CHECKING, Any, TypedDict
+from typing import TYPE_CHECKING, Any, Protocol, TypedDict
 
 import numpy as np
 
 from .._parallel import parallel_map
-from ..fit import FitError, GMWMResult, fit_gmwm
 from ..models import Model
 from ..wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
 from .asymptotic import wv_cov_model
+from .result import FitError
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
@@ -28,9 +29,7 @@ __all__ = [
     "wv_cov_data",
     "wv_cov_bootstrap",
     "wv_cov",
-    "fit_efficient",
     "inverse_cov",
-    "parallel_map",
     "VOptions",
     "V_DEFAULTS",
     "v_options",
@@ -149,7 +148,7 @@ def wv_cov_bootstrap(
         child of ``SeedSequence(seed)``), local processes (results do not depend on it).
     executor : concurrent.futures.Executor, optional
         Runs the replicates instead of the local pool (e.g. a Dask ``Client.get_executor()``);
-        the results do not depend on it (:func:`engine.inference.parallel_map`).
+        the results do not depend on it (:func:`engine._parallel.parallel_map`).
     """
     if B < 2:
         raise ValueError(f"B must be at least 2, got {B}")
@@ -170,31 +169,15 @@ def inverse_cov(v: np.ndarray) -> np.ndarray:
     return (inv + inv.T) / 2
 
 
-def fit_efficient(
-    wv: WaveletVariance, model: Model | str, **options: Unpack[VOptions]
-) -> GMWMResult:
-    """Two-step efficient GMWM: ``weights="ci"``, then ``Omega = V^-1`` with V estimated.
+class _FittedWV(Protocol):
+    """What :func:`wv_cov` reads of a fit: its model and its empirical WV."""
 
-    Parameters
-    ----------
-    wv : WaveletVariance
-        The empirical WV.
-    model : Model or str
-        The model to fit.
-    **options
-        How V is estimated (:class:`VOptions`: ``v``, ``x``, ``B``, ``seed``, ``workers``,
-        ``executor``): by default from the first-step fit (``v="model"``, analytic Gaussian);
-        ``"bootstrap"`` (parametric), ``"data"`` (needs ``x``; diagonal) or a given matrix.
-    """
-    first = fit_gmwm(wv, model)
-    vmat = wv_cov(first, **v_options(options))
-    res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat))
-    object.__setattr__(res, "weights", "efficient")
-    return res
+    model: Model
+    wv: WaveletVariance
 
 
 def wv_cov(
-    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[VOptions]
+    res: _FittedWV, v: str | np.ndarray = "model", **options: Unpack[VOptions]
 ) -> np.ndarray:
     """The covariance V of a fit's WV, by name.
 
