@@ -176,7 +176,6 @@ def fit_log(
     """
     from .formats import export
     from .io import ImuLog, load_log, pick_channel
-    from .wv import wavelet_variance
 
     _check_choice(model, select)
     t0 = time.perf_counter()
@@ -192,14 +191,7 @@ def fit_log(
     errors: dict[str, str] = {}
     for ch in names:
         try:
-            if log.is_summary:
-                wv = log.wv[ch]
-                wv = wv.truncate(levels) if levels is not None and levels < wv.n_levels else wv
-            else:
-                x = log[ch]
-                if np.ptp(x) == 0:
-                    raise FitError(f"channel {ch!r} is constant: there is no noise to analyse")
-                wv = wavelet_variance(x, fs=log.fs, levels=levels, unit=log.units.get(ch, ""))
+            wv = log.wavelet_variance(ch, levels=levels)
             fits[ch] = _fit_channel(wv, model, select, weights)
         except (FitError, ModelError, ValueError) as e:
             errors[ch] = f"{type(e).__name__}: {e}"
@@ -224,10 +216,6 @@ def _fit_channel(wv: Any, model: str | None, select: str | None, weights: str) -
         if best.result is None:  # pragma: no cover - rank_models raises when nothing fits
             raise FitError(f"no sub-model of {select} could be fitted: {best.error}")
         return best.result
-    if weights == "efficient":
-        from .fit import fit_efficient
-
-        return fit_efficient(wv, parse_model(model))
     return fit_gmwm(wv, parse_model(model), weights=weights)
 
 

@@ -106,7 +106,9 @@ def test_wv_is_computed_once_per_channel(app_demo: Path, monkeypatch: pytest.Mon
         calls.append((np.size(x), kw.get("robust", False)))
         return real(x, **kw)
 
-    monkeypatch.setattr(eg, "wavelet_variance", counting)
+    import engine.io.log  # where "the WV of a channel of a log" is computed (ImuLog)
+
+    monkeypatch.setattr(engine.io.log, "wavelet_variance", counting)
     s = AppState()
     assert s.load_demo()
     assert len(calls) == 1
