@@ -18,7 +18,7 @@ import numpy as np
 
 from .._parallel import parallel_map
 from ..models import Model
-from ..wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
+from ..wv import WaveletVariance, as_series, haar_coefficients, wavelet_variance
 from .asymptotic import wv_cov_model
 from .result import FitError
 
@@ -111,11 +111,9 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
     a = as_series(x)
     if a.size != wv.n:
         raise ValueError(f"the series has {a.size} samples but the WV was computed from {wv.n}")
-    s = cumsum_demeaned(a)
     out = np.empty(wv.n_levels)
     for i, j in enumerate(wv.levels):
-        m = 1 << (int(j) - 1)
-        w = (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+        w = haar_coefficients(a, int(j))
         nfft = 1 << int(math.ceil(math.log2(2 * w.size)))
         spec = np.fft.rfft(w, nfft)
         acf = np.fft.irfft(spec.real**2 + spec.imag**2, nfft)[: w.size] / w.size
