@@ -75,7 +75,7 @@ def autopilot_params(
     if fr is None or not (math.isfinite(float(fr)) and float(fr) > 0):
         raise ExportError(
             f"the {prefix.rstrip('_')} export needs the EKF's filter rate in Hz "
-            "(filter_rate=..., CLI --filter-rate): its noise parameters are per filter step"
+            "(filter_rate=...): its noise parameters are per filter step"
         )
     fr = float(fr)
     label = f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters"

@@ -231,7 +231,7 @@ def kalibr_imu(
         raise ExportError(
             f"Kalibr needs gyroscope and accelerometer noise; the fits give only "
             f"{' and '.join(have)} ({', '.join(fits)}). Add the other channels, "
-            "or allow a partial file (allow_partial=True, CLI --partial)"
+            "or allow a partial file (allow_partial=True)"
         )
     values, chosen = {}, {}
     for key in _KALIBR_KEYS:

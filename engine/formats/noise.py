@@ -198,7 +198,7 @@ def imu_noise(
         raise ExportError(
             f"the filter file needs gyroscope and accelerometer noise; the fits give only "
             f"{' and '.join(vals)} ({', '.join(fits)}). Add the other channels, or allow a "
-            "partial file (allow_partial=True, CLI --partial)"
+            "partial file (allow_partial=True)"
         )
     models = sorted({r.model.spec() for r in fits.values()})
     p0 = next(iter(projs.values()))

@@ -64,7 +64,7 @@ import numpy as np
 
 from ..fit import GMWMResult
 from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model
-from ..units import ExportError, si_factor
+from ..units import SI_UNIT, ExportError, si_factor
 from .bound import POINTS_PER_OCTAVE, Split, columns, fine_scales, solve
 
 __all__ = [
@@ -410,7 +410,7 @@ def project(
     u = (unit if unit is not None else fit.wv.unit) or ""
     try:
         sensor, f_si = si_factor(u, channel)
-        si_unit = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}[sensor]
+        si_unit = SI_UNIT[sensor]
     except ExportError:
         sensor, f_si, si_unit = None, 1.0, u or "u"
     # scales: even numbers of log samples, POINTS_PER_OCTAVE per octave

@@ -115,7 +115,7 @@ def _kalibr(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 def _no_inflate(kw: Mapping[str, Any], name: str) -> None:
     if check_inflate(kw.get("inflate", 1.0)) != 1.0:
         raise ExportError(
-            f"--inflate is for filter formats; the {name} reports the fit itself (inflate 1)"
+            f"inflate= is for filter formats; the {name} reports the fit itself (inflate 1)"
         )
 
 

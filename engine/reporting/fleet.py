@@ -138,12 +138,12 @@ def parse_limits(specs: Iterable[str]) -> list[Limit]:
             m = _SPEC.fullmatch(raw)
             if m is None:
                 raise DatasheetError(
-                    f"--spec {raw.strip()!r} is not KEY<=VALUE UNIT (e.g. 'arw<=0.3 deg/sqrt(h)')"
+                    f"spec={raw.strip()!r} is not KEY<=VALUE UNIT (e.g. 'arw<=0.3 deg/sqrt(h)')"
                 )
-            spec = parse_datasheet(f"{m.group(1)}={m.group(2)}", source="--spec")
+            spec = parse_datasheet(f"{m.group(1)}={m.group(2)}", source="spec=")
             ((sym, si),) = spec.values.items()
             if (spec.kind, sym) in seen:
-                raise DatasheetError(f"--spec {raw.strip()!r}: {sym} has a limit already")
+                raise DatasheetError(f"spec={raw.strip()!r}: {sym} has a limit already")
             seen.add((spec.kind, sym))
             out.append(Limit(m.group(1).lower(), sym, spec.kind, si, spec.given[sym]))
     return out

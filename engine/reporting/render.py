@@ -194,7 +194,7 @@ def _static(specs: dict[str, FigureSpec]) -> dict[str, str]:
     except ImportError:
         raise ReportError(
             "a static report draws its figures with matplotlib, which is not installed: "
-            "pip install 'gmwm-app[study]' (or drop --static / static=True)"
+            "pip install 'gmwm-app[study]' (or drop static=True)"
         ) from None
     out: dict[str, str] = {}
     for key, s in specs.items():
