@@ -41,8 +41,9 @@ def check_fs(value: object, name: str = "fs") -> float:
     ...
     ValueError: fs must be a positive number of Hz, got 0.0
     """
-    ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
-    v = float(value) if ok else math.nan  # type: ignore[arg-type]
+    v = math.nan
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        v = float(value)
     if not (math.isfinite(v) and v > 0):
         raise ValueError(f"{name} must be a positive number of Hz, got {value!r}")
     return v

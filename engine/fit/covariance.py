@@ -170,8 +170,11 @@ def inverse_cov(v: np.ndarray) -> np.ndarray:
 class _FittedWV(Protocol):
     """What :func:`wv_cov` reads of a fit: its model and its empirical WV."""
 
-    model: Model
-    wv: WaveletVariance
+    @property
+    def model(self) -> Model: ...
+
+    @property
+    def wv(self) -> WaveletVariance: ...
 
 
 def wv_cov(

@@ -84,7 +84,7 @@ def time_divisor(name: str, unit: str = "") -> tuple[float, bool] | None:
 def check_fs(value: Any, src: str, what: str, fix: str) -> float:
     try:
         # a file's attribute or text, as a number; then the one check (engine._checks)
-        return _checks.check_fs(value if isinstance(value, bool) else float(value))  # type: ignore[arg-type]
+        return _checks.check_fs(value if isinstance(value, bool) else float(value))
     except (TypeError, ValueError):
         raise LoadError(
             f"file '{src}': {what} = {value!r} is not a valid sampling frequency "

@@ -69,9 +69,9 @@ def read_kalibr(source: str | os.PathLike[str]) -> dict[str, Any]:
     if isinstance(source, os.PathLike) or (
         "\n" not in text and ":" not in text.split("/")[0] and Path(text).exists()
     ):
-        raw = read_regular(source, error=ExportError)  # no FIFO or device: engine._files
+        data = read_regular(source, error=ExportError)  # no FIFO or device: engine._files
         try:
-            text = raw.decode("utf-8")
+            text = data.decode("utf-8")
         except UnicodeDecodeError:
             raise ExportError(f"Kalibr file '{source}' is not UTF-8 text") from None
     out: dict[str, Any] = {}
