@@ -5,78 +5,212 @@
 >>> res = eg.fit_gmwm(wv, eg.WN() + eg.RW() + 2 * eg.GM())  # doctest: +SKIP
 >>> print(res.summary())                                  # doctest: +SKIP
 
-The public surface is the union of the ``__all__`` of the subpackages in :data:`SUBPACKAGES`
-(one concept each; see README, "Developers"). ``models``, ``wv``, ``fit`` and ``units`` are
-imported with ``engine``; every other name is imported on first use (PEP 562), so that
-``import engine`` and the ``gmwm`` command stay light (SciPy, h5py and the multivariate code
-cost tenths of a second). The lazy names are read from each subpackage's literal ``__all__``
-without importing it; ``tests/test_public_api.py`` checks that every name resolves and that no
-two subpackages export the same name.
+The API is what a user calls, written out below (README, "The API"): :data:`API` maps each
+public name to the module that defines it, one place per name. A name is imported on first use
+(PEP 562), so that ``import engine`` and the ``gmwm`` command stay light (SciPy, h5py and the
+multivariate code cost tenths of a second). ``tests/test_public_api.py`` pins the list: adding
+a name is a deliberate act. Everything else lives in the subpackages (``engine.fit``,
+``engine.formats`` ...) for those who need it.
 """
 
 from __future__ import annotations
 
-import ast
 import importlib
-from pathlib import Path
 from typing import Any
 
-from . import fit, models, units, wv
 from ._version import __version__ as __version__
 
-#: The subpackages whose ``__all__`` make up ``engine``'s public names, in this order.
-SUBPACKAGES: tuple[str, ...] = (
+#: Every public name and the module that defines it.
+API: dict[str, str] = {
+    "__version__": "engine._version",
+    # processes and models
+    **dict.fromkeys(
+        ("Process", "Model", "ModelError", "parse_model", "PROCESS_TYPES"), "engine.models"
+    ),
+    **dict.fromkeys(("WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv"), "engine.models.processes"),
+    # wavelet variance, Allan variance, cross-covariance
+    **dict.fromkeys(
+        (
+            "WaveletVariance",
+            "wavelet_variance",
+            "default_levels",
+            "haar_coefficients",
+            "biweight_constant",
+            "robust_scale_biweight",
+        ),
+        "engine.wv",
+    ),
+    "wavelet_variance_stream": "engine.wv.stream",
+    **dict.fromkeys(("AllanVariance", "allan_variance"), "engine.wv.allan"),
+    **dict.fromkeys(
+        ("WaveletCrossCovariance", "wavelet_cross_covariance", "WVMatrix", "wv_matrix"),
+        "engine.wv.wccv",
+    ),
+    # fits and their results
+    **dict.fromkeys(
+        (
+            "fit_gmwm",
+            "fit_efficient",
+            "GMWMResult",
+            "weight_matrix",
+            "gmwm_objective",
+            "FitResult",
+            "FitError",
+            "ParamRecord",
+            "ParamTable",
+            "Summary",
+            "starting_values",
+            "wv_cov",
+            "wv_cov_model",
+            "wv_cov_data",
+            "wv_cov_bootstrap",
+        ),
+        "engine.fit",
+    ),
+    **dict.fromkeys(("fit_replicates", "ReplicateResult"), "engine.fit.replicates"),
+    **dict.fromkeys(("fit_gmwfm", "fit_armav", "GMWFMResult"), "engine.fit.gmwfm"),
+    **dict.fromkeys(("MethodEstimate", "from_gmwm", "compare_table"), "engine.fit.estimate"),
+    # inference: intervals, J-test, selection, datasheet check
+    **dict.fromkeys(
+        (
+            "param_intervals",
+            "ParamInterval",
+            "j_test",
+            "JTest",
+            "rank_models",
+            "submodels",
+            "SelectionResult",
+            "Candidate",
+            "check_datasheet",
+            "read_datasheet",
+            "parse_datasheet",
+            "DatasheetSpec",
+            "DatasheetCheck",
+            "DatasheetError",
+        ),
+        "engine.inference",
+    ),
+    # multivariate GMWM and the virtual sensor
+    **dict.fromkeys(
+        (
+            "MultiModel",
+            "SharedProcess",
+            "fit_mgmwm",
+            "MGMWMResult",
+            "SharedEstimate",
+            "moment_covariance",
+            "dependence_test",
+            "DependenceTest",
+            "virtual_sensor",
+            "VirtualSensor",
+            "virtual_model",
+            "virtual_signal",
+            "optimal_weights",
+        ),
+        "engine.multivariate",
+    ),
+    # loading logs, sessions
+    **dict.fromkeys(
+        (
+            "load_log",
+            "save_log",
+            "ImuLog",
+            "LoadError",
+            "check_time",
+            "TimeReport",
+            "read_imu_bag",
+            "imu_topics",
+        ),
+        "engine.io",
+    ),
+    "read_kalibr": "engine.io.kalibr",
+    **dict.fromkeys(("Session", "SessionError", "load_session", "save_session"), "engine.session"),
+    # export formats and the projection onto a filter's noise model
+    **dict.fromkeys(
+        (
+            "export",
+            "FORMATS",
+            "project",
+            "Projection",
+            "datasheet_table",
+            "fit_report",
+            "kalibr_imu",
+            "kalibr_models",
+            "write_kalibr",
+        ),
+        "engine.formats",
+    ),
+    # reports
+    **dict.fromkeys(
+        (
+            "report",
+            "fleet_report",
+            "gather_report",
+            "gather_fleet",
+            "render_html",
+            "render_fleet_html",
+            "CalibrationReport",
+            "FleetReport",
+            "ReportError",
+        ),
+        "engine.reporting",
+    ),
+    # units and datasheet conversions
+    **dict.fromkeys(
+        (
+            "datasheet",
+            "param_unit",
+            "si_factor",
+            "to_datasheet",
+            "from_datasheet",
+            "process_values",
+            "BI_FACTOR",
+            "ExportError",
+        ),
+        "engine.units",
+    ),
+    # fleets of logs
+    **dict.fromkeys(("fit_batch", "fit_log", "BatchResult", "LogFit"), "engine.batch"),
+    # teaching: the slope method against GMWM, the scenarios
+    **dict.fromkeys(
+        ("run_slope_study", "avsm", "avsm_auto", "simulate_scenario", "Scenario", "SCENARIOS"),
+        "engine.teaching",
+    ),
+    # the demo log shipped with the package
+    **dict.fromkeys(("demo_path", "demo_truth", "demo_dir"), "engine.demo"),
+}
+
+__all__ = sorted(API)
+
+#: The subpackages and modules, reachable as attributes (``eg.units.datasheet_rows``).
+SUBMODULES: tuple[str, ...] = (
     "models",
-    "wv",
-    "fit",
     "units",
+    "wv",
+    "io",
+    "demo",
+    "fit",
     "inference",
     "multivariate",
-    "io",
-    "export",
+    "formats",
     "teaching",
-    "demo",
     "batch",
-    "report",
+    "session",
+    "reporting",
+    "cli",
 )
-_EAGER = {"models": models, "wv": wv, "fit": fit, "units": units}
-
-
-def _literal_all(package: str) -> list[str]:
-    """A subpackage's ``__all__``, read from its source (a literal list), not imported."""
-    init = Path(__file__).with_name(package)
-    path = init / "__init__.py" if init.is_dir() else init.with_suffix(".py")
-    for node in ast.parse(path.read_text(encoding="utf-8")).body:
-        if isinstance(node, ast.Assign) and any(
-            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
-        ):
-            return list(ast.literal_eval(node.value))
-    raise ImportError(f"engine.{package} has no literal __all__ (engine's API is built from it)")
-
-
-#: Public name -> the subpackage that defines it.
-_SOURCE: dict[str, str] = {}
-for _pkg in SUBPACKAGES:
-    _names = list(_EAGER[_pkg].__all__) if _pkg in _EAGER else _literal_all(_pkg)
-    for _name in _names:
-        _SOURCE.setdefault(_name, _pkg)
-    # names an eager subpackage already holds are bound now; its own lazy names stay lazy
-    if _pkg in _EAGER:
-        for _name in _names:
-            if _name in vars(_EAGER[_pkg]):
-                globals()[_name] = vars(_EAGER[_pkg])[_name]
-
-__all__ = sorted(_SOURCE)
 
 
 def __getattr__(name: str) -> Any:
-    pkg = _SOURCE.get(name)
-    if pkg is None:
+    if name in SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    module = API.get(name)
+    if module is None:
         raise AttributeError(f"module 'engine' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{pkg}", __name__), name)
+    value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_SOURCE))
+    return sorted(set(globals()) | set(API))

@@ -6,7 +6,7 @@ which costs more than it saves at this size and becomes 4-30x slower as soon as 
 thread or process keeps a core busy (its threads spin waiting for each other). So the
 wavelet variance calls BLAS on the whole block only when the pool has one thread, and otherwise
 in chunks that OpenBLAS keeps in the calling thread
-(:func:`engine.wv.second_difference_sums`); the ``gmwm`` command and the app limit the
+(:func:`engine.wv._kernel.second_difference_sums`); the ``gmwm`` command and the app limit the
 pool to one thread. Library users keep whatever their process has configured.
 
 Uses threadpoolctl when installed, else OpenBLAS's own ``*_num_threads`` functions through

@@ -206,7 +206,7 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
         from distributed import Client, LocalCluster
     except ImportError as e:
         raise ImportError(
-            "--scheduler needs Dask's distributed scheduler: pip install 'gmwm-app[dask]' "
+            "scheduler= needs Dask's distributed scheduler: pip install 'gmwm-app[dask]' "
             "(or 'dask[distributed]')"
         ) from e
     cluster = None

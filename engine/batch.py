@@ -1,7 +1,7 @@
 """Calibrating a fleet: fit every channel of many logs, one report per log, and the spread of
 every parameter across the units.
 
-:func:`fit_batch` maps :func:`fit_log` over the logs with :func:`engine.inference.parallel_map`
+:func:`fit_batch` maps :func:`fit_log` over the logs with :func:`engine._parallel.parallel_map`
 (in process, on local processes, or on any ``concurrent.futures.Executor``: a Dask cluster's
 ``Client.get_executor()`` spreads a lab's logs over many machines). A log that cannot be read
 or fitted is a result, not a failure of the batch: its error is kept and the other logs
@@ -174,9 +174,8 @@ def fit_log(
         With ``error == ""``; raises on a log that cannot be loaded or whose every channel
         fails (:class:`engine.io.LoadError`, :class:`engine.fit.FitError` ...).
     """
-    from .export import export
+    from .formats import export
     from .io import ImuLog, load_log, pick_channel
-    from .wv import wavelet_variance
 
     _check_choice(model, select)
     t0 = time.perf_counter()
@@ -192,14 +191,7 @@ def fit_log(
     errors: dict[str, str] = {}
     for ch in names:
         try:
-            if log.is_summary:
-                wv = log.wv[ch]
-                wv = wv.truncate(levels) if levels is not None and levels < wv.n_levels else wv
-            else:
-                x = log[ch]
-                if np.ptp(x) == 0:
-                    raise FitError(f"channel {ch!r} is constant: there is no noise to analyse")
-                wv = wavelet_variance(x, fs=log.fs, levels=levels, unit=log.units.get(ch, ""))
+            wv = log.wavelet_variance(ch, levels=levels)
             fits[ch] = _fit_channel(wv, model, select, weights)
         except (FitError, ModelError, ValueError) as e:
             errors[ch] = f"{type(e).__name__}: {e}"
@@ -226,10 +218,6 @@ def _fit_channel(wv: Any, model: str | None, select: str | None, weights: str) -
         return best.result
     if model is None:
         raise ModelError("give a model to fit (model=) or a maximal model to select from (select=)")
-    if weights == "efficient":
-        from .inference import fit_efficient
-
-        return fit_efficient(wv, parse_model(model))
     return fit_gmwm(wv, parse_model(model), weights=weights)
 
 

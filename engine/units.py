@@ -72,6 +72,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "BI_FACTOR",
+    "SI_UNIT",
     "G0",
     "ExportError",
     "Quantity",
@@ -139,7 +140,8 @@ _SI: dict[str, tuple[str, float]] = {
     "mm/s^2": ("accelerometer", 1e-3),
     "gal": ("accelerometer", 1e-2),
 }
-_SI_UNIT = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
+#: The SI signal unit of each sensor kind: the one map (datasheet check, projection, exports).
+SI_UNIT: dict[str, str] = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
 
 
 def norm_unit(unit: str) -> str:
@@ -179,13 +181,13 @@ def si_factor(unit: str, channel: str = "") -> tuple[str, float]:
     if not unit or not unit.strip():
         raise ExportError(
             f"the unit{where} is unknown: SI conversion needs it; give it with "
-            f"units={{{channel or 'name'!r}: 'deg/s'}} (CLI: --units) among {known}"
+            f"units={{{channel or 'name'!r}: 'deg/s'}} among {known}"
         )
     got = _SI.get(norm_unit(unit))
     if got is None:
         raise ExportError(
             f"unknown unit {unit!r}{where}: cannot convert to SI; use one of "
-            f"{known} (CLI: --units NAME=UNIT)"
+            f"{known} (units={{{channel or 'name'!r}: 'deg/s'}})"
         )
     return got
 
@@ -428,7 +430,7 @@ def datasheet_rows(
             kind, f_si = si_factor(unit, channel)
         except ExportError as e:
             note_si = f"no SI rows: {e}"
-    su = _SI_UNIT.get(kind or "", "")
+    su = SI_UNIT.get(kind or "", "")
     rows: list[DatasheetRow] = []
 
     def add(proc: str, q: Quantity, value: float, iv: tuple[float, float], note: str = "") -> None:

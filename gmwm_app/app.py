@@ -195,7 +195,7 @@ class GMWMApp:
         self.download = download_button(
             self._export_json, "gmwm_fit.json", "Download fit (JSON)", "primary"
         )
-        # the calibration report of the session's fit (engine.report, not refitted)
+        # the calibration report of the session's fit (engine.reporting, not refitted)
         self.report_download = download_button(
             self._export_report, "gmwm_report.html", "Download report (HTML)"
         )

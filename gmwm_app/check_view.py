@@ -30,7 +30,7 @@ import param
 from bokeh.models import ColumnDataSource, Legend, LegendItem, StringFormatter, TableColumn
 
 import engine as eg
-from engine.units import DISPLAY, ExportError, si_factor, times_s
+from engine.units import DISPLAY, ExportError, si_factor, squared, times_s
 
 from . import views
 from .state import AppState
@@ -421,7 +421,7 @@ class CheckView(pn.viewable.Viewer):
             "verdict": list(chk.verdict),
             "color": colors,
         }
-        u = eg.squared(self.state.unit or "u")
+        u = squared(self.state.unit or "u")
         self.wv_figure.yaxis.axis_label = f"wavelet variance [{u}]"
         self.adev_figure.yaxis.axis_label = f"Allan deviation [{self.state.unit or 'u'}]"
         fv = chk.fit_verdict or ("",) * len(chk.verdict)

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 import engine as eg
+from engine._checks import check_fs as engine_check_fs
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
 
@@ -311,12 +312,13 @@ def message_of(e: BaseException) -> str:
 def check_fs(fs: Any) -> float:
     """``fs`` as a positive finite number of Hz; ValueError naming the bad value."""
     try:
-        f = float(fs)
+        f = float(fs)  # the field's text or number
     except (TypeError, ValueError):
+        f = math.nan
+    try:
+        return engine_check_fs(f)
+    except ValueError:
         raise ValueError(f"fs must be a positive number of Hz, got {fs!r}") from None
-    if not math.isfinite(f) or f <= 0:
-        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
-    return f
 
 
 def channel_names(lg: Any) -> list[str]:
@@ -337,11 +339,7 @@ def fs_source(lg: Any) -> str:
 
 def unit_of(lg: Any, ch: str) -> str:
     """Unit of channel ``ch`` of a log (empty when the file names none)."""
-    units = getattr(lg, "units", None) or {}
-    u = units.get(ch, "")
-    if not u and lg.is_summary and ch in lg.wv:
-        u = lg.wv[ch].unit
-    return str(u or "")
+    return str(lg.unit_of(ch))
 
 
 def compute_wv(
@@ -358,24 +356,8 @@ def compute_wv(
     """
     if lg is None:
         raise ValueError("load a log first")
-    if lg.is_summary:
-        if ch not in lg.wv:
-            raise ValueError(f"there is no channel {ch!r} in the summary file")
-        wv = lg.wv[ch]
-        if robust and not wv.robust:
-            raise ValueError(
-                "this file holds a classical WV summary only; the robust WV needs the raw log"
-            )
-        if not robust and wv.robust:
-            if wv.classical is None:
-                raise ValueError("this summary file holds a robust WV only")
-            wv = wv.classical
-        return wv if wv.fs == fs else wv.with_fs(fs)
-    if ch not in lg.channels:
-        raise ValueError(f"there is no channel {ch!r}; channels: {', '.join(lg.channels)}")
-    x = lg.channels[ch]
     try:
-        return eg.wavelet_variance(x, fs=fs, robust=robust, unit=unit_of(lg, ch), progress=progress)
+        return lg.wavelet_variance(ch, robust=robust, fs=fs, progress=progress)
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
 

@@ -1,7 +1,7 @@
 """What a filter will assume, shown in the export menu before the download (issue 23 item 6).
 
 For a filter format, every fitted channel is projected onto the format's consumer noise model
-by the engine (:func:`engine.export.project`, the call the filter formats make: the rule, the
+by the engine (:func:`engine.formats.project`, the call the filter formats make: the rule, the
 bound, 95 % intervals); the app only draws and tabulates the result:
 
 * :func:`preview_projections`: the projections of the session's fits for one format;
@@ -24,7 +24,7 @@ import panel as pn
 from bokeh.models import BoxAnnotation, Span
 from bokeh.plotting import figure
 
-from engine.export import FORMAT_CONSUMERS, ExportError, Projection, project
+from engine.formats import FORMAT_CONSUMERS, ExportError, Projection, project
 
 __all__ = ["preview_projections", "preview_table", "preview_figure", "ExportPreview"]
 
@@ -43,7 +43,7 @@ def preview_projections(
     ----------
     fits : mapping of channel to GMWMResult
     fmt : str
-        A filter format (a key of :data:`engine.export.FORMAT_CONSUMERS`).
+        A filter format (a key of :data:`engine.formats.FORMAT_CONSUMERS`).
     units : mapping of channel to unit, optional
         The signal units (default each WV's).
     filter_rate : float, optional

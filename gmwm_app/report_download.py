@@ -1,8 +1,8 @@
 """The page's "Download report": the calibration report of the session's fit (no widgets).
 
 :func:`session_report` hands the session's loaded log and its fit to the engine
-(:func:`engine.report.gather_report` with ``fits=``: the fit is reported as it is, nothing is
-refitted; :func:`engine.report.render_html` draws the page); :func:`report_file` is the
+(:func:`engine.reporting.gather_report` with ``fits=``: the fit is reported as it is, nothing is
+refitted; :func:`engine.reporting.render_html` draws the page); :func:`report_file` is the
 download button's callback: the page as a file, or, when it cannot be made, the reason as the
 page's error message (and a short HTML file saying it), never an exception.
 """
@@ -14,7 +14,7 @@ import io
 import logging
 from pathlib import Path
 
-from engine.report import gather_report, render_html
+from engine.reporting import gather_report, render_html
 from gmwm_app.data import message_of
 from gmwm_app.state import AppState
 

@@ -4,7 +4,7 @@ Two layers, like the rest of the app:
 
 * functions on an :class:`~gmwm_app.state.AppState` (no widgets, testable without a browser):
   :func:`session_json` writes the session (data reference, load options, channel, fs, robust
-  WV, model, WV and fit) with :func:`engine.io.session.session_to_json`; :func:`prepare_restore`
+  WV, model, WV and fit) with :func:`engine.session.session_to_json`; :func:`prepare_restore`
   (worker-thread safe) reads a session file and its data again; :func:`apply_restore` puts it
   in the state; :func:`export_text` gives the Kalibr ``imu.yaml`` or the datasheet of the fit;
   :func:`export_fits` writes the fits of several channels in any registered format;
@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import panel as pn
 
-from engine.export import FORMATS, export
-from engine.io import Session, SessionError, session_from_json, session_to_json
+from engine.formats import FORMATS, export
+from engine.session import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size
@@ -66,7 +66,7 @@ def _data_path(state: AppState) -> str:
 
 
 def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
-    """The session of ``state`` as JSON text (:func:`engine.io.session.session_to_json`).
+    """The session of ``state`` as JSON text (:func:`engine.session.session_to_json`).
 
     ``load``: the ``load_log`` options the data were read with (e.g. ``{"segment": "longest"}``).
     The app part holds the source, file name, channel, fs, robust flag and model spec.
@@ -276,7 +276,7 @@ def export_fits(
     fits : mapping of channel to GMWMResult
         The fits to export (the filter formats need a gyroscope and an accelerometer).
     fmt : str
-        A name of :data:`engine.export.FORMATS`.
+        A name of :data:`engine.formats.FORMATS`.
     inflate : float
         Filter formats: the noise values times this factor (written in the file).
     filter_rate : float, optional

@@ -16,7 +16,7 @@ import numpy as np
 
 import engine as eg
 from engine.fit.estimate import MethodEstimate, from_gmwm
-from engine.teaching import avsm, avsm_auto, gmwm_spec
+from engine.teaching import SLOPES, avsm, avsm_auto, gmwm_spec
 from engine.wv.allan import AllanVariance
 
 from .state import AppState, demo_path, format_value
@@ -41,11 +41,11 @@ __all__ = [
 #: Rows of the comparison table by Allan-deviation slope: QN, WN, the bias-like terms (the
 #: floor BI, then GM and AR1, which have no single slope), RW, DR.
 CODE_ORDER = tuple(
-    sorted(["BI", *eg.PROCESS_TYPES], key=lambda c: eg.SLOPES.get(c, 0.0))  # stable: BI first
+    sorted(["BI", *eg.PROCESS_TYPES], key=lambda c: SLOPES.get(c, 0.0))  # stable: BI first
 )
 #: Colour of each slope-method term's region (and of its slope line): the process's own colour,
 #: orange for the bias-instability floor.
-REGION_COLORS = {c: eg.PROCESS_TYPES[c].color if c != "BI" else "#FF7F0E" for c in eg.SLOPES}
+REGION_COLORS = {c: eg.PROCESS_TYPES[c].color if c != "BI" else "#FF7F0E" for c in SLOPES}
 
 #: Methods in the table and on the plot: column name -> (MethodEstimate.method, colour, dash).
 METHODS: dict[str, tuple[str, str, str]] = {

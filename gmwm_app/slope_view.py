@@ -43,7 +43,7 @@ from bokeh.models import (
 
 import engine as eg
 from engine.fit.estimate import MethodEstimate, from_gmwm
-from engine.teaching import SCENARIOS, get_scenario
+from engine.teaching import SCENARIOS, SLOPES, get_scenario
 
 from .slope_data import (
     METHODS,
@@ -81,7 +81,7 @@ TITLE = "Slope method"
 _SLOPE_TEXT = {-1.0: "−1", -0.5: "−½", 0.5: "+½", 1.0: "+1"}
 PROCESS_CHOICES: dict[str, str] = {
     (f"{c}  slope {_SLOPE_TEXT[s]}" if c != "BI" else "bias instability  floor"): c
-    for c, s in sorted(eg.SLOPES.items(), key=lambda cs: cs[0] != eg.WN.code)  # WN first
+    for c, s in sorted(SLOPES.items(), key=lambda cs: cs[0] != eg.WN.code)  # WN first
 }
 
 TRUTH_COLOR = "#2E7D32"

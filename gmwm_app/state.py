@@ -494,10 +494,6 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             return None
         m = start if start is not None else model.cleared()
         try:
-            if self.weights == "efficient":
-                from engine.inference import fit_efficient
-
-                return fit_efficient(wv, m)
             return eg.fit_gmwm(wv, m, weights=self.weights)
         except (eg.ModelError, eg.FitError, ValueError) as e:
             return message_of(e)

@@ -23,7 +23,7 @@ import panel as pn
 from bokeh.models import ColumnDataSource, NumberFormatter, ScientificFormatter
 
 import engine as eg
-from engine.export import FORMATS, export
+from engine.formats import FORMATS, export
 from engine.units import param_unit
 
 from .data import message_of

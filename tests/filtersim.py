@@ -39,7 +39,7 @@ the truth it depends on which terms one calls bias (a 0.3 s GM is neither the fi
 noise nor its random walk), so it is kept for the sanity checks, not for the table.
 
 Case (b), the projected and bounded numbers, comes from the engine's projection
-(``engine.export.projection.project``, issue 23 items 1-2; :func:`projected_noise`).
+(``engine.formats.projection.project``, issue 23 items 1-2; :func:`projected_noise`).
 :func:`local_bound`, a minimal PSD bound written before the engine had one, is kept as an
 independent reference (tested as a PSD bound; not used for case (b)).
 """
@@ -54,7 +54,7 @@ import numpy as np
 from scipy.stats import chi2
 
 import engine as eg
-from engine.export.projection import project
+from engine.formats.projection import project
 
 __all__ = [
     "FilterNoise",

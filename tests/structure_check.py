@@ -12,6 +12,11 @@ asserts ``0/0/0``.
   and ``_name`` is not a dunder. A helper shared by two modules is public, or lives in a private
   *module* (``_optim.py``) whose names are public.
 * **Big modules**: more than ``MAX_LINES`` lines.
+* **Layers** (:func:`layer_violations`): the packages of ``engine`` run one way, in the order of
+  :data:`LAYERS`; an import (anywhere in the module, as for cycles) of a package of the same or
+  a higher layer is a finding, and so is a package missing from the table. Only the shared
+  private modules (``engine/_*.py``, layer 0) may import each other (the cycle check keeps
+  them acyclic).
 """
 
 from __future__ import annotations
@@ -23,6 +28,25 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("engine", "gmwm_app")
 MAX_LINES = 800
+
+#: The layers of the project, lowest first: a package imports only packages of lower layers.
+#: ``engine.io`` sits low (loaders need no fit); the API (``engine/__init__.py``) sits above
+#: the engine's packages and below the app.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("engine._*",),  # shared private modules: _files, _limits, _parallel, _optim ...
+    ("engine.models",),
+    ("engine.units",),
+    ("engine.wv",),
+    ("engine.io", "engine.demo"),
+    ("engine.fit",),
+    ("engine.inference",),
+    ("engine.multivariate", "engine.formats"),
+    ("engine.teaching", "engine.batch", "engine.session"),
+    ("engine.reporting",),
+    ("engine.cli",),
+    ("engine",),
+    ("gmwm_app",),
+)
 
 
 def _module_name(path: Path) -> str:
@@ -53,6 +77,53 @@ def _resolve(importer: str, is_pkg: bool, level: int, module: str | None) -> str
 
 def analyse() -> tuple[list[list[str]], list[str], list[str]]:
     """Return (cycles, private imports, big modules), each as a list of readable findings."""
+    mods, graph, private = _graph()
+    cycles = _sccs(graph)
+    big = [
+        f"{p.relative_to(ROOT)}: {n} lines"
+        for p in mods.values()
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES
+    ]
+    return cycles, private, big
+
+
+def package_of(module: str) -> str:
+    """The layer unit of a module: ``engine.fit.gmwm`` -> ``engine.fit``, ``engine._files`` ->
+    ``engine._*``, ``engine`` -> ``engine``, ``gmwm_app.state`` -> ``gmwm_app``."""
+    parts = module.split(".")
+    if parts[0] != "engine":
+        return parts[0]
+    if len(parts) == 1:
+        return "engine"
+    return "engine._*" if parts[1].startswith("_") else f"engine.{parts[1]}"
+
+
+def layer_violations(graph: dict[str, set[str]] | None = None) -> list[str]:
+    """Imports against :data:`LAYERS` (default: the project's import graph), as findings."""
+    if graph is None:
+        graph = _graph()[1]
+    rank = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
+    out: list[str] = []
+    missing = sorted({package_of(m) for m in graph} - set(rank))
+    out += [
+        f"{pkg}: not in LAYERS (tests/structure_check.py): give it its layer" for pkg in missing
+    ]
+    for src in sorted(graph):
+        a = package_of(src)
+        for dst in sorted(graph[src]):
+            b = package_of(dst)
+            if a == b or a not in rank or b not in rank:
+                continue
+            if rank[b] > rank[a] or (rank[b] == rank[a] and a != "engine._*"):
+                out.append(
+                    f"{src} imports {dst}: {a} (layer {rank[a]}) may not import {b} "
+                    f"(layer {rank[b]})"
+                )
+    return out
+
+
+def _graph() -> tuple[dict[str, Path], dict[str, set[str]], list[str]]:
+    """The modules, the import graph (module -> modules it imports) and the private imports."""
     mods = _modules()
     graph: dict[str, set[str]] = {m: set() for m in mods}
     private: list[str] = []
@@ -86,13 +157,7 @@ def analyse() -> tuple[list[list[str]], list[str], list[str]]:
                         and src != name
                     ):
                         private.append(f"{path.relative_to(ROOT)}:{node.lineno}: {src}.{n}")
-    cycles = _sccs(graph)
-    big = [
-        f"{p.relative_to(ROOT)}: {n} lines"
-        for p in mods.values()
-        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES
-    ]
-    return cycles, private, big
+    return mods, graph, private
 
 
 def _sccs(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -148,8 +213,12 @@ def main() -> int:
         print("private import:", p)
     for b in big:
         print("big module:", b)
+    layers = layer_violations()
+    for v in layers:
+        print("layer:", v)
     print(f"cycles/private imports/big modules: {len(cycles)}/{len(private)}/{len(big)}")
-    return 0 if not (cycles or private or big) else 1
+    print(f"layer violations: {len(layers)}")
+    return 0 if not (cycles or private or big or layers) else 1
 
 
 if __name__ == "__main__":

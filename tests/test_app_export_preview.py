@@ -12,7 +12,7 @@ import pytest
 import yaml
 from bokeh.models import BoxAnnotation, Span
 
-from engine.export import project
+from engine.formats import project
 from gmwm_app.export_preview import preview_figure, preview_projections, preview_table
 
 

@@ -10,7 +10,7 @@ import re
 from typing import Any
 
 import engine as eg
-from engine.report import gather_report
+from engine.reporting import gather_report
 
 
 def _report_data(page: str) -> dict[str, Any]:
@@ -78,7 +78,7 @@ def test_report_made_in_the_app_process_loads_nothing(app_demo) -> None:
     import panel as pn
 
     import engine as eg
-    from engine.report import gather_report, render_html
+    from engine.reporting import gather_report, render_html
 
     pn.widgets.FileDropper()  # a Panel model with external files, as the app has
     log = eg.load_log(eg.demo_path())

@@ -149,7 +149,7 @@ def test_exports_of_the_fit(app_state: AppState) -> None:
     )
     # by default the app writes what the engine's export writes by default: the projected and
     # over-bounded numbers, never below the fit's own white noise density here
-    from engine.export import export
+    from engine.formats import export
 
     y_bound = sv.export_text(s, "kalibr")
     fits = {s.channel: s.result}
@@ -280,7 +280,7 @@ def test_page_export_menu_every_format_from_the_fitted_channels(app_demo: Path) 
 
     import yaml
 
-    from engine.export import FORMATS
+    from engine.formats import FORMATS
     from gmwm_app.app import create_app
 
     app = create_app().gmwm_app

@@ -106,7 +106,9 @@ def test_wv_is_computed_once_per_channel(app_demo: Path, monkeypatch: pytest.Mon
         calls.append((np.size(x), kw.get("robust", False)))
         return real(x, **kw)
 
-    monkeypatch.setattr(eg, "wavelet_variance", counting)
+    import engine.io.log  # where "the WV of a channel of a log" is computed (ImuLog)
+
+    monkeypatch.setattr(engine.io.log, "wavelet_variance", counting)
     s = AppState()
     assert s.load_demo()
     assert len(calls) == 1
@@ -557,7 +559,7 @@ def test_demo_path_default(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_weights_switch_refits_with_efficient_weights(app_state: AppState, app_demo: Path) -> None:
     # the demo's accel_x is QN+WN+RW+DR (engine/demo/demo_imu_truth.json)
-    from engine.inference import fit_efficient
+    from engine.fit import fit_efficient
 
     s = app_state
     assert s.select_channel("accel_x") and s.set_model("QN+WN+RW+DR"), s.error

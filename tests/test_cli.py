@@ -248,3 +248,63 @@ def test_fit_json_keeps_strings_with_nan_in_them(capsys, tmp_path):
     d = json.loads(out)
     assert d["channel"] == "NaNo"
     assert d["params"][0]["value"] == pytest.approx(1.0, rel=0.2)
+
+
+def _raised_texts(path: Path) -> list[tuple[int, str]]:
+    """The literal text of every ``raise X(...)`` of a module (f-string parts included)."""
+    import ast
+
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call):
+            parts = [
+                c.value
+                for arg in node.exc.args
+                for c in ast.walk(arg)
+                if isinstance(c, ast.Constant) and isinstance(c.value, str)
+            ]
+            out.append((node.lineno, "".join(parts)))
+    return out
+
+
+def test_engine_messages_name_arguments_not_cli_flags():
+    # issue 20: 14 engine messages named --units, --inflate, --scheduler ... (the CLI's words)
+    import re
+
+    root = Path(__file__).resolve().parents[1] / "engine"
+    found = [
+        f"{p.relative_to(root.parent)}:{line}: {text}"
+        for p in sorted(root.rglob("*.py"))
+        if "cli" not in p.relative_to(root).parts
+        for line, text in _raised_texts(p)
+        if re.search(r"(?<![\w-])--[a-z]", text)
+    ]
+    assert found == []
+
+
+def test_the_cli_words_engine_messages_in_its_flags(capsys, tmp_path):
+    from engine.cli.common import cli_text
+
+    assert cli_text("levels=30 is out of range") == "--levels 30 is out of range"
+    assert (
+        cli_text("allow a partial file (allow_partial=True)") == "allow a partial file (--partial)"
+    )
+    assert cli_text("give it with units={'gyro_x': 'deg/s'} among") == (
+        "give it with --units gyro_x=deg/s among"
+    )
+    assert cli_text("choose segment='longest' to") == "choose --segment longest to"
+    assert cli_text("spec='arw<=0.3 deg/sqrt(h)' is not") == "--spec 'arw<=0.3 deg/sqrt(h)' is not"
+    assert (
+        cli_text("fs=100 Hz; wv.levels=3; segment=(0, 9)")
+        == "fs=100 Hz; wv.levels=3; segment=(0, 9)"
+    )
+    demo = str(eg.demo_path())
+    args = ["export", demo, "--model", "WN+RW", "-o", str(tmp_path / "x.txt")]
+    assert main([*args, "--format", "px4"]) == 2
+    err = capsys.readouterr().err
+    assert "(--filter-rate)" in err and "filter_rate=" not in err
+    assert main([*args, "--channels", "gyro_x", "--format", "kalibr"]) == 2
+    err = capsys.readouterr().err
+    assert "only gyroscope" in err and "(--partial)" in err
+    assert main(["fit", demo, "--channel", "gyro_x", "--model", "WN", "--levels", "99"]) == 2
+    assert "--levels 99 is out of range" in capsys.readouterr().err

@@ -25,7 +25,7 @@ import yaml
 
 import engine as eg
 from engine.demo import demo_path
-from engine.export import FORMATS, export
+from engine.formats import FORMATS, export
 
 cv2 = pytest.importorskip("cv2", reason="opencv-python-headless (the test extra) is needed")
 

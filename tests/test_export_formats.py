@@ -1,4 +1,4 @@
-"""Filter export formats (engine.export.vio/autopilot/sim/ins): every key read back from the
+"""Filter export formats (engine.formats.vio/autopilot/sim/ins): every key read back from the
 file and checked against the fit's datasheet table (engine.units.datasheet_rows), --inflate,
 the autopilot range warnings, and a fit -> OpenVINS -> simulate -> refit round trip."""
 
@@ -14,7 +14,7 @@ import yaml
 
 import engine as eg
 from engine.demo import demo_path
-from engine.export import ExportError, export
+from engine.formats import FORMATS, ExportError, export
 from engine.units import datasheet_rows, si_factor
 
 REL = 1e-12
@@ -346,6 +346,6 @@ def test_ros_imu_covariance(fits) -> None:
 def test_every_registered_filter_format_records_inflate(fits) -> None:
     filt = ["kalibr", "openvins", "basalt", "orbslam3", "vins", "px4", "ardupilot", "matlab"]
     filt += ["gazebo", "gz-sim", "kf-gins", "ros-imu"]
-    assert set(filt) | {"json", "csv", "datasheet", "datasheet-csv"} == set(eg.export.FORMATS)
+    assert set(filt) | {"json", "csv", "datasheet", "datasheet-csv"} == set(FORMATS)
     for f in filt:
         assert "inflate = 1.25" in export(None, fits, f, inflate=1.25, filter_rate=100.0), f

@@ -18,8 +18,8 @@ import yaml
 
 import engine as eg
 from engine.demo import demo_path
-from engine.export import FORMATS, export
-from engine.export.common import clean_text, yaml_str
+from engine.formats import FORMATS, export
+from engine.formats.common import clean_text, yaml_str
 
 # what a hostile name tries to add: a PX4 parameter, an ArduPilot one, YAML keys
 INJECTED = ("EKF2_GYR_NOISE 9.9", "EK3_GYRO_P_NSE,99.9", "key:", "key2:", "k3:", "<evil")

@@ -31,7 +31,7 @@ from filtersim import (
 from scipy.stats import chi2
 
 import engine as eg
-from engine.export.projection import project
+from engine.formats.projection import project
 
 FS = 100.0
 Z = 4.0  # standard errors of every Monte Carlo band

@@ -279,3 +279,29 @@ def test_every_fit_result_shares_one_base_with_the_same_fields() -> None:
     assert "<table>" in ci90._repr_html_() and "GM.beta" in str(ci90)
     with pytest.raises(eg.FitError, match="not available"):
         r.conf_int()
+
+
+def test_efficient_weights_are_a_choice_of_fit_gmwm():
+    """``fit_gmwm(weights="efficient")``: the ci fit, V implied by it, the refit with V^-1 (the
+    GMWM paper, Corollary 1), step by step; ``fit_efficient`` is the same call."""
+    from engine.fit import fit_efficient
+    from engine.fit.covariance import inverse_cov, wv_cov_data, wv_cov_model
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(scale=0.05, size=2**14) + np.cumsum(rng.normal(scale=1e-3, size=2**14))
+    wv = eg.wavelet_variance(x, fs=100.0)
+    eff = eg.fit_gmwm(wv, "WN+RW", weights="efficient")
+    first = eg.fit_gmwm(wv, "WN+RW")
+    by_hand = eg.fit_gmwm(wv, first.model, weights=inverse_cov(wv_cov_model(first.model, wv)))
+    assert eff.weights == "efficient"
+    np.testing.assert_array_equal(eff.omega, by_hand.omega)
+    assert eff.params == by_hand.params
+    assert fit_efficient(wv, "WN+RW").params == eff.params
+    # a raw signal and levels go through the same path
+    raw = eg.fit_gmwm(x, "WN+RW", fs=100.0, weights="efficient", levels=8)
+    assert raw.wv.n_levels == 8 and raw.weights == "efficient"
+    # the V options reach the estimate of V
+    data = eg.fit_gmwm(wv, "WN+RW", weights="efficient", v="data", x=x)
+    np.testing.assert_allclose(data.omega, inverse_cov(wv_cov_data(x, wv)), rtol=1e-12)
+    with pytest.raises(TypeError, match="v, x set how V is estimated.*weights='efficient'"):
+        eg.fit_gmwm(wv, "WN+RW", v="data", x=x)

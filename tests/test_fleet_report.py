@@ -21,8 +21,8 @@ import engine as eg
 from engine.cli import main
 from engine.inference import DatasheetError
 from engine.io import save_log
-from engine.report import gather_fleet, render_fleet_html
-from engine.report.fleet import MIN_UNITS_Z, OUTLIER_Z, noise_terms, parse_limits, robust_z
+from engine.reporting import gather_fleet, render_fleet_html
+from engine.reporting.fleet import MIN_UNITS_Z, OUTLIER_Z, noise_terms, parse_limits, robust_z
 
 FS = 100.0
 N = 2**15

@@ -15,8 +15,8 @@ import pytest
 from conftest import CHROMIUM, CHROMIUM_ARGS
 from test_report_browser import _open_offline, _painted, _require_chromium
 
-from engine.report import gather_fleet, render_fleet_html
-from engine.report.render import fleet_figure_specs
+from engine.reporting import gather_fleet, render_fleet_html
+from engine.reporting.render import fleet_figure_specs
 
 pytestmark = pytest.mark.browser
 

@@ -25,10 +25,11 @@ from hypothesis.extra import numpy as hnp
 
 import engine as eg
 from engine.cli import main
-from engine.export import ExportError, read_kalibr, si_factor
 from engine.fit import FitError
-from engine.io import ImuLog, LoadError, SessionError, check_time, load_log, load_session
+from engine.formats import ExportError, read_kalibr, si_factor
+from engine.io import ImuLog, LoadError, check_time, load_log
 from engine.models import ModelError, parse_model
+from engine.session import SessionError, load_session
 from engine.wv import wavelet_variance_stream
 
 

@@ -10,14 +10,10 @@ import pytest
 
 import engine as eg
 from engine.cli import main
-from engine.inference import (
-    fit_efficient,
-    j_test,
-    param_intervals,
-    wv_cov_bootstrap,
-    wv_cov_data,
-    wv_cov_model,
-)
+from engine.fit import fit_efficient
+from engine.fit.asymptotic import wv_cov_model
+from engine.fit.covariance import wv_cov_bootstrap, wv_cov_data
+from engine.inference import j_test, param_intervals
 
 
 def corr(a: np.ndarray) -> np.ndarray:
@@ -170,7 +166,7 @@ def test_j_test_of_a_ci_fit_is_calibrated_400_replicates():
     tests/benchmarks/bench_jtest.py runs three models, two lengths, 400 logs each."""
     from scipy import stats
 
-    from engine.inference import wv_cov_model
+    from engine.fit.asymptotic import wv_cov_model
 
     truth = eg.parse_model("QN(q2=2e-5)+WN(sigma2=7e-5)+RW(gamma2=1e-10)+DR(omega=5e-8)")
     rng = np.random.default_rng(22)
@@ -199,7 +195,7 @@ def test_j_test_rejects_a_wrong_model():
 def test_the_v_options_are_one_keyword_list_with_one_set_of_defaults():
     """wv_cov, fit_efficient, param_intervals and j_test take the same VOptions keywords; a
     misspelt one is an error that lists them (not silently ignored)."""
-    from engine.inference import V_DEFAULTS, v_options, wv_cov
+    from engine.fit.covariance import V_DEFAULTS, v_options, wv_cov
 
     x = eg.parse_model("WN(sigma2=1)+RW(gamma2=1e-4)").simulate(2**12, fs=10.0, rng=1)
     res = eg.fit_gmwm(eg.wavelet_variance(x, fs=10.0), "WN+RW")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -432,3 +433,47 @@ def test_bad_fs_and_channel(tmp_path: Path) -> None:
         f.attrs["fs_hz"] = 0.0
     raises(path, "attribute 'fs_hz'", "fs=")
     assert load_log(path, fs=25).fs == 25.0
+
+
+def test_the_wv_of_a_channel_is_the_log_s_one_operation(tmp_path: Path) -> None:
+    """``ImuLog.wavelet_variance``: the WV of the samples (unit and fs of the log), or a summary
+    file's WV (truncated, relabelled, robust or classical as asked), with one rule set."""
+    from engine.wv import wavelet_variance
+
+    rng = np.random.default_rng(7)
+    x = np.cumsum(rng.normal(size=4096)) * 1e-3 + rng.normal(size=4096)
+    log = ImuLog({"gyro_x": x, "flat": np.full(64, 2.5)}, fs=50.0, units={"gyro_x": "deg/s"})
+    wv = log.wavelet_variance("gyro_x", levels=8)
+    ref = wavelet_variance(x, fs=50.0, levels=8, unit="deg/s")
+    np.testing.assert_array_equal(wv.variance, ref.variance)
+    np.testing.assert_array_equal(wv.ci_low, ref.ci_low)
+    assert (wv.fs, wv.unit, wv.n_levels) == (50.0, "deg/s", 8)
+    assert log.wavelet_variance(0, levels=8).variance.tolist() == wv.variance.tolist()
+    rob = log.wavelet_variance("gyro_x", robust=True, eff=0.8, levels=6)
+    np.testing.assert_array_equal(
+        rob.variance, wavelet_variance(x, fs=50.0, levels=6, robust=True, eff=0.8).variance
+    )
+    other = log.wavelet_variance("gyro_x", levels=8, fs=100.0)  # fs overrides the log's
+    assert other.fs == 100.0 and np.array_equal(other.tau_s, wv.tau_s / 2)
+    np.testing.assert_array_equal(other.variance, wv.variance)
+    with pytest.raises(LoadError, match=r"channel 'flat' is constant \(all 64 samples equal 2.5\)"):
+        log.wavelet_variance("flat")
+    with pytest.raises(LoadError, match="has no channel 'nope'"):
+        log.wavelet_variance("nope")
+
+    # a summary file: its WV, never recomputed
+    summary = ImuLog({}, fs=50.0, wv={"gyro_x": ref})
+    assert summary.wavelet_variance("gyro_x") is ref
+    assert summary.wavelet_variance("gyro_x", levels=5).n_levels == 5
+    assert summary.wavelet_variance("gyro_x", fs=25.0).fs == 25.0
+    assert summary.unit_of("gyro_x") == "deg/s"
+    with pytest.raises(LoadError, match="levels=9 is too many: .* has 8 levels for gyro_x"):
+        summary.wavelet_variance("gyro_x", levels=9)
+    with pytest.raises(LoadError, match="classical WV of gyro_x only: robust=True needs the raw"):
+        summary.wavelet_variance("gyro_x", robust=True)
+    both = ImuLog({}, fs=50.0, wv={"gyro_x": rob})  # a robust WV carries its classical one
+    assert both.wavelet_variance("gyro_x", robust=True) is rob
+    assert both.wavelet_variance("gyro_x") is rob.classical is not None
+    robust_only = ImuLog({}, fs=50.0, wv={"gyro_x": dataclasses.replace(rob, classical=None)})
+    with pytest.raises(LoadError, match="robust WV of gyro_x only: pass robust=True"):
+        robust_only.wavelet_variance("gyro_x")

@@ -29,8 +29,9 @@ import engine._files as files
 import engine._limits as _limits
 from engine.cli.main import main as gmwm
 from engine.inference.datasheet_check import read_datasheet
-from engine.io import LoadError, load_log, load_session
+from engine.io import LoadError, load_log
 from engine.io.text import text_memory_need
+from engine.session import load_session
 from engine.wv import open_series, wavelet_variance_stream
 from gmwm_app import limits
 from gmwm_app.state import AppState

@@ -590,7 +590,7 @@ def test_efficient_weights_and_the_moment_covariance():
     assert v.shape == (6 * 8, 6 * 8) and np.allclose(v, v.T)
     assert np.linalg.eigvalsh(v)[0] > 0
     # the WV block is the univariate model covariance of the channel
-    from engine.inference import wv_cov_model
+    from engine.fit.asymptotic import wv_cov_model
 
     np.testing.assert_allclose(v[:8, :8], wv_cov_model(mm.channel_model("g1"), m.wv(0)), rtol=1e-9)
     # Monte Carlo check of one WCCV variance and its covariance with a WV

@@ -31,8 +31,8 @@ _CONSUMER = (
     "pass to project(); it names the filter's model, not a branch on a fitted process"
 )
 ALLOWED_LITERALS: dict[tuple[str, str], str] = {
-    ("engine/export/projection.py", "WN"): _CONSUMER,
-    ("engine/export/bound.py", "WN"): _CONSUMER,
+    ("engine/formats/projection.py", "WN"): _CONSUMER,
+    ("engine/formats/bound.py", "WN"): _CONSUMER,
 }
 
 

@@ -1,4 +1,4 @@
-"""engine.export.projection: the rule, the over-bound and its least inflation, the intervals,
+"""engine.formats.projection: the rule, the over-bound and its least inflation, the intervals,
 on simulated fits and on the real ADIS16405 log, and the filter formats that use it (every
 file parses and has the consumer's keys; each consumer-convention fix).
 
@@ -20,8 +20,8 @@ import yaml
 
 import engine as eg
 from engine.demo import demo_path
-from engine.export import ExportError, export, project
-from engine.export.autopilot import RANGES
+from engine.formats import ExportError, export, project
+from engine.formats.autopilot import RANGES
 
 ADIS = Path("/work/shared/data/adis16405_imu1.h5")
 DEG = math.pi / 180

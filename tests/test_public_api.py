@@ -1,39 +1,82 @@
-"""engine's public surface is built from its subpackages' ``__all__`` (issue 11), stays lazy,
-and the structure of engine/ and gmwm_app/ has no import cycle, no private import across
-modules and no module over 800 lines (tests/structure_check.py)."""
+"""engine's API is an explicit list (issue 20) and stays lazy; the structure of engine/ and
+gmwm_app/ has no import cycle, no back-edge between layers, no private
+import across modules and no module over 800 lines (tests/structure_check.py)."""
 
 from __future__ import annotations
 
 import importlib
+import re
 import subprocess
 import sys
-from collections import defaultdict
+import types
 from pathlib import Path
+
+import pytest
 
 import engine as eg
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_every_public_name_comes_from_one_subpackage_and_resolves():
-    expected: dict[str, set[str]] = defaultdict(set)
-    for pkg in eg.SUBPACKAGES:
-        for name in importlib.import_module(f"engine.{pkg}").__all__:
-            expected[name].add(pkg)
-    assert set(eg.__all__) == set(expected)
-    for name, pkgs in expected.items():
-        objs = [getattr(importlib.import_module(f"engine.{p}"), name) for p in sorted(pkgs)]
-        # a name two subpackages export is one object (re-exported), never two meanings
-        assert all(o is objs[0] for o in objs), (name, pkgs)
-        got = getattr(eg, name)
-        if name in eg.SUBPACKAGES:
-            # ``export`` is also a subpackage: once ``engine.export`` is imported the attribute is
-            # the package, which is callable and does what the function does
-            assert got is objs[0] or (
-                got is importlib.import_module(f"engine.{name}") and callable(got)
-            )
-        else:
-            assert got is objs[0], name
+#: The API (engine/__init__.py, README "The API"), written out: adding or removing a name is a
+#: deliberate act that changes this list.
+API = """
+    AR1 AllanVariance BI_FACTOR BatchResult CalibrationReport Candidate DR DatasheetCheck
+    DatasheetError DatasheetSpec DependenceTest ExportError FORMATS FitError FitResult
+    FleetReport GM GMWFMResult GMWMResult ImuLog JTest LoadError LogFit MGMWMResult
+    MethodEstimate Model ModelError MultiModel PROCESS_TYPES ParamInterval ParamRecord
+    ParamTable Process Projection QN RW ReplicateResult ReportError SCENARIOS Scenario
+    SelectionResult Session SessionError SharedEstimate SharedProcess Summary TimeReport
+    VirtualSensor WN WVMatrix WaveletCrossCovariance WaveletVariance __version__ allan_variance
+    ar1_wv avsm avsm_auto biweight_constant check_datasheet check_time compare_table datasheet
+    datasheet_table default_levels demo_dir demo_path demo_truth dependence_test export
+    fit_armav fit_batch fit_efficient fit_gmwfm fit_gmwm fit_log fit_mgmwm fit_replicates
+    fit_report fleet_report from_datasheet from_gmwm gather_fleet gather_report gmwm_objective
+    haar_coefficients imu_topics j_test kalibr_imu kalibr_models load_log load_session
+    moment_covariance optimal_weights param_intervals param_unit parse_datasheet parse_model
+    process_values project rank_models read_datasheet read_imu_bag read_kalibr render_fleet_html
+    render_html report robust_scale_biweight run_slope_study save_log save_session si_factor
+    simulate_scenario starting_values submodels to_datasheet virtual_model virtual_sensor
+    virtual_signal wavelet_cross_covariance wavelet_variance wavelet_variance_stream
+    weight_matrix write_kalibr wv_cov wv_cov_bootstrap wv_cov_data wv_cov_model wv_matrix
+""".split()
+
+
+def test_the_api_is_the_written_list():
+    assert sorted(eg.__all__) == sorted(API) == sorted(eg.API)
+    assert len(API) == len(set(API)) == 128
+
+
+def test_every_public_name_resolves_to_the_one_module_that_holds_it():
+    for name, module in eg.API.items():
+        obj = getattr(importlib.import_module(module), name)
+        assert getattr(eg, name) is obj, name
+        # the module named is where the object is defined (or the package re-exporting it)
+        home = getattr(obj, "__module__", None)
+        if home is not None and isinstance(obj, type | types.FunctionType):
+            assert home == module or home.startswith(module + "."), (name, home, module)
+
+
+def test_engine_export_and_report_are_functions_not_modules():
+    assert (
+        isinstance(eg.export, types.FunctionType)
+        and eg.export.__module__ == "engine.formats.registry"
+    )
+    assert isinstance(eg.report, types.FunctionType) and eg.report.__module__ == "engine.reporting"
+    assert isinstance(eg.fleet_report, types.FunctionType)
+    # the subpackages have other names and stay ordinary modules
+    import engine.formats
+    import engine.reporting
+
+    assert type(engine.formats) is types.ModuleType and type(engine.reporting) is types.ModuleType
+    assert eg.export is engine.formats.export
+
+
+def test_subpackages_are_reachable_but_not_in_the_api():
+    assert eg.units.datasheet_rows is importlib.import_module("engine.units").datasheet_rows
+    assert not set(eg.SUBMODULES) & set(eg.__all__)
+    with pytest.raises(AttributeError, match="no attribute 'parallel_map'"):
+        eg.parallel_map  # noqa: B018 - a helper, not in the API
 
 
 def test_the_names_users_had_are_still_there():
@@ -72,3 +115,46 @@ def test_structure_has_no_cycle_no_private_import_no_big_module():
     spec.loader.exec_module(mod)
     cycles, private, big = mod.analyse()
     assert (cycles, private, big) == ([], [], [])
+
+
+def _structure_check():
+    spec = importlib.util.spec_from_file_location(
+        "structure_check", ROOT / "tests" / "structure_check.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_packages_run_one_way_through_the_layers():
+    # every import, inside functions and under TYPE_CHECKING too (issue 20: the old tree had
+    # fit.gmwm -> inference.asymptotic and io.session -> fit/inference: 3 findings)
+    assert _structure_check().layer_violations() == []
+
+
+def test_a_back_edge_between_packages_is_a_finding():
+    sc = _structure_check()
+    graph = {
+        "engine.fit.gmwm": {"engine.inference.asymptotic", "engine.wv.classical", "engine._optim"},
+        "engine.inference.asymptotic": {"engine.fit.result"},
+        "engine.wv.classical": {"engine._blas"},
+        "engine._optim": {"engine._limits"},
+        "engine.fit.result": set(),
+        "engine._blas": set(),
+        "engine._limits": set(),
+        "engine.formats.kalibr": {"engine.multivariate.fit"},  # same layer: a finding too
+        "engine.multivariate.fit": set(),
+        "engine.newpkg.mod": set(),
+    }
+    found = sc.layer_violations(graph)
+    assert len(found) == 3, found
+    assert found[0].startswith("engine.newpkg: not in LAYERS")
+    assert any(f.startswith("engine.fit.gmwm imports engine.inference.asymptotic") for f in found)
+    assert any(f.startswith("engine.formats.kalibr imports engine.multivariate.fit") for f in found)
+
+
+def test_readme_documents_exactly_the_api():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## The API", 1)[1].split("\n## ", 1)[0]
+    documented = re.findall(r"^\| `([A-Za-z_][A-Za-z0-9_]*)` \|", section, re.M)
+    assert sorted(documented) == sorted(API)

@@ -20,8 +20,8 @@ import pytest
 
 import engine as eg
 from engine.cli import main
-from engine.report import ReportError, gather_report, render_html
-from engine.report.data import welch_psd
+from engine.reporting import ReportError, gather_report, render_html
+from engine.reporting.data import welch_psd
 
 MODEL = "GM+WN+RW"
 DATASHEET = "arw=0.3 deg/sqrt(h), bi=6 deg/h, rrw=1 deg/h/sqrt(h)"

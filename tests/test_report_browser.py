@@ -18,8 +18,8 @@ import pytest
 from conftest import CHROMIUM, CHROMIUM_ARGS
 
 import engine as eg
-from engine.report import gather_report, render_html
-from engine.report.render import figure_specs
+from engine.reporting import gather_report, render_html
+from engine.reporting.render import figure_specs
 
 pytestmark = pytest.mark.browser
 

@@ -11,7 +11,8 @@ from scipy import integrate, optimize, stats
 
 import engine as eg
 import engine.wv.robust as rwv
-from engine.wv import cumsum_demeaned, max_levels, robust_scale_biweight
+from engine.wv import max_levels, robust_scale_biweight
+from engine.wv._kernel import cumsum_demeaned
 
 C = eg.biweight_constant(0.6)
 

@@ -142,8 +142,7 @@ def test_default_stops_with_report(gappy: Path) -> None:
         "1 duplicate stamp(s)",
         "line 403 (sample 401",
         "line 102 (sample 100",
-        "segment='longest'",
-        "--segment longest",
+        "segment='longest'",  # the CLI says --segment longest: test_cli_segment_option
         "samples 100 to 400",
         "joined",
     ):

@@ -266,9 +266,9 @@ def test_squared_unit_one_spelling():
 
 
 def test_one_bi_factor():
-    import engine.export
+    import engine.formats
     import engine.teaching.slope
 
     assert engine.teaching.slope.BI_FACTOR is units.BI_FACTOR
-    assert engine.export.BI_FACTOR is units.BI_FACTOR
+    assert engine.formats.BI_FACTOR is units.BI_FACTOR
     assert units.BI_FACTOR == pytest.approx(math.sqrt(2 * math.log(2) / math.pi), rel=1e-15)

@@ -316,7 +316,7 @@ def test_virtual_sensor_of_a_fit_scale_band_and_export(tmp_path):
 def test_interval_is_the_moment_covariance_of_w_nhat_w():
     # the interval's variance is c' V c with V the MGMWM moments' covariance (independent
     # path: moment_covariance over every pair), put in chi-square form with eta = 2 nu^2 / var
-    from engine.inference.asymptotic import wv_cov_model
+    from engine.fit.asymptotic import wv_cov_model
 
     k3 = ["a", "b", "c"]
     truth = MultiModel(

@@ -1,4 +1,4 @@
-"""The closed-form model covariance of the WV (engine.inference._closed_form) against the
+"""The closed-form model covariance of the WV (engine.fit._closed_form) against the
 frequency-domain quadrature it replaced (kept here as the slow reference) and against direct
 lag-domain sums."""
 
@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 import engine as eg
-import engine.inference._closed_form as cf
-from engine.inference import fit_efficient, inverse_cov, spectral_density, wv_cov_model
+import engine.fit._closed_form as cf
+from engine.fit import fit_efficient
+from engine.fit.asymptotic import spectral_density, wv_cov_model
+from engine.fit.covariance import inverse_cov
 from engine.models import RW, Model
 
 

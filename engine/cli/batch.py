@@ -12,7 +12,7 @@ datasheet quantity across the units). ``--select`` is the deprecated spelling of
 ``--max-model`` (the name ``gmwm select`` uses). ``--scheduler`` runs the logs on a Dask cluster
 (:func:`add_scheduler_option` and :func:`scheduler_executor`, also used by ``gmwm study``).
 
-``--report FILE.html`` writes the fleet acceptance report (:func:`engine.report.fleet_report`:
+``--report FILE.html`` writes the fleet acceptance report (:func:`engine.reporting.fleet_report`:
 a row per unit, verdicts against ``--spec`` limits and/or ``--datasheet``, outliers, every
 unit's own section); the logs are fitted once for both outputs (:func:`add_report_options`,
 :func:`run_fleet`).
@@ -172,7 +172,7 @@ def run_fleet(
     import shlex
 
     from ..inference.datasheet_check import DatasheetError
-    from ..report import ReportError, gather_fleet, render_fleet_html
+    from ..reporting import ReportError, gather_fleet, render_fleet_html
 
     try:
         fleet = gather_fleet(

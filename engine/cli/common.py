@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -17,9 +18,11 @@ from typing import Any, Literal
 import numpy as np
 
 from .._limits import check_sample_count
-from ..wv import WaveletVariance, wavelet_variance
+from ..wv import WaveletVariance
 
 __all__ = [
+    "ARGUMENT_FLAGS",
+    "cli_text",
     "CliError",
     "UsageError",
     "usage_error",
@@ -41,6 +44,50 @@ __all__ = [
     "queue_warning",
     "DeprecatedAlias",
 ]
+
+
+#: The engine's keyword arguments and the ``gmwm`` options that set them: the one mapping by
+#: which the CLI words an engine message (which names arguments, ``units=``) in its flags.
+ARGUMENT_FLAGS: dict[str, str] = {
+    "units": "--units",
+    "inflate": "--inflate",
+    "scheduler": "--scheduler",
+    "filter_rate": "--filter-rate",
+    "allow_partial": "--partial",
+    "channel": "--channel",
+    "dataset": "--channel",
+    "segment": "--segment",
+    "topic": "--topic",
+    "spec": "--spec",
+    "static": "--static",
+    "levels": "--levels",
+    "robust": "--robust",
+}
+
+_ARGUMENT = re.compile(
+    r"(?<![\w.])(" + "|".join(ARGUMENT_FLAGS) + r")="
+    r"(\{[^}]*\}|'[^']*'|\"[^\"]*\"|\([^)]*\)|[^\s,;:)]*)"
+)
+
+
+def _flag(m: re.Match[str]) -> str:
+    flag, value = ARGUMENT_FLAGS[m.group(1)], m.group(2)
+    if value in ("", "...", "True"):
+        return flag
+    if value.startswith("("):  # a Python tuple (segment=(start, stop)): no CLI form
+        return m.group(0)
+    if value.startswith("{"):  # units={'gyro_x': 'deg/s'} -> --units gyro_x=deg/s
+        pairs = re.findall(r"['\"]([^'\"]*)['\"]\s*:\s*['\"]([^'\"]*)['\"]", value)
+        return f"{flag} " + ",".join(f"{k}={v}" for k, v in pairs) if pairs else flag
+    inner = value.strip(chr(39) + chr(34))
+    return f"{flag} {value if inner.split() != [inner] else inner}"  # quotes kept around spaces
+
+
+def cli_text(message: str) -> str:
+    """An engine message in the words of the ``gmwm`` command: ``levels=30`` -> ``--levels
+    30``, ``allow_partial=True`` -> ``--partial``, ``units={'gyro_x': 'deg/s'}`` -> ``--units
+    gyro_x=deg/s`` (:data:`ARGUMENT_FLAGS`)."""
+    return _ARGUMENT.sub(_flag, message)
 
 
 class CliError(Exception):
@@ -68,37 +115,11 @@ def load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVaria
         return stream_wv(args, alpha)
     log = load_log(args.input, channel=args.channel, fs=args.fs, **log_kwargs(args))
     name = log.names[0]
-    if log.is_summary:
-        wv = log.wv[name]
-        if args.robust:
-            raise CliError(
-                f"{args.input}: a WV summary file holds a fixed WV; --robust needs the raw log"
-            )
-        if args.levels is not None:
-            if args.levels > wv.n_levels:
-                raise CliError(
-                    f"--levels {args.levels} is too many: {args.input} has "
-                    f"{wv.n_levels} levels for {name}"
-                )
-            wv = wv.truncate(args.levels)
-        return wv, name
-    x = log[name]
-    if x.size >= 4 and np.ptp(x) == 0:
-        raise CliError(
-            f"{args.input}: channel {name!r} is constant (all {x.size} samples equal "
-            f"{x[0]:g}): there is no noise to analyse"
-        )
-    if log.fs_source == "default":
-        warn_fs_unknown(args, args.input)
-    wv = wavelet_variance(
-        x,
-        fs=log.fs,
-        levels=args.levels,
-        robust=args.robust,
-        eff=args.eff,
-        alpha=alpha,
-        unit=log.units.get(name, ""),
+    wv = log.wavelet_variance(
+        name, robust=args.robust, eff=args.eff, levels=args.levels, alpha=alpha
     )
+    if not log.is_summary and log.fs_source == "default":
+        warn_fs_unknown(args, args.input)
     return wv, name
 
 

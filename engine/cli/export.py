@@ -1,7 +1,7 @@
 """``gmwm export`` (:func:`add_parser`, :func:`run`)::
 
     gmwm export INPUT --model SPEC [--model-for CH=SPEC ...] [--channels a,b,...]
-                --format NAME (engine.export.FORMATS) -o OUT|-
+                --format NAME (engine.formats.FORMATS) -o OUT|-
                 [--ci asymptotic|bootstrap [--confidence 0.95]] [--weights ci|identity|efficient]
                 [--fs HZ] [--levels J] [--robust] [--segment ...] [--scale ...] [--units ...]
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import argparse
 from typing import Any
-
-import numpy as np
 
 from .common import (
     add_bootstrap_options,
@@ -55,7 +53,7 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..export.registry import FORMATS
+    from ..formats.registry import FORMATS
 
     ex = sub.add_parser(
         "export",
@@ -177,12 +175,11 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
     check_output(args.output, "-o")  # before the (slow) imports and any fit
-    from ..export import export
     from ..fit import fit_gmwm
-    from ..inference import fit_efficient, param_intervals
+    from ..formats import export
+    from ..inference import param_intervals
     from ..io import load_log, pick_channel
     from ..models import parse_model
-    from ..wv import wavelet_variance
 
     band = None
     if args.bound_band:
@@ -220,38 +217,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             [pick_channel(str(args.input), log.names, c) for c in wanted] if wanted else log.names
         )
         for ch in names:
-            if log.is_summary:
-                if ch not in log.wv:
-                    raise usage_error(
-                        f"{args.input} has no channel {ch!r}; channels: {', '.join(log.names)}"
-                    )
-                if args.robust:
-                    raise usage_error(
-                        f"{args.input}: a WV summary file holds a fixed WV; "
-                        "--robust needs the raw log"
-                    )
-                wv = log.wv[ch]
-                if args.levels is not None:
-                    if args.levels > wv.n_levels:
-                        raise usage_error(
-                            f"--levels {args.levels} is too many: {ch} has {wv.n_levels} levels"
-                        )
-                    wv = wv.truncate(args.levels)
-            else:
-                x = log[ch]
-                if np.ptp(x) == 0:
-                    raise usage_error(
-                        f"{args.input}: channel {ch!r} is constant: there is no noise to analyse"
-                    )
-                wv = wavelet_variance(
-                    x,
-                    fs=log.fs,
-                    levels=args.levels,
-                    robust=args.robust,
-                    eff=args.eff,
-                    unit=log.units.get(ch, ""),
-                )
-            wvs[ch] = wv
+            wvs[ch] = log.wavelet_variance(ch, robust=args.robust, eff=args.eff, levels=args.levels)
     unknown = [c for c in per if c not in wvs]
     if unknown:
         raise usage_error(
@@ -260,11 +226,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     fits, intervals = {}, {}
     for ch, wv in wvs.items():
         m = per.get(ch, model)
-        fits[ch] = (
-            fit_efficient(wv, m)
-            if args.weights == "efficient"
-            else fit_gmwm(wv, m, weights=args.weights)
-        )
+        fits[ch] = fit_gmwm(wv, m, weights=args.weights)
         if args.ci:
             intervals[ch] = param_intervals(
                 fits[ch],

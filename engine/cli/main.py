@@ -47,6 +47,7 @@ from .common import (
     alpha_of,
     bootstrap_kwargs,
     check_output,
+    cli_text,
     load_wv,
     positive,
     queue_warning,
@@ -236,12 +237,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
 
     model = parse_model(args.model)
     wv, name = load_wv(args)
-    if args.weights == "efficient":
-        from ..inference import fit_efficient
-
-        res = fit_efficient(wv, model)
-    else:
-        res = fit_gmwm(wv, model, weights=args.weights)
+    res = fit_gmwm(wv, model, weights=args.weights)
     intervals = None
     if args.ci:
         from ..inference import param_intervals
@@ -343,8 +339,9 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}{also}"
 
 
-def _one_line(e: BaseException | str) -> str:
-    return " ".join(str(e).split())
+def _one_line(e: BaseException | Warning | str) -> str:
+    """An engine error or warning as one line, in the command's words (:func:`cli_text`)."""
+    return cli_text(" ".join(str(e).split()))
 
 
 def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:

@@ -32,7 +32,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``report`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..report import DEFAULT_SELECT
+    from ..reporting import DEFAULT_SELECT
 
     rp = sub.add_parser(
         "report",
@@ -77,8 +77,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm report``; returns one line saying what was written."""
     check_output(args.output, "-o", suffixes=(".html", ".htm"))  # before any import or fit
-    from ..export import FORMATS
-    from ..report import report
+    from ..formats import FORMATS
+    from ..reporting import report
 
     fmt = None if args.format.lower() == "none" else args.format
     if fmt is not None and fmt not in FORMATS:

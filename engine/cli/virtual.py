@@ -55,7 +55,7 @@ def _band(text: str) -> tuple[float, float]:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``virtual`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..export.registry import FORMATS
+    from ..formats.registry import FORMATS
 
     vp = sub.add_parser(
         "virtual",
@@ -209,7 +209,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         queue_warning(args, w)
     exported = None
     if args.format:
-        from ..export import export
+        from ..formats import export
 
         name = args.name or base
         out = None if args.output == "-" else args.output

@@ -1,7 +1,14 @@
 """GMWM fitting: the univariate fit, its result and the result base every fit shares.
 
-* :mod:`engine.fit.gmwm`: :func:`fit_gmwm`, :class:`GMWMResult`, :func:`weight_matrix`,
-  :func:`gmwm_objective`;
+* :mod:`engine.fit.gmwm`: :func:`fit_gmwm` (weights ``"ci"``, ``"identity"``, ``"efficient"``
+  or a matrix; :func:`fit_efficient` is its two-step alias), :class:`GMWMResult`,
+  :func:`weight_matrix`, :func:`gmwm_objective`;
+* :mod:`engine.fit.covariance`: ``V = Cov(nu_hat)`` three ways (:func:`wv_cov_model`,
+  :func:`wv_cov_data`, :func:`wv_cov_bootstrap`; :func:`wv_cov` by name), the efficient
+  weights ``V^-1``;
+* :mod:`engine.fit.asymptotic`: the model-implied WV covariance in closed form
+  (:mod:`engine.fit._closed_form`), the Jacobian and the sandwich covariance of a fit
+  (:func:`param_cov`; ``GMWMResult.conf_int``);
 * :mod:`engine.fit.result`: :class:`FitResult` (the base of every fit's result),
   :class:`ParamRecord`, :class:`ParamTable`, :class:`Summary`, :class:`FitError`;
 * :mod:`engine.fit.start`: :func:`starting_values` (rough values read off a WV);
@@ -20,7 +27,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .._lazy import lazy_attributes
-from .gmwm import GMWMResult, fit_gmwm, gmwm_objective, weight_matrix
+from .asymptotic import param_cov, wv_cov_model
+from .covariance import V_DEFAULTS, VOptions, wv_cov, wv_cov_bootstrap, wv_cov_data
+from .gmwm import GMWMResult, fit_efficient, fit_gmwm, gmwm_objective, weight_matrix
 from .result import FitError, FitResult, ParamRecord, ParamTable, Summary
 from .start import starting_values
 
@@ -39,7 +48,15 @@ __getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "fit_gmwm",
+    "fit_efficient",
     "GMWMResult",
+    "wv_cov",
+    "wv_cov_model",
+    "wv_cov_data",
+    "wv_cov_bootstrap",
+    "param_cov",
+    "VOptions",
+    "V_DEFAULTS",
     "starting_values",
     "weight_matrix",
     "gmwm_objective",

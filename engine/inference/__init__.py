@@ -1,6 +1,7 @@
-"""Inference for GMWM: covariance of the WV, efficient weights, intervals, goodness of fit.
+"""Inference for GMWM: intervals, goodness of fit, model selection, the datasheet check.
 
-* ``V = Cov(nu_hat)`` across levels, three ways:
+* ``V = Cov(nu_hat)`` across levels (in :mod:`engine.fit.covariance`, below the fit, which
+  uses it for ``weights="efficient"``), three ways:
 
   - :func:`wv_cov_data`: from the data, per level (diagonal), Percival & Walden's asymptotic
     estimator ``2 A_j / M_j`` with ``A_j = s_0^2 / 2 + sum_{tau>0} s_tau^2`` (``s`` the
@@ -13,8 +14,9 @@
   - :func:`wv_cov_bootstrap`: parametric bootstrap from a fitted model (simulate, recompute
     the WV, sample covariance).
 
-* Efficient two-step GMWM (:func:`fit_efficient`): fit with ``weights="ci"``, estimate V from
-  that fit, refit with ``Omega = V^-1`` (the GMWM paper, Corollary 1).
+* Efficient two-step GMWM (``fit_gmwm(..., weights="efficient")``): fit with
+  ``weights="ci"``, estimate V from that fit, refit with ``Omega = V^-1`` (the GMWM paper,
+  Corollary 1).
 * Parameter intervals (:func:`param_intervals`): asymptotic sandwich
   ``(A' W A)^-1 A' W V W A (A' W A)^-1`` (the GMWM paper, Theorem 2 / Lemma 2) in the
   unconstrained space of each parameter (log variances, log beta, atanh phi) mapped back, so
@@ -28,26 +30,6 @@
 
 from __future__ import annotations
 
-from .asymptotic import (
-    asymptotic_bounds,
-    free_params,
-    frequency_grid,
-    jacobian,
-    param_cov,
-    spectral_density,
-    wv_cov_model,
-)
-from .covariance import (
-    V_DEFAULTS,
-    VOptions,
-    fit_efficient,
-    inverse_cov,
-    parallel_map,
-    v_options,
-    wv_cov,
-    wv_cov_bootstrap,
-    wv_cov_data,
-)
 from .datasheet_check import (
     DATASHEET_KEYS,
     DatasheetCheck,
@@ -62,21 +44,8 @@ from .jtest import JTest, j_test
 from .selection import Candidate, SelectionResult, rank_models, submodels
 
 __all__ = [
-    "wv_cov_data",
-    "wv_cov_model",
-    "wv_cov_bootstrap",
-    "wv_cov",
-    "fit_efficient",
-    "inverse_cov",
-    "parallel_map",
-    "frequency_grid",
-    "spectral_density",
     "param_intervals",
     "ParamInterval",
-    "jacobian",
-    "free_params",
-    "asymptotic_bounds",
-    "param_cov",
     "j_test",
     "JTest",
     "rank_models",
@@ -90,7 +59,4 @@ __all__ = [
     "DatasheetCheck",
     "DatasheetError",
     "DATASHEET_KEYS",
-    "VOptions",
-    "V_DEFAULTS",
-    "v_options",
 ]

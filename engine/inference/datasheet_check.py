@@ -45,11 +45,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._files import read_regular
+from ..io.kalibr import read_kalibr
+from ..io.log import channel_axis
 from ..models import QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
     DISPLAY,
     QUANTITIES,
+    SI_UNIT,
     ExportError,
     quantity_name,
     si_factor,
@@ -102,7 +105,6 @@ _KEY_KIND = {
 }
 #: Signal units whose native datasheet units are accepted (``deg/s/sqrt(Hz)``, ``g*s`` ...).
 _SIGNAL_UNITS = ("rad/s", "deg/s", "deg/h", "mrad/s", "m/s^2", "g", "mg", "ug")
-_SI_UNIT = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
 
 
 def _canon(unit: str) -> str:
@@ -168,7 +170,7 @@ class DatasheetSpec:
     source: str = ""
 
     def __post_init__(self) -> None:
-        if self.kind not in _SI_UNIT:
+        if self.kind not in SI_UNIT:
             raise DatasheetError(f"sensor kind {self.kind!r}: use gyroscope or accelerometer")
         bad = [k for k in self.values if k not in _ORDER]
         if bad:
@@ -217,7 +219,7 @@ class DatasheetSpec:
     @property
     def si_unit(self) -> str:
         """``rad/s`` or ``m/s^2``."""
-        return _SI_UNIT[self.kind]
+        return SI_UNIT[self.kind]
 
     def in_unit(self, unit: str) -> dict[str, float]:
         """The values in a signal unit ``unit`` (N in unit/sqrt(Hz) ...).
@@ -358,16 +360,14 @@ def _pick(names: list[str], channel: str | None, where: str) -> str:
             raise DatasheetError(f"{where} has no channel {channel!r}; channels: {names}")
         return channel
     if len(names) != 1:
-        raise DatasheetError(f"{where} has channels {names}: choose one (channel=, --channel)")
+        raise DatasheetError(f"{where} has channels {names}: choose one (channel=)")
     return names[0]
 
 
 def _from_kalibr(
     d: Mapping[str, Any], kind: str | None, channel: str | None, where: str
 ) -> DatasheetSpec:
-    from ..export.common import channel_axis
-
-    kinds = [k for k in _SI_UNIT if f"{k}_noise_density" in d or f"{k}_random_walk" in d]
+    kinds = [k for k in SI_UNIT if f"{k}_noise_density" in d or f"{k}_random_walk" in d]
     if not kinds:
         raise DatasheetError(f"{where}: no gyroscope_* or accelerometer_* noise keys")
     if kind is None:
@@ -393,7 +393,7 @@ def _from_kalibr(
             raise DatasheetError(f"{where}: {key} = {v!r} is not a non-negative number")
         vals[sym], given[sym] = (
             float(v),
-            f"{float(v):g} {_QUANTITY[sym].unit(_SI_UNIT[kind])}",
+            f"{float(v):g} {_QUANTITY[sym].unit(SI_UNIT[kind])}",
         )
     return DatasheetSpec(kind, vals, given, where)
 
@@ -421,7 +421,6 @@ def read_datasheet(
     DatasheetError
         Unreadable file, unknown format, missing or bad key (the message names file and key).
     """
-    from ..export.kalibr import read_kalibr
 
     p = Path(source)
     where = str(p)

@@ -13,15 +13,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
+from ..fit.asymptotic import asymptotic_bounds
+from ..fit.covariance import v_options, wv_cov
 from ..wv import wavelet_variance
-from .asymptotic import asymptotic_bounds
-from .covariance import parallel_map, v_options, wv_cov
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
 
-    from .covariance import VOptions
+    from ..fit.covariance import VOptions
 
 __all__ = ["param_intervals", "ParamInterval"]
 

@@ -41,15 +41,15 @@ import numpy as np
 from .._jsonutil import FieldsDict
 from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
+from ..fit.asymptotic import free_params
+from ..fit.covariance import inverse_cov, v_options, wv_cov
 from ..wv import WaveletVariance, wavelet_variance
-from .asymptotic import free_params
-from .covariance import inverse_cov, v_options, wv_cov
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
 
+    from ..fit.covariance import VOptions
     from ..models import Model
-    from .covariance import VOptions
 
 __all__ = ["j_test", "JTest", "ETA_MIN", "jtest_levels", "efficient_j"]
 

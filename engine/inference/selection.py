@@ -56,12 +56,13 @@ from typing import Any
 
 import numpy as np
 
+from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..fit._varpro import TC_FLAG
+from ..fit.asymptotic import free_params, jacobian
+from ..fit.covariance import inverse_cov, wv_cov
 from ..models import WN, Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
-from .asymptotic import free_params, jacobian
-from .covariance import inverse_cov, parallel_map, wv_cov
 from .jtest import ETA_MIN, efficient_j
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""Loading and saving IMU logs, ROS bags, time-column checks and sessions.
+"""Loading and saving IMU logs, ROS bags, time-column checks (sessions: :mod:`engine.session`).
 
 * :mod:`engine.io.log`: :class:`ImuLog`, :class:`LoadError`, :func:`pick_channel`.
 * :mod:`engine.io.load`: :func:`load_log` (format sniffing and dispatch) over the readers
@@ -7,7 +7,6 @@
   :mod:`engine.io._assemble`.
 * :mod:`engine.io.save`: :func:`save_log`.
 * :mod:`engine.io.timecheck`: gaps, duplicates and jitter of time stamps.
-* :mod:`engine.io.session`: saving and restoring an analysis session (JSON).
 
 Numerics (:mod:`engine.wv`, :mod:`engine.models`, the fit) never import this package.
 """
@@ -19,19 +18,6 @@ from .log import ImuLog, LoadError, pick_channel
 from .npy import npy_sidecar_path, read_npy_sidecar, write_npy_sidecar
 from .rosbag import IMU_CHANNELS, ImuBag, imu_topics, mcap_profile, read_imu_bag, write_imu_bag
 from .save import save_log
-from .session import (
-    Session,
-    SessionError,
-    file_fingerprint,
-    load_session,
-    result_from_dict,
-    result_to_dict,
-    save_session,
-    session_from_json,
-    session_to_json,
-    wv_from_dict,
-    wv_to_dict,
-)
 from .timecheck import GAP_FACTOR, TimeEvent, TimeReport, as_seconds, check_time, segment_fs
 
 __all__ = [
@@ -55,15 +41,4 @@ __all__ = [
     "segment_fs",
     "as_seconds",
     "GAP_FACTOR",
-    "Session",
-    "SessionError",
-    "load_session",
-    "save_session",
-    "session_to_json",
-    "session_from_json",
-    "file_fingerprint",
-    "wv_to_dict",
-    "wv_from_dict",
-    "result_to_dict",
-    "result_from_dict",
 ]

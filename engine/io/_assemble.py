@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _checks
 from .._limits import check_memory
 from .log import ImuLog, LoadError, pick_channel
 
@@ -82,15 +83,13 @@ def time_divisor(name: str, unit: str = "") -> tuple[float, bool] | None:
 
 def check_fs(value: Any, src: str, what: str, fix: str) -> float:
     try:
-        v = float(value)
+        # a file's attribute or text, as a number; then the one check (engine._checks)
+        return _checks.check_fs(value if isinstance(value, bool) else float(value))
     except (TypeError, ValueError):
-        v = math.nan
-    if isinstance(value, bool) or not math.isfinite(v) or v <= 0:
         raise LoadError(
             f"file '{src}': {what} = {value!r} is not a valid sampling frequency "
             f"(it must be a finite number of Hz > 0): {fix}"
-        )
-    return v
+        ) from None
 
 
 def ordered_names(names: list[str], units: Mapping[str, str]) -> list[str]:
@@ -162,7 +161,7 @@ class LoadOptions:
 
 
 _SEGMENT_HELP = (
-    "choose segment='longest' (CLI: --segment longest) to analyse the longest "
+    "choose segment='longest' to analyse the longest "
     "clean segment, segment=(start, stop) for another one, or segment='report' to "
     "keep every sample as if uniformly spaced (samples joined across the breaks); "
     "or fix the log, or pass fs= to ignore the time column"

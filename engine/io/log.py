@@ -7,14 +7,16 @@ another. :func:`pick_channel` resolves a channel given by name, index or digit s
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..wv.classical import WaveletVariance
+from ..wv.classical import WaveletVariance, wavelet_variance
 
-__all__ = ["LoadError", "ImuLog", "pick_channel"]
+__all__ = ["LoadError", "ImuLog", "pick_channel", "channel_axis"]
 
 
 class LoadError(ValueError):
@@ -81,6 +83,103 @@ class ImuLog:
             )
         return self.channels[pick_channel(self.source, self.names, name)]
 
+    def unit_of(self, channel: str | int) -> str:
+        """The signal unit of a channel: the file's (or the user's), else its stored WV's."""
+        name = pick_channel(self.source, self.names, channel)
+        unit = self.units.get(name, "")
+        if not unit and name in self.wv:
+            unit = self.wv[name].unit
+        return str(unit or "")
+
+    def wavelet_variance(
+        self,
+        channel: str | int,
+        *,
+        robust: bool = False,
+        eff: float = 0.6,
+        levels: int | None = None,
+        alpha: float = 0.05,
+        fs: float | None = None,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> WaveletVariance:
+        """The wavelet variance of one channel: computed from the samples, or a summary file's.
+
+        The one place where "the WV of a channel of a log" is decided (the CLI, batch, the
+        reports and the app call it), with one set of rules.
+
+        Parameters
+        ----------
+        channel : str or int
+            Channel name or index (:func:`pick_channel`).
+        robust, eff : bool, float
+            Robust (Tukey biweight) WV and its Gaussian efficiency. A summary file gives the
+            WV it stores: its robust one with ``robust=True``, its classical one otherwise.
+        levels : int, optional
+            Number of levels J (default :func:`engine.wv.default_levels`); a summary's WV is
+            truncated to ``levels`` (it cannot be extended).
+        alpha : float
+            ``1 - alpha`` intervals of a computed WV.
+        fs : float, optional
+            Sampling frequency (Hz), default the log's; a summary's WV is relabelled to it.
+        progress : callable, optional
+            ``progress(j, J)`` as each level of a computed WV is done.
+
+        Returns
+        -------
+        WaveletVariance
+            In the channel's unit (:meth:`unit_of`).
+
+        Raises
+        ------
+        LoadError
+            An unknown channel; a constant channel (no noise to analyse); ``robust`` asked of a
+            classical summary (or the classical WV of a robust-only summary); ``levels`` beyond
+            a summary's.
+
+        Examples
+        --------
+        >>> import engine as eg
+        >>> log = eg.load_log(eg.demo_path())
+        >>> wv = log.wavelet_variance("gyro_x", levels=10)
+        >>> wv.n_levels, wv.unit
+        (10, 'deg/s')
+        """
+        name = pick_channel(self.source, self.names, channel)
+        where = f"file '{self.source}'"
+        if self.is_summary:
+            wv = self.wv[name]
+            if robust and not wv.robust:
+                raise LoadError(
+                    f"{where} holds the classical WV of {name} only: robust=True needs the raw log"
+                )
+            if not robust and wv.robust:
+                if wv.classical is None:
+                    raise LoadError(f"{where} holds the robust WV of {name} only: pass robust=True")
+                wv = wv.classical
+            if levels is not None and levels != wv.n_levels:
+                if levels > wv.n_levels:
+                    raise LoadError(
+                        f"levels={levels} is too many: {where} has {wv.n_levels} levels for {name}"
+                    )
+                wv = wv.truncate(levels)
+            return wv if fs is None or wv.fs == fs else wv.with_fs(fs)
+        x = self.channels[name]
+        if x.size >= 4 and np.ptp(x) == 0:
+            raise LoadError(
+                f"{where}: channel {name!r} is constant (all {x.size} samples equal "
+                f"{x[0]:g}): there is no noise to analyse"
+            )
+        return wavelet_variance(
+            x,
+            fs=self.fs if fs is None else fs,
+            levels=levels,
+            robust=robust,
+            eff=eff,
+            alpha=alpha,
+            unit=self.unit_of(name),
+            progress=progress,
+        )
+
     def __repr__(self) -> str:
         what = "WV summary" if self.is_summary else "log"
         return (
@@ -107,3 +206,14 @@ def pick_channel(src: str, names: list[str], channel: str | int) -> str:
         f"file '{src}' has no channel {channel!r}; available channels: {shown}. "
         "Pass one of these names or an integer index"
     )
+
+
+def channel_axis(name: str) -> str:
+    """Axis letter of a channel name (``gyro_x`` -> ``x``, ``imu/acc[1]`` -> ``y``), else the
+    name itself."""
+    n = name.strip().lower()
+    m = re.search(r"\[(\d)\]$", n)
+    if m and int(m.group(1)) < 3:
+        return "xyz"[int(m.group(1))]
+    m = re.search(r"(?:^|[^a-z])([xyz])$", n) or re.search(r"([xyz])$", n)
+    return m.group(1) if m else name

@@ -292,7 +292,7 @@ def read_imu_bag(
             if len(topics) > 1:
                 raise LoadError(
                     f"bag '{src}' has {len(topics)} sensor_msgs/Imu topics "
-                    f"({', '.join(topics)}): choose one with topic= (CLI: --topic)"
+                    f"({', '.join(topics)}): choose one with topic="
                 )
             topic = topics[0]
         elif topic not in topics:

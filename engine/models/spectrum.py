@@ -25,7 +25,7 @@ class PsdTerms(NamedTuple):
 
     QN is ``q2 x``, WN ``sigma2``, RW (generalised) ``gamma2 / x``, an AR1 (phi, s) the last
     term (``|1 - phi z|^2 = (1 - phi)^2 + phi x``, stable near phi = 1); a drift has none.
-    The closed-form WV covariance (``engine.inference._closed_form``) works on these pieces.
+    The closed-form WV covariance (``engine.fit._closed_form``) works on these pieces.
     """
 
     poly: dict[int, float]
@@ -34,7 +34,7 @@ class PsdTerms(NamedTuple):
 
 class FilterTerms(NamedTuple):
     """What one fitted process contributes to a filter's WN+RW / WN+GM model (the rule of
-    ``engine.export.bound.split_terms``).
+    ``engine.formats.bound.split_terms``).
 
     ``white``: white-noise variance per log sample (a term white at the filter step);
     ``rw_k2``: continuous random-walk density ``K^2`` [u^2/s]; ``gamma2``: RW per sample;

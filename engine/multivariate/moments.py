@@ -47,7 +47,7 @@ def moment_covariance(model: MultiModel, wvm: WVMatrix) -> np.ndarray:
     ndarray, shape (P J, P J)
         ``P = k (k + 1) / 2`` pairs.
     """
-    from ..inference.asymptotic import frequency_grid
+    from ..fit.asymptotic import frequency_grid
 
     if not model.is_set:
         raise FitError("moment_covariance needs a model with every value set (a fitted model)")

@@ -390,7 +390,7 @@ class VirtualSensor:
         )
 
     def as_fit(self) -> GMWMResult:
-        """The virtual sensor as a single-channel fit, for :func:`engine.export.export` and
+        """The virtual sensor as a single-channel fit, for :func:`engine.formats.export` and
         every single-channel view: ``model`` is :attr:`model` (not refitted), ``wv`` the
         empirical WV of the combined series, ``objective`` its ``"ci"``-weighted distance
         to the implied WV."""
@@ -707,7 +707,7 @@ def virtual_sensor(
     # covariance (moment_covariance), which is the univariate Var(nu_hat_j) of the virtual
     # model (v is one Gaussian series with spectral density w' S(f) w; Isserlis on both
     # sides) and costs one J x J integral instead of (P J)^2
-    from ..inference.asymptotic import wv_cov_model
+    from ..fit.asymptotic import wv_cov_model
 
     shape = WaveletVariance.from_arrays(np.maximum(nu, 0.0), n=wvm.n, fs=wvm.fs, alpha=alpha)
     var = np.diagonal(wv_cov_model(vmodel, shape)).copy()

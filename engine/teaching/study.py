@@ -5,7 +5,7 @@ each log length T and each replicate: simulate the true model at 250 Hz, compute
 (and from it the octave Allan variance, ``AVAR = 2 nu2``), and estimate the model by
 
 * ``GMWM``: :func:`engine.fit_gmwm`, default weights ``diag(1/(ci_high - ci_low)^2)``;
-* ``GMWM-efficient``: :func:`engine.inference.fit_efficient`, two-step efficient weights
+* ``GMWM-efficient``: ``fit_gmwm(..., weights="efficient")``, two-step efficient weights
   ``Omega = V^-1`` with V the WV covariance implied by the first (``ci``) fit's model
   (the GMWM paper, Corollary 1);
 * ``ARMAV``: :func:`engine.fit.gmwfm.fit_armav` (``f = log10``, log-space interval weights);
@@ -112,9 +112,7 @@ def _estimate_one(
     if meth == "GMWM":
         return from_gmwm(fit_gmwm(wv, model))
     if meth == "GMWM-efficient":
-        from ..inference import fit_efficient
-
-        return from_gmwm(fit_efficient(wv, model), method=meth)
+        return from_gmwm(fit_gmwm(wv, model, weights="efficient"), method=meth)
     if meth == "ARMAV":
         return fit_armav(wv, model).as_estimate()
     if meth == "ARMAV-unweighted":
@@ -189,7 +187,7 @@ def run_slope_study(
     fs : float
         Sampling frequency (Hz).
     workers : int or None
-        Local worker processes (:func:`engine.inference.parallel_map`); 1 runs in process;
+        Local worker processes (:func:`engine._parallel.parallel_map`); 1 runs in process;
         None uses every CPU.
     regions : dict, optional
         AVSM regions per sensor (``{"gyro": {"WN": (lo, hi), ...}}``, seconds); default

@@ -2,8 +2,9 @@
 
 * :mod:`engine.wv.classical`: :class:`WaveletVariance`, :func:`wavelet_variance` (classical,
   or robust through :mod:`engine.wv.robust`), intervals, the :class:`LevelScales` mixin.
-* :mod:`engine.wv._kernel`: the shared kernel (series checks, de-meaned cumulative sum,
-  blocked sums of squared second differences), also used by the Allan variance.
+* :mod:`engine.wv._kernel`: the shared kernel (series checks, de-meaned cumulative sum, the
+  Haar coefficients, blocked sums of squared second differences), also used by the Allan
+  variance.
 * :mod:`engine.wv.stream`: the WV of logs larger than memory, read in blocks.
 * :mod:`engine.wv.wccv`: the WCCV of two channels and the k x k WV/WCCV matrix.
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .._lazy import lazy_attributes
-from ._kernel import as_series, cumsum_demeaned, second_difference_sums, sumsq_kernel
+from ._kernel import as_series
 from .classical import (
     LevelScales,
     WaveletVariance,
@@ -53,8 +54,5 @@ __all__ = [
     "robust_wv",
     "max_levels",
     "as_series",
-    "cumsum_demeaned",
-    "second_difference_sums",
-    "sumsq_kernel",
     *_lazy_names,
 ]

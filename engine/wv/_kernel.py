@@ -9,18 +9,19 @@ go through :func:`sumsq_kernel` (see :mod:`engine._blas`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from .._blas import blas_threads
+from .._checks import check_fs
 
 __all__ = [
     "as_series",
     "check_fs_alpha",
     "cumsum_demeaned",
+    "haar_from_cumsum",
     "second_difference_sums",
     "sumsq_kernel",
 ]
@@ -76,10 +77,21 @@ def check_fs_alpha(fs: float, alpha: float) -> None:
     fs, alpha : float
         Sampling frequency (Hz) and interval level ``1 - alpha``.
     """
-    if not (isinstance(fs, (int, float, np.floating, np.integer)) and math.isfinite(fs) and fs > 0):
-        raise ValueError(f"fs must be a positive number of Hz, got {fs!r}")
+    check_fs(fs)
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+
+
+def haar_from_cumsum(s: np.ndarray, m: int, at: np.ndarray | None = None) -> np.ndarray:
+    """Haar MODWT coefficients of the level with half-width ``m = 2^(j-1)`` from the cumulative
+    sum ``s`` (length ``N + 1``) of the de-meaned series: ``W_{j,t} = (S_{t+2m} - 2 S_{t+m} +
+    S_t) / 2^j``, for every ``t`` (``N - 2m + 1`` values) or only at the offsets ``at``.
+
+    The one Haar-coefficient formula of the package (classical and robust WV, V from data).
+    """
+    if at is not None:
+        return (s[at + 2 * m] - 2.0 * s[at + m] + s[at]) / (2.0 * m)
+    return (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
 
 
 def cumsum_demeaned(x: np.ndarray) -> np.ndarray:

@@ -23,10 +23,17 @@ from typing import Any, TypedDict
 
 import numpy as np
 
+from .._checks import check_fs
 from .._jsonutil import JsonFields, columns_table, interval_columns
 from .._optim import chi2_isf
 from ..units import squared
-from ._kernel import as_series, check_fs_alpha, cumsum_demeaned, second_difference_sums
+from ._kernel import (
+    as_series,
+    check_fs_alpha,
+    cumsum_demeaned,
+    haar_from_cumsum,
+    second_difference_sums,
+)
 from .robust import biweight_constant, robust_wv
 
 __all__ = [
@@ -209,9 +216,7 @@ class WaveletVariance(LevelScales, JsonFields):
         WaveletVariance
             A new WV; this one is unchanged.
         """
-        fs = float(fs)
-        if not np.isfinite(fs) or fs <= 0:
-            raise ValueError(f"fs must be a positive number, got {fs}")
+        fs = check_fs(fs)
         classical = None if self.classical is None else self.classical.with_fs(fs)
         return replace(self, fs=fs, classical=classical)
 
@@ -323,8 +328,7 @@ def haar_coefficients(x: Any, level: int) -> np.ndarray:
     m = 1 << (level - 1)
     if 2 * m > a.size:
         raise ValueError(f"level {level} needs at least {2 * m} samples, the series has {a.size}")
-    s = cumsum_demeaned(a)
-    return (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+    return haar_from_cumsum(cumsum_demeaned(a), m)
 
 
 def wavelet_variance(

@@ -59,7 +59,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .._blas import blas_threads
-from ._kernel import sumsq_kernel
+from ._kernel import haar_from_cumsum, sumsq_kernel
 
 __all__ = [
     "biweight_constant",
@@ -501,10 +501,8 @@ def _level(
     """(mu, s) of the level with m = 2^(j-1) from the cumulative sum ``s`` (length n + 1)."""
     n_coef = n - 2 * m + 1
     if n_coef <= 2 * _PILOT:
-        w = (s[2 * m :] - 2.0 * s[m : n + 1 - m] + s[: n + 1 - 2 * m]) / (2.0 * m)
-        return biweight_location_scale(w, c)
-    idx = np.arange(0, n_coef, n_coef // _PILOT)
-    wp = (s[idx + 2 * m] - 2.0 * s[idx + m] + s[idx]) / (2.0 * m)
+        return biweight_location_scale(haar_from_cumsum(s, m), c)
+    wp = haar_from_cumsum(s, m, at=np.arange(0, n_coef, n_coef // _PILOT))
     mu0, s0 = _start(wp)
     if s0 > 0:
         pilot = _newton(lambda mm, sc: _direct_means(wp, mm, sc, c), a, mu0, s0, tol=1e-10)
@@ -519,8 +517,7 @@ def _level(
             if res is not None:
                 return res
     # no usable pilot, or the iteration left the trust region: the direct computation
-    w = (s[2 * m :] - 2.0 * s[m : n + 1 - m] + s[: n + 1 - 2 * m]) / (2.0 * m)
-    return biweight_location_scale(w, c)
+    return biweight_location_scale(haar_from_cumsum(s, m), c)
 
 
 def robust_wv(

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from .._checks import check_fs
 from .._files import open_regular
 from ._kernel import sumsq_kernel
 from .classical import WaveletVariance, default_levels
@@ -274,7 +275,7 @@ def _h5_source(
             if len(names) > 1:
                 raise ValueError(
                     f"file '{path}' has several datasets ({', '.join(names[:20])}): "
-                    "choose one with dataset= (CLI: --channel)"
+                    "choose one with dataset="
                 )
             dataset = names[0]
         ds = f.get(dataset)
@@ -516,9 +517,7 @@ def wavelet_variance_stream(
     clones: list[SeriesSource] = []
     try:
         n = src.n
-        fs_v = float(fs if fs is not None else src.fs if src.fs is not None else 1.0)
-        if not (math.isfinite(fs_v) and fs_v > 0):
-            raise ValueError(f"fs must be a positive number of Hz, got {fs_v}")
+        fs_v = check_fs(float(fs if fs is not None else src.fs if src.fs is not None else 1.0))
         if n < 4:
             raise ValueError(f"the series has {n} samples; a wavelet variance needs at least 4")
         jmax = default_levels(n)

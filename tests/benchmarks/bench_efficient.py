@@ -18,13 +18,9 @@ import time
 import numpy as np
 
 import engine as eg
-from engine.inference import (
-    fit_efficient,
-    frequency_grid,
-    inverse_cov,
-    spectral_density,
-    wv_cov_model,
-)
+from engine.fit import fit_efficient
+from engine.fit.asymptotic import frequency_grid, spectral_density, wv_cov_model
+from engine.fit.covariance import inverse_cov
 from engine.models import Model
 
 MODELS = [

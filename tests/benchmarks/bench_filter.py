@@ -9,7 +9,7 @@ integral every T_fix seconds) is given only N and K:
 
 * (a) the plain conversion of the ``WN+RW`` fit (the Kalibr export's numbers);
 * (b) the full fit projected onto WN + RW and over-bounded by the engine's projection
-  (``engine.export.projection.project``, the numbers the filter formats write);
+  (``engine.formats.projection.project``, the numbers the filter formats write);
 * (c) the folk 10x inflation of (a);
 * (a0) for reference, the full fit's own WN and RW terms (N = 0: the exports before issue 23).
 

@@ -14,7 +14,8 @@ import argparse
 import time
 
 import engine as eg
-from engine.inference import param_intervals, rank_models, wv_cov_model
+from engine.fit.asymptotic import wv_cov_model
+from engine.inference import param_intervals, rank_models
 
 TRUTH = (
     "GM(beta=0.5, sigma2_gm=4e-4)+GM(beta=0.01, sigma2_gm=1e-4)+WN(sigma2=1e-2)+RW(gamma2=1e-10)"

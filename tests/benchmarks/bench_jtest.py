@@ -25,7 +25,8 @@ import time
 import numpy as np
 
 import engine as eg
-from engine.inference import fit_efficient, j_test, rank_models
+from engine.fit import fit_efficient
+from engine.inference import j_test, rank_models
 
 #: true models (demo accel_x with drift, demo gyro_x with two GMs, a GM+WN with a strong GM)
 MODELS = {

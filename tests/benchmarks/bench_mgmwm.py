@@ -19,7 +19,7 @@ Estimators of the 9 covariance parameters (3 WN variances, 6 RW covariance entri
   with ``weights="efficient"`` (two-step, inverse of the model-implied covariance of all
   stacked WV/WCCV moments);
 * univariate GMWM of ``WN+RW`` on each channel for the 6 variances (``"ci"`` weights, and the
-  two-step efficient fit of ``engine.inference.fit_efficient``), plus the plain sample
+  two-step efficient fit of ``engine.fit.fit_efficient``), plus the plain sample
   cross-covariance of the differenced signals, ``cov(x_p(t) - x_p(t-1), x_q(t) - x_q(t-1))``,
   for the 3 RW covariances (unbiased here: the WN are independent across channels).
 
@@ -43,8 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.fit import fit_gmwm
-from engine.inference import fit_efficient, parallel_map
+from engine._parallel import parallel_map
+from engine.fit import fit_efficient, fit_gmwm
 from engine.multivariate import MultiModel, fit_mgmwm
 from engine.wv import wv_matrix
 

@@ -89,6 +89,7 @@ import matplotlib
 import numpy as np
 
 import engine as eg
+from engine._parallel import parallel_map
 from engine.models import RW, WN, Model
 from engine.teaching import avsm
 from engine.teaching.table1 import STUDY_FS, table1_model, typical_regions
@@ -504,7 +505,7 @@ def run(
     for name in names:
         sc = scs[name]
         t0 = time.perf_counter()
-        results = eg.parallel_map(
+        results = parallel_map(
             run_replicate, [(sc, seed, r, avar_density) for r in range(reps)], workers
         )
         summary["scenarios"][name] = {

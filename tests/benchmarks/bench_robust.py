@@ -17,7 +17,8 @@ import numpy as np
 
 import engine as eg
 from engine._blas import set_blas_threads
-from engine.wv import cumsum_demeaned, robust_scale_biweight
+from engine.wv import robust_scale_biweight
+from engine.wv._kernel import cumsum_demeaned
 
 
 def old_robust_wv(x: np.ndarray, levels: int) -> np.ndarray:

@@ -4,7 +4,7 @@
 
 Fits ``2*GM+WN+RW`` (and ``WN+RW`` for reference) to ``gyro_x`` and ``accel_x`` of the real
 ``adis16405_imu1.h5`` (100 Hz, 10^6 samples) and projects the full fit onto the WN + RW of
-Kalibr/OpenVINS (``engine.export.projection.project``, the filter formats' default: the rule,
+Kalibr/OpenVINS (``engine.formats.projection.project``, the filter formats' default: the rule,
 the bound from two filter steps to the log length, 95 % asymptotic intervals) and onto the
 WN + GM of KF-GINS/Gazebo. Prints the fitted model, where each term went, and each exported
 value with its interval, factor over the plain conversion and binding scale, in SI, as README
@@ -25,7 +25,7 @@ sys.path.insert(0, str(REPO / "tests"))
 from conftest import real_data_dir  # noqa: E402
 
 import engine as eg  # noqa: E402
-from engine.export import project  # noqa: E402
+from engine.formats import project  # noqa: E402
 
 CHANNELS = ("gyro_x", "accel_x")
 

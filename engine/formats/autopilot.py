@@ -69,13 +69,13 @@ def autopilot_params(
     Raises
     ------
     ExportError
-        No ``filter_rate``, or the errors of :func:`~engine.export.noise.imu_noise`.
+        No ``filter_rate``, or the errors of :func:`~engine.formats.noise.imu_noise`.
     """
     fr = kw.get("filter_rate")
     if fr is None or not (math.isfinite(float(fr)) and float(fr) > 0):
         raise ExportError(
             f"the {prefix.rstrip('_')} export needs the EKF's filter rate in Hz "
-            "(filter_rate=..., CLI --filter-rate): its noise parameters are per filter step"
+            "(filter_rate=...): its noise parameters are per filter step"
         )
     fr = float(fr)
     label = f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters"

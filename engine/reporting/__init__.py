@@ -11,14 +11,12 @@
   outliers), :func:`render_fleet_html` draws it with every unit's own section, and
   :func:`fleet_report` does both and writes the file.
 
-``engine.report`` is both this package and the function :func:`report` (as ``engine.export``).
+``engine.report`` and ``engine.fleet_report`` are the functions of this package that users call.
 """
 
 from __future__ import annotations
 
 import os
-import sys
-import types
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -139,13 +137,3 @@ def fleet_report(
     if output is not None:
         Path(output).write_text(page, encoding="utf-8")
     return page
-
-
-class _ReportModule(types.ModuleType):
-    """``engine.report`` is both this package and :func:`report` (see ``engine.export``)."""
-
-    def __call__(self, *args: Any, **kwargs: Any) -> str:
-        return report(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _ReportModule

@@ -29,12 +29,14 @@ from typing import Any
 
 import numpy as np
 
-from .._files import open_regular, read_regular
-from .._jsonutil import json_ready
-from .._version import __version__
-from ..fit import FitError, GMWMResult, weight_matrix
-from ..models import parse_model
-from ..wv import WaveletVariance
+from ._files import open_regular, read_regular
+from ._jsonutil import json_ready
+from ._version import __version__
+from .fit import FitError, GMWMResult, weight_matrix
+from .inference import ParamInterval
+from .io import load_log
+from .models import parse_model
+from .wv import WaveletVariance
 
 __all__ = [
     "wv_to_dict",
@@ -217,8 +219,6 @@ class Session:
 
     def reload_log(self, *, check: bool = True) -> Any:
         """``load_log(data_path, **load)``; with ``check``, refuse a changed file."""
-        from .load import load_log
-
         if check and (why := self.data_changed()):
             raise SessionError(
                 f"{why} since the session was saved: the saved fits may not "
@@ -333,8 +333,6 @@ def load_session(path: str | os.PathLike[str]) -> Session:
 
 def session_from_json(text: str | bytes, *, source: str = "<upload>") -> Session:
     """A :class:`Session` from JSON text (e.g. an uploaded file); see :func:`load_session`."""
-    from ..inference import ParamInterval
-
     path = source
     try:
         doc = json.loads(text)

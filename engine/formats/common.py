@@ -18,7 +18,6 @@ from collections.abc import Iterable
 from typing import Any
 
 __all__ = [
-    "channel_axis",
     "fmt_float",
     "yaml_float",
     "clean_text",
@@ -78,17 +77,6 @@ def source_text(source: Any) -> str:
     if source is None:
         return ""
     return os.fspath(source) if isinstance(source, os.PathLike) else str(source)
-
-
-def channel_axis(name: str) -> str:
-    """Axis letter of a channel name (``gyro_x`` -> ``x``, ``imu/acc[1]`` -> ``y``), else the
-    name itself."""
-    n = name.strip().lower()
-    m = re.search(r"\[(\d)\]$", n)
-    if m and int(m.group(1)) < 3:
-        return "xyz"[int(m.group(1))]
-    m = re.search(r"(?:^|[^a-z])([xyz])$", n) or re.search(r"([xyz])$", n)
-    return m.group(1) if m else name
 
 
 def fmt_float(v: float) -> str:

@@ -32,7 +32,7 @@ then chooses the consumer's parameters so that its WV (Haar, docs/conventions.md
 fitted model's, or its upper ``confidence`` limit (eta3: ``eta / chi2_{(1-c)/2}(eta)`` times
 the fitted WV), at every scale ``tau`` of ``band`` (default from two filter steps to the
 horizon, default the log length), with the least inflation: the least geometric-mean ratio
-consumer WV / target over the band's scales (:mod:`engine.export.bound`: the integral over
+consumer WV / target over the band's scales (:mod:`engine.formats.bound`: the integral over
 log-scale of the log excess, minimised exactly at a vertex of the feasible set); a
 Gauss-Markov bias adds a 1-D search over ``T_c``. :attr:`Projection.inflation` reports that
 geometric mean and the largest ratio over the band.
@@ -64,7 +64,7 @@ import numpy as np
 
 from ..fit import GMWMResult
 from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model
-from ..units import ExportError, si_factor
+from ..units import SI_UNIT, ExportError, si_factor
 from .bound import POINTS_PER_OCTAVE, Split, columns, fine_scales, solve
 
 __all__ = [
@@ -410,7 +410,7 @@ def project(
     u = (unit if unit is not None else fit.wv.unit) or ""
     try:
         sensor, f_si = si_factor(u, channel)
-        si_unit = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}[sensor]
+        si_unit = SI_UNIT[sensor]
     except ExportError:
         sensor, f_si, si_unit = None, 1.0, u or "u"
     # scales: even numbers of log samples, POINTS_PER_OCTAVE per octave
@@ -577,7 +577,7 @@ def _intervals(
     level: float,
 ) -> dict[str, tuple[float, float]]:
     """Delta-method intervals of the log of each exported value."""
-    from ..inference import free_params, param_cov, wv_cov_model
+    from ..fit.asymptotic import free_params, param_cov, wv_cov_model
 
     free = free_params(fit)
     if not free:

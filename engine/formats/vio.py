@@ -4,7 +4,7 @@ ORB-SLAM3 settings and VINS-Mono/Fusion config keys.
 OpenVINS, Basalt and ORB-SLAM3 take continuous-time densities in SI: the white-noise density
 ``N = sqrt(sigma2 / fs)`` and the random-walk density ``K = sqrt(gamma2 fs)`` of
 :mod:`engine.units` (docs/conventions.md, "Units and datasheet conversions"), as gathered by
-:func:`~engine.export.noise.imu_noise`. Where a format takes one number per sensor it gets the
+:func:`~engine.formats.noise.imu_noise`. Where a format takes one number per sensor it gets the
 conservative choice (max over axes); Basalt takes one per axis.
 
 Sources of the keys' meaning:

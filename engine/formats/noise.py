@@ -5,10 +5,10 @@ bias random walk K, the model's bias-instability (Allan floor) B, and a Gauss-Ma
 :func:`imu_noise` takes them, by ``projection``:
 
 * ``"bound"`` (the filter formats' default): the fit projected onto the consumer's noise model
-  and over-bounded (:func:`~engine.export.projection.project`), with intervals;
+  and over-bounded (:func:`~engine.formats.projection.project`), with intervals;
 * ``"plain"``: the same rule without the bound;
 * ``"fit"``: the fit's own terms converted one by one (the Kalibr extraction of
-  :func:`~engine.export.kalibr.kalibr_imu`, the most persistent GM term), as before the
+  :func:`~engine.formats.kalibr.kalibr_imu`, the most persistent GM term), as before the
   projection existed.
 
 It multiplies every noise value (never a time) by the explicit ``inflate`` factor and says so
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..fit import GMWMResult
+from ..io.log import channel_axis
 from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
-from .common import channel_axis
 from .kalibr import kalibr_imu
 from .projection import Projection, consumer_of, project
 
@@ -126,15 +126,15 @@ def imu_noise(
     ----------
     projection : {"bound", "plain", "fit"}
     consumer : str
-        The consumer's noise model or format (:func:`~engine.export.projection.consumer_of`).
+        The consumer's noise model or format (:func:`~engine.formats.projection.consumer_of`).
     fs_filter, horizon_s, band, confidence, ci
-        Passed to :func:`~engine.export.projection.project`.
+        Passed to :func:`~engine.formats.projection.project`.
 
     Raises
     ------
     ExportError
-        As :func:`~engine.export.kalibr.kalibr_imu` or
-        :func:`~engine.export.projection.project`, or a bad ``inflate`` or ``projection``.
+        As :func:`~engine.formats.kalibr.kalibr_imu` or
+        :func:`~engine.formats.projection.project`, or a bad ``inflate`` or ``projection``.
     """
     f = check_inflate(inflate)
     if projection not in PROJECTIONS:
@@ -198,13 +198,13 @@ def imu_noise(
         raise ExportError(
             f"the filter file needs gyroscope and accelerometer noise; the fits give only "
             f"{' and '.join(vals)} ({', '.join(fits)}). Add the other channels, or allow a "
-            "partial file (allow_partial=True, CLI --partial)"
+            "partial file (allow_partial=True)"
         )
     models = sorted({r.model.spec() for r in fits.values()})
     p0 = next(iter(projs.values()))
     what = (
         "projected onto the consumer's noise model by the rule and over-bounded "
-        "(engine.export.projection; --projection plain: the rule alone, fit: the fit's own terms)"
+        "(engine.formats.projection; --projection plain: the rule alone, fit: the fit's own terms)"
         if projection == "bound"
         else "projected onto the consumer's noise model by the rule, not bounded "
         "(--projection plain)"
@@ -235,7 +235,7 @@ def _fit_noise(
     fmt: str,
     allow_partial: bool,
 ) -> ImuNoise:
-    """``projection="fit"``: N and K as :func:`~engine.export.kalibr.kalibr_imu` extracts
+    """``projection="fit"``: N and K as :func:`~engine.formats.kalibr.kalibr_imu` extracts
     them (K from the GM driving noise when a model has no RW, with a warning), the most
     persistent GM term's numbers."""
     kal = kalibr_imu(fits, units=units, source=source, allow_partial=allow_partial)

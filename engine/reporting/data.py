@@ -16,7 +16,7 @@ asymptotic`` calls them, so that the report and the command agree to the last di
 * the parameter intervals (:func:`engine.inference.param_intervals`), the datasheet rows
   (:func:`engine.units.datasheet_rows`), the J-test (:func:`engine.inference.j_test`);
 * the datasheet check (:func:`engine.inference.check_datasheet`) and the export text
-  (:func:`engine.export.export`).
+  (:func:`engine.formats.export`).
 """
 
 from __future__ import annotations
@@ -422,7 +422,7 @@ def gather_report(
         ``imu.yaml``, gmwm JSON report, datasheet CSV) or a DatasheetSpec: checked against
         every channel of its sensor kind (the other channels say why they were not).
     export_format : str or None
-        An :data:`engine.export.FORMATS` name whose text the report includes (default
+        An :data:`engine.formats.FORMATS` name whose text the report includes (default
         ``"kalibr"``); None for none.
     command_line : str
         How the report was asked for, shown under "How it was made".
@@ -444,7 +444,7 @@ def gather_report(
         ``fits`` with fitting options, or naming a channel the log does not have.
     """
     from ..batch import fit_log
-    from ..export import export
+    from ..formats import export
     from ..inference.datasheet_check import DatasheetSpec, parse_datasheet
 
     if not 0 < level < 1:

@@ -1,8 +1,8 @@
-"""The projection rule and the over-bound of :mod:`engine.export.projection`: which fitted
+"""The projection rule and the over-bound of :mod:`engine.formats.projection`: which fitted
 terms are white at the filter step and which form the bias (:func:`split_terms`), the
 consumers' WV columns (:func:`columns`), the least inflation (:func:`least_inflation`) and
 one projection of a model (:func:`solve`). Quantities are per log sample, in the log's unit;
-:func:`engine.export.projection.project` converts them to the consumer's units.
+:func:`engine.formats.projection.project` converts them to the consumer's units.
 
 **Least inflation.** Among the consumer models whose WV is at least the target (the fitted WV,
 or its upper confidence limit) at every scale of a fine grid of the band (:func:`fine_scales`),

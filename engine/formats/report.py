@@ -15,8 +15,9 @@ from typing import TYPE_CHECKING, Any
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import GMWMResult
+from ..io.log import channel_axis
 from ..units import ExportError, allan_floor, si_factor, squared
-from .common import channel_axis, csv_cells, fmt_float, source_text
+from .common import csv_cells, fmt_float, source_text
 from .datasheet import datasheet_table
 from .kalibr import kalibr_imu
 from .projection import consumer_of, project
@@ -64,7 +65,7 @@ def fit_report(
         Add the Kalibr numbers.
     consumers : sequence of str, optional
         The filter noise models or filter formats to project each fit onto
-        (:func:`engine.export.projection.project`; default :data:`DEFAULT_REPORT_CONSUMERS`,
+        (:func:`engine.formats.projection.project`; default :data:`DEFAULT_REPORT_CONSUMERS`,
         the WN + RW of Kalibr/OpenVINS/PX4 ...). Duplicates of one consumer model are kept
         under each requested name.
     projection : {"bound", "plain", "fit"}

@@ -1,4 +1,7 @@
-"""Exports of GMWM fits for navigation filters and reports.
+"""The export formats of GMWM fits (navigation filters, simulators, reports) and the projection.
+
+``engine.export`` (:func:`.registry.export`) is the function users call; this package holds
+the formats it writes.
 
 * :mod:`.datasheet`: :func:`datasheet_table` (rows of the one datasheet table,
   :mod:`engine.units`), :func:`datasheet_text`, :func:`datasheet_csv`;
@@ -16,14 +19,10 @@
 
 from __future__ import annotations
 
-import sys
-import types
-from typing import Any
-
+from ..io.kalibr import read_kalibr
 from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
-from .common import channel_axis
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
-from .kalibr import KalibrImu, kalibr_imu, kalibr_models, read_kalibr, write_kalibr
+from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr
 from .noise import ImuNoise, imu_noise
 from .projection import FORMAT_CONSUMERS, ProjectedParam, Projection, project
 from .registry import FORMATS, Format, export, register
@@ -33,7 +32,6 @@ __all__ = [
     "ExportError",
     "DatasheetRow",
     "si_factor",
-    "channel_axis",
     "datasheet_table",
     "datasheet_text",
     "datasheet_csv",
@@ -57,15 +55,3 @@ __all__ = [
     "ProjectedParam",
     "FORMAT_CONSUMERS",
 ]
-
-
-class _ExportModule(types.ModuleType):
-    """``engine.export`` is both this package and the function :func:`export`: importing the
-    package makes ``engine.export`` the module (Python sets the parent's attribute), so the
-    module is callable and ``engine.export(path, fits, fmt)`` works either way."""
-
-    def __call__(self, *args: Any, **kwargs: Any) -> str:
-        return export(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _ExportModule

@@ -1,7 +1,7 @@
 """Fleet acceptance: :func:`gather_fleet` fits a batch of logs and computes what a fleet
-report shows (pure numerics; :func:`engine.report.render.render_fleet_html` draws it).
+report shows (pure numerics; :func:`engine.reporting.render.render_fleet_html` draws it).
 
-Per unit (log), in the worker that fits it (:func:`engine.inference.parallel_map`: in process,
+Per unit (log), in the worker that fits it (:func:`engine._parallel.parallel_map`: in process,
 local processes or any ``concurrent.futures.Executor``, like :func:`engine.batch.fit_batch`):
 the log is loaded once, fitted by :func:`engine.batch.fit_log` (the batch's own numbers) and
 its calibration report gathered from those fits (:func:`~.data.gather_report` with ``fits=``,
@@ -138,12 +138,12 @@ def parse_limits(specs: Iterable[str]) -> list[Limit]:
             m = _SPEC.fullmatch(raw)
             if m is None:
                 raise DatasheetError(
-                    f"--spec {raw.strip()!r} is not KEY<=VALUE UNIT (e.g. 'arw<=0.3 deg/sqrt(h)')"
+                    f"spec={raw.strip()!r} is not KEY<=VALUE UNIT (e.g. 'arw<=0.3 deg/sqrt(h)')"
                 )
-            spec = parse_datasheet(f"{m.group(1)}={m.group(2)}", source="--spec")
+            spec = parse_datasheet(f"{m.group(1)}={m.group(2)}", source="spec=")
             ((sym, si),) = spec.values.items()
             if (spec.kind, sym) in seen:
-                raise DatasheetError(f"--spec {raw.strip()!r}: {sym} has a limit already")
+                raise DatasheetError(f"spec={raw.strip()!r}: {sym} has a limit already")
             seen.add((spec.kind, sym))
             out.append(Limit(m.group(1).lower(), sym, spec.kind, si, spec.given[sym]))
     return out

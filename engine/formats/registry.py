@@ -16,11 +16,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..fit import GMWMResult
+from ..io.kalibr import read_kalibr
+from ..io.log import channel_axis
 from ..units import ExportError
 from . import autopilot, ins, sim, vio
-from .common import channel_axis, source_text
+from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
-from .kalibr import KalibrImu, kalibr_imu, read_kalibr
+from .kalibr import KalibrImu, kalibr_imu
 from .noise import check_inflate, noise_for
 from .report import curves_csv, fit_report
 
@@ -113,7 +115,7 @@ def _kalibr(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 def _no_inflate(kw: Mapping[str, Any], name: str) -> None:
     if check_inflate(kw.get("inflate", 1.0)) != 1.0:
         raise ExportError(
-            f"--inflate is for filter formats; the {name} reports the fit itself (inflate 1)"
+            f"inflate= is for filter formats; the {name} reports the fit itself (inflate 1)"
         )
 
 
@@ -227,7 +229,7 @@ def export(
         Passed to the format's writer (parameter intervals per channel, the log for the JSON
         report, signal unit per channel, source name (a str or a path), Kalibr topic, partial
         Kalibr file). Every user-given string is written with its control characters escaped
-        (:func:`engine.export.common.clean_text`): a newline in a file name cannot add a line
+        (:func:`engine.formats.common.clean_text`): a newline in a file name cannot add a line
         (a parameter, a key) to the file.
     inflate : float
         Filter formats: every noise value (density, random walk, bias std) is the fitted value
@@ -241,12 +243,12 @@ def export(
         other filter formats: the filter's step for the projection (default the log's rate).
     projection : {"bound", "plain", "fit"}
         Filter formats: ``"bound"`` (default) projects each fit onto the consumer's noise model
-        and over-bounds it (:func:`engine.export.projection.project`); ``"plain"`` the rule
+        and over-bounds it (:func:`engine.formats.projection.project`); ``"plain"`` the rule
         without the bound; ``"fit"`` the fit's own terms converted one by one (no projection).
     horizon_s, band, confidence, ci
         The bound's horizon (s, default the log length), its WV scales (s), the confidence of
         the fitted WV's upper limit to bound (default: the WV itself), the intervals
-        (``"asymptotic"`` or None); :func:`engine.export.projection.project`.
+        (``"asymptotic"`` or None); :func:`engine.formats.projection.project`.
     vehicle_id : int
         PX4: the MAVLink system id of the ``.params`` lines (default 1).
     scale_factor_std_ppm : float, optional

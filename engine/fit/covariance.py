@@ -1,9 +1,10 @@
-"""Covariance of the wavelet variance, and the efficient (two-step) GMWM.
+"""Covariance of the wavelet variance, the weights of the efficient (two-step) GMWM.
 
 ``V = Cov(nu_hat)`` across levels, three ways: :func:`wv_cov_data` (from the data, diagonal,
 Percival & Walden), :func:`wv_cov_model` (from a fitted model, Gaussian and asymptotic, full),
 :func:`wv_cov_bootstrap` (parametric bootstrap); :func:`wv_cov` picks one by name for a fit.
-:func:`fit_efficient` refits with ``Omega = V^-1`` (the GMWM paper, Corollary 1).
+``fit_gmwm(..., weights="efficient")`` refits with ``Omega = V^-1`` (the GMWM paper,
+Corollary 1); this module sits below :mod:`engine.fit.gmwm` so that the fit can do it.
 """
 
 from __future__ import annotations
@@ -11,15 +12,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from concurrent.futures import Executor
-from typing import TYPE_CHECKING, Any, TypedDict
+from typing import TYPE_CHECKING, Any, Protocol, TypedDict
 
 import numpy as np
 
 from .._parallel import parallel_map
-from ..fit import FitError, GMWMResult, fit_gmwm
 from ..models import Model
-from ..wv import WaveletVariance, as_series, cumsum_demeaned, wavelet_variance
+from ..wv import WaveletVariance, as_series, haar_coefficients, wavelet_variance
 from .asymptotic import wv_cov_model
+from .result import FitError
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
@@ -28,9 +29,7 @@ __all__ = [
     "wv_cov_data",
     "wv_cov_bootstrap",
     "wv_cov",
-    "fit_efficient",
     "inverse_cov",
-    "parallel_map",
     "VOptions",
     "V_DEFAULTS",
     "v_options",
@@ -117,11 +116,9 @@ def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
     a = as_series(x)
     if a.size != wv.n:
         raise ValueError(f"the series has {a.size} samples but the WV was computed from {wv.n}")
-    s = cumsum_demeaned(a)
     out = np.empty(wv.n_levels)
     for i, j in enumerate(wv.levels):
-        m = 1 << (int(j) - 1)
-        w = (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+        w = haar_coefficients(a, int(j))
         nfft = 1 << int(math.ceil(math.log2(2 * w.size)))
         spec = np.fft.rfft(w, nfft)
         acf = np.fft.irfft(spec.real**2 + spec.imag**2, nfft)[: w.size] / w.size
@@ -154,7 +151,7 @@ def wv_cov_bootstrap(
         child of ``SeedSequence(seed)``), local processes (results do not depend on it).
     executor : concurrent.futures.Executor, optional
         Runs the replicates instead of the local pool (e.g. a Dask ``Client.get_executor()``);
-        the results do not depend on it (:func:`engine.inference.parallel_map`).
+        the results do not depend on it (:func:`engine._parallel.parallel_map`).
     """
     if B < 2:
         raise ValueError(f"B must be at least 2, got {B}")
@@ -175,40 +172,18 @@ def inverse_cov(v: np.ndarray) -> np.ndarray:
     return (inv + inv.T) / 2
 
 
-def fit_efficient(
-    wv: WaveletVariance, model: Model | str, **options: Unpack[VOptions]
-) -> GMWMResult:
-    """Two-step efficient GMWM: ``weights="ci"``, then ``Omega = V^-1`` with V estimated.
+class _FittedWV(Protocol):
+    """What :func:`wv_cov` reads of a fit: its model and its empirical WV."""
 
-    Parameters
-    ----------
-    wv : WaveletVariance
-        The empirical WV.
-    model : Model or str
-        The model to fit.
-    **options
-        How V is estimated (:class:`VOptions`: ``v``, ``x``, ``B``, ``seed``, ``workers``,
-        ``executor``): by default from the first-step fit (``v="model"``, analytic Gaussian);
-        ``"bootstrap"`` (parametric), ``"data"`` (needs ``x``; diagonal) or a given matrix.
+    @property
+    def model(self) -> Model: ...
 
-    Examples
-    --------
-    >>> import numpy as np
-    >>> import engine as eg
-    >>> x = eg.parse_model("WN(1e-2) + RW(1e-6)").simulate(2**14, rng=np.random.default_rng(1))
-    >>> res = eg.fit_efficient(eg.wavelet_variance(x, fs=100.0), "WN + RW")
-    >>> res.weights, {k: f"{v:.2e}" for k, v in res.params.items()}
-    ('efficient', {'WN.sigma2': '9.91e-03', 'RW.gamma2': '6.78e-07'})
-    """
-    first = fit_gmwm(wv, model)
-    vmat = wv_cov(first, **v_options(options))
-    res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat))
-    object.__setattr__(res, "weights", "efficient")
-    return res
+    @property
+    def wv(self) -> WaveletVariance: ...
 
 
 def wv_cov(
-    res: GMWMResult, v: str | np.ndarray = "model", **options: Unpack[_ReplicateOptions]
+    res: _FittedWV, v: str | np.ndarray = "model", **options: Unpack[_ReplicateOptions]
 ) -> np.ndarray:
     """The covariance V of a fit's WV, by name.
 

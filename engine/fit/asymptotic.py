@@ -1,7 +1,10 @@
-"""The asymptotic pieces of GMWM inference that need no fitting: the model-implied covariance of
-the WV, the Jacobian of the implied WV in the unconstrained coordinates, and the sandwich
-intervals. :meth:`engine.fit.GMWMResult.conf_int` uses them without importing the fitting
-layer back (the rest of :mod:`engine.inference` imports :mod:`engine.fit`).
+"""The asymptotic theory of a GMWM fit: the model-implied covariance of the WV, the Jacobian of
+the implied WV in the unconstrained coordinates, and the sandwich intervals.
+
+It needs no fitting, and the fit needs it (:meth:`engine.fit.GMWMResult.conf_int`, the
+efficient weights of :mod:`engine.fit.covariance`), so it sits in the fitting layer;
+:mod:`engine.inference` (intervals, J-test, selection) and :mod:`engine.formats` (the
+projection's intervals) build on it.
 """
 
 from __future__ import annotations
@@ -62,7 +65,7 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
     """Asymptotic Gaussian covariance of the WV implied by a model (full J x J matrix).
 
     ``Cov(nu_j, nu_k) = (2 / max(M_j, M_k)) int_{-1/2}^{1/2} |H_j|^2 |H_k|^2 S^2 df``, in closed
-    form (:mod:`engine.inference._closed_form`: 25 lags of one generalised autocovariance per
+    form (:mod:`engine.fit._closed_form`: 25 lags of one generalised autocovariance per
     pair of levels, exact integer sums for QN/WN/RW, decimal arithmetic for AR1/GM), so the
     cost does not grow with the series: about 1 ms for 22 levels without AR1/GM terms, 10-20 ms
     per AR1/GM term.

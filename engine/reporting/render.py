@@ -196,7 +196,7 @@ def _static(specs: dict[str, FigureSpec]) -> dict[str, str]:
     except ImportError:
         raise ReportError(
             "a static report draws its figures with matplotlib, which is not installed: "
-            "pip install 'gmwm-app[study]' (or drop --static / static=True)"
+            "pip install 'gmwm-app[study]' (or drop static=True)"
         ) from None
     out: dict[str, str] = {}
     for key, s in specs.items():
@@ -261,7 +261,7 @@ def _environment() -> Any:
     from jinja2 import Environment, PackageLoader, select_autoescape
 
     env = Environment(
-        loader=PackageLoader("engine.report", "templates"),
+        loader=PackageLoader("engine.reporting", "templates"),
         autoescape=select_autoescape(["html", "jinja"], default=True),
         trim_blocks=True,
         lstrip_blocks=True,
@@ -301,7 +301,7 @@ def render_html(rep: CalibrationReport, *, static: bool = False, title: str | No
     Parameters
     ----------
     rep : CalibrationReport
-        From :func:`engine.report.gather_report`.
+        From :func:`engine.reporting.gather_report`.
     static : bool
         Figures as PNG images (matplotlib) instead of interactive Bokeh plots.
     title : str, optional
@@ -346,7 +346,7 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
     Parameters
     ----------
     fleet : FleetReport
-        From :func:`engine.report.fleet.gather_fleet`.
+        From :func:`engine.reporting.fleet.gather_fleet`.
     static : bool
         Figures as PNG images (matplotlib) instead of interactive Bokeh plots.
     title : str, optional
