@@ -23,7 +23,7 @@ REQUIRED = [
     ("engine.models.model", "parse_model"),
     ("engine.models.model", "Model.simulate"),
     ("engine.fit.gmwm", "fit_gmwm"),
-    ("engine.inference.covariance", "fit_efficient"),
+    ("engine.fit.gmwm", "fit_efficient"),
     ("engine.inference.intervals", "param_intervals"),
     ("engine.inference.jtest", "j_test"),
     ("engine.inference.selection", "rank_models"),

@@ -30,9 +30,14 @@ _CONSUMER = (
     "consumer-model name, a key of CONSUMER_PARAMS beside 'WN+RW' and 'WN+GM' that users "
     "pass to project(); it names the filter's model, not a branch on a fitted process"
 )
+_API_NAME = (
+    "a public name in engine.API, the table of what `import engine` offers (name -> module): "
+    "the class's Python name, not a branch on a fitted process's code"
+)
 ALLOWED_LITERALS: dict[tuple[str, str], str] = {
     ("engine/formats/projection.py", "WN"): _CONSUMER,
     ("engine/formats/bound.py", "WN"): _CONSUMER,
+    **{("engine/__init__.py", code): _API_NAME for code in ("WN", "QN", "RW", "DR", "AR1", "GM")},
 }
 
 
