@@ -30,6 +30,7 @@ import logging
 import threading
 import weakref
 from collections.abc import Iterator
+from functools import partial
 from typing import Any
 
 import panel as pn
@@ -176,9 +177,11 @@ def placeholder_session(
     this context when the page is handed over (:func:`hand_over_sessions`).
     """
     from bokeh.server.contexts import BokehSessionContext, _RequestProxy
-    from tornado.httputil import HTTPHeaders, HTTPServerRequest
+    from tornado.httputil import HTTPHeaders, HTTPServerRequest, RequestStartLine
 
-    request = HTTPServerRequest(method="GET", uri=path, headers=HTTPHeaders({"Host": host}))
+    request = HTTPServerRequest(
+        start_line=RequestStartLine("GET", path, "HTTP/1.1"), headers=HTTPHeaders({"Host": host})
+    )
     request.protocol = protocol
     request.app_path = app_path  # type: ignore[attr-defined]
     context = BokehSessionContext("gmwm-page-built-ahead", server_context, doc, logout_url=None)
@@ -273,12 +276,14 @@ def hand_over_sessions(application_context: Any, take: Any) -> None:
 
 
 def discard_document(doc: Any, context: Any) -> None:
-    """Release a page document built ahead that no session will get, as Panel releases a
-    session's: its session-destroyed callbacks (with ``context``), then the document."""
+    """Release a page document built ahead that no session will get, as Bokeh and Panel
+    release a session's (Bokeh's ``_discard_session``): the document is destroyed (Panel's
+    ``_destroy_document``), then its session-destroyed callbacks run with ``context``."""
     from panel.io.application import _on_session_destroyed
     from panel.io.document import _destroy_document
 
+    doc.destroy = partial(_destroy_document, doc)  # as Panel's initialize_document sets it
     try:
-        _on_session_destroyed(context)
+        doc.destroy(None)
     finally:
-        _destroy_document(doc, None)
+        _on_session_destroyed(context)

@@ -15,7 +15,7 @@ import sys
 import threading
 import weakref
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
 from functools import partial
 from typing import Any, NamedTuple
@@ -307,6 +307,9 @@ class PagePool:
         The number of pages being built on demand now.
     on_full : callable, optional
         ``on_full(size)`` when the pool becomes full (called in the build thread).
+    sessions : callable
+        The app objects of the sessions (:func:`gmwm_app.app.live_apps`), each with its
+        ``busy`` (loading data) and ``ready`` (first data shown) flags.
     """
 
     #: Consecutive failed builds after which the pool stops building.
@@ -322,6 +325,7 @@ class PagePool:
         app_url: str = "/",
         on_demand: Callable[[], int] = lambda: 0,
         on_full: Callable[[int], None] | None = None,
+        sessions: Callable[[], Iterable[Any]] = live_apps,
     ) -> None:
         self.size = max(0, int(size))
         self.shape = shape
@@ -329,6 +333,7 @@ class PagePool:
         self._build_page = build
         self._server_context = server_context
         self._on_demand = on_demand
+        self._sessions = sessions
         self._on_full = on_full
         self._ready: deque[tuple[Any, Any, GMWMApp]] = deque()
         self._building: Future | None = None
@@ -353,7 +358,7 @@ class PagePool:
         opening (its first data not yet shown) or loading data."""
         if self._on_demand() > 0:
             return True
-        return any(app.busy or not app.ready for app in live_apps())
+        return any(app.busy or not app.ready for app in self._sessions())
 
     def step(self) -> bool:
         """Start building one page if the pool is short and the server idle (on the loop);
@@ -440,7 +445,7 @@ class PagePool:
         self.size = 0
         if self._stepper is not None:
             self._stepper.stop()
-        self._executor.shutdown(wait=False, cancel_futures=True)
+        self._executor.shutdown(wait=True, cancel_futures=True)  # a build ends within ~1 s
         with self._lock:
             old = list(self._ready)
             self._ready.clear()
