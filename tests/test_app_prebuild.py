@@ -221,6 +221,47 @@ def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -
     assert sum("GM" in m for m in models) == 1, models
 
 
+def test_pooled_page_in_a_browser(pooled: dict[str, Any]) -> None:
+    """Chromium draws a page built ahead, its first click redraws, and its URL follows the
+    session's state (the location bound at hand-over)."""
+    from conftest import CHROMIUM, CHROMIUM_ARGS
+
+    if not CHROMIUM.exists():
+        pytest.skip("no Chromium at /usr/bin/chromium")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("playwright is not installed")
+    pool = pooled["pool"]
+    _wait(lambda: len(pool) > 0, "a page in the pool")
+    handed = pool.stats["handed"]
+    errors: list[str] = []
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
+            page.goto(pooled["url"])
+            assert pool.stats["handed"] == handed + 1  # this page came from the pool
+            page.get_by_text("WV levels").first.wait_for(timeout=WAIT_S * 1000)
+            page.get_by_role("button", name="+ GM", exact=True).click()
+
+            def table() -> str:
+                return " ".join(page.locator(".gmwm-params .slick-cell").all_inner_texts())
+
+            deadline = time.time() + WAIT_S
+            while "beta" not in table() and time.time() < deadline:
+                page.wait_for_timeout(50)
+            assert "beta" in table(), table()
+            while "model=GM" not in page.url and time.time() < deadline:
+                page.wait_for_timeout(50)
+            assert "model=GM" in page.url, page.url
+        finally:
+            browser.close()
+    assert errors == []
+
+
 def test_query_or_other_host_builds_on_demand(pooled: dict[str, Any]) -> None:
     pool = pooled["pool"]
     _wait(lambda: len(pool) > 0, "a page in the pool")
