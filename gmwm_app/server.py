@@ -251,13 +251,20 @@ class RequestShape(NamedTuple):
 def request_shape(request: Any, app_url: str = "/") -> RequestShape | None:
     """The shape of a session's request (Bokeh's request proxy), or None when a page built
     ahead cannot answer it: a query (``?source=path...``: the page loads other data), no
-    request, or not a ``GET``."""
+    request, or not a ``GET``. A session created by its websocket (``APP/ws``) has the shape
+    of its page (``APP``)."""
     if request is None or getattr(request, "method", "GET") != "GET":
         return None
-    if request.arguments:
+    if request.arguments:  # (for a websocket: the page request's, from the session token)
         return None
     app_path = getattr(request, "app_path", None) or app_url
-    return RequestShape(str(request.protocol), str(request.host), str(request.path), app_path)
+    path = str(request.path)
+    if path == app_url.rstrip("/") + "/ws":
+        # a session created by its websocket: with --num-procs, the page's HTML came from
+        # another process (Bokeh creates the session again where the websocket lands); the
+        # page is the one of the application's path
+        path = app_url
+    return RequestShape(str(request.protocol), str(request.host), path, app_path)
 
 
 def _lowest_priority() -> None:

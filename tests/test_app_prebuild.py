@@ -347,6 +347,8 @@ def test_request_shape_and_default_size() -> None:
     shape = server.request_shape(proxy("/"))
     assert shape == server.RequestShape("http", "lab-pc:5006", "/", "/")
     assert server.request_shape(proxy("/?source=path&path=x.h5")) is None
+    assert server.request_shape(proxy("/ws")) == shape  # a session created by its websocket
+    assert server.request_shape(proxy("/other")) != shape
     assert server.request_shape(None) is None
     assert server.default_prebuild(available_mb=20_000) == server.DEFAULT_PREBUILD == 32
     # at most a tenth of the available memory, about 5 MB a page
