@@ -1,7 +1,8 @@
 """Serving the app: one Bokeh application whose pages are built off the server loop.
 
-:func:`create_application` is what ``gmwm-app`` serves; :func:`limit_blas_threads` keeps
-OpenBLAS's threads from fighting the loop for the cores. The Panel internals this needs are
+:func:`create_application` is what ``gmwm-app`` serves; :class:`PagePool` keeps pages built
+ahead of demand (``gmwm-app --prebuild N``); :func:`limit_blas_threads` keeps OpenBLAS's
+threads from fighting the loop for the cores. The Panel internals this needs are
 in :mod:`gmwm_app._panel_compat`; the page itself is :func:`gmwm_app.app.create_app`.
 """
 
@@ -365,7 +366,11 @@ class PagePool:
         opening (its first data not yet shown) or loading data."""
         if self._on_demand() > 0:
             return True
-        return any(app.busy or not app.ready for app in self._sessions())
+        try:
+            apps = list(self._sessions())
+        except RuntimeError:  # the registry changed meanwhile (a page built): look next step
+            return True
+        return any(app.busy or not app.ready for app in apps)
 
     def step(self) -> bool:
         """Start building one page if the pool is short and the server idle (on the loop);
