@@ -162,6 +162,25 @@ def add_report_options(bt: argparse.ArgumentParser) -> None:
     )
 
 
+def _fit_kwargs(
+    args: argparse.Namespace, channels: list[str] | None, executor: Executor | None, progress: Any
+) -> dict[str, Any]:
+    """How every log of the fleet is fitted (``fit_batch``'s and ``gather_fleet``'s keywords),
+    from the command's options: one list for the plain batch and the fleet report."""
+    return {
+        "model": args.model,
+        "select": args.max_model,
+        "channels": channels,
+        "fs": args.fs,
+        "levels": args.levels,
+        "weights": args.weights,
+        "load_options": log_kwargs(args),
+        "workers": args.workers,
+        "executor": executor,
+        "progress": progress,
+    }
+
+
 def run_fleet(
     args: argparse.Namespace,
     channels: list[str] | None,
@@ -180,16 +199,7 @@ def run_fleet(
             datasheet=args.datasheet_file or args.datasheet,
             spec=args.spec,
             level=0.95,
-            model=args.model,
-            select=args.max_model,
-            channels=channels,
-            fs=args.fs,
-            levels=args.levels,
-            weights=args.weights,
-            load_options=log_kwargs(args),
-            workers=args.workers,
-            executor=executor,
-            progress=progress,
+            **_fit_kwargs(args, channels, executor, progress),
             command_line=shlex.join(["gmwm", *getattr(args, "argv", [])]),
         )
         page = render_fleet_html(fleet)
@@ -224,19 +234,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         if args.report is not None:
             res = run_fleet(args, channels, ex, bar)
         else:
-            res = fit_batch(
-                args.inputs,
-                model=args.model,
-                select=args.max_model,
-                channels=channels,
-                fs=args.fs,
-                levels=args.levels,
-                weights=args.weights,
-                load_options=log_kwargs(args),
-                workers=args.workers,
-                executor=ex,
-                progress=bar,
-            )
+            res = fit_batch(args.inputs, **_fit_kwargs(args, channels, ex, bar))
     files = res.save(args.output) if args.output is not None else {}
     for lf in res.logs:
         if lf.error:
