@@ -158,6 +158,12 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
     # model selection and inference (see gmwm_app/selection_view.py)
     selection = param.Parameter(default=None, doc="Last WVIC ranking (SelectionResult).")
     show_intervals = param.Boolean(default=False, doc="Show 95% intervals and the J-test.")
+    inferred = param.ClassSelector(
+        class_=Inference,
+        default=None,
+        allow_None=True,
+        doc="The intervals and J-test installed last (the views showing them depend on it).",
+    )
     # messages
     error = param.String(default="", doc="Last error, in words (empty when fine).")
     notice = param.String(default="", doc="Information (not an error), e.g. a URL fallback.")
@@ -724,7 +730,7 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         if len(self._inference) >= 32:
             self._inference.pop(next(iter(self._inference)))
         self._inference[id(inf.result)] = inf
-        self.param.update(revision=self.revision + 1)
+        self.param.update(inferred=inf, revision=self.revision + 1)
         return True
 
     def inference(self, result: eg.GMWMResult | None = None) -> Inference | None:
