@@ -411,6 +411,7 @@ class SelectionView(TabView):
         state = self.state
 
         def fail(e: BaseException) -> None:
+            self._log_job_error(e)
             state.report_error(f"Could not compute the intervals: {_message(e)}")
 
         if not self.jobs.served:  # tests, notebooks: at once
@@ -423,8 +424,8 @@ class SelectionView(TabView):
 
         self.jobs.run(
             lambda: state.compute_inference(result),
-            state.install_inference,
-            fail,
+            self._guarded(state.install_inference),
+            self._guarded(fail),
             lambda: self._pending.discard(id(result)),
         )
         return False
