@@ -161,12 +161,16 @@ class TabView(pn.viewable.Viewer):
             except Exception:  # the message itself failed: the log has both
                 log.exception("%s tab: showing the failure failed", self.slug)
 
-    def _job_failed(self, err: BaseException) -> None:
-        """A background job raised: log it (a traceback unless a ValueError) and show it."""
+    def _log_job_error(self, err: BaseException) -> None:
+        """Log the exception of a background job (a traceback unless a ValueError)."""
         if isinstance(err, ValueError):  # bad input: the message says it all
             log.warning("%s tab: %s: %s", self.slug, type(err).__name__, err)
         else:
             log.error("%s tab: job failed", self.slug, exc_info=err)
+
+    def _job_failed(self, err: BaseException) -> None:
+        """A background job raised: log it and show it in the tab."""
+        self._log_job_error(err)
         self._failed(err)
 
     def _guarded(self, fn: Callable[[Any], Any]) -> Callable[[Any], None]:
