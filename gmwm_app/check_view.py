@@ -17,7 +17,6 @@ check runs in the session's job runner (at once outside a server); bad values sh
 
 from __future__ import annotations
 
-import logging
 import os
 import tempfile
 from functools import partial
@@ -34,13 +33,12 @@ from engine.units import DISPLAY, ExportError, si_factor, squared, times_s
 
 from . import views
 from .state import AppState
+from .tab_view import TabView
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
 
 __all__ = ["CheckView", "FIELDS", "DEFAULTS", "VERDICT_COLORS", "check_fields"]
-
-log = logging.getLogger(__name__)
 
 #: Colour of a scale by verdict.
 VERDICT_COLORS = {"inside": "#2CA02C", "above": "#FF7F0E", "below": "#D62728"}
@@ -87,7 +85,7 @@ def _fmt(v: float) -> str:
     return f"{v:.4g}"
 
 
-class CheckView(pn.viewable.Viewer):
+class CheckView(TabView):
     """Widgets, figures, table and callbacks of the "Datasheet check" tab of one session.
 
     Parameters
@@ -105,26 +103,30 @@ class CheckView(pn.viewable.Viewer):
         What is shown.
     kind : str
         The channel's sensor kind (``""`` when its unit is unknown).
+    texts : list of str
+        The values of the fields, as typed (the widgets show them).
+    file_spec : DatasheetSpec or None
+        The uploaded file's exact values, until a field is edited.
     """
 
-    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+    slug = "check"
 
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
-        super().__init__(**params)
-        self.state = state
-        self.jobs = jobs
+        super().__init__(state, jobs, **params)
         self.result: Any = None
         self.kind = ""
+        self.texts = [""] * 4
         self.file_spec: eg.DatasheetSpec | None = None
         self._key: Any = None
-        self._dirty = True  # something changed while the tab was hidden
-        self._syncing = False
         for build in (self._build_widgets, self._build_figures, self._build_table):
             build()
         self._build_layout()
-        self.state.param.watch(self._on_change, "revision")
-        self.param.watch(self._on_change, "active")
         self.refresh()
+
+    @param.depends("state.wv", "state.result", "state.unit", watch=True)
+    def _on_state(self) -> None:
+        """The channel's WV, its unit or the Fit tab's fit changed."""
+        super()._on_state()
 
     # ------------------------------------------------------------------------------------
     # construction (once)
@@ -134,13 +136,12 @@ class CheckView(pn.viewable.Viewer):
             pn.widgets.TextInput(label="", value="", width=170, css_classes=[f"gmwm-check-{i}"])
             for i in range(4)
         ]
-        for w in self.inputs:
-            w.param.watch(self._on_input, "value")
+        for i, w in enumerate(self.inputs):
+            w.param.watch(partial(self._on_input, i), "value")
         self.upload = pn.widgets.FileInput(
             accept=".yaml,.yml,.json,.csv", multiple=False, css_classes=["gmwm-check-upload"]
         )
         self.upload.param.watch(self._on_upload, "value")
-        self.message = views.hidden_alert("warning", css_classes=["gmwm-check-message"])
         self.status = pn.pane.Markdown(
             "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-check-status"]
         )
@@ -229,26 +230,21 @@ class CheckView(pn.viewable.Viewer):
             sizing_mode="stretch_width",
         )
 
-    def __panel__(self) -> pn.Column:
-        """The tab's content."""
-        return self.panel
-
     # ------------------------------------------------------------------------------------
     # actions (also called by tests)
     # ------------------------------------------------------------------------------------
     def set_values(self, values: dict[str, str]) -> None:
         """Set input fields by key (``{"arw": "0.3", "bi": ""}``) and recompute once."""
         keys = [k for k, _s, _u in FIELDS.get(self.kind, [])]
-        self._syncing = True
-        try:
-            for key, text in values.items():
-                if key not in keys:
-                    self._show([f"no field {key!r} for a {self.kind or 'unknown'} channel"])
-                    return
-                self.inputs[keys.index(key)].value = str(text)
-        finally:
-            self._syncing = False
+        bad = [key for key in values if key not in keys]
+        if bad:
+            self._show([f"no field {bad[0]!r} for a {self.kind or 'unknown'} channel"])
+            return
+        texts = list(self.texts)
+        for key, text in values.items():
+            texts[keys.index(key)] = str(text)
         self.file_spec = None
+        self._set_texts(texts)
         self.refresh(force=True)
 
     def load_file(self, data: bytes, filename: str) -> None:
@@ -267,53 +263,48 @@ class CheckView(pn.viewable.Viewer):
         if self.kind and spec.kind != self.kind:
             self._show([f"{filename} is a {spec.kind}'s datasheet; the channel is a {self.kind}"])
             return
-        self._fill(spec)
         self.file_spec = spec  # the file's exact values, until a field is edited
+        self._set_texts(self._file_texts(spec))
         self.message.visible = False
         self.refresh(force=True)
 
     # ------------------------------------------------------------------------------------
     # callbacks (thin)
     # ------------------------------------------------------------------------------------
-    def _on_input(self, _event: Any) -> None:
-        if not self._syncing:
-            self.file_spec = None
-            self.refresh(force=True)
+    def _on_input(self, i: int, event: Any) -> None:
+        """A field was edited (idempotent: the echo of :meth:`_set_texts` is a no-op)."""
+        if event.new == self.texts[i]:
+            return
+        self.texts[i] = event.new
+        self.file_spec = None  # the user's values now
+        self._safely(self.refresh, True)
 
     def _on_upload(self, event: Any) -> None:
         if event.new:
-            self.load_file(event.new, self.upload.filename or "datasheet.yaml")
-
-    def _on_change(self, event: Any = None) -> None:
-        """The session changed, or the tab was shown: refresh (never raising into Panel)."""
-        if getattr(event, "name", "") == "active" and not (self.active and self._dirty):
-            return
-        try:
-            self.refresh()
-        except Exception as e:  # a display problem must not break the session
-            log.exception("datasheet check refresh failed")
-            self._show([f"display error: {type(e).__name__}: {e}"])
+            self._safely(self.load_file, event.new, self.upload.filename or "datasheet.yaml")
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views
     # ------------------------------------------------------------------------------------
-    def _fill(self, spec: eg.DatasheetSpec) -> None:
-        """Show a datasheet's values in the fields (datasheet units, 4 digits)."""
-        vals = {}
-        for key, sym, _unit in FIELDS[spec.kind]:
+    @staticmethod
+    def _file_texts(spec: eg.DatasheetSpec) -> list[str]:
+        """A datasheet's values as the fields show them (datasheet units, 4 digits)."""
+        out = []
+        for _key, sym, _unit in FIELDS[spec.kind]:
             v = spec.values.get(sym)
             if v is None:
-                vals[key] = ""
+                out.append("")
             elif sym == "Q":
-                vals[key] = _fmt(v / si_factor(_SIGNAL[spec.kind])[1])
+                out.append(_fmt(v / si_factor(_SIGNAL[spec.kind])[1]))
             else:
-                vals[key] = _fmt(v * DISPLAY[(spec.kind, sym)].factor)
-        self._syncing = True
-        try:
-            for w, (key, _s, _u) in zip(self.inputs, FIELDS[spec.kind], strict=True):
-                w.value = vals[key]
-        finally:
-            self._syncing = False
+                out.append(_fmt(v * DISPLAY[(spec.kind, sym)].factor))
+        return out
+
+    def _set_texts(self, texts: list[str]) -> None:
+        """The fields' values: first the view's, then the widgets' (whose echo is a no-op)."""
+        self.texts = list(texts)
+        for w, text in zip(self.inputs, self.texts, strict=True):
+            w.value = text
 
     def _sync_kind(self) -> None:
         """Fields follow the channel's sensor kind (labels, units, defaults)."""
@@ -324,20 +315,21 @@ class CheckView(pn.viewable.Viewer):
         if kind == self.kind:
             return
         self.kind = kind
-        self._syncing = True
-        try:
-            for w, (key, _s, unit) in zip(self.inputs, FIELDS.get(kind, []), strict=False):
-                w.param.update(label=f"{key.upper()} [{unit}]", value=DEFAULTS[kind][key])
+        if kind:
+            fields = FIELDS[kind]
+            self.texts = [DEFAULTS[kind][key] for key, _s, _u in fields]
+            for w, text, (key, _s, unit) in zip(self.inputs, self.texts, fields, strict=True):
+                # one update, after self.texts: the value's echo in _on_input is a no-op
+                w.param.update(label=f"{key.upper()} [{unit}]", value=text, disabled=False)
+        else:
             for w in self.inputs:
-                w.disabled = not kind
-        finally:
-            self._syncing = False
+                w.disabled = True
 
     def spec(self) -> eg.DatasheetSpec:
         """The datasheet of the fields (raises DatasheetError with a readable message)."""
         items: dict[str, tuple[float, str]] = {}
-        for w, (key, _s, unit) in zip(self.inputs, FIELDS[self.kind], strict=True):
-            text = w.value.strip()
+        for text, (key, _s, unit) in zip(self.texts, FIELDS[self.kind], strict=True):
+            text = text.strip()
             if not text:
                 continue
             try:
@@ -346,17 +338,13 @@ class CheckView(pn.viewable.Viewer):
                 raise eg.DatasheetError(f"{key.upper()}: {text!r} is not a number") from None
         return eg.DatasheetSpec.from_values(items, source="app")
 
-    def refresh(self, force: bool = False) -> None:
-        """Recompute when the data, the fit or the values changed (only while shown)."""
+    def _draw(self, force: bool) -> None:
+        """Recompute when the data, the fit or the values changed."""
         s = self.state
         self._sync_kind()
-        key = (s.wv, s.result, s.unit, self.kind, tuple(w.value for w in self.inputs))
+        key = (s.wv, s.result, s.unit, self.kind, tuple(self.texts), self.file_spec)
         if key == self._key and not force:
             return
-        if not (self.active or not self.jobs.served):  # tests, notebooks: always drawn
-            self._dirty = True
-            return
-        self._dirty = False
         self._key = key
         if s.wv is None:
             self._clear(["load a log first"])
@@ -376,13 +364,7 @@ class CheckView(pn.viewable.Viewer):
             self._clear([str(e)])
             return
         fit = s.result if s.result is not None and s.result.wv is s.wv else None
-        self.jobs.run(
-            partial(eg.check_datasheet, s.wv, spec, fit=fit),
-            self.show,
-            self._failed,
-            key="check",
-            inline=not self.jobs.served,
-        )
+        self._compute(partial(eg.check_datasheet, s.wv, spec, fit=fit), self.show, "check")
 
     def _failed(self, err: BaseException) -> None:
         self._clear([f"could not check: {err}"])
@@ -447,8 +429,4 @@ class CheckView(pn.viewable.Viewer):
         )
 
     def _show(self, msgs: list[str], info: bool = False) -> None:
-        self.message.param.update(
-            object="  \n".join(f"• {m}" for m in msgs),
-            visible=bool(msgs),
-            alert_type="info" if info else "warning",
-        )
+        self.show_message(msgs, level="info" if info else "warning")

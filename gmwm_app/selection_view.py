@@ -31,6 +31,7 @@ from bokeh.models import (
 
 from .jobs import ProgressThrottle, job_controls
 from .state import Inference, format_value
+from .tab_view import TabView
 from .views import (
     TOTAL_COLOR,
     component_color,
@@ -179,7 +180,7 @@ class _DecompFigure:
 # -----------------------------------------------------------------------------------------
 # the tab
 # -----------------------------------------------------------------------------------------
-class SelectionView(pn.viewable.Viewer):
+class SelectionView(TabView):
     """Widgets, figures and callbacks of the "Model selection" tab of one session.
 
     Parameters
@@ -190,15 +191,12 @@ class SelectionView(pn.viewable.Viewer):
         The session's job runner (worker threads, document lock).
     """
 
-    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+    slug = "selection"
 
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
-        super().__init__(**params)
-        self.jobs = jobs
-        self.state: AppState = state
+        super().__init__(state, jobs, **params)
         self.running = False
         self._cancel = threading.Event()
-        self._syncing = False
         self._shown_selection: Any = None
         self._compare_key: Any = None
         self._pending: set[int] = set()  # ids of fits whose inference is being computed
@@ -259,7 +257,7 @@ class SelectionView(pn.viewable.Viewer):
         self.compare_a = pn.widgets.Select(label="Compare A", options=[], width=230)
         self.compare_b = pn.widgets.Select(label="with B", options=[], width=230)
         for w in (self.compare_a, self.compare_b):
-            w.param.watch(lambda _e: self.refresh_compare(), "value")
+            w.param.watch(lambda _e: self._safely(self.refresh_compare), "value")
         self.fig_a = _DecompFigure("compare_a")
         self.fig_b = _DecompFigure(
             "compare_b", self.fig_a.figure.x_range, self.fig_a.figure.y_range
@@ -290,6 +288,7 @@ class SelectionView(pn.viewable.Viewer):
             ),
             self.progress,
             self.status,
+            self.message,
             pn.pane.Bokeh(self.table, sizing_mode="stretch_width", margin=(5, 10)),
             h(
                 "Click a row to load that model into the builder (Fit tab) and refit. Click a "
@@ -313,9 +312,10 @@ class SelectionView(pn.viewable.Viewer):
         )
         self.refresh()  # built on first opening: show the session's ranking at once
 
-    def __panel__(self) -> pn.Column:
-        """The tab's content."""
-        return self.panel
+    @param.depends("state.selection", "state.inferred", "state.unit", watch=True)
+    def _on_state(self) -> None:
+        """A new ranking, new intervals (of a compared candidate) or another unit."""
+        super()._on_state()
 
     # ------------------------------------------------------------------------------------
     # ranking (off the event loop, with progress and cancel)
@@ -378,10 +378,17 @@ class SelectionView(pn.viewable.Viewer):
             if isinstance(e, _Cancelled):
                 self.status.object = "Ranking cancelled; the previous table is kept."
             else:
+                self._job_failed(e)
                 self.status.object = f"**Ranking failed:** {_message(e)}"
                 state.report_error(f"Could not rank the models: {_message(e)}")
 
-        self.jobs.run(work, apply, fail, lambda: self._set_running(False), key="ranking")
+        self.jobs.run(
+            work,
+            self._guarded(apply),
+            self._guarded(fail),
+            lambda: self._set_running(False),
+            key="ranking",
+        )
 
     def cancel(self) -> None:
         """Ask the running ranking to stop (at its next candidate)."""
@@ -404,6 +411,7 @@ class SelectionView(pn.viewable.Viewer):
         state = self.state
 
         def fail(e: BaseException) -> None:
+            self._log_job_error(e)
             state.report_error(f"Could not compute the intervals: {_message(e)}")
 
         if not self.jobs.served:  # tests, notebooks: at once
@@ -416,8 +424,8 @@ class SelectionView(pn.viewable.Viewer):
 
         self.jobs.run(
             lambda: state.compute_inference(result),
-            state.install_inference,
-            fail,
+            self._guarded(state.install_inference),
+            self._guarded(fail),
             lambda: self._pending.discard(id(result)),
         )
         return False
@@ -425,26 +433,28 @@ class SelectionView(pn.viewable.Viewer):
     # ------------------------------------------------------------------------------------
     # state -> widgets
     # ------------------------------------------------------------------------------------
-    def refresh(self) -> None:
+    def _draw(self, force: bool) -> None:
         """Bring the table and the comparison in line with the state (in place)."""
         sel = self.state.selection
-        if sel is not self._shown_selection:
+        if sel is not self._shown_selection or force:
             self._shown_selection = sel
-            self._syncing = True
-            try:
-                self.source.selected.indices = []
-                same = sel is not None and len(sel.candidates) == len(self.source.data["model"])
-                self.source.data = ranking_data(sel)
-                if same:
-                    redraw_table(self.table)
-                names = [c.model for c in sel.candidates if c.result is not None] if sel else []
-                self.compare_a.options = names
-                self.compare_b.options = names
-                self.compare_a.value = names[0] if names else None
-                self.compare_b.value = names[1] if len(names) > 1 else (names[0] if names else None)
-            finally:
-                self._syncing = False
+            self.source.selected.indices = []  # its echo in _on_row is a no-op
+            same = sel is not None and len(sel.candidates) == len(self.source.data["model"])
+            self.source.data = ranking_data(sel)
+            if same:
+                redraw_table(self.table)
+            names = self._names()
+            # one update per picker; refresh_compare waits until both list the new ranking
+            self.compare_a.param.update(options=names, value=names[0] if names else None)
+            self.compare_b.param.update(
+                options=names, value=names[1] if len(names) > 1 else (names[0] if names else None)
+            )
         self.refresh_compare()
+
+    def _names(self) -> list[str]:
+        """The candidates of the ranking that were fitted (the pickers' options)."""
+        sel = self.state.selection
+        return [c.model for c in sel.candidates if c.result is not None] if sel else []
 
     def _candidate(self, model: str | None) -> Any:
         sel = self.state.selection
@@ -456,8 +466,10 @@ class SelectionView(pn.viewable.Viewer):
         return None
 
     def refresh_compare(self) -> None:
-        if self._syncing:
-            return
+        """Draw the two picked candidates (idempotent: nothing when nothing changed)."""
+        names = self._names()
+        if list(self.compare_a.options) != names or list(self.compare_b.options) != names:
+            return  # a picker of the previous ranking: _draw is updating them
         s = self.state
         picks = [self._candidate(self.compare_a.value), self._candidate(self.compare_b.value)]
         infs = [s.inference(p[1].result) if p else None for p in picks]
@@ -507,12 +519,12 @@ class SelectionView(pn.viewable.Viewer):
 
     def _on_row(self, _attr: str, _old: Any, new: list[int]) -> None:
         """A click on a ranked row: load that model into the builder and refit."""
-        if self._syncing or not new:
+        if not new:  # also the echo of clearing the selection in _draw
             return
         models = self.source.data["model"]
         if not 0 <= new[0] < len(models):
             return
-        self.load_row(new[0])
+        self._safely(self.load_row, new[0])
 
     def load_row(self, index: int) -> bool:
         """Load the candidate in row ``index`` (data order = rank - 1) into the builder."""

@@ -7,6 +7,7 @@ browser; worker-thread safe).
 from __future__ import annotations
 
 import json
+import logging
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -20,6 +21,8 @@ from engine.teaching import SLOPES, avsm, avsm_auto, gmwm_spec
 from engine.wv.allan import AllanVariance
 
 from .state import AppState, demo_path, format_value
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "SlopeResult",
@@ -400,13 +403,17 @@ def truth_model(state: AppState) -> eg.Model | None:
         try:
             with open(p, encoding="utf-8") as f:
                 spec = json.load(f).get("models", {}).get(state.channel)
-        except (OSError, ValueError):
+        except FileNotFoundError:  # a demo log without its truth (a simulated stand-in)
+            spec = None
+        except (OSError, ValueError) as e:  # no truth then; say why in the log
+            log.warning("could not read the demo's truth from %s: %s", p, e)
             spec = None
     if not spec:
         return None
     try:
         m = eg.parse_model(spec)
-    except ValueError:
+    except ValueError as e:
+        log.warning("the truth %r of channel %s is no model: %s", spec, state.channel, e)
         return None
     return m if m.is_set else None
 

@@ -24,7 +24,6 @@ The fit runs off the server's event loop; a result that is no longer the latest 
 
 from __future__ import annotations
 
-import logging
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
@@ -59,6 +58,7 @@ from .slope_data import (
     truth_model,
 )
 from .state import AppState
+from .tab_view import TabView
 from .views import (
     data_table,
     empirical_curve,
@@ -72,8 +72,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
 
 __all__ = ["SlopeView", "PROCESS_CHOICES"]
-
-log = logging.getLogger(__name__)
 
 TITLE = "Slope method"
 
@@ -90,7 +88,7 @@ TRUTH_COLOR = "#2E7D32"
 # -----------------------------------------------------------------------------------------
 # the tab
 # -----------------------------------------------------------------------------------------
-class SlopeView(pn.viewable.Viewer):
+class SlopeView(TabView):
     """Widgets, figure, table and callbacks of the "Slope method" tab of one session.
 
     Parameters
@@ -110,29 +108,34 @@ class SlopeView(pn.viewable.Viewer):
         What is shown.
     """
 
-    active = param.Boolean(default=True, doc="Whether the tab is shown.")
+    slug = "slope"
 
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
-        super().__init__(**params)
-        self.jobs = jobs
-        self.state: AppState = state
+        super().__init__(state, jobs, **params)
         self.regions: dict[str, tuple[float, float]] = {}
         self._scenario_seen = ""  # last scenario whose naive regions were offered
         self.result: SlopeResult | None = None
-        self._ticket = 0
         self._key: Any = None
-        self._dirty = True
-        self._syncing = False
         self._gmwm_cache: dict[tuple[eg.WaveletVariance, str], MethodEstimate] = {}
-        self.computing = False
 
         self._build_widgets()
         self._build_figure()
         self._build_table()
         self._build_layout()
-        self.state.param.watch(self._on_state, "revision")
-        self.param.watch(self._on_tab, "active")
         self.refresh()
+
+    @param.depends(
+        "state.wv",
+        "state.unit",
+        "state.source",
+        "state.path",
+        "state.channel",
+        "state.fs",
+        watch=True,
+    )
+    def _on_state(self) -> None:
+        """The data the tab draws changed (its WV, unit, channel, fs, or the scenario)."""
+        super()._on_state()
 
     # ------------------------------------------------------------------------------------
     # construction (once)
@@ -162,7 +165,6 @@ class SlopeView(pn.viewable.Viewer):
         )
         self.clear_button.on_click(lambda _e: self.clear_regions())
         self.explain = hidden_alert("info", css_classes=["gmwm-scenario-why"])
-        self.message = hidden_alert("warning", css_classes=["gmwm-slope-message"])
         self.status = pn.pane.Markdown(
             "",
             sizing_mode="stretch_width",
@@ -340,68 +342,37 @@ class SlopeView(pn.viewable.Viewer):
     # callbacks (thin)
     # ------------------------------------------------------------------------------------
     def _on_scenario(self, event: Any) -> None:
-        if self._syncing or not event.new:
-            return
-        if self.state.source == "scenario" and self.state.path == event.new:
+        # idempotent: the menu showing the session's scenario (set by _sync_scenario) is a no-op
+        if not event.new or (self.state.source == "scenario" and self.state.path == event.new):
             return
         self.load_scenario(event.new)
 
     def _on_select(self, _attr: str, _old: Any, new: list[int]) -> None:
-        if self._syncing or not new:
+        if not new:  # also the echo of clearing the selection below
             return
         tau = np.asarray(self.adev_src.data["tau_s"], float)
         idx = [i for i in new if 0 <= i < tau.size]
-        self._syncing = True
-        try:
-            self.adev_src.selected.indices = []  # the shaded region shows it now
-        finally:
-            self._syncing = False
+        self.adev_src.selected.indices = []  # the shaded region shows it now
         if idx:
             self.set_region(self.process.value, float(tau[idx].min()), float(tau[idx].max()))
-
-    def _on_state(self, _event: Any = None) -> None:
-        try:
-            self.refresh()
-        except Exception as e:  # a display problem must not break the session
-            log.exception("slope view refresh failed")
-            self._show_messages([f"display error: {type(e).__name__}: {e}"])
-
-    def _on_tab(self, _event: Any = None) -> None:
-        if self._visible() and self._dirty:
-            self._on_state()
-
-    def _visible(self) -> bool:
-        return self.active or not self.jobs.served  # tests, notebooks: always up to date
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views
     # ------------------------------------------------------------------------------------
-    def refresh(self, force: bool = False) -> None:
-        """Recompute when the data or the regions changed (only while the tab is shown)."""
+    def _draw(self, force: bool) -> None:
+        """Recompute when the data or the regions changed."""
         s = self.state
         self._sync_scenario()
         # the WV object itself (identity), not its id(): an id can be reused after collection
         key = (s.wv, s.unit, s.source, s.path, s.channel, s.fs, tuple(sorted(self.regions.items())))
         if key == self._key and not force:
             return
-        if not self._visible():
-            self._dirty = True
-            return
-        self._dirty = False
         self._key = key
         wv, regions, truth = s.wv, dict(self.regions), truth_model(s)
-        self.computing = True
         self.status.object = "⏳ Reading the slopes and fitting GMWM ..."
-        self._ticket += 1
-        # outside a server at once (tests, notebooks: no server loop to hand back to);
         # compute_slope reports bad regions itself, anything else is shown by _failed
-        self.jobs.run(
-            partial(compute_slope, wv, regions, truth, gmwm=self._gmwm),
-            self.show,
-            self._failed,
-            partial(self._computed, self._ticket),
-            key="slope",
-            inline=not self.jobs.served,
+        self._compute(
+            partial(compute_slope, wv, regions, truth, gmwm=self._gmwm), self.show, "slope"
         )
 
     def _gmwm(self, wv: eg.WaveletVariance, spec: str) -> MethodEstimate:
@@ -415,18 +386,9 @@ class SlopeView(pn.viewable.Viewer):
             self._gmwm_cache[key] = est
         return est
 
-    def _computed(self, ticket: int) -> None:
-        if ticket == self._ticket:  # not when a newer one runs
-            self.computing = False
-
     def _failed(self, err: BaseException) -> None:
-        log.error("slope computation failed: %s: %s", type(err).__name__, err)
         self.status.object = ""
         self._show_messages([f"could not compute: {type(err).__name__}: {err}"])
-
-    def __panel__(self) -> pn.Column:
-        """The tab's content."""
-        return self.panel
 
     def show(self, result: SlopeResult) -> None:
         """Draw a result: points, regions, lines, implied curves, table, messages."""
@@ -477,22 +439,15 @@ class SlopeView(pn.viewable.Viewer):
         self.status.object = "  \n".join(p for p in parts if p)
 
     def _show_messages(self, msgs: list[str]) -> None:
-        text = "  \n".join(f"• {m}" for m in msgs)
         hint = len(msgs) == 1 and msgs[0].startswith("choose a process")  # guidance, no fault
-        self.message.param.update(
-            object=text, visible=bool(msgs), alert_type="info" if hint else "warning"
-        )
+        self.show_message(msgs, level="info" if hint else "warning")
 
     def _sync_scenario(self) -> None:
         """The scenario menu and the explanation follow the session's data."""
         s = self.state
         key = s.path if s.source == "scenario" and s.path in SCENARIOS else ""
         if self.scenario_select.value != key:
-            self._syncing = True
-            try:
-                self.scenario_select.value = key
-            finally:
-                self._syncing = False
+            self.scenario_select.value = key  # its echo in _on_scenario is a no-op
         if key and key != self._scenario_seen:
             # a scenario arrived by other means than the menu (a link, a restored session):
             # its naive regions (the state gave it its true model form)

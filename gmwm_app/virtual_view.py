@@ -15,7 +15,10 @@ from __future__ import annotations
 
 import html
 import io
+import logging
 import math
+from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,6 +45,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
 
 __all__ = ["VirtualView", "parse_target", "EXPORT_FORMATS"]
+
+log = logging.getLogger(__name__)
 
 #: Formats offered for the virtual sensor's model (those that need no filter rate).
 EXPORT_FORMATS = tuple(f for f in FORMATS if f not in ("px4", "ardupilot"))
@@ -79,6 +84,9 @@ class VirtualView:
     ----------
     jobs : Jobs
         The session's job runner.
+    safely : callable
+        ``safely(fn, *args)`` runs ``fn(*args)`` and shows an exception in the tab (logged)
+        instead of raising it (:meth:`gmwm_app.tab_view.TabView._safely`).
 
     Attributes
     ----------
@@ -90,8 +98,9 @@ class VirtualView:
         The message shown (empty when fine).
     """
 
-    def __init__(self, jobs: Jobs) -> None:
+    def __init__(self, jobs: Jobs, safely: Callable[..., None]) -> None:
         self.jobs = jobs
+        self._safely = safely
         self.result: Any = None
         self.sensor: eg.VirtualSensor | None = None
         self.error = ""
@@ -106,7 +115,7 @@ class VirtualView:
             label="each scale relative to the average's WV", value=True, margin=(30, 10, 5, 10)
         )
         for w in (self.target_input, self.relative):
-            w.param.watch(lambda _e: self.refresh(), "value")
+            w.param.watch(lambda _e: self._safely(self.refresh), "value")
         self.alert = hidden_alert("danger")
         self.info = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         sci = ScientificFormatter(precision=4)
@@ -227,12 +236,20 @@ class VirtualView:
                 self._show(vs, "")
 
         def fail(e: BaseException) -> None:
+            if not isinstance(e, ValueError):  # not a model the weights cannot be found for
+                log.error("virtual sensor failed", exc_info=e)
             if res is self.result:
                 self._show(None, f"No virtual sensor: {message_of(e)}")
 
         # served: in a worker; unserved (scripts, tests) at once, since this runs from the
         # fit's own job, whose event loop would only queue a nested one
-        self.jobs.run(work, apply, fail, key="virtual", inline=not self.jobs.served)
+        self.jobs.run(
+            work,
+            partial(self._safely, apply),
+            partial(self._safely, fail),
+            key="virtual",
+            inline=not self.jobs.served,
+        )
 
     def _on_format(self, event: Any) -> None:
         self.download.filename = f"virtual{FORMATS[event.new].suffix}"

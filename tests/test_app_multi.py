@@ -50,7 +50,7 @@ def direct_fit(lg: Any, chans: list[str], spec: str, shared: dict) -> eg.MGMWMRe
 def test_grid_shows_the_engine_wv_and_wccv_and_the_fitted_model(app: Any) -> None:
     v = open_view(app)
     lg = app.state.log
-    assert list(v.channel_choice.value) == GYROS  # default: the first 3 channels
+    assert list(v.controls.channel_choice.value) == GYROS  # default: the first 3 channels
     assert v.error == "" and v.result is not None and v.grid.k == 3
     assert sorted(v.grid.cells) == [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2)]
     fs = lg.fs
@@ -97,7 +97,7 @@ def test_grid_shows_the_engine_wv_and_wccv_and_the_fitted_model(app: Any) -> Non
 def test_changing_channels_resizes_the_grid_and_reuses_figures(app: Any) -> None:
     v = open_view(app)
     g3 = v.grid
-    v.channel_choice.value = ["gyro_z", "accel_x"]
+    v.controls.channel_choice.value = ["gyro_z", "accel_x"]
     assert v.grid.k == 2 and len(v.grid.cells) == 3 and v.error == ""
     assert v.grid_box.objects == [v.grid.pane]
     # order follows the choice: row 0 is gyro_z
@@ -110,19 +110,19 @@ def test_changing_channels_resizes_the_grid_and_reuses_figures(app: Any) -> None
     # RW shared by every channel by default, also the new ones; units of the pair
     rows = v.cov_source.data
     assert rows["unit"] == ["(deg/s)²", "deg/s·m/s^2".replace("^2", "²"), "(m/s²)²"]
-    v.channel_choice.value = ["accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y"]
+    v.controls.channel_choice.value = ["accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y"]
     assert v.grid.k == 5 and len(v.grid.cells) == 15
-    v.channel_choice.value = GYROS
+    v.controls.channel_choice.value = GYROS
     assert v.grid is g3  # built once per grid size
     # one channel: a message, no grid; at most 6 channels
-    v.channel_choice.value = ["gyro_x"]
+    v.controls.channel_choice.value = ["gyro_x"]
     assert "at least 2 channels" in v.error and not v.grid_box.visible
-    assert v.channel_choice.max_items == 6
+    assert v.controls.channel_choice.max_items == 6
 
 
 def test_data_changes_follow_cheaply_while_hidden(app: Any, tmp_path: Path) -> None:
     v = open_view(app, show=False)
-    v.spec_input.value = "WN"
+    v.controls.spec_input.value = "WN"
     fits, wvms = v.n_fits, v.n_wvm
     path = write_log(
         tmp_path / "two.h5",
@@ -134,8 +134,8 @@ def test_data_changes_follow_cheaply_while_hidden(app: Any, tmp_path: Path) -> N
     assert app.state.load_path(path), app.state.error
     assert v.n_fits == fits and v.n_wvm == wvms  # hidden: nothing computed
     app.tabs.active = list(app.tabs._names).index(TITLE)
-    assert list(v.channel_choice.options) == ["u", "w"]
-    assert list(v.channel_choice.value) == ["u", "w"] and v.grid.k == 2
+    assert list(v.controls.channel_choice.options) == ["u", "w"]
+    assert list(v.controls.channel_choice.value) == ["u", "w"] and v.grid.k == 2
     assert v.n_fits == fits + 1 and v.n_wvm == wvms + 1
     # a change of the sharing refits on the cached matrix
     v.set_shared("WN", ["u", "w"])
@@ -162,7 +162,7 @@ def test_robust_setting_gives_a_notice_and_keeps_the_classical_matrix(app: Any) 
 # -------------------------------------------------------------------------------------------
 def test_tables_equal_fit_mgmwm_run_directly(app: Any) -> None:
     v = open_view(app)
-    v.spec_input.value = "WN+RW"
+    v.controls.spec_input.value = "WN+RW"
     v.set_shared("WN", ["gyro_x", "gyro_z"])
     lg = app.state.log
     ref = direct_fit(lg, GYROS, "WN+RW", {"WN": ["gyro_x", "gyro_z"], "RW": GYROS})
@@ -195,7 +195,7 @@ def test_tables_equal_fit_mgmwm_run_directly(app: Any) -> None:
     assert f"**Objective** {format_value(ref.objective)} [1]" in v.fit_info.object
     # a shared GM: its common beta is a parameter row (WN stays shared by x and z: the
     # marks survive a change of the model)
-    v.spec_input.value = "GM+WN"
+    v.controls.spec_input.value = "GM+WN"
     v.set_shared("GM", GYROS)
     ref = direct_fit(lg, GYROS, "GM+WN", {"GM": GYROS, "WN": ["gyro_x", "gyro_z"]})
     assert v.result.model.spec() == ref.model.spec()
@@ -244,9 +244,9 @@ def test_table_recovers_a_known_shared_random_walk_covariance(app: Any, tmp_path
     names = ["imu_a", "imu_b", "imu_c"]
     path = write_log(tmp_path / "shared_rw.h5", dict(zip(names, x.T, strict=True)))
     v = open_view(app)
-    v.spec_input.value = "WN+RW"  # RW shared by every channel (the default)
+    v.controls.spec_input.value = "WN+RW"  # RW shared by every channel (the default)
     assert app.state.load_path(path), app.state.error
-    assert list(v.channel_choice.value) == names and v.error == ""
+    assert list(v.controls.channel_choice.value) == names and v.error == ""
     assert v.result.model.spec() == "imu_a,imu_b,imu_c: WN+RW | shared: RW"
     rows = v.cov_source.data
     for a, b, cov, rho in zip(
@@ -274,18 +274,18 @@ def test_bad_specs_are_messages_and_the_session_keeps_working(app: Any) -> None:
         ("GM+AR1", "mixes AR1 and GM"),
         ("", "model is empty"),
     ):
-        v.spec_input.value = spec
+        v.controls.spec_input.value = spec
         assert v.error.startswith("Could not fit the model") and words in v.error, v.error
-        assert v.alert.visible and "Traceback" not in v.alert.object
+        assert v.message.visible and "Traceback" not in v.message.object
         assert v.result is None and v.cov_source.data["covariance"] == []
         # the empirical grid stays
         assert v.grid_box.visible and v.grid.cells[(0, 0)].emp.data["value"].size == 17
         assert all(not r.visible for r in v.grid.cells[(1, 0)].comp_renderers)
-    v.override_input.value = "gyro_q: WN"
-    v.spec_input.value = "WN+RW"
+    v.controls.override_input.value = "gyro_q: WN"
+    v.controls.spec_input.value = "WN+RW"
     assert "gyro_q" in v.error and "not among the chosen channels" in v.error
-    v.override_input.value = "gyro_z: GM+WN+RW"
-    assert v.error == "" and not v.alert.visible
+    v.controls.override_input.value = "gyro_z: GM+WN+RW"
+    assert v.error == "" and not v.message.visible
     assert v.result.model.models["gyro_z"].spec() == "GM+WN+RW"
     assert v.result.model.models["gyro_x"].spec() == "WN+RW"
     assert app.state.error == ""  # the Fit tab is untouched
@@ -293,7 +293,7 @@ def test_bad_specs_are_messages_and_the_session_keeps_working(app: Any) -> None:
 
 def test_too_short_and_uneven_logs_are_messages(app: Any) -> None:
     v = open_view(app)
-    v.spec_input.value = "WN+RW"
+    v.controls.spec_input.value = "WN+RW"
     rng = np.random.default_rng(5)
     short = ImuLog(channels={"a": rng.standard_normal(4), "b": rng.standard_normal(4)}, fs=1.0)
     assert app.state.install(LoadedData(short, "path", "short.h5"))
@@ -310,7 +310,7 @@ def test_too_short_and_uneven_logs_are_messages(app: Any) -> None:
 
 def test_summary_file_is_a_message(app: Any, real_data: Path) -> None:
     v = open_view(app)
-    v.spec_input.value = "WN+RW"
+    v.controls.spec_input.value = "WN+RW"
     assert app.state.load_path(real_data / "derived" / "navchip_wv_av.h5"), app.state.error
     assert "summaries only" in v.error and "raw" in v.error and not v.grid_box.visible
 
@@ -350,10 +350,10 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(
     held: list[Any] = []
     monkeypatch.setattr(app.jobs, "spawn", lambda coro_fn: held.append(coro_fn))
     before = v.n_fits
-    v.spec_input.value = "WN+RW"  # starts a fit (held: "running")
+    v.controls.spec_input.value = "WN+RW"  # starts a fit (held: "running")
     assert v.n_fits == before + 1 and v.busy and v.spinner.visible
     for spec in ("GM+WN", "WN", "GM+WN+RW+QN"):  # three more changes while it runs
-        v.spec_input.value = spec
+        v.controls.spec_input.value = spec
     assert v.n_fits == before + 1 and len(held) == 1
     asyncio.run(held.pop()())  # the first fit ends: its (stale) result is dropped ...
     assert v.n_fits == before + 2 and len(held) == 1  # ... and one new fit starts
@@ -370,13 +370,13 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(
 # -------------------------------------------------------------------------------------------
 def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> None:
     v = open_view(app)
-    v.spec_input.value = "WN+RW"  # RW shared by the three gyros (the default marks)
+    v.controls.spec_input.value = "WN+RW"  # RW shared by the three gyros (the default marks)
     mm = MultiModel(GYROS, "WN+RW", shared=["RW"])
     ref = eg.dependence_test(eg.wv_matrix(app.state.log, channels=GYROS), mm, B=4, seed=0)
     seen: list[int] = []
-    assert v.start_dependence_test(4, observer=lambda d, t: seen.append(d))
-    assert seen == [0, 1, 2, 3, 4] and not v.dep_running
-    t = v.dependence
+    assert v.dep.start(4, observer=lambda d, t: seen.append(d))
+    assert seen == [0, 1, 2, 3, 4] and not v.dep.running
+    t = v.dep.result
     assert t.labels == ("RW",) and t.B == 4
     assert t.statistic == pytest.approx(ref.statistic, rel=1e-9)
     assert t.p_value == ref.p_value
@@ -389,19 +389,19 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
     assert t.statistic == pytest.approx(q0 - q1, rel=1e-9, abs=1e-12)
     boot = np.asarray(t.bootstrap)
     assert t.p_value == pytest.approx((1 + np.sum(boot >= t.statistic)) / (1 + boot.size))
-    assert f"p = {format_value(ref.p_value, 3)}" in v.dep_text.object
+    assert f"p = {format_value(ref.p_value, 3)}" in v.dep.text.object
 
     # cancel after the second replicate: the previous outcome is kept
     def observer(done: int, total: int) -> None:
         if done == 2:
-            v.cancel_dependence_test()
+            v.dep.cancel()
 
-    assert v.start_dependence_test(50, observer=observer)
-    assert v.dependence is t and "cancelled" in v.dep_text.object
-    assert not v.dep_running and not v.dep_button.disabled and v.dep_cancel.disabled
+    assert v.dep.start(50, observer=observer)
+    assert v.dep.result is t and "cancelled" in v.dep.text.object
+    assert not v.dep.running and not v.dep.button.disabled and v.dep.cancel_button.disabled
     # nothing shared: nothing to test
     v.set_shared("RW", [])
-    assert not v.start_dependence_test(4) and "shares no process" in v.dep_text.object
+    assert not v.dep.start(4) and "shares no process" in v.dep.text.object
 
 
 # -------------------------------------------------------------------------------------------

@@ -54,7 +54,7 @@ def array_log(tmp_path: Path) -> Path:
 
 def test_view_shows_the_engine_virtual_sensor_of_the_fit(app: Any, array_log: Path) -> None:
     v = open_view(app)
-    v.spec_input.value = "GM+WN"
+    v.controls.spec_input.value = "GM+WN"
     assert app.state.load_path(array_log), app.state.error
     v.set_shared("GM", ["imu_a", "imu_b"])
     v.set_shared("WN", ["imu_a", "imu_b"])
@@ -90,7 +90,7 @@ def test_view_shows_the_engine_virtual_sensor_of_the_fit(app: Any, array_log: Pa
 
 def test_scale_band_and_export(app: Any, array_log: Path) -> None:
     v = open_view(app)
-    v.spec_input.value = "GM+WN"
+    v.controls.spec_input.value = "GM+WN"
     assert app.state.load_path(array_log), app.state.error
     v.set_shared("GM", ["imu_a", "imu_b"])
     vv = v.virtual
@@ -131,10 +131,10 @@ def test_scale_band_and_export(app: Any, array_log: Path) -> None:
 
 def test_no_fit_clears_the_view(app: Any) -> None:
     v = open_view(app)
-    v.spec_input.value = "WN+FOO"
+    v.controls.spec_input.value = "WN+FOO"
     assert v.result is None and v.virtual.sensor is None
     assert v.virtual.weight_source.data["channel"] == []
-    v.spec_input.value = "WN+RW"
+    v.controls.spec_input.value = "WN+RW"
     assert v.virtual.sensor is not None and len(v.virtual.sensor.channels) == 3
 
 
