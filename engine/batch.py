@@ -283,6 +283,19 @@ def fit_batch(
     -------
     BatchResult
         Failed logs are in it with their error; none raises.
+
+    Examples
+    --------
+    The bundled demo log and a pattern that matches nothing:
+
+    >>> import engine as eg
+    >>> b = eg.fit_batch(
+    ...     [eg.demo_path(), "no_such_unit_*.h5"], workers=1, model="WN+RW", channels=["gyro_x"]
+    ... )
+    >>> [bool(lf.error) for lf in b.logs]
+    [False, True]
+    >>> {k: f"{v:.3e}" for k, v in b.logs[0].fits["gyro_x"].params.items()}
+    {'WN.sigma2': '2.514e-03', 'RW.gamma2': '1.561e-09'}
     """
     unknown = sorted(set(options) - _FIT_LOG_OPTIONS)
     if unknown:
