@@ -5,8 +5,9 @@ One place for what they all repeated: the Debian ``chromium`` binary and its fla
 the binary or Playwright a test skips, except in CI (env ``CI`` set), where it fails), the
 launch (:func:`launch` on a running Playwright, :func:`chromium` as a context manager that
 also starts and stops Playwright), a page opened from ``file://`` with the network cut off
-(:func:`open_offline`), the wait for BokehJS to draw its canvases (:func:`wait_for_canvases`)
-and the share of painted pixels of a screenshot (:func:`painted`).
+(:func:`open_offline`), the wait for BokehJS to draw its canvases (:func:`wait_for_canvases`),
+the share of painted pixels of a screenshot (:func:`painted`) and the README screenshots of a
+page's top (:func:`screenshot_top`).
 """
 
 from __future__ import annotations
@@ -115,3 +116,23 @@ def painted(png: bytes) -> float:
     colour = (a[:, 0] << 16) | (a[:, 1] << 8) | a[:, 2]  # one integer per colour: a 1-D count
     _, counts = np.unique(colour, return_counts=True)
     return 1.0 - counts.max() / colour.size
+
+
+def screenshot_top(
+    page_path: Path,
+    out: str | os.PathLike[str],
+    *,
+    width: int,
+    height: int,
+    ready: str,
+    ready_timeout_ms: int = 30_000,
+    settle_ms: int = 1500,
+) -> None:
+    """Save the top ``width`` x ``height`` pixels of a page opened offline from ``file://``
+    as a PNG, once the element ``ready`` (a CSS selector) is there and BokehJS has had
+    ``settle_ms`` to paint (the screenshot scripts of ``tests/benchmarks``)."""
+    with chromium() as b:
+        _ctx, page, _errors, _outside = open_offline(b, page_path, (width, height))
+        page.locator(ready).wait_for(timeout=ready_timeout_ms)
+        page.wait_for_timeout(settle_ms)  # BokehJS paints after load
+        page.screenshot(path=str(out), clip={"x": 0, "y": 0, "width": width, "height": height})

@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from _browser import chromium, open_offline  # noqa: E402
+from _browser import screenshot_top  # noqa: E402
 
 import engine as eg  # noqa: E402
 
@@ -55,13 +55,15 @@ def main() -> None:
             "--spec 'vrw<=0.1 m/s/sqrt(h)' --report fleet.html",
         )
         print(f"fleet report: {os.path.getsize(page_path) / 1e6:.2f} MB")
-        with chromium() as b:
-            _ctx, page, _errors, _outside = open_offline(b, page_path, (1300, args.height))
-            page.locator("#fig-fleet-gyro_x-adev").wait_for(timeout=180_000)
-            page.wait_for_timeout(2500)  # BokehJS paints after load
-            page.screenshot(
-                path=args.out, clip={"x": 0, "y": 0, "width": 1300, "height": args.height}
-            )
+        screenshot_top(
+            page_path,
+            args.out,
+            width=1300,
+            height=args.height,
+            ready="#fig-fleet-gyro_x-adev",
+            ready_timeout_ms=180_000,
+            settle_ms=2500,
+        )
     print(f"wrote {args.out}")
 
 

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from _browser import chromium, open_offline  # noqa: E402
+from _browser import screenshot_top  # noqa: E402
 
 import engine as eg  # noqa: E402
 
@@ -46,13 +46,7 @@ def main() -> None:
             command_line="gmwm report demo_imu.h5 --channels gyro_x --model GM+WN+RW "
             f"--datasheet '{DATASHEET}' -o report.html",
         )
-        with chromium() as b:
-            _ctx, page, _errors, _outside = open_offline(b, page_path, (1150, args.height))
-            page.locator("#fig-gyro_x-psd").wait_for()
-            page.wait_for_timeout(1500)  # BokehJS paints after load
-            page.screenshot(
-                path=args.out, clip={"x": 0, "y": 0, "width": 1150, "height": args.height}
-            )
+        screenshot_top(page_path, args.out, width=1150, height=args.height, ready="#fig-gyro_x-psd")
     print(f"wrote {args.out}")
 
 
