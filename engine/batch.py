@@ -175,17 +175,12 @@ def fit_log(
         fails (:class:`engine.io.LoadError`, :class:`engine.fit.FitError` ...).
     """
     from .formats import export
-    from .io import ImuLog, load_log, pick_channel
+    from .io import log_of, pick_channel
 
     _check_choice(model, select)
     t0 = time.perf_counter()
-    if isinstance(path, ImuLog):
-        if fs is not None or load_options:
-            raise TypeError("fit_log(): fs and load_options apply to a path, not to a loaded log")
-        log, src = path, path.source
-    else:
-        src = str(path)
-        log = load_log(src, fs=fs, **dict(load_options or {}))
+    log = log_of(path, fs=fs, load_options=load_options, caller="fit_log")
+    src = log.source if log is path else str(path)
     names = [pick_channel(src, log.names, c) for c in channels] if channels else log.names
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}
@@ -283,6 +278,19 @@ def fit_batch(
     -------
     BatchResult
         Failed logs are in it with their error; none raises.
+
+    Examples
+    --------
+    The bundled demo log and a pattern that matches nothing:
+
+    >>> import engine as eg
+    >>> b = eg.fit_batch(
+    ...     [eg.demo_path(), "no_such_unit_*.h5"], workers=1, model="WN+RW", channels=["gyro_x"]
+    ... )
+    >>> [bool(lf.error) for lf in b.logs]
+    [False, True]
+    >>> {k: f"{v:.3e}" for k, v in b.logs[0].fits["gyro_x"].params.items()}
+    {'WN.sigma2': '2.514e-03', 'RW.gamma2': '1.561e-09'}
     """
     unknown = sorted(set(options) - _FIT_LOG_OPTIONS)
     if unknown:

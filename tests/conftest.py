@@ -29,18 +29,6 @@ import engine as eg
 REAL_DATA_ENV = "GMWM_REAL_DATA"
 REQUIRE_REAL_DATA_ENV = "GMWM_REQUIRE_REAL_DATA"
 
-#: The headless Chromium of the browser tests and the app benchmark, and its flags.
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
-
 #: The keys of a WV's JSON form (``WaveletVariance.to_dict``, ``gmwm wv --json``).
 WV_KEYS = {
     "n",

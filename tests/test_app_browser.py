@@ -7,51 +7,32 @@ skip, except in CI (env ``CI`` set), where they fail: CI must install chromium.
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import CHROMIUM, CHROMIUM_ARGS, served_app
+from _browser import chromium, require_chromium
+from conftest import served_app
 
 pytestmark = pytest.mark.browser
 
 TIMEOUT_MS = 20_000
 
 
-def _require_chromium() -> None:
-    if not CHROMIUM.exists():
-        if os.environ.get("CI"):
-            pytest.fail("CI must install chromium (/usr/bin/chromium is missing)")
-        pytest.skip("/usr/bin/chromium is not installed")
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        if os.environ.get("CI"):
-            pytest.fail("CI must install playwright")
-        pytest.skip("playwright is not installed")
-
-
 @pytest.fixture(scope="module")
 def server(app_demo_file: Path) -> Iterator[str]:
     """The app served in a background thread; yields its URL; always shut down."""
-    _require_chromium()
+    require_chromium()
     with served_app(app_demo_file) as (port, _thread):
         yield f"http://127.0.0.1:{port}/"
 
 
 @pytest.fixture(scope="module")
 def browser(server: str) -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
+    with chromium() as b:
+        yield b
 
 
 class Tab:

@@ -409,18 +409,19 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
 # -------------------------------------------------------------------------------------------
 @pytest.mark.browser
 def test_browser_tab_renders_the_grid_and_the_table(app_demo_file: Path) -> None:
+    from _browser import launch, require_chromium
     from conftest import served_app
-    from test_app_browser import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_MS, _require_chromium
+    from test_app_browser import TIMEOUT_MS
 
     from gmwm_app.app import live_apps
 
-    _require_chromium()
+    require_chromium()
     from playwright.sync_api import sync_playwright
 
     # sessions of earlier tests in this process (one of them cleared the shared RW) are not ours
     before = live_apps()
     with served_app(app_demo_file) as (port, _thread), sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        browser = launch(pw)
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 1100})
             errors: list[str] = []

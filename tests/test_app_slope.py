@@ -290,21 +290,15 @@ def test_pure_helpers_curves_and_table_rows() -> None:
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.browser
 def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
+    from _browser import launch, require_chromium
     from conftest import served_app
-    from test_app_browser import (
-        CHROMIUM,
-        CHROMIUM_ARGS,
-        TIMEOUT_MS,
-        Tab,
-        _app_for,
-        _require_chromium,
-    )
+    from test_app_browser import TIMEOUT_MS, Tab, _app_for
 
-    _require_chromium()
+    require_chromium()
     from playwright.sync_api import sync_playwright
 
     with served_app(app_demo_file) as (port, _thread), sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        b = launch(p)
         try:
             ctx = b.new_context(viewport={"width": 1400, "height": 1000})
             t = Tab(ctx.new_page()).open(f"http://127.0.0.1:{port}/?model=WN")

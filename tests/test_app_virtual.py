@@ -176,17 +176,18 @@ def numbers(text: str) -> list[float]:
 
 @pytest.mark.browser
 def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Path) -> None:
+    from _browser import launch, require_chromium
     from conftest import served_app
-    from test_app_browser import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_MS, Tab, _require_chromium
+    from test_app_browser import TIMEOUT_MS, Tab
 
     from gmwm_app.app import live_apps
 
-    _require_chromium()
+    require_chromium()
     from playwright.sync_api import sync_playwright
 
     before = live_apps()  # sessions of earlier tests in this process are not ours
     with served_app(app_demo_file) as (port, _thread), sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        browser = launch(pw)
         try:
             # Tab: console and page errors collected in t.errors; opened once the data loads
             t = Tab(browser.new_page(viewport={"width": 1400, "height": 1100}))

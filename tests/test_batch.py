@@ -221,3 +221,25 @@ def test_cli_batch_surfaces_the_sub_sample_warning_on_the_adis_fleet(real_data, 
     lines = [ln for ln in cap.err.splitlines() if ln.startswith("gmwm batch: warning: ")]
     assert len(lines) == 6 and all("[gyro_x]: GM: correlation time" in ln for ln in lines)
     assert "fleet of 6 log(s): 6 fitted" in cap.out
+
+
+def test_a_loaded_log_or_its_path_give_the_same_fits_and_refuse_loader_options(tmp_path) -> None:
+    """fit_log and gather_report take a path or a loaded log alike (engine.io.log_of): the same
+    fits either way; with a loaded log the loader's options are refused, naming the caller."""
+    from engine.batch import fit_log
+    from engine.reporting import gather_report
+
+    x = eg.parse_model("WN(1e-4) + RW(1e-9)").simulate(2**12, rng=np.random.default_rng(5))
+    path = tmp_path / "unit.h5"
+    save_log(path, {"gyro_x": x}, fs=100.0, units={"gyro_x": "rad/s"})
+    log = eg.load_log(path)
+    by_path = fit_log(path, model="WN+RW")
+    by_log = fit_log(log, model="WN+RW")
+    assert by_path.source == by_log.source == str(path)
+    assert by_path.fits["gyro_x"].params == by_log.fits["gyro_x"].params
+    rep = gather_report(log, model="WN+RW", export_format=None)
+    assert rep.channels["gyro_x"].fit.params == by_path.fits["gyro_x"].params
+    for call, name in ((fit_log, "fit_log"), (gather_report, "gather_report")):
+        for bad in ({"fs": 50.0}, {"load_options": {"scale": 2.0}}):
+            with pytest.raises(TypeError, match=rf"^{name}\(\): fs and load_options apply to a"):
+                call(log, model="WN+RW", **bad)

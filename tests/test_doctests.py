@@ -27,6 +27,15 @@ REQUIRED = [
     ("engine.inference.intervals", "param_intervals"),
     ("engine.inference.jtest", "j_test"),
     ("engine.inference.selection", "rank_models"),
+    ("engine.inference.datasheet_check", "check_datasheet"),
+    ("engine.multivariate.fit", "fit_mgmwm"),
+    ("engine.multivariate.virtual", "virtual_sensor"),
+    ("engine.formats.registry", "export"),
+    ("engine.formats.projection", "project"),
+    ("engine.reporting", "report"),
+    ("engine.batch", "fit_batch"),
+    # every latent process (engine.PROCESS_TYPES, checked below)
+    *[("engine.models.processes", code) for code in ("WN", "QN", "RW", "DR", "AR1", "GM")],
 ]
 
 MODULES = sorted({m for m, _ in REQUIRED})
@@ -52,6 +61,24 @@ def test_required_are_public() -> None:
     """The top-level names the examples call are the public API's."""
     for name in ("load_log", "wavelet_variance", "allan_variance", "parse_model", "fit_gmwm"):
         assert hasattr(eg, name), name
+
+
+def test_every_process_type_required() -> None:
+    """A new process type needs its own example: the list above names every one."""
+    listed = {q for m, q in REQUIRED if m == "engine.models.processes"}
+    assert listed == set(eg.PROCESS_TYPES), sorted(set(eg.PROCESS_TYPES) ^ listed)
+
+
+def test_required_examples_run_not_skipped() -> None:
+    """A required example really runs: at least one of its lines is not ``+SKIP``."""
+    for module, qualname in REQUIRED:
+        doc = inspect.getdoc(_resolve(module, qualname)) or ""
+        runs = [
+            line
+            for line in doc.splitlines()
+            if line.lstrip().startswith(">>> ") and "doctest: +SKIP" not in line
+        ]
+        assert runs, f"{module}.{qualname}: every example line is skipped"
 
 
 @pytest.mark.parametrize("module", MODULES)

@@ -1,6 +1,6 @@
 """Real-browser test of the fleet acceptance report: the six ADIS16405 logs and one damaged
 file as a fleet, opened by Chromium from ``file://`` with the network cut off (helpers of
-``tests/test_report_browser.py``): no console error, no request outside the file, every
+``tests/_browser.py``): no console error, no request outside the file, every
 figure painted, the damaged unit listed; the page's size measured against its budget.
 
 Without ``/usr/bin/chromium`` this skips, except in CI (env ``CI`` set), where it fails.
@@ -8,12 +8,14 @@ Without ``/usr/bin/chromium`` this skips, except in CI (env ``CI`` set), where i
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
-from conftest import CHROMIUM, CHROMIUM_ARGS
-from test_report_browser import _open_offline, _painted, _require_chromium
+from _browser import chromium, open_offline, painted, require_chromium, wait_for_canvases
+from PIL import Image
 
 from engine.reporting import gather_fleet, render_fleet_html
 from engine.reporting.render import fleet_figure_specs
@@ -27,11 +29,6 @@ BUDGET_MB = 5.0
 
 def _marker_pixels(png: bytes) -> int:
     """Pixels of the spread plots' marker colours (#1f77b4 units, #d62728 outliers)."""
-    import io
-
-    import numpy as np
-    from PIL import Image
-
     a = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
     near = [np.abs(a - np.array(c)).sum(axis=2) < 40 for c in ((31, 119, 180), (214, 39, 40))]
     return int(np.sum(near[0] | near[1]))
@@ -39,7 +36,7 @@ def _marker_pixels(png: bytes) -> int:
 
 @pytest.fixture(scope="module")
 def fleet_page(real_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    _require_chromium()
+    require_chromium()
     d = tmp_path_factory.mktemp("fleet")
     bad = d / "adis16405_imu7.h5"
     bad.write_bytes((real_data / "adis16405_imu1.h5").read_bytes()[:5000])  # truncated
@@ -51,8 +48,6 @@ def fleet_page(real_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dic
 
 
 def test_fleet_report_offline_every_figure_painted(fleet_page: dict[str, Any]) -> None:
-    from playwright.sync_api import sync_playwright
-
     size_mb = fleet_page["path"].stat().st_size / 1e6
     print(f"fleet report: {size_mb:.2f} MB, {len(fleet_page['keys'])} figures")
     assert size_mb < BUDGET_MB
@@ -60,40 +55,27 @@ def test_fleet_report_offline_every_figure_painted(fleet_page: dict[str, Any]) -
     # per channel the overlay and 5 spread plots (GM T_c, sigma_gm, ARW/VRW, RRW/AccRW, B),
     # per unit and channel its 4 figures
     assert len(keys) == 6 * (1 + 5) + 6 * 6 * 4
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            ctx, page, errors, outside = _open_offline(browser, fleet_page["path"])
-            page.wait_for_function(
-                """n => {
-                    const walk = r => [...r.querySelectorAll('*')].reduce(
-                        (k, e) => k + (e.tagName === 'CANVAS' && e.width > 0 ? 1 : 0)
-                            + (e.shadowRoot ? walk(e.shadowRoot) : 0), 0);
-                    return walk(document) >= n;
-                }""",
-                arg=len(keys),
-                timeout=120_000,
-            )
-            for key in keys:
-                el = page.locator(f"#fig-{key}")
-                el.scroll_into_view_if_needed()
-                box = el.bounding_box()
-                assert box is not None and box["height"] > 100, key
-                png = el.screenshot()
-                if key.startswith("fleet-") and not key.endswith("-adev"):
-                    # a spread plot: six markers on a short figure (~5 % painted): its data
-                    # markers (blue, or red for outliers) are drawn
-                    assert _marker_pixels(png) >= 20, f"spread plot {key} has no marker"
-                else:
-                    share = _painted(png)
-                    assert share > 0.05, f"figure {key} looks blank ({share:.3f} painted)"
-            # the damaged unit is listed with its reason, the six with their links
-            row = page.locator('table.acceptance tr[data-unit="adis16405_imu7.h5"]')
-            assert "not a readable HDF5 file" in row.inner_text()
-            assert page.locator("table.acceptance a").count() == 6
-            assert page.locator("table.fleet").count() == 6
-            ctx.close()
-        finally:
-            browser.close()
+    with chromium() as browser:
+        ctx, page, errors, outside = open_offline(browser, fleet_page["path"])
+        wait_for_canvases(page, len(keys), timeout_ms=120_000)
+        for key in keys:
+            el = page.locator(f"#fig-{key}")
+            el.scroll_into_view_if_needed()
+            box = el.bounding_box()
+            assert box is not None and box["height"] > 100, key
+            png = el.screenshot()
+            if key.startswith("fleet-") and not key.endswith("-adev"):
+                # a spread plot: six markers on a short figure (~5 % painted): its data
+                # markers (blue, or red for outliers) are drawn
+                assert _marker_pixels(png) >= 20, f"spread plot {key} has no marker"
+            else:
+                share = painted(png)
+                assert share > 0.05, f"figure {key} looks blank ({share:.3f} painted)"
+        # the damaged unit is listed with its reason, the six with their links
+        row = page.locator('table.acceptance tr[data-unit="adis16405_imu7.h5"]')
+        assert "not a readable HDF5 file" in row.inner_text()
+        assert page.locator("table.acceptance a").count() == 6
+        assert page.locator("table.fleet").count() == 6
+        ctx.close()
     assert outside == [], f"requests outside the file: {outside}"
     assert errors == [], errors

@@ -28,9 +28,12 @@ from contextlib import contextmanager
 from typing import Any
 
 from .common import (
+    CHANNELS_HELP,
     CliError,
     add_deprecated_alias,
     add_log_options,
+    add_weights_option,
+    add_wv_options,
     check_output,
     log_kwargs,
     positive,
@@ -110,15 +113,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="folder for one JSON report per log, summary.csv and summary.json (created if "
         "missing; checked before any fit); -o, --report or both",
     )
-    bt.add_argument("--channels", help="channels separated by commas (default: all)")
-    bt.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
-    bt.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
-    bt.add_argument(
-        "--weights",
-        default="ci",
-        choices=["ci", "identity", "efficient"],
-        help="weighting matrix: ci (default), identity, or efficient (two-step, V^-1)",
-    )
+    bt.add_argument("--channels", help=CHANNELS_HELP)
+    add_wv_options(bt)
+    add_weights_option(bt)
     bt.add_argument(
         "--workers",
         type=positive(int, "--workers"),

@@ -16,7 +16,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import add_confidence_option, add_log_options, alpha_of, load_wv, positive
+from .common import (
+    INPUT_HELP,
+    add_confidence_option,
+    add_log_options,
+    add_wv_options,
+    alpha_of,
+    load_wv,
+)
 
 __all__ = ["add_parser", "run"]
 
@@ -28,10 +35,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="datasheet check: the manufacturer's noise model (ARW/VRW, bias instability, "
         "rate random walk) against the empirical WV and its interval, per scale",
     )
-    ck.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
+    ck.add_argument("input", help=INPUT_HELP)
     ck.add_argument("--channel", help="channel name or index (default: the first)")
-    ck.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
-    ck.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
+    add_wv_options(ck)
     add_confidence_option(ck, "the empirical WV interval the verdicts use", "--level")
     src = ck.add_mutually_exclusive_group(required=True)
     src.add_argument(

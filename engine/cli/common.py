@@ -1,8 +1,10 @@
 """What the ``gmwm`` subcommands share: the user-error types, argument converters, the log
 options (``--segment --scale --units --topic --stream``), the loading of one channel's WV, the
 output check run before any work (:func:`check_output`), sample counts (:func:`sample_count`),
-the confidence option (:func:`add_confidence_option`), deprecated spellings of options
-(:func:`add_deprecated_alias`) and the queue of one-line warnings (:func:`queue_warning`)."""
+the options every fitting sub-command takes (:data:`INPUT_HELP`, :data:`CHANNELS_HELP`,
+:func:`add_wv_options`, :func:`add_weights_option`), the confidence option
+(:func:`add_confidence_option`), deprecated spellings of options (:func:`add_deprecated_alias`)
+and the queue of one-line warnings (:func:`queue_warning`)."""
 
 from __future__ import annotations
 
@@ -27,7 +29,11 @@ __all__ = [
     "UsageError",
     "usage_error",
     "positive",
+    "INPUT_HELP",
+    "CHANNELS_HELP",
+    "WEIGHTS_HELP",
     "add_log_options",
+    "add_wv_options",
     "add_weights_option",
     "add_bootstrap_options",
     "bootstrap_kwargs",
@@ -201,7 +207,31 @@ def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None
         )
 
 
-def add_weights_option(sp: argparse.ArgumentParser, help: str) -> None:
+#: The help of the one-log ``input`` argument of ``check``, ``export`` and ``report``.
+INPUT_HELP = "log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary"
+#: The help of ``--channels`` where it selects the channels to fit, each on its own.
+CHANNELS_HELP = "channels separated by commas (default: all)"
+#: The help of ``--weights`` where a sub-command says nothing more of it.
+WEIGHTS_HELP = "weighting matrix: ci (default), identity, or efficient (two-step, V^-1)"
+
+
+def add_wv_options(sp: argparse.ArgumentParser, *, robust: bool = False) -> None:
+    """Add the WV options of a sub-command: ``--fs`` (sampling frequency in Hz), ``--levels``
+    (number of WV levels J) and, with ``robust``, ``--robust`` and ``--eff`` (the robust
+    WV and its efficiency)."""
+    sp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
+    sp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
+    if robust:
+        sp.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
+        sp.add_argument(
+            "--eff",
+            type=float,
+            default=0.6,
+            help="efficiency of the robust WV, in (0, 0.99) (default 0.6)",
+        )
+
+
+def add_weights_option(sp: argparse.ArgumentParser, help: str = WEIGHTS_HELP) -> None:
     """Add ``--weights {ci,identity,efficient}`` (default ci) to a sub-command."""
     sp.add_argument("--weights", default="ci", choices=["ci", "identity", "efficient"], help=help)
 

@@ -20,10 +20,13 @@ import argparse
 from typing import Any
 
 from .common import (
+    CHANNELS_HELP,
+    INPUT_HELP,
     add_bootstrap_options,
     add_confidence_option,
     add_log_options,
     add_weights_option,
+    add_wv_options,
     bootstrap_kwargs,
     check_output,
     confidence,
@@ -61,7 +64,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "datasheet table, or a filter/simulator format (OpenVINS, Basalt, ORB-SLAM3, VINS, "
         "PX4, ArduPilot, MATLAB, Gazebo, KF-GINS, sensor_msgs/Imu)",
     )
-    ex.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
+    ex.add_argument("input", help=INPUT_HELP)
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
     ex.add_argument(
         "--model-for",
@@ -70,7 +73,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         metavar="CH=SPEC",
         help="model of one channel (repeatable), e.g. gyro_z=2*GM+WN+RW",
     )
-    ex.add_argument("--channels", help="channels separated by commas (default: all)")
+    ex.add_argument("--channels", help=CHANNELS_HELP)
     ex.add_argument(
         "--format",
         default="kalibr",
@@ -82,15 +85,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument(
         "-o", "--output", required=True, help="output file, or - for stdout (checked first)"
     )
-    ex.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
-    ex.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
-    ex.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
-    ex.add_argument(
-        "--eff", type=float, default=0.6, help="efficiency of the robust WV, in (0, 0.99) (0.6)"
-    )
-    add_weights_option(
-        ex, "weighting matrix: ci (default), identity, or efficient (two-step, V^-1)"
-    )
+    add_wv_options(ex, robust=True)
+    add_weights_option(ex)
     ex.add_argument("--ci", choices=["asymptotic", "bootstrap"], help="parameter intervals")
     add_confidence_option(ex, "the --ci parameter intervals", "--level")
     add_bootstrap_options(ex, replicates="bootstrap replicates for --ci bootstrap")

@@ -43,7 +43,9 @@ from .common import (
     add_bootstrap_options,
     add_confidence_option,
     add_deprecated_alias,
+    add_log_options,
     add_weights_option,
+    add_wv_options,
     alpha_of,
     bootstrap_kwargs,
     check_output,
@@ -73,19 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     def data_args(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5 or a WV summary HDF5")
         sp.add_argument("--channel", help="channel name or index (default: the first)")
-        sp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
-        sp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
-        sp.add_argument("--robust", action="store_true", help="robust (Tukey biweight) WV")
-        sp.add_argument(
-            "--eff",
-            type=float,
-            default=0.6,
-            help="efficiency of the robust WV, in (0, 0.99) (default 0.6)",
-        )
+        add_wv_options(sp, robust=True)
         sp.add_argument("--json", action="store_true", help="print one JSON object")
-        from .common import add_log_options  # --segment --scale --units --topic --stream
-
-        add_log_options(sp)
+        add_log_options(sp)  # --segment --scale --units --topic --stream
 
     wv = sub.add_parser("wv", help="empirical Haar wavelet variance with intervals")
     data_args(wv)

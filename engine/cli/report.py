@@ -18,12 +18,14 @@ import shlex
 from typing import Any
 
 from .common import (
+    CHANNELS_HELP,
+    INPUT_HELP,
     add_confidence_option,
     add_log_options,
     add_weights_option,
+    add_wv_options,
     check_output,
     log_kwargs,
-    positive,
     usage_error,
 )
 
@@ -39,7 +41,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="calibration report of one log: one self-contained HTML file (plots, "
         "parameters with intervals, datasheet check, export numbers)",
     )
-    rp.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary")
+    rp.add_argument("input", help=INPUT_HELP)
     rp.add_argument("-o", "--output", required=True, help="output file: the HTML report (.html)")
     what = rp.add_mutually_exclusive_group()
     what.add_argument("--model", help="model of every channel, e.g. 'GM+WN+RW'")
@@ -48,7 +50,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         metavar="SPEC",
         help=f"per channel, the WVIC-best sub-model of this model (default {DEFAULT_SELECT})",
     )
-    rp.add_argument("--channels", help="channels separated by commas (default: all)")
+    rp.add_argument("--channels", help=CHANNELS_HELP)
     src = rp.add_mutually_exclusive_group()
     src.add_argument(
         "--datasheet",
@@ -64,11 +66,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="export format whose file the report includes (default kalibr; 'none': none)",
     )
     rp.add_argument("--static", action="store_true", help="PNG figures instead of interactive")
-    rp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
-    rp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
-    add_weights_option(
-        rp, "weighting matrix: ci (default), identity, or efficient (two-step, V^-1)"
-    )
+    add_wv_options(rp)
+    add_weights_option(rp)
     add_confidence_option(rp, "the parameter intervals")
     add_log_options(rp, stream=False)
     return rp

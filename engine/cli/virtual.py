@@ -27,6 +27,7 @@ from .common import (
     add_confidence_option,
     add_deprecated_alias,
     add_weights_option,
+    add_wv_options,
     alpha_of,
     check_output,
     positive,
@@ -91,8 +92,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         action="store_true",
         help="band: sum the WVs plainly (default: each relative to the average's WV)",
     )
-    vp.add_argument("--fs", type=positive(float, "--fs"), help="sampling frequency in Hz")
-    vp.add_argument("--levels", type=positive(int, "--levels"), help="number of WV levels J")
+    add_wv_options(vp)
     vp.add_argument("--units", help="signal unit overriding the files', e.g. deg/s")
     add_confidence_option(vp, "the virtual sensor's WV interval", "--alpha")
     vp.add_argument(

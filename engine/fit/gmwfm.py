@@ -27,7 +27,7 @@ from ._varpro import (
 )
 from .estimate import MethodEstimate
 from .gmwm import fit_gmwm, weight_matrix
-from .result import FitError, FitResult, OneWVFit
+from .result import FitError, OneWVFit, UnivariateFit
 
 __all__ = ["fit_gmwfm", "fit_armav", "GMWFMResult"]
 
@@ -43,7 +43,7 @@ _U_LO, _U_HI = -70.0, 8.0  # bounds of the log linear coefficients (relative to 
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class GMWFMResult(OneWVFit, FitResult):
+class GMWFMResult(OneWVFit, UnivariateFit):
     """Result of :func:`fit_gmwfm` / :func:`fit_armav` (the fields of
     :class:`engine.fit.result.FitResult`, the objective in f-space, plus:).
 

@@ -37,7 +37,7 @@ from ._varpro import (
 )
 from .asymptotic import asymptotic_bounds, wv_cov_model
 from .covariance import VOptions, inverse_cov, v_options, wv_cov
-from .result import FitError, FitResult, OneWVFit, ParamTable
+from .result import FitError, OneWVFit, ParamTable, UnivariateFit
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
@@ -46,7 +46,7 @@ __all__ = ["fit_gmwm", "GMWMResult", "weight_matrix", "gmwm_objective"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class GMWMResult(OneWVFit, FitResult):
+class GMWMResult(OneWVFit, UnivariateFit):
     """Result of :func:`fit_gmwm` (the fields of :class:`engine.fit.result.FitResult`, plus:).
 
     Attributes

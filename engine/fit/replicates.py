@@ -25,13 +25,13 @@ from ._varpro import (
     sub_sample_warnings,
 )
 from .gmwm import GMWMResult, fit_gmwm, weight_matrix
-from .result import FitError, FitResult
+from .result import FitError, UnivariateFit
 
 __all__ = ["ReplicateResult", "fit_replicates"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class ReplicateResult(FitResult):
+class ReplicateResult(UnivariateFit):
     """Result of :func:`fit_replicates`: one model fitted to several recordings.
 
     The fields of :class:`engine.fit.result.FitResult` (``omega`` is block diagonal over the

@@ -1,7 +1,9 @@
 """What every fit returns: the error type, labelled parameter records and the result base.
 
 Every fit result (:class:`engine.fit.GMWMResult`, :class:`engine.fit.replicates.ReplicateResult`,
-:class:`engine.fit.gmwfm.GMWFMResult`, the multivariate result) derives from :class:`FitResult`:
+:class:`engine.fit.gmwfm.GMWFMResult`, the multivariate result) derives from :class:`FitResult`,
+generic in the type of its fitted model (a univariate :class:`engine.Model`: the
+:class:`UnivariateFit` results; a :class:`engine.MultiModel`: the multivariate result), with
 the same fields with one name and one type each (``model``, ``params``, ``objective``, the
 weighting as ``weights: str`` naming the scheme and ``omega: ndarray`` the matrix, ``converged``,
 ``at_bound``, ``warnings``, ``n_evaluations``, ``method``, ``message``, ``elapsed_s``), and the
@@ -14,7 +16,7 @@ from __future__ import annotations
 import html
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -26,10 +28,12 @@ from ..wv import WaveletVariance
 __all__ = [
     "FitError",
     "FitResult",
+    "FittedModel",
     "OneWVFit",
     "ParamRecord",
     "ParamTable",
     "Summary",
+    "UnivariateFit",
     "warning_lines",
 ]
 
@@ -144,14 +148,24 @@ class OneWVFit:
         return self.wv.unit
 
 
+class FittedModel(Protocol):
+    """What the base of a fit result needs of its model: its specification string."""
+
+    def spec(self, values: bool = False) -> str: ...
+
+
+ModelT = TypeVar("ModelT", bound=FittedModel)
+
+
 @dataclass(frozen=True, eq=False, kw_only=True)
-class FitResult:
-    """Base of every fit result.
+class FitResult(Generic[ModelT]):
+    """Base of every fit result, generic in the type of its fitted model.
 
     Attributes
     ----------
-    model : Model
-        The fitted model, every parameter set (AR1/GM most persistent first).
+    model : ModelT
+        The fitted model, every parameter set: an :class:`engine.Model` (AR1/GM most
+        persistent first, :class:`UnivariateFit`) or an :class:`engine.MultiModel`.
     weights : str
         The weighting scheme: ``"ci"``, ``"identity"``, ``"efficient"`` or ``"user"``.
     omega : ndarray
@@ -176,7 +190,7 @@ class FitResult:
         Wall time of the fit (s).
     """
 
-    model: Model
+    model: ModelT
     weights: str
     omega: np.ndarray
     objective: float
@@ -208,18 +222,12 @@ class FitResult:
     def _dict_extra(self) -> dict[str, Any]:
         return {}
 
-    # shared
     @property
     def param_records(self) -> Sequence[ParamRecord]:
         """Parameters with process code, index among its kind, label, name, value and unit."""
-        m = self.model
-        return [
-            ParamRecord(p.code, idx, lab, name, float(v), param_unit(p.code, name, self.unit))
-            for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True)
-            for name, v in zip(p.param_names, p.values, strict=True)
-            if v is not None  # a fitted model: every value is set
-        ]
+        raise NotImplementedError
 
+    # shared
     @property
     def params(self) -> dict[str, float]:
         """Estimated values by unique name (``WN.sigma2``, ``GM_1.beta`` ...)."""
@@ -262,3 +270,20 @@ class FitResult:
         }
         d.update(self._dict_extra())
         return d
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class UnivariateFit(FitResult[Model]):
+    """Base of the results whose model is one univariate :class:`engine.Model` (GMWM, GMWFM,
+    replicates): its parameter records are the model's processes' values."""
+
+    @property
+    def param_records(self) -> Sequence[ParamRecord]:
+        """Parameters with process code, index among its kind, label, name, value and unit."""
+        m = self.model
+        return [
+            ParamRecord(p.code, idx, lab, name, float(v), param_unit(p.code, name, self.unit))
+            for lab, idx, p in zip(m.labels, m.indices, m.processes, strict=True)
+            for name, v in zip(p.param_names, p.values, strict=True)
+            if v is not None  # a fitted model: every value is set
+        ]

@@ -388,6 +388,25 @@ def project(
     ExportError
         Unknown consumer, bad rates or band, or a parameter the consumer needs that nothing in
         the fit can set.
+
+    Examples
+    --------
+    A white noise plus a Gauss-Markov of correlation time ~1 s, for a filter that knows
+    only white noise and a random walk: the GM becomes the bias's random walk, and both
+    values are raised just enough that the filter's WV bounds the fitted one at every scale:
+
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> m = eg.parse_model("WN(1e-6) + GM(beta=0.5, sigma2_gm=1e-8)")
+    >>> x = m.simulate(2**15, rng=np.random.default_rng(3), fs=100.0)
+    >>> fit = eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0, unit="rad/s"), "WN + GM")
+    >>> p = eg.project(fit, "WN+RW")
+    >>> p.assignment
+    {'GM': 'bias (T_c 1.052 s >= filter step)', 'WN': 'WN'}
+    >>> for name, q in p.params.items():
+    ...     print(name, f"{q.value:.3e} {q.unit} ({q.binds}; plain {q.plain:.3e})")
+    N 1.669e-04 rad/s/sqrt(Hz) (bounds GM; plain 9.998e-05)
+    K 8.356e-07 rad/s/s/sqrt(Hz) (bounds GM; plain 1.310e-04)
     """
     cons = consumer_of(consumer)
     fs = float(fit.fs)

@@ -257,6 +257,25 @@ def export(
         JSON report: the consumer models or filter formats each fit is projected onto, with
         each value's interval and factor (default ``("WN+RW",)``; ``projection="fit"``:
         none); the filter formats use their own consumer.
+
+    Examples
+    --------
+    A Kalibr ``imu.yaml`` of one gyroscope axis (the simulated white noise is
+    ``sqrt(1e-6 / 100 Hz) = 1e-4 rad/s/sqrt(Hz)``, the random walk
+    ``sqrt(1e-12 * 100 Hz) = 1e-5 rad/s^2/sqrt(Hz)``):
+
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> m = eg.parse_model("WN(1e-6) + RW(1e-12)")
+    >>> x = m.simulate(2**15, rng=np.random.default_rng(1))
+    >>> fit = eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0, unit="rad/s"), "WN + RW")
+    >>> text = eg.export(None, {"gyro_x": fit}, "kalibr", allow_partial=True)
+    >>> for line in text.splitlines():
+    ...     if line.startswith(("gyroscope_noise_density:", "gyroscope_random_walk:")):
+    ...         key, value = line.split("#")[0].split(":")
+    ...         print(key, f"{float(value):.3e}")
+    gyroscope_noise_density 9.906e-05
+    gyroscope_random_walk 7.675e-06
     """
     f = FORMATS.get(fmt)
     if f is None:

@@ -1,7 +1,8 @@
 """Loading and saving IMU logs, ROS bags, time-column checks (sessions: :mod:`engine.session`).
 
 * :mod:`engine.io.log`: :class:`ImuLog`, :class:`LoadError`, :func:`pick_channel`.
-* :mod:`engine.io.load`: :func:`load_log` (format sniffing and dispatch) over the readers
+* :mod:`engine.io.load`: :func:`load_log` (format sniffing and dispatch; :func:`log_of`: a path
+  loaded or a log as it is) over the readers
   :mod:`~engine.io.text`, :mod:`~engine.io.npy`, :mod:`~engine.io.hdf5` (WV summaries:
   :mod:`~engine.io.summary`) and :mod:`~engine.io.rosbag`, which share the column checks of
   :mod:`engine.io._assemble`.
@@ -13,7 +14,7 @@ Numerics (:mod:`engine.wv`, :mod:`engine.models`, the fit) never import this pac
 
 from __future__ import annotations
 
-from .load import load_log
+from .load import load_log, log_of
 from .log import ImuLog, LoadError, pick_channel
 from .npy import npy_sidecar_path, read_npy_sidecar, write_npy_sidecar
 from .rosbag import IMU_CHANNELS, ImuBag, imu_topics, mcap_profile, read_imu_bag, write_imu_bag
@@ -24,6 +25,7 @@ __all__ = [
     "ImuLog",
     "LoadError",
     "load_log",
+    "log_of",
     "save_log",
     "pick_channel",
     "npy_sidecar_path",

@@ -39,7 +39,7 @@ from .log import ImuLog, LoadError
 from .npy import read_npy, read_npz
 from .text import read_text
 
-__all__ = ["load_log"]
+__all__ = ["load_log", "log_of"]
 
 _MAGIC = {
     b"\x89HDF\r\n\x1a\n": "hdf5",
@@ -144,6 +144,23 @@ def load_log(
         head = fh.read(16)
     fmt = _sniff(head, p.suffix, src)
     return _guarded(_READERS[fmt], p, src, channel, opts, fmt)
+
+
+def log_of(
+    source: str | os.PathLike[str] | ImuLog,
+    *,
+    fs: float | None,
+    load_options: Mapping[str, Any] | None,
+    caller: str,
+) -> ImuLog:
+    """A log given as a path (loaded by :func:`load_log` with ``fs`` and ``load_options``)
+    or already loaded (returned as it is: ``fs`` and ``load_options`` must then be left out,
+    they were the loader's; else TypeError naming ``caller``)."""
+    if isinstance(source, ImuLog):
+        if fs is not None or load_options:
+            raise TypeError(f"{caller}(): fs and load_options apply to a path, not to a loaded log")
+        return source
+    return load_log(str(source), fs=fs, **dict(load_options or {}))
 
 
 def _sniff(head: bytes, suffix: str, src: str) -> str:

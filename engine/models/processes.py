@@ -200,7 +200,24 @@ def _ar_shared(z: np.ndarray, x0: np.ndarray, phi: float, innovation_factor: flo
 
 @dataclass(frozen=True, repr=False)
 class WN(Process, order=3, description="white noise"):
-    """White noise: iid, variance ``sigma2`` [u^2]. WV ``sigma2 / tau``."""
+    """White noise: iid, variance ``sigma2`` [u^2]. WV ``sigma2 / tau``.
+
+    Examples
+    --------
+    Its implied WV at dyadic scales (samples) against the closed form; processes add up to
+    a :class:`~engine.models.Model`, whose WV is the sum of theirs:
+
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> tau = np.array([2.0, 4.0, 8.0, 16.0])
+    >>> print(*(f"{v:.4g}" for v in eg.WN(sigma2=2.0).wv(tau)))
+    1 0.5 0.25 0.125
+    >>> m = eg.WN(2.0) + eg.RW(0.03)
+    >>> m.spec(values=True)
+    'WN(sigma2=2.0)+RW(gamma2=0.03)'
+    >>> bool(np.allclose(m.wv(tau), 2.0 / tau + 0.03 * (tau**2 + 2) / (12 * tau)))
+    True
+    """
 
     sigma2: float | None = None
 
@@ -248,7 +265,19 @@ class WN(Process, order=3, description="white noise"):
 
 @dataclass(frozen=True, repr=False)
 class QN(Process, order=2, description="quantization noise"):
-    """Quantization noise ``sqrt(q2) (U_t - U_{t-1})``, ``Var U = 1``. WV ``6 q2 / tau^2``."""
+    """Quantization noise ``sqrt(q2) (U_t - U_{t-1})``, ``Var U = 1``. WV ``6 q2 / tau^2``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> tau = np.array([2.0, 4.0, 8.0])
+    >>> print(*(f"{v:.4g}" for v in eg.QN(q2=2.0).wv(tau)))  # 12 / tau^2
+    3 0.75 0.1875
+    >>> x = eg.QN(q2=2.0).simulate(2**16, rng=np.random.default_rng(1))
+    >>> round(float(np.var(x)), 2)  # 2 q2
+    4.0
+    """
 
     q2: float | None = None
 
@@ -300,7 +329,16 @@ class QN(Process, order=2, description="quantization noise"):
 
 @dataclass(frozen=True, repr=False)
 class RW(Process, order=4, description="random walk"):
-    """Random walk: cumulative sum of iid N(0, gamma2). WV ``gamma2 (tau^2 + 2) / (12 tau)``."""
+    """Random walk: cumulative sum of iid N(0, gamma2). WV ``gamma2 (tau^2 + 2) / (12 tau)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> tau = np.array([2.0, 4.0, 8.0])
+    >>> print(*(f"{v:.4g}" for v in eg.RW(gamma2=12.0).wv(tau)))  # (tau^2 + 2) / tau
+    3 4.5 8.25
+    """
 
     gamma2: float | None = None
 
@@ -345,7 +383,18 @@ class RW(Process, order=4, description="random walk"):
 
 @dataclass(frozen=True, repr=False)
 class DR(Process, order=5, description="drift (rate ramp)"):
-    """Drift ``omega * t`` (omega per sample). WV ``omega^2 tau^2 / 16``."""
+    """Drift ``omega * t`` (omega per sample). WV ``omega^2 tau^2 / 16``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> tau = np.array([2.0, 4.0, 8.0])
+    >>> print(*(f"{v:.4g}" for v in eg.DR(omega=2.0).wv(tau)))  # tau^2 / 4
+    1 4 16
+    >>> print(*eg.DR(omega=2.0).simulate(4))  # deterministic: the ramp
+    2.0 4.0 6.0 8.0
+    """
 
     omega: float | None = None
 
@@ -415,7 +464,21 @@ def _simulate_ar1(n: int, phi: float, sigma2: float, rng: np.random.Generator) -
 
 @dataclass(frozen=True, repr=False)
 class AR1(Process, order=1, description="first-order autoregression", nonlinear="phi"):
-    """First-order autoregression ``X_t = phi X_{t-1} + e_t``, ``Var e = sigma2``, ``|phi| < 1``."""
+    """First-order autoregression ``X_t = phi X_{t-1} + e_t``, ``Var e = sigma2``, ``|phi| < 1``.
+
+    Examples
+    --------
+    Its autocovariance ``sigma2 phi^h / (1 - phi^2)``, and its WV (:func:`ar1_wv`); at
+    ``tau = 2`` the Haar WV of any stationary process is ``(gamma(0) - gamma(1)) / 2``:
+
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> ar = eg.AR1(phi=0.5, sigma2=1.0)
+    >>> print(*(f"{v:.4f}" for v in ar.autocovariance(np.array([0, 1, 2]))))
+    1.3333 0.6667 0.3333
+    >>> print(*(f"{v:.4f}" for v in ar.wv(np.array([2.0, 4.0, 8.0]))))
+    0.3333 0.3125 0.2705
+    """
 
     phi: float | None = None
     sigma2: float | None = None
@@ -501,6 +564,22 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
 
     Sampled at ``fs`` it is an AR1 with ``phi = exp(-beta/fs)`` and innovation variance
     ``sigma2_gm (1 - exp(-2 beta/fs))``.
+
+    Examples
+    --------
+    A correlation time of 2 s sampled at 10 Hz: the AR1 it samples, the same WV:
+
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> gm = eg.GM(beta=0.5, sigma2_gm=4.0)
+    >>> ar = gm.as_ar1(fs=10.0)
+    >>> f"{ar.phi:.6f} {ar.sigma2:.6f}"  # exp(-0.05), 4 (1 - exp(-0.1))
+    '0.951229 0.380650'
+    >>> tau = np.array([2.0, 32.0, 512.0])
+    >>> bool(np.allclose(gm.wv(tau, fs=10.0), ar.wv(tau)))
+    True
+    >>> print(*(f"{v:.4g}" for v in gm.wv(tau, fs=10.0)))
+    0.09754 0.6126 0.276
     """
 
     beta: float | None = None

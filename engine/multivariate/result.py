@@ -96,14 +96,14 @@ class MultiParamRecord(ParamRecord):
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class MGMWMResult(FitResult):
+class MGMWMResult(FitResult[MultiModel]):
     """Result of :func:`fit_mgmwm` (the fields of :class:`engine.fit.result.FitResult`, plus:).
 
     Attributes
     ----------
     model : MultiModel
-        The fitted model, every value set (the base's ``model`` is a univariate
-        :class:`engine.Model`; a multivariate fit's is a :class:`MultiModel`).
+        The fitted model, every value set (the base :class:`engine.fit.result.FitResult` is
+        generic in its model's type: here a :class:`MultiModel`).
     wvm : WVMatrix
         The empirical WV/WCCV matrix it was fitted to.
     implied : ndarray, shape (J, k, k)
@@ -126,9 +126,6 @@ class MGMWMResult(FitResult):
     range; ``method`` is ``"closed-form"`` (no AR1/GM) or ``"profiled nelder-mead"``.
     """
 
-    # not a Model: FitResult's Model-typed field is narrowed to another class (a known
-    # substitution break; FitResult generic in its model type would state it)
-    model: MultiModel  # type: ignore[assignment]
     wvm: WVMatrix
     implied: np.ndarray
     components: dict[str, np.ndarray]

@@ -83,8 +83,17 @@ def report(
 
     Examples
     --------
+    The report of a simulated gyroscope log (``eg.report(eg.demo_path(), "demo.html",
+    model="GM+WN+RW")`` writes the bundled demo's):
+
+    >>> import re
+    >>> import numpy as np
     >>> import engine as eg
-    >>> html = eg.report(eg.demo_path(), "demo.html", model="GM+WN+RW")  # doctest: +SKIP
+    >>> x = eg.parse_model("WN(1e-6) + RW(1e-12)").simulate(2**14, rng=np.random.default_rng(1))
+    >>> log = eg.ImuLog({"gyro_x": x}, fs=100.0, units={"gyro_x": "rad/s"}, source="sim.h5")
+    >>> page = eg.report(log, model="WN+RW")
+    >>> re.search("<title>(.*)</title>", page).group(1), page.count('id="fig-')
+    ('Calibration report: sim.h5', 4)
     """
     if output is not None:  # before the fits: a bad path fails at once
         _check_html_output(output)

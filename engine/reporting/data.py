@@ -37,7 +37,7 @@ import numpy as np
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
-from ..io import ImuLog, load_log
+from ..io import ImuLog, log_of
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
 from ..wv import AllanVariance
 
@@ -470,12 +470,7 @@ def gather_report(
             ds, ds_text = Path(datasheet), f"file {datasheet}"
         else:
             ds, ds_text = parse_datasheet(str(datasheet), source="datasheet"), str(datasheet)
-    if isinstance(source, ImuLog):
-        if fs is not None or load_options:
-            raise TypeError("gather_report(): fs and load_options apply to a path, not to a log")
-        log = source
-    else:
-        log = load_log(str(source), fs=fs, **dict(load_options or {}))
+    log = log_of(source, fs=fs, load_options=load_options, caller="gather_report")
     src = log.source or str(source)
     if fits is not None:
         unknown = [ch for ch in fits if ch not in log.names]

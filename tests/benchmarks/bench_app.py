@@ -34,7 +34,7 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-from conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from _browser import CHROMIUM, launch  # noqa: E402
 
 import engine as eg  # noqa: E402
 
@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         url = f"http://127.0.0.1:{port}/"
         try:
             with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+                browser = launch(p)
 
                 # reference: the smallest click -> new line data -> redraw round trip
                 ref = browser.new_page(viewport={"width": 1400, "height": 1000})

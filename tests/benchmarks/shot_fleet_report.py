@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from _browser import screenshot_top  # noqa: E402
 
 import engine as eg  # noqa: E402
 
@@ -37,7 +37,6 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "tests/benchmarks/figures/fleet_report.png"))
     ap.add_argument("--height", type=int, default=1700, help="pixels of the page to keep")
     args = ap.parse_args()
-    from playwright.sync_api import sync_playwright
 
     data = Path(args.data)
     with tempfile.TemporaryDirectory() as d:
@@ -56,23 +55,15 @@ def main() -> None:
             "--spec 'vrw<=0.1 m/s/sqrt(h)' --report fleet.html",
         )
         print(f"fleet report: {os.path.getsize(page_path) / 1e6:.2f} MB")
-        with sync_playwright() as p:
-            b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-            ctx = b.new_context(viewport={"width": 1300, "height": args.height}, offline=True)
-            ctx.route(
-                "**/*",
-                lambda r: (
-                    r.continue_() if r.request.url.startswith(("file:", "data:")) else r.abort()
-                ),
-            )
-            page = ctx.new_page()
-            page.goto(page_path.as_uri(), wait_until="load")
-            page.locator("#fig-fleet-gyro_x-adev").wait_for(timeout=180_000)
-            page.wait_for_timeout(2500)  # BokehJS paints after load
-            page.screenshot(
-                path=args.out, clip={"x": 0, "y": 0, "width": 1300, "height": args.height}
-            )
-            b.close()
+        screenshot_top(
+            page_path,
+            args.out,
+            width=1300,
+            height=args.height,
+            ready="#fig-fleet-gyro_x-adev",
+            ready_timeout_ms=180_000,
+            settle_ms=2500,
+        )
     print(f"wrote {args.out}")
 
 

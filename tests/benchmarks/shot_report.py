@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from _browser import screenshot_top  # noqa: E402
 
 import engine as eg  # noqa: E402
 
@@ -33,7 +33,6 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "tests/benchmarks/figures/report_demo.png"))
     ap.add_argument("--height", type=int, default=1500, help="pixels of the page to keep")
     args = ap.parse_args()
-    from playwright.sync_api import sync_playwright
 
     os.chdir(ROOT)  # the report shows the file as given: engine/demo/demo_imu.h5
     with tempfile.TemporaryDirectory() as d:
@@ -47,23 +46,7 @@ def main() -> None:
             command_line="gmwm report demo_imu.h5 --channels gyro_x --model GM+WN+RW "
             f"--datasheet '{DATASHEET}' -o report.html",
         )
-        with sync_playwright() as p:
-            b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-            ctx = b.new_context(viewport={"width": 1150, "height": args.height}, offline=True)
-            ctx.route(
-                "**/*",
-                lambda r: (
-                    r.continue_() if r.request.url.startswith(("file:", "data:")) else r.abort()
-                ),
-            )
-            page = ctx.new_page()
-            page.goto(page_path.as_uri(), wait_until="load")
-            page.locator("#fig-gyro_x-psd").wait_for()
-            page.wait_for_timeout(1500)  # BokehJS paints after load
-            page.screenshot(
-                path=args.out, clip={"x": 0, "y": 0, "width": 1150, "height": args.height}
-            )
-            b.close()
+        screenshot_top(page_path, args.out, width=1150, height=args.height, ready="#fig-gyro_x-psd")
     print(f"wrote {args.out}")
 
 
