@@ -224,6 +224,11 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
     _fail = report_error
 
+    def show_notice(self, notice: str, *, clear_error: bool = False) -> None:
+        """Show ``notice`` (information, not an error; empty: none); ``clear_error`` also
+        removes the error shown (e.g. a session restored in full)."""
+        self._publish(notice=notice, **({"error": ""} if clear_error else {}))
+
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool:
         """Run ``fn``; an exception becomes a message in :attr:`error` (never raised).
 
