@@ -5,9 +5,16 @@ the widgets drive, so it can be tested without a browser. Data flows one way::
 
     file -> ImuLog -> WaveletVariance (computed once per channel, cached) -> fit_gmwm -> result
 
-Changing the model refits on the cached WV; it never recomputes the WV. Every public action
-returns ``True`` on success; on failure it sets :attr:`AppState.error` to a sentence that says
-what went wrong and how to fix it, and leaves the previous (valid) state in place.
+Changing the model refits on the cached WV (:class:`gmwm_app.wv_cache.WVCache`); it never
+recomputes the WV. Every public action returns ``True`` on success; on failure it sets
+:attr:`AppState.error` to a sentence that says what went wrong and how to fix it (and logs
+it), and leaves the previous (valid) state in place. Each action changes its parameters in one
+``param.update``, so that a view depending on several of them draws once.
+
+The actions live with their ideas: the data and model actions here, the what-if mode in
+:mod:`gmwm_app.whatif`, the URL round trip in :mod:`gmwm_app.query`, ranking and inference in
+:mod:`gmwm_app.selection_state`, the JSON export in :mod:`gmwm_app.fit_export` (mixins of
+:class:`AppState`).
 
 Heavy work (reading a file, computing a WV) is split from the state change so that the app
 can run it in a worker thread: :meth:`AppState.read` and :meth:`AppState.precompute` /
@@ -658,14 +665,16 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # what the views draw
     # ---------------------------------------------------------------------------------
     def display_model(self) -> eg.Model | None:
-        """The model whose curves are drawn: the what-if one, the fit, or None."""
+        """The model whose curves are drawn: the what-if one, the fit, or None.
+
+        The what-if values are checked as they are set (:meth:`set_whatif_value`): should
+        they still not make a model, the error is raised (a redraw reports it), not hidden
+        behind the fit's curves.
+        """
         if not len(self.model) or self.wv is None:
             return None
         if self.whatif:
-            try:
-                return self.whatif_model()
-            except (ValueError, KeyError):
-                return self.result.model if self.result is not None else None
+            return self.whatif_model()
         return self.result.model if self.result is not None else None
 
     def display_objective(self) -> float | None:
