@@ -181,7 +181,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.views = WVFigures()
         self.ready = False
         self._last_query: dict[str, str] | None = None
-        self.last_refresh_s = 0.0
+        self.last_refresh_s = 0.0  # the last WV plot redraw (s), the bulk of a redraw
         self.busy = False
         self._query: dict[str, Any] = {}
         self._prefetched: Future | None = None

@@ -222,6 +222,7 @@ class ModelPanel(pn.viewable.Viewer):
         "state.result",
         "state.channel",
         "state.fs",
+        "state.unit",
         "state.whatif_values",
         watch=True,
     )
