@@ -14,6 +14,13 @@ are read while the browser is still loading the page; a fit takes milliseconds a
 inline; every redraw replaces ColumnDataSource data in place (``wv_figures.WVFigures``,
 ``FitTables``). Serving (pages built off the loop, BLAS limits) is :mod:`gmwm_app.server`.
 
+State and page: :class:`GMWMApp` is a :class:`panel.viewable.Viewer` around the session's
+:class:`~gmwm_app.state.AppState`; each part of the Fit tab depends on the state parameters
+it draws (``param.depends(..., watch=True)`` for the in-place Bokeh updates, parameter
+references and ``param.depends`` methods as the text panes' objects), so an action redraws
+what it changed, each part once. Widgets drive the state through its actions only when
+their value differs from the state's, so the state's own updates of a widget are no-ops.
+
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
 
@@ -36,6 +43,7 @@ if __package__ in (None, ""):  # run as a script by `panel serve gmwm_app/app.py
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import panel as pn  # noqa: E402
+import param  # noqa: E402
 
 from gmwm_app._panel_compat import light_text_updates  # noqa: E402
 from gmwm_app.jobs import Jobs  # noqa: E402
@@ -52,6 +60,7 @@ from gmwm_app.views import (  # noqa: E402
     FitTables,
     fit_summary,
     hidden_alert,
+    redraws,
 )
 from gmwm_app.wv_figures import WVFigures  # noqa: E402
 
@@ -105,7 +114,50 @@ def live_apps() -> list[GMWMApp]:
     return [app for app, _ in sorted(items, key=lambda kv: kv[1])]
 
 
-class GMWMApp:
+#: The state parameters the WV plot and the residual strip draw.
+_PLOT = ("wv", "unit", "channel", "filename", "model", "result", "whatif", "whatif_values")
+#: ... the parameter and datasheet tables and the J-test badge.
+_TABLES = (
+    "wv",
+    "unit",
+    "fs",
+    "model",
+    "result",
+    "whatif",
+    "whatif_values",
+    "show_intervals",
+    "inferred",
+)
+#: ... the data widgets (channel, fs, robust).
+_DATA_WIDGETS = ("channels", "channel", "fs", "robust")
+#: ... the data description.
+_DATA_INFO = (
+    "wv",
+    "unit",
+    "is_summary",
+    "filename",
+    "source",
+    "n",
+    "duration_s",
+    "fs",
+    "fs_source",
+)
+#: ... the fit summary line.
+_SUMMARY = ("wv", "model", "result", "whatif", "whatif_values", "weights")
+#: ... the file names of the downloads (:meth:`AppState.export_filename`).
+_FILENAMES = ("filename", "channel", "model")
+#: ... the URL (:meth:`AppState.to_query`).
+_QUERY = ("source", "path", "channel", "fs", "robust", "weights", "model")
+#: ... the "Model selection" tab (its refresh, called while the tab is not its own watcher).
+_SELECTION = ("selection", "inferred", "unit")
+
+
+def _on_state(*names: str) -> Any:
+    """``param.depends`` on parameters of the ``state`` sub-object, run on every change."""
+    return param.depends(*(f"state.{n}" for n in names), watch=True)
+
+
+class GMWMApp(pn.viewable.Viewer):
     """Widgets, views and callbacks of one session, around an :class:`AppState`.
 
     Parameters
@@ -118,17 +170,18 @@ class GMWMApp:
         Server path loaded when ``default_source == "path"`` (the ``gmwm-app FILE`` argument).
     """
 
+    state = param.ClassSelector(class_=AppState, constant=True, doc="The session state.")
+
     def __init__(
         self, state: AppState | None = None, *, default_source: str = "demo", default_path: str = ""
     ) -> None:
-        self.state = state or AppState()
+        super().__init__(state=state or AppState())
         self.default_source = default_source
         self.default_path = default_path
         self.views = WVFigures()
-        self._syncing = False
         self.ready = False
         self._last_query: dict[str, str] | None = None
-        self.last_refresh_s = 0.0
+        self.last_refresh_s = 0.0  # the last WV plot redraw (s), the bulk of a redraw
         self.busy = False
         self._query: dict[str, Any] = {}
         self._prefetched: Future | None = None
@@ -141,7 +194,6 @@ class GMWMApp:
         self.jobs.failed = self._load_failed
         self.jobs.settled = self._settled
         self.jobs.install = self.install
-        self.state.param.watch(self._on_state, "revision")
         self.refresh()
         _APPS[self] = next(_SERIAL)
 
@@ -190,6 +242,7 @@ class GMWMApp:
             css_classes=["gmwm-robust"],
         )
         self.robust_check.param.watch(self._on_robust, "value")
+        self.data_info.object = self._data_info_text
 
         self.model_panel = ModelPanel(self.state)
         self.download = download_button(
@@ -213,10 +266,10 @@ class GMWMApp:
                 code=_EXPORT_JS.replace("KIND", kind),
             )
 
-        # main area
-        self.alert = hidden_alert("danger")
-        self.notice = hidden_alert("info")
-        self.warning = hidden_alert("warning")
+        # main area: the messages follow the state
+        self.alert = hidden_alert("danger", s.param.error)
+        self.notice = hidden_alert("info", s.param.notice)
+        self.warning = hidden_alert("warning")  # (_show_warnings)
         self.status = pn.pane.Markdown(
             "",
             sizing_mode="stretch_width",
@@ -229,7 +282,9 @@ class GMWMApp:
         self.resid_pane = pn.pane.Bokeh(
             self.views.residual, sizing_mode="stretch_width", margin=(0, 10)
         )
-        self.summary = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
+        self.summary = pn.pane.Markdown(
+            self._summary_text, sizing_mode="stretch_width", margin=(0, 10)
+        )
         self.tables = FitTables()
         self.param_table = pn.pane.Bokeh(
             self.tables.params, sizing_mode="stretch_width", margin=(5, 10)
@@ -240,7 +295,7 @@ class GMWMApp:
         # 95% intervals in the parameter table and the J-test badge (computed off the loop)
         self.intervals_check = pn.widgets.Checkbox(
             label="Intervals (95%, asymptotic) and goodness of fit",
-            value=False,
+            value=s.show_intervals,
             css_classes=["gmwm-intervals"],
             margin=(0, 10),
         )
@@ -393,86 +448,105 @@ class GMWMApp:
                 self.open_view(title)
             except Exception as e:  # a view that fails to build must not end the session
                 log.exception("building tab %s failed", title)
-                self.alert.param.update(object=f"Could not open {title}: {e}", visible=True)
+                self.state.report_error(f"Could not open {title}: {type(e).__name__}: {e}")
         for name, view in self.lazy_views.items():
             view.active = self._shown(name)
 
     # -------------------------------------------------------------------------------------
-    # refresh (state -> widgets and views)
+    # state -> page: each part depends on the state parameters it draws
     # -------------------------------------------------------------------------------------
-    def _on_state(self, _event: Any = None) -> None:
-        try:
-            self.refresh()
-        except Exception as e:  # a display problem must not look like a state error
-            log.exception("refresh failed")
-            self.alert.param.update(object=f"Display error: {type(e).__name__}: {e}", visible=True)
+    def __panel__(self) -> pn.template.BootstrapTemplate:
+        return self.template
 
     def refresh(self) -> None:
-        """Bring every view and widget in line with the state (in place, one batch)."""
+        """Draw every part of the Fit tab from the state (the page's first draw; afterwards
+        each part redraws itself when a parameter it depends on changes)."""
+        with pn.io.hold():
+            self._draw_plot()
+            self._draw_tables()
+            self._sync_data_widgets()
+            self._sync_filenames()
+            self._show_warnings()
+            self.model_panel.refresh()
+
+    @_on_state(*_PLOT)
+    @redraws("the WV plot")
+    def _draw_plot(self) -> None:
         t0 = time.perf_counter()
         s = self.state
-        self._syncing = True
-        try:
-            with pn.io.hold():
-                self.views.update(s)
-                self.resid_box.visible = s.display_model() is not None
-                self._refresh_tables()
-                self._refresh_data_widgets()
-                self.model_panel.refresh()
-                self._refresh_messages()
-                self.download.filename = s.export_filename()
-                self.views.save_tool.filename = s.export_filename()[:-5].replace("+", "_")
-        finally:
-            self._syncing = False
-        self._sync_url()
+        self.views.update(s)
+        self.resid_box.visible = s.display_model() is not None
         self.last_refresh_s = time.perf_counter() - t0
 
-    def _refresh_tables(self) -> None:
+    @_on_state(*_TABLES)
+    @redraws("the parameter tables")
+    def _draw_tables(self) -> None:
         s = self.state
         self.tables.update(s)
-        self.summary.object = fit_summary(s)
         show = bool(s.show_intervals and s.result is not None and not s.whatif)
         if show:
             self.selection.ensure_inference(s.result)
         badge = jtest_badge(s.inference(), pending=True) if show else ""
         self.jtest_pane.param.update(object=badge, visible=bool(badge))
-        if self.intervals_check.value != s.show_intervals:
-            self.intervals_check.value = s.show_intervals
+        self.intervals_check.value = s.show_intervals  # (an unchanged value wakes no one)
+
+    @_on_state(*_SELECTION)
+    @redraws("the model selection")
+    def _refresh_selection(self) -> None:
         if "Model selection" in self.lazy_views:
             self.selection.refresh()
 
-    def _refresh_data_widgets(self) -> None:
+    @_on_state(*_DATA_WIDGETS)
+    @redraws("the data widgets")
+    def _sync_data_widgets(self) -> None:
         s = self.state
+        # options and value in one update: the widget's watcher (_on_channel) runs once, with
+        # the final value, which is the state's (no intermediate first option of a new log)
+        chan: dict[str, Any] = {}
         if list(self.channel_select.options) != list(s.channels):
-            self.channel_select.options = list(s.channels)
-        if s.channel and self.channel_select.value != s.channel:
-            self.channel_select.value = s.channel
-        if s.fs is not None and self.fs_input.value != s.fs:
+            chan["options"] = list(s.channels)
+        if s.channel:
+            chan["value"] = s.channel
+        self.channel_select.param.update(**chan)
+        if s.fs is not None:
             self.fs_input.value = s.fs
-        if self.robust_check.value != s.robust:
-            self.robust_check.value = s.robust
-        if s.wv is None:
-            self.data_info.object = "No data loaded."
-        else:
-            u = (s.unit or "unknown unit (set it in the file)").replace("^2", "²")
-            kind = "WV summary file (no raw samples)" if s.is_summary else "raw log"
-            self.data_info.object = (
-                f"**{s.filename}** ({kind}, source: {s.source})  \n"
-                f"N = {s.n:,} samples, duration {format_value(s.duration_s)} s "
-                f"({s.duration_s / 3600:.2f} h)  \n"
-                f"fs = {s.fs:g} Hz ({s.fs_source}), unit: {u}, {len(s.wv)} WV levels"
-            )
+        self.robust_check.value = s.robust
 
-    def _refresh_messages(self) -> None:
+    @param.depends(*(f"state.{n}" for n in _DATA_INFO))
+    @redraws("the data description")
+    def _data_info_text(self) -> str:
         s = self.state
-        self.alert.object = s.error
-        self.alert.visible = bool(s.error)
-        self.notice.object = s.notice
-        self.notice.visible = bool(s.notice)
-        warn = s.warnings() if not s.whatif else []
-        self.warning.object = "**Fit warning**: " + "; ".join(warn) if warn else ""
-        self.warning.visible = bool(warn)
+        if s.wv is None:
+            return "No data loaded."
+        u = (s.unit or "unknown unit (set it in the file)").replace("^2", "²")
+        kind = "WV summary file (no raw samples)" if s.is_summary else "raw log"
+        return (
+            f"**{s.filename}** ({kind}, source: {s.source})  \n"
+            f"N = {s.n:,} samples, duration {format_value(s.duration_s)} s "
+            f"({s.duration_s / 3600:.2f} h)  \n"
+            f"fs = {s.fs:g} Hz ({s.fs_source}), unit: {u}, {len(s.wv)} WV levels"
+        )
 
+    @param.depends(*(f"state.{n}" for n in _SUMMARY))
+    @redraws("the fit summary")
+    def _summary_text(self) -> str:
+        return fit_summary(self.state)
+
+    @_on_state("result", "whatif")
+    @redraws("the fit warnings")
+    def _show_warnings(self) -> None:
+        s = self.state
+        warn = s.warnings() if not s.whatif else []
+        text = "**Fit warning**: " + "; ".join(warn) if warn else ""
+        self.warning.param.update(object=text, visible=bool(text))
+
+    @_on_state(*_FILENAMES)
+    def _sync_filenames(self) -> None:
+        name = self.state.export_filename()
+        self.download.filename = name
+        self.views.save_tool.filename = name[:-5].replace("+", "_")
+
+    @_on_state(*_QUERY)
     def _sync_url(self) -> None:
         if not self.ready or self._location is None:
             return
@@ -497,7 +571,11 @@ class GMWMApp:
             w.disabled = on
 
     def _load_failed(self, message: str, err: BaseException) -> None:
-        self.state.report_error(f"{message}: {err}")
+        what = str(err)
+        if not isinstance(err, (ValueError, OSError)):  # not a file's or an input's fault
+            log.error("%s: unexpected %s", message, type(err).__name__, exc_info=err)
+            what = f"unexpected {type(err).__name__}: {err}"
+        self.state.report_error(f"{message}: {what}")
         self.session_panel.failed(err)  # time gaps: offer the longest segment
         if self.upload.value:
             self.upload.value = {}  # free a refused upload's bytes (a retry keeps its own)
@@ -521,12 +599,13 @@ class GMWMApp:
         query = self._query
 
         def apply(prepared: Any) -> None:
-            self.state.from_query(
-                query,
-                prepared=prepared,
-                default_source=self.default_source,
-                default_path=self.default_path,
-            )
+            with pn.io.hold():  # one message to the browser for every part redrawn
+                self.state.from_query(
+                    query,
+                    prepared=prepared,
+                    default_source=self.default_source,
+                    default_path=self.default_path,
+                )
 
         self.jobs.load(
             "Loading the data and computing its wavelet variance", self._prefetched, apply
@@ -569,46 +648,56 @@ class GMWMApp:
 
     def install(self, loaded: Any) -> None:
         """Make newly read data the session's (and remember how they were read)."""
-        self.session_panel.loaded(loaded)
-        self.state.install(loaded)
-        if self.upload.value:
-            self.upload.value = {}  # free an upload's bytes
+        with pn.io.hold():  # one message to the browser for every part redrawn
+            self.session_panel.loaded(loaded)
+            self.state.install(loaded)
+            if self.upload.value:
+                self.upload.value = {}  # free an upload's bytes
 
+    # widget -> state: only a value that differs from the state's is an action (the state's own
+    # updates of the widgets come back here as no-ops)
     def _on_channel(self, event: Any) -> None:
-        if self._syncing or not event.new or event.new == self.state.channel:
+        if not event.new or event.new == self.state.channel:
             return
         ch = event.new
         self.jobs.load(
             f"Computing the wavelet variance of {ch}",
             lambda report: self.state.warm(ch, progress=report),
-            lambda _out: self.state.select_channel(ch),
+            lambda _out: self._held(self.state.select_channel, ch),
             progress=True,
         )
 
     def _on_robust(self, event: Any) -> None:
-        if self._syncing or bool(event.new) == self.state.robust:
+        if bool(event.new) == self.state.robust:
             return
         rob = bool(event.new)
         what = "robust" if rob else "classical"
         self.jobs.load(
             f"Computing the {what} wavelet variance",
             lambda report: self.state.warm(robust=rob, progress=report),
-            lambda _out: self._after_robust(rob),
+            lambda _out: self._held(self._after_robust, rob),
             progress=True,
         )
 
+    @staticmethod
+    def _held(action: Callable[..., Any], *args: Any) -> Any:
+        """Run a job's continuation with the document held: the parts it redraws reach the
+        browser as one message (a widget's callback is held by Panel already)."""
+        with pn.io.hold():
+            return action(*args)
+
     def _after_robust(self, rob: bool) -> None:
         if not self.state.set_robust(rob):
-            self.refresh()  # put the checkbox back
+            self._sync_data_widgets()  # put the checkbox back (the state did not change)
 
     def _on_fs(self, event: Any) -> None:
-        if self._syncing or event.new is None or event.new == self.state.fs:
+        if event.new is None or event.new == self.state.fs:
             return
         if not self.state.set_fs(event.new):
-            self.refresh()
+            self._sync_data_widgets()  # put the old fs back
 
     def _on_intervals(self, event: Any) -> None:
-        if not self._syncing and bool(event.new) != self.state.show_intervals:
+        if bool(event.new) != self.state.show_intervals:
             self.state.set_show_intervals(bool(event.new))
 
     def _export_json(self) -> io.StringIO:

@@ -2,19 +2,20 @@
 
 Worker-thread safe: nothing here changes a session's state. :func:`read_source` reads the
 demo, an upload, a server path or a teaching scenario into a :class:`LoadedData`;
-:func:`precompute` fills its WV cache, ``(channel, fs, robust) -> WaveletVariance``, the one
-WV cache of a session (:class:`gmwm_app.state.AppState` keeps it with the log, and every tab
-reads its WVs from there).
+:func:`precompute` fills its WVs, ``(channel, fs, robust) -> WaveletVariance``, which become
+the session's WV cache when the data are installed (:class:`gmwm_app.wv_cache.WVCache`, kept
+by :class:`gmwm_app.state.AppState` with the log; every tab reads its WVs from there).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import threading
 import time
 import weakref
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ import engine as eg
 from engine._checks import check_fs as engine_check_fs
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
+from gmwm_app.wv_cache import WVKey, store_wv, wv_from_cache
 
 __all__ = [
     "LoadedData",
@@ -33,8 +35,6 @@ __all__ = [
     "read_source",
     "precompute",
     "compute_wv",
-    "wv_from_cache",
-    "store_wv",
     "check_fs",
     "channel_names",
     "summary_has_robust",
@@ -46,6 +46,8 @@ __all__ = [
     "shared_wvs",
     "clear_shared",
 ]
+
+log = logging.getLogger(__name__)
 
 
 def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> Any:
@@ -82,7 +84,9 @@ def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> Any:
 # cache (a copy of the shared one), to which it adds what it computes.
 _SHARED_LOCK = threading.Lock()
 _SHARED_DEMO: dict[tuple[str, int, int], Any] = {}  # (path, mtime_ns, size) -> ImuLog
-_SHARED_WVS: weakref.WeakKeyDictionary[Any, dict] = weakref.WeakKeyDictionary()
+_SHARED_WVS: weakref.WeakKeyDictionary[Any, dict[WVKey, eg.WaveletVariance]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def read_demo(path: str | os.PathLike[str]) -> Any:
@@ -118,7 +122,7 @@ def read_demo(path: str | os.PathLike[str]) -> Any:
         return _SHARED_DEMO[key]
 
 
-def shared_wvs(lg: Any) -> dict[tuple[str, float, bool], eg.WaveletVariance] | None:
+def shared_wvs(lg: Any) -> dict[WVKey, eg.WaveletVariance] | None:
     """A copy of the WVs shared with every session for ``lg`` (None: ``lg`` is not shared)."""
     with _SHARED_LOCK:
         wvs = _SHARED_WVS.get(lg)
@@ -150,16 +154,24 @@ class LoadedData:
         ``(channel, fs, robust) -> WaveletVariance``.
     elapsed_s : float
         Time spent reading the file (s).
+    computations : int
+        WVs computed for it (by :func:`precompute`).
+    load : dict
+        The ``load_log`` options it was read with (``segment``).
+    wv_errors : dict
+        ``(channel, fs, robust) -> message``: WVs :func:`precompute` could not compute (the
+        install reports the message instead of computing the WV again).
     """
 
     log: Any
     source: str
     name: str
     path: str = ""
-    wv_cache: dict[tuple[str, float, bool], eg.WaveletVariance] = field(default_factory=dict)
+    wv_cache: dict[WVKey, eg.WaveletVariance] = field(default_factory=dict)
     elapsed_s: float = 0.0
     computations: int = 0
-    load: dict[str, Any] = field(default_factory=dict)  # load_log options (segment)
+    load: dict[str, Any] = field(default_factory=dict)
+    wv_errors: dict[WVKey, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -169,33 +181,6 @@ class PreparedQuery:
     settings: dict[str, Any]
     loaded: LoadedData | None
     problems: list[str]
-
-
-def wv_from_cache(
-    cache: Mapping[tuple[str, float, bool], eg.WaveletVariance],
-    channel: str,
-    fs: float,
-    robust: bool,
-) -> eg.WaveletVariance | None:
-    """A cached WV for (channel, fs, robust), derived without recomputation when possible."""
-    hit = cache.get((channel, fs, robust))
-    if hit is not None:
-        return hit
-    for (ch, _fs, rob), wv in list(cache.items()):
-        if ch != channel or not isinstance(wv, eg.WaveletVariance):  # (WV matrices too)
-            continue
-        if rob == robust:
-            return wv.with_fs(fs)
-        if not robust and rob and wv.classical is not None:
-            return wv.classical.with_fs(fs)
-    return None
-
-
-def store_wv(cache: dict, ch: str, fs: float, robust: bool, wv: eg.WaveletVariance) -> None:
-    """Put ``wv`` in a WV cache under ``(ch, fs, robust)``."""
-    cache[(ch, fs, robust)] = wv
-    if robust and wv.classical is not None:
-        cache.setdefault((ch, fs, False), wv.classical)
 
 
 def read_source(
@@ -282,24 +267,29 @@ def precompute(
 ) -> None:
     """Compute the WV of one channel of ``loaded`` into its cache (worker-thread safe).
 
-    Errors are not raised here; :meth:`install` reports them.
+    A WV that cannot be computed (e.g. a channel of NaN) is not raised here: its message is
+    kept in ``loaded.wv_errors`` (and logged), and the install that follows reports it on the
+    page (the data cannot be shown without it). Anything else is raised.
     """
     lg = loaded.log
     names = channel_names(lg)
     if not names:
         return
     ch = channel if channel in names else names[0]
+    f = float(fs) if fs else float(lg.fs)
+    if wv_from_cache(loaded.wv_cache, ch, f, robust) is not None:
+        return
     try:
-        f = float(fs) if fs else float(lg.fs)
-        if wv_from_cache(loaded.wv_cache, ch, f, robust) is None:
-            wv = compute_wv(lg, ch, f, robust)
-            store_wv(loaded.wv_cache, ch, f, robust, wv)
-            loaded.computations += 1
-            with _SHARED_LOCK:  # a shared log: the next sessions find this WV computed
-                if lg in _SHARED_WVS:
-                    store_wv(_SHARED_WVS[lg], ch, f, robust, wv)
-    except Exception:  # reported when installed
-        pass
+        wv = compute_wv(lg, ch, f, robust)
+    except ValueError as e:
+        log.warning("%s: no WV of %s: %s", loaded.name, ch, message_of(e))
+        loaded.wv_errors[(ch, f, robust)] = message_of(e)
+        return
+    store_wv(loaded.wv_cache, ch, f, robust, wv)
+    loaded.computations += 1
+    with _SHARED_LOCK:  # a shared log: the next sessions find this WV computed
+        if lg in _SHARED_WVS:
+            store_wv(_SHARED_WVS[lg], ch, f, robust, wv)
 
 
 def message_of(e: BaseException) -> str:

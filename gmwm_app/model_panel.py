@@ -4,6 +4,10 @@ One add button per process, a text spec, the list of the model's processes (rows
 fixed pool, each with a remove button: an add or a remove creates no new Bokeh model), and
 the what-if sliders generated from the parameters (:meth:`AppState.slider_specs`), also
 from a pool.
+
+Each part depends on the state parameters it shows (``param.depends(..., watch=True)``); a
+widget drives the state only with a value that differs from the state's, so that the
+panel's own updates of its widgets are no-ops.
 """
 
 from __future__ import annotations
@@ -11,11 +15,12 @@ from __future__ import annotations
 from typing import Any
 
 import panel as pn
+import param
 from bokeh.models import CustomJSTickFormatter
 
 import engine as eg
 from gmwm_app.state import PROCESS_CODES, PROCESS_NAMES, AppState
-from gmwm_app.views import component_color
+from gmwm_app.views import component_color, redraws
 from gmwm_app.whatif import SliderSpec
 
 __all__ = ["ModelPanel", "N_POOL"]
@@ -35,7 +40,7 @@ _WEIGHTS_HELP = (
 )
 
 
-class ModelPanel:
+class ModelPanel(pn.viewable.Viewer):
     """Model and what-if widgets of one page, driven by the session state.
 
     Parameters
@@ -44,9 +49,10 @@ class ModelPanel:
         The session state (every change goes through its actions).
     """
 
+    state = param.ClassSelector(class_=AppState, constant=True, doc="The session state.")
+
     def __init__(self, state: AppState) -> None:
-        self.state = state
-        self._syncing = False
+        super().__init__(state=state)
         self._proc_key: tuple | None = None
         self._slider_key: Any = None
         self.add_buttons = {}
@@ -99,6 +105,9 @@ class ModelPanel:
         self.sliders = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
         self._slider_pool: list[pn.widgets.FloatSlider] = []
         self._slider_specs: list[SliderSpec] = []
+        # the position each slider stands for in the state (its spec's, or the last one the
+        # user moved it to): a slider event at that position is the panel's own update
+        self._slider_x: list[float] = []
         self._log_format = CustomJSTickFormatter(code="return Math.pow(10, tick).toExponential(3)")
         self._phi_format = CustomJSTickFormatter(
             code="return (1 - Math.pow(10, tick)).toPrecision(6)"
@@ -140,23 +149,32 @@ class ModelPanel:
             self.whatif_buttons,
         ]
 
-    def refresh(self) -> None:
-        """Bring the widgets in line with the state (no new Bokeh models)."""
-        s = self.state
-        self._syncing = True
-        try:
-            if self.whatif_toggle.value != s.whatif:
-                self.whatif_toggle.value = s.whatif
-            if s.weights != self.weights_select.value and s.weights in dict(_WEIGHTS).values():
-                self.weights_select.value = s.weights
-            spec = s.model.spec()
-            if self.spec_input.value != spec:
-                self.spec_input.value = spec
-            self._refresh_process_list()
-            self._refresh_sliders()
-        finally:
-            self._syncing = False
+    def __panel__(self) -> pn.Column:
+        return pn.Column(*self.sidebar(), sizing_mode="stretch_width", margin=0)
 
+    def refresh(self) -> None:
+        """Bring every widget in line with the state (no new Bokeh models); also puts back a
+        widget whose value the state refused."""
+        self._sync_choices()
+        self._sync_spec()
+        self._refresh_process_list()
+        self._refresh_sliders()
+
+    @param.depends("state.whatif", "state.weights", watch=True)
+    @redraws("the what-if and weights choices")
+    def _sync_choices(self) -> None:
+        s = self.state
+        self.whatif_toggle.value = s.whatif
+        if s.weights in dict(_WEIGHTS).values():
+            self.weights_select.value = s.weights
+
+    @param.depends("state.model", watch=True)
+    @redraws("the model spec")
+    def _sync_spec(self) -> None:
+        self.spec_input.value = self.state.model.spec()
+
+    @param.depends("state.model", watch=True)
+    @redraws("the process list")
     def _refresh_process_list(self) -> None:
         """One row per process from a fixed pool (no new Bokeh models on add/remove)."""
         s = self.state
@@ -198,6 +216,17 @@ class ModelPanel:
         self._proc_rows.append((row, label, btn))
         self.process_list.append(row)
 
+    @param.depends(
+        "state.whatif",
+        "state.model",
+        "state.result",
+        "state.channel",
+        "state.fs",
+        "state.unit",
+        "state.whatif_values",
+        watch=True,
+    )
+    @redraws("the what-if sliders")
     def _refresh_sliders(self) -> None:
         """What-if sliders from the parameter specs, from a pool of slider widgets."""
         s = self.state
@@ -227,17 +256,20 @@ class ModelPanel:
             )
             w.param.watch(lambda e, i=i: self._on_slider(i, e.new), "value")
             self._slider_pool.append(w)
+            self._slider_x.append(w.value)
             self.sliders.append(w)
         self._slider_specs = specs
         for i, w in enumerate(self._slider_pool):
             if i < len(specs):
                 sp = specs[i]
                 phi = sp.transform == "log10(1-x)"
+                x = min(max(sp.x, sp.lo), sp.hi)
+                self._slider_x[i] = x  # before the update, whose event is then a no-op
                 w.param.update(
                     label=f"{sp.name} [{sp.unit.replace('^2', '²')}]",
                     start=sp.lo,
                     end=sp.hi,
-                    value=min(max(sp.x, sp.lo), sp.hi),
+                    value=x,
                     step=(sp.hi - sp.lo) / 600,
                     format=self._phi_format if phi else self._log_format,
                     bar_color=component_color(sp.label),
@@ -259,22 +291,26 @@ class ModelPanel:
             else self.spec_input.value
         )
         if not self.state.set_model(spec or ""):
-            self.refresh()  # put the spec back
+            self._sync_spec()  # put the spec back (the state did not change)
 
     def _on_weights(self, event: Any) -> None:
-        if self._syncing or event.new == self.state.weights:
+        if event.new == self.state.weights:
             return
         if not self.state.set_weights(event.new):
-            self.refresh()  # put the choice back
+            self._sync_choices()  # put the choice back (the state did not change)
 
     def _on_whatif(self, event: Any) -> None:
-        if self._syncing:
-            return
-        self.state.set_whatif(bool(event.new))
+        if bool(event.new) != self.state.whatif:
+            self.state.set_whatif(bool(event.new))
 
     def _on_slider(self, slot: int, x: float) -> None:
-        if self._syncing or slot >= len(self._slider_specs):
+        # The state holds the value, the slider a position: the two do not round-trip exactly
+        # (log10 and back), and a value the slider cannot show (a zero variance) stands at
+        # its guess's position. So "differs from the state" is asked of the position this
+        # slider last stood for.
+        if slot >= len(self._slider_specs) or x == self._slider_x[slot]:
             return
+        self._slider_x[slot] = x
         spec = self._slider_specs[slot]
         self.state.set_whatif_value(spec.name, spec.value_of(x))
 

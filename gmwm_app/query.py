@@ -1,7 +1,7 @@
 """The URL round trip of a session: its shareable settings as query parameters and back.
 
 :class:`QueryMixin` holds these methods of :class:`gmwm_app.state.AppState` (it has the
-state's parameters, ``read``, ``precompute``, ``install`` and ``set_model``).
+state's parameters, ``read``, ``precompute``, ``install``, ``set_model`` and ``_publish``).
 """
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ class QueryMixin:
             if not self.set_model(s["model"]):
                 problems.append(self.error)
         if problems:
-            self.param.update(error="; ".join(dict.fromkeys(problems)), revision=self.revision + 1)
+            self._publish(error="; ".join(dict.fromkeys(problems)))
             return False
         return True
 

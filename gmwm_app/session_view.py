@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import panel as pn
+import param
 
 from engine.formats import FORMATS, export
 from engine.session import Session, SessionError, session_from_json, session_to_json
@@ -30,6 +31,7 @@ from gmwm_app.data import LoadedData
 from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size
 from gmwm_app.state import AppState, demo_path
+from gmwm_app.views import redraws
 
 if TYPE_CHECKING:
     from gmwm_app.jobs import Jobs
@@ -217,8 +219,7 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
     if problems:
         state.report_error("Session not fully restored: " + "; ".join(dict.fromkeys(problems)))
         return False
-    notes = "; ".join(plan.notes)
-    state.param.update(error="", notice=notes, revision=state.revision + 1)
+    state.show_notice("; ".join(plan.notes), clear_error=True)
     return True
 
 
@@ -359,13 +360,18 @@ def download_button(
     )
 
 
-class SessionPanel:
-    """The session, export and time-gap widgets of one page (see the module docstring)."""
+class SessionPanel(pn.viewable.Viewer):
+    """The session, export and time-gap widgets of one page (see the module docstring).
+
+    The file names, the fits kept for the exports and the time-gap box depend on the state
+    parameters they show (``param.depends(..., watch=True)``).
+    """
+
+    state = param.ClassSelector(class_=AppState, constant=True, doc="The session state.")
 
     def __init__(self, state: AppState, jobs: Jobs) -> None:
-        self.state = state
+        super().__init__(state=state)
         self.jobs = jobs
-        s = state
         self._retry: tuple[str, dict[str, Any]] | None = None
         self._load: dict[str, Any] = {}  # load options of the data shown (for the session)
         self.session_download = download_button(
@@ -428,7 +434,6 @@ class SessionPanel:
             styles={"border": "1px solid #e0a800", "border-radius": "4px"},
             margin=(5, 10),
         )
-        s.param.watch(self._on_state, "revision")
         self.refresh()
 
     # layout pieces ---------------------------------------------------------------------------
@@ -463,14 +468,23 @@ class SessionPanel:
         """The time-gap box for the main area."""
         return [self.gap_box]
 
-    # refresh ---------------------------------------------------------------------------------
-    def _on_state(self, _event: Any = None) -> None:
-        try:
-            self.refresh()
-        except Exception:  # never break the page over a label
-            pass
+    def __panel__(self) -> pn.Column:
+        return pn.Column(*self.sidebar(), *self.main(), sizing_mode="stretch_width", margin=0)
 
+    # state -> widgets ------------------------------------------------------------------------
+    @param.depends(
+        "state.filename",
+        "state.channel",
+        "state.result",
+        "state.loads",
+        "state.fs",
+        "state.robust",
+        watch=True,
+    )
+    @redraws("the export and session buttons")
     def refresh(self) -> None:
+        """The download names, the fits kept for the exports and their preview, from the
+        state."""
         s = self.state
         self.session_download.filename = session_filename(s)
         stem = Path(s.filename or "data").stem
@@ -486,7 +500,11 @@ class SessionPanel:
         )
         self._remember_fit()
         self._on_format()
-        if self.gap_box.visible and not is_gap_error(s.error):
+
+    @param.depends("state.error", watch=True)
+    def _hide_gap_box(self) -> None:
+        """The time-gap box goes with its error (another message replaced it)."""
+        if self.gap_box.visible and not is_gap_error(self.state.error):
             self.gap_box.visible = False
 
     def _remember_fit(self) -> None:
@@ -559,7 +577,7 @@ class SessionPanel:
             s.report_error(f"Could not export ({key}): {e}")
             return io.StringIO(f"# could not export: {e}\n")
         if caught:  # e.g. an autopilot value outside its documented range
-            s.notice = "Export warning: " + "; ".join(str(w.message) for w in caught)
+            s.show_notice("Export warning: " + "; ".join(str(w.message) for w in caught))
         return io.StringIO(text)
 
     def _on_restore(self, event: Any) -> None:

@@ -5,9 +5,16 @@ the widgets drive, so it can be tested without a browser. Data flows one way::
 
     file -> ImuLog -> WaveletVariance (computed once per channel, cached) -> fit_gmwm -> result
 
-Changing the model refits on the cached WV; it never recomputes the WV. Every public action
-returns ``True`` on success; on failure it sets :attr:`AppState.error` to a sentence that says
-what went wrong and how to fix it, and leaves the previous (valid) state in place.
+Changing the model refits on the cached WV (:class:`gmwm_app.wv_cache.WVCache`); it never
+recomputes the WV. Every public action returns ``True`` on success; on failure it sets
+:attr:`AppState.error` to a sentence that says what went wrong and how to fix it (and logs
+it), and leaves the previous (valid) state in place. Each action changes its parameters in one
+``param.update``, so that a view depending on several of them draws once.
+
+The actions live with their ideas: the data and model actions here, the what-if mode in
+:mod:`gmwm_app.whatif`, the URL round trip in :mod:`gmwm_app.query`, ranking and inference in
+:mod:`gmwm_app.selection_state`, the JSON export in :mod:`gmwm_app.fit_export` (mixins of
+:class:`AppState`).
 
 Heavy work (reading a file, computing a WV) is split from the state change so that the app
 can run it in a worker thread: :meth:`AppState.read` and :meth:`AppState.precompute` /
@@ -17,13 +24,11 @@ can run it in a worker thread: :meth:`AppState.read` and :meth:`AppState.precomp
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,26 +45,25 @@ from gmwm_app.data import (
     message_of,
     precompute,
     read_source,
-    store_wv,
     summary_has_robust,
     unit_of,
-    wv_from_cache,
     wv_matrix_of,
 )
+from gmwm_app.fit_export import ExportMixin
 from gmwm_app.query import QueryMixin
+from gmwm_app.selection_state import Inference, SelectionMixin
 from gmwm_app.whatif import SliderSpec, WhatIfMixin
+from gmwm_app.wv_cache import WVCache, WVKey, wv_from_cache
 
 __all__ = [
     "AppState",
+    "Inference",
     "PROCESS_CODES",
     "demo_path",
     "format_value",
 ]
 
 log = logging.getLogger(__name__)
-
-#: WV/WCCV matrices kept in a session's WV cache (multi-channel view).
-N_WV_MATRICES = 4
 
 #: Process codes in the order of the add buttons: the engine's processes, in its order.
 PROCESS_CODES: tuple[str, ...] = tuple(eg.PROCESS_TYPES)
@@ -96,25 +100,16 @@ def format_value(v: float, digits: int = 4) -> str:
     return f"{v:.{digits - 1}e}"
 
 
-@dataclass
-class Inference:
-    """95% asymptotic intervals (``ParamInterval`` list) and J-test of one fit."""
-
-    result: Any
-    intervals: list[Any]
-    j_test: Any = None  # engine.inference.JTest, None when it cannot be computed
-    j_error: str = ""
-
-
 # ---------------------------------------------------------------------------------------------
 # the state
 # ---------------------------------------------------------------------------------------------
-class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
+class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Parameterized):
     """Everything one browser session knows: data, channel, WV, model, fit, what-if values.
 
     Parameters are set by the action methods (``load_*``, ``select_channel``, ``set_fs``,
     ``set_robust``, ``add_process``, ``remove_process``, ``set_model``, ``set_whatif_value``,
-    ``from_query``); views watch :attr:`revision`, which increases after every change.
+    ``from_query``), each change in one ``param.update`` (:meth:`_publish`): a view depends on
+    the parameters it draws (``param.depends``/``pn.bind``) and redraws once per action.
     """
 
     # data
@@ -164,19 +159,25 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         allow_None=True,
         doc="The intervals and J-test installed last (the views showing them depend on it).",
     )
+    loads = param.Integer(
+        default=0,
+        doc="Data installs: a reload of the (shared) demo log is a new load, whose fits are "
+        "new ones (e.g. the session panel's fits of other channels are forgotten).",
+    )
     # messages
     error = param.String(default="", doc="Last error, in words (empty when fine).")
     notice = param.String(default="", doc="Information (not an error), e.g. a URL fallback.")
-    revision = param.Integer(default=0, doc="Increases after every change the views draw.")
+    # TODO(issue #20): remove once the lazily built tabs depend on the parameters they draw;
+    # it is written by _publish only and read by nothing of the Fit page
+    revision = param.Integer(default=0, doc="Increases after every change (legacy).")
 
     def __init__(self, **params: Any) -> None:
         super().__init__(**params)
         self._log: Any = None
-        self._wv_cache: dict[tuple[str, float, bool], eg.WaveletVariance] = {}
+        self._wv_cache = WVCache()  # of self._log (the two change together, under _lock)
         self._lock = threading.Lock()
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
-        self.loads = 0  # data installs: a reload of the (shared) demo log is a new load
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
 
     # ---------------------------------------------------------------------------------
@@ -186,47 +187,68 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         """:func:`gmwm_app.data.wv_matrix_of`, cached in the session's WV cache while ``lg``
         is the session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
         """
-        key = ("wv-matrix", tuple(channels), float(fs))
         with self._lock:
             cache = self._wv_cache if self._log is lg else None
-            hit = cache.get(key) if cache is not None else None
+            hit = cache.matrix(channels, fs) if cache is not None else None
         if hit is not None:
             return hit
         out = wv_matrix_of(lg, channels, fs)
         with self._lock:
             self.wvm_computations += 1
             if cache is not None and self._log is lg:
-                cache[key] = out
-                old = [k for k in cache if k[0] == "wv-matrix" and isinstance(k[1], tuple)]
-                for k in old[:-N_WV_MATRICES]:
-                    cache.pop(k)
+                cache.store_matrix(channels, fs, out)
         return out
 
-    def cached_wvs(self) -> dict[tuple[str, float, bool], eg.WaveletVariance]:
-        """A copy of the session's WV cache, ``(channel, fs, robust) -> WaveletVariance``."""
+    def cached_wvs(self) -> dict[WVKey, eg.WaveletVariance]:
+        """A copy of the session's WVs, ``(channel, fs, robust) -> WaveletVariance``."""
         with self._lock:
-            return dict(self._wv_cache)
+            return dict(self._wv_cache.wvs)
 
     @property
     def log(self) -> Any:
         """The loaded ``ImuLog`` (None before the first load)."""
         return self._log
 
+    def _publish(self, **changes: Any) -> None:
+        """Set parameters in one ``param.update``: each watcher of them runs once, with the
+        final values.
+
+        An error message equal to the one shown is triggered again (an unchanged value wakes
+        no watcher): a repeated failure is reported as often as it happens. ``revision`` is
+        also increased, for the views that still watch it (see its TODO).
+        """
+        again = bool(changes.get("error")) and changes["error"] == self.error
+        self.param.update(**changes, revision=self.revision + 1)
+        if again:
+            self.param.trigger("error")
+
     def report_error(self, message: str) -> bool:
-        """Show ``message`` as the error of the page (state otherwise unchanged); False."""
-        self.param.update(error=message, revision=self.revision + 1)
+        """Show ``message`` as the error of the page (state otherwise unchanged) and log it;
+        returns False."""
+        log.warning("reported to the page: %s", message)
+        self._publish(error=message)
         return False
 
     _fail = report_error
 
+    def show_notice(self, notice: str, *, clear_error: bool = False) -> None:
+        """Show ``notice`` (information, not an error; empty: none); ``clear_error`` also
+        removes the error shown (e.g. a session restored in full)."""
+        self._publish(notice=notice, **({"error": ""} if clear_error else {}))
+
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool:
-        """Run ``fn``; any exception becomes a message in :attr:`error` (never raised)."""
+        """Run ``fn``; an exception becomes a message in :attr:`error` (never raised).
+
+        The errors an action expects (bad input, unreadable file) are reported as they are;
+        anything else is a bug: logged with its traceback, and still shown on the page, as an
+        "unexpected" error (the session keeps working).
+        """
         try:
             return fn()
         except (ValueError, KeyError, OSError, TypeError, IndexError) as e:
             return self._fail(f"{action}: {message_of(e)}")
         except Exception as e:  # the UI must keep working
-            log.exception("unexpected error while %s", action)
+            log.exception("unexpected error while: %s", action)
             return self._fail(f"{action}: unexpected {type(e).__name__}: {e}")
 
     # ---------------------------------------------------------------------------------
@@ -265,6 +287,12 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
         ``progress(j, J)`` is called as each level is done (a robust WV of a long log takes
         seconds).
+
+        Raises
+        ------
+        ValueError
+            The WV cannot be computed (e.g. a channel of NaN); the job running this reports
+            it on the page (``Jobs.load``'s failure hook).
         """
         with self._lock:  # the log and its cache, together (a new log brings a new cache)
             lg, cache = self._log, self._wv_cache
@@ -273,16 +301,13 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         ch = channel or self.channel
         f = float(fs or self.fs or lg.fs)
         rob = self.robust if robust is None else bool(robust)
-        try:
-            with self._lock:
-                if wv_from_cache(cache, ch, f, rob) is not None:
-                    return
-            wv = compute_wv(lg, ch, f, rob, progress)
-            with self._lock:
-                store_wv(cache, ch, f, rob, wv)
-                self.wv_computations += 1
-        except Exception:  # reported by the state change that follows
-            pass
+        with self._lock:
+            if cache.find(ch, f, rob) is not None:
+                return
+        wv = compute_wv(lg, ch, f, rob, progress)
+        with self._lock:
+            cache.store(ch, f, rob, wv)
+            self.wv_computations += 1
 
     # ---------------------------------------------------------------------------------
     # WV cache
@@ -297,13 +322,12 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             summary file.
         """
         with self._lock:
-            wv = wv_from_cache(self._wv_cache, channel, fs, robust)
-            if wv is not None:
-                self._wv_cache[(channel, fs, robust)] = wv
-                return wv
+            wv = self._wv_cache.find(channel, fs, robust)
+        if wv is not None:
+            return wv
         wv = compute_wv(self._log, channel, fs, robust)
         with self._lock:
-            store_wv(self._wv_cache, channel, fs, robust, wv)
+            self._wv_cache.store(channel, fs, robust, wv)
             self.wv_computations += 1
         return wv
 
@@ -366,13 +390,16 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
                     "the robust WV needs the raw log"
                 )
                 rob = False
-            cache = dict(loaded.wv_cache)
-            wv = wv_from_cache(cache, ch, f, rob)
+            cache = WVCache(loaded.wv_cache)
+            wv = wv_from_cache(cache.wvs, ch, f, rob)
             computed = 0
             if wv is None:
+                failed = loaded.wv_errors.get((ch, f, rob))
+                if failed is not None:  # precompute tried (and logged it): not again
+                    raise ValueError(failed)
                 wv = compute_wv(lg, ch, f, rob)
                 computed = 1
-            store_wv(cache, ch, f, rob, wv)
+            cache.store(ch, f, rob, wv)
             model = self.model
             if loaded.source == "scenario" and not len(model):
                 # a teaching scenario starts with the form of its true model
@@ -388,11 +415,11 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
                 msgs.append(f"the model {model.spec()} was cleared: {fit}")
             with self._lock:
                 self._log = lg
-                self.loads += 1
                 self._wv_cache = cache
                 self.wv_computations += computed + loaded.computations
             fs_src = "user" if fs is not None and f != f_file else fs_source(lg)
-            self.param.update(
+            self._publish(
+                loads=self.loads + 1,
                 source=loaded.source,
                 path=loaded.path if loaded.source in ("path", "scenario") else "",
                 filename=loaded.name,
@@ -407,7 +434,6 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
                 **self._model_update(new_model, result),
                 error="; ".join(msgs),
                 notice="; ".join(lg.meta.get("notes", []) or []),
-                revision=self.revision + 1,
             )
             return not msgs
 
@@ -479,13 +505,12 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
             msgs.append(f"the model {self.model.spec()} was cleared: {fit}")
             model, result = eg.Model(), None
         ch = changes.get("channel", self.channel)
-        self.param.update(
+        self._publish(
             wv=wv,
             **changes,
             **self._data_info(self._log, ch, wv),
             **self._model_update(model, result),
             error="; ".join(msgs),
-            revision=self.revision + 1,
         )
         return not msgs
 
@@ -493,14 +518,21 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
     # model actions
     # ---------------------------------------------------------------------------------
     def _fit_or_none(
-        self, wv: eg.WaveletVariance, model: eg.Model, start: eg.Model | None = None
+        self,
+        wv: eg.WaveletVariance,
+        model: eg.Model,
+        start: eg.Model | None = None,
+        weights: str | None = None,
     ) -> eg.GMWMResult | str | None:
-        """Fit ``model`` (structure only, so a spec always gives the same fit) or say why not."""
+        """Fit ``model`` (structure only, so a spec always gives the same fit) or say why not.
+
+        ``weights``: the GMWM weights (the session's by default).
+        """
         if len(model) == 0:
             return None
         m = start if start is not None else model.cleared()
         try:
-            return eg.fit_gmwm(wv, m, weights=self.weights)
+            return eg.fit_gmwm(wv, m, weights=weights or self.weights)
         except (eg.ModelError, eg.FitError, ValueError) as e:
             return message_of(e)
 
@@ -515,12 +547,10 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         def run() -> bool:
             if weights not in ("ci", "identity", "efficient"):
                 raise ValueError(f"unknown weights {weights!r}: use ci, identity or efficient")
-            old = self.weights
-            self.param.update(weights=weights)
-            if self.wv is None or not len(self.model) or self._apply_model(self.model):
+            if self.wv is None or not len(self.model):
+                self._publish(weights=weights)
                 return True
-            self.param.update(weights=old)
-            return False
+            return self._apply_model(self.model, weights=weights)  # the choice and its fit
 
         return self._guard("Could not switch the weights", run)
 
@@ -541,15 +571,19 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
 
         return self._guard("Could not set the model", run)
 
-    def _apply_model(self, m: eg.Model, start: eg.Model | None = None) -> bool:
+    def _apply_model(
+        self, m: eg.Model, start: eg.Model | None = None, weights: str | None = None
+    ) -> bool:
+        """Fit ``m`` (with ``weights``, the session's by default) and show it: one update."""
         if len(m) and self.wv is None:
             raise ValueError("load data before building a model")
         if len(m):
             m.validate(self.wv.n_levels)
-        fit = self._fit_or_none(self.wv, m, start) if self.wv is not None else None
+        fit = self._fit_or_none(self.wv, m, start, weights) if self.wv is not None else None
         if isinstance(fit, str):
             return self._fail(f"Cannot fit {m.spec()}: {fit}")
-        self.param.update(**self._model_update(m, fit), error="", revision=self.revision + 1)
+        chosen = {"weights": weights} if weights is not None else {}
+        self._publish(**self._model_update(m, fit), **chosen, error="")
         return True
 
     def add_process(self, code: str) -> bool:
@@ -631,14 +665,16 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
     # what the views draw
     # ---------------------------------------------------------------------------------
     def display_model(self) -> eg.Model | None:
-        """The model whose curves are drawn: the what-if one, the fit, or None."""
+        """The model whose curves are drawn: the what-if one, the fit, or None.
+
+        The what-if values are checked as they are set (:meth:`set_whatif_value`): should
+        they still not make a model, the error is raised (a redraw reports it), not hidden
+        behind the fit's curves.
+        """
         if not len(self.model) or self.wv is None:
             return None
         if self.whatif:
-            try:
-                return self.whatif_model()
-            except (ValueError, KeyError):
-                return self.result.model if self.result is not None else None
+            return self.whatif_model()
         return self.result.model if self.result is not None else None
 
     def display_objective(self) -> float | None:
@@ -668,129 +704,3 @@ class AppState(QueryMixin, WhatIfMixin, param.Parameterized):
         if not res.converged:
             out.append(f"not converged: {res.message}")
         return out
-
-    # ---------------------------------------------------------------------------------
-    # model selection and inference (compute_* are worker-thread safe: no parameter change)
-    # ---------------------------------------------------------------------------------
-    def compute_ranking(
-        self, spec: str, *, progress: Callable[[int, int], None] | None = None
-    ) -> tuple[eg.WaveletVariance, Any]:
-        """Rank models by WVIC on the current WV: every sub-model of a maximal model
-        (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
-        from engine.inference import rank_models
-
-        wv = self.wv
-        if wv is None:
-            raise ValueError("load data before ranking models")
-        parts = [p.strip() for p in (spec or "").split(",") if p.strip()]
-        if not parts:
-            raise ValueError(
-                "type a maximal model (e.g. 3*GM+WN+QN+RW+DR) or candidate "
-                "models separated by commas"
-            )
-        try:
-            if len(parts) == 1:
-                sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
-            else:
-                sel = rank_models(wv, parts, weights=self.weights, progress=progress)
-        except (eg.ModelError, eg.FitError) as e:
-            raise ValueError(message_of(e)) from None
-        return wv, sel
-
-    def install_ranking(self, out: tuple[eg.WaveletVariance, Any]) -> bool:
-        """Show a ranking from :meth:`compute_ranking` (refused if the data changed since)."""
-        wv, sel = out
-        if wv is not self.wv:
-            return self._fail("The data changed while ranking: rank again")
-        self.param.update(selection=sel, error="", revision=self.revision + 1)
-        return True
-
-    def rank(self, spec: str, *, progress: Callable[[int, int], None] | None = None) -> bool:
-        """:meth:`compute_ranking` then :meth:`install_ranking` (synchronous)."""
-        return self._guard(
-            "Could not rank the models",
-            lambda: self.install_ranking(self.compute_ranking(spec, progress=progress)),
-        )
-
-    def compute_inference(self, result: eg.GMWMResult) -> Inference:
-        """95% asymptotic intervals and the J-test of a fit (worker-thread safe)."""
-        from engine.inference import j_test, param_intervals
-
-        try:
-            intervals = param_intervals(result, method="asymptotic", level=0.95)
-        except (eg.FitError, np.linalg.LinAlgError) as e:
-            raise ValueError(f"no intervals for {result.model.spec()}: {message_of(e)}") from None
-        try:
-            return Inference(result, intervals, j_test(result), "")
-        except (eg.FitError, ValueError, np.linalg.LinAlgError) as e:
-            return Inference(result, intervals, None, message_of(e))
-
-    def install_inference(self, inf: Inference) -> bool:
-        """Cache intervals and J-test of a fit (at most 32 fits kept) and redraw."""
-        if len(self._inference) >= 32:
-            self._inference.pop(next(iter(self._inference)))
-        self._inference[id(inf.result)] = inf
-        self.param.update(inferred=inf, revision=self.revision + 1)
-        return True
-
-    def inference(self, result: eg.GMWMResult | None = None) -> Inference | None:
-        """The cached intervals and J-test of a fit (the current one by default), or None."""
-        res = self.result if result is None else result
-        inf = self._inference.get(id(res)) if res is not None else None
-        return inf if inf is not None and inf.result is res else None
-
-    def set_show_intervals(self, on: bool) -> bool:
-        """Show (or hide) the interval columns and the goodness-of-fit badge."""
-        self.param.update(show_intervals=bool(on), revision=self.revision + 1)
-        return True
-
-    # ---------------------------------------------------------------------------------
-    # export (the URL round trip: gmwm_app.query)
-    # ---------------------------------------------------------------------------------
-    def export_dict(self) -> dict[str, Any]:
-        """JSON-ready export: the fit (``GMWMResult.to_dict()``), datasheet values, data info.
-
-        Without a fit, the empirical WV alone (``"fit": null``).
-        """
-        out: dict[str, Any] = {
-            "app": "gmwm-app",
-            "query": self.to_query(),
-            "data": self.data_info(),
-        }
-        if self.result is not None:
-            out["fit"] = self.result.to_dict()
-            out["datasheet"] = eg.datasheet(
-                self.result.model, float(self.fs), self.unit, n_levels=self.result.wv.n_levels
-            )
-            out["warnings"] = self.warnings()
-        else:
-            out["fit"] = None
-            out["wv"] = None if self.wv is None else self.wv.to_dict()
-        if self.whatif and len(self.model):
-            m = self.whatif_model()
-            out["whatif"] = {
-                "model_values": m.spec(values=True),
-                "objective": self.display_objective(),
-            }
-        return out
-
-    def export_json(self) -> str:
-        """:meth:`export_dict` as indented JSON text."""
-        return json.dumps(self.export_dict(), indent=2, allow_nan=False, default=_json_default)
-
-    def export_filename(self) -> str:
-        """A file name for the JSON export, e.g. ``gmwm_demo_imu_gyro_x_2GM+WN+RW.json``."""
-        stem = Path(self.filename or "data").stem
-        spec = self.model.spec().replace("*", "") or "wv"
-        return f"gmwm_{stem}_{self.channel or 'none'}_{spec}.json"
-
-
-# ---------------------------------------------------------------------------------------------
-# module helpers
-# ---------------------------------------------------------------------------------------------
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"cannot export {type(o).__name__} to JSON")

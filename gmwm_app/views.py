@@ -10,7 +10,10 @@ plain data for the widgets of ``app.py``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+import functools
+import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from bokeh.models import (
@@ -33,6 +36,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from .state import AppState
 
 __all__ = [
+    "redraws",
+    "hidden_alert",
     "wv_data",
     "FitTables",
     "component_color",
@@ -43,6 +48,41 @@ __all__ = [
     "fit_summary",
     "add_renderer",
 ]
+
+log = logging.getLogger(__name__)
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def redraws(what: str) -> Callable[[_F], _F]:
+    """Decorate a view's method (taking no argument) that draws part of the page from the
+    state (a watcher).
+
+    A failure while drawing is a bug of the view, not of the state change that woke it: it is
+    logged with its traceback and shown on the page as a display error (through the state's
+    ``report_error``, on the object's ``state``), and never raised into the action that
+    changed the state (which succeeded). The method then returns None.
+
+    Parameters
+    ----------
+    what : str
+        What the method draws, for the message (e.g. ``"the WV plot"``).
+    """
+
+    def decorate(fn: _F) -> _F:
+        @functools.wraps(fn)
+        def draw(self: Any) -> Any:  # no other arguments: param.depends reads the signature
+            try:
+                return fn(self)
+            except Exception as e:  # see the docstring: logged and shown, never raised
+                log.exception("drawing %s failed", what)
+                self.state.report_error(f"Display error in {what}: {type(e).__name__}: {e}")
+                return None
+
+        return draw  # type: ignore[return-value]
+
+    return decorate
+
 
 #: Minimum legend label width (px); the residual strip has a legend as wide, so the two
 #: plot frames line up on the shared x axis.
@@ -339,13 +379,16 @@ def _table(
     return data_table(src, cols, name, css, height), src
 
 
-def hidden_alert(alert_type: str, **kw: Any) -> Any:
-    """An empty full-width alert, hidden until it has something to say.
+def hidden_alert(alert_type: str, text: Any = None, **kw: Any) -> Any:
+    """A full-width alert, hidden while it has nothing to say.
 
     Parameters
     ----------
     alert_type
         ``"danger"``, ``"warning"`` or ``"info"``.
+    text
+        What it says: a parameter (e.g. ``state.param.error``) the alert follows, shown when
+        not empty. None: an empty alert its owner sets (``object`` and ``visible``).
     **kw
         More settings (e.g. ``css_classes``).
 
@@ -355,9 +398,19 @@ def hidden_alert(alert_type: str, **kw: Any) -> Any:
         The alert.
     """
     import panel as pn
+    import param
 
+    if text is None:
+        text, visible = "", False
+    else:
+        visible = param.rx(text).rx.bool()
     return pn.pane.Alert(
-        "", alert_type=alert_type, visible=False, sizing_mode="stretch_width", margin=(5, 10), **kw
+        text,
+        alert_type=alert_type,
+        visible=visible,
+        sizing_mode="stretch_width",
+        margin=(5, 10),
+        **kw,
     )
 
 

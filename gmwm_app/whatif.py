@@ -48,21 +48,20 @@ class SliderSpec:
 
 class WhatIfMixin:
     """What-if actions of :class:`gmwm_app.state.AppState` (its parameters ``model``,
-    ``result``, ``wv``, ``whatif``, ``whatif_values``, ``revision``; its ``_guard``,
+    ``result``, ``wv``, ``whatif``, ``whatif_values``; its ``_publish``, ``_guard``,
     ``_model_update`` and ``_apply_model``)."""
 
     param: Any
     model: eg.Model
     wv: Any
     whatif_values: dict[str, float]
-    revision: int
 
     def set_whatif(self, on: bool) -> bool:
         """Turn the what-if mode on (curves follow the sliders) or off (curves show the fit)."""
         vals = dict(self.whatif_values)
         if on:
             vals = {**self._default_values(), **vals}
-        self.param.update(whatif=bool(on), whatif_values=vals, revision=self.revision + 1)
+        self._publish(whatif=bool(on), whatif_values=vals)
         return True
 
     def set_whatif_value(self, name: str, value: float) -> bool:
@@ -75,20 +74,17 @@ class WhatIfMixin:
             if not math.isfinite(v):
                 raise ValueError(f"{name} must be a finite number, got {value}")
             self.whatif_model({name: v})  # validates the value (e.g. beta > 0)
-            self.param.update(
-                whatif_values={**self.whatif_values, name: v}, error="", revision=self.revision + 1
-            )
+            self._publish(whatif_values={**self.whatif_values, name: v}, error="")
             return True
 
         return self._guard("Could not set the what-if value", run)
 
     def reset_whatif(self) -> bool:
         """What-if values back to the fitted ones."""
-        self.param.update(
+        self._publish(
             whatif_values=self._model_update(self.model, self.result)["whatif_values"]
             or self._default_values(),
             error="",
-            revision=self.revision + 1,
         )
         return True
 

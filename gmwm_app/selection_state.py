@@ -1,0 +1,118 @@
+"""Model selection and inference of a session (no widgets): WVIC ranking, intervals, J-test.
+
+:class:`SelectionMixin` holds these actions of :class:`gmwm_app.state.AppState` (it has the
+state's parameters ``wv``, ``weights``, ``result``, ``selection``, ``show_intervals`` and
+``inferred``, and its ``_publish``, ``_fail`` and ``_guard``). The ``compute_*`` methods are
+worker-thread safe (no parameter change); the ``install_*`` methods put their results in the
+state on the event loop. The views are :mod:`gmwm_app.selection_view` (the "Model selection"
+tab, the J-test badge) and the Fit tab's parameter table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+import engine as eg
+from gmwm_app.data import message_of
+
+__all__ = ["Inference", "SelectionMixin", "N_INFERENCES"]
+
+#: Fits whose intervals and J-test a session keeps.
+N_INFERENCES = 32
+
+
+@dataclass
+class Inference:
+    """95% asymptotic intervals (``ParamInterval`` list) and J-test of one fit."""
+
+    result: Any
+    intervals: list[Any]
+    j_test: Any = None  # engine.inference.JTest, None when it cannot be computed
+    j_error: str = ""
+
+
+class SelectionMixin:
+    """Ranking and inference actions of :class:`gmwm_app.state.AppState`."""
+
+    param: Any
+    wv: eg.WaveletVariance | None
+    weights: str
+    result: eg.GMWMResult | None
+    _inference: dict[int, Inference]
+
+    def compute_ranking(
+        self, spec: str, *, progress: Callable[[int, int], None] | None = None
+    ) -> tuple[eg.WaveletVariance, Any]:
+        """Rank models by WVIC on the current WV: every sub-model of a maximal model
+        (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
+        from engine.inference import rank_models
+
+        wv = self.wv
+        if wv is None:
+            raise ValueError("load data before ranking models")
+        parts = [p.strip() for p in (spec or "").split(",") if p.strip()]
+        if not parts:
+            raise ValueError(
+                "type a maximal model (e.g. 3*GM+WN+QN+RW+DR) or candidate "
+                "models separated by commas"
+            )
+        try:
+            if len(parts) == 1:
+                sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
+            else:
+                sel = rank_models(wv, parts, weights=self.weights, progress=progress)
+        except (eg.ModelError, eg.FitError) as e:
+            raise ValueError(message_of(e)) from None
+        return wv, sel
+
+    def install_ranking(self, out: tuple[eg.WaveletVariance, Any]) -> bool:
+        """Show a ranking from :meth:`compute_ranking` (refused if the data changed since)."""
+        wv, sel = out
+        if wv is not self.wv:
+            return self._fail("The data changed while ranking: rank again")
+        self._publish(selection=sel, error="")
+        return True
+
+    def rank(self, spec: str, *, progress: Callable[[int, int], None] | None = None) -> bool:
+        """:meth:`compute_ranking` then :meth:`install_ranking` (synchronous)."""
+        return self._guard(
+            "Could not rank the models",
+            lambda: self.install_ranking(self.compute_ranking(spec, progress=progress)),
+        )
+
+    def compute_inference(self, result: eg.GMWMResult) -> Inference:
+        """95% asymptotic intervals and the J-test of a fit (worker-thread safe)."""
+        from engine.inference import j_test, param_intervals
+
+        try:
+            intervals = param_intervals(result, method="asymptotic", level=0.95)
+        except (eg.FitError, np.linalg.LinAlgError) as e:
+            raise ValueError(f"no intervals for {result.model.spec()}: {message_of(e)}") from None
+        try:
+            return Inference(result, intervals, j_test(result), "")
+        except (eg.FitError, ValueError, np.linalg.LinAlgError) as e:
+            return Inference(result, intervals, None, message_of(e))
+
+    def install_inference(self, inf: Inference) -> bool:
+        """Cache intervals and J-test of a fit (the latest :data:`N_INFERENCES` fits kept) and
+        set :attr:`inferred` (the views showing them depend on it)."""
+        if len(self._inference) >= N_INFERENCES:
+            self._inference.pop(next(iter(self._inference)))
+        self._inference[id(inf.result)] = inf
+        self._publish(inferred=inf)
+        return True
+
+    def inference(self, result: eg.GMWMResult | None = None) -> Inference | None:
+        """The cached intervals and J-test of a fit (the current one by default), or None."""
+        res = self.result if result is None else result
+        inf = self._inference.get(id(res)) if res is not None else None
+        return inf if inf is not None and inf.result is res else None
+
+    def set_show_intervals(self, on: bool) -> bool:
+        """Show (or hide) the interval columns and the goodness-of-fit badge."""
+        self._publish(show_intervals=bool(on))
+        return True
