@@ -167,9 +167,6 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # messages
     error = param.String(default="", doc="Last error, in words (empty when fine).")
     notice = param.String(default="", doc="Information (not an error), e.g. a URL fallback.")
-    # TODO(issue #20): remove once the lazily built tabs depend on the parameters they draw;
-    # it is written by _publish only and read by nothing of the Fit page
-    revision = param.Integer(default=0, doc="Increases after every change (legacy).")
 
     def __init__(self, **params: Any) -> None:
         super().__init__(**params)
@@ -214,11 +211,10 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         final values.
 
         An error message equal to the one shown is triggered again (an unchanged value wakes
-        no watcher): a repeated failure is reported as often as it happens. ``revision`` is
-        also increased, for the views that still watch it (see its TODO).
+        no watcher): a repeated failure is reported as often as it happens.
         """
         again = bool(changes.get("error")) and changes["error"] == self.error
-        self.param.update(**changes, revision=self.revision + 1)
+        self.param.update(**changes)
         if again:
             self.param.trigger("error")
 

@@ -46,7 +46,7 @@ def _csv(names: tuple[str, ...], n: int = 4096, seed: int = 0) -> bytes:
 def test_the_fit_page_watches_no_revision(app: Any) -> None:
     s = app.state
     watched = set(s.param.watchers)  # parameter name -> its watchers (this instance)
-    assert "revision" not in watched  # the lazily built tabs are not built: none of them
+    assert not hasattr(s.param, "revision")  # no catch-all counter: each view names its parameters
     assert {"wv", "model", "result", "error", "inferred", "show_intervals"} <= watched
 
 
@@ -54,7 +54,7 @@ def test_each_part_redraws_once_per_action(app: Any, monkeypatch: pytest.MonkeyP
     s = app.state
     plot = _count(monkeypatch, app.views, "update")
     tables = _count(monkeypatch, app.tables, "update")
-    # a model change sets model, result, whatif_values, error (and revision) in one update
+    # a model change sets model, result, whatif_values and error in one update
     assert s.set_model("GM+WN"), s.error
     assert (len(plot), len(tables)) == (1, 1)
     # a channel sets ten parameters at once: still one redraw of each
