@@ -141,8 +141,9 @@ class Jobs:
             with set_curdoc(doc):
                 try:
                     fn()
-                except Exception:  # never leave the loop with an exception
+                except Exception as e:  # never leave the loop with an exception: say so
                     log.exception("page callback failed")
+                    self.failed("Could not update the page", e)
 
         doc.add_next_tick_callback(run)
 

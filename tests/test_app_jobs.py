@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import panel as pn
+import pytest
 
 from gmwm_app import _panel_compat as compat
 from gmwm_app.jobs import Jobs
@@ -186,3 +188,25 @@ def test_live_apps_lists_sessions_oldest_first_and_forgets_closed_ones(app_demo:
     gc.collect()
     assert gone not in {id(a) for a in live_apps()}
     assert [id(a) for a in live_apps() if any(a is b for b in apps)] == [id(a) for a in apps]
+
+
+def test_a_failing_page_update_reaches_the_page_and_the_log(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    class ServedDoc:  # a document of a served session whose next tick comes at once
+        session_context = object()
+
+        def add_next_tick_callback(self, fn: Any) -> None:
+            fn()
+
+    jobs = Jobs(ServedDoc())
+    shown: list[str] = []
+    jobs.failed = lambda message, err: shown.append(f"{message}: {err}")
+
+    def broken() -> None:
+        raise RuntimeError("a figure could not be drawn")
+
+    with caplog.at_level(logging.ERROR, logger="gmwm_app.jobs"):
+        jobs.locked(broken)  # no exception leaves the loop
+    assert shown == ["Could not update the page: a figure could not be drawn"]
+    assert "page callback failed" in caplog.text and "RuntimeError" in caplog.text
