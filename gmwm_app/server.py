@@ -40,6 +40,7 @@ __all__ = [
     "serialize_ahead",
     "PULLS",
     "PagePool",
+    "served_apps",
     "RequestShape",
     "request_shape",
     "default_prebuild",
@@ -268,6 +269,22 @@ def request_shape(request: Any, app_url: str = "/") -> RequestShape | None:
     return RequestShape(str(request.protocol), str(request.host), path, app_path)
 
 
+def served_apps() -> list[GMWMApp]:
+    """The app objects of the sessions being served now (:func:`gmwm_app.app.live_apps`
+    whose document still has its session).
+
+    A session's app leaves ``live_apps()`` only when it is garbage-collected: the page and
+    its app refer to each other (the template holds the app's watchers, the app its
+    template), so that takes a full collection of the cyclic garbage collector, which Panel
+    schedules 5 s after a session ends and which may come much later (Panel runs none while
+    sessions keep ending; a long-lived server's gen-2 collections are rare). Its document
+    drops its session context at once when Bokeh discards the session (Panel's
+    ``_destroy_document``): a page request whose websocket never came, or a tab closed
+    while its data loaded, is then no session opening or loading any more.
+    """
+    return [app for app in live_apps() if app.served]
+
+
 def _lowest_priority() -> None:
     """Run this thread at the lowest CPU priority (Linux: nice is per thread)."""
     try:
@@ -316,8 +333,8 @@ class PagePool:
     on_full : callable, optional
         ``on_full(size)`` when the pool becomes full (called in the build thread).
     sessions : callable
-        The app objects of the sessions (:func:`gmwm_app.app.live_apps`), each with its
-        ``busy`` (loading data) and ``ready`` (first data shown) flags.
+        The app objects of the sessions (:func:`served_apps`), each with its ``busy``
+        (loading data) and ``ready`` (first data shown) flags.
     """
 
     #: Consecutive failed builds after which the pool stops building.
@@ -333,7 +350,7 @@ class PagePool:
         app_url: str = "/",
         on_demand: Callable[[], int] = lambda: 0,
         on_full: Callable[[int], None] | None = None,
-        sessions: Callable[[], Iterable[Any]] = live_apps,
+        sessions: Callable[[], Iterable[Any]] = served_apps,
     ) -> None:
         self.size = max(0, int(size))
         self.shape = shape

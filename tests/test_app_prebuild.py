@@ -24,9 +24,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import stop_server
 
 from gmwm_app import server
-from gmwm_app.app import live_apps
+from gmwm_app.app import live_apps, set_listed
 
 REPO = Path(__file__).resolve().parents[1]
 POOL = 3
@@ -65,6 +66,7 @@ def pooled(app_demo_file: Path) -> Iterator[dict[str, Any]]:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
     n_pools = len(server.POOLS)
+    scheduled = set(pn.state._scheduled)
     thread = pn.serve(
         {"/": server.create_application(prebuild=POOL, host=f"127.0.0.1:{port}")},
         port=port,
@@ -86,8 +88,7 @@ def pooled(app_demo_file: Path) -> Iterator[dict[str, Any]]:
         _wait(lambda: len(pool) == POOL and not pool.building, "the pool to fill")
         yield {"url": f"http://127.0.0.1:{port}/", "port": port, "pool": pool}
     finally:
-        thread.stop()
-        thread.join(timeout=10)
+        stop_server(thread, scheduled)
         if pool is not None:
             pool.close()
         if old is None:
@@ -281,14 +282,34 @@ def test_query_or_other_host_builds_on_demand(pooled: dict[str, Any]) -> None:
     assert doc.session_context.request.host == f"localhost:{pooled['port']}"
 
 
+def test_an_ended_session_not_yet_collected_does_not_pause_the_refill(
+    pooled: dict[str, Any],
+) -> None:
+    """A page request whose websocket never comes: Bokeh discards the session (here after
+    8 s), but its app stays in ``live_apps()`` until the garbage collector frees it (held
+    here, as a pending collection holds it). The pool refills all the same."""
+    pool = pooled["pool"]
+    _wait(lambda: len(pool) > 0, "a page in the pool")
+    handed = pool.stats["handed"]
+    _get(pooled["url"], host=pool.shape.host)  # (the host the pool serves now)
+    app = live_apps()[-1]
+    assert pool.stats["handed"] == handed + 1 and app.served and not app.ready
+    assert pool.busy()  # a session opening
+    _wait(lambda: not app.served, "Bokeh to discard the unused session", 60)
+    assert any(a is app for a in live_apps())  # ended, not collected
+    assert not pool.busy()
+    _wait(lambda: len(pool) == POOL and not pool.building, "the pool to refill")
+
+
 # ---------------------------------------------------------------------------------------------
 # refilling pauses while the sessions need the server (counted steps)
 # ---------------------------------------------------------------------------------------------
 class _Session:
-    """Stands for a session's app in ``live_apps()``: its busy and ready flags."""
+    """Stands for a session's app in ``live_apps()``: its busy, ready and served flags."""
 
     busy = False
     ready = True
+    served = True
 
 
 def test_refill_pauses_while_a_session_is_busy_or_opening() -> None:
@@ -332,6 +353,41 @@ def test_refill_pauses_while_a_session_is_busy_or_opening() -> None:
     finally:
         pool.close()
     assert pool.busy() is False and len(pool) == 0  # closed: its pages released
+
+
+class _Ended(_Session):
+    """An app whose session ended and which the garbage collector has not freed yet."""
+
+    served = False
+    ready = False
+
+
+def test_refill_counts_only_the_sessions_being_served() -> None:
+    assert server.PagePool.__init__.__kwdefaults__["sessions"] is server.served_apps
+    ended, opening = _Ended(), _Session()
+    opening.ready = False
+    set_listed(ended, True)
+    pool = server.PagePool(
+        1,
+        lambda doc: _Session(),
+        None,
+        shape=server.RequestShape("http", "h:1", "/", "/"),
+        # these two among the served apps (other tests' sessions may be open meanwhile)
+        sessions=lambda: [a for a in server.served_apps() if a in (ended, opening)],
+    )
+    try:
+        assert ended in live_apps() and ended not in server.served_apps()
+        assert pool.step()  # the ended session does not pause the refill
+        pool._building.result(timeout=60)
+        assert len(pool) == 1 and pool.stats["paused"] == 0
+        pool.size = 2
+        set_listed(opening, True)  # a session being served, opening
+        assert opening in server.served_apps()
+        assert not pool.step() and pool.stats["paused"] == 1
+    finally:
+        set_listed(ended, False)
+        set_listed(opening, False)
+        pool.close()
 
 
 def test_request_shape_and_default_size() -> None:
