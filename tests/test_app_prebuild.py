@@ -201,11 +201,16 @@ def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -
     pool = pooled["pool"]
     _wait(lambda: len(pool) >= 2, "two pages in the pool")
     handed, ahead = pool.stats["handed"], server.PULLS["ahead"]
+    before = live_apps()  # (other tests' apps may still be there, some with a GM)
+    mine: list[Any] = []
 
     async def run() -> tuple[Any, Any, float]:
         one, two = bench.Session(pooled["url"]), bench.Session(pooled["url"])
         await asyncio.gather(one.open(WAIT_S), two.open(WAIT_S))
         assert not one.error and not two.error, (one.error, two.error)
+        # the two sessions' apps (ready: their first data shown; a page being built ahead
+        # for the pool is listed until its build ends, never ready)
+        mine.extend(a for a in live_apps() if a.ready and not any(a is b for b in before))
         seen_by_two = two._events.qsize()
         s = await one.timed_click("add_gm", "GM", WAIT_S)
         await asyncio.sleep(0.5)
@@ -218,8 +223,9 @@ def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -
     assert pool.stats["handed"] == handed + 2
     assert server.PULLS["ahead"] >= ahead + 2  # the first pulls were the JSON made ahead
     assert 0 < click_s < 30
-    models = [str(a.state.model) for a in live_apps()]
-    assert sum("GM" in m for m in models) == 1, models
+    # the two sessions' apps: the click changed the model of one of them only
+    models = [str(a.state.model) for a in mine]
+    assert len(models) == 2 and sum("GM" in m for m in models) == 1, models
 
 
 def test_pooled_page_in_a_browser(pooled: dict[str, Any]) -> None:
