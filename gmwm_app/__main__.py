@@ -1,5 +1,6 @@
 """``gmwm-app [FILE] [--port N] [--address A] [--allow-websocket-origin HOST:PORT] [--no-show]
-[--max-upload-mb N] [--data-dir DIR] [--basic-auth FILE] [--cookie-secret S] [--num-procs N]``.
+[--max-upload-mb N] [--data-dir DIR] [--basic-auth FILE] [--cookie-secret S] [--num-procs N]
+[--prebuild N]``.
 
 Serve the GMWM app.
 
@@ -28,7 +29,14 @@ from typing import Any
 
 from gmwm_app.limits import UPLOAD_CHUNK_BYTES
 
-__all__ = ["main", "build_parser", "is_loopback", "read_password_file", "server_options"]
+__all__ = [
+    "main",
+    "build_parser",
+    "is_loopback",
+    "read_password_file",
+    "server_options",
+    "expected_host",
+]
 
 #: The address served on when ``--address`` is not given: this machine only.
 DEFAULT_ADDRESS = "localhost"
@@ -127,7 +135,32 @@ def build_parser() -> argparse.ArgumentParser:
         help="serve from N processes sharing the port (default 1; 0: one per core); sessions "
         "are spread over them, each session stays in one",
     )
+    p.add_argument(
+        "--prebuild",
+        type=int,
+        default=None,
+        metavar="N",
+        help="pages each server process keeps built ahead, so that a class opening the app at "
+        "once gets them at once (default 32, fewer if memory is short: about 5 MB each; 0: "
+        "none); a link with a query (?source=...) builds its page on demand",
+    )
     return p
+
+
+def expected_host(args: argparse.Namespace, address: str) -> str | None:
+    """The ``HOST:PORT`` the browsers will ask for (the first ``--allow-websocket-origin``,
+    else the address served), for the pages built ahead; None when the port is not known
+    yet (``--port 0``)."""
+    origins = [o.strip() for o in (args.allow_websocket_origin or []) if o.strip()]
+    if origins and origins[0] != "*":
+        host = origins[0].split("://", 1)[-1].rstrip("/")
+        return host if ":" in host.rsplit("]", 1)[-1] or not args.port else f"{host}:{args.port}"
+    if not args.port:
+        return None
+    host = address.strip() or "localhost"
+    if ":" in host and not host.startswith("["):
+        host = f"[{host}]"  # an IPv6 address
+    return f"{host}:{args.port}"
 
 
 def is_loopback(address: str) -> bool:
@@ -233,6 +266,8 @@ def server_options(args: argparse.Namespace) -> dict[str, Any]:
             f"HOST:{port} with the host name or address the browsers will use "
             f"(e.g. --allow-websocket-origin {socket.gethostname()}:{port})"
         )
+    if args.prebuild is not None and args.prebuild < 0:
+        raise UsageError(f"--prebuild must be 0 (none) or more, got {args.prebuild}")
     if args.num_procs < 0:
         raise UsageError(f"--num-procs must be 0 (one per core) or more, got {args.num_procs}")
     if args.basic_auth and args.oauth_provider:
@@ -316,11 +351,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import panel as pn
 
-    from gmwm_app.server import create_application
+    from gmwm_app.server import create_application, default_prebuild
 
+    def pool_full(n: int) -> None:
+        print(f"gmwm-app: {n} pages ready ahead (process {os.getpid()})", file=sys.stderr)
+
+    application = create_application(
+        path,
+        prebuild=default_prebuild() if args.prebuild is None else args.prebuild,
+        host=expected_host(args, opts["address"]),
+        on_full=pool_full,
+    )
     try:
         pn.serve(
-            {"/": create_application(path)},
+            {"/": application},
             port=args.port,
             show=not args.no_show and args.num_procs == 1,
             title="GMWM",

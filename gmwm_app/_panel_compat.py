@@ -13,6 +13,11 @@ that an upgrade forces a re-check of what is here).
   the page (``patch_model_css``: a walk of every model, about half of the loop's work per
   page open, 0.1-0.5 s on a busy machine); the off-loop build does it in its thread, and the
   handler skips a root already patched for the same ``dist_url`` (the result is the same).
+* :func:`placeholder_session`, :func:`hand_over_sessions` and :func:`discard_document`: page
+  documents built ahead of their sessions (:class:`gmwm_app.server.PagePool`). Bokeh creates a
+  session's ``Document`` in ``ApplicationContext.create_session_if_needed``, before any hook
+  of the application runs; :func:`hand_over_sessions` gives that method a document built
+  ahead when there is one for the request (also checked against :data:`BOKEH_VERSIONS`).
 
 On another Panel version :func:`supported` is False: the text patch is not applied and the
 server builds its pages on the loop, as Panel does (slower, never wrong).
@@ -21,9 +26,11 @@ server builds its pages on the loop, as Panel does (slower, never wrong).
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 import weakref
 from collections.abc import Iterator
+from functools import partial
 from typing import Any
 
 import panel as pn
@@ -31,21 +38,37 @@ from panel.io.state import state as pn_state
 
 __all__ = [
     "PANEL_VERSIONS",
+    "BOKEH_VERSIONS",
     "supported",
+    "pool_supported",
     "light_text_updates",
     "building_off_loop",
     "eval_panel",
     "patch_css_off_loop",
     "skip_repeated_css_patch",
+    "placeholder_session",
+    "hand_over_sessions",
+    "discard_document",
 ]
 
 #: Panel versions whose internals this module was checked against.
 PANEL_VERSIONS = ("1.9.4",)
 
 
+#: Bokeh versions whose session creation :func:`hand_over_sessions` reproduces.
+BOKEH_VERSIONS = ("3.9.2",)
+
+
 def supported() -> bool:
     """Whether the installed Panel is one this module was written for."""
     return pn.__version__ in PANEL_VERSIONS
+
+
+def pool_supported() -> bool:
+    """Whether page documents can be built ahead (this Panel and this Bokeh)."""
+    import bokeh
+
+    return supported() and bokeh.__version__ in BOKEH_VERSIONS
 
 
 def light_text_updates() -> bool:
@@ -140,3 +163,127 @@ def skip_repeated_css_patch() -> bool:
     patch_model_css._gmwm_skip = True  # type: ignore[attr-defined]
     pn_server.patch_model_css = patch_model_css
     return True
+
+
+def placeholder_session(
+    doc: Any, server_context: Any, *, protocol: str, host: str, path: str, app_path: str
+) -> Any:
+    """A session context for a page built ahead of its session: a request of the given shape
+    (``GET path`` with the ``Host`` header ``host``, no query, no cookie, no other header).
+
+    What Panel reads from the request while it builds a page (the location's protocol, host,
+    path and query; the stylesheets' relative path) is then what the session that receives
+    the page will have; its own request (cookies, headers, user) and its session id replace
+    this context when the page is handed over (:func:`hand_over_sessions`).
+    """
+    from bokeh.server.contexts import BokehSessionContext, _RequestProxy
+    from tornado.httputil import HTTPHeaders, HTTPServerRequest, RequestStartLine
+
+    request = HTTPServerRequest(
+        start_line=RequestStartLine("GET", path, "HTTP/1.1"), headers=HTTPHeaders({"Host": host})
+    )
+    request.protocol = protocol
+    request.app_path = app_path  # type: ignore[attr-defined]
+    context = BokehSessionContext("gmwm-page-built-ahead", server_context, doc, logout_url=None)
+    context._request = _RequestProxy(request, arguments={}, cookies={}, headers={"Host": host})
+    doc._session_context = weakref.ref(context)
+    return context
+
+
+def hand_over_sessions(application_context: Any, take: Any) -> None:
+    """Make ``application_context`` create its sessions around a document from ``take``.
+
+    ``take(request)`` gets the new session's request (Bokeh's ``_RequestProxy``) and returns a
+    page document built ahead for it, or None (a new, empty ``Document`` then, as Bokeh
+    does). The method is Bokeh 3.9's ``ApplicationContext.create_session_if_needed`` with
+    that one change: the session context, the request, the token, the application's session
+    hooks, ``initialize_document`` and the ``ServerSession`` are the session's own, created
+    here as Bokeh creates them.
+    """
+    from bokeh.document import Document
+    from bokeh.protocol.exceptions import ProtocolError
+    from bokeh.server.contexts import BokehSessionContext, _RequestProxy
+    from bokeh.server.session import ServerSession
+    from bokeh.util.token import get_token_payload
+    from tornado import gen
+
+    self = application_context
+    log = logging.getLogger("bokeh.server.contexts")
+
+    async def create_session_if_needed(
+        session_id: Any, request: Any = None, token: str | None = None
+    ) -> Any:
+        if len(session_id) == 0:
+            raise ProtocolError("Session ID must not be empty")
+
+        if session_id not in self._sessions and session_id not in self._pending_sessions:
+            future = self._pending_sessions[session_id] = gen.Future()
+
+            proxy = None
+            if request is not None:
+                payload = get_token_payload(token) if token else {}
+                if (
+                    "cookies" in payload
+                    and "headers" in payload
+                    and "Cookie" not in payload["headers"]
+                ):
+                    payload["headers"]["Cookie"] = "; ".join(
+                        [f"{k}={v}" for k, v in payload["cookies"].items()]
+                    )
+                proxy = _RequestProxy(
+                    request,
+                    arguments=payload.get("arguments"),
+                    cookies=payload.get("cookies"),
+                    headers=payload.get("headers"),
+                )
+            doc = None
+            try:
+                doc = take(proxy)
+            except Exception:  # never fail a session for the pool: build it as Bokeh does
+                log.exception("taking a page built ahead failed")
+            if doc is None:
+                doc = Document()
+
+            session_context = BokehSessionContext(
+                session_id, self.server_context, doc, logout_url=self._logout_url
+            )
+            session_context._request = proxy
+            session_context._token = token
+            doc._session_context = weakref.ref(session_context)
+
+            try:
+                await self._application.on_session_created(session_context)
+            except Exception as e:
+                log.error("Failed to run session creation hooks %r", e, exc_info=True)
+
+            self._application.initialize_document(doc)
+
+            session = ServerSession(session_id, doc, io_loop=self._loop, token=token)
+            del self._pending_sessions[session_id]
+            self._sessions[session_id] = session
+            session_context._set_session(session)
+            self._session_contexts[session_id] = session_context
+
+            future.set_result(session)
+
+        if session_id in self._pending_sessions:
+            session = await self._pending_sessions[session_id]
+        else:
+            session = self._sessions[session_id]
+        return session
+
+    self.create_session_if_needed = create_session_if_needed
+
+
+def discard_document(doc: Any, context: Any) -> None:
+    """Release a page document built ahead that no session will get, as Bokeh and Panel
+    release a session's (Bokeh's ``_discard_session``): the document is destroyed (Panel's
+    ``_destroy_document``), then its session-destroyed callbacks run with ``context``."""
+    from panel.io.application import _on_session_destroyed
+    from panel.io.document import _destroy_document
+
+    doc.destroy = partial(_destroy_document, doc)  # as Panel's initialize_document sets it
+    try:
+        doc.destroy(None)
+    finally:
+        _on_session_destroyed(context)

@@ -64,7 +64,7 @@ from gmwm_app.views import (  # noqa: E402
 )
 from gmwm_app.wv_figures import WVFigures  # noqa: E402
 
-__all__ = ["GMWMApp", "create_app", "live_apps"]
+__all__ = ["GMWMApp", "create_app", "live_apps", "set_listed"]
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +112,18 @@ def live_apps() -> list[GMWMApp]:
     """
     items = list(_APPS.items())
     return [app for app, _ in sorted(items, key=lambda kv: kv[1])]
+
+
+def set_listed(app: GMWMApp, listed: bool) -> None:
+    """List ``app`` in :func:`live_apps` as the newest session (True), or not at all (False).
+
+    A page built ahead of its session (:class:`gmwm_app.server.PagePool`) is not a session's
+    until it is handed over: the pool unlists it when it is built and lists it then.
+    """
+    if listed:
+        _APPS[app] = next(_SERIAL)
+    else:
+        _APPS.pop(app, None)
 
 
 #: The state parameters the WV plot and the residual strip draw.

@@ -152,6 +152,30 @@ def app_state(app_demo: Path):
     return s
 
 
+def stop_server(thread: Any, scheduled_before: set[str]) -> None:
+    """Stop a server started by ``pn.serve(..., threaded=True)`` and drop the Panel tasks
+    scheduled on its loop meanwhile (``scheduled_before``: the keys of
+    ``pn.state._scheduled`` before it started).
+
+    Panel schedules one ``gc.collect`` 5 s after a session ends, on the server's loop, under
+    a name that makes any later scheduling of it a no-op while it is pending. A server
+    stopped within those 5 s leaves it pending forever: no later server of the process gets
+    its collections after a session ends (the page pool tests failed after test_app_load.py
+    this way). The collection it would have run is run here.
+    """
+    import gc
+
+    import panel as pn
+
+    thread.stop()
+    thread.join(timeout=10)
+    stale = [key for key in list(pn.state._scheduled) if key not in scheduled_before]
+    for key in stale:
+        pn.state._scheduled.pop(key, None)
+    if stale:
+        gc.collect()
+
+
 @contextlib.contextmanager
 def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
     """Serve the app on a free 127.0.0.1 port in a background thread with ``demo_file`` as
@@ -165,6 +189,7 @@ def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
+    scheduled = set(pn.state._scheduled)
     thread = pn.serve(
         {"/": create_application()},
         port=port,
@@ -186,8 +211,7 @@ def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
                 time.sleep(0.05)
         yield port, thread
     finally:
-        thread.stop()
-        thread.join(timeout=10)
+        stop_server(thread, scheduled)
         if old is None:
             os.environ.pop("GMWM_APP_DEMO", None)
         else:

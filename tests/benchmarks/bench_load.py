@@ -2,6 +2,7 @@
 collect it).
 
     python tests/benchmarks/bench_load.py [--n 10 20 30] [--num-procs 1] [--clicks 8]
+        [--prebuild N] [--cold]
 
 It starts ``gmwm-app`` itself (``python -m gmwm_app --address 127.0.0.1 --no-show``, the
 demo log) on a free loopback port, once per measurement (a fresh server, so that one burst's
@@ -26,6 +27,12 @@ measured on the idle server (the reference), then while 20 other sessions open a
 Memory per session: the server's resident memory (its process and children) once the N
 sessions are ready, minus that before the burst, divided by N.
 
+Pages built ahead (``gmwm-app --prebuild N``, the app's default unless ``--prebuild`` is
+given): by default every burst starts with the pools full ("warm": each server process has
+printed that its pages are ready and the server's CPU time stayed flat for a second, before
+the reference page and again before the burst); ``--cold`` opens the burst as soon as the
+server listens (the pool still empty), and measures the reference page after it.
+
 Bounded: at most 60 sessions, every wait has a time limit (``--timeout`` per burst), and the
 server is stopped in every case. Loopback only.
 """
@@ -42,6 +49,7 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -115,15 +123,18 @@ def _cpu_s(pid: int) -> float:
 class Server:
     """``gmwm-app`` on a free loopback port in a subprocess (stopped on exit)."""
 
-    def __init__(self, num_procs: int, timeout: float = 60) -> None:
+    def __init__(self, num_procs: int, timeout: float = 60, prebuild: int | None = None) -> None:
         self.port = _free_port()
+        self.num_procs = num_procs
         cmd = [sys.executable, "-m", "gmwm_app", "--address", HOST, "--port", str(self.port)]
         cmd += ["--no-show"]
         if num_procs > 1:
             cmd += ["--num-procs", str(num_procs)]
+        if prebuild is not None:
+            cmd += ["--prebuild", str(prebuild)]
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
-        self.log = open(os.devnull, "w")  # noqa: SIM115 - closed in stop()
+        self.log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - closed in stop()
         self.proc = subprocess.Popen(
             cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True
         )
@@ -145,6 +156,23 @@ class Server:
 
     def rss_mb(self) -> float:
         return _rss_mb(self.proc.pid)
+
+    def pools_reported(self) -> int:
+        """Server processes that printed "pages ready ahead" (their pool was full once)."""
+        self.log.seek(0)
+        return len(set(re.findall(r"pages ready ahead \(process (\d+)\)", self.log.read())))
+
+    async def wait_pools(self, timeout: float) -> float:
+        """Wait until every process reported a full pool and the server's CPU time stays
+        flat for a second (no page being built); the seconds waited."""
+        t0 = time.perf_counter()
+        deadline = t0 + timeout
+        while time.perf_counter() < deadline:
+            cpu = self.cpu_s()
+            await asyncio.sleep(1.0)
+            if self.pools_reported() >= self.num_procs and self.cpu_s() - cpu < 0.05:
+                return time.perf_counter() - t0
+        raise RuntimeError(f"the page pools did not fill in {timeout:.0f} s")
 
     def cpu_s(self) -> float:
         return _cpu_s(self.proc.pid)
@@ -406,18 +434,30 @@ def _close_all(sessions: list[Session]) -> Any:
     return asyncio.gather(*(s.close() for s in sessions))
 
 
-async def measure_burst(n: int, num_procs: int, timeout: float) -> dict[str, Any]:
-    """A fresh server: one warm-up page, the reference (one page alone), then ``n`` at once."""
-    with Server(num_procs) as srv:
-        await _single(srv.url, timeout)  # warm-up: imports, first document
-        ref = await _single(srv.url, timeout)
-        await asyncio.sleep(1.0)
+async def measure_burst(
+    n: int, num_procs: int, timeout: float, prebuild: int | None = None, cold: bool = False
+) -> dict[str, Any]:
+    """A fresh server; warm: the pools full, one warm-up page, the reference (one page
+    alone), the pools full again, then ``n`` at once; cold: ``n`` at once as soon as the
+    server listens, then the reference."""
+    pool_s = float("nan")
+    with Server(num_procs, prebuild=prebuild) as srv:
+        if not cold:
+            if prebuild != 0:
+                pool_s = await srv.wait_pools(max(timeout, 300))
+            await _single(srv.url, timeout)  # warm-up: imports, first document
+            ref = await _single(srv.url, timeout)
+            await asyncio.sleep(1.0)
+            if prebuild != 0:
+                await srv.wait_pools(max(timeout, 300))
         rss0, cpu0 = srv.rss_mb(), srv.cpu_s()
         t = time.perf_counter()
         sessions = await _burst(srv.url, n, timeout)
         wall = time.perf_counter() - t
         rss1, cpu1 = srv.rss_mb(), srv.cpu_s()
         await _close_all(sessions)
+        if cold:
+            ref = await _single(srv.url, timeout)
     ok = [s for s in sessions if not s.error]
     ready = [s.ready_s for s in ok]
     return {
@@ -434,6 +474,7 @@ async def measure_burst(n: int, num_procs: int, timeout: float) -> dict[str, Any
         "mb_per_session": (rss1 - rss0) / n,
         "cpu_per_session": (cpu1 - cpu0) / n,
         "rss0": rss0,
+        "pool_s": pool_s,
     }
 
 
@@ -450,9 +491,14 @@ async def _clicks(probe: Session, k: int, timeout: float, stop: asyncio.Event | 
     return out
 
 
-async def measure_clicks(n: int, num_procs: int, clicks: int, timeout: float) -> dict[str, Any]:
-    """Click-to-redraw of one session, alone and while ``n`` other sessions open at once."""
-    with Server(num_procs) as srv:
+async def measure_clicks(
+    n: int, num_procs: int, clicks: int, timeout: float, prebuild: int | None = None
+) -> dict[str, Any]:
+    """Click-to-redraw of one session, alone and while ``n`` other sessions open at once
+    (with the pools full first, unless ``prebuild`` is 0)."""
+    with Server(num_procs, prebuild=prebuild) as srv:
+        if prebuild != 0:
+            await srv.wait_pools(max(timeout, 300))
         await _single(srv.url, timeout)  # warm-up
         probe = Session(srv.url + "?channel=gyro_x&model=WN%2BRW")
         await probe.open(timeout)
@@ -488,6 +534,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--click-n", type=int, default=20, help="sessions opening during clicks")
     ap.add_argument("--clicks", type=int, default=5, help="add/remove pairs on the idle server")
     ap.add_argument("--timeout", type=float, default=120.0, help="time limit per burst (s)")
+    ap.add_argument(
+        "--prebuild", type=int, default=None, help="gmwm-app --prebuild (default: the app's)"
+    )
+    ap.add_argument("--cold", action="store_true", help="burst at once, the pools empty")
+    ap.add_argument("--no-clicks", action="store_true", help="skip the click measurement")
     args = ap.parse_args(argv)
     if any(not 1 <= n <= MAX_SESSIONS for n in [*args.n, args.click_n]):
         ap.error(f"--n and --click-n must be 1..{MAX_SESSIONS}")
@@ -506,12 +557,13 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()
     print(
         f"bench_load: {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} "
-        f"{load[2]:.2f}, --num-procs {args.num_procs}"
+        f"{load[2]:.2f}, --num-procs {args.num_procs}, --prebuild "
+        f"{'default' if args.prebuild is None else args.prebuild}{', cold' if args.cold else ''}"
     )
     print("page ready = HTML + whole document over the websocket + the first data (WV) drawn")
     rows = []
     for n in args.n:
-        r = asyncio.run(measure_burst(n, args.num_procs, args.timeout))
+        r = asyncio.run(measure_burst(n, args.num_procs, args.timeout, args.prebuild, args.cold))
         rows.append(r)
         err = f"  FAILED {r['n'] - r['ok']}: {r['errors']}" if r["errors"] else ""
         print(
@@ -519,25 +571,29 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['max']:.2f} s (x{r['p95'] / r['ref']:.1f} a single page's {r['ref']:.2f} s; "
             f"target p95 < {TARGET_P95_S:g} s); all in {r['wall']:.1f} s; memory "
             f"{r['mb_per_session']:.1f} MB/session (server {r['rss0']:.0f} MB before); server CPU "
-            f"{r['cpu_per_session']:.2f} s/session{err}",
+            f"{r['cpu_per_session']:.2f} s/session; pools filled in {r['pool_s']:.0f} s{err}",
             flush=True,
         )
         h, d, w = r["ref_parts"]
         print(f"       single page: HTML {h:.2f} s, document {d:.2f} s, first data {w:.2f} s")
-    c = asyncio.run(measure_clicks(args.click_n, args.num_procs, args.clicks, args.timeout))
-    print(
-        f"click '+ GM'/remove -> component_0 redrawn: idle median {c['idle_med'] * 1e3:.0f} ms; "
-        f"while {c['n']} pages open ({c['ok']} ready, last at {c['open_max']:.1f} s): median "
-        f"{c['busy_med'] * 1e3:.0f} ms, max {c['busy_max'] * 1e3:.0f} ms over "
-        f"{c['busy_count']} clicks (x{c['busy_max'] / c['idle_med']:.1f} idle; target < "
-        f"{TARGET_CLICK_S * 1e3:.0f} ms)"
-    )
+    c = None
+    if not args.no_clicks:
+        c = asyncio.run(
+            measure_clicks(args.click_n, args.num_procs, args.clicks, args.timeout, args.prebuild)
+        )
+        print(
+            f"click '+ GM'/remove -> component_0 redrawn: idle median {c['idle_med'] * 1e3:.0f} "
+            f"ms; while {c['n']} pages open ({c['ok']} ready, last at {c['open_max']:.1f} s): "
+            f"median {c['busy_med'] * 1e3:.0f} ms, max {c['busy_max'] * 1e3:.0f} ms over "
+            f"{c['busy_count']} clicks (x{c['busy_max'] / c['idle_med']:.1f} idle; target < "
+            f"{TARGET_CLICK_S * 1e3:.0f} ms)"
+        )
     load = os.getloadavg()
     print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     met = all(r["ok"] == r["n"] for r in rows) and all(
         r["p95"] < TARGET_P95_S for r in rows if r["n"] <= 30
     )
-    met = met and c["busy_max"] < TARGET_CLICK_S
+    met = met and (c is None or c["busy_max"] < TARGET_CLICK_S)
     print("targets met" if met else "targets NOT met")
     return 0
 
