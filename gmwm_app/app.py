@@ -199,6 +199,10 @@ class GMWMApp(pn.viewable.Viewer):
         self._prefetched: Future | None = None
         # the session's job runner (async continuations lose pn.state.curdoc: it keeps it)
         self.jobs = Jobs(pn.state.curdoc)
+        # each state change reaches the browser as one message, whichever part it redraws
+        # (Panel holds the document in a job's continuation only if asked; a widget's or a
+        # button's callback is not held: 19 messages a click before)
+        self.state.batch = partial(pn.io.hold, self.jobs.doc)
         self._location = pn.state.location if self.served else None
         self._build_widgets()
         self._build_layout()

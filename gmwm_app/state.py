@@ -29,6 +29,7 @@ import math
 import os
 import threading
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -173,6 +174,10 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self._log: Any = None
         self._wv_cache = WVCache()  # of self._log (the two change together, under _lock)
         self._lock = threading.Lock()
+        #: How a front end sends the redraws of one change together (the app: Panel's hold of
+        #: the session's document, so that a click reaches the browser as one message, not one
+        #: per part redrawn); a context manager factory, nothing by default.
+        self.batch: Callable[[], AbstractContextManager[Any]] = nullcontext
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
@@ -214,9 +219,10 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         no watcher): a repeated failure is reported as often as it happens.
         """
         again = bool(changes.get("error")) and changes["error"] == self.error
-        self.param.update(**changes)
-        if again:
-            self.param.trigger("error")
+        with self.batch():
+            self.param.update(**changes)
+            if again:
+                self.param.trigger("error")
 
     def report_error(self, message: str) -> bool:
         """Show ``message`` as the error of the page (state otherwise unchanged) and log it;

@@ -245,3 +245,34 @@ def test_wv_cache_maps_and_eviction() -> None:
     assert c.matrix(["a", "b"], 1.0) is None and c.matrix(["a", "b"], 3.0) == (2, "note 2")
     assert set(c.wvs) == {("a", 100.0, True), ("a", 100.0, False), ("a", 50.0, False),
                           ("b", 100.0, False)}  # fmt: skip
+
+
+def test_a_state_change_reaches_the_page_as_one_held_batch(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Every part a click redraws is drawn while the session's document is held, so Bokeh
+    sends one message (a button's callback is not held by Panel: 19 messages a click)."""
+    from bokeh.document import Document
+    from panel.io.state import set_curdoc
+
+    from gmwm_app.app import create_app
+
+    doc = Document()
+    with set_curdoc(doc):
+        page = create_app(load=False)
+        page.server_doc(doc)
+        app = page.gmwm_app
+        app.start_sync()
+        held: list[Any] = []
+        for obj, name in ((app.views, "update"), (app.tables, "update")):
+            real = getattr(obj, name)
+
+            def seen(*a: Any, _real: Any = real, **kw: Any) -> Any:
+                held.append(doc.callbacks.hold_value)
+                return _real(*a, **kw)
+
+            monkeypatch.setattr(obj, name, seen)
+        assert app.jobs.doc is doc
+        assert app.state.add_process("GM"), app.state.error
+        assert held == ["combine", "combine"]  # the plot and the tables, inside one hold
+        assert doc.callbacks.hold_value is None  # released after the change
