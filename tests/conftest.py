@@ -17,7 +17,7 @@ import os
 import socket
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -177,9 +177,13 @@ def stop_server(thread: Any, scheduled_before: set[str]) -> None:
 
 
 @contextlib.contextmanager
-def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
+def served_app(
+    demo_file: Path, make_app: Callable[[int], Any] | None = None, **serve_kw: Any
+) -> Iterator[tuple[int, Any]]:
     """Serve the app on a free 127.0.0.1 port in a background thread with ``demo_file`` as
-    the demo; yields (port, server thread) once the port accepts connections; always stops."""
+    the demo; yields (port, server thread) once the port accepts connections; always stops
+    (:func:`stop_server`). ``make_app(port)`` makes the application (default: the app's
+    :func:`gmwm_app.server.create_application`)."""
     import panel as pn
 
     from gmwm_app.server import create_application
@@ -191,7 +195,7 @@ def served_app(demo_file: Path, **serve_kw: Any) -> Iterator[tuple[int, Any]]:
         port = sock.getsockname()[1]
     scheduled = set(pn.state._scheduled)
     thread = pn.serve(
-        {"/": create_application()},
+        {"/": make_app(port) if make_app is not None else create_application()},
         port=port,
         address="127.0.0.1",
         show=False,

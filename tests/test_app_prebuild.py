@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
-import os
 import re
-import socket
 import sys
 import time
 import urllib.request
@@ -25,7 +23,7 @@ from typing import Any
 
 import pytest
 from _browser import chromium, require_chromium
-from conftest import stop_server
+from conftest import served_app
 
 from gmwm_app import server
 from gmwm_app.app import live_apps, set_listed
@@ -59,43 +57,25 @@ def _wait(predicate: Any, what: str, timeout: float = WAIT_S) -> None:
 @pytest.fixture(scope="module")
 def pooled(app_demo_file: Path) -> Iterator[dict[str, Any]]:
     """The app served with ``prebuild=POOL`` for 127.0.0.1:PORT; yields its URL and pool."""
-    import panel as pn
 
-    old = os.environ.get("GMWM_APP_DEMO")
-    os.environ["GMWM_APP_DEMO"] = str(app_demo_file)
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
     n_pools = len(server.POOLS)
-    scheduled = set(pn.state._scheduled)
-    thread = pn.serve(
-        {"/": server.create_application(prebuild=POOL, host=f"127.0.0.1:{port}")},
-        port=port,
-        address="127.0.0.1",
-        show=False,
-        threaded=True,
-        start=True,
-        verbose=False,
-        websocket_origin=[f"127.0.0.1:{port}"],
-        # a page request without its websocket (most tests here) counts as a session
-        # opening, which pauses the refill until Bokeh discards it
-        unused_session_lifetime_milliseconds=8000,
-        check_unused_sessions_milliseconds=1000,
-    )
     pool = None
     try:
-        _wait(lambda: len(server.POOLS) > n_pools, "the page pool to start")
-        pool = server.POOLS[-1]
-        _wait(lambda: len(pool) == POOL and not pool.building, "the pool to fill")
-        yield {"url": f"http://127.0.0.1:{port}/", "port": port, "pool": pool}
-    finally:
-        stop_server(thread, scheduled)
+        with served_app(
+            app_demo_file,
+            lambda port: server.create_application(prebuild=POOL, host=f"127.0.0.1:{port}"),
+            # a page request without its websocket (most tests here) counts as a session
+            # opening, which pauses the refill until Bokeh discards it
+            unused_session_lifetime_milliseconds=8000,
+            check_unused_sessions_milliseconds=1000,
+        ) as (port, _thread):
+            _wait(lambda: len(server.POOLS) > n_pools, "the page pool to start")
+            pool = server.POOLS[-1]
+            _wait(lambda: len(pool) == POOL and not pool.building, "the pool to fill")
+            yield {"url": f"http://127.0.0.1:{port}/", "port": port, "pool": pool}
+    finally:  # after the server stopped, as before
         if pool is not None:
             pool.close()
-        if old is None:
-            os.environ.pop("GMWM_APP_DEMO", None)
-        else:
-            os.environ["GMWM_APP_DEMO"] = old
 
 
 def _get(url: str, host: str | None = None) -> None:
