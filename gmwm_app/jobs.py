@@ -21,7 +21,6 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from functools import partial
 from typing import Any
 
-from panel.io.document import hold
 from panel.io.state import set_curdoc
 from panel.io.state import state as pn_state
 
@@ -131,8 +130,7 @@ class Jobs:
         """Run ``fn`` with the session's document lock (next tick of the server loop).
 
         Async jobs run without the lock (so the session stays responsive); every change of
-        the state, and so of Bokeh models, goes through here, held (Panel's ``hold``): what
-        ``fn`` changes reaches the browser as one message. Outside a server: at once.
+        the state, and so of Bokeh models, goes through here. Outside a server: at once.
         """
         if not self.served:
             fn()
@@ -140,8 +138,7 @@ class Jobs:
         doc = self.doc
 
         def run() -> None:
-            # held: whatever fn changes reaches the browser as one message
-            with set_curdoc(doc), hold(doc):
+            with set_curdoc(doc):
                 try:
                     fn()
                 except Exception as e:  # never leave the loop with an exception: say so
