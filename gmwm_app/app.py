@@ -581,10 +581,11 @@ class GMWMApp(pn.viewable.Viewer):
 
     def _busy(self, on: bool, message: str = "") -> None:
         self.busy = on
-        self.plot_box.loading = on  # (not on the Bokeh pane itself: Panel 1.9 fails there)
-        self.status.object = f"⏳ {message} ..." if on else ""
-        for w in (self.demo_button, self.path_button, self.upload, self.channel_select):
-            w.disabled = on
+        with pn.io.hold(self.jobs.doc):  # the indicator, the text and 4 widgets: one message
+            self.plot_box.loading = on  # (not on the Bokeh pane itself: Panel 1.9 fails there)
+            self.status.object = f"⏳ {message} ..." if on else ""
+            for w in (self.demo_button, self.path_button, self.upload, self.channel_select):
+                w.disabled = on
 
     def _load_failed(self, message: str, err: BaseException) -> None:
         what = str(err)

@@ -276,3 +276,9 @@ def test_a_state_change_reaches_the_page_as_one_held_batch(
         assert app.state.add_process("GM"), app.state.error
         assert held == ["combine", "combine"]  # the plot and the tables, inside one hold
         assert doc.callbacks.hold_value is None  # released after the change
+        # the loading indicator of a job: its text and widgets together, one message
+        held.clear()
+        app.status.param.watch(lambda _e: held.append(doc.callbacks.hold_value), "object")
+        app._busy(True, "Reading x")
+        app._busy(False)
+        assert held == ["combine", "combine"] and doc.callbacks.hold_value is None
