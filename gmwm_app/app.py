@@ -477,7 +477,7 @@ class GMWMApp(pn.viewable.Viewer):
     def refresh(self) -> None:
         """Draw every part of the Fit tab from the state (the page's first draw; afterwards
         each part redraws itself when a parameter it depends on changes)."""
-        with pn.io.hold():
+        with self.state.batch():
             self._draw_plot()
             self._draw_tables()
             self._sync_data_widgets()
@@ -581,7 +581,7 @@ class GMWMApp(pn.viewable.Viewer):
 
     def _busy(self, on: bool, message: str = "") -> None:
         self.busy = on
-        with pn.io.hold(self.jobs.doc):  # the indicator, the text and 4 widgets: one message
+        with self.state.batch():  # the indicator, the text and 4 widgets: one message
             self.plot_box.loading = on  # (not on the Bokeh pane itself: Panel 1.9 fails there)
             self.status.object = f"⏳ {message} ..." if on else ""
             for w in (self.demo_button, self.path_button, self.upload, self.channel_select):
@@ -616,7 +616,7 @@ class GMWMApp(pn.viewable.Viewer):
         query = self._query
 
         def apply(prepared: Any) -> None:
-            with pn.io.hold():  # one message to the browser for every part redrawn
+            with self.state.batch():  # one message to the browser for every part redrawn
                 self.state.from_query(
                     query,
                     prepared=prepared,
@@ -665,7 +665,7 @@ class GMWMApp(pn.viewable.Viewer):
 
     def install(self, loaded: Any) -> None:
         """Make newly read data the session's (and remember how they were read)."""
-        with pn.io.hold():  # one message to the browser for every part redrawn
+        with self.state.batch():  # one message to the browser for every part redrawn
             self.session_panel.loaded(loaded)
             self.state.install(loaded)
             if self.upload.value:
@@ -696,11 +696,10 @@ class GMWMApp(pn.viewable.Viewer):
             progress=True,
         )
 
-    @staticmethod
-    def _held(action: Callable[..., Any], *args: Any) -> Any:
-        """Run a job's continuation with the document held: the parts it redraws reach the
-        browser as one message (a widget's callback is held by Panel already)."""
-        with pn.io.hold():
+    def _held(self, action: Callable[..., Any], *args: Any) -> Any:
+        """Run a job's continuation under the session's hold (:attr:`AppState.batch`): the
+        state changes it makes, each held already, reach the browser together."""
+        with self.state.batch():
             return action(*args)
 
     def _after_robust(self, rob: bool) -> None:

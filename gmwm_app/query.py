@@ -155,9 +155,9 @@ class QueryMixin:
             if self.error:
                 problems.append(self.error)
         elif s.get("robust") is not None:
-            self.param.update(robust=s["robust"])
+            self._publish(robust=s["robust"])
         if s.get("weights") is not None and s["weights"] != self.weights:
-            self.param.update(weights=s["weights"])  # before the model: one fit
+            self._publish(weights=s["weights"])  # before the model: one fit
             if s.get("model") is None and len(self.model) and not self.set_model(self.model):
                 problems.append(self.error)
         if s.get("model") is not None and (s["model"] or len(self.model)):

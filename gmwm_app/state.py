@@ -484,7 +484,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
         def run() -> bool:
             if self._log is None:
-                self.param.update(robust=bool(robust))
+                self._publish(robust=bool(robust))
                 return True
             if self.is_summary and robust and not summary_has_robust(self._log, self.channel):
                 raise ValueError(
