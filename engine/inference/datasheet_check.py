@@ -91,12 +91,22 @@ DATASHEET_KEYS: dict[str, str] = {
     "rw": "K",
     "bi": "B",
     "b": "B",
+    "bi_min": "B",
+    "bis": "B",
+    "adev_min": "B",
     "q": "Q",
     "qn": "Q",
 }
 #: Datasheet symbol -> its quantity (N of WN, K of RW, Q of QN, B of the model's floor).
 _QUANTITY = {q.symbol: q for qs in QUANTITIES.values() for q in qs}
 _ORDER = ("N", "K", "B", "Q")
+#: Keys that declare the bias instability as the Allan-deviation minimum itself (the vendors'
+#: "in-run bias stability", allan_variance_ros), not as the IEEE 952 B = floor / 0.664.
+ADEV_MIN_KEYS = frozenset({"bi_min", "bis", "adev_min"})
+#: ``bi=VALUE UNIT (adev min)`` / ``(ieee)``: the convention written after the unit.
+_CONVENTION = re.compile(
+    r"\s*\(\s*(adev[\s_-]*min(?:imum)?|adev|ieee(?:\s*952)?)\s*\)\s*$", re.IGNORECASE
+)
 _KEY_KIND = {
     "arw": "gyroscope",
     "rrw": "gyroscope",
@@ -162,12 +172,21 @@ class DatasheetSpec:
         The values as the user wrote them (``"0.3 deg/sqrt(h)"``), by symbol.
     source : str
         Where they come from (``command line``, a file and its key).
+    bi_convention : {"ieee", "adev_min"}
+        How B was declared: ``ieee`` (IEEE 952 B, the Allan floor / 0.664) or ``adev_min``
+        (the Allan-deviation minimum itself, e.g. Analog Devices' "in-run bias stability";
+        ``values["B"]`` then holds that minimum / 0.664, so the check draws the same floor).
+    also : DatasheetSpec or None
+        The other sensor kind's values of the same datasheet (gyroscope and accelerometer
+        items given together); :meth:`for_kind` picks one.
     """
 
     kind: str
     values: dict[str, float]
     given: dict[str, str] = field(default_factory=dict)
     source: str = ""
+    bi_convention: str = "ieee"
+    also: DatasheetSpec | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in SI_UNIT:
@@ -179,42 +198,113 @@ class DatasheetSpec:
             raise DatasheetError(
                 "the datasheet has no value: give at least one of ARW/VRW, RRW, BI, Q"
             )
+        if self.bi_convention not in ("ieee", "adev_min"):
+            raise DatasheetError(
+                f"bias-instability convention {self.bi_convention!r}: use ieee or adev_min"
+            )
+        if self.also is not None and (self.also.kind == self.kind or self.also.also is not None):
+            raise DatasheetError("a datasheet holds at most one part per sensor kind")
 
-    @classmethod
-    def from_values(
-        cls, values: Mapping[str, tuple[float, str]], *, source: str = ""
-    ) -> DatasheetSpec:
-        """From ``{key: (value, unit)}`` with keys of :data:`DATASHEET_KEYS` (``arw``, ``bi`` ...).
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The sensor kinds the datasheet has values for."""
+        return (self.kind,) + ((self.also.kind,) if self.also is not None else ())
+
+    def for_kind(self, kind: str) -> DatasheetSpec:
+        """The part of the datasheet for one sensor kind (``gyroscope``/``accelerometer``).
 
         Raises
         ------
         DatasheetError
-            Unknown key or unit, a symbol given twice, or gyroscope and accelerometer mixed.
+            The datasheet has no value for that kind.
         """
-        si: dict[str, float] = {}
-        given: dict[str, str] = {}
-        kinds: dict[str, str] = {}
-        for key, (value, unit) in values.items():
+        for part in (self, self.also):
+            if part is not None and part.kind == kind:
+                return DatasheetSpec(
+                    part.kind, part.values, part.given, part.source, part.bi_convention
+                )
+        raise DatasheetError(
+            f"the datasheet ({self.describe()}) has no {kind} value; give "
+            f"{'arw/rrw' if kind == 'gyroscope' else 'vrw/accrw'} items for it"
+        )
+
+    def for_unit(self, unit: str) -> DatasheetSpec:
+        """The part for a channel's signal unit (itself when it has one part only)."""
+        if self.also is None:
+            return self
+        try:
+            kind = si_factor(unit)[0]
+        except ExportError as e:
+            raise DatasheetError(f"{e}; the datasheet check needs the log's unit") from e
+        return self.for_kind(kind)
+
+    @classmethod
+    def from_values(
+        cls,
+        values: Mapping[str, tuple[float, str]] | Sequence[tuple[str, float, str]],
+        *,
+        source: str = "",
+    ) -> DatasheetSpec:
+        """From ``{key: (value, unit)}`` (or ``[(key, value, unit), ...]``, where a key may come
+        once per sensor kind) with keys of :data:`DATASHEET_KEYS` (``arw``, ``bi`` ...).
+
+        Gyroscope and accelerometer values may be given together (``arw`` and ``vrw``, or
+        ``bi`` in deg/h and in mg): the result then holds one part per kind
+        (:meth:`for_kind`). ``bi_min``/``bis``/``adev_min`` (or ``bi=VALUE UNIT (adev min)``)
+        declare the bias instability as the Allan-deviation minimum, ``bi`` (or
+        ``(ieee)``) as the IEEE 952 B = floor / 0.664.
+
+        Raises
+        ------
+        DatasheetError
+            Unknown key or unit, a symbol given twice for one sensor kind.
+        """
+        si: dict[str, dict[str, float]] = {}
+        given: dict[str, dict[str, str]] = {}
+        conv: dict[str, str] = {}
+        triples = (
+            [(k, v, u) for k, (v, u) in values.items()]
+            if isinstance(values, Mapping)
+            else list(values)
+        )
+        for key, value, unit in triples:
             k = key.strip().lower()
             sym = DATASHEET_KEYS.get(k)
             if sym is None:
                 raise DatasheetError(
                     f"unknown datasheet key {key!r}: use {', '.join(DATASHEET_KEYS)}"
                 )
-            if sym in si:
-                raise DatasheetError(f"{key!r} gives {sym} a second time")
+            convention = "adev_min" if k in ADEV_MIN_KEYS else "ieee"
+            m = _CONVENTION.search(unit)
+            if m is not None:
+                if sym != "B":
+                    raise DatasheetError(
+                        f"{key} = {value} {unit}: a convention in parentheses is for bi only"
+                    )
+                convention = "ieee" if m.group(1).lower().startswith("ieee") else "adev_min"
+                unit = unit[: m.start()].strip()
             kind, v = _convert(sym, float(value), unit, f"{source or 'datasheet'} {key}")
             if _KEY_KIND.get(k, kind) != kind:
                 raise DatasheetError(
                     f"{key} = {value} {unit}: {k.upper()} is a {_KEY_KIND[k]} value"
                 )
-            si[sym], given[sym], kinds[f"{key} ({unit})"] = v, f"{value:g} {unit}", kind
-        if len(set(kinds.values())) > 1:
-            raise DatasheetError(
-                "gyroscope and accelerometer units mixed: "
-                + ", ".join(f"{k}: {v}" for k, v in kinds.items())
-            )
-        return cls(next(iter(kinds.values()), "gyroscope"), si, given, source)
+            if sym in si.get(kind, {}):
+                raise DatasheetError(f"{key!r} gives the {kind}'s {sym} a second time")
+            text = f"{value:g} {unit}"
+            if sym == "B":
+                conv[kind] = convention
+                if convention == "adev_min":  # stored as the IEEE B of that floor
+                    v, text = v / BI_FACTOR, f"{text} (ADEV minimum)"
+            si.setdefault(kind, {})[sym] = v
+            given.setdefault(kind, {})[sym] = text
+        kinds = sorted(si, key=list(SI_UNIT).index) or ["gyroscope"]
+        parts = [
+            cls(kd, si.get(kd, {}), given.get(kd, {}), source, conv.get(kd, "ieee")) for kd in kinds
+        ]
+        if len(parts) == 1:
+            return parts[0]
+        first, second = parts
+        return cls(first.kind, first.values, first.given, source, first.bi_convention, also=second)
 
     @property
     def si_unit(self) -> str:
@@ -277,23 +367,31 @@ class DatasheetSpec:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (``schema: gmwm-datasheet/1``); :func:`read_datasheet` reads it back."""
-        return {
+        d: dict[str, Any] = {
             "schema": "gmwm-datasheet/1",
             "kind": self.kind,
             "source": self.source,
             "values": {r["symbol"]: [r["si"], r["si_unit"]] for r in self.rows()},
             "rows": self.rows(),
+            "bi_convention": self.bi_convention,
         }
+        if self.also is not None:
+            d["also"] = self.also.to_dict()
+        return d
 
     def describe(self) -> str:
-        """One line: ``ARW 0.3 deg/sqrt(h), B 5 deg/h`` (datasheet units)."""
+        """One line: ``ARW 0.3 deg/sqrt(h), B 5 deg/h`` (datasheet units; the other sensor's
+        part after a semicolon; a B declared as the ADEV minimum says so)."""
         parts = []
         for r in self.rows():
             if r["display"] is not None:
                 parts.append(f"{r['display_symbol']} {r['display']:.4g} {r['display_unit']}")
             else:
                 parts.append(f"{r['symbol']} {r['si']:.4g} {r['si_unit']}")
-        return ", ".join(parts)
+            if r["symbol"] == "B" and self.bi_convention == "adev_min":
+                parts[-1] += f" (ADEV minimum {self.given.get('B', '').split(' (')[0]})"
+        text = ", ".join(parts)
+        return text if self.also is None else f"{text}; {self.also.describe()}"
 
 
 def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec:
@@ -310,7 +408,7 @@ def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec
     DatasheetError
         An item that is not ``KEY=VALUE UNIT``, or any error of :meth:`DatasheetSpec.from_values`.
     """
-    items: dict[str, tuple[float, str]] = {}
+    items: list[tuple[str, float, str]] = []
     for raw in re.split(r"[;,]", text or ""):
         if not raw.strip():
             continue
@@ -325,9 +423,8 @@ def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec
             raise DatasheetError(
                 f"datasheet item {raw.strip()!r} has no unit (e.g. arw=0.3 deg/sqrt(h))"
             )
-        if key.strip().lower() in items:
-            raise DatasheetError(f"datasheet key {key.strip()!r} given twice")
-        items[key.strip().lower()] = (value, m.group(2))
+        # a key may come once per sensor kind (bi in deg/h and in mg): from_values checks
+        items.append((key.strip().lower(), value, m.group(2)))
     return DatasheetSpec.from_values(items, source=source)
 
 
@@ -440,6 +537,9 @@ def read_datasheet(
         if not isinstance(d, Mapping):
             raise DatasheetError(f"{where}: a JSON object is expected")
         if d.get("schema") == "gmwm-datasheet/1":
+            also = d.get("also")
+            if kind is not None and d.get("kind") != kind and isinstance(also, Mapping):
+                d = also
             vals = d.get("values")
             if not isinstance(vals, Mapping):
                 raise DatasheetError(f"{where}: key 'values' missing or not an object")
@@ -727,6 +827,7 @@ def check_datasheet(
             if isinstance(datasheet, str)
             else DatasheetSpec.from_values(datasheet)
         )
+    datasheet = datasheet.for_unit(wv.unit)
     lo, hi = np.asarray(wv.ci_low, float), np.asarray(wv.ci_high, float)
     if not math.isclose(level, 1.0 - wv.alpha, rel_tol=0, abs_tol=1e-12):
         if wv.robust:
