@@ -31,7 +31,7 @@ from .figures import (
     fleet_adev_figure,
     spread_figure,
 )
-from .fleet import MIN_UNITS_Z, OUTLIER_Z, FleetReport
+from .fleet import MIN_UNITS_Z, OUTLIER_REL, OUTLIER_Z, FleetReport
 
 __all__ = ["ReportError", "render_html", "render_fleet_html", "figure_specs", "fleet_figure_specs"]
 
@@ -80,9 +80,11 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
             limit = None
             for lim in fleet.limits:
                 d = DISPLAY.get((lim.kind, lim.symbol))
+                # a B limit declared as the ADEV minimum is drawn on the "ADEV min" columns
+                sym = "ADEV min" if lim.ieee_key == "ADEV_min" else (d.symbol if d else "")
                 if (
                     d is not None
-                    and (d.symbol, d.unit) == col[1:]
+                    and (sym, d.unit) == (col[1].removesuffix(" (data)"), col[2])
                     and _kind_of(fleet, ch) == lim.kind
                 ):
                     limit = lim.si * d.factor
@@ -389,6 +391,7 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         spread=spread,
         static=static,
         outlier_z=OUTLIER_Z,
+        outlier_rel=OUTLIER_REL,
         min_units_z=MIN_UNITS_Z,
         bokeh_resources=Markup(resources),
         bokeh_script=Markup(script),
