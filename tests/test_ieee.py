@@ -165,3 +165,45 @@ def test_n_and_k_intervals_cover_the_truth_monte_carlo():
         hit_k += t["K"].low <= k_true * math.pi / 180 <= t["K"].high
     assert 0.895 <= hit_n / reps <= 0.99, hit_n
     assert 0.895 <= hit_k / reps <= 0.99, hit_k
+
+
+@pytest.fixture(scope="module")
+def gyro_log(tmp_path_factory):
+    """A deg/s gyroscope log whose white noise comes through a sensor filter (a GM of 0.5
+    samples: ARW sqrt(0.0656517 / 100) x 60 = 1.537 deg/sqrt(h)) plus a random walk."""
+    from engine.io import save_log
+
+    path = tmp_path_factory.mktemp("ieee") / "gyro.h5"
+    m = eg.GM(beta=200.0, sigma2_gm=0.05) + eg.RW(gamma2=1e-8)
+    save_log(path, {"gyro_x": m.simulate(2**15, fs=FS, rng=7)}, FS, units={"gyro_x": "deg/s"})
+    return path
+
+
+ARW_TRUE = math.sqrt(0.0656517 / FS) * 60.0
+
+
+def test_cli_fit_select_report_json_carry_ieee(gyro_log, tmp_path, capsys):
+    import json
+
+    from engine.cli import main
+
+    keys = {"value", "low", "high", "unit", "datasheet_value", "datasheet_unit"}
+    assert main(["fit", str(gyro_log), "--model", "GM+QN", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    n = d["ieee"]["N"]
+    assert keys <= set(n) and n["datasheet_unit"] == "deg/sqrt(h)"
+    assert n["datasheet_value"] == pytest.approx(ARW_TRUE, rel=0.05)
+    assert main(["select", str(gyro_log), "--models", "GM+QN,GM+WN+RW", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["ieee_model"] == d["candidates"][0]["model"]
+    assert d["ieee"]["N"]["datasheet_value"] == pytest.approx(ARW_TRUE, rel=0.05)
+    out = tmp_path / "r.html"
+    assert main(["report", str(gyro_log), "-o", str(out), "--model", "GM+RW", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    e = d["channels"]["gyro_x"]["ieee"]
+    assert keys <= set(e["N"]) and e["N"]["datasheet_value"] == pytest.approx(ARW_TRUE, rel=0.05)
+    assert {"B", "ADEV_min", "ADEV_data", "K"} <= set(e)
+    page = out.read_text()
+    # the report's IEEE table and the -1/2 guide through N (no WN term in the model)
+    assert '<table class="ieee" data-channel="gyro_x">' in page
+    assert "angle random walk" in page and "WN slope -0.5: N = " in page
