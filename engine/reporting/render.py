@@ -70,6 +70,8 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
         unit = next((c.unit for _, c in curves if c.fit is not None), "")
         out[f"fleet-{ch}-adev"] = fleet_adev_figure(f"fleet-{ch}-adev", ch, unit, curves)
         for k, col in enumerate(cols):
+            if not _spread_drawn(col):
+                continue
             values = []
             for u in fleet.units:
                 t = next((t for t in u.terms.get(ch, []) if t.column == col), None)
@@ -95,6 +97,13 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
         if u.report is not None:
             out.update(figure_specs(u.report, f"{u.anchor}-"))
     return out
+
+
+def _spread_drawn(col: tuple[str, str, str]) -> bool:
+    """Whether a fleet column gets a spread plot: every process term, and of the IEEE
+    quantities (the table's ``IEEE`` columns) the white-noise density, which the limits
+    check and which a process column misses when a sub-sample GM carries it."""
+    return col[0] != "IEEE" or col[1] in ("ARW", "VRW", "N")
 
 
 def _kind_of(fleet: FleetReport, channel: str) -> str | None:
@@ -378,7 +387,8 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         for ch in fleet.columns
     }
     spread = {
-        ch: [f"fleet-{ch}-{k}" for k in range(len(cols))] for ch, cols in fleet.columns.items()
+        ch: [f"fleet-{ch}-{k}" for k, c in enumerate(cols) if _spread_drawn(c)]
+        for ch, cols in fleet.columns.items()
     }
     page = _environment().get_template("fleet.html.jinja")
     render: Callable[..., str] = page.render
