@@ -207,3 +207,14 @@ def test_cli_fit_select_report_json_carry_ieee(gyro_log, tmp_path, capsys):
     # the report's IEEE table and the -1/2 guide through N (no WN term in the model)
     assert '<table class="ieee" data-channel="gyro_x">' in page
     assert "angle random walk" in page and "WN slope -0.5: N = " in page
+
+
+def test_a_minimum_at_the_edge_is_only_an_upper_bound():
+    # white noise alone: the ADEV falls at every averaging time, its minimum is at the longest
+    t = ieee_table(_stub(eg.parse_model("WN(sigma2=0.1)"), "deg/s"))
+    for key in ("B", "ADEV_min", "ADEV_data"):
+        assert t[key].upper_bound, key
+    assert "no floor" in t["B"].note
+    # with a random walk the floor is inside the scales
+    t = ieee_table(_stub(eg.WN(sigma2=0.1) + eg.RW(gamma2=1e-8), "deg/s"))
+    assert not t["B"].upper_bound and not t["ADEV_min"].upper_bound

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -123,6 +123,9 @@ class IeeeQuantity:
         The fitted terms it comes from (``("WN", "GM_2")``).
     note : str
         Caveats: a term on its bound, a floor at the edge of the analysed scales.
+    upper_bound : bool
+        True for a minimum at the edge of the analysed scales: no floor inside them, the
+        value only bounds the floor from above.
     """
 
     key: str
@@ -141,6 +144,7 @@ class IeeeQuantity:
     interval: str = ""
     sources: tuple[str, ...] = ()
     note: str = ""
+    upper_bound: bool = False
 
     @property
     def has_interval(self) -> bool:
@@ -170,6 +174,7 @@ class IeeeQuantity:
             v = getattr(self, k)
             out[k] = (float(v) if math.isfinite(v) else None) if isinstance(v, float) else v
         out["sources"] = list(self.sources)
+        out["upper_bound"] = self.upper_bound
         return out
 
 
@@ -391,6 +396,8 @@ def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
             src,
             note,
         )
+        if key in ("B", "ADEV_min") and fl["at_edge"]:
+            out[key] = replace(out[key], upper_bound=True)
     # the data's own Allan-deviation minimum, with the WV's interval at that scale
     var = np.asarray(wv.variance, float)
     ok = np.isfinite(var) & (var > 0)
@@ -418,6 +425,7 @@ def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
             _CHI2,
             (),
             note,
+            upper_bound=j in (0, var.size - 1),
         )
     order = {k: i for i, k in enumerate(IEEE_KEYS)}
     return IeeeTable(
@@ -440,6 +448,8 @@ def _quantity(
     interval: str,
     sources: tuple[str, ...],
     note: str,
+    *,
+    upper_bound: bool = False,
 ) -> IeeeQuantity:
     """One quantity from its value in the signal unit: SI and datasheet conversions."""
     u = unit or "u"
@@ -461,6 +471,7 @@ def _quantity(
             interval,
             sources,
             note,
+            upper_bound,
         )
     si = SI_UNIT[kind]
     d = DISPLAY.get((kind, dsym))
@@ -482,4 +493,5 @@ def _quantity(
         interval,
         sources,
         note,
+        upper_bound,
     )

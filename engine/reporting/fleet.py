@@ -494,8 +494,7 @@ def _limit_verdicts(rep: CalibrationReport, limits: Sequence[Limit]) -> list[tup
                 )
                 continue
             what = f"{ch} {_ieee_label(t.kind, q.key)} {q.datasheet_value:.4g} {q.datasheet_unit}"
-            upper_bound = "no floor" in q.note  # a minimum at the edge: an upper bound
-            if q.value > lim.si and not upper_bound:
+            if q.value > lim.si and not q.upper_bound:  # a minimum at the edge: a bound only
                 out.append(("fail", f"{what} > limit {lim.given}"))
             elif q.value > lim.si or not q.has_interval:
                 why = q.note or "no interval"
