@@ -51,7 +51,6 @@ from ..models import QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
     DISPLAY,
-    QUANTITIES,
     SI_UNIT,
     ExportError,
     quantity_name,
@@ -59,6 +58,14 @@ from ..units import (
     squared,
 )
 from ..wv.classical import eta3_interval
+from .datasheet_keys import ADEV_MIN_KEYS, DATASHEET_KEYS, DatasheetError
+from .datasheet_keys import CONVENTION as _CONVENTION
+from .datasheet_keys import KEY_KIND as _KEY_KIND
+from .datasheet_keys import ORDER as _ORDER
+from .datasheet_keys import QUANTITY_OF as _QUANTITY
+from .datasheet_keys import UNITS as _UNITS
+from .datasheet_keys import canon_unit as _canon
+from .datasheet_keys import convert_value as _convert
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..fit import GMWMResult
@@ -73,88 +80,6 @@ __all__ = [
     "check_datasheet",
     "DATASHEET_KEYS",
 ]
-
-
-class DatasheetError(ExportError):
-    """Datasheet values or a datasheet file that cannot be used; the message says which."""
-
-
-#: Accepted keys (lower case) -> datasheet symbol of :data:`engine.units.QUANTITIES`.
-DATASHEET_KEYS: dict[str, str] = {
-    "arw": "N",
-    "vrw": "N",
-    "n": "N",
-    "wn": "N",
-    "rrw": "K",
-    "accrw": "K",
-    "k": "K",
-    "rw": "K",
-    "bi": "B",
-    "b": "B",
-    "bi_min": "B",
-    "bis": "B",
-    "adev_min": "B",
-    "q": "Q",
-    "qn": "Q",
-}
-#: Datasheet symbol -> its quantity (N of WN, K of RW, Q of QN, B of the model's floor).
-_QUANTITY = {q.symbol: q for qs in QUANTITIES.values() for q in qs}
-_ORDER = ("N", "K", "B", "Q")
-#: Keys that declare the bias instability as the Allan-deviation minimum itself (the vendors'
-#: "in-run bias stability", allan_variance_ros), not as the IEEE 952 B = floor / 0.664.
-ADEV_MIN_KEYS = frozenset({"bi_min", "bis", "adev_min"})
-#: ``bi=VALUE UNIT (adev min)`` / ``(ieee)``: the convention written after the unit.
-_CONVENTION = re.compile(
-    r"\s*\(\s*(adev[\s_-]*min(?:imum)?|adev|ieee(?:\s*952)?)\s*\)\s*$", re.IGNORECASE
-)
-_KEY_KIND = {
-    "arw": "gyroscope",
-    "rrw": "gyroscope",
-    "vrw": "accelerometer",
-    "accrw": "accelerometer",
-}
-#: Signal units whose native datasheet units are accepted (``deg/s/sqrt(Hz)``, ``g*s`` ...).
-_SIGNAL_UNITS = ("rad/s", "deg/s", "deg/h", "mrad/s", "m/s^2", "g", "mg", "ug")
-
-
-def _canon(unit: str) -> str:
-    """A unit spelling reduced for comparison: ``(deg/s)/sqrt(Hz)`` == ``deg/s/rtHz``."""
-    u = unit.strip().lower().replace(" ", "").replace("°", "deg").replace("√", "sqrt")
-    u = u.replace("µ", "u").replace("**", "^").replace("²", "^2")
-    u = re.sub(r"sqrt\(([a-z]+)\)", r"sqrt\1", u)
-    u = u.replace("(", "").replace(")", "")
-    u = re.sub(r"\brt(hz|h|s)", r"sqrt\1", u).replace("/rt", "/sqrt")
-    u = u.replace("hr", "h").replace("sec", "s").replace("dps", "deg/s").replace("degs", "deg")
-    return u
-
-
-def _unit_table() -> dict[str, dict[str, tuple[str, str, float]]]:
-    """Per symbol: canonical unit -> (kind, spelling, factor to SI), from engine.units."""
-    table: dict[str, dict[str, tuple[str, str, float]]] = {s: {} for s in _ORDER}
-    for sym in _ORDER:
-        q = _QUANTITY[sym]
-        for u in _SIGNAL_UNITS:
-            kind, f = si_factor(u)
-            spelled = q.unit(u)
-            table[sym].setdefault(_canon(spelled), (kind, spelled, f))
-        for (kind, dsym), d in DISPLAY.items():
-            if dsym == sym:
-                table[sym].setdefault(_canon(d.unit), (kind, d.unit, 1.0 / d.factor))
-    return table
-
-
-_UNITS = _unit_table()
-
-
-def _convert(sym: str, value: float, unit: str, where: str) -> tuple[str, float]:
-    """(kind, SI value) of one datasheet value with its unit."""
-    got = _UNITS[sym].get(_canon(unit))
-    if got is None:
-        ok = ", ".join(dict.fromkeys(s for _, s, _ in _UNITS[sym].values()))
-        raise DatasheetError(f"{where}: unit {unit!r} is not a unit of {sym}; use one of {ok}")
-    if not math.isfinite(value) or value < 0:
-        raise DatasheetError(f"{where}: {value!r} is not a non-negative number")
-    return got[0], value * got[2]
 
 
 @dataclass(frozen=True, eq=False)
