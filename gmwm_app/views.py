@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -481,7 +482,9 @@ def _pretty(unit: str) -> str:
 
 
 def parameter_rows(state: AppState) -> list[dict[str, str]]:
-    """Rows ``{"process", "parameter", "value", "unit"}`` of the drawn model (fit or what-if)."""
+    """Rows ``{"process", "parameter", "value", "low", "high", "unit"}`` of the drawn model (fit
+    or what-if), then, for a fit, its IEEE quantities (process ``IEEE``: N, B, ADEV_min,
+    ADEV_data, K, Q, R in datasheet units)."""
     m = state.display_model()
     if m is None:
         return []
@@ -499,6 +502,22 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
                     "low": format_value(i.low) if i else "",
                     "high": format_value(i.high) if i else "",
                     "unit": _pretty(eg.param_unit(p.code, name, state.unit)),
+                }
+            )
+    res = state.result
+    if not state.whatif and res is not None and hasattr(res, "ieee"):
+        # the fit's IEEE quantities (engine.fit.ieee): N with its disguised share, B and the
+        # ADEV minimum (model, data) at their T, K, Q, R; datasheet units; intervals on request
+        for key, q in res.ieee.quantities.items():
+            at = f" (T {q.tau_s:.3g} s)" if math.isfinite(q.tau_s) else ""
+            rows.append(
+                {
+                    "process": "IEEE",
+                    "parameter": key,
+                    "value": format_value(q.datasheet_value),
+                    "low": format_value(q.datasheet_low) if inf is not None else "",
+                    "high": format_value(q.datasheet_high) if inf is not None else "",
+                    "unit": _pretty(q.datasheet_unit) + at,
                 }
             )
     return rows

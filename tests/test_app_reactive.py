@@ -181,7 +181,9 @@ def test_a_failed_redraw_is_shown_and_logged_and_the_action_stands(
     rec = [r for r in caplog.records if "drawing the WV plot failed" in r.getMessage()]
     assert rec and rec[0].exc_info is not None  # with its traceback
     # the other parts were drawn
-    assert list(app.tables.param_source.data["process"]) == ["WN", "RW"]
+    procs = list(app.tables.param_source.data["process"])
+    # the model's parameters, then the fit's IEEE quantities (engine/fit/ieee.py)
+    assert procs[:2] == ["WN", "RW"] and set(procs[2:]) == {"IEEE"}
 
 
 def test_a_failed_session_panel_refresh_is_shown_and_logged(

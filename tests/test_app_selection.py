@@ -104,8 +104,11 @@ def test_interval_columns_equal_param_intervals(app: Any) -> None:
     assert s.show_intervals and shown() == ["process", "parameter", "value", "low", "high", "unit"]
     ref = param_intervals(s.result, method="asymptotic", level=0.95)
     data = app.tables.param_source.data
-    assert list(data["low"]) == [format_value(i.low) for i in ref]
-    assert list(data["high"]) == [format_value(i.high) for i in ref]
+    # the parameters' rows first (the fit's IEEE quantities follow, with their own intervals)
+    assert list(data["low"])[: len(ref)] == [format_value(i.low) for i in ref]
+    assert list(data["high"])[: len(ref)] == [format_value(i.high) for i in ref]
+    ieee = s.result.ieee.quantities.values()
+    assert list(data["low"])[len(ref) :] == [format_value(q.datasheet_low) for q in ieee]
     inf = s.inference()
     for a, b in zip(inf.intervals, ref, strict=True):
         assert (a.name, a.low, a.high, a.unit) == (b.name, b.low, b.high, b.unit)

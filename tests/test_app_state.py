@@ -16,7 +16,7 @@ import pytest
 
 import engine as eg
 from gmwm_app import state as state_mod
-from gmwm_app.state import AppState
+from gmwm_app.state import AppState, format_value
 from gmwm_app.views import (
     datasheet_rows,
     fit_summary,
@@ -455,13 +455,20 @@ def test_tables(app_state: AppState) -> None:
     assert "Empty model" in fit_summary(s)
     assert s.set_model("GM+WN+RW")
     rows = parameter_rows(s)
-    assert [(r["process"], r["parameter"]) for r in rows] == [
+    assert [(r["process"], r["parameter"]) for r in rows[:4]] == [
         ("GM", "beta"),
         ("GM", "sigma2_gm"),
         ("WN", "sigma2"),
         ("RW", "gamma2"),
     ]
-    assert [r["unit"] for r in rows] == ["1/s", "(deg/s)²", "(deg/s)²", "(deg/s)²"]
+    assert [r["unit"] for r in rows[:4]] == ["1/s", "(deg/s)²", "(deg/s)²", "(deg/s)²"]
+    # then the fit's IEEE quantities (engine/fit/ieee.py), in datasheet units
+    ieee = {r["parameter"]: r for r in rows[4:]}
+    assert all(r["process"] == "IEEE" for r in rows[4:])
+    assert list(ieee) == list(s.result.ieee.quantities) and {"N", "B", "K"} <= set(ieee)
+    assert ieee["N"]["unit"] == "deg/sqrt(h)"
+    assert ieee["N"]["value"] == format_value(s.result.ieee["N"].datasheet_value)
+    assert ieee["B"]["unit"].startswith("deg/h (T ")
     ds = datasheet_rows(s)
     q = {r["quantity"]: r["unit"] for r in ds}
     assert q["angle random walk"] == "deg/sqrt(h)" and q["correlation time"] == "s"

@@ -147,7 +147,8 @@ def test_parse_spellings_and_units():
         ("foo=1 deg/h", "unknown datasheet key"),
         ("arw=0.3 m/s/sqrt(h)", "is a gyroscope value"),
         ("arw=0.3 deg/h", "not a unit of N"),
-        ("arw=0.3 deg/sqrt(h), bi=0.2 mg", "mixed"),
+        ("arw=0.3 deg/sqrt(h), bi=5 deg/h, bi=6 deg/h", "second time"),
+        ("arw=0.3 deg/sqrt(h) (adev min)", "for bi only"),
         ("arw=-1 deg/sqrt(h)", "non-negative"),
         ("arw=0.3 deg/sqrt(h), n=0.005 deg/s/sqrt(Hz)", "second time"),
         ("", "no value"),
@@ -362,3 +363,52 @@ def test_real_navchip_reproduces_the_case_study(real_data):
     above = [band for band in s["bands"] if band["verdict"] == "above"]
     assert len(above) == 1 and above[0]["tau_s_from"] == pytest.approx(0.256)
     assert above[0]["tau_s_to"] == pytest.approx(1.024)
+
+
+def test_gyroscope_and_accelerometer_items_together(tmp_path):
+    """A full datasheet (issue 27: this failed with "'vrw' gives N a second time"): each
+    channel is checked against its own sensor's part; bi may come once per sensor."""
+    text = "arw=2 deg/sqrt(h), bi=25.2 deg/h, vrw=0.2 m/s/sqrt(h), bi=0.2 mg"
+    spec = eg.parse_datasheet(text)
+    assert spec.kinds == ("gyroscope", "accelerometer")
+    gyro, acc = spec.for_kind("gyroscope"), spec.for_kind("accelerometer")
+    # 2 deg/sqrt(h) = 2/60 deg/s/sqrt(Hz) = 5.8178e-4 rad/s/sqrt(Hz); 0.2 m/s/sqrt(h) =
+    # 0.2/60 m/s^2/sqrt(Hz); 0.2 mg = 0.2e-3 x 9.80665 m/s^2
+    assert gyro.values["N"] == pytest.approx(2 / 60 * math.pi / 180, rel=1e-12)
+    assert gyro.values["B"] == pytest.approx(25.2 / 3600 * math.pi / 180, rel=1e-12)
+    assert acc.values["N"] == pytest.approx(0.2 / 60, rel=1e-12)
+    assert acc.values["B"] == pytest.approx(0.2e-3 * 9.80665, rel=1e-12)
+    assert spec.describe() == "ARW 2 deg/sqrt(h), B 25.2 deg/h; VRW 0.2 m/s/sqrt(h), B 0.2 mg"
+    rng = np.random.default_rng(4)
+    x = eg.WN(sigma2=1e-4).simulate(2**12, rng=rng, fs=100.0)
+    chk_g = eg.check_datasheet(eg.wavelet_variance(x, fs=100.0, unit="deg/s"), spec)
+    chk_a = eg.check_datasheet(eg.wavelet_variance(x, fs=100.0, unit="g"), spec)
+    assert chk_g.datasheet.kind == "gyroscope" and chk_a.datasheet.kind == "accelerometer"
+    # the check of one kind uses that kind's values: WV of WN N^2/dt / tau in the signal unit
+    n_deg = 2 / 60
+    assert chk_g.components["WN"][0] == pytest.approx(n_deg**2 * 100.0 / 2, rel=1e-9)
+    with pytest.raises(eg.DatasheetError, match="no accelerometer value"):
+        eg.parse_datasheet("arw=2 deg/sqrt(h)").for_kind("accelerometer")
+    saved = tmp_path / "ds.json"  # the saved form keeps both parts
+    saved.write_text(json.dumps(spec.to_dict()))
+    assert eg.read_datasheet(saved, kind="accelerometer").values == pytest.approx(acc.values)
+    assert eg.read_datasheet(saved, kind="gyroscope").values == pytest.approx(gyro.values)
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["bi_min=25.2 deg/h", "bis=25.2 deg/h", "bi=25.2 deg/h (ADEV min)", "adev_min=25.2 deg/h"],
+)
+def test_bias_instability_declared_as_the_adev_minimum(text):
+    """A vendor's in-run bias stability is the ADEV minimum itself: its floor is drawn at
+    25.2 deg/h, not at 0.664 x 25.2 = 16.7 deg/h as for an IEEE B (issue 27)."""
+    spec = eg.parse_datasheet(text)
+    ieee = eg.parse_datasheet("bi=25.2 deg/h")
+    assert spec.bi_convention == "adev_min" and ieee.bi_convention == "ieee"
+    floor = math.sqrt(2 * spec.floor_wv("deg/s")) * 3600  # ADEV of the floor, deg/h
+    assert floor == pytest.approx(25.2, rel=1e-12)
+    assert math.sqrt(2 * ieee.floor_wv("deg/s")) * 3600 == pytest.approx(
+        25.2 * eg.BI_FACTOR, rel=1e-12
+    )
+    assert "ADEV minimum 25.2 deg/h" in spec.describe()
+    assert eg.parse_datasheet("bi=25.2 deg/h (ieee)").bi_convention == "ieee"

@@ -22,7 +22,14 @@ from engine.cli import main
 from engine.inference import DatasheetError
 from engine.io import save_log
 from engine.reporting import gather_fleet, render_fleet_html
-from engine.reporting.fleet import MIN_UNITS_Z, OUTLIER_Z, noise_terms, parse_limits, robust_z
+from engine.reporting.fleet import (
+    MIN_UNITS_Z,
+    OUTLIER_Z,
+    ieee_terms,
+    noise_terms,
+    parse_limits,
+    robust_z,
+)
 
 FS = 100.0
 N = 2**15
@@ -148,7 +155,15 @@ def test_the_table_equals_the_engines_batch_numbers(sim_report):
     for ch in ("gx", "gy"):
         table = page.tables[("fleet", ch)]
         cols = page.columns[ch]
-        assert cols == ["WN|ARW|deg/sqrt(h)", "RW|RRW|deg/h/sqrt(h)", "model|B|deg/h"]
+        assert cols[:3] == ["WN|ARW|deg/sqrt(h)", "RW|RRW|deg/h/sqrt(h)", "model|B|deg/h"]
+        # the fit's IEEE quantities follow (engine/fit/ieee.py)
+        assert cols[3:] == [
+            "IEEE|ARW|deg/sqrt(h)",
+            "IEEE|B|deg/h",
+            "IEEE|ADEV min|deg/h",
+            "IEEE|ADEV min (data)|deg/h",
+            "IEEE|RRW|deg/h/sqrt(h)",
+        ]
         for lf in batch.fitted:
             name = Path(lf.source).name
             fit = lf.fits[ch]
@@ -157,7 +172,7 @@ def test_the_table_equals_the_engines_batch_numbers(sim_report):
             )
             want = {
                 (t.column[0], t.column[1], t.column[2]): t.value
-                for t in noise_terms(rows, "deg/s", ch)
+                for t in noise_terms(rows, "deg/s", ch) + ieee_terms(fit)
             }
             cells = table[name][1:]
             for col, (_, attrs) in zip(cols, cells, strict=True):
@@ -277,7 +292,8 @@ def test_real_fleet_numbers_equal_the_batch(real_data, tmp_path):
     for lf in batch.logs:
         fit = lf.fits["gyro_x"]
         rows = eg.units.datasheet_rows(fit.model, fit.fs, fit.wv.unit, n_levels=fit.wv.n_levels)
-        want = {"|".join(t.column): t.value for t in noise_terms(rows, fit.wv.unit, "gyro_x")}
+        terms = noise_terms(rows, fit.wv.unit, "gyro_x") + ieee_terms(fit)
+        want = {"|".join(t.column): t.value for t in terms}
         got = {
             c: float(a["data-value"])
             for c, (_, a) in zip(cols, table[Path(lf.source).name][1:], strict=True)

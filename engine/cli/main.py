@@ -299,6 +299,10 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
         d["n_ranked"], d["n_shown"] = n_ranked, len(shown)
         d["channel"] = name
         d["wv"] = wv.to_dict()
+        best = sel.best.result
+        # the IEEE quantities of the selected model (engine.fit.ieee), as gmwm fit --json
+        d["ieee"] = best.ieee.to_dict() if best is not None else None
+        d["ieee_model"] = sel.best.model
         return d
     table = dataclasses.replace(sel, candidates=shown).table()
     if len(shown) < n_ranked:  # say how many were ranked, not only how many are shown

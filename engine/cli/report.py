@@ -3,7 +3,7 @@
     gmwm report INPUT -o report.html [--model SPEC | --max-model SPEC] [--channels a,b,...]
                 [--datasheet VALUES | --datasheet-file FILE] [--format kalibr] [--static]
                 [--fs HZ] [--levels J] [--weights ci|identity|efficient] [--confidence 0.95]
-                [--segment ...] [--scale ...] [--units ...] [--topic T]
+                [--segment ...] [--scale ...] [--units ...] [--topic T] [--json]
 
 One self-contained HTML file (:func:`engine.report`): the log, per channel the Allan deviation,
 the WV with the fit, its decomposition and residuals, the PSD, the parameters and datasheet
@@ -66,6 +66,11 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="export format whose file the report includes (default kalibr; 'none': none)",
     )
     rp.add_argument("--static", action="store_true", help="PNG figures instead of interactive")
+    rp.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object: per channel its model and IEEE quantities (key 'ieee')",
+    )
     add_wv_options(rp)
     add_weights_option(rp)
     add_confidence_option(rp, "the parameter intervals")
@@ -76,17 +81,17 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm report``; returns one line saying what was written."""
     check_output(args.output, "-o", suffixes=(".html", ".htm"))  # before any import or fit
+    from pathlib import Path
+
     from ..formats import FORMATS
-    from ..reporting import report
+    from ..reporting import gather_report, render_html
 
     fmt = None if args.format.lower() == "none" else args.format
     if fmt is not None and fmt not in FORMATS:
         raise usage_error(f"--format {fmt!r}: use one of {', '.join(FORMATS)} or none")
     channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
-    page = report(
+    rep = gather_report(
         args.input,
-        args.output,
-        static=args.static,
         model=args.model,
         select=args.max_model,
         channels=channels,
@@ -99,5 +104,19 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         load_options=log_kwargs(args),
         command_line=shlex.join(["gmwm", *args.argv]),
     )
+    page = render_html(rep, static=args.static)
+    Path(args.output).write_text(page, encoding="utf-8")
     kind = "static" if args.static else "interactive"
+    if args.json:
+        return {
+            "output": str(args.output),
+            "channels": {
+                ch: (
+                    {"model": c.fit.model.spec(values=True), "ieee": c.fit.ieee.to_dict()}
+                    if c.fit is not None
+                    else {"error": c.error}
+                )
+                for ch, c in rep.channels.items()
+            },
+        }
     return f"wrote {args.output} ({kind}, {len(page.encode('utf-8')) / 1e6:.2f} MB)"

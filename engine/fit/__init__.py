@@ -9,6 +9,8 @@
 * :mod:`engine.fit.asymptotic`: the model-implied WV covariance in closed form
   (:mod:`engine.fit._closed_form`), the Jacobian and the sandwich covariance of a fit
   (:func:`param_cov`; ``GMWMResult.conf_int``);
+* :mod:`engine.fit.ieee`: the IEEE quantities of a fit (:func:`ieee_table`,
+  ``GMWMResult.ieee``): N with its disguised share, B and the ADEV minimum, K, Q, R;
 * :mod:`engine.fit.result`: :class:`FitResult` (the base of every fit's result),
   :class:`ParamRecord`, :class:`ParamTable`, :class:`Summary`, :class:`FitError`;
 * :mod:`engine.fit.start`: :func:`starting_values` (rough values read off a WV);
@@ -30,6 +32,7 @@ from .._lazy import lazy_attributes
 from .asymptotic import param_cov, wv_cov_model
 from .covariance import V_DEFAULTS, VOptions, wv_cov, wv_cov_bootstrap, wv_cov_data
 from .gmwm import GMWMResult, fit_efficient, fit_gmwm, gmwm_objective, weight_matrix
+from .ieee import IeeeQuantity, IeeeTable, ieee_table
 from .result import FitError, FitResult, ParamRecord, ParamTable, Summary
 from .start import starting_values
 
@@ -50,6 +53,9 @@ __all__ = [
     "fit_gmwm",
     "fit_efficient",
     "GMWMResult",
+    "IeeeTable",
+    "IeeeQuantity",
+    "ieee_table",
     "wv_cov",
     "wv_cov_model",
     "wv_cov_data",

@@ -10,6 +10,7 @@ projection's intervals) build on it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ __all__ = [
     "jacobian",
     "param_cov",
     "asymptotic_bounds",
+    "delta_bounds",
 ]
 
 
@@ -202,4 +204,74 @@ def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[fl
         if r.name == "omega":  # the sign of a drift is not identified: report |omega|
             lo, hi = (max(lo, 0.0), hi) if r.value >= 0 else (lo, hi)
         out.append((float(lo), float(hi)))
+    return out
+
+
+def delta_bounds(
+    res: Any,
+    fns: Sequence[Callable[[Model, float], float]],
+    level: float,
+    *,
+    vmat: np.ndarray | None = None,
+) -> list[tuple[float, float]]:
+    """Delta-method bounds of positive functions of a fitted model, on the log scale.
+
+    For each ``g = fn(model, fs)``: ``se = sqrt(d' C d)`` with ``d`` the central-difference
+    gradient of ``g`` in the unconstrained coordinates of the free parameters
+    (:func:`free_params`) and ``C`` their sandwich covariance (:func:`param_cov`); the bounds
+    are ``g exp(-/+ z se / g)`` (positive, like the parameters' own).
+
+    Parameters
+    ----------
+    res : GMWMResult
+        The fit (model, WV, Omega, at_bound).
+    fns : sequence of callables ``(model, fs) -> float``
+        The quantities.
+    level : float
+        Two-sided coverage in (0, 1).
+    vmat : ndarray (J, J), optional
+        Covariance of the WV (default :func:`wv_cov_model` of the fit).
+
+    Returns
+    -------
+    list of (low, high)
+        NaN bounds for a quantity that is not positive or that depends on no free parameter
+        (all its terms on a bound).
+    """
+    from scipy import stats
+
+    free = free_params(res)
+    if not free:
+        return [(math.nan, math.nan)] * len(fns)
+    try:
+        cov = param_cov(res, wv_cov_model(res.model, res.wv) if vmat is None else vmat, free)
+    except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate V
+        return [(math.nan, math.nan)] * len(fns)
+    z = float(stats.norm.ppf(0.5 + level / 2))
+    u0 = _u0(res.model, free)
+    steps = [1e-5 * max(1.0, abs(u)) for u in u0]
+    shifted = []
+    for k, h in enumerate(steps):
+        up, dn = u0.copy(), u0.copy()
+        up[k] += h
+        dn[k] -= h
+        shifted.append((_set(res.model, free, up), _set(res.model, free, dn)))
+    out = []
+    for fn in fns:
+        g0 = fn(res.model, res.fs)
+        if not (math.isfinite(g0) and g0 > 0):
+            out.append((math.nan, math.nan))
+            continue
+        d = np.array(
+            [
+                (fn(a, res.fs) - fn(b, res.fs)) / (2 * h)
+                for (a, b), h in zip(shifted, steps, strict=True)
+            ]
+        )
+        var = float(d @ cov @ d)
+        if not (math.isfinite(var) and var > 0):
+            out.append((math.nan, math.nan))
+            continue
+        s = math.sqrt(var) / g0
+        out.append((g0 * math.exp(-z * s), g0 * math.exp(z * s)))
     return out

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,6 +38,7 @@ from ._varpro import (
 )
 from .asymptotic import asymptotic_bounds, wv_cov_model
 from .covariance import VOptions, inverse_cov, v_options, wv_cov
+from .ieee import IeeeTable, ieee_table
 from .result import FitError, OneWVFit, ParamTable, UnivariateFit
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -88,6 +90,14 @@ class GMWMResult(OneWVFit, UnivariateFit):
             level=1.0 - alpha,
         )
 
+    @cached_property
+    def ieee(self) -> IeeeTable:
+        """The IEEE quantities of the fit with 95 % intervals (:func:`engine.fit.ieee.ieee_table`):
+        N (white noise, its disguised share included), B (Allan floor / 0.664), the Allan
+        deviation minimum with its averaging time (model and data), and K, Q, R where the model
+        has them, in SI and datasheet units."""
+        return ieee_table(self)
+
     def _summary_head(self) -> list[str]:
         w = self.wv
         return [
@@ -102,13 +112,18 @@ class GMWMResult(OneWVFit, UnivariateFit):
         from ..units import datasheet
 
         ds = datasheet(self.model, self.wv.fs, self.wv.unit, n_levels=self.wv.n_levels)
+        out = ["", *self.ieee.lines()]
         if not ds:
-            return []
-        return ["", "  datasheet view (as gmwm export --format datasheet):"] + [
-            f"  {row['label']:<8} {row['quantity']:<40} {row['symbol']:<8} "
-            f"{row['value']:>12.5g}  {row['unit']}"
-            for row in ds
-        ]
+            return out
+        return (
+            out
+            + ["", "  datasheet view (as gmwm export --format datasheet):"]
+            + [
+                f"  {row['label']:<8} {row['quantity']:<40} {row['symbol']:<8} "
+                f"{row['value']:>12.5g}  {row['unit']}"
+                for row in ds
+            ]
+        )
 
     def _dict_extra(self) -> dict[str, Any]:
         return {
@@ -116,6 +131,7 @@ class GMWMResult(OneWVFit, UnivariateFit):
             "implied": [float(v) for v in self.implied],
             "components": {k: [float(x) for x in v] for k, v in self.components.items()},
             "wv": self.wv.to_dict(),
+            "ieee": self.ieee.to_dict(),
         }
 
 

@@ -51,7 +51,6 @@ from ..models import QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
     DISPLAY,
-    QUANTITIES,
     SI_UNIT,
     ExportError,
     quantity_name,
@@ -59,6 +58,14 @@ from ..units import (
     squared,
 )
 from ..wv.classical import eta3_interval
+from .datasheet_keys import ADEV_MIN_KEYS, DATASHEET_KEYS, DatasheetError
+from .datasheet_keys import CONVENTION as _CONVENTION
+from .datasheet_keys import KEY_KIND as _KEY_KIND
+from .datasheet_keys import ORDER as _ORDER
+from .datasheet_keys import QUANTITY_OF as _QUANTITY
+from .datasheet_keys import UNITS as _UNITS
+from .datasheet_keys import canon_unit as _canon
+from .datasheet_keys import convert_value as _convert
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..fit import GMWMResult
@@ -73,78 +80,6 @@ __all__ = [
     "check_datasheet",
     "DATASHEET_KEYS",
 ]
-
-
-class DatasheetError(ExportError):
-    """Datasheet values or a datasheet file that cannot be used; the message says which."""
-
-
-#: Accepted keys (lower case) -> datasheet symbol of :data:`engine.units.QUANTITIES`.
-DATASHEET_KEYS: dict[str, str] = {
-    "arw": "N",
-    "vrw": "N",
-    "n": "N",
-    "wn": "N",
-    "rrw": "K",
-    "accrw": "K",
-    "k": "K",
-    "rw": "K",
-    "bi": "B",
-    "b": "B",
-    "q": "Q",
-    "qn": "Q",
-}
-#: Datasheet symbol -> its quantity (N of WN, K of RW, Q of QN, B of the model's floor).
-_QUANTITY = {q.symbol: q for qs in QUANTITIES.values() for q in qs}
-_ORDER = ("N", "K", "B", "Q")
-_KEY_KIND = {
-    "arw": "gyroscope",
-    "rrw": "gyroscope",
-    "vrw": "accelerometer",
-    "accrw": "accelerometer",
-}
-#: Signal units whose native datasheet units are accepted (``deg/s/sqrt(Hz)``, ``g*s`` ...).
-_SIGNAL_UNITS = ("rad/s", "deg/s", "deg/h", "mrad/s", "m/s^2", "g", "mg", "ug")
-
-
-def _canon(unit: str) -> str:
-    """A unit spelling reduced for comparison: ``(deg/s)/sqrt(Hz)`` == ``deg/s/rtHz``."""
-    u = unit.strip().lower().replace(" ", "").replace("°", "deg").replace("√", "sqrt")
-    u = u.replace("µ", "u").replace("**", "^").replace("²", "^2")
-    u = re.sub(r"sqrt\(([a-z]+)\)", r"sqrt\1", u)
-    u = u.replace("(", "").replace(")", "")
-    u = re.sub(r"\brt(hz|h|s)", r"sqrt\1", u).replace("/rt", "/sqrt")
-    u = u.replace("hr", "h").replace("sec", "s").replace("dps", "deg/s").replace("degs", "deg")
-    return u
-
-
-def _unit_table() -> dict[str, dict[str, tuple[str, str, float]]]:
-    """Per symbol: canonical unit -> (kind, spelling, factor to SI), from engine.units."""
-    table: dict[str, dict[str, tuple[str, str, float]]] = {s: {} for s in _ORDER}
-    for sym in _ORDER:
-        q = _QUANTITY[sym]
-        for u in _SIGNAL_UNITS:
-            kind, f = si_factor(u)
-            spelled = q.unit(u)
-            table[sym].setdefault(_canon(spelled), (kind, spelled, f))
-        for (kind, dsym), d in DISPLAY.items():
-            if dsym == sym:
-                table[sym].setdefault(_canon(d.unit), (kind, d.unit, 1.0 / d.factor))
-    return table
-
-
-_UNITS = _unit_table()
-
-
-def _convert(sym: str, value: float, unit: str, where: str) -> tuple[str, float]:
-    """(kind, SI value) of one datasheet value with its unit."""
-    got = _UNITS[sym].get(_canon(unit))
-    if got is None:
-        ok = ", ".join(dict.fromkeys(s for _, s, _ in _UNITS[sym].values()))
-        raise DatasheetError(f"{where}: unit {unit!r} is not a unit of {sym}; use one of {ok}")
-    if not math.isfinite(value) or value < 0:
-        raise DatasheetError(f"{where}: {value!r} is not a non-negative number")
-    return got[0], value * got[2]
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,12 +97,21 @@ class DatasheetSpec:
         The values as the user wrote them (``"0.3 deg/sqrt(h)"``), by symbol.
     source : str
         Where they come from (``command line``, a file and its key).
+    bi_convention : {"ieee", "adev_min"}
+        How B was declared: ``ieee`` (IEEE 952 B, the Allan floor / 0.664) or ``adev_min``
+        (the Allan-deviation minimum itself, e.g. Analog Devices' "in-run bias stability";
+        ``values["B"]`` then holds that minimum / 0.664, so the check draws the same floor).
+    also : DatasheetSpec or None
+        The other sensor kind's values of the same datasheet (gyroscope and accelerometer
+        items given together); :meth:`for_kind` picks one.
     """
 
     kind: str
     values: dict[str, float]
     given: dict[str, str] = field(default_factory=dict)
     source: str = ""
+    bi_convention: str = "ieee"
+    also: DatasheetSpec | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in SI_UNIT:
@@ -179,42 +123,113 @@ class DatasheetSpec:
             raise DatasheetError(
                 "the datasheet has no value: give at least one of ARW/VRW, RRW, BI, Q"
             )
+        if self.bi_convention not in ("ieee", "adev_min"):
+            raise DatasheetError(
+                f"bias-instability convention {self.bi_convention!r}: use ieee or adev_min"
+            )
+        if self.also is not None and (self.also.kind == self.kind or self.also.also is not None):
+            raise DatasheetError("a datasheet holds at most one part per sensor kind")
 
-    @classmethod
-    def from_values(
-        cls, values: Mapping[str, tuple[float, str]], *, source: str = ""
-    ) -> DatasheetSpec:
-        """From ``{key: (value, unit)}`` with keys of :data:`DATASHEET_KEYS` (``arw``, ``bi`` ...).
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The sensor kinds the datasheet has values for."""
+        return (self.kind,) + ((self.also.kind,) if self.also is not None else ())
+
+    def for_kind(self, kind: str) -> DatasheetSpec:
+        """The part of the datasheet for one sensor kind (``gyroscope``/``accelerometer``).
 
         Raises
         ------
         DatasheetError
-            Unknown key or unit, a symbol given twice, or gyroscope and accelerometer mixed.
+            The datasheet has no value for that kind.
         """
-        si: dict[str, float] = {}
-        given: dict[str, str] = {}
-        kinds: dict[str, str] = {}
-        for key, (value, unit) in values.items():
+        for part in (self, self.also):
+            if part is not None and part.kind == kind:
+                return DatasheetSpec(
+                    part.kind, part.values, part.given, part.source, part.bi_convention
+                )
+        raise DatasheetError(
+            f"the datasheet ({self.describe()}) has no {kind} value; give "
+            f"{'arw/rrw' if kind == 'gyroscope' else 'vrw/accrw'} items for it"
+        )
+
+    def for_unit(self, unit: str) -> DatasheetSpec:
+        """The part for a channel's signal unit (itself when it has one part only)."""
+        if self.also is None:
+            return self
+        try:
+            kind = si_factor(unit)[0]
+        except ExportError as e:
+            raise DatasheetError(f"{e}; the datasheet check needs the log's unit") from e
+        return self.for_kind(kind)
+
+    @classmethod
+    def from_values(
+        cls,
+        values: Mapping[str, tuple[float, str]] | Sequence[tuple[str, float, str]],
+        *,
+        source: str = "",
+    ) -> DatasheetSpec:
+        """From ``{key: (value, unit)}`` (or ``[(key, value, unit), ...]``, where a key may come
+        once per sensor kind) with keys of :data:`DATASHEET_KEYS` (``arw``, ``bi`` ...).
+
+        Gyroscope and accelerometer values may be given together (``arw`` and ``vrw``, or
+        ``bi`` in deg/h and in mg): the result then holds one part per kind
+        (:meth:`for_kind`). ``bi_min``/``bis``/``adev_min`` (or ``bi=VALUE UNIT (adev min)``)
+        declare the bias instability as the Allan-deviation minimum, ``bi`` (or
+        ``(ieee)``) as the IEEE 952 B = floor / 0.664.
+
+        Raises
+        ------
+        DatasheetError
+            Unknown key or unit, a symbol given twice for one sensor kind.
+        """
+        si: dict[str, dict[str, float]] = {}
+        given: dict[str, dict[str, str]] = {}
+        conv: dict[str, str] = {}
+        triples = (
+            [(k, v, u) for k, (v, u) in values.items()]
+            if isinstance(values, Mapping)
+            else list(values)
+        )
+        for key, value, unit in triples:
             k = key.strip().lower()
             sym = DATASHEET_KEYS.get(k)
             if sym is None:
                 raise DatasheetError(
                     f"unknown datasheet key {key!r}: use {', '.join(DATASHEET_KEYS)}"
                 )
-            if sym in si:
-                raise DatasheetError(f"{key!r} gives {sym} a second time")
+            convention = "adev_min" if k in ADEV_MIN_KEYS else "ieee"
+            m = _CONVENTION.search(unit)
+            if m is not None:
+                if sym != "B":
+                    raise DatasheetError(
+                        f"{key} = {value} {unit}: a convention in parentheses is for bi only"
+                    )
+                convention = "ieee" if m.group(1).lower().startswith("ieee") else "adev_min"
+                unit = unit[: m.start()].strip()
             kind, v = _convert(sym, float(value), unit, f"{source or 'datasheet'} {key}")
             if _KEY_KIND.get(k, kind) != kind:
                 raise DatasheetError(
                     f"{key} = {value} {unit}: {k.upper()} is a {_KEY_KIND[k]} value"
                 )
-            si[sym], given[sym], kinds[f"{key} ({unit})"] = v, f"{value:g} {unit}", kind
-        if len(set(kinds.values())) > 1:
-            raise DatasheetError(
-                "gyroscope and accelerometer units mixed: "
-                + ", ".join(f"{k}: {v}" for k, v in kinds.items())
-            )
-        return cls(next(iter(kinds.values()), "gyroscope"), si, given, source)
+            if sym in si.get(kind, {}):
+                raise DatasheetError(f"{key!r} gives the {kind}'s {sym} a second time")
+            text = f"{value:g} {unit}"
+            if sym == "B":
+                conv[kind] = convention
+                if convention == "adev_min":  # stored as the IEEE B of that floor
+                    v, text = v / BI_FACTOR, f"{text} (ADEV minimum)"
+            si.setdefault(kind, {})[sym] = v
+            given.setdefault(kind, {})[sym] = text
+        kinds = sorted(si, key=list(SI_UNIT).index) or ["gyroscope"]
+        parts = [
+            cls(kd, si.get(kd, {}), given.get(kd, {}), source, conv.get(kd, "ieee")) for kd in kinds
+        ]
+        if len(parts) == 1:
+            return parts[0]
+        first, second = parts
+        return cls(first.kind, first.values, first.given, source, first.bi_convention, also=second)
 
     @property
     def si_unit(self) -> str:
@@ -277,23 +292,31 @@ class DatasheetSpec:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (``schema: gmwm-datasheet/1``); :func:`read_datasheet` reads it back."""
-        return {
+        d: dict[str, Any] = {
             "schema": "gmwm-datasheet/1",
             "kind": self.kind,
             "source": self.source,
             "values": {r["symbol"]: [r["si"], r["si_unit"]] for r in self.rows()},
             "rows": self.rows(),
+            "bi_convention": self.bi_convention,
         }
+        if self.also is not None:
+            d["also"] = self.also.to_dict()
+        return d
 
     def describe(self) -> str:
-        """One line: ``ARW 0.3 deg/sqrt(h), B 5 deg/h`` (datasheet units)."""
+        """One line: ``ARW 0.3 deg/sqrt(h), B 5 deg/h`` (datasheet units; the other sensor's
+        part after a semicolon; a B declared as the ADEV minimum says so)."""
         parts = []
         for r in self.rows():
             if r["display"] is not None:
                 parts.append(f"{r['display_symbol']} {r['display']:.4g} {r['display_unit']}")
             else:
                 parts.append(f"{r['symbol']} {r['si']:.4g} {r['si_unit']}")
-        return ", ".join(parts)
+            if r["symbol"] == "B" and self.bi_convention == "adev_min":
+                parts[-1] += f" (ADEV minimum {self.given.get('B', '').split(' (')[0]})"
+        text = ", ".join(parts)
+        return text if self.also is None else f"{text}; {self.also.describe()}"
 
 
 def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec:
@@ -310,7 +333,7 @@ def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec
     DatasheetError
         An item that is not ``KEY=VALUE UNIT``, or any error of :meth:`DatasheetSpec.from_values`.
     """
-    items: dict[str, tuple[float, str]] = {}
+    items: list[tuple[str, float, str]] = []
     for raw in re.split(r"[;,]", text or ""):
         if not raw.strip():
             continue
@@ -325,9 +348,8 @@ def parse_datasheet(text: str, *, source: str = "command line") -> DatasheetSpec
             raise DatasheetError(
                 f"datasheet item {raw.strip()!r} has no unit (e.g. arw=0.3 deg/sqrt(h))"
             )
-        if key.strip().lower() in items:
-            raise DatasheetError(f"datasheet key {key.strip()!r} given twice")
-        items[key.strip().lower()] = (value, m.group(2))
+        # a key may come once per sensor kind (bi in deg/h and in mg): from_values checks
+        items.append((key.strip().lower(), value, m.group(2)))
     return DatasheetSpec.from_values(items, source=source)
 
 
@@ -440,6 +462,9 @@ def read_datasheet(
         if not isinstance(d, Mapping):
             raise DatasheetError(f"{where}: a JSON object is expected")
         if d.get("schema") == "gmwm-datasheet/1":
+            also = d.get("also")
+            if kind is not None and d.get("kind") != kind and isinstance(also, Mapping):
+                d = also
             vals = d.get("values")
             if not isinstance(vals, Mapping):
                 raise DatasheetError(f"{where}: key 'values' missing or not an object")
@@ -727,6 +752,7 @@ def check_datasheet(
             if isinstance(datasheet, str)
             else DatasheetSpec.from_values(datasheet)
         )
+    datasheet = datasheet.for_unit(wv.unit)
     lo, hi = np.asarray(wv.ci_low, float), np.asarray(wv.ci_high, float)
     if not math.isclose(level, 1.0 - wv.alpha, rel_tol=0, abs_tol=1e-12):
         if wv.robust:

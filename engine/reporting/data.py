@@ -38,6 +38,7 @@ from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
 from ..io import ImuLog, log_of
+from ..models import DR, QN, RW, WN
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
 from ..wv import AllanVariance
 
@@ -75,6 +76,8 @@ class SlopeGuide:
     value: float
     unit: str
     datasheet_value: float  # N, K, Q, R (= value) or B (= value / BI_FACTOR)
+    display_value: float = math.nan  # datasheet_value in display_unit (deg/sqrt(h) ...)
+    display_unit: str = ""
 
     def adev(self, t: np.ndarray) -> np.ndarray:
         """The line at averaging times ``t`` [s]."""
@@ -127,6 +130,7 @@ class ChannelReport:
         d["j_test"] = self.jtest.to_dict() if self.jtest is not None else None
         d["allan"] = self.allan.to_dict() if self.allan is not None else None
         d["slope_guides"] = [g.__dict__ for g in self.guides]
+        d["ieee"] = self.fit.ieee.to_dict() if self.fit is not None else None
         if self.spectrum is not None:
             d["psd"] = {"f": self.spectrum.f, "welch": self.spectrum.welch}
             d["psd"].update(model=self.spectrum.model, nperseg=self.spectrum.nperseg)
@@ -237,24 +241,50 @@ def welch_psd(
     return Spectrum(band(f), band(p), total, comps, nperseg)
 
 
-def slope_guides(fit: GMWMResult, rows: Sequence[DatasheetRow]) -> list[SlopeGuide]:
-    """The IEEE slope lines of a fit's QN, WN, RW and DR terms and its Allan floor."""
+#: The IEEE quantities drawn as slope lines, with the process class that owns the slope.
+_GUIDED = {"N": WN, "K": RW, "Q": QN, "R": DR}
+
+
+def slope_guides(fit: GMWMResult) -> list[SlopeGuide]:
+    """The IEEE slope lines of a fit's quantities (:attr:`engine.fit.GMWMResult.ieee`): -1/2
+    through N (white noise, its disguised share included), +1/2 through K, -1 through Q, +1
+    through R (each present and non-zero) and the bias-instability floor at the model's ADEV
+    minimum (when it lies inside the analysed scales)."""
+    t = fit.ieee
     out: list[SlopeGuide] = []
-    for lab, proc in zip(fit.model.labels, fit.model.processes, strict=True):
-        if proc.allan_slope is None or proc.read_tau is None:
-            continue  # no single slope (AR1, GM)
-        sym = proc.quantities[0].symbol
-        row = next(r for r in rows if r.process == lab and r.symbol == sym)
+    for key, cls in _GUIDED.items():
+        q = t.get(key)
+        if q is None or not q.native > 0 or cls.allan_slope is None or cls.read_tau is None:
+            continue  # absent, or a term fitted at 0: no line
         out.append(
             SlopeGuide(
-                proc.code, sym, proc.allan_slope, proc.read_tau, row.value, row.unit, row.value
+                cls.code,
+                key,
+                cls.allan_slope,
+                cls.read_tau,
+                q.native,
+                q.native_unit,
+                q.native,
+                q.datasheet_value,
+                q.datasheet_unit,
             )
         )
     fl = allan_floor(fit.model, fit.fs, fit.wv.n_levels)
-    if not fl["at_edge"] and math.isfinite(fl["adev_min"]):
-        unit = fit.wv.unit or "u"
-        b = fl["bias_instability"]  # adev_min / BI_FACTOR
-        out.append(SlopeGuide("BI", "B", 0.0, fl["T_s"], b * BI_FACTOR, unit, b))
+    b = t["B"]
+    if not fl["at_edge"] and math.isfinite(b.native):
+        out.append(
+            SlopeGuide(
+                "BI",
+                "B",
+                0.0,
+                b.tau_s,
+                b.native * BI_FACTOR,
+                b.native_unit,
+                b.native,
+                b.datasheet_value,
+                b.datasheet_unit,
+            )
+        )
     return out
 
 
@@ -373,7 +403,7 @@ def _channel(
         fit,
         "",
         allan,
-        slope_guides(fit, rows),
+        slope_guides(fit),
         spectrum,
         intervals,
         rows,

@@ -100,7 +100,11 @@ def channel_figures(ch: ChannelReport, prefix: str = "") -> list[FigureSpec]:
             ),
         ]
         for i, g in enumerate(ch.guides):
-            label = f"{g.code} slope {g.slope:+g}: {g.symbol} = {g.datasheet_value:.3g} {g.unit}"
+            label = (
+                f"{g.code} slope {g.slope:+g}: {g.symbol} = {g.display_value:.3g} {g.display_unit}"
+                if g.display_unit
+                else f"{g.code} slope {g.slope:+g}: {g.symbol} = {g.datasheet_value:.3g} {g.unit}"
+            )
             layers.append(Layer("dashed", t, g.adev(t), label, PALETTE[(i + 2) % 10]))
         out.append(
             FigureSpec(

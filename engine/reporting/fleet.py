@@ -10,15 +10,23 @@ nothing refitted). The caller then adds:
 * the noise terms of every unit, per channel, in datasheet units with their intervals
   (:func:`noise_terms`: ARW/VRW, RRW/AccRW, the bias-instability floor B, Q, R, the GM
   correlation times and standard deviations);
-* the verdicts: against limits (``--spec arw<=0.3 deg/sqrt(h)``, :func:`parse_limits`) a term
-  passes when its interval's upper end is within the limit, fails when its estimate is
-  over it, and is ``marginal`` between; against a datasheet (:func:`engine.check_datasheet`)
+* the verdicts: against limits (``--spec arw<=0.3 deg/sqrt(h)``, :func:`parse_limits`) each
+  limit is checked on the fit's IEEE quantity (:attr:`engine.fit.GMWMResult.ieee`: N with the
+  white noise an AR1/GM faster than one sample carries, B or the ADEV minimum as the limit
+  declares it, K, Q), never on a term that the model does not have: the quantity passes when
+  its interval's upper end is within the limit, fails when its estimate is over it, and is
+  ``marginal`` between; a unit whose model cannot answer (no such quantity, or an estimate
+  on a bound without an interval, or a floor outside the analysed scales above the limit) is
+  ``cannot tell``, never ``pass``; against a datasheet (:func:`engine.check_datasheet`)
   a channel fails when the datasheet model is below the empirical interval at more scales
   than a correct datasheet would give with probability ``level`` (binomial, each scale below
   with probability ``(1 - level) / 2``), is ``marginal`` with fewer, passes with none; a
   unit's verdict is its worst;
 * the robust z-scores of every term across the units, ``z = (x - median) / (1.4826 MAD)``
-  (:func:`robust_z`), outliers where ``|z| > 3.5`` (Iglewicz and Hoaglin).
+  (:func:`robust_z`), outliers where ``|z| > 3.5`` (Iglewicz and Hoaglin) *and* the value
+  differs from the median by more than :data:`OUTLIER_REL` of it (a 0.6 % difference is no
+  outlier however tight the fleet); terms of an AR1/GM faster than one sample (white noise
+  in disguise: their correlation time means nothing) get no z-score.
 
 Units whose log cannot be read or fitted are in the report with their reason, never dropped.
 """
@@ -40,11 +48,12 @@ import numpy as np
 
 from .._jsonutil import json_ready
 from ..batch import BatchResult, LogFit, expand_paths, fit_log
-from ..units import DISPLAY, DatasheetRow, ExportError, si_factor
+from ..units import BI_FACTOR, DISPLAY, DatasheetRow, ExportError, si_factor
 from .data import CalibrationReport, ChannelReport, software_versions
 
 __all__ = [
     "OUTLIER_Z",
+    "OUTLIER_REL",
     "MIN_UNITS_Z",
     "Limit",
     "TermValue",
@@ -53,11 +62,15 @@ __all__ = [
     "robust_z",
     "parse_limits",
     "noise_terms",
+    "ieee_terms",
     "gather_fleet",
 ]
 
 #: Robust z-score beyond which a unit's term is an outlier (Iglewicz and Hoaglin 1993).
 OUTLIER_Z = 3.5
+#: Least relative difference from the fleet's median for an outlier (with a robust z beyond
+#: OUTLIER_Z): units that agree within 10 % are alike for any datasheet.
+OUTLIER_REL = 0.10
 #: Fewest units with a term for its robust z-scores (with three, the MAD is one deviation).
 MIN_UNITS_Z = 5
 #: MAD of a normal sample / its SD.
@@ -102,13 +115,21 @@ def robust_z(x: Sequence[float] | np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Limit:
     """An acceptance limit ``term <= value``: ``key`` as given (``arw``), its datasheet
-    ``symbol`` (N, K, B, Q), the sensor ``kind``, the value in SI and as written."""
+    ``symbol`` (N, K, B, Q), the sensor ``kind``, the value in SI and as written;
+    ``convention`` of a B limit: ``ieee`` (IEEE 952 B, floor / 0.664) or ``adev_min`` (the
+    Allan-deviation minimum itself, ``bi_min<=``)."""
 
     key: str
     symbol: str
     kind: str
     si: float
     given: str
+    convention: str = "ieee"
+
+    @property
+    def ieee_key(self) -> str:
+        """The key of the IEEE quantity it limits (:data:`engine.fit.ieee.IEEE_KEYS`)."""
+        return "ADEV_min" if self.symbol == "B" and self.convention == "adev_min" else self.symbol
 
     def in_unit(self, unit: str) -> float:
         """The limit in a channel's signal unit (N in unit/sqrt(Hz), B in unit ...)."""
@@ -142,10 +163,14 @@ def parse_limits(specs: Iterable[str]) -> list[Limit]:
                 )
             spec = parse_datasheet(f"{m.group(1)}={m.group(2)}", source="spec=")
             ((sym, si),) = spec.values.items()
-            if (spec.kind, sym) in seen:
+            conv = spec.bi_convention if sym == "B" else "ieee"
+            if conv == "adev_min":
+                si *= BI_FACTOR  # the spec stores the IEEE B of that minimum
+            lim = Limit(m.group(1).lower(), sym, spec.kind, si, spec.given[sym], conv)
+            if (spec.kind, lim.ieee_key) in seen:
                 raise DatasheetError(f"spec={raw.strip()!r}: {sym} has a limit already")
-            seen.add((spec.kind, sym))
-            out.append(Limit(m.group(1).lower(), sym, spec.kind, si, spec.given[sym]))
+            seen.add((spec.kind, lim.ieee_key))
+            out.append(lim)
     return out
 
 
@@ -166,11 +191,13 @@ class TermValue:
     native: float
     native_symbol: str
     z: float = math.nan
+    rel: float = math.nan
 
     @property
     def outlier(self) -> bool:
-        """``|z| > OUTLIER_Z``."""
-        return bool(abs(self.z) > OUTLIER_Z)
+        """``|z| > OUTLIER_Z`` and a relative difference from the median ``|rel|`` above
+        :data:`OUTLIER_REL`."""
+        return bool(abs(self.z) > OUTLIER_Z and abs(self.rel) > OUTLIER_REL)
 
 
 def _kind(unit: str, channel: str) -> str | None:
@@ -213,6 +240,38 @@ def noise_terms(rows: Sequence[DatasheetRow], unit: str, channel: str = "") -> l
     return out
 
 
+#: Column labels of the IEEE quantities that have no display symbol of their own.
+_IEEE_LABEL = {"B": "B", "ADEV_min": "ADEV min", "ADEV_data": "ADEV min (data)", "Q": "Q", "R": "R"}
+
+
+def _ieee_label(kind: str, key: str) -> str:
+    """``ARW``/``VRW`` (N), ``RRW``/``AccRW`` (K), ``B``, ``ADEV min`` ... of an IEEE key."""
+    d = DISPLAY.get((kind, key)) if key in ("N", "K") else None
+    return d.symbol if d is not None else _IEEE_LABEL.get(key, key)
+
+
+def ieee_terms(fit: Any) -> list[TermValue]:
+    """The IEEE quantities of a fit (:attr:`engine.fit.GMWMResult.ieee`) as noise terms of
+    process ``IEEE``: ``ARW``/``VRW`` (N with its disguised share), ``RRW``/``AccRW`` (K),
+    ``B``, ``ADEV min`` (model and data), ``Q``, ``R``, in their datasheet units."""
+    t = fit.ieee
+    out = []
+    for key, q in t.quantities.items():
+        label = _ieee_label(t.kind, key)
+        out.append(
+            TermValue(
+                ("IEEE", label, q.datasheet_unit),
+                q.name,
+                q.datasheet_value,
+                q.datasheet_low,
+                q.datasheet_high,
+                q.native,
+                key,
+            )
+        )
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class FleetUnit:
     """One unit of the fleet.
@@ -232,8 +291,8 @@ class FleetUnit:
     terms : dict of str to list of TermValue
         Per fitted channel, its noise terms.
     verdict : str
-        ``pass``, ``marginal``, ``fail``, ``not checked`` (no limit, no datasheet) or
-        ``error`` (no fit).
+        ``pass``, ``marginal``, ``cannot tell`` (a limit the model cannot answer), ``fail``,
+        ``not checked`` (no limit, no datasheet) or ``error`` (no fit).
     reasons : list of str
         What made the verdict (each failed or marginal check), and the outliers.
     """
@@ -252,6 +311,14 @@ class FleetUnit:
         """``(channel, term)`` of every outlying term."""
         return [(ch, t) for ch, ts in self.terms.items() for t in ts if t.outlier]
 
+    @property
+    def warnings(self) -> list[str]:
+        """The fits' warnings, ``channel: warning`` (a term faster than one sample, a
+        parameter on a bound, no convergence): shown beside the verdict."""
+        if self.report is None:
+            return []
+        return [f"{ch}: {w}" for ch, c in self.report.channels.items() for w in c.warnings]
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: source, status, verdict and reasons, terms with z-scores."""
         return json_ready(
@@ -263,6 +330,7 @@ class FleetUnit:
                 "channel_errors": dict(self.log.channel_errors),
                 "verdict": self.verdict,
                 "reasons": list(self.reasons),
+                "warnings": self.warnings,
                 "terms": {
                     ch: [
                         {
@@ -274,6 +342,7 @@ class FleetUnit:
                             "low": t.low,
                             "high": t.high,
                             "z": t.z,
+                            "rel": t.rel,
                             "outlier": t.outlier,
                         }
                         for t in ts
@@ -402,43 +471,48 @@ def _datasheet_verdict(rep: CalibrationReport, level: float) -> list[tuple[str, 
     return out
 
 
-def _limit_verdicts(
-    rep: CalibrationReport, terms: dict[str, list[TermValue]], limits: Sequence[Limit]
-) -> list[tuple[str, str]]:
-    """Per limit and channel of its kind: (verdict, reason)."""
+def _limit_verdicts(rep: CalibrationReport, limits: Sequence[Limit]) -> list[tuple[str, str]]:
+    """Per limit and channel of its kind: (verdict, reason), on the fit's IEEE quantities."""
     out = []
     for ch, c in rep.channels.items():
         if c.fit is None:
             continue
         kind = _kind(c.unit, ch)
+        t = c.fit.ieee
         for lim in limits:
             if kind != lim.kind:
                 continue
-            lv = lim.in_unit(c.unit)
-            ts = [t for t in terms.get(ch, []) if t.native_symbol == lim.symbol]
-            if not ts:
-                out.append(("pass", f"{ch}: no {lim.symbol} term in the fitted model (0)"))
-                continue
-            # several processes of one symbol (two WN cannot be, GM ones have no limit)
-            for t in ts:
-                ratio = t.high / t.value if t.value > 0 and math.isfinite(t.high) else 1.0
-                high_native = t.native * ratio
-                what = f"{ch} {t.column[1]} {t.value:.4g} {t.column[2]}"
-                if t.native > lv:
-                    out.append(("fail", f"{what} > limit {lim.given}"))
-                elif high_native > lv:
-                    out.append(
-                        (
-                            "marginal",
-                            f"{what} <= limit {lim.given}, but its interval reaches {t.high:.4g}",
-                        )
+            q = t.get(lim.ieee_key)
+            if q is None:
+                out.append(
+                    (
+                        "cannot tell",
+                        f"{ch}: the model {c.fit.model.spec()} has no {lim.symbol} (no such "
+                        f"term, and no AR1/GM faster than one sample): {lim.key} <= "
+                        f"{lim.given} cannot be checked; fit a model with it",
                     )
-                else:
-                    out.append(("pass", ""))
+                )
+                continue
+            what = f"{ch} {_ieee_label(t.kind, q.key)} {q.datasheet_value:.4g} {q.datasheet_unit}"
+            if q.value > lim.si and not q.upper_bound:  # a minimum at the edge: a bound only
+                out.append(("fail", f"{what} > limit {lim.given}"))
+            elif q.value > lim.si or not q.has_interval:
+                why = q.note or "no interval"
+                out.append(("cannot tell", f"{what}: {why}; cannot say if <= {lim.given}"))
+            elif q.high > lim.si:
+                out.append(
+                    (
+                        "marginal",
+                        f"{what} <= limit {lim.given}, but its interval reaches "
+                        f"{q.datasheet_high:.4g}",
+                    )
+                )
+            else:
+                out.append(("pass", ""))
     return out
 
 
-_RANK = {"pass": 0, "marginal": 1, "fail": 2}
+_RANK = {"pass": 0, "marginal": 1, "cannot tell": 2, "fail": 3}
 #: :func:`engine.batch.fit_log`'s keywords (the fit options of every unit).
 _FIT_OPTIONS = frozenset(inspect.signature(fit_log).parameters) - {"path"}
 
@@ -541,13 +615,17 @@ def gather_fleet(
     batch = BatchResult([r[0] for r in results], settings, time.perf_counter() - t0)
     names = _unit_names([r[0].source for r in results])
     terms: list[dict[str, list[TermValue]]] = []
+    fast: list[dict[str, tuple[str, ...]]] = []  # per unit and channel: sub-sample terms
     columns: dict[str, list[tuple[str, str, str]]] = {}
     for _lf, rep, _err in results:
         t: dict[str, list[TermValue]] = {}
+        fast.append({})
         if rep is not None:
             for ch, c in rep.channels.items():
                 if c.fit is not None:
-                    t[ch] = noise_terms(c.rows, c.unit, ch)
+                    n = c.fit.ieee.get("N")
+                    fast[-1][ch] = tuple(s for s in (n.sources if n else ()) if s != "WN")
+                    t[ch] = noise_terms(c.rows, c.unit, ch) + ieee_terms(c.fit)
                     cols = columns.setdefault(ch, [])
                     cols += [v.column for v in t[ch] if v.column not in cols]
         terms.append(t)
@@ -560,16 +638,21 @@ def gather_fleet(
                 for j, v in enumerate(t.get(ch, []))
                 if v.column == col
             ]
-            z = robust_z([terms[i][ch][j].value for i, j in where])
-            for (i, j), zi in zip(where, z, strict=True):
-                terms[i][ch][j] = replace(terms[i][ch][j], z=float(zi))
+            # a term of an AR1/GM faster than one sample has no z: its T_c means nothing
+            where = [(i, j) for i, j in where if col[0] not in fast[i].get(ch, ())]
+            vals = np.array([terms[i][ch][j].value for i, j in where], float)
+            z = robust_z(vals)
+            med = float(np.nanmedian(vals)) if np.isfinite(vals).any() else math.nan
+            for (i, j), zi, v in zip(where, z, vals, strict=True):
+                rel = (v - med) / abs(med) if med != 0 else (math.inf if v != med else 0.0)
+                terms[i][ch][j] = replace(terms[i][ch][j], z=float(zi), rel=float(rel))
     units = []
     for k, ((lf, rep, rep_err), name, t) in enumerate(zip(results, names, terms, strict=True)):
         error = lf.error or rep_err
         if rep is None:
             units.append(FleetUnit(name, f"unit-{k + 1}", lf, None, error, {}, "error", [error]))
             continue
-        checks = _limit_verdicts(rep, t, limits) + _datasheet_verdict(rep, level)
+        checks = _limit_verdicts(rep, limits) + _datasheet_verdict(rep, level)
         verdict = "not checked"
         if checks:
             verdict = max((v for v, _ in checks), key=_RANK.__getitem__)
@@ -577,7 +660,8 @@ def gather_fleet(
         reasons += [f"{ch}: {c.error}" for ch, c in rep.channels.items() if c.error]
         unit = FleetUnit(name, f"unit-{k + 1}", lf, rep, "", t, verdict, reasons)
         unit.reasons.extend(
-            f"outlier: {ch} {v.column[1]} {v.value:.4g} {v.column[2]} (robust z = {v.z:.1f})"
+            f"outlier: {ch} {v.column[0]} {v.column[1]} {v.value:.4g} {v.column[2]} (robust z = "
+            f"{v.z:.1f}, {100 * v.rel:+.0f} % from the median)"
             for ch, v in unit.outliers
         )
         units.append(unit)
@@ -590,7 +674,8 @@ def gather_fleet(
         "versions": software_versions(),
         "settings": settings,
         "intervals": f"asymptotic sandwich, {100 * level:g} % two-sided",
-        "outliers": f"robust z = (x - median) / ({_MAD_NORMAL} MAD), |z| > {OUTLIER_Z}",
+        "outliers": f"robust z = (x - median) / ({_MAD_NORMAL} MAD), |z| > {OUTLIER_Z} and "
+        f"|x - median| > {OUTLIER_REL:g} |median|",
         "command_line": command_line,
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }

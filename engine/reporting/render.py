@@ -31,7 +31,7 @@ from .figures import (
     fleet_adev_figure,
     spread_figure,
 )
-from .fleet import MIN_UNITS_Z, OUTLIER_Z, FleetReport
+from .fleet import MIN_UNITS_Z, OUTLIER_REL, OUTLIER_Z, FleetReport
 
 __all__ = ["ReportError", "render_html", "render_fleet_html", "figure_specs", "fleet_figure_specs"]
 
@@ -70,6 +70,8 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
         unit = next((c.unit for _, c in curves if c.fit is not None), "")
         out[f"fleet-{ch}-adev"] = fleet_adev_figure(f"fleet-{ch}-adev", ch, unit, curves)
         for k, col in enumerate(cols):
+            if not _spread_drawn(col):
+                continue
             values = []
             for u in fleet.units:
                 t = next((t for t in u.terms.get(ch, []) if t.column == col), None)
@@ -80,9 +82,11 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
             limit = None
             for lim in fleet.limits:
                 d = DISPLAY.get((lim.kind, lim.symbol))
+                # a B limit declared as the ADEV minimum is drawn on the "ADEV min" columns
+                sym = "ADEV min" if lim.ieee_key == "ADEV_min" else (d.symbol if d else "")
                 if (
                     d is not None
-                    and (d.symbol, d.unit) == col[1:]
+                    and (sym, d.unit) == (col[1].removesuffix(" (data)"), col[2])
                     and _kind_of(fleet, ch) == lim.kind
                 ):
                     limit = lim.si * d.factor
@@ -93,6 +97,13 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
         if u.report is not None:
             out.update(figure_specs(u.report, f"{u.anchor}-"))
     return out
+
+
+def _spread_drawn(col: tuple[str, str, str]) -> bool:
+    """Whether a fleet column gets a spread plot: every process term, and of the IEEE
+    quantities (the table's ``IEEE`` columns) the white-noise density, which the limits
+    check and which a process column misses when a sub-sample GM carries it."""
+    return col[0] != "IEEE" or col[1] in ("ARW", "VRW", "N")
 
 
 def _kind_of(fleet: FleetReport, channel: str) -> str | None:
@@ -376,7 +387,8 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         for ch in fleet.columns
     }
     spread = {
-        ch: [f"fleet-{ch}-{k}" for k in range(len(cols))] for ch, cols in fleet.columns.items()
+        ch: [f"fleet-{ch}-{k}" for k, c in enumerate(cols) if _spread_drawn(c)]
+        for ch, cols in fleet.columns.items()
     }
     page = _environment().get_template("fleet.html.jinja")
     render: Callable[..., str] = page.render
@@ -389,6 +401,7 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         spread=spread,
         static=static,
         outlier_z=OUTLIER_Z,
+        outlier_rel=OUTLIER_REL,
         min_units_z=MIN_UNITS_Z,
         bokeh_resources=Markup(resources),
         bokeh_script=Markup(script),
