@@ -46,6 +46,8 @@ __all__ = [
     "load_budget",
     "reserved_memory",
     "load_scope",
+    "MAX_REPLICATES",
+    "check_replicates",
 ]
 
 #: Peak bytes per simulated sample and channel: the float64 result, one process's float64
@@ -277,6 +279,23 @@ def check_memory(
         f"'{src}' is too large to load: it needs about {_mb(need)} of memory{detail}, and "
         f"{where}: {todo}" + (f", or {fix}" if fix else "")
     )
+
+
+#: Most bootstrap replicates (each one a simulation and a refit: 1e5 take hours already);
+#: ``B = 1e11`` would first try to create 1e11 seeds.
+MAX_REPLICATES = 100_000
+
+
+def check_replicates(B: object) -> int:
+    """``B`` as a number of bootstrap replicates: an integer from 2 to :data:`MAX_REPLICATES`;
+    ValueError naming ``B`` otherwise."""
+    if isinstance(B, bool) or not isinstance(B, SupportsIndex):
+        raise ValueError(f"B must be a whole number of bootstrap replicates, got {B!r}")
+    if not 2 <= operator.index(B) <= MAX_REPLICATES:
+        raise ValueError(
+            f"B must be from 2 to {MAX_REPLICATES} bootstrap replicates, got {operator.index(B)}"
+        )
+    return operator.index(B)
 
 
 def _bytes(n: int) -> str:

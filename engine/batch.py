@@ -30,9 +30,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._files import write_atomic
 from ._jsonutil import json_ready
 from ._parallel import executor_workers, parallel_map
 from .fit import FitError, GMWMResult, fit_gmwm
+from .formats.common import csv_cells
 from .models import ModelError, parse_model
 from .units import datasheet_rows
 
@@ -409,7 +411,7 @@ class BatchResult:
         for r in self.rows:
             w.writerow(
                 [
-                    *(getattr(r, k) for k in _CSV_FIELDS[:7]),
+                    *csv_cells(getattr(r, k) for k in _CSV_FIELDS[:7]),
                     *(f"{getattr(r, k):.6e}" for k in _CSV_FIELDS[7:]),
                 ]
             )
@@ -475,12 +477,12 @@ class BatchResult:
                 name, k = f"{stem}_{k}", k + 1
             used.add(name)
             p = out / f"{name}.json"
-            p.write_text(lf.report)
+            write_atomic(p, lf.report)
             reports[lf.source] = str(p)
-        (out / "summary.csv").write_text(self.summary_csv())
+        write_atomic(out / "summary.csv", self.summary_csv())
         d = self.to_dict()
         d["reports"] = reports
-        (out / "summary.json").write_text(json.dumps(d, indent=1, allow_nan=False) + "\n")
+        write_atomic(out / "summary.json", json.dumps(d, indent=1, allow_nan=False) + "\n")
         return {
             "reports": reports,
             "summary_csv": str(out / "summary.csv"),

@@ -10,6 +10,7 @@ in docs/cli-safety.md.
 
 from __future__ import annotations
 
+import csv
 import os
 import resource
 import subprocess
@@ -24,6 +25,8 @@ import numpy as np
 import pytest
 
 import engine._limits as _limits
+from engine._text import spreadsheet_safe
+from engine.cli import main
 from engine.io import LoadError, load_log
 from engine.io._assemble import MAX_CHANNELS, ordered_names
 from engine.io.hdf5 import H5_MAX_CHUNKS
@@ -257,3 +260,129 @@ def test_budget_is_checked() -> None:
     for bad in (0, -5, True):
         with pytest.raises(ValueError, match="positive number of bytes"):
             _limits.set_load_budget(bad)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------------- names and options
+HOSTILE_NAMES = ("=cmd|' /C calc'!A0", "\x1b]0;pwned\x07gx")
+
+
+def _hostile_csv(path: Path) -> Path:
+    t = np.arange(3000) / 100
+    rng = np.random.default_rng(5)
+    lines = [f"time,{HOSTILE_NAMES[0]},{HOSTILE_NAMES[1]}"]
+    lines += [
+        f"{a},{b},{c}"
+        for a, b, c in zip(t, rng.normal(size=3000), rng.normal(size=3000), strict=True)
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_formula_names_are_text_in_every_csv_output(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A channel named ``=cmd|...`` becomes ``'=cmd|...`` in the export CSVs, the fleet
+    summary and a simulated CSV's header (before: written raw, a formula to a spreadsheet)."""
+    src = _hostile_csv(tmp_path / "inj.csv")
+    for fmt in ("datasheet-csv", "csv"):
+        out = tmp_path / f"{fmt}.csv"
+        assert main(["export", str(src), "--model", "WN", "--format", fmt, "-o", str(out)]) == 0
+        cells = [row[0] for row in csv.reader(out.read_text().splitlines()[1:])]
+        assert any(c.startswith("'=cmd|") for c in cells), fmt
+        assert not any(c.startswith(("=", "+", "@")) for c in cells), fmt
+    assert main(["batch", str(src), "--model", "WN", "-o", str(tmp_path / "b")]) == 0
+    cells = [r[0] for r in csv.reader((tmp_path / "b" / "summary.csv").read_text().splitlines())]
+    assert "'=cmd|' /C calc'!A0" in cells and not any(c.startswith("=") for c in cells)
+    sim = tmp_path / "sim.csv"
+    argv = ["simulate", "--model", "WN(1)", "-n", "100", "--channel", "=1+1", "-o", str(sim)]
+    assert main(argv) == 0
+    assert sim.read_text().splitlines()[0] == "time,'=1+1"
+    capsys.readouterr()
+
+
+def test_spreadsheet_safe_keeps_numbers() -> None:
+    assert spreadsheet_safe("-1.5e-3") == "-1.5e-3" and spreadsheet_safe("+7") == "+7"
+    assert spreadsheet_safe("@SUM(A1)") == "'@SUM(A1)" and spreadsheet_safe("-x") == "'-x"
+    assert spreadsheet_safe("\uff1dcmd") == "'\uff1dcmd" and spreadsheet_safe("") == ""
+
+
+def test_terminal_escapes_in_names_are_never_printed_raw(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Errors, tables and batch lines show ``\\x1b`` as text (before: the ESC byte itself)."""
+    src = _hostile_csv(tmp_path / "inj.csv")
+    assert main(["fit", str(src), "--model", "WN", "--channel", "nope"]) == 2
+    assert main(["wv", str(src), "--channel", "1"]) == 0
+    assert main(["batch", str(src), "--model", "WN", "-o", str(tmp_path / "b")]) == 0
+    out, err = capsys.readouterr()
+    assert "\x1b" not in out + err and "\x07" not in out + err
+    assert "\\x1b]0;pwned\\x07gx" in err  # named, escaped, in the error
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["wv", "LOG", "--fs", "1e308"],
+            "outside the range of a sampling frequency (1e-09 to 1e+09 Hz)",
+        ),
+        (["wv", "LOG", "--fs", "1e-300"], "outside the range of a sampling frequency"),
+        (
+            [
+                "export",
+                "LOG",
+                "--model",
+                "WN",
+                "--ci",
+                "bootstrap",
+                "-B",
+                "1e11",
+                "--format",
+                "json",
+                "-o",
+                "OUT",
+            ],
+            "-B 1e11: must be from 2 to 100000 bootstrap replicates",
+        ),
+        (
+            [
+                "export",
+                "LOG",
+                "--model",
+                "WN",
+                "--ci",
+                "bootstrap",
+                "-B",
+                "100000000000",
+                "--format",
+                "json",
+                "-o",
+                "OUT",
+            ],
+            "must be from 2 to 100000 bootstrap replicates",
+        ),
+    ],
+)
+def test_absurd_fs_and_replicates_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    """``--fs 1e308`` and ``-B 1e11`` (before: accepted) are one-line usage errors, in under
+    a second, before anything is read."""
+    src = _hostile_csv(tmp_path / "x.csv")
+    argv = [str(src) if a == "LOG" else str(tmp_path / "o.json") if a == "OUT" else a for a in argv]
+    t0 = time.perf_counter()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert time.perf_counter() - t0 < 1.0 and not (tmp_path / "o.json").exists()
+
+
+def test_engine_owns_the_bounds() -> None:
+    import engine as eg
+    from engine._limits import MAX_REPLICATES, check_replicates
+
+    with pytest.raises(ValueError, match="outside the range of a sampling frequency"):
+        eg.wavelet_variance(np.ones(64), fs=1e308)
+    assert check_replicates(MAX_REPLICATES) == MAX_REPLICATES
+    with pytest.raises(ValueError, match="B must be from 2 to 100000"):
+        check_replicates(10**11)

@@ -27,6 +27,7 @@ from concurrent.futures import Executor
 from contextlib import contextmanager
 from typing import Any
 
+from .._files import write_atomic
 from .common import (
     CHANNELS_HELP,
     CliError,
@@ -35,9 +36,11 @@ from .common import (
     add_weights_option,
     add_wv_options,
     check_output,
+    input_paths,
     log_kwargs,
     positive,
     queue_warning,
+    terminal_text,
     usage_error,
 )
 
@@ -202,8 +205,7 @@ def run_fleet(
         page = render_fleet_html(fleet)
     except (DatasheetError, ReportError) as e:
         raise CliError(str(e)) from None
-    with open(args.report, "w", encoding="utf-8") as f:
-        f.write(page)
+    write_atomic(args.report, page)
     print(
         f"gmwm: batch: wrote {args.report} ({len(fleet.units)} units, "
         f"{len(page.encode('utf-8')) / 1e6:.2f} MB)",
@@ -221,7 +223,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     if args.output is not None:  # before the (slow) imports and any fit
         check_output(args.output, "-o", kind="dir")
     if args.report is not None:
-        check_output(args.report, "--report", suffixes=(".html", ".htm"))
+        check_output(args.report, "--report", suffixes=(".html", ".htm"), inputs=input_paths(args))
     from .._parallel import ProgressLine
     from ..batch import fit_batch
 
@@ -235,9 +237,9 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     files = res.save(args.output) if args.output is not None else {}
     for lf in res.logs:
         if lf.error:
-            print(f"gmwm: batch: {lf.source}: {lf.error}", file=sys.stderr)
+            print(terminal_text(f"gmwm: batch: {lf.source}: {lf.error}"), file=sys.stderr)
         for ch, err in lf.channel_errors.items():
-            print(f"gmwm: batch: {lf.source} [{ch}]: {err}", file=sys.stderr)
+            print(terminal_text(f"gmwm: batch: {lf.source} [{ch}]: {err}"), file=sys.stderr)
     for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
         queue_warning(args, w)
     if not res.fitted:

@@ -97,7 +97,8 @@ def check_fs(value: Any, src: str, what: str, fix: str) -> float:
     except (TypeError, ValueError):
         raise LoadError(
             f"file '{src}': {what} = {value!r} is not a valid sampling frequency "
-            f"(it must be a finite number of Hz > 0): {fix}"
+            f"(it must be a finite number of Hz > 0, from {_checks.MIN_FS:g} to "
+            f"{_checks.MAX_FS:g}): {fix}"
         ) from None
 
 

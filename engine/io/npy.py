@@ -15,7 +15,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from .._files import open_regular
+from .._files import open_regular, write_atomic
 from ._assemble import (
     LoadOptions,
     RawLog,
@@ -151,7 +151,7 @@ def write_npy_sidecar(
     """Write the sidecar of a ``.npy`` log (see :func:`read_npy_sidecar`); returns its path."""
     d = {"fs_hz": float(fs), "channels": list(channels), "units": dict(units or {}), **extra}
     side = npy_sidecar_path(path)
-    side.write_text(json.dumps(d, indent=2) + "\n", encoding="utf-8")
+    write_atomic(side, json.dumps(d, indent=2) + "\n")
     return side
 
 
