@@ -225,7 +225,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     if args.report is not None:
         check_output(args.report, "--report", suffixes=(".html", ".htm"), inputs=input_paths(args))
     from .._parallel import ProgressLine
-    from ..batch import fit_batch
+    from ..batch import BatchFolder, fit_batch
+
+    if args.output is not None:  # files it did not write: refused before any fit
+        BatchFolder(args.output, "").check_summaries()
 
     channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
     bar = None if args.quiet else ProgressLine(0, sys.stderr, "gmwm batch", "logs")
@@ -233,7 +236,9 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         if args.report is not None:
             res = run_fleet(args, channels, ex, bar)
         else:
-            res = fit_batch(args.inputs, **_fit_kwargs(args, channels, ex, bar))
+            res = fit_batch(  # each log's report written as it completes; resumes the folder
+                args.inputs, **_fit_kwargs(args, channels, ex, bar), output=args.output
+            )
     files = res.save(args.output) if args.output is not None else {}
     for lf in res.logs:
         if lf.error:
@@ -251,7 +256,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         return d
     wrote = [f"the fleet report {args.report}"] if args.report else []
     if files:
+        again = sum(lf.resumed for lf in res.logs)
         wrote.append(
-            f"{len(files['reports'])} report(s), summary.csv and summary.json to {args.output}"
+            f"{len(files['reports'])} report(s)"
+            + (f" ({again} resumed from an earlier run)" if again else "")
+            + f", summary.csv and summary.json to {args.output}"
         )
     return f"{res.table()}\n\nwrote {' and '.join(wrote)}"
