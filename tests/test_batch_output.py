@@ -108,3 +108,23 @@ def test_an_edited_report_is_not_overwritten(tmp_path: Path, logs: list[str]) ->
     with pytest.raises(ValueError, match=r"unit1.json' exists and was not written by gmwm batch"):
         fit_batch(logs, workers=1, model=MODEL, output=out)
     assert (out / "unit1.json").read_text() == "edited by hand\n"
+
+
+def test_the_fleet_report_writes_each_report_as_it_completes(
+    tmp_path: Path, logs: list[str]
+) -> None:
+    """``gmwm batch --report R.html -o DIR``: the same folder, written unit by unit."""
+    from engine.reporting import gather_fleet
+
+    out = tmp_path / "out"
+
+    def stop_after_two(done: int, total: int) -> None:
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        gather_fleet(logs, workers=1, model=MODEL, output=out, progress=stop_after_two)
+    assert sorted(p.name for p in out.glob("unit*.json")) == ["unit0.json", "unit1.json"]
+    (out / "summary.json").write_text("{}\n")  # not the batch's: refused before any fit
+    with pytest.raises(ValueError, match="summary.json' exists and was not written"):
+        gather_fleet(logs, workers=1, model=MODEL, output=out)

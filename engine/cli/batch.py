@@ -201,6 +201,7 @@ def run_fleet(
             level=0.95,
             **_fit_kwargs(args, channels, executor, progress),
             command_line=shlex.join(["gmwm", *getattr(args, "argv", [])]),
+            output=args.output,  # each unit's report written as it completes
         )
         page = render_fleet_html(fleet)
     except (DatasheetError, ReportError) as e:
