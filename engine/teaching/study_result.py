@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import write_atomic
+from .._files import atomic_output, write_atomic
 from .table1 import TABLE_I
 
 __all__ = ["StudyResult"]
@@ -389,7 +389,8 @@ class StudyResult:
         fig.suptitle(f"Estimates over {self.settings['reps']} replicates (truth = 1)")
         fig.tight_layout()
         p = Path(path)
-        fig.savefig(p, dpi=110)
+        with atomic_output(p) as tmp:  # a full disk never leaves half a picture
+            fig.savefig(tmp, dpi=110)  # (the same suffix: the same format)
         plt.close(fig)
         return p
 
@@ -436,7 +437,8 @@ class StudyResult:
             ax.legend(fontsize=8)
         fig.tight_layout()
         p = Path(path)
-        fig.savefig(p, dpi=110)
+        with atomic_output(p) as tmp:  # a full disk never leaves half a picture
+            fig.savefig(tmp, dpi=110)  # (the same suffix: the same format)
         plt.close(fig)
         return p
 
