@@ -10,11 +10,17 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["check_fs"]
+__all__ = ["check_fs", "MIN_FS", "MAX_FS"]
+
+#: The range of a sampling frequency (Hz): one sample in 30 years to 1 GHz. Beyond it the
+#: times in seconds and the datasheet values overflow or lose every digit (``fs = 1e308``
+#: gives ``dt = 1e-308``, a subnormal).
+MIN_FS, MAX_FS = 1e-9, 1e9
 
 
 def check_fs(value: object, name: str = "fs") -> float:
-    """``value`` as a sampling frequency in Hz: a real number (not a bool), finite and > 0.
+    """``value`` as a sampling frequency in Hz: a real number (not a bool), finite and > 0,
+    within :data:`MIN_FS` to :data:`MAX_FS`.
 
     Parameters
     ----------
@@ -30,7 +36,8 @@ def check_fs(value: object, name: str = "fs") -> float:
     Raises
     ------
     ValueError
-        ``"fs must be a positive number of Hz, got 'abc'"``: names the argument and the value.
+        ``"fs must be a positive number of Hz, got 'abc'"``: names the argument and the value
+        (and the range, for a number outside it).
 
     Examples
     --------
@@ -48,4 +55,9 @@ def check_fs(value: object, name: str = "fs") -> float:
         v = float(value)
     if not (math.isfinite(v) and v > 0):
         raise ValueError(f"{name} must be a positive number of Hz, got {value!r}")
+    if not MIN_FS <= v <= MAX_FS:
+        raise ValueError(
+            f"{name} must be a positive number of Hz, got {value!r}: outside the range of a "
+            f"sampling frequency ({MIN_FS:g} to {MAX_FS:g} Hz)"
+        )
     return v

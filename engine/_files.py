@@ -14,12 +14,26 @@ keep no checks of their own:
   :func:`engine._limits.check_memory` (the one place that knows the memory available).
 
 Messages name the file as the caller gave it (``src``) and never quote its content.
+
+Writing goes through here too, so that no output of the command line or of an engine writer
+can destroy data:
+
+* :func:`check_not_input` refuses an output that is one of the inputs (the same file: same
+  device and inode, symlinks and hard links included);
+* :func:`atomic_output` (and :func:`write_atomic` for text or bytes) writes a temporary file
+  in the output's folder and renames it over the output only once it is complete: a full disk,
+  a crash or an interrupt leaves the previous file (or none), never a truncated one, and the
+  error names the file.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import stat
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import BinaryIO
 
 from ._limits import check_memory
@@ -29,6 +43,10 @@ __all__ = [
     "check_regular",
     "open_regular",
     "read_regular",
+    "same_file",
+    "check_not_input",
+    "atomic_output",
+    "write_atomic",
 ]
 
 _KINDS = (
@@ -147,3 +165,106 @@ def read_regular(
     with open_regular(path, src, error=error) as fh:
         check_memory(int(factor * os.fstat(fh.fileno()).st_size), src, error=error)
         return fh.read()
+
+
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether ``a`` and ``b`` are the same existing file (device and inode, symlinks
+    followed: a symlink or a hard link to a file is that file)."""
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+    except (OSError, ValueError):
+        return False
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
+
+
+def check_not_input(
+    output: str | os.PathLike[str] | None,
+    inputs: Iterable[str | os.PathLike[str] | None],
+    *,
+    what: str = "the output",
+    error: type[Exception] = ValueError,
+) -> None:
+    """Refuse an output that is one of the ``inputs`` (see :func:`same_file`).
+
+    Parameters
+    ----------
+    output : path or None
+        The file to be written (None and ``"-"``, stdout, pass).
+    inputs : iterable of paths
+        The files the command reads (None entries are skipped).
+    what : str
+        How the caller names the output in the message (``"-o out.yaml"``).
+    error : exception type
+        Raised with a one-line message naming both paths.
+    """
+    if output is None or str(output) == "-":
+        return
+    for src in inputs:
+        if src is not None and same_file(output, src):
+            same = "" if str(src) == str(output) else f" (through the path '{output}')"
+            raise error(
+                f"{what} is the input file '{src}'{same}: writing it would destroy the input; "
+                "choose another output file"
+            )
+
+
+def _write_refusal(path: str | os.PathLike[str], exc: OSError) -> str:
+    why = exc.strerror or type(exc).__name__
+    return (
+        f"cannot write '{os.fspath(path)}' ({why}): nothing was written and any previous "
+        "file of that name is unchanged; free space or choose another folder"
+    )
+
+
+@contextmanager
+def atomic_output(
+    path: str | os.PathLike[str], *, error: type[Exception] = OSError
+) -> Iterator[Path]:
+    """Write a file atomically: yields a temporary path in the same folder (same suffix, so
+    that writers that add one, such as ``numpy.save``, keep it), renamed over ``path`` when
+    the block ends without an error; removed otherwise.
+
+    A symlink ``path`` stays a symlink: its target is replaced. An ``OSError`` while writing
+    or renaming (a full disk: ENOSPC) becomes ``error`` with one line naming ``path``.
+    """
+    final = Path(os.path.realpath(path))
+    tmp = final.with_name(f".{final.name}.{secrets.token_hex(4)}.tmp{final.suffix}")
+    try:
+        # created here, so that the umask gives it a new file's mode, and no other file is
+        # ever written through this name (O_EXCL)
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666))
+        yield tmp
+        if final.exists():  # a replaced file keeps its mode
+            os.chmod(tmp, stat.S_IMODE(os.stat(final).st_mode))
+        os.replace(tmp, final)
+    except OSError as exc:
+        _remove(tmp)
+        raise error(_write_refusal(path, exc)) from exc
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+def write_atomic(
+    path: str | os.PathLike[str],
+    data: str | bytes,
+    *,
+    encoding: str = "utf-8",
+    error: type[Exception] = OSError,
+) -> Path:
+    """Write ``data`` (text, encoded with ``encoding``, or bytes) to ``path`` atomically
+    (:func:`atomic_output`), flushed to the disk before the rename; returns the path."""
+    raw = data.encode(encoding) if isinstance(data, str) else bytes(data)
+    with atomic_output(path, error=error) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(raw)
+            fh.flush()
+            os.fsync(fh.fileno())
+    return Path(path)
+
+
+def _remove(p: Path) -> None:
+    try:
+        os.unlink(p)
+    except OSError:
+        pass

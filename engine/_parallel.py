@@ -21,6 +21,7 @@ import math
 import multiprocessing
 import os
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -36,6 +37,7 @@ __all__ = [
     "dask_executor",
     "executor_workers",
     "main_importable",
+    "end_with_parent",
 ]
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -54,6 +56,31 @@ def main_importable() -> bool:
     return main_file is None or os.path.exists(main_file)
 
 
+#: How often (seconds) a worker checks that the process that started it is still alive.
+PARENT_POLL_S = 0.5
+
+
+def end_with_parent(parent: int) -> None:
+    """Worker initializer: end this worker (``os._exit``) as soon as ``parent`` (the process
+    that started it) is gone, checked every :data:`PARENT_POLL_S` seconds by a daemon thread.
+
+    Without it, a ``gmwm batch`` killed with SIGKILL left its workers waiting on their queue
+    forever (and the resource tracker with them: it ends when the last of them has).
+    ``PR_SET_PDEATHSIG`` is not used: it follows the thread that started the worker, which
+    in a server's thread pool may end long before the process.
+    """
+    if os.getppid() != parent:
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(PARENT_POLL_S)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="gmwm-parent-watch", daemon=True).start()
+
+
 def _run_chunk(fn: Callable[[Any], Any], chunk: Sequence[Any]) -> list[Any]:
     return [fn(it) for it in chunk]
 
@@ -67,7 +94,12 @@ def _local_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     saved = {k: os.environ.get(k) for k in (*_THREAD_VARS, _MALLOC_TRIM)}
     os.environ.update({k: "1" for k in _THREAD_VARS})
     os.environ.pop(_MALLOC_TRIM, None)
-    ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    ex = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=end_with_parent,
+        initargs=(os.getpid(),),
+    )
     try:
         yield ex
     except BaseException:  # Ctrl-C, a failed task or a cancel: drop the queued tasks
@@ -91,6 +123,7 @@ def parallel_map(
     executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
     chunksize: int | None = None,
+    each: Callable[[int, Any], None] | None = None,
 ) -> list[Any]:
     """``[fn(item) for item in items]``, in parallel, in the order of ``items``.
 
@@ -110,6 +143,9 @@ def parallel_map(
         Called in this process after every task (a chunk's tasks are counted when the chunk
         returns). An exception raised by it cancels the tasks not yet started and propagates
         (a user's cancel).
+    each : callable (index, result), optional
+        Called in this process with every task's result as soon as it is back (in the order
+        they complete), before ``progress``: e.g. to write each result as it completes.
     chunksize : int, optional
         Tasks per submitted job. Default: about four jobs per local worker; one task per job
         on an ``executor`` (the finest progress, and a lost worker loses one task).
@@ -126,6 +162,8 @@ def parallel_map(
         with one_blas_thread():  # as in a worker: the same numbers wherever a task runs
             for it in items:
                 out.append(fn(it))
+                if each is not None:
+                    each(len(out) - 1, out[-1])
                 if progress is not None:
                     progress(len(out), total)
         return out
@@ -133,9 +171,9 @@ def parallel_map(
         chunksize = 1 if executor is not None else max(1, total // (4 * max(1, workers)))
     chunks = [items[i : i + chunksize] for i in range(0, total, chunksize)]
     if executor is not None:
-        return _collect(executor, fn, chunks, total, progress, own=False)
+        return _collect(executor, fn, chunks, total, progress, own=False, each=each)
     with _local_pool(workers) as pool:
-        return _collect(pool, fn, chunks, total, progress, own=True)
+        return _collect(pool, fn, chunks, total, progress, own=True, each=each)
 
 
 def _collect(
@@ -145,6 +183,7 @@ def _collect(
     total: int,
     progress: Callable[[int, int], None] | None,
     own: bool,
+    each: Callable[[int, Any], None] | None = None,
 ) -> list[Any]:
     futs: dict[Future, int] = {}
     try:
@@ -157,6 +196,9 @@ def _collect(
         for f in as_completed(futs):
             res = f.result()
             out[futs[f] : futs[f] + len(res)] = res
+            if each is not None:
+                for k, r in enumerate(res):
+                    each(futs[f] + k, r)
             done += len(res)
             if progress is not None:
                 progress(done, total)

@@ -16,7 +16,9 @@ logs at the same paths (a shared file system); the reports are written by the ca
 from __future__ import annotations
 
 import csv
+import datetime as _dt
 import glob
+import hashlib
 import io as _io
 import json
 import math
@@ -30,16 +32,34 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._files import open_regular, read_regular, write_atomic
 from ._jsonutil import json_ready
 from ._parallel import executor_workers, parallel_map
+from ._version import __version__
 from .fit import FitError, GMWMResult, fit_gmwm
+from .formats.common import csv_cells
 from .models import ModelError, parse_model
 from .units import datasheet_rows
 
 if TYPE_CHECKING:  # pragma: no cover - engine.io is imported on use (it costs h5py)
     from .io import ImuLog
 
-__all__ = ["LogFit", "FleetRow", "BatchResult", "fit_log", "fit_batch", "fleet_summary"]
+__all__ = [
+    "LogFit",
+    "FleetRow",
+    "BatchResult",
+    "BatchFolder",
+    "BATCH_RECORD",
+    "fit_log",
+    "fit_batch",
+    "fleet_summary",
+    "unit_values",
+    "options_fingerprint",
+]
+
+#: The record an output folder of :func:`fit_batch` keeps of what it wrote (see
+#: :class:`BatchFolder`).
+BATCH_RECORD = ".gmwm-batch.json"
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,6 +82,10 @@ class LogFit:
         Sampling frequency (Hz) and samples per channel.
     elapsed_s : float
         Time taken to load and fit the log (s), where it ran.
+    resumed : bool
+        Not fitted again: its report was read back from the output folder of an earlier run
+        with the same log and options (:class:`BatchFolder`); ``fits`` is then empty and
+        ``values`` holds its summary quantities (:func:`unit_values`).
     """
 
     source: str
@@ -72,6 +96,8 @@ class LogFit:
     fs: float = math.nan
     n: int = 0
     elapsed_s: float = 0.0
+    resumed: bool = False
+    values: tuple[tuple[tuple[str, ...], float], ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -97,6 +123,7 @@ class LogFit:
                 "channel_errors": dict(self.channel_errors),
                 "warnings": {ch: list(r.warnings) for ch, r in self.fits.items() if r.warnings},
                 "elapsed_s": self.elapsed_s,
+                "resumed": self.resumed,
             }
         )
 
@@ -254,6 +281,7 @@ def fit_batch(
     workers: int = 2,
     executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
+    output: str | os.PathLike[str] | None = None,
     **options: Any,
 ) -> BatchResult:
     """Fit every channel of every log, in parallel, and summarise the fleet.
@@ -270,6 +298,11 @@ def fit_batch(
         workers must see the logs at the same paths). The results do not depend on it.
     progress : callable (done, total), optional
         Called after every log.
+    output : path, optional
+        A folder (:class:`BatchFolder`) where each log's report is written as soon as it is
+        fitted; logs already fitted there with the same content and options are not fitted
+        again (resumed). A file there that the batch did not write is never overwritten
+        (ValueError before any fit). The summaries are written by :meth:`BatchResult.save`.
     **options
         The keywords of :func:`fit_log`, the same for every log: ``model`` or ``select``,
         ``channels``, ``fs``, ``levels``, ``weights``, ``load_options``.
@@ -305,24 +338,49 @@ def fit_batch(
     if kw["model"] is not None:
         parse_model(kw["model"])  # a bad spec is the caller's error, not every log's
     t0 = time.perf_counter()
+    fingerprint = options_fingerprint(kw)
+    folder = None if output is None else BatchFolder(output, fingerprint)
+    if folder is not None:
+        folder.check_summaries()
     entries = expand_paths(paths)
     todo = [p for p, err in entries if not err]
+    resumed = {p: lf for p in todo if folder is not None and (lf := folder.resumed(p))}
+    run = [p for p in todo if p not in resumed]
+    if folder is not None:  # a report would replace a file the batch did not write: now
+        folder.check_reports(run)
     done = parallel_map(
         _fit_log_task,
-        [(p, kw) for p in todo],
+        [(p, kw) for p in run],
         workers,
         executor=executor,
         progress=progress,
         chunksize=1,
+        each=None if folder is None else (lambda _, lf: folder.record(lf)),
     )
     settings = {
         **{k: v for k, v in kw.items() if k != "load_options"},
         "workers": executor_workers(executor, workers),
         "executor": "local" if executor is None else type(executor).__name__,
+        "options_fingerprint": fingerprint,
     }
-    fitted = iter(done)
-    logs = [LogFit(p, error=err) if err else next(fitted) for p, err in entries]
+    fitted = dict(zip(run, done, strict=True)) | resumed
+    logs = [LogFit(p, error=err) if err else fitted[p] for p, err in entries]
     return BatchResult(logs, settings, time.perf_counter() - t0)
+
+
+def unit_values(lf: LogFit) -> list[tuple[tuple[str, ...], float]]:
+    """The summary quantities of one fitted log: ``((channel, kind, process, quantity,
+    symbol, unit), value)`` for every parameter and datasheet quantity (see
+    :func:`fleet_summary`)."""
+    out: list[tuple[tuple[str, ...], float]] = []
+    for ch, res in lf.fits.items():
+        for r in res.param_records:
+            out.append(((ch, "parameter", r.label, r.full_name, r.name, r.unit), float(r.value)))
+        for d in datasheet_rows(
+            res.model, res.fs, res.wv.unit, channel=ch, n_levels=res.wv.n_levels
+        ):
+            out.append(((ch, "datasheet", d.process, d.quantity, d.symbol, d.unit), float(d.value)))
+    return out
 
 
 def fleet_summary(logs: Iterable[LogFit]) -> list[FleetRow]:
@@ -332,17 +390,10 @@ def fleet_summary(logs: Iterable[LogFit]) -> list[FleetRow]:
     datasheet quantities of :func:`engine.units.datasheet_rows`, each keyed with its unit
     (logs in different units are never pooled). Rows are in order of first appearance.
     """
-    values: dict[tuple[str, str, str, str, str, str], list[float]] = {}
+    values: dict[tuple[str, ...], list[float]] = {}
     for lf in logs:
-        for ch, res in lf.fits.items():
-            for r in res.param_records:
-                key = (ch, "parameter", r.label, r.full_name, r.name, r.unit)
-                values.setdefault(key, []).append(float(r.value))
-            for d in datasheet_rows(
-                res.model, res.fs, res.wv.unit, channel=ch, n_levels=res.wv.n_levels
-            ):
-                key = (ch, "datasheet", d.process, d.quantity, d.symbol, d.unit)
-                values.setdefault(key, []).append(float(d.value))
+        for key, value in lf.values if lf.resumed else unit_values(lf):
+            values.setdefault(key, []).append(value)
     rows = []
     for (ch, kind, proc, qty, sym, unit), vals in values.items():
         v = np.array([x for x in vals if math.isfinite(x)])
@@ -409,7 +460,7 @@ class BatchResult:
         for r in self.rows:
             w.writerow(
                 [
-                    *(getattr(r, k) for k in _CSV_FIELDS[:7]),
+                    *csv_cells(getattr(r, k) for k in _CSV_FIELDS[:7]),
                     *(f"{getattr(r, k):.6e}" for k in _CSV_FIELDS[7:]),
                 ]
             )
@@ -463,26 +514,189 @@ class BatchResult:
 
     def save(self, directory: str | os.PathLike[str]) -> dict[str, Any]:
         """Write one JSON report per fitted log (``<name>.json``, numbered when two logs share
-        a name), ``summary.csv`` and ``summary.json``; returns the paths written."""
-        out = Path(directory)
-        out.mkdir(parents=True, exist_ok=True)
+        a name), ``summary.csv`` and ``summary.json`` (dated: ``written_utc``) through a
+        :class:`BatchFolder` (which refuses to overwrite a file it did not write); returns the
+        paths written."""
+        fp = str(self.settings.get("options_fingerprint") or options_fingerprint(self.settings))
+        return BatchFolder(directory, fp).finish(self)
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _file_sha256(path: str | os.PathLike[str]) -> str | None:
+    """SHA-256 of a regular file's content (read in 1 MB blocks), None when unreadable."""
+    h = hashlib.sha256()
+    try:
+        with open_regular(path) as fh:
+            while block := fh.read(1 << 20):
+                h.update(block)
+    except (OSError, ValueError):
+        return None
+    return h.hexdigest()
+
+
+def options_fingerprint(options: Mapping[str, Any]) -> str:
+    """SHA-256 of the fit options of a batch (workers and executor excluded: they do not
+    change the results) and of this package's version."""
+    keep = {k: v for k, v in options.items() if k not in ("workers", "executor", "progress")}
+    text = json.dumps(json_ready(keep), sort_keys=True, default=str) + __version__
+    return _sha256(text.encode())
+
+
+class BatchFolder:
+    """An output folder of :func:`fit_batch`: writes each log's report as it completes, the
+    summaries at the end, and keeps a record (:data:`BATCH_RECORD`) of what it wrote.
+
+    * it never overwrites a file it did not write (an input named ``summary.csv``, a report
+      edited since): the one-line ValueError names the file and writes nothing;
+    * a second run with the same options resumes the folder: a log whose content (SHA-256) and
+      options match a recorded report is not fitted again (:attr:`LogFit.resumed`);
+    * every file is written atomically (:func:`engine._files.write_atomic`).
+
+    Parameters
+    ----------
+    directory : path
+        The folder (created with its parents when missing).
+    fingerprint : str
+        :func:`options_fingerprint` of the batch's fit options.
+    """
+
+    def __init__(self, directory: str | os.PathLike[str], fingerprint: str) -> None:
+        self.path = Path(directory)
+        self.path.mkdir(parents=True, exist_ok=True)
+        self._record = self._read_record()
+        if self._record.get("options") != fingerprint:  # other options: nothing to resume
+            self._record["units"] = {}
+        self._record["options"] = fingerprint
+        self._inputs: dict[str, str | None] = {}
+
+    def _read_record(self) -> dict[str, Any]:
+        p = self.path / BATCH_RECORD
+        if not p.exists() and not p.is_symlink():
+            return {"files": {}, "units": {}}
+        bad = ValueError(
+            f"'{p}' is not a record written by gmwm batch: the folder holds files of "
+            "another program; choose another output folder"
+        )
+        try:
+            d = json.loads(read_regular(p, str(p)))
+        except (ValueError, OSError):
+            raise bad from None
+        ok = isinstance(d, dict) and isinstance(d.get("files"), dict)
+        if not ok or not isinstance(d.get("units"), dict):
+            raise bad
+        return d
+
+    def fingerprint(self, source: str) -> str | None:
+        """SHA-256 of a log's content and of the options (None when unreadable)."""
+        if source not in self._inputs:
+            h = _file_sha256(source)
+            self._inputs[source] = (
+                None if h is None else _sha256((h + str(self._record["options"])).encode())
+            )
+        return self._inputs[source]
+
+    def check_writable(self, name: str) -> None:
+        """ValueError unless ``name`` is absent from the folder or a file this batch wrote and
+        that is unchanged since."""
+        p = self.path / name
+        if not p.exists() and not p.is_symlink():
+            return
+        known = self._record["files"].get(name)
+        if p.is_symlink() or known is None or _file_sha256(p) != known:
+            raise ValueError(
+                f"'{p}' exists and was not written by gmwm batch (or was changed since): "
+                "nothing was overwritten; move it away or choose another output folder"
+            )
+
+    def check_summaries(self) -> None:
+        """Refuse now (before any fit) a folder whose summary files are not this program's."""
+        for name in ("summary.csv", "summary.json"):
+            self.check_writable(name)
+
+    def check_reports(self, sources: Iterable[str]) -> None:
+        """Refuse now the logs whose report would replace a file this batch did not write
+        (see :meth:`check_writable`)."""
+        for src in sources:
+            self.check_writable(self._report_name(src))
+
+    def write(self, name: str, text: str) -> Path:
+        """Write ``name`` atomically (after :meth:`check_writable`) and record it."""
+        data = text.encode("utf-8")
+        if self._record["files"].get(name) != _sha256(data) or not (self.path / name).exists():
+            self.check_writable(name)
+            write_atomic(self.path / name, data)
+            self._record["files"][name] = _sha256(data)
+            self._save()
+        return self.path / name
+
+    def _save(self) -> None:
+        write_atomic(self.path / BATCH_RECORD, json.dumps(self._record, indent=1) + "\n")
+
+    def _report_name(self, source: str) -> str:
+        unit = self._record["units"].get(source)
+        if unit is not None:
+            return str(unit["report"])
+        used = {str(u["report"]) for u in self._record["units"].values()} | {"summary.json"}
+        stem = Path(source.rstrip("/")).name.split(".")[0] or "log"
+        name, k = f"{stem}.json", 2
+        while name in used:
+            name, k = f"{stem}_{k}.json", k + 1
+        return name
+
+    def resumed(self, source: str) -> LogFit | None:
+        """The log's result from an earlier run (same content, same options, its report
+        unchanged), or None."""
+        unit = self._record["units"].get(source)
+        fp = self.fingerprint(source)
+        if unit is None or fp is None or unit.get("fingerprint") != fp:
+            return None
+        p = self.path / str(unit["report"])
+        if _file_sha256(p) != self._record["files"].get(str(unit["report"])):
+            return None
+        values = tuple((tuple(map(str, k)), float(v)) for k, v in unit.get("values", []))
+        return LogFit(
+            source,
+            report=p.read_text(encoding="utf-8"),
+            fs=float(unit.get("fs", math.nan)),
+            n=int(unit.get("n", 0)),
+            resumed=True,
+            values=values,
+        )
+
+    def record(self, lf: LogFit) -> None:
+        """Write a fitted log's report now and record it (a failed log is not recorded)."""
+        if not lf.ok or lf.resumed:
+            return
+        name = self._report_name(lf.source)
+        self._record["units"][lf.source] = {
+            "report": name,
+            "fingerprint": self.fingerprint(lf.source),
+            "fs": lf.fs,
+            "n": lf.n,
+            "values": [[list(k), v] for k, v in unit_values(lf)],
+        }
+        self.write(name, lf.report)
+
+    def finish(self, result: BatchResult) -> dict[str, Any]:
+        """Write every fitted log's report (those not yet written), ``summary.csv`` and
+        ``summary.json`` (dated ``written_utc``, with the resumed logs counted); returns the
+        paths."""
+        self.check_summaries()
         reports: dict[str, str] = {}
-        used: set[str] = {"summary"}
-        for lf in self.fitted:
-            stem = Path(lf.source.rstrip("/")).name.split(".")[0] or "log"
-            name, k = stem, 2
-            while name in used:
-                name, k = f"{stem}_{k}", k + 1
-            used.add(name)
-            p = out / f"{name}.json"
-            p.write_text(lf.report)
-            reports[lf.source] = str(p)
-        (out / "summary.csv").write_text(self.summary_csv())
-        d = self.to_dict()
+        for lf in result.fitted:
+            self.record(lf)
+            reports[lf.source] = str(self.path / self._record["units"][lf.source]["report"])
+        d = result.to_dict()
         d["reports"] = reports
-        (out / "summary.json").write_text(json.dumps(d, indent=1, allow_nan=False) + "\n")
+        d["written_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        d["n_resumed"] = sum(lf.resumed for lf in result.logs)
+        self.write("summary.csv", result.summary_csv())
+        self.write("summary.json", json.dumps(d, indent=1, allow_nan=False) + "\n")
         return {
             "reports": reports,
-            "summary_csv": str(out / "summary.csv"),
-            "summary_json": str(out / "summary.json"),
+            "summary_csv": str(self.path / "summary.csv"),
+            "summary_json": str(self.path / "summary.json"),
         }

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._files import open_regular, read_regular
+from ._files import open_regular, read_regular, write_atomic
 from ._jsonutil import json_ready
 from ._version import __version__
 from .fit import FitError, GMWMResult, weight_matrix
@@ -311,11 +311,7 @@ def save_session(path: str | os.PathLike[str], **kwargs: Any) -> Path:
     ``models``, ``wvs``, ``fits``, ``intervals``, ``app``, ``fingerprint``).
     """
     text = session_to_json(**kwargs)
-    p = Path(path)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, p)  # atomic: a crash never leaves half a session
-    return p
+    return write_atomic(path, text)  # a crash or a full disk never leaves half a session
 
 
 def load_session(path: str | os.PathLike[str]) -> Session:

@@ -27,6 +27,7 @@ from concurrent.futures import Executor
 from contextlib import contextmanager
 from typing import Any
 
+from .._files import write_atomic
 from .common import (
     CHANNELS_HELP,
     CliError,
@@ -35,9 +36,11 @@ from .common import (
     add_weights_option,
     add_wv_options,
     check_output,
+    input_paths,
     log_kwargs,
     positive,
     queue_warning,
+    terminal_text,
     usage_error,
 )
 
@@ -198,12 +201,12 @@ def run_fleet(
             level=0.95,
             **_fit_kwargs(args, channels, executor, progress),
             command_line=shlex.join(["gmwm", *getattr(args, "argv", [])]),
+            output=args.output,  # each unit's report written as it completes
         )
         page = render_fleet_html(fleet)
     except (DatasheetError, ReportError) as e:
         raise CliError(str(e)) from None
-    with open(args.report, "w", encoding="utf-8") as f:
-        f.write(page)
+    write_atomic(args.report, page)
     print(
         f"gmwm: batch: wrote {args.report} ({len(fleet.units)} units, "
         f"{len(page.encode('utf-8')) / 1e6:.2f} MB)",
@@ -221,9 +224,12 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     if args.output is not None:  # before the (slow) imports and any fit
         check_output(args.output, "-o", kind="dir")
     if args.report is not None:
-        check_output(args.report, "--report", suffixes=(".html", ".htm"))
+        check_output(args.report, "--report", suffixes=(".html", ".htm"), inputs=input_paths(args))
     from .._parallel import ProgressLine
-    from ..batch import fit_batch
+    from ..batch import BatchFolder, fit_batch
+
+    if args.output is not None:  # files it did not write: refused before any fit
+        BatchFolder(args.output, "").check_summaries()
 
     channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
     bar = None if args.quiet else ProgressLine(0, sys.stderr, "gmwm batch", "logs")
@@ -231,13 +237,15 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         if args.report is not None:
             res = run_fleet(args, channels, ex, bar)
         else:
-            res = fit_batch(args.inputs, **_fit_kwargs(args, channels, ex, bar))
+            res = fit_batch(  # each log's report written as it completes; resumes the folder
+                args.inputs, **_fit_kwargs(args, channels, ex, bar), output=args.output
+            )
     files = res.save(args.output) if args.output is not None else {}
     for lf in res.logs:
         if lf.error:
-            print(f"gmwm: batch: {lf.source}: {lf.error}", file=sys.stderr)
+            print(terminal_text(f"gmwm: batch: {lf.source}: {lf.error}"), file=sys.stderr)
         for ch, err in lf.channel_errors.items():
-            print(f"gmwm: batch: {lf.source} [{ch}]: {err}", file=sys.stderr)
+            print(terminal_text(f"gmwm: batch: {lf.source} [{ch}]: {err}"), file=sys.stderr)
     for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
         queue_warning(args, w)
     if not res.fitted:
@@ -249,7 +257,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         return d
     wrote = [f"the fleet report {args.report}"] if args.report else []
     if files:
+        again = sum(lf.resumed for lf in res.logs)
         wrote.append(
-            f"{len(files['reports'])} report(s), summary.csv and summary.json to {args.output}"
+            f"{len(files['reports'])} report(s)"
+            + (f" ({again} resumed from an earlier run)" if again else "")
+            + f", summary.csv and summary.json to {args.output}"
         )
     return f"{res.table()}\n\nwrote {' and '.join(wrote)}"

@@ -9,17 +9,21 @@ and the queue of one-line warnings (:func:`queue_warning`)."""
 from __future__ import annotations
 
 import argparse
+import glob
 import math
 import os
 import re
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
-from .._limits import check_sample_count
+from .._checks import check_fs
+from .._files import check_not_input
+from .._limits import check_replicates, check_sample_count
+from ..formats.common import text_lines
 from ..wv import WaveletVariance
 
 __all__ = [
@@ -48,6 +52,8 @@ __all__ = [
     "alpha_of",
     "add_deprecated_alias",
     "queue_warning",
+    "terminal_text",
+    "input_paths",
     "DeprecatedAlias",
 ]
 
@@ -96,6 +102,14 @@ def cli_text(message: str) -> str:
     return _ARGUMENT.sub(_flag, message)
 
 
+def terminal_text(text: str) -> str:
+    """``text`` as it may reach a terminal: every control character but the line breaks
+    escaped (``\x1b`` for ESC), so that a channel or file name such as ``"\x1b]0;pwned\x07"``
+    cannot retitle, recolour or rewrite the user's terminal
+    (:func:`engine.formats.common.clean_text`, line by line)."""
+    return text_lines(text.split("\n"), end="")
+
+
 class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
@@ -108,6 +122,11 @@ def positive(kind: type[int] | type[float], name: str) -> Callable[[str], float]
             raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
         if not (math.isfinite(v) and v > 0):
             raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text!r}")
+        if name == "--fs":  # the engine's range (engine._checks)
+            try:
+                check_fs(v, name)
+            except ValueError as e:
+                raise argparse.ArgumentTypeError(str(e)) from None
         return v
 
     return conv
@@ -242,10 +261,32 @@ def add_bootstrap_options(
     """Add ``-B/--bootstrap`` (100 replicates), ``--seed`` (0) and ``--workers`` (2) to a
     sub-command; ``replicates`` and ``workers`` are the help texts, before the default."""
     sp.add_argument(
-        "-B", "--bootstrap", type=positive(int, "-B"), default=100, help=f"{replicates} (100)"
+        "-B", "--bootstrap", type=_replicates("-B"), default=100, help=f"{replicates} (100)"
     )
     sp.add_argument("--seed", type=int, default=0, help="bootstrap seed (0)")
     sp.add_argument("--workers", type=positive(int, "--workers"), default=2, help=f"{workers} (2)")
+
+
+def _replicates(option: str) -> Callable[[str], int]:
+    """An argparse type: a number of bootstrap replicates (``500`` or ``1e3``), checked by
+    :func:`engine._limits.check_replicates` (a whole number from 2 to its maximum)."""
+
+    def conv(text: str) -> int:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} must be a number, got {text!r}") from None
+        if not (math.isfinite(v) and v == int(v)):
+            raise argparse.ArgumentTypeError(
+                f"{option} must be a whole number of replicates, got {text!r}"
+            )
+        try:
+            return check_replicates(int(text) if text.strip().isdigit() else int(v))
+        except ValueError as e:
+            msg = f"{option} {text}: {e}".replace("B must", "must")
+            raise argparse.ArgumentTypeError(msg) from None
+
+    return conv
 
 
 def bootstrap_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -342,8 +383,10 @@ def check_output(
     *,
     kind: Literal["file", "dir"] = "file",
     suffixes: tuple[str, ...] = (),
+    inputs: Iterable[str | os.PathLike[str] | None] = (),
 ) -> None:
-    """Refuse an output path that cannot be written, before any computation.
+    """Refuse an output path that cannot be written, or that is an input, before any
+    computation.
 
     Every subcommand that writes (``simulate -o``, ``export -o``, ``virtual -o``, ``report -o``,
     ``batch -o DIR``, ``study -o DIR``) calls this first, so that a typo in a folder name
@@ -361,6 +404,9 @@ def check_output(
         nearest existing ancestor must be a writable folder.
     suffixes : tuple of str
         File names must end with one of these (lower case), when given.
+    inputs : iterable of paths
+        The files the command reads (:func:`input_paths`): a file output that is one of them
+        (the same file, through a symlink or a hard link too) is refused.
 
     Raises
     ------
@@ -383,6 +429,7 @@ def check_output(
                 + (" (it is a file)" if folder.exists() else "")
                 + "; create it or choose another path"
             )
+        check_not_input(path, inputs, what=f"{option} {path}", error=UsageError)
         if p.exists() and not os.access(p, os.W_OK):
             raise usage_error(f"{option} {path}: the file exists and is not writable")
     else:
@@ -399,6 +446,19 @@ def check_output(
         raise usage_error(
             f"{option} {path}: the folder {folder} is not writable; choose another path"
         )
+
+
+def input_paths(args: argparse.Namespace) -> list[str]:
+    """The files a command reads: its ``input`` or ``inputs`` (glob patterns expanded) and its
+    ``--datasheet-file``."""
+    found: list[str] = []
+    for name in ("input", "inputs", "datasheet_file"):
+        v = getattr(args, name, None)
+        for item in [] if v is None else [v] if isinstance(v, (str, os.PathLike)) else v:
+            found.append(str(item))
+            if glob.has_magic(str(item)):
+                found.extend(glob.glob(str(item)))
+    return found
 
 
 def _writable(folder: Path) -> bool:

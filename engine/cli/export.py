@@ -30,6 +30,7 @@ from .common import (
     bootstrap_kwargs,
     check_output,
     confidence,
+    input_paths,
     log_kwargs,
     positive,
     stream_wv,
@@ -170,7 +171,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm export``; returns the text to print (or a JSON-ready dict)."""
-    check_output(args.output, "-o")  # before the (slow) imports and any fit
+    # before the (slow) imports and any fit:
+    check_output(args.output, "-o", inputs=input_paths(args))
     from ..fit import fit_gmwm
     from ..formats import export
     from ..inference import param_intervals

@@ -54,6 +54,7 @@ from .common import (
     positive,
     queue_warning,
     sample_count,
+    terminal_text,
 )
 
 __all__ = ["main", "build_parser"]
@@ -397,19 +398,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         for w in caught:
             queue_warning(args, _one_line(w.message))
     except (CliError, LoadError, ModelError, FitError) as e:
-        print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)
+        print(terminal_text(f"gmwm: error: {_one_line(e)}"), file=sys.stderr)
         return 2
     except (ValueError, OSError, TypeError) as e:  # data-dependent errors from numpy/h5py
-        print(f"gmwm: error: {_one_line(e)}", file=sys.stderr)
+        print(terminal_text(f"gmwm: error: {_one_line(e)}"), file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # pragma: no cover
         print("gmwm: interrupted", file=sys.stderr)
         return 130
     for warning in getattr(args, "warnings", ()):  # e.g. fs unknown, deprecated option
-        print(f"gmwm {args.command}: warning: {warning}", file=sys.stderr)
+        print(terminal_text(f"gmwm {args.command}: warning: {warning}"), file=sys.stderr)
     text = json.dumps(out, allow_nan=False) if isinstance(out, dict) else out
     try:
-        print(text)
+        print(terminal_text(text))
         sys.stdout.flush()  # here, not at exit, so that a closed pipe is caught
     except BrokenPipeError:  # `gmwm wv ... | head -3`: the reader left; no traceback
         devnull = os.open(os.devnull, os.O_WRONLY)

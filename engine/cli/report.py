@@ -25,6 +25,7 @@ from .common import (
     add_weights_option,
     add_wv_options,
     check_output,
+    input_paths,
     log_kwargs,
     usage_error,
 )
@@ -80,7 +81,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm report``; returns one line saying what was written."""
-    check_output(args.output, "-o", suffixes=(".html", ".htm"))  # before any import or fit
+    # before any import or fit:
+    check_output(args.output, "-o", suffixes=(".html", ".htm"), inputs=input_paths(args))
     from pathlib import Path
 
     from ..formats import FORMATS

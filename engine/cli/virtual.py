@@ -30,6 +30,7 @@ from .common import (
     add_wv_options,
     alpha_of,
     check_output,
+    input_paths,
     positive,
     queue_warning,
     usage_error,
@@ -188,7 +189,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         raise usage_error("--format needs -o OUT (a file, or - for stdout)")
     if args.output and not args.format:
         raise usage_error("-o needs --format NAME (the export format of the virtual sensor)")
-    check_output(args.output, "-o")  # before the (slow) imports and the fit
+    # before the (slow) imports and the fit:
+    check_output(args.output, "-o", inputs=input_paths(args))
     from .._jsonutil import json_ready
     from ..multivariate import MultiModel, fit_mgmwm, virtual_sensor
     from ..wv import wv_matrix

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypedDict
 
 import numpy as np
 
+from .._limits import check_replicates
 from .._parallel import parallel_map
 from ..models import Model
 from ..wv import WaveletVariance, as_series, haar_coefficients, wavelet_variance
@@ -97,7 +98,9 @@ def v_options(options: Mapping[str, Any], **defaults: Any) -> dict[str, Any]:
         raise TypeError(
             f"unknown keyword(s) {', '.join(unknown)}: the V options are {', '.join(V_DEFAULTS)}"
         )
-    return {**V_DEFAULTS, **defaults, **options}
+    out = {**V_DEFAULTS, **defaults, **options}
+    out["B"] = check_replicates(out["B"])
+    return out
 
 
 def wv_cov_data(x: Any, wv: WaveletVariance) -> np.ndarray:
@@ -153,8 +156,7 @@ def wv_cov_bootstrap(
         Runs the replicates instead of the local pool (e.g. a Dask ``Client.get_executor()``);
         the results do not depend on it (:func:`engine._parallel.parallel_map`).
     """
-    if B < 2:
-        raise ValueError(f"B must be at least 2, got {B}")
+    B = check_replicates(B)
     seeds = np.random.SeedSequence(seed).spawn(B)
     items = [(model, wv.n, wv.fs, wv.n_levels, wv.robust, wv.eff, s) for s in seeds]
     sims = np.array(parallel_map(_boot_wv, items, workers, executor=executor))

@@ -17,6 +17,8 @@ import re
 from collections.abc import Iterable
 from typing import Any
 
+from .._text import spreadsheet_safe
+
 __all__ = [
     "fmt_float",
     "yaml_float",
@@ -57,8 +59,9 @@ def text_lines(lines: Iterable[str], end: str = "\n") -> str:
 
 
 def csv_cells(row: Iterable[Any]) -> list[Any]:
-    """A CSV row with its text cells cleaned (:func:`clean_text`); numbers unchanged."""
-    return [clean_text(c) if isinstance(c, str) else c for c in row]
+    """A CSV row with its text cells cleaned (:func:`clean_text`) and never a spreadsheet
+    formula (:func:`engine._text.spreadsheet_safe`); numbers unchanged."""
+    return [spreadsheet_safe(clean_text(c)) if isinstance(c, str) else c for c in row]
 
 
 def yaml_str(text: Any) -> str:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._files import write_atomic
 from ..fit import GMWMResult
 from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
@@ -271,7 +272,7 @@ def write_kalibr(
 ) -> Path:
     """Write :func:`kalibr_imu` as a YAML file; returns the path."""
     p = Path(path)
-    p.write_text(kalibr_imu(fits, **kwargs).to_yaml())
+    write_atomic(p, kalibr_imu(fits, **kwargs).to_yaml())
     return p
 
 

@@ -12,9 +12,9 @@ import json
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .._files import write_atomic
 from ..fit import GMWMResult
 from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
@@ -300,5 +300,5 @@ def export(
         consumers=consumers,
     )
     if path is not None:
-        Path(path).write_text(text)
+        write_atomic(path, text)  # the one write of every format (engine._files)
     return text

@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .._files import write_atomic
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import GMWMResult
@@ -186,7 +187,7 @@ def write_report(
 ) -> Path:
     """Write :func:`fit_report` as strict JSON (no NaN); returns the path."""
     p = Path(path)
-    p.write_text(json.dumps(fit_report(fits, **kwargs), indent=1, allow_nan=False) + "\n")
+    write_atomic(p, json.dumps(fit_report(fits, **kwargs), indent=1, allow_nan=False) + "\n")
     return p
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -35,7 +36,15 @@ __all__ = [
     "UNIT_RE",
     "array_memory_need",
     "check_array_memory",
+    "stored_size",
+    "check_channel_count",
+    "MAX_CHANNELS",
 ]
+
+#: Most channels a log may have once one is selected (``channel=`` picks one of a wider
+#: file). An IMU log has a handful; a file declaring 1e5 or 1e6 columns is refused before its
+#: values are converted (each channel costs tens of microseconds of checks).
+MAX_CHANNELS = 10_000
 
 _TIME_RE = re.compile(r"(time|t|timestamp|stamp|sec|seconds)(?:_(s|ms|us|ns))?|(ms|us|ns)")
 _TIME_DIV = {"s": 1.0, "sec": 1.0, "seconds": 1.0, "ms": 1e3, "us": 1e6, "µs": 1e6, "ns": 1e9}
@@ -88,14 +97,19 @@ def check_fs(value: Any, src: str, what: str, fix: str) -> float:
     except (TypeError, ValueError):
         raise LoadError(
             f"file '{src}': {what} = {value!r} is not a valid sampling frequency "
-            f"(it must be a finite number of Hz > 0): {fix}"
+            f"(it must be a finite number of Hz > 0, from {_checks.MIN_FS:g} to "
+            f"{_checks.MAX_FS:g}): {fix}"
         ) from None
 
 
 def ordered_names(names: list[str], units: Mapping[str, str]) -> list[str]:
-    """Names in the order of the file's ``units`` map first (gyro_x..accel_z), then as found."""
-    first = [k for k in units if k in names]
-    return first + [k for k in names if k not in first]
+    """Names in the order of the file's ``units`` map first (gyro_x..accel_z), then as found.
+
+    Linear in the number of names (set look-ups): a file may declare 1e6 of them."""
+    have = set(names)
+    first = [k for k in units if k in have]
+    seen = set(first)
+    return first + [k for k in names if k not in seen]
 
 
 def array_memory_need(shape: tuple[int, ...], dtype: np.dtype) -> int:
@@ -114,12 +128,29 @@ def array_memory_need(shape: tuple[int, ...], dtype: np.dtype) -> int:
     return 2 * raw if len(shape) == 2 and min(shape) > 1 else raw
 
 
-def check_array_memory(need: int, src: str, what: str) -> None:
+def check_array_memory(need: int, src: str, what: str, stored: int | None = None) -> None:
     """LoadError when reading arrays that need ``need`` bytes (:func:`array_memory_need`)
-    cannot fit in the available memory (see :func:`engine._limits.check_memory`)."""
+    cannot fit in the available memory, or expand too far from the ``stored`` bytes of the
+    file (see :func:`engine._limits.check_memory`)."""
     fix = "load one channel (channel=) of an HDF5 file, or compute the WV of a .npy/HDF5 log "
     fix += "in blocks (wavelet_variance_stream)"
-    check_memory(need, src, what=what, fix=fix, error=LoadError)
+    check_memory(need, src, what=what, fix=fix, error=LoadError, stored=stored)
+
+
+def stored_size(path: Any) -> int:
+    """Size (bytes) of a file given as a path or as content (``io.BytesIO``)."""
+    if hasattr(path, "getbuffer"):
+        return int(path.getbuffer().nbytes)
+    return int(os.stat(path).st_size)
+
+
+def check_channel_count(src: str, count: int, what: str = "columns") -> None:
+    """LoadError when a file offers more than :data:`MAX_CHANNELS` channels at once."""
+    if count > MAX_CHANNELS:
+        raise LoadError(
+            f"file '{src}' has {count} {what}, more than the {MAX_CHANNELS} channels a log may "
+            "have: select one (channel=) or save the IMU channels in a file of their own"
+        )
 
 
 def _where(i: int, rows: np.ndarray | None) -> str:
@@ -188,7 +219,8 @@ def _time_scale(name: str, t: np.ndarray, div: tuple[float, bool], notes: list[s
 
 def _check_known(src: str, what: str, given: Mapping[Any, Any], names: list[str]) -> None:
     """LoadError naming the keys of a per-channel ``what`` mapping that are not channels."""
-    unknown = [k for k in given if k not in names]
+    have = set(names)
+    unknown = [k for k in given if k not in have]
     if unknown:
         raise LoadError(
             f"file '{src}': {what} given for unknown channel(s) {unknown}; "
@@ -380,6 +412,7 @@ def finish_log(
     if channel is not None:
         name = pick_channel(src, list(cols), channel)
         cols = {name: cols[name]}
+    check_channel_count(src, len(cols), "channels")
     n = _length(next(iter(cols.values())))
     fs_time = None
     if time is not None:

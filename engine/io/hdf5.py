@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import io
 from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,6 +21,7 @@ from ._assemble import (
     array_memory_need,
     attr_value,
     check_array_memory,
+    check_channel_count,
     clean_unit,
     finish_log,
     ordered_names,
@@ -37,6 +37,18 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["read_h5", "H5_EXT"]
 
 H5_EXT = {".h5", ".hdf5", ".hdf", ".he5"}
+#: Bytes the HDF5 library allocates per chunk that one read touches (its map of the chunks),
+#: measured: reading 1e5 one-sample chunks at once peaked at 423 MB (about 3.8 KB a chunk).
+H5_BYTES_PER_CHUNK = 4096
+#: Chunks one read may touch: a dataset of tiny chunks is read in slices of at most this many
+#: chunks (the library's chunk map then stays under 5 MB; measured on 1e5 one-sample chunks,
+#: slices of 1024 chunks were also the fastest), and of at most :data:`H5_SLICE_SAMPLES`
+#: samples when the chunks are small.
+H5_CHUNKS_PER_READ = 1024
+#: Most chunks a channel may be stored in (about 15 us each to read): a dataset of 1e6
+#: one-sample chunks is refused, not read for tens of seconds. The logs of shared/data have 16.
+H5_MAX_CHUNKS = 1 << 18
+H5_SLICE_SAMPLES = 1 << 20
 _SUMMARY_KINDS = {"wavelet_and_allan_variance", "wavelet_variance"}
 
 
@@ -75,16 +87,14 @@ def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) 
             if obj.ndim == 1 and div is not None:
                 times.append((name, obj, div))
             elif obj.ndim == 1 and obj.size > 1:
-                found[name] = (obj.shape[0], lambda: obj[...], obj)
+                found[name] = (obj.shape[0], _reader(obj), obj)
                 units[name] = unit or units.get(name, "")
             elif obj.ndim == 2 and obj.size > 1:
                 rows_first = obj.shape[0] < obj.shape[1]  # (k, N): channels in rows
-                for j in range(obj.shape[1 - int(rows_first)]):
-                    found[f"{name}[{j}]"] = (
-                        obj.shape[int(rows_first)],
-                        partial(obj.__getitem__, np.s_[j, :] if rows_first else np.s_[:, j]),
-                        obj,
-                    )
+                k = obj.shape[1 - int(rows_first)]
+                check_channel_count(src, len(found) + k, f"channels (dataset '{name}': {k})")
+                for j in range(k):
+                    found[f"{name}[{j}]"] = (obj.shape[int(rows_first)], _reader(obj, j), obj)
                     units[f"{name}[{j}]"] = unit or units.get(f"{name}[{j}]", "")
             elif obj.ndim == 0 and name.lower() in FS_KEYS:
                 scalar_fs.append((attr_value(obj[()]), f"dataset '{name}'"))
@@ -112,10 +122,14 @@ def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) 
                 fs_file = (attr_value(ds_attrs[key]), f"attribute '{key}' of dataset '{k}'")
                 break
         n = found[names[0]][0] if names else 0
-        need = sum(array_memory_need((found[k][0],), found[k][2].dtype) for k in names)
-        need += next((array_memory_need((n,), ds.dtype) for _, ds, _ in times), 0)
-        check_array_memory(need, src, f"{len(names)} dataset column(s) of {n} samples")
-        time = next(((nm, ds[...], div) for nm, ds, div in times if ds.shape[0] == n), None)
+        reads = [found[k][2] for k in names] + [ds for _, ds, _ in times if ds.shape[0] == n][:1]
+        for ds in reads:
+            _check_chunks(src, ds)
+        need = sum(_read_need(ds) for ds in reads)
+        stored = sum({id(ds): ds.id.get_storage_size() for ds in reads}.values())
+        what = f"{len(names)} dataset column(s) of {n} samples"
+        check_array_memory(need, src, what, stored=stored)
+        time = next(((nm, _reader(ds)(), div) for nm, ds, div in times if ds.shape[0] == n), None)
         cols: dict[str, Any] = {}
         for k in names:
             try:
@@ -127,3 +141,68 @@ def read_h5(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) 
                 ) from exc
     raw = RawLog(cols, units, fs_file=fs_file, time=time, meta=meta, notes=notes)
     return finish_log(src, raw, fmt="hdf5", channel=None, opts=opts)
+
+
+def _slicing(ds: h5py.Dataset, axis: int) -> tuple[int, int]:
+    """(samples per read, chunks along the samples axis) of reading a channel of ``ds``."""
+    n = int(ds.shape[axis])
+    if ds.chunks is None:
+        return n, 1
+    c = max(1, int(ds.chunks[axis]))
+    step = c * max(1, min(H5_CHUNKS_PER_READ, H5_SLICE_SAMPLES // c))
+    return min(step, n), -(-n // c)
+
+
+def _sample_axis(ds: h5py.Dataset) -> int:
+    return 0 if ds.ndim == 1 or ds.shape[0] >= ds.shape[1] else 1
+
+
+def _check_chunks(src: str, ds: h5py.Dataset) -> None:
+    """LoadError when a channel of ``ds`` is stored in more than :data:`H5_MAX_CHUNKS`
+    chunks."""
+    axis = _sample_axis(ds)
+    _, chunks = _slicing(ds, axis)
+    if chunks > H5_MAX_CHUNKS:
+        c = ds.chunks[axis]
+        raise LoadError(
+            f"file '{src}', dataset '{ds.name.lstrip('/')}': {ds.shape[axis]} samples stored in "
+            f"{chunks} chunks of {c} sample(s), more than {H5_MAX_CHUNKS} chunks: re-save it "
+            "with larger chunks (e.g. h5repack -l CHUNK=65536, or chunks=True in h5py)"
+        )
+
+
+def _read_need(ds: h5py.Dataset) -> int:
+    """Peak memory (bytes) of reading one channel of ``ds`` with :func:`_reader` and making it
+    a channel: the samples (:func:`array_memory_need`), the library's map of the chunks one
+    read touches, and the slice copied at a time when the read is sliced."""
+    axis = _sample_axis(ds)
+    n = int(ds.shape[axis])
+    step, chunks = _slicing(ds, axis)
+    per_read = 0 if ds.chunks is None else min(chunks, H5_CHUNKS_PER_READ) * H5_BYTES_PER_CHUNK
+    return (
+        array_memory_need((n,), ds.dtype) + per_read + (step * ds.dtype.itemsize if step < n else 0)
+    )
+
+
+def _reader(ds: h5py.Dataset, j: int | None = None) -> Callable[[], np.ndarray]:
+    """A zero-argument reader of the channel of ``ds`` (the dataset, or its column or row
+    ``j``), in slices of chunks (:data:`H5_CHUNKS_PER_READ`) so that a dataset of one-sample
+    chunks cannot make the library map a million chunks at once."""
+    axis = _sample_axis(ds)
+
+    def sel(a: int, b: int) -> Any:
+        if ds.ndim == 1:
+            return np.s_[a:b]
+        return np.s_[j, a:b] if axis == 1 else np.s_[a:b, j]
+
+    def read() -> np.ndarray:
+        n = int(ds.shape[axis])
+        step, _ = _slicing(ds, axis)
+        if step >= n:
+            return np.asarray(ds[sel(0, n)])
+        out = np.empty(n, dtype=ds.dtype)
+        for a in range(0, n, step):
+            out[a : a + step] = ds[sel(a, min(a + step, n))]
+        return out
+
+    return read

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from .._files import open_regular
+from .._limits import load_scope
 from ._assemble import LoadOptions, RawLog, check_fs, finish_log
 from .hdf5 import H5_EXT, read_h5
 from .log import ImuLog, LoadError
@@ -251,7 +252,8 @@ def _guarded(
     """Run a reader; a library error on damaged content becomes a LoadError (with its type, so
     that the cause stays visible)."""
     try:
-        return reader(p, src, channel, opts)
+        with load_scope():  # its memory estimates are reserved in the process's budget
+            return reader(p, src, channel, opts)
     except LoadError:
         raise
     except _CORRUPT as exc:

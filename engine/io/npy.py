@@ -15,7 +15,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from .._files import open_regular
+from .._files import open_regular, write_atomic
 from ._assemble import (
     LoadOptions,
     RawLog,
@@ -23,6 +23,7 @@ from ._assemble import (
     attr_value,
     check_array_memory,
     finish_log,
+    stored_size,
     time_divisor,
     units_map,
 )
@@ -79,7 +80,8 @@ def read_npy(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions)
         if head is not None:
             shape, dtype = head
             what = f"an array of shape {shape} and dtype {dtype}"
-            check_array_memory(array_memory_need(shape, dtype), src, what)
+            need = array_memory_need(shape, dtype)
+            check_array_memory(need, src, what, stored=stored_size(path))
         fh.seek(0)
         a = _np_load(fh, src, ".npy array of numbers", "numpy.save(path, array)")
     raw = RawLog()
@@ -149,7 +151,7 @@ def write_npy_sidecar(
     """Write the sidecar of a ``.npy`` log (see :func:`read_npy_sidecar`); returns its path."""
     d = {"fs_hz": float(fs), "channels": list(channels), "units": dict(units or {}), **extra}
     side = npy_sidecar_path(path)
-    side.write_text(json.dumps(d, indent=2) + "\n", encoding="utf-8")
+    write_atomic(side, json.dumps(d, indent=2) + "\n")
     return side
 
 
@@ -168,7 +170,8 @@ def read_npz(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions)
     with _open(path, src) as fh:
         z = _np_load(fh, src, ".npz archive", "numpy.savez(path, gyro_x=..., fs=100.0)")
         with z:
-            check_array_memory(_npz_memory_need(z), src, f"{len(z.files)} array(s)")
+            need, what = _npz_memory_need(z), f"{len(z.files)} array(s)"
+            check_array_memory(need, src, what, stored=stored_size(path))
             for key in z.files:
                 try:
                     a = z[key]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 from collections.abc import Mapping
@@ -10,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from .._files import atomic_output
+from .._text import spreadsheet_safe
 from ._assemble import check_fs, clean_unit, time_divisor
 from .hdf5 import H5_EXT
 
@@ -82,34 +85,43 @@ def save_log(
         )
     if clash := sorted(_RESERVED & set(extra)):
         raise ValueError(f"cannot save '{p}': attrs {clash} are written by save_log itself")
-    if ext in H5_EXT:
-        with h5py.File(p, "w") as f:
-            for k, a in arrs.items():
-                ds = f.create_dataset(k, data=a, compression="gzip", chunks=(min(n, 65536),))
-                ds.attrs["units"] = unit[k]
-            f.attrs.update(
-                {
-                    "fs_hz": fs,
-                    "n_samples": np.int64(n),
-                    "duration_s": n / fs,
-                    "units": json.dumps(unit),
-                    "kind": "raw",
-                    "schema_version": "1",
-                }
-            )
-            for k, v in extra.items():
-                ok = isinstance(v, (str, bytes, int, float, bool, np.generic, np.ndarray))
-                f.attrs[k] = v if ok else json.dumps(v)
-    elif ext == ".npy":
-        a = next(iter(arrs.values())) if len(arrs) == 1 else np.column_stack(list(arrs.values()))
-        np.save(p, a)
-    else:
+    if ext not in H5_EXT and ext != ".npy":
         if bad := [k for k in arrs if any(c in k for c in ',"#\n\r[(')]:
             raise ValueError(
                 f"cannot save '{p}': channel names {bad} contain characters that "
                 'CSV headers cannot hold (, " # [ ( or newlines)'
             )
-        head = ",".join(["time"] + [f"{k} [{unit[k]}]" if unit[k] else k for k in arrs])
-        data = np.column_stack([np.arange(n) / fs] + [a.astype(np.float64) for a in arrs.values()])
-        np.savetxt(p, data, fmt="%.17g", delimiter=",", header=head, comments="")
+    with atomic_output(p) as tmp:  # a full disk or an error never leaves half a file
+        if ext in H5_EXT:  # built in memory, then written by us: the HDF5 library never
+            # meets a full disk (it crashes at exit when it cannot close a file)
+            image = io.BytesIO()
+            with h5py.File(image, "w") as f:
+                for k, a in arrs.items():
+                    ds = f.create_dataset(k, data=a, compression="gzip", chunks=(min(n, 65536),))
+                    ds.attrs["units"] = unit[k]
+                f.attrs.update(
+                    {
+                        "fs_hz": fs,
+                        "n_samples": np.int64(n),
+                        "duration_s": n / fs,
+                        "units": json.dumps(unit),
+                        "kind": "raw",
+                        "schema_version": "1",
+                    }
+                )
+                for k, v in extra.items():
+                    ok = isinstance(v, (str, bytes, int, float, bool, np.generic, np.ndarray))
+                    f.attrs[k] = v if ok else json.dumps(v)
+            with open(tmp, "wb") as fh:
+                fh.write(image.getbuffer())
+        elif ext == ".npy":
+            cols = list(arrs.values())
+            with open(tmp, "wb") as fh:  # (a file object: np.save adds no suffix)
+                np.save(fh, cols[0] if len(cols) == 1 else np.column_stack(cols))
+        else:
+            cells = [f"{k} [{unit[k]}]" if unit[k] else k for k in arrs]
+            head = ",".join(["time", *(spreadsheet_safe(c) for c in cells)])
+            floats = [a.astype(np.float64) for a in arrs.values()]
+            data = np.column_stack([np.arange(n) / fs, *floats])
+            np.savetxt(tmp, data, fmt="%.17g", delimiter=",", header=head, comments="")
     return p

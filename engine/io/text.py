@@ -13,13 +13,21 @@ import itertools
 import os
 from collections.abc import Callable, Generator, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from .._files import open_regular
 from .._limits import check_memory
-from ._assemble import UNIT_RE, LoadOptions, RawLog, clean_unit, finish_log, time_divisor
+from ._assemble import (
+    UNIT_RE,
+    LoadOptions,
+    RawLog,
+    check_channel_count,
+    clean_unit,
+    finish_log,
+    time_divisor,
+)
 from .log import ImuLog, LoadError
 
 __all__ = ["read_text"]
@@ -57,17 +65,13 @@ BLOCK_BYTES = 1 << 18
 CHUNK_ROWS = 16384
 
 
-def _encoding(raw: bytes, src: str) -> str:
+def _encoding(raw: bytes | bytearray, src: str) -> str:
     """The encoding of a text log (``utf-8-sig`` or ``latin-1``); LoadError for binary data.
 
     Checked block by block (line ends never fall inside a UTF-8 sequence), so no decoded copy
     of the whole file is made.
     """
-    not_text = LoadError(
-        f"file '{src}' is not a text file (binary data, or an encoding other than "
-        "UTF-8/Latin-1): expected CSV/TSV text, .npy/.npz or HDF5; check the "
-        "file and its extension"
-    )
+    not_text = _not_text(src)
     if b"\x00" in raw[:65536]:
         raise not_text
     try:
@@ -82,7 +86,15 @@ def _encoding(raw: bytes, src: str) -> str:
         return "latin-1"
 
 
-def _blocks(raw: bytes) -> Iterator[bytes]:
+def _not_text(src: str) -> LoadError:
+    return LoadError(
+        f"file '{src}' is not a text file (binary data, or an encoding other than "
+        "UTF-8/Latin-1): expected CSV/TSV text, .npy/.npz or HDF5; check the "
+        "file and its extension"
+    )
+
+
+def _blocks(raw: bytes | bytearray) -> Iterator[bytes | bytearray]:
     """``raw`` in pieces of about :data:`BLOCK_BYTES`, each ending at a line end (``\\n``)."""
     start, n = 0, len(raw)
     while start < n:
@@ -92,7 +104,7 @@ def _blocks(raw: bytes) -> Iterator[bytes]:
         start = end
 
 
-def _content_lines(raw: bytes, encoding: str) -> Generator[tuple[int, str], None, None]:
+def _content_lines(raw: bytes | bytearray, encoding: str) -> Generator[tuple[int, str], None, None]:
     """(1-based line number, content) of the lines that hold something besides a ``#``
     comment and blanks, decoded a block at a time."""
     lineno = 0
@@ -105,7 +117,7 @@ def _content_lines(raw: bytes, encoding: str) -> Generator[tuple[int, str], None
                 yield lineno, s
 
 
-def _last_content(raw: bytes, encoding: str) -> str:
+def _last_content(raw: bytes | bytearray, encoding: str) -> str:
     """The last content line of ``raw`` (see :func:`_content_lines`), read from the end."""
     end = len(raw)
     while end > 0:
@@ -166,6 +178,7 @@ def _parse_rows(
 #: :data:`CHUNK_ROWS` rows as text and the parser's buffer).
 PEAK_PER_BYTE, PEAK_PER_LINE, PEAK_PER_VALUE, PEAK_FIXED = 1.5, 4, 10, 8_000_000
 _SAMPLE = 1 << 16  # bytes read first to estimate the lines and values of a file
+_READ_BYTES = 1 << 24  # then read in blocks of 16 MB, each checked for NUL bytes
 
 
 def text_memory_need(size: int, sample: bytes) -> int:
@@ -184,7 +197,7 @@ def text_memory_need(size: int, sample: bytes) -> int:
     )
 
 
-def _read(path: Path | io.BytesIO, src: str) -> bytes:
+def _read(path: Path | io.BytesIO, src: str) -> bytes | bytearray:
     """The bytes of a text log, once its parsing is known to fit in the available memory."""
     if isinstance(path, io.BytesIO):  # content already in memory: the rest of the peak
         raw = path.getvalue()
@@ -196,8 +209,22 @@ def _read(path: Path | io.BytesIO, src: str) -> bytes:
         sample = fh.read(_SAMPLE)
         need = text_memory_need(size, sample)
         what = f"to parse {size / 1e6:.3g} MB of text"
+        if b"\x00" in sample:  # binary (a sparse file of zeros): before reading the rest
+            raise _not_text(src)
         check_memory(need, src, what=what, fix="convert it to .npy or HDF5", error=LoadError)
-        return sample + fh.read()
+        buf = bytearray(max(size, len(sample)))  # filled in place: no second copy
+        buf[: len(sample)] = sample
+        pos = len(sample)
+        with memoryview(buf) as view:
+            while pos < len(buf):  # NUL is no text: refused as soon as a block holds one
+                got = cast(io.BufferedReader, fh).readinto(view[pos : pos + _READ_BYTES])
+                if not got:
+                    break
+                if buf.find(b"\x00", pos, pos + got) >= 0:
+                    raise _not_text(src)
+                pos += got
+        del buf[pos:]  # (a file that shrank since its size was read)
+        return buf
 
 
 def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions) -> ImuLog:
@@ -241,13 +268,13 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
     first = _split(first_row[1], delim)
     header = any(_num(f) is None for f in first)
     names: list[str] = []
-    units: dict[str, str] = {}
+    units: dict[str, str] = {}  # also the set of names so far: linear in the columns
     if header:
         for j, tok in enumerate(_split_header(first_row[1], delim)):
             m = UNIT_RE.fullmatch(tok)
             name, unit = (m.group(1).strip(), m.group(2)) if m else (tok.strip(), "")
             name = name or f"col{j}"
-            if name in names:
+            if name in units:
                 notes.append(f"duplicate column name '{name}' renamed '{name}_{j}'")
                 name = f"{name}_{j}"
             names.append(name)
@@ -262,6 +289,8 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
     else:
         names = [f"col{j}" for j in range(len(first))]
         data_rows = itertools.chain([first_row], rows_it)
+    if channel is None:  # before parsing: a file of 1e6 columns is refused at its header
+        check_channel_count(src, len(names))
     try:
         # every row ends with a line feed but maybe the last (old Mac files: grown as needed)
         values, rows = _parse_rows(data_rows, delim, len(names), raw.count(b"\n") + 1)

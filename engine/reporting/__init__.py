@@ -21,6 +21,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from .._files import write_atomic
 from .data import DEFAULT_SELECT, CalibrationReport, ChannelReport, gather_report
 from .fleet import FleetReport, gather_fleet
 from .render import ReportError, render_fleet_html, render_html
@@ -99,7 +100,7 @@ def report(
         _check_html_output(output)
     page = render_html(gather_report(source, **options), static=static, title=title)
     if output is not None:
-        Path(output).write_text(page, encoding="utf-8")
+        write_atomic(output, page)
     return page
 
 
@@ -144,5 +145,5 @@ def fleet_report(
         _check_html_output(output)
     page = render_fleet_html(gather_fleet(paths, **options), static=static, title=title)
     if output is not None:
-        Path(output).write_text(page, encoding="utf-8")
+        write_atomic(output, page)
     return page

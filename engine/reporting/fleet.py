@@ -47,7 +47,14 @@ from typing import Any
 import numpy as np
 
 from .._jsonutil import json_ready
-from ..batch import BatchResult, LogFit, expand_paths, fit_log
+from ..batch import (
+    BatchFolder,
+    BatchResult,
+    LogFit,
+    expand_paths,
+    fit_log,
+    options_fingerprint,
+)
 from ..units import BI_FACTOR, DISPLAY, DatasheetRow, ExportError, si_factor
 from .data import CalibrationReport, ChannelReport, software_versions
 
@@ -528,6 +535,7 @@ def gather_fleet(
     executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
     command_line: str = "",
+    output: str | os.PathLike[str] | None = None,
     **options: Any,
 ) -> FleetReport:
     """Fit every log of a fleet and compute its acceptance report.
@@ -549,6 +557,9 @@ def gather_fleet(
         As :func:`engine.batch.fit_batch`: local processes, or any Executor (Dask).
     command_line : str
         Shown under "How it was made".
+    output : path, optional
+        A folder where each unit's JSON report is written as soon as it is fitted (as
+        :func:`engine.batch.fit_batch`'s ``output``: :class:`engine.batch.BatchFolder`).
     **options
         :func:`engine.batch.fit_log`'s keywords: ``model`` or ``select``, ``channels``,
         ``fs``, ``levels``, ``weights``, ``load_options``.
@@ -594,8 +605,13 @@ def gather_fleet(
         parse_model(kw["model"])
     rkw = {"level": level, "datasheet": ds, "export_format": export_format}
     t0 = time.perf_counter()
+    fingerprint = options_fingerprint(kw)
     entries = expand_paths(paths)
     todo = [p for p, err in entries if not err]
+    folder = None if output is None else BatchFolder(output, fingerprint)
+    if folder is not None:  # as fit_batch(output=): each report written as its unit completes
+        folder.check_summaries()
+        folder.check_reports(todo)
     done = iter(
         parallel_map(
             _unit_task,
@@ -604,6 +620,7 @@ def gather_fleet(
             executor=executor,
             progress=progress,
             chunksize=1,
+            each=None if folder is None else (lambda _, r: folder.record(r[0])),
         )
     )
     results = [(LogFit(p, error=err), None, "") if err else next(done) for p, err in entries]
@@ -611,6 +628,7 @@ def gather_fleet(
         **{k: v for k, v in kw.items() if k != "load_options"},
         "workers": executor_workers(executor, workers),
         "executor": "local" if executor is None else type(executor).__name__,
+        "options_fingerprint": fingerprint,
     }
     batch = BatchResult([r[0] for r in results], settings, time.perf_counter() - t0)
     names = _unit_names([r[0].source for r in results])

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import atomic_output, write_atomic
 from .table1 import TABLE_I
 
 __all__ = ["StudyResult"]
@@ -388,7 +389,8 @@ class StudyResult:
         fig.suptitle(f"Estimates over {self.settings['reps']} replicates (truth = 1)")
         fig.tight_layout()
         p = Path(path)
-        fig.savefig(p, dpi=110)
+        with atomic_output(p) as tmp:  # a full disk never leaves half a picture
+            fig.savefig(tmp, dpi=110)  # (the same suffix: the same format)
         plt.close(fig)
         return p
 
@@ -435,7 +437,8 @@ class StudyResult:
             ax.legend(fontsize=8)
         fig.tight_layout()
         p = Path(path)
-        fig.savefig(p, dpi=110)
+        with atomic_output(p) as tmp:  # a full disk never leaves half a picture
+            fig.savefig(tmp, dpi=110)  # (the same suffix: the same format)
         plt.close(fig)
         return p
 
@@ -445,9 +448,9 @@ class StudyResult:
         d = Path(out_dir)
         d.mkdir(parents=True, exist_ok=True)
         paths = {"json": d / "study.json", "markdown": d / "study.md", "text": d / "study.txt"}
-        paths["json"].write_text(json.dumps(self.to_dict(), allow_nan=False, indent=1))
-        paths["markdown"].write_text(self.markdown() + "\n")
-        paths["text"].write_text(self.table() + "\n")
+        write_atomic(paths["json"], json.dumps(self.to_dict(), allow_nan=False, indent=1))
+        write_atomic(paths["markdown"], self.markdown() + "\n")
+        write_atomic(paths["text"], self.table() + "\n")
         try:
             import matplotlib  # noqa: F401
         except ImportError:  # pragma: no cover - matplotlib is optional
