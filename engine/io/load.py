@@ -34,10 +34,12 @@ from typing import IO, Any
 
 from .._files import open_regular
 from ._assemble import LoadOptions, RawLog, check_fs, finish_log
+from .dataflash import DATAFLASH_MAGIC, is_dataflash_text, read_dataflash
 from .hdf5 import H5_EXT, read_h5
 from .log import ImuLog, LoadError
 from .npy import read_npy, read_npz
 from .text import read_text
+from .ulog import ULOG_MAGIC, read_ulog
 
 __all__ = ["load_log", "log_of"]
 
@@ -48,6 +50,8 @@ _MAGIC = {
     b"#ROSBAG V2.0": "bag",
     b"\x89MCAP0\r\n": "bag",
     b"SQLite format 3\x00": "bag",
+    ULOG_MAGIC: "ulog",
+    DATAFLASH_MAGIC: "dataflash",
 }
 
 
@@ -69,7 +73,9 @@ def load_log(
     path : str, path-like, bytes or binary file object
         CSV/TSV/whitespace text (``.csv .tsv .txt .dat`` or any unknown extension), ``.npy``,
         ``.npz``, HDF5 (``.h5 .hdf5``), or a ROS bag with ``sensor_msgs/Imu`` messages: ROS 1
-        ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``. The
+        ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``; a PX4
+        ULog ``.ulg`` (extra ``px4``) or an ArduPilot DataFlash ``.bin``/``.log`` (extra
+        ``ardupilot``), see :mod:`engine.io.ulog` and :mod:`engine.io.dataflash`. The
         content's magic bytes win over the extension. The file's content may be given instead
         of its path (an upload): ``bytes`` or a binary file object (read to its end); ``name``
         then gives its extension and its name in messages. (A ROS bag given as content goes
@@ -103,7 +109,8 @@ def load_log(
         Signal unit of every channel, or per channel; overrides the file (e.g. after scaling
         counts: ``scale=0.05, units="deg/s"``).
     topic : str, optional
-        ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several.
+        ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several; PX4 ULogs: the
+        IMU topic (``sensor_combined``, ``sensor_gyro``, ``sensor_accel``, ``vehicle_imu``).
 
     Returns
     -------
@@ -169,6 +176,8 @@ def _sniff(head: bytes, suffix: str, src: str) -> str:
         raise LoadError(f"file '{src}' is empty (0 bytes): check that the logger wrote data")
     fmt = next((v for k, v in _MAGIC.items() if head.startswith(k)), None)
     ext = suffix.lower()
+    if fmt is None and ext == ".log" and is_dataflash_text(head):
+        fmt = "dataflash"
     return fmt or (
         "hdf5"
         if ext in H5_EXT
@@ -256,6 +265,7 @@ def _guarded(
         raise
     except _CORRUPT as exc:
         what = {"text": "text", "npy": ".npy", "npz": ".npz", "hdf5": "HDF5", "bag": "ROS bag"}
+        what.update(ulog="PX4 ULog", dataflash="ArduPilot DataFlash")
         why = type(exc).__name__
         if fmt in ("npy", "npz", "hdf5"):  # the library speaks of the file's structure
             why += ": " + " ".join(str(exc).split())[:200]
@@ -282,4 +292,6 @@ _READERS: dict[str, Callable[..., ImuLog]] = {
     "npz": read_npz,
     "text": read_text,
     "bag": _read_bag,
+    "ulog": read_ulog,
+    "dataflash": read_dataflash,
 }

@@ -36,13 +36,17 @@ class ImuLog:
     fs_source : str
         Where ``fs`` came from: ``"file"``, ``"time column"``, ``"user"`` or ``"default"``.
     units : dict of str to str
-        Channel name to signal unit (``"deg/s"``, ``"g"``, ...), ``""`` when unknown.
+        Channel name (and auxiliary channel name) to unit (``"deg/s"``, ``"g"``, ``"degC"``),
+        ``""`` when unknown.
     source : str
         The path as given to :func:`load_log`.
     wv : dict of str to WaveletVariance
         Precomputed WV per channel (summary files only).
     meta : dict
         Format, file attributes (sensor, description, n_samples, ...) and ``notes``.
+    aux : dict of str to ndarray
+        Auxiliary channels sampled with the signals, not analysed as noise: the sensor's
+        temperature (``temperature``, ``imu1_temperature``), same length as the channels.
     """
 
     channels: dict[str, np.ndarray]
@@ -52,6 +56,7 @@ class ImuLog:
     source: str = ""
     wv: dict[str, WaveletVariance] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def is_summary(self) -> bool:
