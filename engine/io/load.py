@@ -22,13 +22,14 @@ Sample indices in messages are 0-based; line numbers are 1-based, as in an edito
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import os
 import struct
 import tempfile
 import zipfile
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -36,8 +37,9 @@ from .._files import open_regular
 from ._assemble import LoadOptions, RawLog, check_fs, finish_log
 from .dataflash import DATAFLASH_MAGIC, is_dataflash_text, read_dataflash
 from .hdf5 import H5_EXT, read_h5
-from .log import ImuLog, LoadError
+from .log import ImuLog, LoadError, pick_channel
 from .npy import read_npy, read_npz
+from .segments import with_segments
 from .text import read_text
 from .ulog import ULOG_MAGIC, read_ulog
 
@@ -65,6 +67,7 @@ def load_log(
     scale: float | Mapping[str, float] | None = None,
     units: str | Mapping[str, str] | None = None,
     topic: str | None = None,
+    segments: str | Sequence[tuple[int, int]] | None = None,
 ) -> ImuLog:
     """Load a static IMU log (or a wavelet-variance summary file).
 
@@ -111,6 +114,10 @@ def load_log(
     topic : str, optional
         ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several; PX4 ULogs: the
         IMU topic (``sensor_combined``, ``sensor_gyro``, ``sensor_accel``, ``vehicle_imu``).
+    segments : "auto" or sequence of (start, stop), optional
+        Analyse only these sample ranges of a flight log (``"auto"``: its still segments,
+        :func:`engine.io.segments.still_segments`, found on every channel before ``channel``
+        selects one): the log's :meth:`~ImuLog.wavelet_variance` pools their WVs.
 
     Returns
     -------
@@ -134,6 +141,11 @@ def load_log(
     >>> log.fs, log.n, list(log.channels)[:3]
     (100.0, 200000, ['gyro_x', 'gyro_y', 'gyro_z'])
     """
+    if segments is not None:
+        whole = load_log(
+            path, name=name, fs=fs, segment=segment, scale=scale, units=units, topic=topic
+        )
+        return _select(with_segments(whole, segments), channel)
     if isinstance(path, (bytes, bytearray, memoryview)) or hasattr(path, "read"):
         return _load_content(path, name, channel, fs, segment, scale, units, topic)
     src = str(path) if name is None else str(name)
@@ -151,6 +163,15 @@ def load_log(
         head = fh.read(16)
     fmt = _sniff(head, p.suffix, src)
     return _guarded(_READERS[fmt], p, src, channel, opts, fmt)
+
+
+def _select(log: ImuLog, channel: str | int | None) -> ImuLog:
+    """The log with one channel (and every auxiliary one), or as it is."""
+    if channel is None:
+        return log
+    name = pick_channel(log.source, log.names, channel)
+    units = {k: v for k, v in log.units.items() if k == name or k in log.aux}
+    return dataclasses.replace(log, channels={name: log.channels[name]}, units=units)
 
 
 def log_of(
