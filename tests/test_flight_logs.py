@@ -132,3 +132,14 @@ def test_real_log_through_a_ulog(real_data: Path, tmp_path: Path) -> None:
     deg = eg.load_log(real_data / "adis16405_imu1.h5", channel="gyro_x", segment=(0, n))
     wdeg = deg.wavelet_variance("gyro_x")
     np.testing.assert_allclose(got.variance, wdeg.variance * (np.pi / 180) ** 2, rtol=1e-5)
+
+
+def test_app_upload_of_flight_logs(logs, flight) -> None:
+    """The app's upload (AppState.load_upload: the content and its name) reads both formats,
+    selects gyro_x (not a time or instance column) and computes its WV at 250 Hz."""
+    from gmwm_app.state import AppState
+
+    for key, first in (("ulg", "gyro_x"), ("bin", "imu0_gyro_x")):
+        s = AppState()
+        assert s.load_upload(logs[key].read_bytes(), logs[key].name), s.error
+        assert s.channel == first and s.wv is not None and s.wv.fs == FS

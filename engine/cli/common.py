@@ -219,7 +219,7 @@ def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None
 
 
 #: The help of the one-log ``input`` argument of ``check``, ``export`` and ``report``.
-INPUT_HELP = "log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary"
+INPUT_HELP = "log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, PX4 .ulg, ArduPilot .bin, WV summary"
 #: The help of ``--channels`` where it selects the channels to fit, each on its own.
 CHANNELS_HELP = "channels separated by commas (default: all)"
 #: The help of ``--weights`` where a sub-command says nothing more of it.
