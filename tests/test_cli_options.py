@@ -70,6 +70,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--scheduler": ("scheduler", r"Dask cluster"),
     "--seed": ("seed", r"seed"),
     "--segment": ("segment", r"^time column with gaps"),
+    "--params": ("params", r"^flight logs: the EKF noise parameters flown"),
     "--segments": ("segments", r"^analyse only these parts of a flight log: auto"),
     "--window": ("window", r"^still segments: the window"),
     "--threshold": ("threshold", r"^still segments: moving when"),
