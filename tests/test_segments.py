@@ -129,3 +129,28 @@ def test_a_real_still_log_is_one_segment(real_data: Path) -> None:
     a = seg.wavelet_variance("gyro_x", levels=10)
     b = eg.wavelet_variance(log["gyro_x"][segs[0][0] : segs[0][1]], fs=log.fs, levels=10)
     np.testing.assert_allclose(a.variance, b.variance, rtol=1e-12)
+
+
+def test_report_shows_the_segments_in_time() -> None:
+    """The report of a flight analysed on its segments: a time plot per channel whose shaded
+    bands are the segments in seconds, the log's segments in its info, the PSD of the longest
+    segment (its note), and the WV the pooled one."""
+    from engine.reporting import gather_report
+    from engine.reporting.render import figure_specs
+
+    fl = make.simulate_flight(FS, still_s=(20.0, 20.0), move_s=10.0, seed=2)
+    log = with_segments(_log(fl), "auto")
+    rep = gather_report(log, model="WN", channels=["gyro_x"])
+    ch = rep.channels["gyro_x"]
+    assert ch.timeline is not None
+    assert ch.timeline.segments == [(a / FS, b / FS) for a, b in log.segments]
+    assert rep.log["segments"] == [list(p) for p in log.segments]
+    assert "longest still segment" in ch.notes["psd"]
+    assert ch.fit is not None
+    np.testing.assert_array_equal(ch.fit.wv.variance, log.wavelet_variance("gyro_x").variance)
+    spec = figure_specs(rep)["gyro_x-segments"]
+    assert not spec.log_x and len(spec.layers) == 1 + len(log.segments)
+    # the envelope holds every sample, the last partial block too (12500 = 1785 x 7 + 5)
+    x = fl.gyro[:, 0]
+    assert ch.timeline.t.size == 1786 and ch.timeline.high[-1] == x[-5:].max()
+    assert ch.timeline.low.min() == x.min() and ch.timeline.high.max() == x.max()
