@@ -143,3 +143,12 @@ def test_app_upload_of_flight_logs(logs, flight) -> None:
         s = AppState()
         assert s.load_upload(logs[key].read_bytes(), logs[key].name), s.error
         assert s.channel == first and s.wv is not None and s.wv.fs == FS
+
+
+def test_dataflash_text_log(flight, tmp_path: Path) -> None:
+    """The text form of a DataFlash log (.log, first line FMT) is read by DFReader_text."""
+    p = make.write_dataflash_text(tmp_path / "flight.log", flight, make.ARDUPILOT_PARAMS)
+    log = eg.load_log(p)
+    assert log.meta["format"] == "dataflash" and log.fs == pytest.approx(FS, rel=1e-9)
+    np.testing.assert_array_equal(log["gyro_x"], flight.gyro[:, 0])
+    assert list(log.aux) == ["temperature"] and log.meta["params"]["EK3_GYRO_P_NSE"] == 0.015
