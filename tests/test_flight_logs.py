@@ -143,6 +143,12 @@ def test_app_upload_of_flight_logs(logs, flight) -> None:
         s = AppState()
         assert s.load_upload(logs[key].read_bytes(), logs[key].name), s.error
         assert s.channel == first and s.wv is not None and s.wv.fs == FS
+        assert s.wv.n == flight.t_us.size
+    # a flight's still segments: the WV pools them (8 + 8 s still, edges trimmed)
+    s = AppState()
+    assert s.load_upload(logs["ulg"].read_bytes(), "flight.ulg", segments="auto"), s.error
+    segs = eg.load_log(logs["ulg"], segments="auto").segments
+    assert s.wv is not None and s.wv.n == sum(b - a for a, b in segs) < (~flight.moving).sum()
 
 
 def test_dataflash_text_log(flight, tmp_path: Path) -> None:
