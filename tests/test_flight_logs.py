@@ -158,3 +158,16 @@ def test_dataflash_text_log(flight, tmp_path: Path) -> None:
     assert log.meta["format"] == "dataflash" and log.fs == pytest.approx(FS, rel=1e-9)
     np.testing.assert_array_equal(log["gyro_x"], flight.gyro[:, 0])
     assert list(log.aux) == ["temperature"] and log.meta["params"]["EK3_GYRO_P_NSE"] == 0.015
+
+
+def test_app_still_segments_checkbox(logs, flight, app) -> None:
+    """The Data panel's 'still segments only' box: an uploaded flight's WV pools its still
+    segments; unticked, the whole flight."""
+    segs = eg.load_log(logs["ulg"], segments="auto").segments
+    app.still_only.value = True
+    app.upload.value = {"flight.ulg": logs["ulg"].read_bytes()}
+    assert app.state.error == "" and app.state.channel == "gyro_x"
+    assert app.state.wv.n == sum(b - a for a, b in segs)
+    app.still_only.value = False
+    app.upload.value = {"flight2.ulg": logs["ulg"].read_bytes()}
+    assert app.state.wv.n == flight.t_us.size
