@@ -41,6 +41,7 @@ API: dict[str, str] = {
         "engine.wv",
     ),
     "wavelet_variance_stream": "engine.wv.stream",
+    "pooled_wavelet_variance": "engine.wv.pooled",
     **dict.fromkeys(("AllanVariance", "allan_variance"), "engine.wv.allan"),
     **dict.fromkeys(
         ("WaveletCrossCovariance", "wavelet_cross_covariance", "WVMatrix", "wv_matrix"),
@@ -124,6 +125,7 @@ API: dict[str, str] = {
         "engine.io",
     ),
     "read_kalibr": "engine.io.kalibr",
+    **dict.fromkeys(("still_segments", "with_segments"), "engine.io.segments"),
     **dict.fromkeys(("Session", "SessionError", "load_session", "save_session"), "engine.session"),
     # export formats and the projection onto a filter's noise model
     **dict.fromkeys(

@@ -227,6 +227,9 @@ class GMWMApp(pn.viewable.Viewer):
         )
         self.upload.param.watch(self._on_upload, "value")
         self.upload.param.watch(self._on_upload_refused, "refused")
+        self.still_only = pn.widgets.Checkbox(  # engine.io.segments: a flight's still parts
+            label="Flight log: analyse its still segments only", value=False
+        )
         self.path_input = pn.widgets.TextInput(
             label="Log file on the server",
             placeholder="/path/to/log.h5 (press Enter)",
@@ -326,11 +329,13 @@ class GMWMApp(pn.viewable.Viewer):
             h("### Data", margin=(0, 10)),
             self.demo_button,
             h(
-                "Upload a log (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5):",
+                "Upload a log (CSV/TSV/text, NPY/NPZ, HDF5, WV summary HDF5, ROS bag, PX4 .ulg, "
+                "ArduPilot .bin):",
                 margin=(0, 10),
                 styles={"font-size": "13px"},
             ),
             self.upload,
+            self.still_only,
             self.path_input,
             self.path_button,
             self.channel_select,
@@ -646,9 +651,12 @@ class GMWMApp(pn.viewable.Viewer):
         if not files:
             return
         name, data = list(files.items())[-1]
+        segments = "auto" if self.still_only.value else None
         self.jobs.load(
             f"Reading {name}",
-            partial(self.state.read_and_warm, "upload", data=data, filename=name),
+            partial(
+                self.state.read_and_warm, "upload", data=data, filename=name, segments=segments
+            ),
         )
 
     def _on_upload_refused(self, event: Any) -> None:
@@ -661,7 +669,11 @@ class GMWMApp(pn.viewable.Viewer):
         if not path:
             self.state.report_error("Type the path of a log file on the server first")
             return
-        self.jobs.load(f"Reading {path}", partial(self.state.read_and_warm, "path", path=path))
+        segments = "auto" if self.still_only.value else None
+        self.jobs.load(
+            f"Reading {path}",
+            partial(self.state.read_and_warm, "path", path=path, segments=segments),
+        )
 
     def install(self, loaded: Any) -> None:
         """Make newly read data the session's (and remember how they were read)."""

@@ -191,6 +191,7 @@ def read_source(
     filename: str = "",
     segment: str | None = None,
     demo: Path | None = None,
+    segments: str | None = None,
 ) -> LoadedData:
     """Read a log from a source. Heavy; touches no state, safe in a worker thread.
 
@@ -198,6 +199,9 @@ def read_source(
     ----------
     source : {"demo", "upload", "path"}
         The bundled demo, uploaded bytes (``data`` + ``filename``), or a server ``path``.
+    segments : str, optional
+        A flight log's parts to analyse (uploads and paths): ``"auto"`` (its still segments)
+        or ``"START:STOP,..."`` samples (``engine.load_log``'s ``segments``).
     demo : Path
         The demo log (``gmwm_app.state.demo_path()``).
 
@@ -227,7 +231,8 @@ def read_source(
             with open(p, "rb") as fh:  # (not a FIFO or a device: the loader refuses those)
                 if is_hdf5(fh.read(2056), p.name):
                     check_hdf5(str(p), given)
-        out = LoadedData(read_log(p, segment=segment, name=given), "path", p.name, str(p))
+        lg = read_log(p, segment=segment, name=given, segments=segments)
+        out = LoadedData(lg, "path", p.name, str(p))
     elif source == "upload":
         if data is None or len(data) == 0:
             raise ValueError(f"the uploaded file {filename or ''} is empty".replace("  ", " "))
@@ -239,7 +244,7 @@ def read_source(
         # buffer, the loader reads it in place (bytes) through io.BytesIO
         if is_hdf5(bytes(data[:2056]), name):  # see gmwm_app.hdf5_guard
             check_hdf5(data, name)
-        lg = read_log(data, segment=segment, name=name)
+        lg = read_log(data, segment=segment, name=name, segments=segments)
         out = LoadedData(lg, "upload", name, "")
     elif source == "scenario":  # a simulated teaching log (engine.teaching), key in path
         from engine.teaching import get_scenario, simulate_scenario
@@ -256,6 +261,8 @@ def read_source(
     out.elapsed_s = time.perf_counter() - t0
     if segment:
         out.load["segment"] = segment
+    if segments:
+        out.load["segments"] = segments
     return out
 
 

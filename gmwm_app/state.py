@@ -340,17 +340,24 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         """Load the bundled demo log (keeps the model; refits it on the new WV)."""
         return self._guard("Could not load the demo", lambda: self.install(self.read("demo")))
 
-    def load_path(self, path: str | os.PathLike[str]) -> bool:
-        """Load a log from a path on the server."""
+    def load_path(self, path: str | os.PathLike[str], segments: str | None = None) -> bool:
+        """Load a log from a path on the server (``segments``: a flight's still parts,
+        ``"auto"`` or ``"START:STOP,..."``; its WV pools them)."""
         return self._guard(
-            f"Could not load {path}", lambda: self.install(self.read("path", path=path))
+            f"Could not load {path}",
+            lambda: self.install(self.read("path", path=path, segments=segments)),
         )
 
-    def load_upload(self, data: bytes | str | None, filename: str) -> bool:
-        """Load an uploaded file (its bytes and its name; the suffix picks the format)."""
+    def load_upload(
+        self, data: bytes | str | None, filename: str, segments: str | None = None
+    ) -> bool:
+        """Load an uploaded file (its bytes and its name; the suffix picks the format;
+        ``segments`` as :meth:`load_path`)."""
         return self._guard(
             f"Could not load the uploaded file {filename}",
-            lambda: self.install(self.read("upload", data=data, filename=filename)),
+            lambda: self.install(
+                self.read("upload", data=data, filename=filename, segments=segments)
+            ),
         )
 
     def install(

@@ -183,7 +183,7 @@ def test_haar_coefficients_level_one():
         (np.arange(100.0), {"fs": -5.0}, "fs must be"),
         (np.arange(100.0), {"robust": True, "eff": 1.0}, "eff"),
         (np.arange(100.0), {"alpha": 1.5}, "alpha"),
-        (np.zeros((10, 3)), {}, "one-dimensional"),
+        (np.zeros((10, 3, 2)), {}, "one-dimensional"),  # (N, 3): one WV per axis now
     ],
 )
 def test_bad_input_messages(x, kwargs, match):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from . import flight_params
 from .common import (
     INPUT_HELP,
     add_confidence_option,
@@ -51,6 +52,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="Kalibr imu.yaml, gmwm JSON report or datasheet CSV (gmwm export), or a "
         "datasheet JSON (gmwm check --json)",
     )
+    src.add_argument(  # engine/cli/flight_params.py
+        "--params",
+        metavar="FILE|log",
+        help="flight logs: the EKF noise parameters flown (PX4 .params, ArduPilot .param, or "
+        "'log': the log's own) against its still segments (--segments, default auto)",
+    )
     ck.add_argument(
         "--model", help="also fit this GMWM model (ci weights) beside it, e.g. 'GM+WN+RW'"
     )
@@ -68,6 +75,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..models import parse_model
     from ..units import ExportError, si_factor
 
+    if getattr(args, "params", None):  # a flight's EKF parameters (engine/cli/flight_params)
+        return flight_params.run(args)
     ds = parse_datasheet(args.datasheet, source="--datasheet") if args.datasheet else None
     model = parse_model(args.model) if args.model else None
     wv, name = load_wv(args, alpha_of(args.confidence))

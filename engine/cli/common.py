@@ -208,6 +208,13 @@ def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None
         "analyse the longest clean segment, or keep every sample (report)",
     )
     sp.add_argument(
+        "--segments",
+        metavar="auto|LIST",
+        help="analyse only these parts of a flight log: auto (its still segments, see "
+        "`gmwm segments`) or START:STOP sample ranges, e.g. 0:5000,8000:12000; their "
+        "wavelet variances are pooled",
+    )
+    sp.add_argument(
         "--scale",
         type=_float_map("--scale"),
         help="scale factor for raw counts: 0.05, or gyro_x=0.05,accel_z=0.001",
@@ -217,7 +224,11 @@ def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None
         type=_str_map,
         help="signal unit(s) overriding the file: deg/s, or gyro_x=deg/s,accel_x=g",
     )
-    sp.add_argument("--topic", help="ROS bag: the sensor_msgs/Imu topic")
+    sp.add_argument(
+        "--topic",
+        help="ROS bag: the sensor_msgs/Imu topic; PX4 ULog: the IMU topic (sensor_combined, "
+        "sensor_gyro, sensor_accel, vehicle_imu)",
+    )
     if stream:
         sp.add_argument(
             "--stream",
@@ -227,7 +238,7 @@ def add_log_options(sp: argparse.ArgumentParser, *, stream: bool = True) -> None
 
 
 #: The help of the one-log ``input`` argument of ``check``, ``export`` and ``report``.
-INPUT_HELP = "log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, WV summary"
+INPUT_HELP = "log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, PX4 .ulg, ArduPilot .bin, WV summary"
 #: The help of ``--channels`` where it selects the channels to fit, each on its own.
 CHANNELS_HELP = "channels separated by commas (default: all)"
 #: The help of ``--weights`` where a sub-command says nothing more of it.
@@ -298,7 +309,7 @@ def log_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """The :func:`engine.io.load_log` keyword arguments given on the command line."""
     return {
         k: getattr(args, k)
-        for k in ("segment", "scale", "units", "topic")
+        for k in ("segment", "scale", "units", "topic", "segments")
         if getattr(args, k, None) is not None
     }
 

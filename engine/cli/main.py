@@ -61,7 +61,7 @@ __all__ = ["main", "build_parser"]
 
 # Subcommands that live in their own module engine/cli/<name>.py, each with
 # ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
-_MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report")
+_MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report", "segments")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -74,7 +74,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def data_args(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("input", help="log file: CSV/TSV/text, NPY/NPZ, HDF5 or a WV summary HDF5")
+        sp.add_argument(
+            "input",
+            help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, PX4 .ulg, ArduPilot .bin "
+            "or a WV summary HDF5",
+        )
         sp.add_argument("--channel", help="channel name or index (default: the first)")
         add_wv_options(sp, robust=True)
         sp.add_argument("--json", action="store_true", help="print one JSON object")

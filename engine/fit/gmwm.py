@@ -22,12 +22,13 @@ import math
 import time
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
 from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
+from ..wv.classical import axis_columns
 from ._varpro import (
     NNLSProblem,
     fitted_fields,
@@ -221,6 +222,48 @@ def fit_efficient(
     return fit_gmwm(wv, model, weights="efficient", **options)
 
 
+@overload
+def fit_gmwm(
+    wv_or_signal: WaveletVariance | np.ndarray[tuple[int], Any],
+    model: Model | Process | str,
+    *,
+    fs: float | None = ...,
+    weights: str | np.ndarray = ...,
+    levels: int | None = ...,
+    robust: bool = ...,
+    eff: float = ...,
+    **options: Unpack[VOptions],
+) -> GMWMResult: ...
+
+
+@overload
+def fit_gmwm(
+    wv_or_signal: np.ndarray[tuple[int, int], Any],
+    model: Model | Process | str,
+    *,
+    fs: float | None = ...,
+    weights: str | np.ndarray = ...,
+    levels: int | None = ...,
+    robust: bool = ...,
+    eff: float = ...,
+    **options: Unpack[VOptions],
+) -> list[GMWMResult]: ...
+
+
+@overload
+def fit_gmwm(
+    wv_or_signal: Any,
+    model: Model | Process | str,
+    *,
+    fs: float | None = ...,
+    weights: str | np.ndarray = ...,
+    levels: int | None = ...,
+    robust: bool = ...,
+    eff: float = ...,
+    **options: Unpack[VOptions],
+) -> GMWMResult: ...
+
+
 def fit_gmwm(
     wv_or_signal: WaveletVariance | np.ndarray | Any,
     model: Model | Process | str,
@@ -231,14 +274,15 @@ def fit_gmwm(
     robust: bool = False,
     eff: float = 0.6,
     **options: Unpack[VOptions],
-) -> GMWMResult:
+) -> GMWMResult | list[GMWMResult]:
     """Fit a latent model by GMWM.
 
     Parameters
     ----------
     wv_or_signal : WaveletVariance or array_like
         A WV (from :func:`wavelet_variance` or a summary file) or a raw signal, whose WV is then
-        computed with ``fs``, ``robust`` and ``eff``.
+        computed with ``fs``, ``robust`` and ``eff``. An ``(N, k)`` signal (``k >= 2`` axes,
+        e.g. a 3-axis gyroscope) gives one fit per column, as a list (the same model each).
     model : Model, Process or str
         E.g. ``WN() + RW() + 2 * GM()`` or ``"2*GM+WN+RW"``. Values given in the model are
         used as extra starting points.
@@ -261,7 +305,7 @@ def fit_gmwm(
 
     Returns
     -------
-    GMWMResult
+    GMWMResult, or list of GMWMResult for an ``(N, k)`` signal
 
     Raises
     ------
@@ -279,6 +323,21 @@ def fit_gmwm(
     >>> {k: f"{v:.2e}" for k, v in res.params.items()}
     {'WN.sigma2': '9.90e-03', 'RW.gamma2': '5.70e-07'}
     """
+    cols = None if isinstance(wv_or_signal, WaveletVariance) else axis_columns(wv_or_signal)
+    if cols is not None:  # one fit per axis
+        return [
+            fit_gmwm(
+                np.ascontiguousarray(cols[:, k]),
+                model,
+                fs=fs,
+                weights=weights,
+                levels=levels,
+                robust=robust,
+                eff=eff,
+                **options,
+            )
+            for k in range(cols.shape[1])
+        ]
     t0 = time.perf_counter()
     m = parse_model(model)
     if isinstance(wv_or_signal, WaveletVariance):

@@ -6,6 +6,10 @@
   :mod:`~engine.io.text`, :mod:`~engine.io.npy`, :mod:`~engine.io.hdf5` (WV summaries:
   :mod:`~engine.io.summary`) and :mod:`~engine.io.rosbag`, which share the column checks of
   :mod:`engine.io._assemble`.
+* Flight logs: :mod:`~engine.io.ulog` (PX4 ULog, extra ``px4``) and :mod:`~engine.io.dataflash`
+  (ArduPilot DataFlash, extra ``ardupilot``); :mod:`engine.io.timecols`: the roles of a table's
+  columns (time, instance, temperature, counters) and the converters' CSV profiles;
+  :mod:`engine.io.segments`: the still segments of a flight log.
 * :mod:`engine.io.save`: :func:`save_log`.
 * :mod:`engine.io.timecheck`: gaps, duplicates and jitter of time stamps.
 

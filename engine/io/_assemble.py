@@ -21,6 +21,7 @@ import numpy as np
 from .. import _checks
 from .._limits import check_memory
 from .log import ImuLog, LoadError, pick_channel
+from .timecols import spacing_divisor, time_divisor
 
 __all__ = [
     "LoadOptions",
@@ -46,8 +47,6 @@ __all__ = [
 #: values are converted (each channel costs tens of microseconds of checks).
 MAX_CHANNELS = 10_000
 
-_TIME_RE = re.compile(r"(time|t|timestamp|stamp|sec|seconds)(?:_(s|ms|us|ns))?|(ms|us|ns)")
-_TIME_DIV = {"s": 1.0, "sec": 1.0, "seconds": 1.0, "ms": 1e3, "us": 1e6, "µs": 1e6, "ns": 1e9}
 UNIT_RE = re.compile(r"(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*")
 FS_KEYS = ("fs_hz", "fs", "sample_rate", "sampling_rate")
 _NO_UNIT = {"", "unknown", "none", "n/a", "-", "?"}
@@ -79,15 +78,6 @@ def units_map(v: Any, src: str, notes: list[str]) -> dict[str, str]:
             notes.append(f"the 'units' attribute of '{src}' is not a JSON map; units ignored")
             return {}
     return {str(k): clean_unit(x) for k, x in v.items()} if isinstance(v, dict) else {}
-
-
-def time_divisor(name: str, unit: str = "") -> tuple[float, bool] | None:
-    """(divisor to seconds, explicit) if ``name`` names a time column, else None."""
-    m = _TIME_RE.fullmatch(name.strip().lower())
-    if m is None:
-        return None
-    suffix = m.group(2) or m.group(3) or unit.strip().lower()
-    return _TIME_DIV.get(suffix, 1.0), suffix in _TIME_DIV
 
 
 def check_fs(value: Any, src: str, what: str, fix: str) -> float:
@@ -208,12 +198,14 @@ def _time_scale(name: str, t: np.ndarray, div: tuple[float, bool], notes: list[s
         d = np.diff(np.asarray(t[: min(t.size, 100_001)], dtype=np.float64))
     pos = d[d > 0]
     med = float(np.median(pos)) if pos.size else 0.0
-    if med > 1e5:
+    guess = spacing_divisor(med)  # (engine.io.timecols: the unit from the spacing)
+    if guess is not None:
         notes.append(
-            f"time column '{name}' has a median step of {med:g}: read as nanoseconds "
-            "(name it time_s, time_ms or time_ns, or pass fs=, to be explicit)"
+            f"time column '{name}' has a median step of {med:g}: read as {guess[1]} "
+            f"({guess[0] / med:.6g} Hz; name it time_s, time_ms, time_us or time_ns, or pass "
+            "fs=, to be explicit)"
         )
-        return 1e9
+        return guess[0]
     return scale
 
 
@@ -382,6 +374,8 @@ class RawLog:
         File line of every sample (text logs), for messages.
     meta, notes : dict, list of str
         Metadata for ``ImuLog.meta`` and the reader's notes.
+    aux : list of str
+        Names in ``cols`` that are auxiliary channels (temperatures: ``ImuLog.aux``).
     """
 
     cols: dict[str, Any] = field(default_factory=dict)
@@ -391,6 +385,7 @@ class RawLog:
     rows: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    aux: list[str] = field(default_factory=list)
 
 
 def finish_log(
@@ -410,8 +405,8 @@ def finish_log(
             "columns/datasets of samples"
         )
     if channel is not None:
-        name = pick_channel(src, list(cols), channel)
-        cols = {name: cols[name]}
+        name = pick_channel(src, [k for k in cols if k not in raw.aux], channel)
+        cols = {k: cols[k] for k in cols if k == name or k in raw.aux}
     check_channel_count(src, len(cols), "channels")
     n = _length(next(iter(cols.values())))
     fs_time = None
@@ -482,4 +477,7 @@ def finish_log(
             unit_map = dict.fromkeys(out, clean_unit(opts.units))
     if notes:
         meta["notes"] = notes
-    return ImuLog(channels=out, fs=fs, fs_source=fs_source, units=unit_map, source=src, meta=meta)
+    aux = {k: out.pop(k) for k in raw.aux if k in out}  # (their units stay in unit_map)
+    return ImuLog(
+        channels=out, fs=fs, fs_source=fs_source, units=unit_map, source=src, meta=meta, aux=aux
+    )

@@ -22,23 +22,27 @@ Sample indices in messages are 0-based; line numbers are 1-based, as in an edito
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import os
 import struct
 import tempfile
 import zipfile
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
 from .._files import open_regular
 from .._limits import load_scope
 from ._assemble import LoadOptions, RawLog, check_fs, finish_log
+from .dataflash import DATAFLASH_MAGIC, is_dataflash_text, read_dataflash
 from .hdf5 import H5_EXT, read_h5
-from .log import ImuLog, LoadError
+from .log import ImuLog, LoadError, pick_channel
 from .npy import read_npy, read_npz
+from .segments import with_segments
 from .text import read_text
+from .ulog import ULOG_MAGIC, read_ulog
 
 __all__ = ["load_log", "log_of"]
 
@@ -49,6 +53,8 @@ _MAGIC = {
     b"#ROSBAG V2.0": "bag",
     b"\x89MCAP0\r\n": "bag",
     b"SQLite format 3\x00": "bag",
+    ULOG_MAGIC: "ulog",
+    DATAFLASH_MAGIC: "dataflash",
 }
 
 
@@ -62,6 +68,7 @@ def load_log(
     scale: float | Mapping[str, float] | None = None,
     units: str | Mapping[str, str] | None = None,
     topic: str | None = None,
+    segments: str | Sequence[tuple[int, int]] | None = None,
 ) -> ImuLog:
     """Load a static IMU log (or a wavelet-variance summary file).
 
@@ -70,7 +77,9 @@ def load_log(
     path : str, path-like, bytes or binary file object
         CSV/TSV/whitespace text (``.csv .tsv .txt .dat`` or any unknown extension), ``.npy``,
         ``.npz``, HDF5 (``.h5 .hdf5``), or a ROS bag with ``sensor_msgs/Imu`` messages: ROS 1
-        ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``. The
+        ``.bag``, ROS 2 bag directory (with ``metadata.yaml``), ``.db3`` or ``.mcap``; a PX4
+        ULog ``.ulg`` (extra ``px4``) or an ArduPilot DataFlash ``.bin``/``.log`` (extra
+        ``ardupilot``), see :mod:`engine.io.ulog` and :mod:`engine.io.dataflash`. The
         content's magic bytes win over the extension. The file's content may be given instead
         of its path (an upload): ``bytes`` or a binary file object (read to its end); ``name``
         then gives its extension and its name in messages. (A ROS bag given as content goes
@@ -104,7 +113,12 @@ def load_log(
         Signal unit of every channel, or per channel; overrides the file (e.g. after scaling
         counts: ``scale=0.05, units="deg/s"``).
     topic : str, optional
-        ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several.
+        ROS bags: the ``sensor_msgs/Imu`` topic, when the bag has several; PX4 ULogs: the
+        IMU topic (``sensor_combined``, ``sensor_gyro``, ``sensor_accel``, ``vehicle_imu``).
+    segments : "auto" or sequence of (start, stop), optional
+        Analyse only these sample ranges of a flight log (``"auto"``: its still segments,
+        :func:`engine.io.segments.still_segments`, found on every channel before ``channel``
+        selects one): the log's :meth:`~ImuLog.wavelet_variance` pools their WVs.
 
     Returns
     -------
@@ -128,6 +142,11 @@ def load_log(
     >>> log.fs, log.n, list(log.channels)[:3]
     (100.0, 200000, ['gyro_x', 'gyro_y', 'gyro_z'])
     """
+    if segments is not None:
+        whole = load_log(
+            path, name=name, fs=fs, segment=segment, scale=scale, units=units, topic=topic
+        )
+        return _select(with_segments(whole, segments), channel)
     if isinstance(path, (bytes, bytearray, memoryview)) or hasattr(path, "read"):
         return _load_content(path, name, channel, fs, segment, scale, units, topic)
     src = str(path) if name is None else str(name)
@@ -145,6 +164,15 @@ def load_log(
         head = fh.read(16)
     fmt = _sniff(head, p.suffix, src)
     return _guarded(_READERS[fmt], p, src, channel, opts, fmt)
+
+
+def _select(log: ImuLog, channel: str | int | None) -> ImuLog:
+    """The log with one channel (and every auxiliary one), or as it is."""
+    if channel is None:
+        return log
+    name = pick_channel(log.source, log.names, channel)
+    units = {k: v for k, v in log.units.items() if k == name or k in log.aux}
+    return dataclasses.replace(log, channels={name: log.channels[name]}, units=units)
 
 
 def log_of(
@@ -170,6 +198,8 @@ def _sniff(head: bytes, suffix: str, src: str) -> str:
         raise LoadError(f"file '{src}' is empty (0 bytes): check that the logger wrote data")
     fmt = next((v for k, v in _MAGIC.items() if head.startswith(k)), None)
     ext = suffix.lower()
+    if fmt is None and ext == ".log" and is_dataflash_text(head):
+        fmt = "dataflash"
     return fmt or (
         "hdf5"
         if ext in H5_EXT
@@ -258,6 +288,7 @@ def _guarded(
         raise
     except _CORRUPT as exc:
         what = {"text": "text", "npy": ".npy", "npz": ".npz", "hdf5": "HDF5", "bag": "ROS bag"}
+        what.update(ulog="PX4 ULog", dataflash="ArduPilot DataFlash")
         why = type(exc).__name__
         if fmt in ("npy", "npz", "hdf5"):  # the library speaks of the file's structure
             why += ": " + " ".join(str(exc).split())[:200]
@@ -284,4 +315,6 @@ _READERS: dict[str, Callable[..., ImuLog]] = {
     "npz": read_npz,
     "text": read_text,
     "bag": _read_bag,
+    "ulog": read_ulog,
+    "dataflash": read_dataflash,
 }

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..wv.classical import WaveletVariance, wavelet_variance
+from ..wv.pooled import pooled_wavelet_variance
 
 __all__ = ["LoadError", "ImuLog", "pick_channel", "channel_axis"]
 
@@ -36,13 +37,20 @@ class ImuLog:
     fs_source : str
         Where ``fs`` came from: ``"file"``, ``"time column"``, ``"user"`` or ``"default"``.
     units : dict of str to str
-        Channel name to signal unit (``"deg/s"``, ``"g"``, ...), ``""`` when unknown.
+        Channel name (and auxiliary channel name) to unit (``"deg/s"``, ``"g"``, ``"degC"``),
+        ``""`` when unknown.
     source : str
         The path as given to :func:`load_log`.
     wv : dict of str to WaveletVariance
         Precomputed WV per channel (summary files only).
     meta : dict
         Format, file attributes (sensor, description, n_samples, ...) and ``notes``.
+    aux : dict of str to ndarray
+        Auxiliary channels sampled with the signals, not analysed as noise: the sensor's
+        temperature (``temperature``, ``imu1_temperature``), same length as the channels.
+    segments : tuple of (start, stop)
+        Sample ranges analysed (the still parts of a flight, :mod:`engine.io.segments`):
+        when set, :meth:`wavelet_variance` pools their WVs; empty: the whole log.
     """
 
     channels: dict[str, np.ndarray]
@@ -52,6 +60,8 @@ class ImuLog:
     source: str = ""
     wv: dict[str, WaveletVariance] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
+    segments: tuple[tuple[int, int], ...] = ()
 
     @property
     def is_summary(self) -> bool:
@@ -168,6 +178,16 @@ class ImuLog:
             raise LoadError(
                 f"{where}: channel {name!r} is constant (all {x.size} samples equal "
                 f"{x[0]:g}): there is no noise to analyse"
+            )
+        if self.segments:  # the still parts of a flight: their coefficients pooled
+            return pooled_wavelet_variance(
+                [x[a:b] for a, b in self.segments],
+                fs=self.fs if fs is None else fs,
+                levels=levels,
+                robust=robust,
+                eff=eff,
+                alpha=alpha,
+                unit=self.unit_of(name),
             )
         return wavelet_variance(
             x,

@@ -26,9 +26,9 @@ from ._assemble import (
     check_channel_count,
     clean_unit,
     finish_log,
-    time_divisor,
 )
 from .log import ImuLog, LoadError
+from .timecols import column_layout, header_field
 
 __all__ = ["read_text"]
 
@@ -89,8 +89,9 @@ def _encoding(raw: bytes | bytearray, src: str) -> str:
 def _not_text(src: str) -> LoadError:
     return LoadError(
         f"file '{src}' is not a text file (binary data, or an encoding other than "
-        "UTF-8/Latin-1): expected CSV/TSV text, .npy/.npz or HDF5; check the "
-        "file and its extension"
+        "UTF-8/Latin-1) nor a binary format read here: CSV/TSV text, .npy/.npz, HDF5, "
+        "ROS bags (.bag/.db3/.mcap), PX4 ULog (.ulg), ArduPilot DataFlash (.bin); "
+        "convert other logs to CSV (ulog2csv, mavlogdump.py --format csv) or check the file"
     )
 
 
@@ -271,8 +272,7 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
     units: dict[str, str] = {}  # also the set of names so far: linear in the columns
     if header:
         for j, tok in enumerate(_split_header(first_row[1], delim)):
-            m = UNIT_RE.fullmatch(tok)
-            name, unit = (m.group(1).strip(), m.group(2)) if m else (tok.strip(), "")
+            name, unit = header_field(tok, UNIT_RE)  # gyro_rad[1] -> gyro_rad_y (timecols)
             name = name or f"col{j}"
             if name in units:
                 notes.append(f"duplicate column name '{name}' renamed '{name}_{j}'")
@@ -298,12 +298,10 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
         skip = 1 if header else 0
         _diagnose(src, lambda: itertools.islice(content_rows(), skip, None), delim, names, header)
     cols = {name: values[j] for j, name in enumerate(names)}  # contiguous: no copy later
-    time = None
-    for name in names:  # a named time column (the first one gives fs)
-        div = time_divisor(name, units.get(name, ""))
-        if div is not None:
-            time = time or (name, cols[name], div)
-            del cols[name]
+    # time, instance, temperature and counter columns; converter profiles (timecols)
+    layout = column_layout(src, cols, units, rows, notes)
+    cols, units, time = layout.cols, layout.units, layout.time
+    rows = rows if layout.rows is None else layout.rows
     if (
         not header
         and len(names) >= 2
@@ -316,7 +314,9 @@ def read_text(path: Path | io.BytesIO, src: str, channel: Any, opts: LoadOptions
             "near-constant step); pass fs= to set the rate explicitly"
         )
     meta = {"delimiter": {None: "whitespace", "\t": "tab"}.get(delim, delim), "header": header}
-    parsed = RawLog(cols, units, time=time, rows=rows, meta=meta, notes=notes)
+    if layout.profile:
+        meta["profile"] = layout.profile
+    parsed = RawLog(cols, units, time=time, rows=rows, meta=meta, notes=notes, aux=layout.aux)
     return finish_log(src, parsed, fmt="text", channel=channel, opts=opts)
 
 

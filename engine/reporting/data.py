@@ -102,6 +102,33 @@ class Spectrum:
 
 
 @dataclass(frozen=True, eq=False)
+class Timeline:
+    """A channel in time, for the plot of a flight's still segments: ``t`` (s) and the
+    envelope ``low``/``high`` of the samples in each of at most :data:`TIMELINE_POINTS`
+    blocks; ``segments`` the analysed ranges in seconds."""
+
+    t: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    segments: list[tuple[float, float]]
+
+
+#: Blocks of the timeline plot (its envelope keeps every spike visible).
+TIMELINE_POINTS = 2000
+
+
+def timeline(x: np.ndarray, fs: float, segments: Sequence[tuple[int, int]]) -> Timeline:
+    """The min/max envelope of ``x`` over at most :data:`TIMELINE_POINTS` blocks, and the
+    ``segments`` (samples) in seconds."""
+    block = max(1, -(-x.size // TIMELINE_POINTS))
+    starts = np.arange(0, x.size, block)  # the last block may be shorter
+    a = np.asarray(x, dtype=np.float64)
+    low, high = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
+    t = (starts + (np.minimum(starts + block, x.size) - starts) / 2) / fs
+    return Timeline(t, low, high, [(p / fs, q / fs) for p, q in segments])
+
+
+@dataclass(frozen=True, eq=False)
 class ChannelReport:
     """Everything the report shows of one channel (``error``: why it has no fit)."""
 
@@ -118,6 +145,7 @@ class ChannelReport:
     notes: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     check: Any = None
+    timeline: Timeline | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the fit (as ``gmwm fit --json``), intervals, datasheet rows, J-test,
@@ -302,6 +330,7 @@ def _log_info(log: ImuLog, source: str) -> dict[str, Any]:
         "units": {ch: log.units.get(ch, "") for ch in log.names},
         "time_report": meta.get("time_report"),
         "segment": meta.get("segment"),
+        "segments": meta.get("segments"),
         "notes": list(meta.get("notes", [])),
         "sensor": meta.get("sensor", ""),
         "description": meta.get("description", ""),
@@ -375,7 +404,12 @@ def _channel(
     if log.is_summary:
         notes["psd"] = "a WV summary file holds no samples: no PSD"
     else:
-        spectrum = welch_psd(log[name], fit.fs, fit)  # the fit's fs (an app session may set it)
+        x = log[name]
+        if log.segments:  # a flight: the PSD of its longest still segment, not of the motion
+            a, b = max(log.segments, key=lambda ab: ab[1] - ab[0])
+            notes["psd"] = f"the PSD is that of the longest still segment, samples {a} to {b}"
+            x = x[a:b]
+        spectrum = welch_psd(x, fit.fs, fit)  # the fit's fs (an app session may set it)
     check = None
     if datasheet is not None:
         try:
@@ -411,6 +445,7 @@ def _channel(
         notes,
         warn,
         check,
+        timeline(log[name], log.fs, log.segments) if log.segments else None,
     )
 
 

@@ -160,6 +160,26 @@ def channel_figures(ch: ChannelReport, prefix: str = "") -> list[FigureSpec]:
             x_range_of=f"{key}-wv",
         )
     )
+    tl = ch.timeline
+    if tl is not None:  # a flight analysed on its still segments: where they are
+        lo, hi = float(np.min(tl.low)), float(np.max(tl.high))
+        layers = [Layer("band", tl.t, tl.low, "samples (min..max per block)", _DATA, tl.high)]
+        for i, (a, b) in enumerate(tl.segments):
+            x = np.array([a, b])
+            label = "still segments (analysed)" if i == 0 else ""
+            layers.append(Layer("band", x, np.full(2, lo), label, PALETTE[2], np.full(2, hi)))
+        out.append(
+            FigureSpec(
+                f"{key}-segments",
+                f"{key}: the log in time; shaded: the still segments the WV pools",
+                "time [s]",
+                f"{ch.name} [{u}]",
+                layers,
+                height=220,
+                log_x=False,
+                log_y=False,
+            )
+        )
     sp = ch.spectrum
     if sp is not None:
         layers = [Layer("line", sp.f, sp.welch, f"Welch (nperseg {sp.nperseg})", _DATA)]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, TypedDict
+from typing import Any, TypedDict, overload
 
 import numpy as np
 
@@ -46,6 +46,7 @@ __all__ = [
     "LevelScales",
     "SeriesSettings",
     "level_grid",
+    "axis_columns",
 ]
 
 
@@ -331,6 +332,69 @@ def haar_coefficients(x: Any, level: int) -> np.ndarray:
     return haar_from_cumsum(cumsum_demeaned(a), m)
 
 
+def axis_columns(x: Any) -> np.ndarray | None:
+    """``x`` as an ``(N, k)`` array when it holds several axes (k >= 2 columns), else None.
+
+    Raises
+    ------
+    ValueError
+        A 2-D array with more columns than rows (``(3, N)``: one row per axis): transpose it.
+    """
+    if not isinstance(x, np.ndarray) and not isinstance(x, (list, tuple)):
+        return None
+    a = np.asarray(x)
+    if a.ndim != 2 or min(a.shape) < 2:
+        return None
+    if a.shape[1] > a.shape[0]:
+        raise ValueError(
+            f"an array of shape {a.shape} has more columns than rows: give one column per "
+            f"axis, shape (N, k) (transpose it: x.T)"
+        )
+    return a
+
+
+@overload
+def wavelet_variance(
+    x: np.ndarray[tuple[int], Any],
+    *,
+    fs: float = ...,
+    levels: int | None = ...,
+    robust: bool = ...,
+    eff: float = ...,
+    alpha: float = ...,
+    unit: str = ...,
+    progress: Callable[[int, int], object] | None = ...,
+) -> WaveletVariance: ...
+
+
+@overload
+def wavelet_variance(
+    x: np.ndarray[tuple[int, int], Any],
+    *,
+    fs: float = ...,
+    levels: int | None = ...,
+    robust: bool = ...,
+    eff: float = ...,
+    alpha: float = ...,
+    unit: str = ...,
+    progress: Callable[[int, int], object] | None = ...,
+) -> list[WaveletVariance]: ...
+
+
+@overload
+def wavelet_variance(
+    x: Any,
+    *,
+    fs: float = ...,
+    levels: int | None = ...,
+    robust: bool = ...,
+    eff: float = ...,
+    alpha: float = ...,
+    unit: str = ...,
+    progress: Callable[[int, int], object] | None = ...,
+) -> WaveletVariance: ...
+
+
 def wavelet_variance(
     x: Any,
     *,
@@ -341,13 +405,15 @@ def wavelet_variance(
     alpha: float = 0.05,
     unit: str = "",
     progress: Callable[[int, int], object] | None = None,
-) -> WaveletVariance:
+) -> WaveletVariance | list[WaveletVariance]:
     """Empirical Haar MODWT wavelet variance at levels 1..J with intervals.
 
     Parameters
     ----------
-    x : array_like, shape (N,)
-        One channel, float32/float64 or integer, ``N >= 4``. The mean is removed first.
+    x : array_like, shape (N,) or (N, k)
+        One channel, float32/float64 or integer, ``N >= 4``. The mean is removed first. An
+        ``(N, k)`` array (``k >= 2`` axes, e.g. a 3-axis gyroscope) gives one WV per column,
+        as a list.
     fs : float
         Sampling frequency in Hz (scales in seconds are ``2^j / fs``).
     levels : int, optional
@@ -376,7 +442,7 @@ def wavelet_variance(
 
     Returns
     -------
-    WaveletVariance
+    WaveletVariance, or list of WaveletVariance for an ``(N, k)`` array
 
     Notes
     -----
@@ -395,6 +461,21 @@ def wavelet_variance(
     >>> print(f"{wv.variance[0]:.2e}")  # sigma2 / tau = 0.01 / 2
     5.00e-03
     """
+    cols = axis_columns(x)
+    if cols is not None:  # one WV per axis
+        return [
+            wavelet_variance(
+                np.ascontiguousarray(cols[:, k]),
+                fs=fs,
+                levels=levels,
+                robust=robust,
+                eff=eff,
+                alpha=alpha,
+                unit=unit,
+                progress=progress,
+            )
+            for k in range(cols.shape[1])
+        ]
     a = as_series(x)
     n = a.size
     check_fs_alpha(fs, alpha)
