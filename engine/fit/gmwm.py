@@ -31,7 +31,7 @@ from ._varpro import (
     NNLSProblem,
     fitted_fields,
     fitted_model,
-    search,
+    nested_search,
     search_message,
     sqrt_weight,
 )
@@ -214,6 +214,7 @@ def fit_gmwm(
     levels: int | None = None,
     robust: bool = False,
     eff: float = 0.6,
+    optima: dict[Any, Any] | None = None,
     **options: Unpack[VOptions],
 ) -> GMWMResult:
     """Fit a latent model by GMWM.
@@ -237,6 +238,11 @@ def fit_gmwm(
         Use only the first ``levels`` WV levels.
     robust, eff
         Robust WV settings when a raw signal is given.
+    optima : dict, optional
+        A dict shared by fits of several models to the same WV (e.g. every candidate of
+        :func:`engine.inference.rank_models`): the optimum of each sub-model, searched once and
+        reused as the anchor of the larger models (see "Global minimum" in the module notes).
+        By default each fit searches its own sub-models.
     **options
         With ``weights="efficient"``, how V is estimated (:class:`VOptions`: ``v``, ``x``,
         ``B``, ``seed``, ``workers``, ``executor``): by default from the first fit
@@ -282,9 +288,9 @@ def fit_gmwm(
             "weights='efficient' uses"
         )
     if efficient:
-        first = fit_gmwm(wv, m)
+        first = fit_gmwm(wv, m, optima=optima)
         vmat = wv_cov(first, **v_options(options))
-        res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat))
+        res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat), optima=optima)
         object.__setattr__(res, "weights", "efficient")
         return res
     m.validate(wv.n_levels)
@@ -294,20 +300,25 @@ def fit_gmwm(
             "there is no noise to model"
         )
     omega, wname = weight_matrix(wv, weights)
-    prob = NNLSProblem.from_wv(m, wv, sqrt_weight(omega))
-
-    if prob.k == 0:
-        u = np.zeros(0)
+    a = sqrt_weight(omega)
+    if m.is_linear:
+        prob = NNLSProblem.from_wv(m, wv, a)
+        u, n_eval = np.zeros(0), 1
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
         # starting values from the user's model, if any
         extra = []
-        given = [m.processes[i].nl_value(wv.fs) for i in prob.nl_idx]
+        given = [p.nl_value(wv.fs) for p in m.processes if p.nonlinear is not None]
         usable = [v for v in given if v is not None and 0 < v < 1]
         if len(usable) == len(given):
             tcs = sorted((-1.0 / math.log(v) for v in usable), reverse=True)
             extra.append(tuple(math.log(t) for t in tcs))
-        _, u, converged = search(prob, extra, keep=3)
+        # the search anchored at every sub-model's optimum (the degenerate corners)
+        key = ("gmwm", wv.tau_samples.tobytes(), wv.variance.tobytes(), omega.tobytes())
+        cache = optima.setdefault(key, {}) if optima is not None else {}
+        _, u, converged, prob, n_eval = nested_search(
+            m, lambda sub: NNLSProblem.from_wv(sub, wv, a), cache, extra, keep=3
+        )
         method, msg = "grid+nelder-mead", search_message(converged)
     fields = fitted_fields(fitted_model(prob, u, wv.fs), wv, prob.tc_min, prob.tc_max)
     resid = wv.variance - fields["implied"]
@@ -317,7 +328,7 @@ def fit_gmwm(
         weights=wname,
         objective=float(resid @ omega @ resid),
         converged=converged,
-        n_evaluations=prob.n_eval,
+        n_evaluations=n_eval,
         method=method,
         message=msg,
         elapsed_s=time.perf_counter() - t0,

@@ -362,17 +362,25 @@ def rank_models(
     total = (rounds + 1) * n_uniq  # the fits, then one J-test refit per candidate
     Fits = list[tuple[Model, GMWMResult | None, str]]
 
+    # the sub-models' optima, shared by every fit: the candidates are fitted smallest first,
+    # so each one's search is anchored at the optima of all its candidate sub-models and no
+    # candidate's fit is above a smaller candidate's (engine.fit._varpro.nested_search)
+    optima: dict[Any, Any] = {}
+    by_size = sorted(range(len(uniq)), key=lambda i: len(uniq[i].processes))
+
     def fit_all(models: list[Model], w: str | np.ndarray, done: int | None) -> Fits:
-        out: Fits = []
-        for i, m in enumerate(models):
+        out: dict[int, tuple[Model, GMWMResult | None, str]] = {}
+        order = by_size if models is uniq else range(len(models))
+        for n, i in enumerate(order):
+            m = models[i]
             try:
                 m.validate(wv.n_levels)
-                out.append((m, fit_gmwm(wv, m, weights=w), ""))
+                out[i] = (m, fit_gmwm(wv, m, weights=w, optima=optima), "")
             except (FitError, ModelError) as e:
-                out.append((m, None, str(e)))
+                out[i] = (m, None, str(e))
             if progress is not None and done is not None:
-                progress(done + i + 1, total)
-        return out
+                progress(done + n + 1, total)
+        return [out[i] for i in range(len(models))]
 
     def largest_fit(fits: Fits) -> tuple[list[GMWMResult], GMWMResult]:
         ok = [r for _, r, _ in fits if r is not None]
