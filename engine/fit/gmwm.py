@@ -32,6 +32,7 @@ from ._varpro import (
     fitted_fields,
     fitted_model,
     nested_search,
+    persistent_first,
     search_message,
     sqrt_weight,
 )
@@ -215,6 +216,7 @@ def fit_gmwm(
     robust: bool = False,
     eff: float = 0.6,
     optima: dict[Any, Any] | None = None,
+    fixed: bool = False,
     **options: Unpack[VOptions],
 ) -> GMWMResult:
     """Fit a latent model by GMWM.
@@ -243,6 +245,10 @@ def fit_gmwm(
         :func:`engine.inference.rank_models`): the optimum of each sub-model, searched once and
         reused as the anchor of the larger models (see "Global minimum" in the module notes).
         By default each fit searches its own sub-models.
+    fixed : bool
+        No search: the result of ``model`` with every value given (its objective, implied WV,
+        flags), e.g. a model derived from another fit, as the model a ranking selects
+        (:func:`engine.inference.actionable`).
     **options
         With ``weights="efficient"``, how V is estimated (:class:`VOptions`: ``v``, ``x``,
         ``B``, ``seed``, ``workers``, ``executor``): by default from the first fit
@@ -288,9 +294,10 @@ def fit_gmwm(
             "weights='efficient' uses"
         )
     if efficient:
-        first = fit_gmwm(wv, m, optima=optima)
+        kw: dict[str, Any] = {"optima": optima, "fixed": fixed}
+        first = fit_gmwm(wv, m, **kw)
         vmat = wv_cov(first, **v_options(options))
-        res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat), optima=optima)
+        res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat), **kw)
         object.__setattr__(res, "weights", "efficient")
         return res
     m.validate(wv.n_levels)
@@ -301,9 +308,15 @@ def fit_gmwm(
         )
     omega, wname = weight_matrix(wv, weights)
     a = sqrt_weight(omega)
-    if m.is_linear:
+    if fixed:
+        if not m.is_set:
+            raise FitError("fixed=True needs the value of every parameter of the model")
         prob = NNLSProblem.from_wv(m, wv, a)
-        u, n_eval = np.zeros(0), 1
+        fitted, n_eval, converged = persistent_first(m.processes, wv.fs), 0, True
+        method, msg = "fixed", "the given values (no search)"
+    elif m.is_linear:
+        prob = NNLSProblem.from_wv(m, wv, a)
+        fitted, n_eval = fitted_model(prob, np.zeros(0), wv.fs), 1
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
         # starting values from the user's model, if any
@@ -314,13 +327,14 @@ def fit_gmwm(
             tcs = sorted((-1.0 / math.log(v) for v in usable), reverse=True)
             extra.append(tuple(math.log(t) for t in tcs))
         # the search anchored at every sub-model's optimum (the degenerate corners)
-        key = ("gmwm", wv.tau_samples.tobytes(), wv.variance.tobytes(), omega.tobytes())
+        key = (wv.tau_samples.tobytes(), wv.variance.tobytes(), omega.tobytes())
         cache = optima.setdefault(key, {}) if optima is not None else {}
         _, u, converged, prob, n_eval = nested_search(
             m, lambda sub: NNLSProblem.from_wv(sub, wv, a), cache, extra, keep=3
         )
+        fitted = fitted_model(prob, u, wv.fs)
         method, msg = "grid+nelder-mead", search_message(converged)
-    fields = fitted_fields(fitted_model(prob, u, wv.fs), wv, prob.tc_min, prob.tc_max)
+    fields = fitted_fields(fitted, wv, prob.tc_min, prob.tc_max)
     resid = wv.variance - fields["implied"]
     return GMWMResult(
         **fields,
