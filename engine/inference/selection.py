@@ -538,6 +538,7 @@ def rank_models(
         raise ValueError(f"unknown optimism {optimism!r}: use 'asymptotic' or 'bootstrap'")
 
     cands: list[Candidate] = []
+    j_optima: dict[Any, Any] = {}  # the J-test refits share theirs too (one Omega = V^-1)
     for i, (m, r, err) in enumerate(fitted):
         tw, labels = twins.get(m.spec(), ("", ()))
         extra_fields: dict[str, Any] = {
@@ -565,7 +566,7 @@ def rank_models(
             continue
         opt = boot_opt[m.spec()] if optimism == "bootstrap" else _asymptotic_optimism(r, vmat)
         try:  # the calibrated J-test: efficient refit on the levels with enough coefficients
-            jstat, df, _, _ = efficient_j(wv, r.model, vmat)
+            jstat, df, _, _ = efficient_j(wv, r.model, vmat, j_optima)
             jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
         except (FitError, ModelError, np.linalg.LinAlgError):
             jstat, df, jp = math.nan, 0, math.nan
