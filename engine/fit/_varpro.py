@@ -13,7 +13,12 @@ replicate fit, a conic PSD solve for the multivariate fit); the outer search ove
 3. a local Nelder-Mead (:func:`local`) from each of them, skipping a start within 1.5 grid
    steps of a local minimum already found; each local search restarts on a smaller simplex
    until a restart no longer lowers the objective;
-4. the lowest objective wins (:func:`search`).
+4. in :func:`engine.fit.fit_gmwm`, the *anchors*: the optima of the sub-models with one term
+   fewer, as points of this model (the degenerate corners, a term at zero:
+   :func:`nested_search`, :func:`corner_anchors`), each a result in its own right and the start
+   of a local search;
+5. the lowest objective wins (:func:`search`), so a fit is never above its anchors' sub-models
+   (docs/fitting.md).
 
 The fitted processes are then ordered most persistent first (:func:`persistent_first`) and the
 parameters on the boundary of their space are listed (:func:`at_bound`).

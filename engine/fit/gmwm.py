@@ -243,7 +243,8 @@ def fit_gmwm(
     optima : dict, optional
         A dict shared by fits of several models to the same WV (e.g. every candidate of
         :func:`engine.inference.rank_models`): the optimum of each sub-model, searched once and
-        reused as the anchor of the larger models (see "Global minimum" in the module notes).
+        reused as the anchor of the larger models (:func:`engine.fit._varpro.nested_search`,
+        docs/fitting.md).
         By default each fit searches its own sub-models.
     fixed : bool
         No search: the result of ``model`` with every value given (its objective, implied WV,
