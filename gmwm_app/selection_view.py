@@ -371,7 +371,13 @@ class SelectionView(TabView):
                     f"Ranked {len(sel.candidates)} candidates in "
                     f"{sel.elapsed_s:.2f} s ({sel.optimism} optimism, "
                     f"weights {sel.weights}) on {state.channel}; "
-                    f"best: **{sel.best.model}**."
+                    f"best: **{sel.best.model}**"
+                    + (
+                        f" (the rank-1 {sel.best.derived_from} with "
+                        f"{'; '.join(sel.best.derivation)})."
+                        if sel.best.derived_from
+                        else "."
+                    )
                 )
 
         def fail(e: BaseException) -> None:

@@ -166,9 +166,11 @@ def test_select_top_says_how_many_were_ranked(capsys, tmp_path):
     assert code == 0, err
     lines = text.splitlines()
     assert f"({n_ranked} candidates ranked, best 3 shown," in lines[1]
-    # file line, title, column header, 3 rows, the 3-line note saying which J-test it is
-    assert len(lines) == 2 + 1 + 3 + 3 and lines[6].startswith("J-test p: efficient J-test")
-    assert [ln.split()[0] for ln in lines[3:6]] == ["1", "2", "3"]
+    # file line, title, the selection, column header, 3 rows, the 3-line note saying which
+    # J-test it is
+    assert lines[2].startswith("selected: ")
+    assert len(lines) == 3 + 1 + 3 + 3 and lines[7].startswith("J-test p: efficient J-test")
+    assert [ln.split()[0] for ln in lines[4:7]] == ["1", "2", "3"]
     code, text, _ = run(capsys, "select", str(path), "--max-model", "2*GM+WN+RW", "--json")
     full = json.loads(text)
     assert full["n_ranked"] == full["n_shown"] == len(full["candidates"]) == n_ranked

@@ -13,7 +13,12 @@ replicate fit, a conic PSD solve for the multivariate fit); the outer search ove
 3. a local Nelder-Mead (:func:`local`) from each of them, skipping a start within 1.5 grid
    steps of a local minimum already found; each local search restarts on a smaller simplex
    until a restart no longer lowers the objective;
-4. the lowest objective wins (:func:`search`).
+4. in :func:`engine.fit.fit_gmwm`, the *anchors*: the optima of the sub-models with one term
+   fewer, as points of this model (the degenerate corners, a term at zero:
+   :func:`nested_search`, :func:`corner_anchors`), each a result in its own right and the start
+   of a local search;
+5. the lowest objective wins (:func:`search`), so a fit is never above its anchors' sub-models
+   (docs/fitting.md).
 
 The fitted processes are then ordered most persistent first (:func:`persistent_first`) and the
 parameters on the boundary of their space are listed (:func:`at_bound`).
@@ -82,6 +87,9 @@ __all__ = [
     "best_candidates",
     "local",
     "search",
+    "drop_one",
+    "corner_anchors",
+    "nested_search",
     "persistent_first",
     "fitted_model",
     "search_message",
@@ -337,7 +345,11 @@ def local(
 
 
 def search(
-    prob: Any, starts: Sequence[Sequence[float]] = (), *, keep: int = 3
+    prob: Any,
+    starts: Sequence[Sequence[float]] = (),
+    *,
+    keep: int = 3,
+    anchors: Sequence[Sequence[float]] = (),
 ) -> tuple[float, np.ndarray, bool]:
     """The variable-projection search over the non-linear coordinates (see the module notes).
 
@@ -350,6 +362,9 @@ def search(
         Extra candidates next to the grid (user values, other fits).
     keep : int
         Number of best candidates the local search starts from.
+    anchors : sequence of (k,) coordinates
+        Points every one of which starts a local search of its own, whatever its grid rank
+        (:func:`nested_search`: the sub-models' optima), so the result is at or below each.
 
     Returns
     -------
@@ -364,7 +379,131 @@ def search(
         if any(np.max(np.abs(np.asarray(u0) - r[1])) < 1.5 * spacing for r in results):
             continue
         results.append(local(prob.profile, u0, spacing / 2, prob.lo, prob.hi))
+    # the anchors (the sub-models' optima), best first: each is a result in its own right, so
+    # the fit is at or below every one of them; a local search starts from the best one and
+    # from every other that is not next to a start or a minimum already searched
+    pts = [np.clip(np.asarray(a, float), prob.lo, prob.hi) for a in anchors]
+    ranked = sorted(((prob.profile(a), a) for a in pts), key=lambda t: t[0])
+    seen = [np.asarray(u0, float) for _, u0 in best] + [r[1] for r in results]
+    for k, (fa, a0) in enumerate(ranked):
+        results.append((fa, a0, True))
+        if k and any(np.max(np.abs(a0 - d)) < 1.5 * spacing for d in seen):
+            continue
+        seen.append(a0)
+        results.append(local(prob.profile, a0, spacing / 2, prob.lo, prob.hi))
     return min(results, key=lambda r: r[0])
+
+
+def drop_one(model: Model) -> list[Model]:
+    """The distinct sub-models of ``model`` with one term fewer (none for a one-term model)."""
+    out: dict[str, Model] = {}
+    for i in range(len(model.processes)):
+        procs = model.processes[:i] + model.processes[i + 1 :]
+        if procs:
+            sub = Model(tuple(p.cleared() for p in procs))
+            out.setdefault(sub.spec(), sub)
+    return list(out.values())
+
+
+def corner_anchors(prob: Any, optima: Sequence[tuple[float, ...]]) -> list[tuple[float, ...]]:
+    """The sub-models' optima as points of ``prob`` (the degenerate corners of its space).
+
+    A sub-model with the same AR1/GM terms (a one-parameter term dropped) has the same
+    coordinates: its optimum is a point of ``prob`` whose profiled objective is at most the
+    sub-model's (the dropped term's variance may stay 0). A sub-model with one AR1/GM term
+    fewer gives a line of such points, the dropped term's correlation time free: every point
+    of ``prob.axis`` on it is profiled and the best one is the anchor.
+
+    Parameters
+    ----------
+    prob
+        The problem (``k``, ``axis``, ``profile``, optionally ``lower_bounds``).
+    optima : sequence of tuples
+        Each sub-model's optimal coordinates (``k`` or ``k - 1`` of them; AR1/GM terms are
+        interchangeable, so the order does not matter).
+
+    Returns
+    -------
+    list of (k,) tuples, correlation times decreasing.
+    """
+    out: list[tuple[float, ...]] = []
+    for u in optima:
+        if len(u) == prob.k:
+            out.append(tuple(sorted(u, reverse=True)))
+        elif len(u) == prob.k - 1:
+            line = [tuple(sorted((*u, float(t)), reverse=True)) for t in prob.axis]
+            out.append(best_candidates(prob, line, 1)[0][1])
+    return out
+
+
+def nested_search(
+    model: Model,
+    make_prob: Callable[[Model], Any],
+    cache: dict[str, tuple[float, tuple[float, ...]]],
+    starts: Sequence[Sequence[float]] = (),
+    *,
+    keep: int = 3,
+) -> tuple[float, np.ndarray, bool, Any, int]:
+    """:func:`search` of ``model`` anchored at the optima of its sub-models.
+
+    The sub-models with one term fewer (:func:`drop_one`) give anchors (:func:`corner_anchors`):
+    every one with one AR1/GM term fewer is searched first (recursively, each once: ``cache``
+    maps a model's spec to its optimum ``(objective, coordinates)``), and one with a
+    one-parameter term fewer when ``cache`` already holds it (a ranking fits the smaller
+    candidates first, so there it always does). Since a sub-model's optimum is a point of the
+    larger model's space with the dropped term at 0, the anchor's objective is at most the
+    sub-model's and the search returns the lowest of its anchors and local minima: the fit of
+    a model is never above the fit of those sub-models (by induction, of every sub-model with
+    the same one-parameter terms, and in a ranking of every smaller candidate).
+
+    Parameters
+    ----------
+    model : Model
+        The structure to fit.
+    make_prob : callable
+        ``make_prob(model)`` returns its problem (the same data and weights for every model).
+    cache : dict
+        Optima already found for this data and these weights (filled in).
+    starts : sequence of (k,) coordinates
+        Extra anchors of ``model`` (e.g. the user's values): the fit is at or below each.
+    keep : int
+        As in :func:`search`.
+
+    Returns
+    -------
+    f, u, converged, prob, n_eval
+        The objective, coordinates and convergence of ``model``'s search, its problem, and
+        the profile evaluations of the whole nested search.
+    """
+    n_eval = 0
+
+    def run(m: Model, top: bool) -> tuple[float, np.ndarray, bool, Any]:
+        nonlocal n_eval
+        prob = make_prob(m)
+        anchors_u = []
+        for sub in drop_one(m):
+            key = sub.spec()
+            if key not in cache:
+                if sum(q.nonlinear is not None for q in sub.processes) == prob.k:
+                    continue  # a one-parameter term dropped: an anchor only when known
+                f_s, u_s, _, _ = run(sub, False)
+                cache[key] = (f_s, tuple(float(x) for x in u_s))
+            anchors_u.append(cache[key][1])
+        if top and m.spec() in cache:  # found before (as another model's sub-model)
+            anchors_u.append(cache[m.spec()][1])
+        if prob.k == 0:
+            f, u, conv = prob.profile(np.zeros(0)), np.zeros(0), True
+        else:
+            anchors = corner_anchors(prob, anchors_u) + (list(starts) if top else [])
+            f, u, conv = search(prob, keep=keep, anchors=anchors)
+        n_eval += prob.n_eval
+        return f, u, conv, prob
+
+    f, u, conv, prob = run(model, True)
+    key = model.spec()
+    if key not in cache or f < cache[key][0]:
+        cache[key] = (f, tuple(float(x) for x in u))
+    return f, u, conv, prob, n_eval
 
 
 # -------------------------------------------------------------------------------------------

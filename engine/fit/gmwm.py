@@ -33,7 +33,8 @@ from ._varpro import (
     NNLSProblem,
     fitted_fields,
     fitted_model,
-    search,
+    nested_search,
+    persistent_first,
     search_message,
     sqrt_weight,
 )
@@ -273,6 +274,8 @@ def fit_gmwm(
     levels: int | None = None,
     robust: bool = False,
     eff: float = 0.6,
+    optima: dict[Any, Any] | None = None,
+    fixed: bool = False,
     **options: Unpack[VOptions],
 ) -> GMWMResult | list[GMWMResult]:
     """Fit a latent model by GMWM.
@@ -297,6 +300,16 @@ def fit_gmwm(
         Use only the first ``levels`` WV levels.
     robust, eff
         Robust WV settings when a raw signal is given.
+    optima : dict, optional
+        A dict shared by fits of several models to the same WV (e.g. every candidate of
+        :func:`engine.inference.rank_models`): the optimum of each sub-model, searched once and
+        reused as the anchor of the larger models (:func:`engine.fit._varpro.nested_search`,
+        docs/fitting.md).
+        By default each fit searches its own sub-models.
+    fixed : bool
+        No search: the result of ``model`` with every value given (its objective, implied WV,
+        flags), e.g. a model derived from another fit, as the model a ranking selects
+        (:func:`engine.inference.actionable`).
     **options
         With ``weights="efficient"``, how V is estimated (:class:`VOptions`: ``v``, ``x``,
         ``B``, ``seed``, ``workers``, ``executor``): by default from the first fit
@@ -357,9 +370,10 @@ def fit_gmwm(
             "weights='efficient' uses"
         )
     if efficient:
-        first = fit_gmwm(wv, m)
+        kw: dict[str, Any] = {"optima": optima, "fixed": fixed}
+        first = fit_gmwm(wv, m, **kw)
         vmat = wv_cov(first, **v_options(options))
-        res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat))
+        res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat), **kw)
         object.__setattr__(res, "weights", "efficient")
         return res
     m.validate(wv.n_levels)
@@ -369,22 +383,34 @@ def fit_gmwm(
             "there is no noise to model"
         )
     omega, wname = weight_matrix(wv, weights)
-    prob = NNLSProblem.from_wv(m, wv, sqrt_weight(omega))
-
-    if prob.k == 0:
-        u = np.zeros(0)
+    a = sqrt_weight(omega)
+    if fixed:
+        if not m.is_set:
+            raise FitError("fixed=True needs the value of every parameter of the model")
+        prob = NNLSProblem.from_wv(m, wv, a)
+        fitted, n_eval, converged = persistent_first(m.processes, wv.fs), 0, True
+        method, msg = "fixed", "the given values (no search)"
+    elif m.is_linear:
+        prob = NNLSProblem.from_wv(m, wv, a)
+        fitted, n_eval = fitted_model(prob, np.zeros(0), wv.fs), 1
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
         # starting values from the user's model, if any
         extra = []
-        given = [m.processes[i].nl_value(wv.fs) for i in prob.nl_idx]
+        given = [p.nl_value(wv.fs) for p in m.processes if p.nonlinear is not None]
         usable = [v for v in given if v is not None and 0 < v < 1]
         if len(usable) == len(given):
             tcs = sorted((-1.0 / math.log(v) for v in usable), reverse=True)
             extra.append(tuple(math.log(t) for t in tcs))
-        _, u, converged = search(prob, extra, keep=3)
+        # the search anchored at every sub-model's optimum (the degenerate corners)
+        key = (wv.tau_samples.tobytes(), wv.variance.tobytes(), omega.tobytes())
+        cache = optima.setdefault(key, {}) if optima is not None else {}
+        _, u, converged, prob, n_eval = nested_search(
+            m, lambda sub: NNLSProblem.from_wv(sub, wv, a), cache, extra, keep=3
+        )
+        fitted = fitted_model(prob, u, wv.fs)
         method, msg = "grid+nelder-mead", search_message(converged)
-    fields = fitted_fields(fitted_model(prob, u, wv.fs), wv, prob.tc_min, prob.tc_max)
+    fields = fitted_fields(fitted, wv, prob.tc_min, prob.tc_max)
     resid = wv.variance - fields["implied"]
     return GMWMResult(
         **fields,
@@ -392,7 +418,7 @@ def fit_gmwm(
         weights=wname,
         objective=float(resid @ omega @ resid),
         converged=converged,
-        n_evaluations=prob.n_eval,
+        n_evaluations=n_eval,
         method=method,
         message=msg,
         elapsed_s=time.perf_counter() - t0,

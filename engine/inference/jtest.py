@@ -34,7 +34,7 @@ tested the same way (no chi-square assumption; the same V for every replicate).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -98,7 +98,7 @@ def jtest_levels(wv: WaveletVariance) -> int:
 
 
 def efficient_j(
-    wv: WaveletVariance, start: Model, vmat: np.ndarray
+    wv: WaveletVariance, start: Model, vmat: np.ndarray, optima: dict[Any, Any] | None = None
 ) -> tuple[float, int, int, GMWMResult]:
     """The J statistic of a model: its efficient refit on the levels of :func:`jtest_levels`.
 
@@ -110,6 +110,9 @@ def efficient_j(
         The model (its values, if set, start the refit).
     vmat : ndarray (J, J)
         Covariance of the WV; only its block on the levels used matters.
+    optima : dict, optional
+        Shared by the refits of several models (a ranking's candidates), as in
+        :func:`engine.fit.fit_gmwm`.
 
     Returns
     -------
@@ -130,7 +133,7 @@ def efficient_j(
             f"have at least {ETA_MIN:g} equivalent degrees of freedom (M_j / 2^j), the model "
             f"has {p} parameters; use a longer log or a smaller model"
         )
-    fit = fit_gmwm(wv, start, weights=inverse_cov(vmat[:k, :k]), levels=k)
+    fit = fit_gmwm(wv, start, weights=inverse_cov(vmat[:k, :k]), levels=k, optima=optima)
     df = k - len(free_params(fit))
     return float(fit.objective), df, k, fit
 

@@ -71,6 +71,7 @@ __all__ = [
     "SelectionResult",
     "Candidate",
     "wn_twin",
+    "actionable",
     "JTEST_NOTE",
     "DISGUISE_LEVEL",
 ]
@@ -154,6 +155,53 @@ def wn_twin(fitted: Model, fs: float) -> tuple[Model, list[str]]:
     return Model(tuple(keep)), labels
 
 
+def actionable(res: GMWMResult) -> tuple[Model, list[str]]:
+    """The model a user can act on that a fit stands for, and what was changed to get it.
+
+    A fitted model is *actionable* when no AR1/GM term is faster than one sample (``TC_FLAG``)
+    and no parameter is at a bound (``res.at_bound``: a variance at 0, a correlation time at
+    the edge of the explored range). Otherwise every such AR1/GM with a positive variance is
+    folded into WN (its white-noise twin, :func:`wn_twin`: WN's variance grows by the term's
+    white-noise equivalent, :meth:`~engine.models.Process.white_equivalent`, so the implied
+    WV is unchanged at the scales much longer than its correlation time) and every other term
+    with a parameter at a bound is dropped; every other value is kept.
+
+    Parameters
+    ----------
+    res : GMWMResult
+        The fit.
+
+    Returns
+    -------
+    model, changes
+        The actionable model (every value set) and one line per change (e.g.
+        ``"GM_2 (0.55 samples) folded into WN"``, ``"QN dropped (QN.q2 at its bound)"``);
+        ``(res.model, [])`` when the fit is actionable.
+    """
+    fs = res.wv.fs
+    keep, changes, white = [], [], 0.0
+    for lab, q in zip(res.model.labels, res.model.processes, strict=True):
+        bound = [b for b in res.at_bound if b.startswith(lab + ".")]
+        if q.nonlinear is not None and q.linear_coef() > 0:
+            tc = _correlation_time(q, fs)
+            if tc < TC_FLAG:
+                changes.append(f"{lab} ({tc:.2g} samples) folded into WN")
+                white += q.white_equivalent(fs)
+                continue
+        if bound:
+            changes.append(f"{lab} dropped ({', '.join(bound)} at its bound)")
+            continue
+        if q.code != WN.code:
+            keep.append(q)
+        else:
+            white += q.linear_coef()
+    if not changes:
+        return res.model, []
+    if white > 0:
+        keep.append(WN(sigma2=white))
+    return Model(tuple(keep)), changes
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One ranked candidate.
@@ -163,7 +211,10 @@ class Candidate:
     ``twin_p`` is the p-value of the distance test of the fold and ``as_twin`` whether the
     candidate is ranked as its twin (white noise in effect: ``twin_p >= DISGUISE_LEVEL``).
     ``added`` is True for a WN twin that was not among the candidates and was fitted to rank
-    one that is.
+    one that is. ``changes`` lists what makes the candidate not actionable
+    (:func:`actionable`): such a candidate is never the selection. ``derived_from`` names the
+    top-ranked candidate the selection was derived from (empty for a ranked candidate) and
+    ``derivation`` the changes made to it.
     """
 
     model: str
@@ -181,19 +232,36 @@ class Candidate:
     added: bool = False
     twin_p: float = math.nan
     as_twin: bool = False
+    changes: tuple[str, ...] = ()
+    derived_from: str = ""
+    derivation: tuple[str, ...] = ()
+
+    @property
+    def is_actionable(self) -> bool:
+        """Fitted, with no AR1/GM faster than one sample and no parameter at a bound."""
+        return self.result is not None and not self.changes
 
     @property
     def note(self) -> str:
-        """One line for the table: not fitted, white noise in disguise, or an added twin."""
+        """One line for the table: not fitted, white noise in disguise, an added twin, or why
+        the candidate cannot be selected and what it stands for."""
         if self.error:
             return f"not fitted: {self.error}"
+        parts = []
         if self.twin:
             head = f"{', '.join(self.sub_sample)} < 1 sample"
             tp = f"{self.twin_p:.2g}" if math.isfinite(self.twin_p) else "n/a"
             if self.as_twin:
-                return f"{head}: WN in effect (p = {tp}), ranked as {self.twin}"
-            return f"{head}: not WN in effect (vs {self.twin}: p = {tp})"
-        return "WN twin (added)" if self.added else ""
+                parts.append(f"{head}: WN in effect (p = {tp}), ranked as {self.twin}")
+            else:
+                parts.append(f"{head}: not WN in effect (vs {self.twin}: p = {tp})")
+        elif self.added:
+            parts.append("WN twin (added)")
+        if self.changes:
+            parts.append(f"not selectable: {'; '.join(self.changes)}")
+        if self.derived_from:
+            parts.append(f"selected: {self.derived_from} with {'; '.join(self.derivation)}")
+        return "; ".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
         d = {
@@ -212,9 +280,13 @@ class Candidate:
                 "twin_p",
                 "as_twin",
                 "added",
+                "derived_from",
             )
         }
         d["sub_sample"] = list(self.sub_sample)
+        d["changes"] = list(self.changes)
+        d["derivation"] = list(self.derivation)
+        d["actionable"] = self.is_actionable
         if self.result is not None:
             d["params"] = [r.to_dict() for r in self.result.param_records]
         return {
@@ -224,22 +296,38 @@ class Candidate:
 
 @dataclass(frozen=True, eq=False)
 class SelectionResult:
-    """Candidates ranked by WVIC (smallest first), with the settings used."""
+    """Candidates ranked by WVIC (smallest first), with the settings used.
+
+    ``best`` is the selection, a model a user can act on (:attr:`Candidate.is_actionable`):
+    the first row when it is actionable, else ``selected``, derived from the first row by
+    :func:`actionable` (each AR1/GM faster than one sample folded into WN, each term at a bound
+    dropped; the other values kept: the implied WV is the first row's at every scale longer
+    than a few samples).
+    """
 
     candidates: list[Candidate]
     optimism: str
     weights: str
     elapsed_s: float
+    selected: Candidate | None = None
 
     @property
     def best(self) -> Candidate:
-        return self.candidates[0]
+        """The selected candidate (see the class notes)."""
+        return self.selected if self.selected is not None else self.candidates[0]
 
     def table(self) -> str:
         """Readable ranked table, with a last line saying which test the J column is."""
+        best = self.best
+        how = (
+            f"the rank-1 {best.derived_from} with {'; '.join(best.derivation)}"
+            if best.derived_from
+            else "rank 1"
+        )
         lines = [
             f"WVIC ranking ({len(self.candidates)} candidates, {self.optimism} optimism, "
             f"weights {self.weights}, {self.elapsed_s:.2f} s)",
+            f"selected: {best.model} ({how}; objective {best.objective:.5g})",
             f"{'rank':>4} {'model':<22} {'p':>3} {'objective':>12} {'optimism':>10} "
             f"{'WVIC':>12} {'J-test p':>9}  note",
         ]
@@ -260,6 +348,7 @@ class SelectionResult:
             "optimism": self.optimism,
             "weights": self.weights,
             "elapsed_s": self.elapsed_s,
+            "selected": self.best.to_dict(),
             "candidates": [c.to_dict() for c in self.candidates],
         }
 
@@ -362,17 +451,25 @@ def rank_models(
     total = (rounds + 1) * n_uniq  # the fits, then one J-test refit per candidate
     Fits = list[tuple[Model, GMWMResult | None, str]]
 
+    # the sub-models' optima, shared by every fit: the candidates are fitted smallest first,
+    # so each one's search is anchored at the optima of all its candidate sub-models and no
+    # candidate's fit is above a smaller candidate's (engine.fit._varpro.nested_search)
+    optima: dict[Any, Any] = {}
+    by_size = sorted(range(len(uniq)), key=lambda i: len(uniq[i].processes))
+
     def fit_all(models: list[Model], w: str | np.ndarray, done: int | None) -> Fits:
-        out: Fits = []
-        for i, m in enumerate(models):
+        out: dict[int, tuple[Model, GMWMResult | None, str]] = {}
+        order = by_size if models is uniq else range(len(models))
+        for n, i in enumerate(order):
+            m = models[i]
             try:
                 m.validate(wv.n_levels)
-                out.append((m, fit_gmwm(wv, m, weights=w), ""))
+                out[i] = (m, fit_gmwm(wv, m, weights=w, optima=optima), "")
             except (FitError, ModelError) as e:
-                out.append((m, None, str(e)))
+                out[i] = (m, None, str(e))
             if progress is not None and done is not None:
-                progress(done + i + 1, total)
-        return out
+                progress(done + n + 1, total)
+        return [out[i] for i in range(len(models))]
 
     def largest_fit(fits: Fits) -> tuple[list[GMWMResult], GMWMResult]:
         ok = [r for _, r, _ in fits if r is not None]
@@ -441,12 +538,14 @@ def rank_models(
         raise ValueError(f"unknown optimism {optimism!r}: use 'asymptotic' or 'bootstrap'")
 
     cands: list[Candidate] = []
+    j_optima: dict[Any, Any] = {}  # the J-test refits share theirs too (one Omega = V^-1)
     for i, (m, r, err) in enumerate(fitted):
         tw, labels = twins.get(m.spec(), ("", ()))
         extra_fields: dict[str, Any] = {
             "sub_sample": labels,
             "twin": tw,
             "added": m.spec() in added,
+            "changes": tuple(actionable(r)[1]) if r is not None else (),
         }
         if r is None:
             cands.append(
@@ -467,7 +566,7 @@ def rank_models(
             continue
         opt = boot_opt[m.spec()] if optimism == "bootstrap" else _asymptotic_optimism(r, vmat)
         try:  # the calibrated J-test: efficient refit on the levels with enough coefficients
-            jstat, df, _, _ = efficient_j(wv, r.model, vmat)
+            jstat, df, _, _ = efficient_j(wv, r.model, vmat, j_optima)
             jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
         except (FitError, ModelError, np.linalg.LinAlgError):
             jstat, df, jp = math.nan, 0, math.nan
@@ -524,4 +623,47 @@ def rank_models(
 
     cands.sort(key=functools.cmp_to_key(order))
     wname = "efficient" if efficient else (weights if isinstance(weights, str) else "user")
-    return SelectionResult(cands, optimism, wname, time.perf_counter() - t0)
+    selected = _selection(wv, cands[0], weights, vmat)
+    return SelectionResult(cands, optimism, wname, time.perf_counter() - t0, selected)
+
+
+def _selection(
+    wv: WaveletVariance, top: Candidate, weights: str | np.ndarray, vmat: np.ndarray
+) -> Candidate | None:
+    """The model a user can act on derived from the top-ranked candidate (None when it is
+    one): :func:`actionable` applied until nothing changes. Not refitted: a refit of the
+    structure puts a term back below one sample where the data favour it (on the ADIS16405
+    gyros, whose filter correlates neighbouring samples, every GM slides there), and a refit
+    of the variances alone at the kept correlation times lets the finest scale (the
+    largest weight, where the filter shows) pull WN 30 % below the WV at 1 s."""
+    from scipy import stats
+
+    if top.result is None or top.is_actionable:
+        return None
+    res, derivation = top.result, []
+    while True:
+        model, changes = actionable(res)
+        if not changes or not model.processes:
+            break
+        derivation += changes
+        res = fit_gmwm(wv, model, weights=weights, fixed=True)
+    opt = _asymptotic_optimism(res, vmat)
+    try:
+        jstat, df, _, _ = efficient_j(wv, res.model.cleared(), vmat)
+        jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
+    except (FitError, ModelError, np.linalg.LinAlgError):
+        jstat, df, jp = math.nan, 0, math.nan
+    return Candidate(
+        res.model.spec(),
+        res.model.n_params,
+        res.objective,
+        opt,
+        res.objective + opt,
+        jstat,
+        df,
+        jp,
+        res,
+        changes=tuple(actionable(res)[1]),
+        derived_from=top.model,
+        derivation=tuple(derivation),
+    )
