@@ -87,6 +87,8 @@ API: dict[str, str] = {
             "DatasheetSpec",
             "DatasheetCheck",
             "DatasheetError",
+            "plan_run",
+            "RunPlan",
         ),
         "engine.inference",
     ),

@@ -1,0 +1,178 @@
+"""Monte Carlo check of `gmwm plan` (engine.inference.planning.plan_run).
+
+For each sensor model, the plan gives the shortest log meeting a precision target; here R logs
+of that length are simulated from the model, each fitted by the efficient GMWM, and the
+realised precision is compared with the plan:
+
+* ``sd(log q_hat)``: the spread of the estimates on the log scale, against the plan's
+  ``log(1 + rel) / z`` (the plan's intervals are log-symmetric: ``q exp(+-z s)``);
+* ``within``: the share of estimates within the target (``|q_hat / q - 1| <= rel``), against
+  the interval level (95 %), with its Wilson 95 % band.
+
+Models: a tactical-grade gyro (WN+RW at 200 Hz), the ADIS16405 gyro and accelerometer
+(GM+WN+RW fitted to ../shared/data/adis16405_imu1.h5, gyro_x and accel_x, at 100 Hz), a
+consumer MEMS gyro with a Gauss-Markov term (GM+WN+RW at 100 Hz).
+
+Usage::
+
+    nice python tests/benchmarks/plan_mc.py [--reps 200] [--seed 1] [--json out.json]
+
+Prints a Markdown table (docs/planning.md holds its output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import engine as eg
+from engine.inference.planning import PlanTarget, plan_precision, plan_run
+
+Z = 1.959963984540054
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+def wilson(k: int, n: int, z: float = Z) -> tuple[float, float]:
+    """Wilson score interval of a binomial share."""
+    p = k / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return c - h, c + h
+
+
+def settings() -> list[tuple[str, eg.Model, float, str, PlanTarget, str]]:
+    """(name, model, fs, unit, target, model to fit)."""
+    out = []
+    tactical = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(
+        200.0, "deg/s"
+    )
+    out.append(("tactical gyro", tactical, 200.0, "deg/s", PlanTarget("N", 0.005), "WN+RW"))
+    out.append(("tactical gyro", tactical, 200.0, "deg/s", PlanTarget("K", 0.25), "WN+RW"))
+    consumer = eg.parse_model(
+        "GM(beta=0.05, sigma2_gm=4e-6)+WN(sigma2=2.5e-5)+RW(gamma2=1e-12)"
+    )  # per sample at 100 Hz, in rad/s: a 20 s Gauss-Markov bias on a MEMS gyro
+    out.append(
+        ("consumer MEMS gyro (GM)", consumer, 100.0, "rad/s", PlanTarget("N", 0.01), "GM+WN+RW")
+    )
+    out.append(
+        ("consumer MEMS gyro (GM)", consumer, 100.0, "rad/s", PlanTarget("K", 0.3), "GM+WN+RW")
+    )
+    path = DATA / "adis16405_imu1.h5"
+    if path.exists():
+        log = eg.load_log(path)
+        for ch, unit in (("gyro_x", "deg/s"), ("accel_x", "g")):
+            wv = log.wavelet_variance(ch)
+            fit = eg.fit_gmwm(wv, "GM+WN+RW", weights="efficient")
+            out.append(
+                (f"ADIS16405 {ch}", fit.model, 100.0, unit, PlanTarget("N", 0.01), "GM+WN+RW")
+            )
+            out.append(
+                (f"ADIS16405 {ch}", fit.model, 100.0, unit, PlanTarget("K", 0.3), "GM+WN+RW")
+            )
+    else:
+        print(f"({path} missing: the ADIS16405 rows are skipped)", file=sys.stderr)
+    return out
+
+
+def estimate(res: eg.GMWMResult, key: str) -> float:
+    q = res.ieee.get(key)
+    return math.nan if q is None else q.value
+
+
+def run(reps: int, seed: int) -> list[dict]:
+    rows = []
+    for name, model, fs, unit, target, fitted in settings():
+        t0 = time.perf_counter()
+        plan = plan_run(model, fs, (target,), unit=unit)
+        n = plan.required[target.key]
+        if n is None:
+            print(f"{name}: {target} not reachable", file=sys.stderr)
+            continue
+        truth = plan_precision(model, fs, n, unit=unit)[target.key]
+        rel_planned = max(truth.high / truth.value - 1.0, 1.0 - truth.low / truth.value)
+        rng = np.random.default_rng(seed)
+        est = []
+        for _ in range(reps):
+            x = model.simulate(n, fs=fs, rng=rng)
+            wv = eg.wavelet_variance(x, fs=fs, unit=unit)
+            try:
+                res = eg.fit_gmwm(wv, fitted, weights="efficient")
+            except eg.FitError:
+                est.append(math.nan)
+                continue
+            est.append(estimate(res, target.key))
+        e = np.asarray(est)
+        ok = np.isfinite(e) & (e > 0)
+        lr = np.log(e[ok] / truth.value)
+        within = int(np.sum(np.abs(e[ok] / truth.value - 1.0) <= target.rel))
+        sd_planned = math.log(1.0 + rel_planned) / Z
+        sd = float(np.std(lr, ddof=1))
+        se_sd = sd / math.sqrt(2 * (ok.sum() - 1))
+        lo, hi = wilson(within, int(ok.sum()))
+        rows.append(
+            {
+                "model": name,
+                "target": str(target),
+                "samples": n,
+                "hours": n / fs / 3600.0,
+                "reps": int(ok.sum()),
+                "sd_planned": sd_planned,
+                "sd_realised": sd,
+                "sd_band": (sd - Z * se_sd, sd + Z * se_sd),
+                "bias_pct": 100 * float(np.expm1(np.mean(lr))),
+                "within": within / ok.sum(),
+                "within_band": (lo, hi),
+                "seconds": time.perf_counter() - t0,
+            }
+        )
+        r = rows[-1]
+        print(
+            f"{name:<26} {r['target']:<16} {r['hours']:8.3g} h  sd planned {sd_planned:.4f} "
+            f"realised {sd:.4f}  within {100 * r['within']:.1f} %  ({r['seconds']:.0f} s)",
+            file=sys.stderr,
+        )
+    return rows
+
+
+def markdown(rows: list[dict], reps: int) -> str:
+    head = (
+        "| sensor model | target (95 %) | planned length | sd of log estimate: planned | "
+        "realised [95 % band] | mean bias | share within target [Wilson 95 %] |\n"
+        "|---|---|---|---|---|---|---|"
+    )
+    lines = [head]
+    for r in rows:
+        b0, b1 = r["sd_band"]
+        w0, w1 = r["within_band"]
+        h = r["hours"]
+        length = f"{h:.3g} h" if h >= 1 else f"{60 * h:.3g} min"
+        lines.append(
+            f"| {r['model']} | {r['target']} | {length} ({r['samples']:,} samples) | "
+            f"{r['sd_planned']:.4f} | {r['sd_realised']:.4f} [{b0:.4f}, {b1:.4f}] | "
+            f"{r['bias_pct']:+.2f} % | {100 * r['within']:.1f} % [{100 * w0:.1f}, "
+            f"{100 * w1:.1f}] |"
+        )
+    return "\n".join(lines) + f"\n\n{reps} logs per row (tests/benchmarks/plan_mc.py)."
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--json")
+    a = ap.parse_args()
+    rows = run(a.reps, a.seed)
+    print(markdown(rows, a.reps))
+    if a.json:
+        Path(a.json).write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
