@@ -173,12 +173,53 @@ def markdown(rows: list[dict], reps: int) -> str:
     return "\n".join(lines) + f"\n\n{reps} logs per row (tests/benchmarks/plan_mc.py)."
 
 
+def rules_table() -> str:
+    """docs/planning.md's table: the rule '100 tau_c' (10x a decade past the WN/RW crossing)
+    against the plan, for the three sensor models (the tactical gyro at 200 Hz)."""
+
+    def rel(q) -> float:
+        return max(q.high / q.value - 1.0, 1.0 - q.low / q.value)
+
+    tact = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)")
+    models = [("tactical gyro (WN+RW)", tact.model(200.0, "deg/s"), 200.0, "deg/s")]
+    if (DATA / "adis16405_imu1.h5").exists():
+        log = eg.load_log(DATA / "adis16405_imu1.h5")
+        models.append(
+            ("ADIS16405 gyro_x", adis_model(log.wavelet_variance("gyro_x")), 100.0, "deg/s")
+        )
+    models.append(("low-cost MEMS gyro (GM+WN+RW)", settings()[2][1], 100.0, "rad/s"))
+    lines = [
+        "| sensor | N | K | tau_c | 100 tau_c | K at 100 tau_c | B at 100 tau_c | "
+        "K within 30 % needs | K within 10 % needs | K at 20 min |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, m, fs, unit in models:
+        t = plan_precision(m, fs, 2**20, unit=unit)
+        tau_c = math.sqrt(3) * t["N"].native / t["K"].native
+        at = plan_precision(m, fs, int(100 * tau_c * fs), unit=unit)
+        k20 = rel(plan_precision(m, fs, int(1200 * fs), unit=unit)["K"])
+        need = [plan_run(m, fs, f"K within {r} %", unit=unit).required["K"] for r in (30, 10)]
+        hours = [f"{n / fs / 3600:.3g} h" if n else "-" for n in need]
+        lines.append(
+            f"| {name} | {t['N'].datasheet_value:.3g} {t['N'].datasheet_unit} | "
+            f"{t['K'].datasheet_value:.3g} {t['K'].datasheet_unit} | {tau_c:.0f} s | "
+            f"{100 * tau_c / 3600:.3g} h | +-{100 * rel(at['K']):.0f} % | "
+            f"+-{100 * rel(at['B']):.0f} % | {hours[0]} | {hours[1]} | "
+            + (f"+-{100 * k20:.0f} % |" if k20 < 100 else "no information |")
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json")
+    ap.add_argument("--rules", action="store_true", help="print the rules-of-thumb table only")
     a = ap.parse_args()
+    if a.rules:
+        print(rules_table())
+        return
     rows = run(a.reps, a.seed)
     print(markdown(rows, a.reps))
     if a.json:
