@@ -49,6 +49,11 @@ _ALIASES: dict[str, str] = {
     "ramp": "R",
     "dr": "R",
 }
+#: A log shorter than this many correlation times of a GM/AR1 term is outside the plan's
+#: asymptotics: the Monte Carlo of docs/planning.md found the realised spread of N up to 1.5x
+#: the plan's at 1.5-10 correlation times, and within its sampling error beyond 100.
+SPAN_GM = 50.0
+
 #: The quantities planned for: the model's own (a plan has no data, so no ``ADEV_data``).
 _PLANNED = ("N", "B", "ADEV_min", "K", "Q", "R")
 
@@ -227,6 +232,10 @@ class RunPlan:
         the longest evaluated does.
     tables : tuple of IeeeTable
         The full expected table (values, intervals, datasheet units) at each length.
+    caveats : tuple of str
+        Where the asymptotic plan is optimistic: a target met by a log shorter than
+        :data:`SPAN_GM` correlation times of a GM/AR1 term (docs/planning.md: Monte Carlo
+        spreads up to 1.5x the plan's there).
     """
 
     model: Model
@@ -238,6 +247,7 @@ class RunPlan:
     precision: dict[str, np.ndarray]
     required: dict[str, int | None]
     tables: tuple[IeeeTable, ...] = field(repr=False)
+    caveats: tuple[str, ...] = ()
 
     @property
     def hours(self) -> np.ndarray:
@@ -267,6 +277,7 @@ class RunPlan:
             else:
                 got = f"{_hours_text(n / self.fs)} ({n} samples)"
             lines.append(f"  {str(t):<22} needs {got}")
+        lines += [f"  caution: {c}" for c in self.caveats]
         keys = [k for k in self.precision if np.isfinite(self.precision[k]).any()]
         head = "  length        " + "".join(f"{k:>11}" for k in keys)
         lines += ["", "  precision (half-width of the interval, % of the value):", head]
@@ -307,6 +318,7 @@ class RunPlan:
                 for t in self.targets
             ],
             "record_samples": self.record_n,
+            "caveats": list(self.caveats),
             "lengths": [int(n) for n in self.lengths],
             "hours": [float(h) for h in self.hours],
             "precision": {k: [num(v) for v in a] for k, a in self.precision.items()},
@@ -425,7 +437,32 @@ def plan_run(
         raise ValueError("plan_run needs lengths of at least 16 samples")
     tables = tuple(table(int(n)) for n in grid)
     precision = {k: np.array([rel(tb, k) for tb in tables]) for k in keys}
-    return RunPlan(m, fs, unit, float(level), tg, grid, precision, required, tables)
+    caveats = tuple(_caveats(m, fs, tg, required))
+    return RunPlan(m, fs, unit, float(level), tg, grid, precision, required, tables, caveats)
+
+
+def _caveats(
+    m: Model, fs: float, targets: tuple[PlanTarget, ...], required: dict[str, int | None]
+) -> list[str]:
+    """Targets met by a log shorter than :data:`SPAN_GM` correlation times of a GM/AR1."""
+    tcs = []
+    for lab, p in zip(m.labels, m.processes, strict=True):
+        phi = p.nl_value(fs) if p.nonlinear is not None else None
+        if phi is not None and 0.0 < phi < 1.0:
+            tcs.append((-1.0 / math.log(phi) / fs, lab))
+    if not tcs:
+        return []
+    tc, lab = max(tcs)
+    out = []
+    for t in targets:
+        n = required.get(t.key)
+        if n is not None and n / fs < SPAN_GM * tc:
+            out.append(
+                f"{t} is met by {_hours_text(n / fs)}, less than {SPAN_GM:g} correlation times "
+                f"of {lab} ({_hours_text(tc)}): the asymptotic plan is optimistic there (the "
+                f"spread can be 1.5x the plan's); record at least {_hours_text(SPAN_GM * tc)}"
+            )
+    return out
 
 
 def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | None:

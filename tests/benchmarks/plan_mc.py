@@ -66,6 +66,10 @@ def settings() -> list[tuple[str, eg.Model, float, str, PlanTarget, str]]:
     out.append(
         ("consumer MEMS gyro (GM)", consumer, 100.0, "rad/s", PlanTarget("K", 0.3), "GM+WN+RW")
     )
+    # N again at about 50 correlation times of the GM (engine.inference.planning.SPAN_GM)
+    out.append(
+        ("consumer MEMS gyro (GM)", consumer, 100.0, "rad/s", PlanTarget("N", 0.0044), "GM+WN+RW")
+    )
     path = DATA / "adis16405_imu1.h5"
     if path.exists():
         log = eg.load_log(path)
@@ -97,9 +101,11 @@ def estimate(res: eg.GMWMResult, key: str) -> float:
     return math.nan if q is None else q.value
 
 
-def run(reps: int, seed: int) -> list[dict]:
+def run(reps: int, seed: int, only: str = "") -> list[dict]:
     rows = []
     for name, model, fs, unit, target, fitted in settings():
+        if only and only not in f"{name} {target}":
+            continue
         t0 = time.perf_counter()
         plan = plan_run(model, fs, (target,), unit=unit)
         n = plan.required[target.key]
@@ -216,11 +222,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json")
     ap.add_argument("--rules", action="store_true", help="print the rules-of-thumb table only")
+    ap.add_argument("--only", default="", help="run only the rows whose 'model target' has this")
     a = ap.parse_args()
     if a.rules:
         print(rules_table())
         return
-    rows = run(a.reps, a.seed)
+    rows = run(a.reps, a.seed, a.only)
     print(markdown(rows, a.reps))
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1))
