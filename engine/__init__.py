@@ -88,6 +88,8 @@ API: dict[str, str] = {
             "DatasheetSpec",
             "DatasheetCheck",
             "DatasheetError",
+            "plan_run",
+            "RunPlan",
         ),
         "engine.inference",
     ),

@@ -95,6 +95,7 @@ def _lazy_view_factories() -> list[tuple[str, Callable[[AppState, Jobs], Any]]]:
     """Tabs built on first opening: (title, view class taking the state and the jobs)."""
     from gmwm_app.check_view import CheckView
     from gmwm_app.multi_view import MultiView
+    from gmwm_app.plan_view import PlanView
     from gmwm_app.slope_view import SlopeView
 
     return [
@@ -102,6 +103,7 @@ def _lazy_view_factories() -> list[tuple[str, Callable[[AppState, Jobs], Any]]]:
         ("Slope method", SlopeView),
         ("Multi-channel", MultiView),
         ("Datasheet check", CheckView),
+        ("Plan", PlanView),
     ]
 
 

@@ -18,6 +18,7 @@ import engine as eg
 from gmwm_app import check_view, slope_view
 from gmwm_app.check_view import CheckView
 from gmwm_app.multi_view import MultiView
+from gmwm_app.plan_view import PlanView
 from gmwm_app.selection_view import SelectionView
 from gmwm_app.slope_view import SlopeView
 from gmwm_app.tab_view import TabView
@@ -27,6 +28,7 @@ VIEWS = {
     "Slope method": SlopeView,
     "Multi-channel": MultiView,
     "Datasheet check": CheckView,
+    "Plan": PlanView,
 }
 TITLES = list(VIEWS)
 
@@ -65,6 +67,7 @@ def test_one_update_of_several_parameters_draws_once(
         "Slope method": 1,
         "Multi-channel": 1,  # a new WV (its own cheap key then sees the same log)
         "Datasheet check": 1,
+        "Plan": 0,  # draws the fit and n: no fit yet (None to None), the same n
     }
     assert len(calls) == wanted[title], calls
     # a change the tab does not draw (a message of the page) draws nothing
@@ -110,6 +113,8 @@ def test_a_hidden_tab_waits_until_shown(
     assert s.set_robust(True), s.error
     if title == "Model selection":  # draws neither: a new ranking instead
         assert s.rank("WN+RW, WN"), s.error
+    if title == "Plan":  # draws neither: a fit instead
+        assert s.set_model("WN+RW"), s.error
     assert calls == [] and view._dirty
     view.active = True
     # drawn when shown (the selection tab draws again when its intervals arrive: at once here)
@@ -136,6 +141,8 @@ def test_a_failing_refresh_is_a_message_and_a_log_record(
         assert s.set_fs(s.fs * 2), s.error  # the tab raises: the session does not
         if title == "Model selection":  # draws a ranking
             assert s.rank("WN+RW, WN"), s.error
+        if title == "Plan":  # draws a fit
+            assert s.set_model("WN+RW"), s.error
     assert s.error == ""
     assert view.message.visible and "boom in the drawing" in view.message.object
     assert "Traceback" not in view.message.object

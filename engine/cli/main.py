@@ -61,7 +61,7 @@ __all__ = ["main", "build_parser"]
 
 # Subcommands that live in their own module engine/cli/<name>.py, each with
 # ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
-_MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report", "segments")
+_MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report", "segments", "plan")
 
 
 class _Parser(argparse.ArgumentParser):

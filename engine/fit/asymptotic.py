@@ -165,8 +165,22 @@ def param_cov(res: Any, vmat: np.ndarray, free: list[tuple[int, str]] | None = N
     free = free_params(res) if free is None else free
     a = jacobian(res, free)
     w = res.omega
-    bread = np.linalg.pinv(a.T @ w @ a)
+    bread = _equilibrated_pinv(a.T @ w @ a)
     return bread @ a.T @ w @ vmat @ w @ a @ bread
+
+
+def _equilibrated_pinv(m: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse of a symmetric information matrix after scaling it to a unit diagonal.
+
+    A parameter that the data barely inform (a random walk in a short log: its information is
+    1e-20 of the white noise's) is a badly *scaled* direction, not a missing one: a plain
+    ``pinv`` drops it below its relative cutoff and reports a variance of 0. Scaled, its
+    variance comes out as large as it is. Parameters with no information at all (a zero
+    diagonal) keep ``pinv``'s 0.
+    """
+    d = np.diagonal(m).copy()
+    s = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 1.0)
+    return s[:, None] * np.linalg.pinv(s[:, None] * m * s[None, :]) * s[None, :]
 
 
 def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[float, float]]:
@@ -272,6 +286,6 @@ def delta_bounds(
         if not (math.isfinite(var) and var > 0):
             out.append((math.nan, math.nan))
             continue
-        s = math.sqrt(var) / g0
+        s = min(math.sqrt(var) / g0, 700.0 / z)  # beyond: an interval of no information
         out.append((g0 * math.exp(-z * s), g0 * math.exp(z * s)))
     return out

@@ -41,6 +41,7 @@ from .datasheet_check import (
 )
 from .intervals import ParamInterval, param_intervals
 from .jtest import JTest, j_test
+from .planning import PlanTarget, RunPlan, parse_targets, plan_precision, plan_run
 from .selection import Candidate, SelectionResult, rank_models, submodels
 
 __all__ = [
@@ -59,4 +60,9 @@ __all__ = [
     "DatasheetCheck",
     "DatasheetError",
     "DATASHEET_KEYS",
+    "plan_run",
+    "plan_precision",
+    "parse_targets",
+    "PlanTarget",
+    "RunPlan",
 ]

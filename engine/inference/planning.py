@@ -1,0 +1,493 @@
+"""Plan a calibration run: how long to record for the IEEE quantities to reach a precision.
+
+The efficient GMWM has a known asymptotic covariance for any model and any length: with the
+model-implied WV covariance ``V(N)`` of a log of ``N`` samples (:func:`engine.fit.asymptotic.
+wv_cov_model`) and the Jacobian ``A`` of the implied WV, the parameters' covariance is
+``(A' V^-1 A)^-1`` (the GMWM paper, Corollary 1), and every IEEE quantity's interval follows
+by the delta method, exactly as a fit's own table (:func:`engine.fit.ieee.ieee_table`) makes
+it. :func:`plan_run` evaluates that table on a grid of lengths for a model with values (no
+data is simulated), and finds the shortest length at which each target holds. The guide
+``docs/planning.md`` compares the plan with Monte Carlo and with the rules of thumb.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..fit.asymptotic import wv_cov_model
+from ..fit.covariance import inverse_cov
+from ..fit.ieee import IEEE_KEYS, IeeeTable, ieee_table
+from ..fit.result import FitError
+from ..models import Model, Process, parse_model
+from ..wv import WaveletVariance
+from ..wv.classical import default_levels
+
+__all__ = ["PlanTarget", "RunPlan", "parse_targets", "plan_run", "plan_precision"]
+
+#: Quantities a target may name, with the words a user may write for them.
+_ALIASES: dict[str, str] = {
+    "n": "N",
+    "arw": "N",
+    "vrw": "N",
+    "wn": "N",
+    "b": "B",
+    "bi": "B",
+    "adev_min": "ADEV_min",
+    "bi_min": "ADEV_min",
+    "k": "K",
+    "rrw": "K",
+    "rw": "K",
+    "q": "Q",
+    "qn": "Q",
+    "r": "R",
+    "ramp": "R",
+    "dr": "R",
+}
+#: A log shorter than this many correlation times of a GM/AR1 term is outside the plan's
+#: asymptotics: the Monte Carlo of docs/planning.md found the realised spread of N up to 1.5x
+#: the plan's at 1.5-10 correlation times, and within its sampling error beyond 100.
+SPAN_GM = 50.0
+
+#: The quantities planned for: the model's own (a plan has no data, so no ``ADEV_data``).
+_PLANNED = ("N", "B", "ADEV_min", "K", "Q", "R")
+
+
+@dataclass(frozen=True)
+class PlanTarget:
+    """A precision target: the ``level`` interval of ``key`` within ``rel`` of its value.
+
+    Attributes
+    ----------
+    key : str
+        An IEEE key (:data:`engine.fit.ieee.IEEE_KEYS`): ``N``, ``B``, ``ADEV_min``, ``K``,
+        ``Q`` or ``R``.
+    rel : float
+        Relative half-width, e.g. 0.1 for "within 10 %".
+    """
+
+    key: str
+    rel: float
+
+    def __str__(self) -> str:
+        return f"{self.key} within {100 * self.rel:g} %"
+
+
+def parse_targets(text: str) -> tuple[PlanTarget, ...]:
+    """Targets from ``"K within 10 %, N within 2 %, B within 20 %"``.
+
+    Each item is ``QUANTITY within P %`` (or ``QUANTITY P%`` / ``QUANTITY=P%``), the quantity an
+    IEEE key or a datasheet word (``arw``, ``vrw``, ``bi``, ``rrw``, ``bi_min`` ...).
+
+    Raises
+    ------
+    ValueError
+        An item that is not of that form, an unknown quantity or a percentage not in (0, 100).
+
+    Examples
+    --------
+    >>> [str(t) for t in parse_targets("K within 10 %, arw 2%")]
+    ['K within 10 %', 'N within 2 %']
+    """
+    out: list[PlanTarget] = []
+    for item in (s.strip() for s in text.split(",")):
+        if not item:
+            continue
+        m = re.fullmatch(r"([A-Za-z_]+)\s*(?:within|=|:)?\s*([0-9.eE+-]+)\s*%", item)
+        if m is None:
+            raise ValueError(
+                f"target {item!r} is not of the form 'QUANTITY within P %' (e.g. 'K within 10 %')"
+            )
+        word, pct = m.group(1), m.group(2)
+        key = _ALIASES.get(word.lower(), word if word in IEEE_KEYS else "")
+        if key not in _PLANNED:
+            raise ValueError(
+                f"target {item!r}: unknown quantity {word!r}; use one of N (arw/vrw), B (bi), "
+                "ADEV_min (bi_min), K (rrw), Q, R"
+            )
+        try:
+            rel = float(pct) / 100.0
+        except ValueError:
+            raise ValueError(f"target {item!r}: {pct!r} is not a percentage") from None
+        if not 0.0 < rel < 1.0:
+            raise ValueError(f"target {item!r}: the percentage must be in (0, 100)")
+        if any(t.key == key for t in out):
+            raise ValueError(f"target {item!r}: {key} has a target already")
+        out.append(PlanTarget(key, rel))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class _PlannedFit:
+    """What :func:`engine.fit.ieee.ieee_table` reads of a fit, for a model at a length:
+    the true model, the WV it implies at that length and the efficient weights."""
+
+    model: Model
+    wv: WaveletVariance
+    omega: np.ndarray
+    at_bound: list[str] = field(default_factory=list)
+
+    @property
+    def fs(self) -> float:
+        return self.wv.fs
+
+    @property
+    def param_records(self) -> list[Any]:  # pragma: no cover - not read by ieee_table
+        return []
+
+
+def _planned_fit(model: Model, fs: float, n: int, unit: str, levels: int | None) -> _PlannedFit:
+    j = default_levels(n) if levels is None else min(levels, default_levels(n))
+    tau = 2.0 ** np.arange(1, j + 1)
+    nu = model.wv(tau, fs)
+    # no data, so no empirical interval (ADEV_data is not planned): skip eta3's quantiles
+    wv = WaveletVariance.from_arrays(nu, n=n, fs=fs, unit=unit, ci_low=nu, ci_high=nu)
+    return _PlannedFit(model, wv, inverse_cov(wv_cov_model(model, wv)))
+
+
+def plan_precision(
+    model: Model | str,
+    fs: float,
+    n: int,
+    *,
+    unit: str = "",
+    level: float = 0.95,
+    levels: int | None = None,
+) -> IeeeTable:
+    """The IEEE table an efficient GMWM fit of ``model`` on ``n`` samples is expected to give.
+
+    Values are the model's own; intervals are the asymptotic ``level`` intervals of the
+    efficient GMWM at that length (no data is simulated).
+
+    Parameters
+    ----------
+    model : Model or str
+        Every value set, e.g. ``"WN(sigma2=1e-6)+RW(gamma2=1e-12)"``.
+    fs : float
+        Sampling frequency (Hz).
+    n : int
+        Log length in samples (at least 16).
+    unit : str
+        Signal unit (``deg/s``, ``m/s^2`` ...): gives the datasheet units.
+    level : float
+        Two-sided interval level.
+    levels : int, optional
+        Number of WV levels the fit will use (default: all, ``floor(log2(n - 1))``).
+    """
+    m = _valued(model)
+    if n < 16:
+        raise ValueError(f"a log of {n} samples is too short to plan for (at least 16)")
+    return ieee_table(_planned_fit(m, float(fs), int(n), unit, levels), level=level)
+
+
+def _valued(model: Model | Process | str) -> Model:
+    m = parse_model(model) if isinstance(model, str) else model
+    if isinstance(m, Process):
+        m = Model((m,))
+    if not m.is_set:
+        raise FitError(
+            f"the model {m.spec()} has no values: give every parameter "
+            "(e.g. 'WN(sigma2=1e-6)+RW(gamma2=1e-12)'), a datasheet, a fit or a pilot log"
+        )
+    return m
+
+
+def _rel(table: IeeeTable, key: str) -> float:
+    """Relative half-width of a quantity's interval (its larger side): NaN when it has none,
+    or for a bias instability whose floor lies at the edge of the scales (an upper bound)."""
+    q = table.get(key)
+    if q is None or not (q.has_interval and q.value > 0):
+        return math.nan
+    if key in ("B", "ADEV_min", "ADEV_data") and "edge" in q.note:
+        return math.nan
+    return max(q.high / q.value - 1.0, 1.0 - q.low / q.value)
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """How precisely a log of each length gives the IEEE quantities (:func:`plan_run`).
+
+    Attributes
+    ----------
+    model : Model
+        The model planned for (values set), at ``fs`` in ``unit``.
+    fs : float
+        Sampling frequency (Hz).
+    unit : str
+        Signal unit.
+    level : float
+        Interval level of the precisions.
+    targets : tuple of PlanTarget
+    lengths : ndarray of int
+        Log lengths evaluated (samples), increasing.
+    precision : dict of str to ndarray
+        Per quantity, the relative half-width of its ``level`` interval at each length.
+    required : dict of str to int or None
+        Per target key, the shortest length (samples) meeting it; None when no length up to
+        the longest evaluated does.
+    tables : tuple of IeeeTable
+        The full expected table (values, intervals, datasheet units) at each length.
+    caveats : tuple of str
+        Where the asymptotic plan is optimistic: a target met by a log shorter than
+        :data:`SPAN_GM` correlation times of a GM/AR1 term (docs/planning.md: Monte Carlo
+        spreads up to 1.5x the plan's there).
+    """
+
+    model: Model
+    fs: float
+    unit: str
+    level: float
+    targets: tuple[PlanTarget, ...]
+    lengths: np.ndarray
+    precision: dict[str, np.ndarray]
+    required: dict[str, int | None]
+    tables: tuple[IeeeTable, ...] = field(repr=False)
+    caveats: tuple[str, ...] = ()
+
+    @property
+    def hours(self) -> np.ndarray:
+        """The lengths in hours."""
+        return self.lengths / self.fs / 3600.0
+
+    @property
+    def record_n(self) -> int | None:
+        """The length meeting every target (samples), None when one cannot be met."""
+        if not self.required:
+            return None
+        vals = list(self.required.values())
+        return None if any(v is None for v in vals) else max(v for v in vals if v is not None)
+
+    def table(self) -> str:
+        """Readable: the targets' required lengths, then the precision at each length."""
+        t0 = self.tables[-1]  # the longest tabulated
+        lines = [
+            f"Run plan for {self.model.spec(values=True)} at {self.fs:g} Hz"
+            + (f" ({self.unit})" if self.unit else ""),
+            f"  efficient GMWM, asymptotic {100 * self.level:g} % intervals",
+        ]
+        for t in self.targets:
+            n = self.required.get(t.key)
+            if n is None:
+                got = f"not reached within {_hours_text(self.lengths[-1] / self.fs)}"
+            else:
+                got = f"{_hours_text(n / self.fs)} ({n} samples)"
+            lines.append(f"  {str(t):<22} needs {got}")
+        lines += [f"  caution: {c}" for c in self.caveats]
+        keys = [k for k in self.precision if np.isfinite(self.precision[k]).any()]
+        head = "  length        " + "".join(f"{k:>11}" for k in keys)
+        lines += ["", "  precision (half-width of the interval, % of the value):", head]
+        for i, n in enumerate(self.lengths):
+            row = "".join(_pct(self.precision[k][i]) for k in keys)
+            lines.append(f"  {_hours_text(n / self.fs):<14}{row}")
+        vals = [
+            f"{k} = {q.datasheet_value:.4g} {q.datasheet_unit}"
+            for k, q in t0.quantities.items()
+            if k in keys
+        ]
+        lines += ["", "  values: " + ", ".join(vals)]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (``gmwm plan --json``)."""
+
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        t0 = self.tables[-1]
+        return {
+            "model": self.model.spec(values=True),
+            "fs": self.fs,
+            "unit": self.unit,
+            "level": self.level,
+            "targets": [
+                {
+                    "key": t.key,
+                    "within": t.rel,
+                    "samples": self.required.get(t.key),
+                    "hours": (
+                        None
+                        if self.required.get(t.key) is None
+                        else float(self.required[t.key] or 0) / self.fs / 3600.0  # type: ignore[operator]
+                    ),
+                }
+                for t in self.targets
+            ],
+            "record_samples": self.record_n,
+            "caveats": list(self.caveats),
+            "lengths": [int(n) for n in self.lengths],
+            "hours": [float(h) for h in self.hours],
+            "precision": {k: [num(v) for v in a] for k, a in self.precision.items()},
+            "values": {
+                k: {
+                    "value": q.value,
+                    "unit": q.unit,
+                    "datasheet_value": q.datasheet_value,
+                    "datasheet_unit": q.datasheet_unit,
+                }
+                for k, q in t0.quantities.items()
+            },
+        }
+
+
+def _pct(p: float) -> str:
+    """A precision as a table cell: '-' without an interval, '>999%' when uninformative."""
+    if not math.isfinite(p):
+        return f"{'-':>11}"
+    return f"{'>999%':>11}" if p >= 9.99 else f"{100 * p:>10.3g}%"
+
+
+def _hours_text(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.3g} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.3g} min"
+    return f"{seconds / 3600:.3g} h"
+
+
+def plan_run(
+    model: Model | str,
+    fs: float,
+    targets: str | tuple[PlanTarget, ...] = "",
+    *,
+    unit: str = "",
+    level: float = 0.95,
+    lengths: np.ndarray | list[int] | None = None,
+    max_hours: float = 1000.0,
+) -> RunPlan:
+    """How long to record: the precision of every IEEE quantity against the log length.
+
+    Parameters
+    ----------
+    model : Model or str
+        The sensor's model with every value set (from a datasheet, a fit, a pilot log).
+    fs : float
+        Sampling frequency (Hz).
+    targets : str or tuple of PlanTarget
+        E.g. ``"K within 10 %, N within 2 %, B within 20 %"`` (:func:`parse_targets`).
+    unit : str
+        Signal unit, for the datasheet units (``deg/s``, ``m/s^2`` ...).
+    level : float
+        Level of the intervals the targets speak of.
+    lengths : array of int, optional
+        Lengths (samples) to tabulate; default a doubling grid of durations from 1 min to
+        ``max_hours``.
+    max_hours : float
+        The longest log considered when searching a target's length.
+
+    Returns
+    -------
+    RunPlan
+
+    Examples
+    --------
+    A tactical-grade gyro (ARW 0.01 deg/sqrt(h), RRW 0.1 deg/h/sqrt(h)) at 200 Hz:
+
+    >>> import engine as eg
+    >>> m = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(200.0, "deg/s")
+    >>> p = plan_run(m, 200.0, "K within 10 %, N within 1 %", unit="deg/s")
+    >>> print(f"{p.required['K'] / 200 / 3600:.2g} h; {p.required['N'] / 200 / 60:.2g} min")
+    """
+    m = _valued(model)
+    fs = float(fs)
+    if not (math.isfinite(fs) and fs > 0):
+        raise ValueError(f"fs must be a positive number of Hz, got {fs}")
+    tg = parse_targets(targets) if isinstance(targets, str) else tuple(targets)
+    n_max = int(max_hours * 3600 * fs)
+    cache: dict[int, IeeeTable] = {}
+
+    def table(n: int) -> IeeeTable:
+        if n not in cache:
+            cache[n] = plan_precision(m, fs, n, unit=unit, level=level)
+        return cache[n]
+
+    longest = table(max(64, n_max))
+    keys = [k for k in _PLANNED if k in longest]
+    # the bias instability planned for is the model's own floor (as the longest log sees it):
+    # a shorter log whose scales end before it sees another minimum (a GM's bump, or the
+    # edge), which is not the quantity asked for
+    floor_tau = {k: longest[k].tau_s for k in ("B", "ADEV_min") if k in longest}
+
+    def rel(tb: IeeeTable, key: str) -> float:
+        if key in floor_tau and not math.isclose(tb[key].tau_s, floor_tau[key], rel_tol=1e-6):
+            return math.nan
+        return _rel(tb, key)
+
+    required: dict[str, int | None] = {}
+    for t in tg:
+        if t.key not in keys:
+            raise ValueError(
+                f"target {t}: the model {m.spec()} has no {t.key} "
+                f"({IEEE_KEYS[t.key]}); the model's quantities: {', '.join(keys)}"
+            )
+        required[t.key] = _shortest(lambda n, k=t.key: rel(table(n), k), t.rel, n_max)
+    if lengths is None:
+        longest = max([4 * n for n in required.values() if n is not None], default=0)
+        top = min(n_max, max(longest, int(3600 * fs)))
+        secs = 60.0 * 2.0 ** np.arange(0, 64)
+        grid = np.unique(np.round(secs[secs * fs <= top] * fs).astype(np.int64))
+        grid = grid[grid >= 64] if grid.size else np.array([min(top, 64)], dtype=np.int64)
+    else:
+        grid = np.unique(np.asarray(lengths, dtype=np.int64))
+    if grid.size == 0 or grid[0] < 16:
+        raise ValueError("plan_run needs lengths of at least 16 samples")
+    tables = tuple(table(int(n)) for n in grid)
+    precision = {k: np.array([rel(tb, k) for tb in tables]) for k in keys}
+    caveats = tuple(_caveats(m, fs, tg, required))
+    return RunPlan(m, fs, unit, float(level), tg, grid, precision, required, tables, caveats)
+
+
+def _caveats(
+    m: Model, fs: float, targets: tuple[PlanTarget, ...], required: dict[str, int | None]
+) -> list[str]:
+    """Targets met by a log shorter than :data:`SPAN_GM` correlation times of a GM/AR1."""
+    tcs = []
+    for lab, p in zip(m.labels, m.processes, strict=True):
+        phi = p.nl_value(fs) if p.nonlinear is not None else None
+        if phi is not None and 0.0 < phi < 1.0:
+            tcs.append((-1.0 / math.log(phi) / fs, lab))
+    if not tcs:
+        return []
+    tc, lab = max(tcs)
+    out = []
+    for t in targets:
+        n = required.get(t.key)
+        if n is not None and n / fs < SPAN_GM * tc:
+            out.append(
+                f"{t} is met by {_hours_text(n / fs)}, less than {SPAN_GM:g} correlation times "
+                f"of {lab} ({_hours_text(tc)}): the asymptotic plan is optimistic there (the "
+                f"spread can be 1.5x the plan's); record at least {_hours_text(SPAN_GM * tc)}"
+            )
+    return out
+
+
+def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | None:
+    """The shortest length (samples) with ``prec(n) <= rel``, to about 2 %: a x4 search from
+    64 samples, a power-law interpolation between the two lengths that bracket the target,
+    then steps of 2 % up until it holds (precision falls with the length)."""
+
+    def ok(n: int) -> bool:
+        p = prec(n)
+        return math.isfinite(p) and p <= rel
+
+    lo, hi = 0, 64
+    while not ok(hi):
+        if hi >= n_max:
+            return None
+        lo, hi = hi, min(4 * hi, n_max)
+    if lo == 0:
+        return hi
+    p_lo, p_hi = prec(lo), prec(hi)
+    n = hi
+    if math.isfinite(p_lo) and p_lo > rel and p_hi > 0:
+        slope = math.log(p_hi / p_lo) / math.log(hi / lo)
+        if slope < 0:
+            n = int(math.ceil(lo * (rel / p_lo) ** (1.0 / slope)))
+            n = min(max(n, lo + 1), hi)
+    while n < hi and not ok(n):
+        n = min(hi, int(math.ceil(n * 1.02)))
+    return n

@@ -1,0 +1,201 @@
+"""The "Plan" tab: how long to record, for the session's fitted model.
+
+From the Fit tab's fit (its model, fs and unit) the tab plans a run
+(:func:`engine.plan_run`): the precision of every IEEE quantity against the log length, drawn
+on log-log axes with the current log's length as a vertical line and each target as a
+horizontal one, and a sentence per target: the length it needs, and what the current log
+gives. A lecturer types ``K within 10 %`` over a 20-minute log and the class sees why it
+cannot give a rate random walk. Guide: ``docs/planning.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import panel as pn
+import param
+from bokeh.models import ColumnDataSource, Legend, LegendItem, Span
+
+import engine as eg
+from engine.inference import parse_targets, plan_precision
+
+from . import views
+from .state import AppState
+from .tab_view import TabView
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .jobs import Jobs
+
+__all__ = ["PlanView", "plan_sentences"]
+
+#: Colours of the quantities' curves.
+COLORS = {
+    "N": "#1F77B4",
+    "B": "#2CA02C",
+    "ADEV_min": "#98DF8A",
+    "K": "#D62728",
+    "Q": "#9467BD",
+    "R": "#8C564B",
+}
+DEFAULT_TARGETS = "K within 20 %, N within 2 %, B within 20 %"
+NOTE = (
+    "The precision (half-width of the 95 % interval, in % of the value) that an efficient "
+    "GMWM fit of the Fit tab's model reaches at each log length, from its asymptotic "
+    "covariance (no simulation). The dashed line is this log's length. Targets: e.g. "
+    "`K within 10 %, N within 2 %` (N = ARW/VRW, B = bias instability, K = rate random walk)."
+)
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.3g} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.3g} min"
+    return f"{seconds / 3600:.3g} h"
+
+
+def plan_sentences(plan: eg.RunPlan, n_log: int) -> list[str]:
+    """One sentence per target: the length it needs, and what a log of ``n_log`` samples gives.
+
+    Parameters
+    ----------
+    plan : RunPlan
+        The plan.
+    n_log : int
+        Length of the session's log (samples); 0 when unknown.
+    """
+    out = []
+    now = plan_precision(plan.model, plan.fs, n_log, unit=plan.unit) if n_log >= 16 else None
+    for t in plan.targets:
+        n = plan.required.get(t.key)
+        need = (
+            f"needs {_duration(n / plan.fs)} of log"
+            if n is not None
+            else f"is not reached within {_duration(plan.lengths[-1] / plan.fs)}"
+        )
+        have = ""
+        q = now.get(t.key) if now is not None else None
+        if q is not None and q.has_interval and q.value > 0:
+            rel = max(q.high / q.value - 1.0, 1.0 - q.low / q.value)
+            gives = f"+-{100 * rel:.3g} %" if rel < 9.99 else "no usable value (beyond a factor 10)"
+            have = f"; this log ({_duration(n_log / plan.fs)}) gives {gives}"
+        out.append(f"**{t}** {need}{have}.")
+    return out
+
+
+class PlanView(TabView):
+    """Widgets, figure and callbacks of the "Plan" tab of one session.
+
+    Attributes
+    ----------
+    plan : RunPlan or None
+        What is drawn.
+    """
+
+    slug = "plan"
+
+    def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
+        super().__init__(state, jobs, **params)
+        self.plan: eg.RunPlan | None = None
+        self.targets = pn.widgets.TextInput(
+            label="Targets (95 % intervals)",
+            value=DEFAULT_TARGETS,
+            width=420,
+            css_classes=["gmwm-plan-targets"],
+        )
+        self.targets.param.watch(lambda _e: self.refresh(force=True), "value")
+        self.status = pn.pane.Markdown(
+            "", sizing_mode="stretch_width", margin=(0, 10), css_classes=["gmwm-plan-status"]
+        )
+        self.source = ColumnDataSource({"hours": [], **{k: [] for k in COLORS}}, name="plan_src")
+        self.figure = views.log_figure(
+            "plan_precision", "Precision against log length", 420, "log length [h]"
+        )
+        self.figure.yaxis.axis_label = "half-width of the 95 % interval [% of the value]"
+        self.figure.xaxis.axis_label = "log length [h]"
+        items = []
+        for key, color in COLORS.items():
+            r = self.figure.line("hours", key, source=self.source, line_color=color, line_width=2)
+            items.append(LegendItem(label=key, renderers=[r]))
+        self.figure.add_layout(
+            Legend(
+                items=items, location="top_right", click_policy="hide", background_fill_alpha=0.7
+            )
+        )
+        self.now_line = Span(
+            location=1.0, dimension="height", line_dash="dashed", line_color="#444", visible=False
+        )
+        self.figure.add_layout(self.now_line)
+        # one horizontal line per quantity, shown where it has a target
+        self.target_lines = {
+            key: Span(
+                location=1.0,
+                dimension="width",
+                line_color=color,
+                line_dash="dotted",
+                line_width=1.5,
+                visible=False,
+            )
+            for key, color in COLORS.items()
+        }
+        for span in self.target_lines.values():
+            self.figure.add_layout(span)
+        self.panel[:] = [
+            pn.pane.Markdown(NOTE, margin=(0, 10), styles={"font-size": "13px", "color": "#444"}),
+            self.targets,
+            self.message,
+            self.status,
+            pn.pane.Bokeh(self.figure, sizing_mode="stretch_width"),
+        ]
+        self.refresh()
+
+    @param.depends("state.result", "state.n", watch=True)
+    def _on_state(self) -> None:
+        """The Fit tab's fit, or the log's length, changed."""
+        super()._on_state()
+
+    def _draw(self, force: bool) -> None:
+        res = self.state.result
+        if res is None or not res.model.is_set:
+            self.show_message(
+                ["Fit a model on the Fit tab first: the plan is made for it."], level="info"
+            )
+            self.status.object = ""
+            return
+        try:
+            targets = parse_targets(self.targets.value)
+        except ValueError as e:
+            self.show_message([str(e)], level="warning")
+            return
+        self.show_message([])
+        model, fs, unit, n_log = res.model, res.fs, res.wv.unit, int(self.state.n or res.wv.n)
+        self.status.object = "Planning ..."
+
+        def work() -> tuple[eg.RunPlan, list[str]]:
+            plan = eg.plan_run(model, fs, targets, unit=unit)
+            return plan, plan_sentences(plan, n_log)
+
+        self._compute(work, lambda out: self._apply(out, n_log), key="plan")
+
+    def _apply(self, out: tuple[eg.RunPlan, list[str]], n_log: int) -> None:
+        plan, sentences = out
+        self.plan = plan
+        data: dict[str, Any] = {"hours": list(plan.hours)}
+        for key in COLORS:
+            p = plan.precision.get(key)
+            vals = np.full(plan.lengths.size, np.nan) if p is None else 100.0 * np.asarray(p)
+            data[key] = [v if math.isfinite(v) and v < 1000.0 else math.nan for v in vals]
+        self.source.data = data
+        self.now_line.location = n_log / plan.fs / 3600.0
+        self.now_line.visible = n_log > 0
+        rel = {t.key: t.rel for t in plan.targets}
+        for key, span in self.target_lines.items():
+            span.visible = key in rel
+            span.location = 100.0 * rel.get(key, 0.01)
+        self.status.object = "  \n".join(sentences)
+
+    def _failed(self, err: BaseException) -> None:
+        self.status.object = ""
+        self.show_message([f"Could not plan: {err}"], level="danger")
