@@ -207,9 +207,13 @@ def run_fleet(
     except (DatasheetError, ReportError) as e:
         raise CliError(str(e)) from None
     write_atomic(args.report, page)
+    verdicts: dict[str, int] = {}
+    for u in fleet.units:
+        verdicts[u.verdict] = verdicts.get(u.verdict, 0) + 1
     print(
         f"gmwm: batch: wrote {args.report} ({len(fleet.units)} units, "
-        f"{len(page.encode('utf-8')) / 1e6:.2f} MB)",
+        f"{len(page.encode('utf-8')) / 1e6:.2f} MB; verdicts: "
+        f"{', '.join(f'{n} {v}' for v, n in verdicts.items())})",
         file=sys.stderr,
     )
     return fleet.batch
