@@ -16,7 +16,6 @@ password (``--basic-auth FILE``) or an OAuth login (``--oauth-provider``, Panel'
 from __future__ import annotations
 
 import argparse
-import ipaddress
 import json
 import os
 import secrets
@@ -27,7 +26,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from gmwm_app.limits import UPLOAD_CHUNK_BYTES
+from gmwm_app.limits import MAX_MESSAGE_BYTES
+from gmwm_app.server_guard import is_loopback
 
 __all__ = [
     "main",
@@ -40,10 +40,10 @@ __all__ = [
 
 #: The address served on when ``--address`` is not given: this machine only.
 DEFAULT_ADDRESS = "localhost"
-#: Largest websocket message the server accepts (bytes): two upload chunks. An upload arrives
-#: in chunks of ``UPLOAD_CHUNK_BYTES`` (one message each); every other message a page sends is
-#: small. Tornado refuses a larger message before buffering it.
-MAX_MESSAGE_BYTES = 2 * UPLOAD_CHUNK_BYTES
+
+
+#: Request headers never copied into a session's token (cookies are never copied either).
+TOKEN_EXCLUDED_HEADERS = ("Cookie", "Authorization", "Proxy-Authorization")
 
 
 class UsageError(ValueError):
@@ -163,18 +163,6 @@ def expected_host(args: argparse.Namespace, address: str) -> str | None:
     return f"{host}:{args.port}"
 
 
-def is_loopback(address: str) -> bool:
-    """Whether ``address`` is this machine's loopback interface only (``localhost``,
-    ``127.x.y.z``, ``::1``); the empty address and ``0.0.0.0`` mean every interface."""
-    a = address.strip().strip("[]").lower()
-    if a == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(a).is_loopback
-    except ValueError:  # a host name: it may resolve to a network interface
-        return False
-
-
 def read_password_file(path: str | os.PathLike[str]) -> str | dict[str, str]:
     """The password(s) of ``--basic-auth FILE``: its first line, or a JSON object mapping
     user names to passwords.
@@ -275,6 +263,10 @@ def server_options(args: argparse.Namespace) -> dict[str, Any]:
     opts: dict[str, Any] = {
         "address": address,
         "websocket_max_message_size": MAX_MESSAGE_BYTES,
+        # the session token is embedded in the page, readable by its scripts: it carries no
+        # cookie (the HttpOnly login cookie stays HttpOnly) and no credential header
+        "include_cookies": [],
+        "exclude_headers": list(TOKEN_EXCLUDED_HEADERS),
     }
     if origins:
         opts["websocket_origin"] = origins
@@ -351,7 +343,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     import panel as pn
 
+    from gmwm_app import server_guard
     from gmwm_app.server import create_application, default_prebuild
+
+    server_guard.install(opts.get("websocket_origin", ()), args.port, login="basic_auth" in opts)
 
     def pool_full(n: int) -> None:
         print(f"gmwm-app: {n} pages ready ahead (process {os.getpid()})", file=sys.stderr)

@@ -16,6 +16,7 @@ from pathlib import Path
 __all__ = [
     "DEFAULT_MAX_UPLOAD_MB",
     "UPLOAD_CHUNK_BYTES",
+    "MAX_MESSAGE_BYTES",
     "ServerLimits",
     "configure",
     "current",
@@ -30,6 +31,12 @@ DEFAULT_MAX_UPLOAD_MB = 200.0
 #: An upload reaches the server in chunks of this many bytes, one websocket message each
 #: (:class:`gmwm_app.upload.BoundedFileDropper`); ``gmwm-app`` refuses larger messages.
 UPLOAD_CHUNK_BYTES = 8_000_000
+#: Largest message a browser may send the server (bytes): two upload chunks. An upload arrives
+#: in chunks of ``UPLOAD_CHUNK_BYTES`` (one message each); every other message a page sends is
+#: small. It bounds each websocket message (Tornado refuses a larger one before buffering it),
+#: all the websocket messages of one Bokeh message together, and the decompressed size of the
+#: inline compressed values of one message (:func:`gmwm_app.server_guard.bound_messages`).
+MAX_MESSAGE_BYTES = 2 * UPLOAD_CHUNK_BYTES
 
 _REPO = Path(__file__).resolve().parents[1]
 
