@@ -22,6 +22,7 @@ __all__ = [
     "current",
     "default_data_dirs",
     "check_path",
+    "public_path",
     "check_upload_size",
     "upload_refusal",
 ]
@@ -94,14 +95,26 @@ def current() -> ServerLimits:
 
 
 def check_path(path: str | os.PathLike[str]) -> Path:
-    """``path`` (``~`` expanded), if it lies in a configured folder; else ValueError.
+    """The server file ``path`` names (``~`` expanded), if it lies in a configured folder;
+    else ValueError.
 
-    The message names the path as given and lists no folder of the server (a page's user
-    learns nothing of the server's files from it)."""
+    A relative path is looked up in each configured folder in turn (as :func:`public_path`
+    names files), then in the current directory; the single files allowed besides are also
+    found by their name. The message names the path as given and lists no folder of the
+    server; whether the path exists is checked after, so that a page's user learns nothing
+    of the server's files outside the folders."""
     p = Path(path).expanduser()
     lim = _LIMITS
     if lim.data_dirs is None:
         return p
+    if not p.is_absolute():
+        for d in lim.data_dirs:
+            q = (d / p).resolve()
+            if q.is_relative_to(d) and q.exists():
+                return d / p
+        for f in lim.allowed_files:
+            if f.name == os.fspath(path):
+                return f
     r = p.resolve()
     if r in lim.allowed_files or any(r.is_relative_to(d) for d in lim.data_dirs):
         return p
@@ -110,6 +123,21 @@ def check_path(path: str | os.PathLike[str]) -> Path:
         "the server's data folders can be opened by path; upload the file instead (or, on "
         "the server, start gmwm-app with --data-dir FOLDER)"
     )
+
+
+def public_path(path: str | os.PathLike[str]) -> str:
+    """How a server file is named to the page's user (links, downloaded sessions): relative
+    to the configured folder that holds it, or its name for a single allowed file, so that
+    the server's folders are never shown; :func:`check_path` finds it again from that name.
+    Without configured folders (a local app), the absolute path."""
+    r = Path(path).expanduser().resolve()
+    lim = _LIMITS
+    if lim.data_dirs is None:
+        return str(r)
+    for d in lim.data_dirs:
+        if r.is_relative_to(d):
+            return r.relative_to(d).as_posix()
+    return r.name
 
 
 def upload_refusal(name: str, n_bytes: int, at_least: bool = False) -> str:

@@ -28,9 +28,11 @@ import json
 import re
 import time
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from test_app_server import _gmwm_app, _login, _request
 
@@ -258,6 +260,7 @@ def test_dns_rebinding_is_refused(tmp_path: Path) -> None:
             assert _request(port, "GET", "/", headers={"Host": host}).status == 200
         # a token obtained by a good page does not open a websocket from the foreign name
         token = _token(_request(port, "GET", "/").body)  # type: ignore[attr-defined]
+
         async def ws_from(host: str) -> Any:
             ws = await _open_ws(port, token, host=host)
             ws.close()
@@ -311,3 +314,91 @@ def urllib_unquote(s: str) -> str:
     from urllib.parse import unquote_plus
 
     return unquote_plus(s)
+
+
+# ---------------------------------------------------------------------------------------------
+# what a page learns of the server's files
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture
+def data_folder(tmp_path: Path) -> Iterator[Path]:
+    """A configured data folder holding a small CSV log; limits back to default after."""
+    from gmwm_app import limits
+
+    d = tmp_path / "class-data"
+    d.mkdir()
+    x = np.random.default_rng(3).normal(size=4000)
+    np.savetxt(d / "run1.csv", x[:, None], header="gyro_x", comments="")
+    limits.configure(data_dirs=[d])
+    yield d
+    limits.configure()
+
+
+def _session_for(data_path: str) -> str:
+    doc = {
+        "schema": "gmwm-session/1",
+        "data": {"path": data_path, "load": {}, "fingerprint": None},
+        "channels": {},
+        "app": {"source": "path", "channel": "gyro_x"},
+    }
+    return json.dumps(doc)
+
+
+def test_restore_does_not_tell_whether_a_server_path_exists(data_folder: Path) -> None:
+    from engine.session import SCHEMA
+    from gmwm_app import session_view as sv
+
+    existing, missing = "/etc/hostname", "/etc/no-such-file-gmwm"
+    assert Path(existing).exists() and not Path(missing).exists()
+    answers = []
+    for p in (existing, missing):
+        plan = sv.prepare_restore(_session_for(p).replace("gmwm-session/1", SCHEMA))
+        assert plan.loaded is None and len(plan.problems) == 1
+        answers.append(plan.problems[0].replace(p, "PATH"))
+    assert answers[0] == answers[1], answers  # the same words, existing or not
+    assert "outside the folders" in answers[0]
+
+
+def test_downloaded_session_names_the_file_relative_to_its_data_folder(
+    data_folder: Path,
+) -> None:
+    from gmwm_app import session_view as sv
+    from gmwm_app.state import AppState
+
+    s = AppState()
+    assert s.load_path(data_folder / "run1.csv"), s.error
+    assert s.set_model("WN")
+    text = sv.session_json(s)
+    assert str(data_folder) not in text and str(data_folder.parent) not in text
+    doc = json.loads(text)
+    assert doc["data"]["path"] == "run1.csv" and doc["data"]["fingerprint"] is not None
+    # restored on the same server from that name: the same file, fingerprint matched
+    plan = sv.prepare_restore(text, "s.json")
+    assert plan.problems == [] and plan.notes == [] and plan.loaded is not None
+    other = AppState()
+    assert sv.apply_restore(other, plan), other.error
+    assert other.model.spec() == "WN" and other.filename == "run1.csv"
+
+
+@pytest.mark.real_data
+def test_downloaded_session_of_a_real_log(real_data: Path) -> None:
+    from gmwm_app import limits
+    from gmwm_app import session_view as sv
+    from gmwm_app.state import AppState
+
+    limits.configure(data_dirs=[real_data])
+    try:
+        s = AppState()
+        assert s.load_path("mtig_cont_imu1.h5"), s.error  # by its name in the data folder
+        assert s.set_model("WN+RW")
+        text = sv.session_json(s)
+        assert str(real_data.resolve()) not in text
+        assert json.loads(text)["data"]["path"] == "mtig_cont_imu1.h5"
+        plan = sv.prepare_restore(text, "s.json")
+        assert plan.problems == [] and plan.notes == []
+        other = AppState()
+        assert sv.apply_restore(other, plan), other.error
+        assert other.model.spec() == "WN+RW" and other.channel == "gyro_x"
+        assert other.result is not None and s.result is not None
+        assert other.result.objective == pytest.approx(s.result.objective, rel=1e-9)
+    finally:
+        limits.configure()
