@@ -1,6 +1,6 @@
 """``gmwm-app [FILE] [--port N] [--address A] [--allow-websocket-origin HOST:PORT] [--no-show]
-[--max-upload-mb N] [--data-dir DIR] [--basic-auth FILE] [--cookie-secret S] [--num-procs N]
-[--prebuild N]``.
+[--max-upload-mb N] [--max-candidates N] [--session-jobs N] [--data-dir DIR] [--basic-auth FILE]
+[--cookie-secret S] [--num-procs N] [--prebuild N]``.
 
 Serve the GMWM app.
 
@@ -88,6 +88,22 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="refuse uploads larger than N MB (default 200), while they arrive",
+    )
+    p.add_argument(
+        "--max-candidates",
+        type=int,
+        default=None,
+        metavar="N",
+        help="candidate models one ranking (Model selection tab) may fit (default 128; "
+        "3*GM+WN+QN+RW+DR has 63, 20*GM+WN+QN+RW+DR 335)",
+    )
+    p.add_argument(
+        "--session-jobs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="computations of one session running at once in the shared worker threads "
+        "(default 2; its others wait their turn)",
     )
     p.add_argument(
         "--data-dir",
@@ -335,8 +351,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    for flag, value in (
+        ("--max-candidates", args.max_candidates),
+        ("--session-jobs", args.session_jobs),
+    ):
+        if value is not None and value < 1:
+            print(f"gmwm-app: error: {flag} must be at least 1, got {value}", file=sys.stderr)
+            return 2
     limits.configure(
-        max_upload_mb=args.max_upload_mb, data_dirs=dirs, allowed_files=[path] if path else ()
+        max_upload_mb=args.max_upload_mb,
+        data_dirs=dirs,
+        allowed_files=[path] if path else (),
+        max_candidates=args.max_candidates,
+        session_jobs=args.session_jobs,
     )
     for note in _notes(args, opts):
         print(note, file=sys.stderr)

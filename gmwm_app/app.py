@@ -226,6 +226,7 @@ class GMWMApp(pn.viewable.Viewer):
             multiple=False, layout="compact", sizing_mode="stretch_width", height=90
         )
         self.upload.param.watch(self._on_upload, "value")
+        self.jobs.on_close(self.upload.drop_partial)  # no partial upload outlives its session
         self.upload.param.watch(self._on_upload_refused, "refused")
         self.path_input = pn.widgets.TextInput(
             label="Log file on the server",

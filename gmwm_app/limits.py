@@ -24,6 +24,9 @@ __all__ = [
     "check_path",
     "public_path",
     "check_upload_size",
+    "check_candidates",
+    "DEFAULT_MAX_CANDIDATES",
+    "DEFAULT_SESSION_JOBS",
     "upload_refusal",
 ]
 
@@ -42,15 +45,25 @@ MAX_MESSAGE_BYTES = 2 * UPLOAD_CHUNK_BYTES
 _REPO = Path(__file__).resolve().parents[1]
 
 
+#: Candidate models one ranking may fit (the Model selection tab), when none is configured.
+DEFAULT_MAX_CANDIDATES = 128
+#: Computations of one session that may occupy the shared worker threads at once.
+DEFAULT_SESSION_JOBS = 2
+
+
 @dataclass(frozen=True)
 class ServerLimits:
     """``max_upload_mb``: largest upload (MB, 1 MB = 1e6 bytes); ``data_dirs``: folders that
     server paths must lie in (None: any path); ``allowed_files``: single files allowed besides
-    (the ``gmwm-app FILE`` argument)."""
+    (the ``gmwm-app FILE`` argument); ``max_candidates``: candidate models one ranking may
+    fit; ``session_jobs``: computations of one session running at once in the shared worker
+    threads (the others wait their turn, so that no session takes every thread)."""
 
     max_upload_mb: float = DEFAULT_MAX_UPLOAD_MB
     data_dirs: tuple[Path, ...] | None = None
     allowed_files: tuple[Path, ...] = ()
+    max_candidates: int = DEFAULT_MAX_CANDIDATES
+    session_jobs: int = DEFAULT_SESSION_JOBS
 
     @property
     def max_upload_bytes(self) -> int:
@@ -74,18 +87,26 @@ def configure(
     max_upload_mb: float | None = None,
     data_dirs: Iterable[str | os.PathLike[str]] | None = None,
     allowed_files: Iterable[str | os.PathLike[str]] = (),
+    max_candidates: int | None = None,
+    session_jobs: int | None = None,
 ) -> ServerLimits:
     """Set the limits of this process (every session); returns them.
 
-    ``data_dirs=None`` lifts the folder restriction; ``max_upload_mb=None`` keeps the default.
+    ``data_dirs=None`` lifts the folder restriction; ``None`` for a number keeps its default.
     """
     global _LIMITS
     mb = DEFAULT_MAX_UPLOAD_MB if max_upload_mb is None else float(max_upload_mb)
     if not mb > 0:
         raise ValueError(f"the upload limit must be a positive number of MB, got {max_upload_mb}")
+    cands = DEFAULT_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    jobs = DEFAULT_SESSION_JOBS if session_jobs is None else int(session_jobs)
+    if cands < 1 or jobs < 1:
+        raise ValueError(
+            f"the candidate and job limits must be at least 1, got {max_candidates}, {session_jobs}"
+        )
     dirs = None if data_dirs is None else tuple(Path(d).expanduser().resolve() for d in data_dirs)
     files = tuple(Path(f).expanduser().resolve() for f in allowed_files)
-    _LIMITS = ServerLimits(mb, dirs, files)
+    _LIMITS = ServerLimits(mb, dirs, files, cands, jobs)
     return _LIMITS
 
 
@@ -158,3 +179,15 @@ def check_upload_size(n_bytes: int, name: str = "") -> None:
     """ValueError when an upload of ``n_bytes`` is larger than the configured limit."""
     if n_bytes > _LIMITS.max_upload_bytes:
         raise ValueError(upload_refusal(name, n_bytes))
+
+
+def check_candidates(n: int, spec: str) -> None:
+    """ValueError when a ranking of ``spec`` would fit ``n`` candidate models, more than the
+    configured :attr:`ServerLimits.max_candidates`."""
+    most = _LIMITS.max_candidates
+    if n > most:
+        raise ValueError(
+            f"{spec} has {n} candidate models; this server ranks at most {most} at once: rank "
+            "a smaller maximal model (fewer GM terms) or list the candidates separated by "
+            "commas (or, on the server, start gmwm-app with a larger --max-candidates)"
+        )
