@@ -133,8 +133,10 @@ class Jobs:
         if self.served:
             self.doc.on_session_destroyed(self._session_ended)
 
-    def _session_ended(self, _context: Any = None) -> None:
-        """The session ended: start nothing more, stop the jobs that can stop."""
+    def _session_ended(self, session_context: Any) -> None:
+        """The session ended (Bokeh's session-destroyed callback, whose signature Bokeh
+        checks: one argument named ``session_context``): start nothing more, stop the jobs
+        that can stop."""
         self.closed = True
         for fn in self._on_close:
             try:

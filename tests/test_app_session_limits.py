@@ -130,7 +130,7 @@ def test_superseded_and_orphaned_jobs_do_not_run(default_limits: None) -> None:
             j2._background(None, 2, lambda: work("y"), lambda _o: None, None, None)
         )
         await asyncio.sleep(0.02)
-        j2._session_ended()
+        j2._session_ended(None)
         await asyncio.gather(first, queued)
 
     asyncio.run(main2())
@@ -143,7 +143,7 @@ def test_the_ranking_stops_when_its_session_ends(app: Any) -> None:
     """The Model selection view's cancel event is one the session's end sets."""
     view = app.open_view("Model selection")
     assert not view._cancel.is_set()
-    app.jobs._session_ended()
+    app.jobs._session_ended(None)
     assert view._cancel.is_set()
 
 
@@ -203,7 +203,7 @@ def test_unfinished_uploads_are_bounded(monkeypatch: pytest.MonkeyPatch) -> None
 def test_app_drops_its_partial_upload_when_the_session_ends(app: Any) -> None:
     app.upload._process_event(_chunk("big.csv", 1, 3, bytes(5000)))
     assert app.upload.held_bytes() == 5000
-    app.jobs._session_ended()
+    app.jobs._session_ended(None)
     assert app.upload.held_bytes() == 0
 
 
