@@ -1,6 +1,6 @@
 """``gmwm-app [FILE] [--port N] [--address A] [--allow-websocket-origin HOST:PORT] [--no-show]
-[--max-upload-mb N] [--data-dir DIR] [--basic-auth FILE] [--cookie-secret S] [--num-procs N]
-[--prebuild N]``.
+[--max-upload-mb N] [--max-candidates N] [--session-jobs N] [--data-dir DIR] [--basic-auth FILE]
+[--cookie-secret S] [--num-procs N] [--prebuild N]``.
 
 Serve the GMWM app.
 
@@ -16,7 +16,6 @@ password (``--basic-auth FILE``) or an OAuth login (``--oauth-provider``, Panel'
 from __future__ import annotations
 
 import argparse
-import ipaddress
 import json
 import os
 import secrets
@@ -27,7 +26,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from gmwm_app.limits import UPLOAD_CHUNK_BYTES
+from gmwm_app.limits import MAX_MESSAGE_BYTES
+from gmwm_app.server_guard import is_loopback
 
 __all__ = [
     "main",
@@ -40,10 +40,10 @@ __all__ = [
 
 #: The address served on when ``--address`` is not given: this machine only.
 DEFAULT_ADDRESS = "localhost"
-#: Largest websocket message the server accepts (bytes): two upload chunks. An upload arrives
-#: in chunks of ``UPLOAD_CHUNK_BYTES`` (one message each); every other message a page sends is
-#: small. Tornado refuses a larger message before buffering it.
-MAX_MESSAGE_BYTES = 2 * UPLOAD_CHUNK_BYTES
+
+
+#: Request headers never copied into a session's token (cookies are never copied either).
+TOKEN_EXCLUDED_HEADERS = ("Cookie", "Authorization", "Proxy-Authorization")
 
 
 class UsageError(ValueError):
@@ -88,6 +88,22 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="refuse uploads larger than N MB (default 200), while they arrive",
+    )
+    p.add_argument(
+        "--max-candidates",
+        type=int,
+        default=None,
+        metavar="N",
+        help="candidate models one ranking (Model selection tab) may fit (default 128; "
+        "3*GM+WN+QN+RW+DR has 63, 20*GM+WN+QN+RW+DR 335)",
+    )
+    p.add_argument(
+        "--session-jobs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="computations of one session running at once in the shared worker threads "
+        "(default 2; its others wait their turn)",
     )
     p.add_argument(
         "--data-dir",
@@ -161,18 +177,6 @@ def expected_host(args: argparse.Namespace, address: str) -> str | None:
     if ":" in host and not host.startswith("["):
         host = f"[{host}]"  # an IPv6 address
     return f"{host}:{args.port}"
-
-
-def is_loopback(address: str) -> bool:
-    """Whether ``address`` is this machine's loopback interface only (``localhost``,
-    ``127.x.y.z``, ``::1``); the empty address and ``0.0.0.0`` mean every interface."""
-    a = address.strip().strip("[]").lower()
-    if a == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(a).is_loopback
-    except ValueError:  # a host name: it may resolve to a network interface
-        return False
 
 
 def read_password_file(path: str | os.PathLike[str]) -> str | dict[str, str]:
@@ -275,6 +279,10 @@ def server_options(args: argparse.Namespace) -> dict[str, Any]:
     opts: dict[str, Any] = {
         "address": address,
         "websocket_max_message_size": MAX_MESSAGE_BYTES,
+        # the session token is embedded in the page, readable by its scripts: it carries no
+        # cookie (the HttpOnly login cookie stays HttpOnly) and no credential header
+        "include_cookies": [],
+        "exclude_headers": list(TOKEN_EXCLUDED_HEADERS),
     }
     if origins:
         opts["websocket_origin"] = origins
@@ -343,15 +351,29 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    for flag, value in (
+        ("--max-candidates", args.max_candidates),
+        ("--session-jobs", args.session_jobs),
+    ):
+        if value is not None and value < 1:
+            print(f"gmwm-app: error: {flag} must be at least 1, got {value}", file=sys.stderr)
+            return 2
     limits.configure(
-        max_upload_mb=args.max_upload_mb, data_dirs=dirs, allowed_files=[path] if path else ()
+        max_upload_mb=args.max_upload_mb,
+        data_dirs=dirs,
+        allowed_files=[path] if path else (),
+        max_candidates=args.max_candidates,
+        session_jobs=args.session_jobs,
     )
     for note in _notes(args, opts):
         print(note, file=sys.stderr)
 
     import panel as pn
 
+    from gmwm_app import server_guard
     from gmwm_app.server import create_application, default_prebuild
+
+    server_guard.install(opts.get("websocket_origin", ()), args.port, login="basic_auth" in opts)
 
     def pool_full(n: int) -> None:
         print(f"gmwm-app: {n} pages ready ahead (process {os.getpid()})", file=sys.stderr)

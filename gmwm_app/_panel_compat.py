@@ -18,6 +18,8 @@ that an upgrade forces a re-check of what is here).
   session's ``Document`` in ``ApplicationContext.create_session_if_needed``, before any hook
   of the application runs; :func:`hand_over_sessions` gives that method a document built
   ahead when there is one for the request (also checked against :data:`BOKEH_VERSIONS`).
+* :func:`wrap_basic_login`: the login throttle of :mod:`gmwm_app.server_guard` around Panel's
+  basic-auth login page.
 
 On another Panel version :func:`supported` is False: the text patch is not applied and the
 server builds its pages on the loop, as Panel does (slower, never wrong).
@@ -27,9 +29,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import threading
 import weakref
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from functools import partial
 from typing import Any
 
@@ -49,6 +52,7 @@ __all__ = [
     "placeholder_session",
     "hand_over_sessions",
     "discard_document",
+    "wrap_basic_login",
 ]
 
 #: Panel versions whose internals this module was checked against.
@@ -287,3 +291,47 @@ def discard_document(doc: Any, context: Any) -> None:
         doc.destroy(None)
     finally:
         _on_session_destroyed(context)
+
+
+def wrap_basic_login(
+    wait_s: Callable[[str], float],
+    failed: Callable[[str], None],
+    succeeded: Callable[[str], None],
+) -> bool:
+    """Throttle Panel's basic-auth login page (``panel.auth.BasicLoginHandler``).
+
+    Before a login attempt, ``wait_s(client)`` (the client's address) says how long it must
+    still wait: while positive, the attempt is refused without checking the password (the
+    login page shows how long to wait). After the attempt, ``succeeded(client)`` when Panel
+    set the login cookie (its ``set_current_user``), else ``failed(client)``. Returns whether
+    it applied (False on another Panel version).
+    """
+    from panel.auth import BasicLoginHandler
+    from tornado.escape import url_escape
+
+    if not supported():
+        return False
+    post, set_user = BasicLoginHandler.post, BasicLoginHandler.set_current_user
+    if getattr(post, "_gmwm_throttled", False):
+        return True
+
+    def throttled_post(self: Any) -> Any:
+        client = str(self.request.remote_ip)
+        wait = wait_s(client)
+        if wait > 0:
+            msg = f"Too many failed logins from this address: try again in {math.ceil(wait)} s"
+            self.redirect(f"{self.request.path}?error={url_escape(msg)}")
+            return None
+        self._gmwm_logged_in = False
+        out = post(self)
+        (succeeded if self._gmwm_logged_in else failed)(client)
+        return out
+
+    def set_current_user(self: Any, user: Any) -> Any:
+        self._gmwm_logged_in = bool(user)
+        return set_user(self, user)
+
+    throttled_post._gmwm_throttled = True  # type: ignore[attr-defined]
+    BasicLoginHandler.post = throttled_post
+    BasicLoginHandler.set_current_user = set_current_user
+    return True

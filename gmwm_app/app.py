@@ -228,6 +228,7 @@ class GMWMApp(pn.viewable.Viewer):
             multiple=False, layout="compact", sizing_mode="stretch_width", height=90
         )
         self.upload.param.watch(self._on_upload, "value")
+        self.jobs.on_close(self.upload.drop_partial)  # no partial upload outlives its session
         self.upload.param.watch(self._on_upload_refused, "refused")
         self.still_only = pn.widgets.Checkbox(  # engine.io.segments: a flight's still parts
             label="Flight log: analyse its still segments only", value=False

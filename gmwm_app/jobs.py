@@ -7,6 +7,13 @@ applied with the session's document lock on the server loop, a failure is handed
 job's ``fail`` (an in-page message, never a traceback), a newer job of the same key
 supersedes a running one (the stale result is dropped), and :meth:`Jobs.cancel` drops a
 running job's result. Outside a server (tests, scripts) a job is waited for.
+
+Fair share: a session occupies at most ``session_jobs`` of the shared worker threads at once
+(:attr:`gmwm_app.limits.ServerLimits.session_jobs`); its other jobs wait their turn on the
+loop (not in a thread), and a job whose turn comes after a newer job of its key superseded
+it, or after its session ended, is skipped without running. When the session ends, the
+cancel events its views registered (:meth:`Jobs.abandon_on_close`) are set, so that a long
+job (a ranking) stops at its next step.
 """
 
 from __future__ import annotations
@@ -23,6 +30,8 @@ from typing import Any
 
 from panel.io.state import set_curdoc
 from panel.io.state import state as pn_state
+
+from gmwm_app.limits import current as current_limits
 
 __all__ = ["EXECUTOR", "Jobs", "ProgressThrottle", "lower_priority", "job_progress", "job_controls"]
 
@@ -117,6 +126,34 @@ class Jobs:
         self.failed: Callable[[str, BaseException], None] = _ignore
         self.settled: Callable[[], None] = _ignore
         self.install: Callable[[Any], None] = _ignore
+        self.closed = False  # the session ended: nothing more is started
+        self.skipped = 0  # jobs not run (superseded or session ended before their turn)
+        self._slots: asyncio.Semaphore | None = None
+        self._on_close: list[Callable[[], Any]] = []
+        if self.served:
+            self.doc.on_session_destroyed(self._session_ended)
+
+    def _session_ended(self, session_context: Any) -> None:
+        """The session ended (Bokeh's session-destroyed callback, whose signature Bokeh
+        checks: one argument named ``session_context``): start nothing more, stop the jobs
+        that can stop."""
+        self.closed = True
+        for fn in self._on_close:
+            try:
+                fn()
+            except Exception:  # the others still run
+                log.exception("a session-end callback failed")
+
+    def on_close(self, fn: Callable[[], Any]) -> None:
+        """Call ``fn()`` when the session ends (at once if it has ended)."""
+        self._on_close.append(fn)
+        if self.closed:
+            fn()
+
+    def abandon_on_close(self, event: threading.Event) -> threading.Event:
+        """Set ``event`` (a job's cancel event) when the session ends; returns it."""
+        self.on_close(event.set)
+        return event
 
     @property
     def served(self) -> bool:
@@ -261,7 +298,15 @@ class Jobs:
             if isinstance(work, Future):
                 out = await asyncio.wrap_future(work)
             else:
-                out = await asyncio.get_running_loop().run_in_executor(EXECUTOR, work)
+                if self._slots is None:  # this session's share of the worker threads
+                    self._slots = asyncio.Semaphore(current_limits().session_jobs)
+                async with self._slots:
+                    if self.closed or (key is not None and not self.current(key, ticket)):
+                        self.skipped += 1  # superseded, or nobody to show it to
+                        if done is not None and not self.closed:
+                            self.locked(done)
+                        return
+                    out = await asyncio.get_running_loop().run_in_executor(EXECUTOR, work)
         except asyncio.CancelledError:  # the session closed
             if done is not None:
                 self.locked(done)

@@ -65,7 +65,7 @@ class DependenceControls:
         self._safely = safely
         self.running = False
         self.result: DependenceTest | None = None
-        self._cancel = threading.Event()
+        self._cancel = jobs.abandon_on_close(threading.Event())  # stops when the session ends
         self._throttle = ProgressThrottle()  # at most ~10 updates a second
         self.replicates = pn.widgets.IntInput(
             label="Bootstrap replicates B", value=100, start=10, end=2000, step=10, width=170

@@ -18,6 +18,7 @@ import numpy as np
 
 import engine as eg
 from gmwm_app.data import message_of
+from gmwm_app.limits import check_candidates
 
 __all__ = ["Inference", "SelectionMixin", "N_INFERENCES"]
 
@@ -49,7 +50,7 @@ class SelectionMixin:
     ) -> tuple[eg.WaveletVariance, Any]:
         """Rank models by WVIC on the current WV: every sub-model of a maximal model
         (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
-        from engine.inference import rank_models
+        from engine.inference import rank_models, submodels
 
         wv = self.wv
         if wv is None:
@@ -62,8 +63,10 @@ class SelectionMixin:
             )
         try:
             if len(parts) == 1:
+                check_candidates(len(submodels(parts[0])), parts[0])
                 sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
             else:
+                check_candidates(len(parts), "the list")
                 sel = rank_models(wv, parts, weights=self.weights, progress=progress)
         except (eg.ModelError, eg.FitError) as e:
             raise ValueError(message_of(e)) from None

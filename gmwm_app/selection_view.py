@@ -196,7 +196,7 @@ class SelectionView(TabView):
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
         super().__init__(state, jobs, **params)
         self.running = False
-        self._cancel = threading.Event()
+        self._cancel = jobs.abandon_on_close(threading.Event())  # stops when the session ends
         self._shown_selection: Any = None
         self._compare_key: Any = None
         self._pending: set[int] = set()  # ids of fits whose inference is being computed

@@ -15,9 +15,10 @@ Two layers, like the rest of the app:
 from __future__ import annotations
 
 import io
+import json
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,7 +30,7 @@ from engine.formats import FORMATS, export
 from engine.session import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.export_preview import ExportPreview
-from gmwm_app.limits import check_path, check_upload_size
+from gmwm_app.limits import check_path, check_upload_size, public_path
 from gmwm_app.state import AppState, demo_path
 from gmwm_app.views import redraws
 
@@ -59,7 +60,7 @@ _GAP_MARK = "segment='longest'"
 # ---------------------------------------------------------------------------------------------
 def _data_path(state: AppState) -> str:
     if state.source == "path" and state.path:
-        return str(Path(state.path).resolve())
+        return str(check_path(state.path).resolve())
     if state.source == "demo":
         return str(demo_path().resolve())
     if state.source == "scenario":  # simulated again from its key and seed on restore
@@ -89,8 +90,9 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
     }
     if state.source == "scenario":
         app["scenario"] = state.path
-    return session_to_json(
-        data_path=_data_path(state),
+    data_path = _data_path(state)
+    text = session_to_json(
+        data_path=data_path,
         load=dict(load or {}),
         models=models,
         wvs=wvs,
@@ -98,6 +100,16 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
         app=app,
         fingerprint=state.source in ("path", "demo"),
     )
+    if state.source not in ("path", "demo"):
+        return text
+    # the file fingerprinted at its server path, named as the server's users know it
+    # (relative to its data folder, gmwm_app.limits.public_path): a downloaded session never
+    # carries the server's absolute path; restoring finds the file again from that name
+    doc = json.loads(text)
+    doc["data"]["path"] = public_path(data_path)
+    if "path" in doc["app"].get("query", {}):
+        doc["app"]["query"]["path"] = doc["data"]["path"]
+    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
 
 
 def session_filename(state: AppState) -> str:
@@ -153,15 +165,21 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
         AppState.precompute(loaded, channel, fs, robust)
         plan.loaded = loaded
         return plan
-    path = sess.data_path
+    given = sess.data_path
+    try:  # the folders first: nothing is said of files outside them (not even existence)
+        path = str(check_path(given)) if given else ""
+    except ValueError as e:
+        plan.problems.append(f"the session's data file could not be read: {e}")
+        return plan
     if not path or not Path(path).is_file():
         plan.problems.append(
-            f"the session's data file {path or fname} is not on this server: "
+            f"the session's data file {given or fname} is not on this server: "
             "copy it back to that path (or upload it) and restore again"
         )
         return plan
+    sess = replace(sess, data_path=path)
+    plan.session = sess
     try:
-        check_path(path)
         why = sess.data_changed()
         if why:
             plan.notes.append(

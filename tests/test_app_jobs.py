@@ -199,6 +199,9 @@ def test_a_failing_page_update_reaches_the_page_and_the_log(
         def add_next_tick_callback(self, fn: Any) -> None:
             fn()
 
+        def on_session_destroyed(self, *callbacks: Any) -> None:  # Jobs registers its end
+            pass
+
     jobs = Jobs(ServedDoc())
     shown: list[str] = []
     jobs.failed = lambda message, err: shown.append(f"{message}: {err}")

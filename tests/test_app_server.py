@@ -171,6 +171,8 @@ def test_pn_serve_accepts_every_option(tmp_path: Path) -> None:
     pw.write_text("pw\n")
     known = set(inspect.signature(get_server).parameters) | {"num_procs"}  # num_procs: **kwargs
     known |= {"websocket_max_message_size"}  # Bokeh Server option, through **kwargs
+    token_opts = {"include_cookies", "exclude_headers"}  # BokehTornado's, through **kwargs
+    known |= token_opts
     for argv in (
         ["--basic-auth", str(pw), "--num-procs", "2"],
         ["--address", "0.0.0.0", "--allow-websocket-origin", "h:1", "--oauth-provider", "x"],
@@ -180,6 +182,9 @@ def test_pn_serve_accepts_every_option(tmp_path: Path) -> None:
 
     bokeh_opts = set(_ServerOpts.properties())
     assert {"num_procs", "websocket_max_message_size"} <= bokeh_opts
+    from bokeh.server.tornado import BokehTornado
+
+    assert token_opts <= set(inspect.signature(BokehTornado.__init__).parameters)
 
 
 # ---------------------------------------------------------------------------------------------
