@@ -115,6 +115,12 @@ def jtest_badge(inf: Inference | None, pending: bool = False) -> str:
     jt = inf.j_test
     if jt is None:
         return f'<span style="{style.format("#888")}">J-test n/a: {html.escape(inf.j_error)}</span>'
+    if not jt.calibrated:
+        return (
+            f'<span class="gmwm-jtest" style="{style.format("#888")}" '
+            f'title="{html.escape(jt.note)}">J-test: not calibrated, T = '
+            f"{format_value(jt.statistic)} [1], df = {jt.df}</span>"
+        )
     p = jt.p_value
     color = "#2E7D32" if p >= 0.05 else "#E69F00" if p >= 0.01 else "#C62828"
     verdict = "fits" if p >= 0.05 else "doubtful fit" if p >= 0.01 else "rejected"

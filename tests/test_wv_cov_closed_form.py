@@ -23,7 +23,7 @@ def fake_wv(n: int, fs: float = 1.0, levels: int | None = None) -> SimpleNamespa
     """What wv_cov_model reads from a WV: levels, M_j and fs (no series needed)."""
     levels = int(math.floor(math.log2(n - 1))) if levels is None else levels
     tau = 2 ** np.arange(1, levels + 1)
-    return SimpleNamespace(n_levels=levels, n_coef=n - tau + 1, fs=fs)
+    return SimpleNamespace(n_levels=levels, n_coef=n - tau + 1, fs=fs, n=n)
 
 
 def quadrature(model: Model, wv, nodes: int, zero_node: bool = True) -> np.ndarray:

@@ -25,6 +25,8 @@ __all__ = [
     "frequency_grid",
     "wv_cov_model",
     "coefficient_cross_cov",
+    "mean_coefficient_cov",
+    "drift_share",
     "free_params",
     "jacobian",
     "param_cov",
@@ -108,21 +110,115 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
     c = closed_form_c(wv.n_levels, poly[1], poly[0], poly[-1], ar)
     m_j = wv.n_coef.astype(float)
     m_max = np.maximum.outer(m_j, m_j)
-    tau = 2.0 ** np.arange(1, wv.n_levels + 1)
-    mu = np.zeros(tau.size)  # mean of the level-j coefficients (deterministic terms)
-    for p in model.processes:
-        if p.deterministic:
-            mu = mu + np.sqrt(np.maximum(p.wv(tau, wv.fs), 0.0))
+    mu = _coefficient_means(model, wv)
     v = 2.0 * c / m_max
     if np.any(mu > 0):
-        d = np.full(m_max.shape, poly[-1])
-        for phi, s in ar:
-            if 0.0 < phi < 1.0:
-                d += 2.0 * s / (1.0 - phi * phi) * (1.0 - phi**m_max) / m_max
-        v = v + np.outer(mu * tau, mu * tau) / 4.0 * d / m_max
+        v = v + drift_share(model, wv)
     if getattr(wv, "robust", False):
         v = v + _robust_excess(wv, poly, ar, mu) / m_max
     return v
+
+
+def _coefficient_means(model: Model, wv: Any) -> np.ndarray:
+    """``mu_j``: the mean of the level-j coefficients, from the deterministic terms (a drift:
+    ``|omega| tau_j / 4``)."""
+    tau = 2.0 ** np.arange(1, wv.n_levels + 1)
+    mu = np.zeros(tau.size)
+    for p in model.processes:
+        if p.deterministic:
+            mu = mu + np.sqrt(np.maximum(p.wv(tau, wv.fs), 0.0))
+    return mu
+
+
+def drift_share(model: Model, wv: WaveletVariance) -> np.ndarray:
+    """The first-order share of a drift in the covariance of the WV (the ``V_1`` of
+    :func:`wv_cov_model`): ``4 mu_j mu_k Cov(ebar_j, ebar_k)`` (:func:`mean_coefficient_cov`);
+    zero without a drift.
+
+    Parameters
+    ----------
+    model : Model
+        Every parameter set.
+    wv : WaveletVariance
+        Gives the levels, ``M_j``, ``n`` and fs.
+    """
+    mu = _coefficient_means(model, wv)
+    if not np.any(mu > 0):
+        return np.zeros((mu.size, mu.size))
+    poly, ar = _spectral_pieces(model, wv.fs)
+    return 4.0 * np.outer(mu, mu) * mean_coefficient_cov(poly, ar, wv.n, wv.n_coef)
+
+
+def mean_coefficient_cov(
+    poly: dict[int, float], ar: list[tuple[float, float]], n: int, n_coef: np.ndarray
+) -> np.ndarray:
+    """Covariance of the means over ``t`` of the noise's Haar coefficients, ``Cov(ebar_j,
+    ebar_k)``, for a log of ``n`` samples (what a drift's first-order share of V needs).
+
+    The sum over the ``M_j`` coefficients of level j is a weighted sum of the increments
+    ``D_u = X_u - X_(u-1)``, ``u = 1..n-1``, with weights ``P_j = tau_j / 4`` on the plateau and
+    ramps ``H_j(r) = sum_{d <= r} G_j(d)`` over the first and last ``2^j`` increments (``G_j``
+    the triangle of :func:`coefficient_cross_cov`), so for a random walk (iid increments of
+    variance gamma2) ``Cov = gamma2 sum_u W_j(u) W_k(u) / (M_j M_k)`` exactly, and for white
+    noise ``sigma2 sum_s w_j(s) w_k(s) / (M_j M_k)`` with ``w`` the weights on the samples (the
+    increments' weights differenced). An AR1/GM term adds ``P_j P_k 2 var (1 - phi^M) /
+    (M_j M_k)``, ``M = min(M_j, M_k)`` (the variance of the difference of its values at the
+    two ends; the ramps' smoothing is left out). QN adds nothing of this order.
+
+    Parameters
+    ----------
+    poly, ar
+        The spectral pieces (``{1: q2, 0: sigma2, -1: gamma2}``, AR1 ``(phi, s)`` pairs).
+    n : int
+        Log length.
+    n_coef : ndarray, shape (J,)
+        ``M_j``.
+
+    Returns
+    -------
+    ndarray (J, J)
+    """
+    n_lev = n_coef.size
+    m_j = np.asarray(n_coef, float)
+    inc = n - 1  # increments
+    ramps = []
+    for j in range(1, n_lev + 1):
+        m = 1 << (j - 1)
+        tri = np.concatenate([np.arange(1, m + 1), np.arange(m - 1, 0, -1)]) / float(2 * m)
+        ramps.append(np.cumsum(tri))  # H_j(r), r = 0 .. 2^j - 2; then the plateau tau_j / 4
+    out = np.empty((n_lev, n_lev))
+    for a in range(n_lev):
+        for b in range(a, n_lev):
+            big = max(ramps[a].size, ramps[b].size)
+            if 2 * big <= inc:  # ramps at both ends, then a plateau: by symmetry
+                ha = np.pad(ramps[a], (0, big - ramps[a].size), constant_values=ramps[a][-1])
+                hb = np.pad(ramps[b], (0, big - ramps[b].size), constant_values=ramps[b][-1])
+                rw = 2.0 * float(ha @ hb) + (inc - 2 * big) * ramps[a][-1] * ramps[b][-1]
+                ga, gb = np.diff(ha, prepend=0.0), np.diff(hb, prepend=0.0)
+                wn = 2.0 * float(ga @ gb)
+            else:  # the coarsest levels of a short log: the ramps meet; build the weights
+                wa, wb = (_increment_weights(r, inc) for r in (ramps[a], ramps[b]))
+                rw = float(wa @ wb)
+                da = np.diff(wa, prepend=0.0, append=0.0)
+                wn = float(da @ np.diff(wb, prepend=0.0, append=0.0))
+            cov = poly[-1] * rw + poly[0] * wn
+            for phi, s in ar:
+                if 0.0 < phi < 1.0:
+                    mm = min(m_j[a], m_j[b])
+                    var = s / (1.0 - phi * phi)
+                    cov += ramps[a][-1] * ramps[b][-1] * 2.0 * var * (1.0 - phi**mm)
+            out[a, b] = out[b, a] = cov / (m_j[a] * m_j[b])
+    return out
+
+
+def _increment_weights(ramp: np.ndarray, inc: int) -> np.ndarray:
+    """Weights of the ``inc`` increments ``u = 1..inc`` in the sum of one level's coefficients,
+    ``H(min(K - 1, inc - u)) - H(K - 1 - u)`` (``H`` the ramp, ``K`` its length, ``H`` of a
+    negative index 0): the ramp up, the plateau, the ramp down, for any log length."""
+    u = np.arange(1, inc + 1)
+    k = ramp.size
+    hx = np.concatenate([[0.0], ramp])  # hx[i + 1] = H(i), hx[0] = H(-1) = 0
+    return hx[np.minimum(k - 1, inc - u) + 1] - hx[np.maximum(k - 1 - u, -1) + 1]
 
 
 def _spectral_pieces(model: Model, fs: float) -> tuple[dict[int, float], list[tuple[float, float]]]:

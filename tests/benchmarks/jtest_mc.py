@@ -12,7 +12,9 @@ structure is tested on every path the tools report:
   and the app's ranking table; V from the larger candidate).
 
 The WV is robust (``eff = 0.6``) or classical as the setting says; V is ``wv_cov_model``, which
-gives the robust WV its own covariance and a drift its share. Each rejection rate is printed
+gives the robust WV its own covariance and a drift its share. The drifts are strong: their
+first-order share of ``Var(nu_j)`` is up to 60-110 times the rest at the statistic's levels
+(the issue's 12-114). A p-value the test declares not calibrated (NaN) is counted apart. Each rejection rate is printed
 with its Wilson 95 % band and the Clopper-Pearson 95 % band; the issue's target is 3-8 %.
 The table in ``docs/jtest.md`` is this script's output.
 """
@@ -36,8 +38,8 @@ FS = 100.0
 SETTINGS: dict[str, tuple[str, str, int, bool]] = {
     # issue 27 item 6: the three settings where the J-test was not calibrated
     "GM+WN robust": ("GM(beta=2, sigma2_gm=1)+WN(sigma2=1)", "RW", 16, True),
-    "WN+RW+DR robust": ("WN(sigma2=1)+RW(gamma2=1e-6)+DR(omega=1e-4)", "QN", 18, True),
-    "WN+RW+DR strong drift": ("WN(sigma2=1)+RW(gamma2=1e-6)+DR(omega=1e-3)", "QN", 20, False),
+    "WN+RW+DR robust": ("WN(sigma2=1)+RW(gamma2=1e-6)+DR(omega=3e-5)", "QN", 18, True),
+    "WN+RW+DR strong drift": ("WN(sigma2=1)+RW(gamma2=1e-6)+DR(omega=2e-5)", "QN", 20, False),
     # issue 27 item 5's settings
     "slow GM+WN+RW": (
         "GM(beta=0.05, sigma2_gm=1e-2)+WN(sigma2=1)+RW(gamma2=1e-7)",
@@ -49,7 +51,7 @@ SETTINGS: dict[str, tuple[str, str, int, bool]] = {
     "QN+WN+RW": ("QN(q2=2e-5)+WN(sigma2=7e-5)+RW(gamma2=1e-10)", "DR", 16, False),
     # our own: robust, a drift and a GM at once
     "GM+WN+RW+DR robust": (
-        "GM(beta=2, sigma2_gm=1)+WN(sigma2=1)+RW(gamma2=1e-5)+DR(omega=3e-4)",
+        "GM(beta=2, sigma2_gm=1)+WN(sigma2=1)+RW(gamma2=1e-5)+DR(omega=1e-4)",
         "QN",
         17,
         True,
@@ -122,7 +124,7 @@ def main() -> None:
         dt = time.perf_counter() - t0
         for path, p in ps.items():
             arr = np.asarray(p, float)
-            arr = arr[np.isfinite(arr)]  # logs the path could not test are listed above
+            arr = arr[np.isfinite(arr)]  # not calibrated, or not testable (listed above)
             k = int(np.sum(arr < 0.05))
             n = arr.size
             w_lo, w_hi = wilson(k, n)
