@@ -53,13 +53,13 @@ from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..fit.asymptotic import drift_share, free_params, wv_cov_model
 from ..fit.covariance import inverse_cov, v_options, wv_cov
+from ..models import Model
 from ..wv import WaveletVariance, wavelet_variance
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
 
     from ..fit.covariance import VOptions
-    from ..models import Model
 
 __all__ = [
     "j_test",
@@ -189,8 +189,9 @@ def calibration_note(model: Model, wv: WaveletVariance, vmat: np.ndarray, levels
     share = np.diagonal(drift_share(model, wv))[:levels]
     if not np.any(share > 0):
         return ""
-    rest = np.maximum(np.diagonal(vmat)[:levels] - share, 1e-300)
-    ratio = share / rest
+    noise = Model(tuple(p for p in model.processes if not p.deterministic))
+    rest = np.diagonal(wv_cov_model(noise, wv))[:levels] if noise.processes else share * 0
+    ratio = share / np.maximum(rest, np.finfo(float).tiny)
     j = int(np.argmax(ratio))
     if ratio[j] <= DRIFT_SHARE_MAX:
         return ""
