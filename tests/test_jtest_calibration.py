@@ -76,6 +76,7 @@ def _mc_variance(spec: str, n: int, reps: int, robust: bool, levels: int | None,
     return nus.var(axis=0, ddof=1), np.diagonal(wv_cov_model(model, wv)), wv
 
 
+@pytest.mark.slow
 def test_robust_wv_variance_is_the_model_v():
     # 600 robust WVs of WN + GM (2^11 samples, levels 1-4: the levels with many coefficients,
     # where the sample variance is nearly chi-square): Var / V in 1 +- 4 sd of a sample
@@ -88,6 +89,7 @@ def test_robust_wv_variance_is_the_model_v():
     assert abs(ratio.mean() - 1) < band / 2, ratio
 
 
+@pytest.mark.slow
 def test_drift_share_is_the_wv_variance():
     # 400 classical WVs of WN + RW + a strong drift (2^12 samples): Var(nu_j) / V_jj within
     # 1 +- 4 sd (sd sqrt(2 / 399) = 0.071) at every level of the J statistic; without the
@@ -113,6 +115,7 @@ def _sizes(spec: str, n: int, reps: int, robust: bool, seed: int) -> tuple[np.nd
     return np.array(p), np.array(t_df)
 
 
+@pytest.mark.slow
 def test_jtest_size_with_a_robust_wv():
     # the true GM + WN, robust WV (eff 0.6), 2^12 samples, 100 logs: rejections at 5 % within
     # the binomial 99.9 % band of a calibrated test (0-13 of 100); the classical V rejected
@@ -127,6 +130,7 @@ def test_jtest_size_with_a_robust_wv():
     assert abs(t_df.mean() - 1) < 4 * math.sqrt(2 / 6 / reps)
 
 
+@pytest.mark.slow
 def test_jtest_size_with_a_strong_drift():
     # the true WN + RW + DR with a strong drift (its share of Var(nu_j) up to 370 times the
     # rest at the truth), 2^14 samples, 100 logs: rejections within the binomial band and
