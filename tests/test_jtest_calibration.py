@@ -165,3 +165,24 @@ def test_no_p_value_where_the_test_is_not_calibrated():
     ranking = eg.rank_models(wv, ["WN+RW+DR"])
     assert ranking.j_note and math.isnan(ranking.best.j_p_value)
     assert "n/c" in ranking.table() and ranking.to_dict()["j_note"] == ranking.j_note
+
+
+@pytest.mark.slow
+def test_robust_v_on_a_real_log(real_data):
+    # ADIS16405 imu1 gyro_x (1e6 samples, robust WV, eff 0.6), GM+WN+QN+RW fitted: the robust
+    # WV's V is between 1 and 1/eff times the classical one at every level (the Hermite
+    # weights of degree >= 4 are at most (2/eff - 2) / 2 of degree 2's, and |r|^n <= r^2), and
+    # the J-test uses it (measured: T = 368.8 with it, 597.5 with the classical V, df 14:
+    # a real log is not in the model class and is rejected either way)
+    import dataclasses
+
+    log = eg.load_log(real_data / "adis16405_imu1.h5")
+    wv = log.wavelet_variance("gyro_x", robust=True)
+    res = eg.fit_gmwm(wv, "GM+WN+QN+RW")
+    ratio = np.diagonal(wv_cov_model(res.model, wv)) / np.diagonal(
+        wv_cov_model(res.model, dataclasses.replace(wv, robust=False))
+    )
+    assert np.all(ratio >= 1 - 1e-12) and np.all(ratio <= 1 / wv.eff + 1e-12), ratio
+    assert ratio[0] > 1.3  # level 1: nearly uncorrelated coefficients, near 1/eff
+    jt = j_test(res)
+    assert jt.calibrated and jt.df == 14 and 300 < jt.statistic < 450
