@@ -98,7 +98,13 @@ def ranking_data(sel: Any) -> dict[str, Any]:
         "optimism": num("optimism"),
         "criterion": num("criterion"),
         "j_p_value": num("j_p_value"),
-        "note": [c.note for c in cands],
+        # no J-test p-value where the test is not calibrated: the note says so and why
+        "note": [
+            "; ".join(x for x in (c.note, f"J-test p {sel.j_note}" if sel.j_note else "") if x)
+            if sel is not None and not c.error
+            else c.note
+            for c in cands
+        ],
     }
 
 
@@ -115,6 +121,12 @@ def jtest_badge(inf: Inference | None, pending: bool = False) -> str:
     jt = inf.j_test
     if jt is None:
         return f'<span style="{style.format("#888")}">J-test n/a: {html.escape(inf.j_error)}</span>'
+    if not jt.calibrated:
+        return (
+            f'<span class="gmwm-jtest" style="{style.format("#888")}" '
+            f'title="{html.escape(jt.note)}">J-test: not calibrated, T = '
+            f"{format_value(jt.statistic)} [1], df = {jt.df}</span>"
+        )
     p = jt.p_value
     color = "#2E7D32" if p >= 0.05 else "#E69F00" if p >= 0.01 else "#C62828"
     verdict = "fits" if p >= 0.05 else "doubtful fit" if p >= 0.01 else "rejected"
@@ -294,8 +306,10 @@ class SelectionView(TabView):
                 "Click a row to load that model into the builder (Fit tab) and refit. Click a "
                 "column title to sort. J-test p: the efficient J-test of each candidate (refitted "
                 "with Omega = V^-1, V from the largest candidate, on the levels with M_j / 2^j "
-                ">= 4), calibrated whatever the weights. A candidate whose AR1/GM is faster than "
-                "one sample is white noise in disguise: it is ranked as its WN twin (note).",
+                ">= 4, V of the WV's own estimator with a drift's share), calibrated whatever "
+                "the weights, or empty with the reason in the note. A candidate whose AR1/GM is "
+                "faster than one sample is white noise in disguise: it is ranked as its WN twin "
+                "(note).",
                 margin=(0, 10),
                 styles={"font-size": "12px", "color": "#555"},
             ),

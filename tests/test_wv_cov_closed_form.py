@@ -23,7 +23,7 @@ def fake_wv(n: int, fs: float = 1.0, levels: int | None = None) -> SimpleNamespa
     """What wv_cov_model reads from a WV: levels, M_j and fs (no series needed)."""
     levels = int(math.floor(math.log2(n - 1))) if levels is None else levels
     tau = 2 ** np.arange(1, levels + 1)
-    return SimpleNamespace(n_levels=levels, n_coef=n - tau + 1, fs=fs)
+    return SimpleNamespace(n_levels=levels, n_coef=n - tau + 1, fs=fs, n=n)
 
 
 def quadrature(model: Model, wv, nodes: int, zero_node: bool = True) -> np.ndarray:
@@ -53,7 +53,14 @@ def quadrature(model: Model, wv, nodes: int, zero_node: bool = True) -> np.ndarr
     if not zero_node:
         w[0] = 0.0
     m_j = np.asarray(wv.n_coef, float)
-    return 2.0 * ((g * w) @ g.T) / np.maximum.outer(m_j, m_j)
+    second = 2.0 * ((g * w) @ g.T) / np.maximum.outer(m_j, m_j)
+    # a drift's first-order share (issue 27): 4 mu_j mu_k S_jk(0) / max(M_j, M_k), with
+    # mu_j = omega tau_j / 4 the mean of its coefficients and S_jk(0) = sqrt(g_j(0) g_k(0))
+    # the coefficients' cross-spectrum at f = 0 (the random walk's limit above)
+    tau = 2.0 ** np.arange(1, levels + 1)
+    mu = sum(abs(float(p.omega)) * tau / 4.0 for p in model.processes if p.code == "DR")
+    s0 = np.sqrt(np.outer(g[:, 0], g[:, 0]))
+    return second + 4.0 * np.outer(mu, mu) * s0 / np.maximum.outer(m_j, m_j)
 
 
 def reference_nodes(model: Model, levels: int, fs: float) -> int:

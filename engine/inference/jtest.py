@@ -26,6 +26,15 @@ Why not the fit's own weights and every level (what the J-test did before)?
 * V at the first-step estimate or at the truth made no difference once those levels are out
   (within Monte Carlo error), so V is evaluated once, at the fit's estimate.
 
+V is :func:`engine.fit.wv_cov_model` at the fit's estimate: the covariance of the WV's own
+estimator (a robust WV's variance is 1.3-1.5 times the classical one's) with a drift's
+first-order share (up to 10^4 times the rest at the coarse levels of a log with a strong
+drift). Without them the test rejected the true model in 36-39 % of robust GM+WN logs and
+18 % of WN+RW+DR logs with a strong drift; ``docs/jtest.md`` has the Monte Carlo with them
+(``tests/benchmarks/jtest_mc.py``). A V without a chi-square reference (``v="data"``: the
+diagonal of the classical WV's variance, no covariance between levels) gives no p-value: the
+result says ``calibrated=False`` and why (``note``), and ``p_value`` is NaN (null in JSON).
+
 ``method="bootstrap"`` compares the same statistic with its distribution over parametric-
 bootstrap replicates of the fitted model, each fitted with the fit's own weights and then
 tested the same way (no chi-square assumption; the same V for every replicate).
@@ -33,6 +42,7 @@ tested the same way (no chi-square assumption; the same V for every replicate).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -41,17 +51,26 @@ import numpy as np
 from .._jsonutil import FieldsDict
 from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
-from ..fit.asymptotic import free_params
+from ..fit.asymptotic import drift_share, free_params, wv_cov_model
 from ..fit.covariance import inverse_cov, v_options, wv_cov
+from ..models import Model
 from ..wv import WaveletVariance, wavelet_variance
 
 if TYPE_CHECKING:  # pragma: no cover
     from typing_extensions import Unpack
 
     from ..fit.covariance import VOptions
-    from ..models import Model
 
-__all__ = ["j_test", "JTest", "ETA_MIN", "jtest_levels", "efficient_j"]
+__all__ = [
+    "j_test",
+    "JTest",
+    "ETA_MIN",
+    "jtest_levels",
+    "efficient_j",
+    "calibration_note",
+    "NOT_CALIBRATED_DATA",
+    "DRIFT_SHARE_MAX",
+]
 
 #: Levels whose equivalent degrees of freedom ``M_j / 2^j`` are below this are left out of the
 #: J statistic (the last two levels at the default number of levels; see the module docstring).
@@ -76,6 +95,10 @@ class JTest(FieldsDict):
     levels : int
         Number of levels in the statistic (levels 1..``levels``: the coarsest, with fewer than
         :data:`ETA_MIN` equivalent degrees of freedom, are left out); 0 when not recorded.
+    calibrated : bool
+        Whether ``p_value`` has a calibrated reference; when False, ``p_value`` is NaN.
+    note : str
+        Why the test is not calibrated (empty when it is).
     """
 
     statistic: float
@@ -83,6 +106,27 @@ class JTest(FieldsDict):
     p_value: float
     method: str
     levels: int = 0
+    calibrated: bool = True
+    note: str = ""
+
+    def p_text(self, spec: str = ".3g") -> str:
+        """The p-value as shown in tables: formatted, or ``"not calibrated"``."""
+        return format(self.p_value, spec) if self.calibrated else "not calibrated"
+
+
+#: Above this ratio of a drift's first-order share of ``Var(nu_j)`` to the rest, at any level of
+#: the statistic, the J-test has no calibrated chi-square reference: the share is proportional
+#: to the random walk's variance, which so strong a drift leaves poorly determined (WN+RW+DR
+#: at 2^14 with the share 4000 times the rest: 24-37 % rejections of the true model at 5 %,
+#: and 10 % even with V at the truth; at 40-140 times: 3-7.5 %; ``docs/jtest.md``).
+DRIFT_SHARE_MAX = 1000.0
+
+#: Why a J-test with V from the data (``v="data"``) has no p-value.
+NOT_CALIBRATED_DATA = (
+    "V from the data (v='data') is the diagonal of the classical WV's variance: without the "
+    "covariance between levels T has no chi-square reference; use v='model' (default) or "
+    "method='bootstrap'"
+)
 
 
 def jtest_levels(wv: WaveletVariance) -> int:
@@ -138,19 +182,48 @@ def efficient_j(
     return float(fit.objective), df, k, fit
 
 
+def calibration_note(model: Model, wv: WaveletVariance, vmat: np.ndarray, levels: int) -> str:
+    """Why the asymptotic J-test of a model with V = ``vmat`` is not calibrated, or ``""``.
+
+    Not calibrated when a drift's first-order share of ``Var(nu_j)``
+    (:func:`engine.fit.asymptotic.drift_share`) exceeds :data:`DRIFT_SHARE_MAX` times the rest
+    at one of the statistic's ``levels``.
+    """
+    share = np.diagonal(drift_share(model, wv))[:levels]
+    if not np.any(share > 0):
+        return ""
+    noise = Model(tuple(p for p in model.processes if not p.deterministic))
+    rest = np.diagonal(wv_cov_model(noise, wv))[:levels] if noise.processes else share * 0
+    ratio = share / np.maximum(rest, np.finfo(float).tiny)
+    j = int(np.argmax(ratio))
+    if ratio[j] <= DRIFT_SHARE_MAX:
+        return ""
+    return (
+        f"not calibrated: the drift's share of the WV's variance is {ratio[j]:.3g} times the "
+        f"rest at level {j + 1} (above {DRIFT_SHARE_MAX:g}); it scales with the random walk's "
+        "variance, which so strong a drift leaves too poorly determined for a chi-square "
+        "reference"
+    )
+
+
 def _boot_statistic(args: tuple) -> float:
-    """J statistic of one parametric-bootstrap replicate (a task of :func:`parallel_map`)."""
+    """J statistic of one parametric-bootstrap replicate (a task of :func:`parallel_map`): the
+    replicate's WV is computed like the fit's (classical or robust, same efficiency)."""
     res, vmat, seed = args
     xb = res.model.simulate(res.wv.n, fs=res.fs, rng=np.random.default_rng(seed))
-    wvb = wavelet_variance(xb, fs=res.fs, levels=res.wv.n_levels)
+    wvb = wavelet_variance(
+        xb, fs=res.fs, levels=res.wv.n_levels, robust=res.wv.robust, eff=res.wv.eff
+    )
     fb = fit_gmwm(wvb, res.model.cleared(), weights=res.omega)
     return efficient_j(wvb, fb.model, vmat)[0]
 
 
 def j_test(res: GMWMResult, *, method: str = "asymptotic", **options: Unpack[VOptions]) -> JTest:
-    """Goodness of fit of a fitted model (calibrated whatever the fit's weights).
+    """Goodness of fit of a fitted model (calibrated whatever the fit's weights, for a
+    classical or robust WV, with or without a drift).
 
-    The model is refitted with ``Omega = V^-1`` (V at the fit's estimate, :class:`VOptions`)
+    The model is refitted with ``Omega = V^-1`` (V at the fit's estimate, :class:`VOptions`;
+    by default :func:`engine.fit.wv_cov_model`, the covariance of the WV's own estimator)
     on the levels with at least :data:`ETA_MIN` equivalent degrees of freedom, and
     ``T = (nu_hat - nu(theta))' V^-1 (nu_hat - nu(theta))`` at that refit is compared with
     ``chi2(levels - p)`` (``method="asymptotic"``) or with its distribution over parametric-
@@ -171,6 +244,8 @@ def j_test(res: GMWMResult, *, method: str = "asymptotic", **options: Unpack[VOp
     Returns
     -------
     JTest
+        With ``calibrated=False``, a NaN ``p_value`` and the reason in ``note`` when V has no
+        chi-square reference (``v="data"`` with ``method="asymptotic"``).
 
     Raises
     ------
@@ -195,10 +270,22 @@ def j_test(res: GMWMResult, *, method: str = "asymptotic", **options: Unpack[VOp
     from scipy import stats
 
     vmat = wv_cov(res, **o)
-    t, df, k, _ = efficient_j(res.wv, res.model, vmat)
+    t, df, k, refit = efficient_j(res.wv, res.model, vmat)
+    model_v = isinstance(o["v"], str) and o["v"] == "model"
+    if model_v and np.any(np.diagonal(drift_share(res.model, res.wv)) > 0):
+        # a drift's share of V scales with the random walk's variance, which the fit's own
+        # weights estimate less well than the efficient refit: V once more, at the refit
+        # (WN+RW+DR, 2^16, 40 logs: mean T/df 1.11 -> 1.03)
+        vmat = wv_cov_model(refit.model, res.wv)
+        t, df, k, refit = efficient_j(res.wv, refit.model, vmat)
     if df < 1:
         raise FitError(f"the J-test needs more levels than free parameters (J - p = {df})")
     if method == "asymptotic":
+        if isinstance(o["v"], str) and o["v"] == "data":
+            return JTest(t, df, math.nan, "asymptotic", k, False, NOT_CALIBRATED_DATA)
+        note = calibration_note(refit.model, res.wv, vmat, k)
+        if note:
+            return JTest(t, df, math.nan, "asymptotic", k, False, note)
         return JTest(t, df, float(stats.chi2.sf(t, df)), "asymptotic", k)
     items = [(res, vmat, s) for s in np.random.SeedSequence(o["seed"]).spawn(o["B"])]
     stats_b = parallel_map(_boot_statistic, items, o["workers"], executor=o["executor"])

@@ -63,7 +63,7 @@ from ..fit.asymptotic import free_params, jacobian
 from ..fit.covariance import inverse_cov, wv_cov
 from ..models import WN, Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
-from .jtest import ETA_MIN, efficient_j
+from .jtest import ETA_MIN, calibration_note, efficient_j, jtest_levels
 
 __all__ = [
     "submodels",
@@ -83,9 +83,10 @@ DISGUISE_LEVEL = 1e-3
 
 #: What the J column of a ranking is (the table's last line; the app and README say the same).
 JTEST_NOTE = (
-    "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V from the "
-    f"largest candidate, on the levels with M_j / 2^j >= {ETA_MIN:g}) against chi2(levels - p), "
-    "whatever the ranking's weights"
+    "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V of the WV's "
+    "own estimator, classical or robust, with a drift's share, from the largest candidate, on "
+    f"the levels with M_j / 2^j >= {ETA_MIN:g}) against chi2(levels - p), whatever the "
+    "ranking's weights"
 )
 
 
@@ -310,6 +311,8 @@ class SelectionResult:
     weights: str
     elapsed_s: float
     selected: Candidate | None = None
+    #: why the J column has no p-values (``"not calibrated: ..."``), or ``""``
+    j_note: str = ""
 
     @property
     def best(self) -> Candidate:
@@ -336,11 +339,14 @@ class SelectionResult:
                 lines.append(f"{i:>4} {c.model:<22} {c.n_params:>3}  {c.note}")
                 continue
             jp = f"{c.j_p_value:9.3g}" if math.isfinite(c.j_p_value) else f"{'n/a':>9}"
+            jp = f"{'n/c':>9}" if self.j_note and math.isfinite(c.j_stat) else jp
             lines.append(
                 f"{i:>4} {c.model:<22} {c.n_params:>3} {c.objective:>12.5g} "
                 f"{c.optimism:>10.4g} {c.criterion:>12.5g} {jp}  {c.note}".rstrip()
             )
         lines += textwrap.wrap(JTEST_NOTE, 100)
+        if self.j_note:
+            lines += textwrap.wrap(f"J-test p n/c: {self.j_note}", 100)
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -349,6 +355,7 @@ class SelectionResult:
             "weights": self.weights,
             "elapsed_s": self.elapsed_s,
             "selected": self.best.to_dict(),
+            "j_note": self.j_note,
             "candidates": [c.to_dict() for c in self.candidates],
         }
 
@@ -484,6 +491,8 @@ def rank_models(
         weights = inverse_cov(vmat)
         fitted = fit_all(uniq, weights, n_uniq)
         ok, largest = largest_fit(fitted)
+    # the J column's p-values, unless V has no chi-square reference (a drift far too strong)
+    j_note = calibration_note(largest.model, wv, vmat, jtest_levels(wv))
 
     # white noise in disguise: a candidate with an AR1/GM faster than one sample is ranked as
     # its WN twin, which is fitted (with the same weights) when it is not a candidate; a
@@ -567,7 +576,7 @@ def rank_models(
         opt = boot_opt[m.spec()] if optimism == "bootstrap" else _asymptotic_optimism(r, vmat)
         try:  # the calibrated J-test: efficient refit on the levels with enough coefficients
             jstat, df, _, _ = efficient_j(wv, r.model, vmat, j_optima)
-            jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
+            jp = float(stats.chi2.sf(jstat, df)) if df > 0 and not j_note else math.nan
         except (FitError, ModelError, np.linalg.LinAlgError):
             jstat, df, jp = math.nan, 0, math.nan
         if progress is not None and i < n_uniq:
@@ -623,12 +632,18 @@ def rank_models(
 
     cands.sort(key=functools.cmp_to_key(order))
     wname = "efficient" if efficient else (weights if isinstance(weights, str) else "user")
-    selected = _selection(wv, cands[0], weights, vmat)
-    return SelectionResult(cands, optimism, wname, time.perf_counter() - t0, selected)
+    selected = _selection(wv, cands[0], weights, vmat, j_note)
+    return SelectionResult(
+        cands, optimism, wname, time.perf_counter() - t0, selected=selected, j_note=j_note
+    )
 
 
 def _selection(
-    wv: WaveletVariance, top: Candidate, weights: str | np.ndarray, vmat: np.ndarray
+    wv: WaveletVariance,
+    top: Candidate,
+    weights: str | np.ndarray,
+    vmat: np.ndarray,
+    j_note: str = "",
 ) -> Candidate | None:
     """The model a user can act on derived from the top-ranked candidate (None when it is
     one): :func:`actionable` applied until nothing changes. Not refitted: a refit of the
@@ -650,7 +665,7 @@ def _selection(
     opt = _asymptotic_optimism(res, vmat)
     try:
         jstat, df, _, _ = efficient_j(wv, res.model.cleared(), vmat)
-        jp = float(stats.chi2.sf(jstat, df)) if df > 0 else math.nan
+        jp = float(stats.chi2.sf(jstat, df)) if df > 0 and not j_note else math.nan
     except (FitError, ModelError, np.linalg.LinAlgError):
         jstat, df, jp = math.nan, 0, math.nan
     return Candidate(

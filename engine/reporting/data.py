@@ -583,7 +583,10 @@ def gather_report(
         "models": {ch: c.fit.model.spec(values=True) for ch, c in chans.items() if c.fit},
         "weights": weights,
         "intervals": f"asymptotic sandwich, {100 * level:g} % two-sided",
-        "j_test": "asymptotic chi-square, V from the fitted model",
+        "j_test": (
+            "asymptotic chi-square, V from the fitted model (the WV's own estimator, a drift's "
+            "share included; no p-value where not calibrated)"
+        ),
         "wv": "classical Haar WV (MODWT), eta3 95 % intervals",
         "command_line": command_line,
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

@@ -67,6 +67,7 @@ __all__ = [
     "gaussian_psi2_mean",
     "biweight_location_scale",
     "robust_wv",
+    "robust_wv_hermite",
 ]
 
 
@@ -108,6 +109,77 @@ def biweight_constant(eff: float = 0.6) -> float:
     if not 0.0 < eff < 0.99:
         raise ValueError(f"eff must be in (0, 0.99), got {eff}")
     return float(optimize.brentq(lambda c: _biweight_efficiency(c) - eff, 0.5, 60.0, xtol=1e-10))
+
+
+@lru_cache(maxsize=16)
+def robust_wv_hermite(eff: float = 0.6, order: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """Hermite weights of the influence function of the robust WV under Gaussian coefficients.
+
+    For coefficients ``W = mu + s Z`` (``Z ~ N(0, 1)``) the robust WV ``nu = s^2 + mu^2`` of
+    :func:`robust_wv` has the influence function
+
+        IF(W) = s^2 f(Z) + 2 mu s h(Z),
+        f(z) = 2 (g(z) - E g) / E[z g'(z)],   g = psi^2   (the scale equation, even)
+        h(z) = psi(z) / E[psi'(z)]                        (the location equation, odd)
+
+    and with the Hermite expansions ``f = sum a_n He_n``, ``h = sum b_n He_n`` the covariance of
+    two such functions of jointly Gaussian coefficients with correlation ``r`` is
+    ``sum_n n! a_n^2 r^n`` (Mehler). The classical WV (``W^2``) has ``f = He_2``,
+    ``h = He_1``; the robust one has the same first terms (``2! a_2^2 = 2``, ``b_1 = 1``:
+    it is consistent) and more: at lag 0 the even weights sum to ``2 / eff``.
+
+    Parameters
+    ----------
+    eff : float
+        Gaussian efficiency of the robust WV (its biweight constant, :func:`biweight_constant`).
+    order : int
+        Highest Hermite degree kept; the mass of the higher degrees (below 1e-5 of the total
+        at ``order=16``) is added to the last even and odd entries, so that each array sums to
+        its function's variance.
+
+    Returns
+    -------
+    even, odd : ndarray, shape (order + 1,)
+        ``n! a_n^2`` (non-zero at even ``n >= 2``) and ``n! b_n^2`` (odd ``n``).
+
+    References
+    ----------
+    Hampel, Ronchetti, Rousseeuw & Stahel (1986), Robust Statistics, ch. 5 (M-estimators of
+    location and scale); Arcones (1994), Ann. Probab. 22, Limit theorems for nonlinear
+    functionals of a stationary Gaussian sequence of vectors.
+    """
+    from scipy import integrate, special
+
+    c = biweight_constant(eff)
+    e_g, e_z2g, e_g2 = _biweight_moments(c)
+    m = e_z2g - e_g  # E[z g'(z)] (Stein)
+
+    def gauss(z: float) -> float:
+        return math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi)
+
+    def psi(z: float) -> float:
+        return z * (1 - z * z / (c * c)) ** 2
+
+    def moment(fn: Callable[[float], float]) -> float:  # E[fn(Z)] for fn even, 0 off [-c, c]
+        return 2 * integrate.quad(lambda z: fn(z) * gauss(z), 0, c, epsabs=1e-14, limit=200)[0]
+
+    e_psi_prime = moment(lambda z: z * psi(z))  # E[psi'] = E[z psi] (Stein)
+    e_psi2 = moment(lambda z: psi(z) ** 2)
+    even, odd = np.zeros(order + 1), np.zeros(order + 1)
+    for n in range(1, order + 1):
+
+        def term(z: float, n: int = n) -> float:
+            # even n: E[(g - E g) He_n] = E[g He_n] for n >= 1 (g = psi^2, 0 off [-c, c])
+            f = 2 * psi(z) ** 2 / m if n % 2 == 0 else psi(z) / e_psi_prime
+            return f * float(special.eval_hermitenorm(n, z))
+
+        e = moment(term)
+        (even if n % 2 == 0 else odd)[n] = e * e / math.factorial(n)
+    top_even, top_odd = order - order % 2, order - 1 + order % 2
+    even[top_even] += max(4 * (e_g2 - e_g * e_g) / (m * m) - even.sum(), 0.0)
+    odd[top_odd] += max(e_psi2 / e_psi_prime**2 - odd.sum(), 0.0)
+    even.flags.writeable = odd.flags.writeable = False
+    return even, odd
 
 
 def robust_scale_biweight(w: np.ndarray, eff: float = 0.6) -> float:
