@@ -49,6 +49,7 @@ from gmwm_app._panel_compat import light_text_updates  # noqa: E402
 from gmwm_app.jobs import Jobs  # noqa: E402
 from gmwm_app.model_panel import ModelPanel  # noqa: E402
 from gmwm_app.report_download import report_file, report_filename  # noqa: E402
+from gmwm_app.segments_view import SegmentsStrip  # noqa: E402
 from gmwm_app.selection_view import SelectionView, jtest_badge  # noqa: E402
 from gmwm_app.session_view import SessionPanel, download_button  # noqa: E402
 from gmwm_app.state import (  # noqa: E402
@@ -377,8 +378,9 @@ class GMWMApp(pn.viewable.Viewer):
         # visibility and loading are set on layouts, not on the Bokeh panes (Panel 1.9.4
         # fails on Layoutable changes of a Bokeh pane: "Bokeh.stylesheets items must be str")
         self.resid_box = pn.Column(self.resid_pane, sizing_mode="stretch_width", margin=0)
+        self.segments = SegmentsStrip()  # a flight analysed on its still segments
         self.plot_box = pn.Column(
-            self.plot_pane, self.resid_box, sizing_mode="stretch_width", margin=0
+            self.plot_pane, self.resid_box, self.segments.box, sizing_mode="stretch_width", margin=0
         )
         main = [
             pn.Column(
@@ -487,6 +489,7 @@ class GMWMApp(pn.viewable.Viewer):
         each part redraws itself when a parameter it depends on changes)."""
         with self.state.batch():
             self._draw_plot()
+            self._draw_segments()
             self._draw_tables()
             self._sync_data_widgets()
             self._sync_filenames()
@@ -501,6 +504,11 @@ class GMWMApp(pn.viewable.Viewer):
         self.views.update(s)
         self.resid_box.visible = s.display_model() is not None
         self.last_refresh_s = time.perf_counter() - t0
+
+    @_on_state("wv", "channel", "filename")
+    @redraws("the still segments")
+    def _draw_segments(self) -> None:
+        self.segments.update(self.state.log, self.state.channel)
 
     @_on_state(*_TABLES)
     @redraws("the parameter tables")

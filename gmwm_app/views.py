@@ -170,6 +170,7 @@ def log_figure(
     *,
     tools: str = "pan,wheel_zoom,box_zoom,reset,save",
     y_axis_type: str = "log",
+    x_axis_type: str = "log",
     **kw: Any,
 ) -> Any:
     """A full-width plot over a log scale axis in the app's style (toolbar above, plain
@@ -185,8 +186,8 @@ def log_figure(
         The x axis label.
     tools
         Bokeh tools.
-    y_axis_type
-        ``"log"`` or ``"auto"`` (linear).
+    y_axis_type, x_axis_type
+        ``"log"`` or ``"auto"``/``"linear"``.
     **kw
         More ``figure`` settings (ranges, borders).
 
@@ -196,7 +197,7 @@ def log_figure(
         The plot.
     """
     p = figure(
-        x_axis_type="log",
+        x_axis_type=x_axis_type,
         y_axis_type=y_axis_type,
         height=height,
         sizing_mode="stretch_width",
