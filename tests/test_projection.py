@@ -302,11 +302,14 @@ def test_json_report_carries_the_projections_with_intervals_and_factors(demo_fit
     values are ``project``'s and their WV bounds the fitted WV (checked with this file's
     formulas, not the engine's)."""
     fits = {c: demo_fits[c] for c in ("gyro_x", "accel_x")}
-    rep = json.loads(export(None, fits, "json"))  # default: WN+RW
+    # data="none": the bound of the fitted WV alone, whose values all depend on the fit (the
+    # default since issue 28 also bounds the data's lower limit; a value set by it has no
+    # interval from the fit's covariance: checked at the end)
+    rep = json.loads(export(None, fits, "json", data="none"))  # default: WN+RW
     assert rep["projection"]["mode"] == "bound" and rep["projection"]["consumers"] == ["WN+RW"]
     for ch, r in fits.items():
         d = rep["channels"][ch]["projections"]["WN+RW"]
-        p = project(r, "WN+RW", channel=ch)
+        p = project(r, "WN+RW", channel=ch, data="none")
         assert d["consumer"] == "WN+RW" and d["bounded"] is True
         assert d["unit"] == ("rad/s" if ch.startswith("gyro") else "m/s^2")
         for name in ("N", "K"):
@@ -341,6 +344,13 @@ def test_json_report_carries_the_projections_with_intervals_and_factors(demo_fit
     assert none["channels"]["gyro_x"]["projections"] == {}
     with pytest.raises(ExportError, match="unknown consumer"):
         export(None, fits, "json", consumers=["nonsense"])
+    # the default (data="low"): a value bound by the empirical WV has no fit interval
+    d = json.loads(export(None, fits, "json"))["channels"]["gyro_x"]["projections"]["WN+RW"]
+    for q in d["params"].values():
+        if "empirical WV" in q["binds"]:
+            assert q["low"] is None and q["high"] is None
+        else:
+            assert q["low"] < q["value"] < q["high"]
 
 
 def test_cli_json_report_consumers(capsys) -> None:

@@ -198,6 +198,8 @@ def least_inflation(
     verts = lower_vertices(b / s) / s
     keep = t_obj > 0
     vals = np.mean(np.log((a_obj[keep] @ verts.T) / t_obj[keep, None]), axis=0)
+    # the consumers need white noise: a vertex without it is taken only when no other exists
+    vals = np.where((verts[:, 0] > 0) | ~np.any(verts[:, 0] > 0), vals, np.inf)
     k = int(np.argmin(vals))
     x = verts[k]
     # rounding: scale up so that the bound holds at every constraint scale
@@ -216,13 +218,13 @@ def solve(
     tau_h: float,
     bound: bool,
     floor: tuple[np.ndarray, np.ndarray] | None = None,
-    tc: float | None = None,
+    tc_fix: float | None = None,
 ) -> dict[str, Any]:
     """The projection of one model: plain and bounded variances (native unit, per sample).
 
     ``floor`` is ``(tau, wv)``: an empirical WV (a limit of its interval, or the estimate) at
     dyadic scales ``tau`` (log samples) that the consumer's WV must also reach there; the
-    target is the larger of the fitted model's and this floor at those scales. ``tc`` (s)
+    target is the larger of the fitted model's and this floor at those scales. ``tc_fix`` (s)
     fixes a Gauss-Markov bias's correlation time (no search): a file that takes one ``T_c``
     for several channels.
 
@@ -280,12 +282,14 @@ def solve(
                 x, f = xp, fp
         out["x"], out["T_c"], out["A"], out["log_excess"] = x, None, a, f
         return out
-    if tc is not None:
-        a = columns(consumer, tau, fs, tc)
-        x, f = least_inflation(columns(consumer, fine, fs, tc), ft, a, target)
+    if tc_fix is not None:
+        a = columns(consumer, tau, fs, tc_fix)
+        x, f = least_inflation(columns(consumer, fine, fs, tc_fix), ft, a, target)
         if not math.isfinite(f):
-            raise ExportError(f"no Gauss-Markov bias of T_c {tc:g} s bounds the WV over the band")
-        out["x"], out["T_c"], out["A"], out["log_excess"] = x, float(tc), a, f
+            raise ExportError(
+                f"no Gauss-Markov bias of T_c {tc_fix:g} s bounds the WV over the band"
+            )
+        out["x"], out["T_c"], out["A"], out["log_excess"] = x, float(tc_fix), a, f
         return out
     # Gauss-Markov bias: 1-D search over log T_c of the least inflation, from the band's
     # shortest scale to ten horizons

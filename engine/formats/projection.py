@@ -772,5 +772,7 @@ def _intervals(
         if not np.all(np.isfinite(grad[i])):
             continue
         se = math.sqrt(max(float(grad[i] @ cov @ grad[i]), 0.0))
+        if not se > 0:  # set by the empirical WV (the data bound), not by the fit: no interval
+            continue
         out[nm] = (vals[nm] * math.exp(-z * se), vals[nm] * math.exp(z * se))
     return out

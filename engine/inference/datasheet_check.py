@@ -47,7 +47,7 @@ import numpy as np
 from .._files import read_regular
 from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
-from ..models import QN, RW, WN, Model
+from ..models import GM, QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
     DISPLAY,
@@ -162,12 +162,16 @@ class DatasheetSpec:
         The values as the user wrote them (``"0.3 deg/sqrt(h)"``), by symbol.
     source : str
         Where they come from (``command line``, a file and its key).
+    gm : tuple of (float, float)
+        Gauss-Markov terms ``(T_c [s], sigma_b [SI])`` (a filter file's Gauss-Markov bias, a
+        datasheet CSV's GM rows); each adds ``GM(beta = 1/T_c, sigma2_gm = sigma_b^2)``.
     """
 
     kind: str
     values: dict[str, float]
     given: dict[str, str] = field(default_factory=dict)
     source: str = ""
+    gm: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in SI_UNIT:
@@ -175,7 +179,13 @@ class DatasheetSpec:
         bad = [k for k in self.values if k not in _ORDER]
         if bad:
             raise DatasheetError(f"unknown datasheet symbol(s) {bad}: use N, K, B, Q")
-        if not self.values:
+        for tc, sb in self.gm:
+            if not (math.isfinite(tc) and tc > 0 and math.isfinite(sb) and sb >= 0):
+                raise DatasheetError(
+                    f"{self.source or 'datasheet'}: a Gauss-Markov term needs T_c > 0 s and "
+                    f"sigma_b >= 0, got T_c {tc!r}, sigma_b {sb!r}"
+                )
+        if not self.values and not self.gm:
             raise DatasheetError(
                 "the datasheet has no value: give at least one of ARW/VRW, RRW, BI, Q"
             )
@@ -245,7 +255,14 @@ class DatasheetSpec:
         vals = self.in_unit(unit)
         cls = {"N": WN, "K": RW, "Q": QN}
         procs = [cls[s].from_datasheet({s: vals[s]}, fs) for s in ("Q", "N", "K") if s in vals]
+        f = self._factor(unit)
+        procs += [GM(beta=1.0 / tc, sigma2_gm=(sb / f) ** 2) for tc, sb in self.gm]
         return Model(tuple(procs)) if procs else None
+
+    def _factor(self, unit: str) -> float:
+        """SI per ``unit`` (checked as :meth:`in_unit` does)."""
+        self.in_unit(unit)
+        return si_factor(unit)[1]
 
     def floor_wv(self, unit: str) -> float:
         """The WV of the bias-instability floor, ``(BI_FACTOR B)^2 / 2`` [unit^2] (0 without B)."""
@@ -283,6 +300,7 @@ class DatasheetSpec:
             "source": self.source,
             "values": {r["symbol"]: [r["si"], r["si_unit"]] for r in self.rows()},
             "rows": self.rows(),
+            "gm": [{"T_c": tc, "sigma_b": sb, "sigma_b_unit": self.si_unit} for tc, sb in self.gm],
         }
 
     def describe(self) -> str:
@@ -293,6 +311,7 @@ class DatasheetSpec:
                 parts.append(f"{r['display_symbol']} {r['display']:.4g} {r['display_unit']}")
             else:
                 parts.append(f"{r['symbol']} {r['si']:.4g} {r['si_unit']}")
+        parts += [f"GM T_c {tc:.4g} s sigma_b {sb:.4g} {self.si_unit}" for tc, sb in self.gm]
         return ", ".join(parts)
 
 
@@ -351,6 +370,65 @@ def _from_rows(rows: Sequence[Mapping[str, Any]], kind: str | None, where: str) 
     if not vals:
         raise DatasheetError(f"{where}: no datasheet value (symbols N, K, Q, B with a sensor unit)")
     return DatasheetSpec(kinds.pop(), vals, given, where)
+
+
+def _with_gm(spec: DatasheetSpec, rows: Sequence[Mapping[str, Any]], where: str) -> DatasheetSpec:
+    """``spec`` with the Gauss-Markov (and AR1) terms of datasheet rows: per process label its
+    ``T_c`` [s] and ``sigma_gm`` (in a signal unit), so that a GM model's white noise is not
+    read as 0 (its fast GM carries it)."""
+    terms: dict[str, dict[str, tuple[float, str]]] = {}
+    for r in rows:
+        if r.get("symbol") in ("T_c", "sigma_gm") and r.get("value") not in (None, ""):
+            terms.setdefault(str(r.get("process")), {})[str(r["symbol"])] = (
+                float(r["value"]),
+                str(r.get("unit") or ""),
+            )
+    gm = []
+    for lab, t in terms.items():
+        if "T_c" not in t or "sigma_gm" not in t:
+            continue
+        v, u = t["sigma_gm"]
+        try:
+            k, f = si_factor(u)
+        except ExportError as e:
+            raise DatasheetError(f"{where} {lab} sigma_gm: {e}") from e
+        if k != spec.kind:
+            continue
+        gm.append((t["T_c"][0], v * f))
+    if not gm:
+        return spec
+    return DatasheetSpec(spec.kind, spec.values, spec.given, spec.source, tuple(gm))
+
+
+def _from_projection(projs: Any, kind: str | None, where: str) -> DatasheetSpec | None:
+    """The first stored projection of a ``gmwm`` JSON report (``WN+RW`` or ``WN+GM``, in SI)
+    as a datasheet: what a filter fed from this report assumes. None when there is none."""
+    if not isinstance(projs, Mapping):
+        return None
+    for name, p in projs.items():
+        if not isinstance(p, Mapping) or p.get("sensor") not in SI_UNIT:
+            continue
+        if kind is not None and p["sensor"] != kind:
+            continue
+        par = p.get("params") or {}
+
+        def val(k: str, par: Mapping[str, Any] = par) -> float | None:
+            v = par.get(k, {}).get("value") if isinstance(par.get(k), Mapping) else None
+            return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+
+        n = val("N")
+        if n is None:
+            continue
+        src = f"{where} projection {name} ({p.get('consumer')})"
+        if p.get("consumer") == "WN+RW" and val("K") is not None:
+            return DatasheetSpec(p["sensor"], {"N": n, "K": val("K") or 0.0}, {}, src)
+        if p.get("consumer") == "WN+GM" and val("T_c") and val("sigma_b") is not None:
+            return DatasheetSpec(
+                p["sensor"], {"N": n}, {}, src, ((val("T_c") or 1.0, val("sigma_b") or 0.0),)
+            )
+        if p.get("consumer") == "WN":
+            return DatasheetSpec(p["sensor"], {"N": n}, {}, src)
+    return None
 
 
 def _pick(names: list[str], channel: str | None, where: str) -> str:
@@ -454,10 +532,14 @@ def read_datasheet(
             if not isinstance(chans, Mapping) or not chans:
                 raise DatasheetError(f"{where}: key 'channels' missing or empty")
             ch = _pick(list(chans), channel, where)
-            stored = chans[ch].get("datasheet") if isinstance(chans[ch], Mapping) else None
+            c = chans[ch] if isinstance(chans[ch], Mapping) else {}
+            spec = _from_projection(c.get("projections"), kind, f"{where} [{ch}]")
+            if spec is not None:
+                return spec
+            stored = c.get("datasheet")
             if not isinstance(stored, list):
                 raise DatasheetError(f"{where}: channels.{ch}.datasheet missing")
-            return _from_rows(stored, kind, f"{where} [{ch}]")
+            return _with_gm(_from_rows(stored, kind, f"{where} [{ch}]"), stored, f"{where} [{ch}]")
         raise DatasheetError(
             f"{where}: unknown JSON (schema {d.get('schema')!r}); expected a gmwm report "
             "(gmwm-report/1) or a datasheet (gmwm-datasheet/1)"
@@ -468,7 +550,8 @@ def read_datasheet(
         if not rows or not need <= set(rows[0]):
             raise DatasheetError(f"{where}: a datasheet CSV needs columns {sorted(need)}")
         ch = _pick(list(dict.fromkeys(r["channel"] for r in rows)), channel, where)
-        return _from_rows([r for r in rows if r["channel"] == ch], kind, f"{where} [{ch}]")
+        mine = [r for r in rows if r["channel"] == ch]
+        return _with_gm(_from_rows(mine, kind, f"{where} [{ch}]"), mine, f"{where} [{ch}]")
     if suffix in (".yaml", ".yml") or "_noise_density" in text:
         try:
             d = read_kalibr(text)
