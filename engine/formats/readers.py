@@ -26,8 +26,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from .._files import read_regular
 from ..inference.datasheet_check import DatasheetError, DatasheetSpec, read_datasheet
 from ..io.kalibr import read_kalibr
@@ -80,7 +78,7 @@ class FilterNoise:
         ax = channel_axis(channel) if channel else "*"
         v = d.get(ax) or d.get("*") or next(iter(d.values()))
         where = f"{source} ({self.fmt}{', ' + '; '.join(self.notes) if self.notes else ''})"
-        vals = {k: v[k] for k in ("N", "K") if k in v}
+        vals: dict[str, float] = {k: v[k] for k in ("N", "K") if k in v}
         gm = ((v["T_c"], v["sigma_b"]),) if "T_c" in v and "sigma_b" in v else ()
         return DatasheetSpec(kind, vals, {}, where, gm)
 
@@ -102,6 +100,15 @@ def _scalar(text: str, key: str) -> float | None:
     may hold ``!!opencv-matrix`` entries that a YAML parser refuses)."""
     m = re.search(r"^[ \t]*" + re.escape(key) + r"[ \t]*:[ \t]*" + _NUM, text, re.M)
     return float(m.group(1)) if m else None
+
+
+def _flow(text: str, key: str) -> list[float] | float | None:
+    """``key: [a, b, c]`` (a YAML flow list of numbers) or ``key: a``, line by line (no YAML
+    library: PyYAML is not an engine dependency)."""
+    m = re.search(r"^[ \t]*" + re.escape(key) + r"[ \t]*:[ \t]*\[([^\]]*)\]", text, re.M)
+    if m:
+        return [float(v) for v in m.group(1).split(",") if v.strip()]
+    return _scalar(text, key)
 
 
 def _vins(text: str, fs: float | None) -> FilterNoise:
@@ -291,10 +298,11 @@ def _gz_sim(text: str, fs: float | None) -> FilterNoise:
 
 
 def _kfgins(text: str, fs: float | None) -> FilterNoise:
-    d = yaml.safe_load(text)
-    d = d.get("imunoise") if isinstance(d, dict) else None
-    if not isinstance(d, dict) or "arw" not in d:
-        raise ExportError("no imunoise.arw")
+    if not re.search(r"^imunoise[ \t]*:", text, re.M):
+        raise ExportError("no imunoise")
+    d = {k: _flow(text, k) for k in ("arw", "vrw", "gbstd", "abstd", "corrtime")}
+    if d["arw"] is None or d["vrw"] is None or not isinstance(d["corrtime"], float):
+        raise ExportError("no imunoise.arw/vrw/corrtime")
     tc = float(d["corrtime"]) * 3600.0
     deg = math.pi / 180.0
     vals: dict[str, dict[str, dict[str, float]]] = {}
@@ -304,14 +312,16 @@ def _kfgins(text: str, fs: float | None) -> FilterNoise:
     ):
         for ax, n in _xyz(d[nkey]).items():
             vals.setdefault(kind, {})[ax] = {"N": n * nf}
-        for ax, b in _xyz(d.get(bkey, 0.0)).items():
+        for ax, b in _xyz(d[bkey] if d[bkey] is not None else 0.0).items():
             vals[kind].setdefault(ax, {}).update({"T_c": tc, "sigma_b": b * bf})
     return FilterNoise("kf-gins", vals)
 
 
 def _ros_imu(text: str, fs: float | None) -> FilterNoise:
-    d = yaml.safe_load(text)
-    if not isinstance(d, dict) or "angular_velocity_covariance" not in d:
+    d = {
+        k: _flow(text, k) for k in ("angular_velocity_covariance", "linear_acceleration_covariance")
+    }
+    if d["angular_velocity_covariance"] is None:
         raise ExportError("no angular_velocity_covariance")
     rate = _rate_comment(text) or fs
     if rate is None:
@@ -358,7 +368,7 @@ def read_filter_noise(text: str, fs: float | None = None) -> FilterNoise:
             return reader(body, fs)
         except (ExportError, ValueError, TypeError, KeyError, AttributeError):
             continue
-        except (yaml.YAMLError, ET.ParseError, json.JSONDecodeError):
+        except (ET.ParseError, json.JSONDecodeError):
             continue
     raise ExportError(f"not a filter file of a known format ({', '.join(READERS)})")
 
