@@ -73,7 +73,7 @@ class FilterNoise:
                 raise DatasheetError(f"{source} has {' and '.join(kinds)} values: choose one")
             kind = kinds[0]
         if kind not in self.values:
-            raise DatasheetError(f"{source} ({self.fmt}) has no {kind} values")
+            raise DatasheetError(f"{source} ({self.fmt}) has no {kind}_* keys: no {kind} values")
         d = self.values[kind]
         ax = channel_axis(channel) if channel else "*"
         v = d.get(ax) or d.get("*") or next(iter(d.values()))
