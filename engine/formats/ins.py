@@ -49,13 +49,16 @@ def _flow(vals: list[float]) -> str:
 def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
     one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
-    nz = noise_for(fits, "KF-GINS imunoise", kw, consumer="kf-gins")
+    bounded = (kw.get("projection") or "bound") == "bound"
+    # with the bound, a first pass without intervals gives each channel's own T_c
+    nz = noise_for(
+        fits, "KF-GINS imunoise", dict(kw, ci=None) if bounded else kw, consumer="kf-gins"
+    )
     nz.need("T_c", "the KF-GINS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
     ss = float(kw.get("scale_factor_std_ppm") or 1000.0)
 
     g, a = "gyroscope", "accelerometer"
     own = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
-    bounded = (kw.get("projection") or "bound") == "bound"
     if bounded:
         tc = _least_total_tc(fits, kw, sorted(set(own.values())))
         nz = noise_for(fits, "KF-GINS imunoise", dict(kw, tc=tc), consumer="kf-gins")
