@@ -17,11 +17,14 @@ Hz, one prediction per 12 ms). :meth:`FilterNoise.spec` gives the
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,7 +33,7 @@ from .._files import read_regular
 from ..inference.datasheet_check import DatasheetError, DatasheetSpec, read_datasheet
 from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
-from ..units import DISPLAY, ExportError
+from ..units import DISPLAY, SI_UNIT, ExportError, si_factor
 from .ins import MGAL
 
 __all__ = ["FilterNoise", "read_filter_noise", "read_check_file", "PX4_DEFAULT_RATE"]
@@ -373,6 +376,93 @@ def read_filter_noise(text: str, fs: float | None = None) -> FilterNoise:
     raise ExportError(f"not a filter file of a known format ({', '.join(READERS)})")
 
 
+def _with_gm(spec: DatasheetSpec, rows: Sequence[Mapping[str, Any]], where: str) -> DatasheetSpec:
+    """``spec`` with the Gauss-Markov (and AR1) terms of datasheet rows: per process label its
+    ``T_c`` [s] and ``sigma_gm`` (in a signal unit), so that a GM model's white noise is not
+    read as 0 (its fast GM carries it)."""
+    terms: dict[str, dict[str, tuple[float, str]]] = {}
+    for r in rows:
+        if r.get("symbol") in ("T_c", "sigma_gm") and r.get("value") not in (None, ""):
+            terms.setdefault(str(r.get("process")), {})[str(r["symbol"])] = (
+                float(r["value"]),
+                str(r.get("unit") or ""),
+            )
+    gm = []
+    for lab, t in terms.items():
+        if "T_c" not in t or "sigma_gm" not in t:
+            continue
+        v, u = t["sigma_gm"]
+        try:
+            k, f = si_factor(u)
+        except ExportError as e:
+            raise DatasheetError(f"{where} {lab} sigma_gm: {e}") from e
+        if k != spec.kind:
+            continue
+        gm.append((t["T_c"][0], v * f))
+    if not gm:
+        return spec
+    return DatasheetSpec(spec.kind, spec.values, spec.given, spec.source, tuple(gm))
+
+
+def _from_projection(projs: Any, kind: str | None, where: str) -> DatasheetSpec | None:
+    """The first stored projection of a ``gmwm`` JSON report (``WN+RW`` or ``WN+GM``, in SI)
+    as a datasheet: what a filter fed from this report assumes. None when there is none."""
+    if not isinstance(projs, Mapping):
+        return None
+    for name, p in projs.items():
+        if not isinstance(p, Mapping) or p.get("sensor") not in SI_UNIT:
+            continue
+        if kind is not None and p["sensor"] != kind:
+            continue
+        par = p.get("params") or {}
+
+        def val(k: str, par: Mapping[str, Any] = par) -> float | None:
+            v = par.get(k, {}).get("value") if isinstance(par.get(k), Mapping) else None
+            return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+
+        n = val("N")
+        if n is None:
+            continue
+        src = f"{where} projection {name} ({p.get('consumer')})"
+        if p.get("consumer") == "WN+RW" and val("K") is not None:
+            return DatasheetSpec(p["sensor"], {"N": n, "K": val("K") or 0.0}, {}, src)
+        if p.get("consumer") == "WN+GM" and val("T_c") and val("sigma_b") is not None:
+            return DatasheetSpec(
+                p["sensor"], {"N": n}, {}, src, ((val("T_c") or 1.0, val("sigma_b") or 0.0),)
+            )
+        if p.get("consumer") == "WN":
+            return DatasheetSpec(p["sensor"], {"N": n}, {}, src)
+    return None
+
+
+def _report_spec(p: Path, channel: str | None, kind: str | None) -> DatasheetSpec | None:
+    """A ``gmwm`` JSON report's stored projection (what a filter fed from it assumes) or a
+    datasheet CSV's rows with their GM terms; None for another file."""
+    text = read_regular(p, str(p), error=DatasheetError).decode("utf-8", "replace")
+    if p.suffix.lower() == ".csv":
+        rows = list(csv.DictReader(io.StringIO(text)))
+        spec = read_datasheet(p, channel=channel, kind=kind)
+        names = list(dict.fromkeys(r.get("channel") for r in rows))
+        ch = channel if channel in names else names[0] if len(names) == 1 else channel
+        return _with_gm(spec, [r for r in rows if r.get("channel") == ch], str(p))
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError:
+        return None
+    if not isinstance(d, dict) or d.get("schema") != "gmwm-report/1":
+        return None
+    chans = d.get("channels") or {}
+    names = list(chans)
+    ch = channel if channel in names else names[0] if len(names) == 1 else channel
+    c = chans.get(ch) if isinstance(chans.get(ch), dict) else None
+    if c is None:
+        return None
+    stored = _from_projection(c.get("projections"), kind, f"{p} [{ch}]")
+    if stored is None and isinstance(c.get("datasheet"), list):
+        return _with_gm(read_datasheet(p, channel=ch, kind=kind), c["datasheet"], str(p))
+    return stored
+
+
 def read_check_file(
     source: str | os.PathLike[str],
     *,
@@ -381,7 +471,8 @@ def read_check_file(
     fs: float | None = None,
 ) -> DatasheetSpec:
     """The datasheet ``gmwm check --datasheet-file`` compares with the log: a ``gmwm`` JSON
-    report, datasheet CSV or saved datasheet (:func:`~engine.inference.read_datasheet`), or
+    report through its stored projection, a datasheet CSV with its GM terms, a saved datasheet
+    (:func:`~engine.inference.read_datasheet`), or
     a filter file of any format :mod:`engine.formats` writes, written by us or by hand
     (:func:`read_filter_noise`).
 
@@ -393,6 +484,9 @@ def read_check_file(
     p = Path(source)
     suffix = p.suffix.lower()
     if suffix in (".json", ".csv"):
+        spec = _report_spec(p, channel, kind)
+        if spec is not None:
+            return spec
         try:
             return read_datasheet(p, channel=channel, kind=kind)
         except DatasheetError:

@@ -372,65 +372,6 @@ def _from_rows(rows: Sequence[Mapping[str, Any]], kind: str | None, where: str) 
     return DatasheetSpec(kinds.pop(), vals, given, where)
 
 
-def _with_gm(spec: DatasheetSpec, rows: Sequence[Mapping[str, Any]], where: str) -> DatasheetSpec:
-    """``spec`` with the Gauss-Markov (and AR1) terms of datasheet rows: per process label its
-    ``T_c`` [s] and ``sigma_gm`` (in a signal unit), so that a GM model's white noise is not
-    read as 0 (its fast GM carries it)."""
-    terms: dict[str, dict[str, tuple[float, str]]] = {}
-    for r in rows:
-        if r.get("symbol") in ("T_c", "sigma_gm") and r.get("value") not in (None, ""):
-            terms.setdefault(str(r.get("process")), {})[str(r["symbol"])] = (
-                float(r["value"]),
-                str(r.get("unit") or ""),
-            )
-    gm = []
-    for lab, t in terms.items():
-        if "T_c" not in t or "sigma_gm" not in t:
-            continue
-        v, u = t["sigma_gm"]
-        try:
-            k, f = si_factor(u)
-        except ExportError as e:
-            raise DatasheetError(f"{where} {lab} sigma_gm: {e}") from e
-        if k != spec.kind:
-            continue
-        gm.append((t["T_c"][0], v * f))
-    if not gm:
-        return spec
-    return DatasheetSpec(spec.kind, spec.values, spec.given, spec.source, tuple(gm))
-
-
-def _from_projection(projs: Any, kind: str | None, where: str) -> DatasheetSpec | None:
-    """The first stored projection of a ``gmwm`` JSON report (``WN+RW`` or ``WN+GM``, in SI)
-    as a datasheet: what a filter fed from this report assumes. None when there is none."""
-    if not isinstance(projs, Mapping):
-        return None
-    for name, p in projs.items():
-        if not isinstance(p, Mapping) or p.get("sensor") not in SI_UNIT:
-            continue
-        if kind is not None and p["sensor"] != kind:
-            continue
-        par = p.get("params") or {}
-
-        def val(k: str, par: Mapping[str, Any] = par) -> float | None:
-            v = par.get(k, {}).get("value") if isinstance(par.get(k), Mapping) else None
-            return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
-
-        n = val("N")
-        if n is None:
-            continue
-        src = f"{where} projection {name} ({p.get('consumer')})"
-        if p.get("consumer") == "WN+RW" and val("K") is not None:
-            return DatasheetSpec(p["sensor"], {"N": n, "K": val("K") or 0.0}, {}, src)
-        if p.get("consumer") == "WN+GM" and val("T_c") and val("sigma_b") is not None:
-            return DatasheetSpec(
-                p["sensor"], {"N": n}, {}, src, ((val("T_c") or 1.0, val("sigma_b") or 0.0),)
-            )
-        if p.get("consumer") == "WN":
-            return DatasheetSpec(p["sensor"], {"N": n}, {}, src)
-    return None
-
-
 def _pick(names: list[str], channel: str | None, where: str) -> str:
     """The channel to read: ``channel``, or the file's only one."""
     if channel is not None and not (len(names) == 1 and channel not in names):
@@ -532,14 +473,10 @@ def read_datasheet(
             if not isinstance(chans, Mapping) or not chans:
                 raise DatasheetError(f"{where}: key 'channels' missing or empty")
             ch = _pick(list(chans), channel, where)
-            c = chans[ch] if isinstance(chans[ch], Mapping) else {}
-            spec = _from_projection(c.get("projections"), kind, f"{where} [{ch}]")
-            if spec is not None:
-                return spec
-            stored = c.get("datasheet")
+            stored = chans[ch].get("datasheet") if isinstance(chans[ch], Mapping) else None
             if not isinstance(stored, list):
                 raise DatasheetError(f"{where}: channels.{ch}.datasheet missing")
-            return _with_gm(_from_rows(stored, kind, f"{where} [{ch}]"), stored, f"{where} [{ch}]")
+            return _from_rows(stored, kind, f"{where} [{ch}]")
         raise DatasheetError(
             f"{where}: unknown JSON (schema {d.get('schema')!r}); expected a gmwm report "
             "(gmwm-report/1) or a datasheet (gmwm-datasheet/1)"
@@ -550,8 +487,7 @@ def read_datasheet(
         if not rows or not need <= set(rows[0]):
             raise DatasheetError(f"{where}: a datasheet CSV needs columns {sorted(need)}")
         ch = _pick(list(dict.fromkeys(r["channel"] for r in rows)), channel, where)
-        mine = [r for r in rows if r["channel"] == ch]
-        return _with_gm(_from_rows(mine, kind, f"{where} [{ch}]"), mine, f"{where} [{ch}]")
+        return _from_rows([r for r in rows if r["channel"] == ch], kind, f"{where} [{ch}]")
     if suffix in (".yaml", ".yml") or "_noise_density" in text:
         try:
             d = read_kalibr(text)
