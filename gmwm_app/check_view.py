@@ -29,6 +29,7 @@ import param
 from bokeh.models import ColumnDataSource, Legend, LegendItem, StringFormatter, TableColumn
 
 import engine as eg
+from engine.formats.readers import read_check_file
 from engine.units import DISPLAY, ExportError, si_factor, squared, times_s
 
 from . import views
@@ -254,7 +255,10 @@ class CheckView(TabView):
         try:
             with os.fdopen(fd, "wb") as f:
                 f.write(data)
-            spec = eg.read_datasheet(tmp, channel=self.state.channel, kind=self.kind or None)
+            # every filter file gmwm export writes, a consumer's own, or a gmwm report/CSV
+            spec = read_check_file(
+                tmp, channel=self.state.channel, kind=self.kind or None, fs=self.state.fs
+            )
         except (ExportError, ValueError) as e:
             self._show([str(e).replace(tmp, filename)])
             return

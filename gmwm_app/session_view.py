@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import panel as pn
 import param
 
-from engine.formats import FORMATS, export
+from engine.formats import FORMATS, export, misfit
 from engine.session import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.export_preview import ExportPreview
@@ -541,14 +541,17 @@ class SessionPanel(pn.viewable.Viewer):
     def _on_format(self, _event: Any = None) -> None:
         key = self.format_select.value
         f = FORMATS[key]
-        self.rate_input.visible = key in ("px4", "ardupilot")
+        self.rate_input.visible = f.is_filter  # every filter format honours the filter rate
+        self.rate_input.placeholder = "required" if f.needs_filter_rate else "the log's rate"
         stem = Path(self.state.filename or "data").stem
         self.format_download.filename = f"{key}_{stem}{f.suffix}"
         self.format_download.disabled = not self._fits
         names = ", ".join(self._fits) or "none yet"
+        disagree = [line for ch, r in self._fits.items() if (line := misfit(r, ch))]
         self.fits_note.object = (
             f"Channels fitted in this session: **{names}**. Filter formats need a gyroscope "
             "and an accelerometer: show another channel and fit it to add it."
+            + "".join(f"\n\n**Warning:** {line}" for line in disagree)
         )
         self.preview.update(
             self._fits,

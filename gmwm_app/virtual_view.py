@@ -49,7 +49,7 @@ __all__ = ["VirtualView", "parse_target", "EXPORT_FORMATS"]
 log = logging.getLogger(__name__)
 
 #: Formats offered for the virtual sensor's model (those that need no filter rate).
-EXPORT_FORMATS = tuple(f for f in FORMATS if f not in ("px4", "ardupilot"))
+EXPORT_FORMATS = tuple(k for k, f in FORMATS.items() if not f.needs_filter_rate)
 SENSOR_COLOR = "#9e9e9e"
 AVERAGE_COLOR = "#1f77b4"
 VIRTUAL_COLOR = "#111111"

@@ -71,7 +71,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm check``; returns the table (or a JSON-ready dict)."""
     from .._jsonutil import json_ready
     from ..fit import fit_gmwm
-    from ..inference.datasheet_check import check_datasheet, parse_datasheet, read_datasheet
+    from ..formats.readers import read_check_file
+    from ..inference.datasheet_check import check_datasheet, parse_datasheet
     from ..models import parse_model
     from ..units import ExportError, si_factor
 
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             kind = si_factor(wv.unit, name)[0]
         except ExportError:
             pass  # the check itself says the unit is needed
-        ds = read_datasheet(args.datasheet_file, channel=name, kind=kind)
+        ds = read_check_file(args.datasheet_file, channel=name, kind=kind, fs=wv.fs)
     fit = fit_gmwm(wv, model) if model is not None else None
     res = check_datasheet(wv, ds, fit=fit, level=args.confidence)
     if args.json:

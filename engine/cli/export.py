@@ -7,6 +7,7 @@
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
                 [--inflate F] [--filter-rate HZ] [--projection bound|plain|fit]
                 [--horizon S] [--bound-band S1:S2] [--bound-confidence C] [--no-intervals]
+                [--bound-data low|estimate|high|none]
                 [--vehicle-id ID] [--scale-factor-std PPM] [--consumer NAME ...]
 
 The log options and the streamed WV are shared with the other subcommands
@@ -128,7 +129,16 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument(
         "--horizon",
         type=positive(float, "--horizon"),
-        help="longest WV scale (s) the bound covers (default: the log length)",
+        help="the longest time (s) your filter runs without aiding (a GNSS outage, a visual "
+        "dropout): the longest WV scale the bound covers (default: the log length)",
+    )
+    ex.add_argument(
+        "--bound-data",
+        choices=["low", "estimate", "high", "none"],
+        default="low",
+        help="filter formats: the bound also covers the empirical WV at its scales in the "
+        "band: low (default) the lower limit of its 95 %% interval, estimate the WV itself, "
+        "high its upper limit, none the fitted model alone",
     )
     ex.add_argument(
         "--bound-band",
@@ -175,6 +185,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     check_output(args.output, "-o", inputs=input_paths(args))
     from ..fit import fit_gmwm
     from ..formats import export
+    from ..formats.projection import misfit
     from ..inference import param_intervals
     from ..io import load_log, pick_channel
     from ..models import parse_model
@@ -258,7 +269,9 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         vehicle_id=args.vehicle_id,
         scale_factor_std_ppm=args.scale_factor_std,
         consumers=args.consumer,
+        data=args.bound_data,
     )
+    disagree = [line for ch, r in fits.items() if (line := misfit(r, ch))]
     if out is None:
         return text.rstrip("\n")
     if args.json:
@@ -267,5 +280,11 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             "format": args.format,
             "channels": list(fits),
             "models": {ch: r.model.spec(values=True) for ch, r in fits.items()},
+            "misfit": disagree,
         }
-    return f"wrote {args.format} export of {len(fits)} channel(s) ({', '.join(fits)}) to {out}"
+    return "\n".join(
+        [
+            f"wrote {args.format} export of {len(fits)} channel(s) ({', '.join(fits)}) to {out}",
+            *(f"  warning: {line}" for line in disagree),
+        ]
+    )

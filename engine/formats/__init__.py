@@ -24,7 +24,15 @@ from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr
 from .noise import ImuNoise, imu_noise
-from .projection import FORMAT_CONSUMERS, ProjectedParam, Projection, project
+from .projection import (
+    DATA_BOUNDS,
+    FORMAT_CONSUMERS,
+    MISFIT_SHARE,
+    ProjectedParam,
+    Projection,
+    misfit,
+    project,
+)
 from .registry import FORMATS, Format, export, register
 from .report import curves_csv, fit_report, write_report
 
@@ -54,4 +62,7 @@ __all__ = [
     "Projection",
     "ProjectedParam",
     "FORMAT_CONSUMERS",
+    "DATA_BOUNDS",
+    "MISFIT_SHARE",
+    "misfit",
 ]

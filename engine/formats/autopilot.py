@@ -85,6 +85,12 @@ def autopilot_params(
         f"filter rate {fr!r} Hz: value = density x sqrt(filter rate) (N in rad/s/sqrt(Hz) "
         "or m/s^2/sqrt(Hz); K in rad/s^2/sqrt(Hz) or m/s^3/sqrt(Hz)), max over axes",
     ]
+    if prefix == "EKF2_":
+        header.append(
+            f"assumes EKF2 predicts at {fr:g} Hz: EKF2_PREDICT_US = {1e6 / fr:.6g} us (PX4's "
+            "default 10000 us, 100 Hz): set it to that value, or re-export with "
+            "--filter-rate 1e6/EKF2_PREDICT_US"
+        )
     if prefix == "EK3_":
         header.append(
             "EKF3 predicts once per 12 ms of IMU data (about 80-83 Hz), not at the 400 Hz "

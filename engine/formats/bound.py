@@ -41,6 +41,7 @@ __all__ = [
     "Split",
     "split_terms",
     "target_ratio",
+    "floor_at",
     "fine_scales",
     "columns",
     "lower_vertices",
@@ -92,6 +93,19 @@ def target_ratio(tau: np.ndarray, n: int, confidence: float | None) -> np.ndarra
         return np.ones_like(tau)
     eta = np.maximum((n - tau + 1.0) / tau, 1.0)
     return eta / chi2_isf(eta, 1.0 - (1.0 - float(confidence)) / 2.0)
+
+
+def floor_at(t: np.ndarray, tau_d: np.ndarray, wv_d: np.ndarray) -> np.ndarray:
+    """The empirical floor ``wv_d`` at the scales of ``t`` that are among its dyadic scales
+    ``tau_d`` (log samples), 0 elsewhere."""
+    t = np.asarray(t, float)
+    out = np.zeros_like(t)
+    if tau_d.size == 0:
+        return out
+    i = np.clip(np.searchsorted(tau_d, t), 0, tau_d.size - 1)
+    hit = np.isclose(tau_d[i], t, rtol=1e-9, atol=0.0)
+    out[hit] = wv_d[i[hit]]
+    return out
 
 
 def fine_scales(tau: np.ndarray) -> np.ndarray:
@@ -184,6 +198,8 @@ def least_inflation(
     verts = lower_vertices(b / s) / s
     keep = t_obj > 0
     vals = np.mean(np.log((a_obj[keep] @ verts.T) / t_obj[keep, None]), axis=0)
+    # the consumers need white noise: a vertex without it is taken only when no other exists
+    vals = np.where((verts[:, 0] > 0) | ~np.any(verts[:, 0] > 0), vals, np.inf)
     k = int(np.argmin(vals))
     x = verts[k]
     # rounding: scale up so that the bound holds at every constraint scale
@@ -201,8 +217,16 @@ def solve(
     confidence: float | None,
     tau_h: float,
     bound: bool,
+    floor: tuple[np.ndarray, np.ndarray] | None = None,
+    tc_fix: float | None = None,
 ) -> dict[str, Any]:
     """The projection of one model: plain and bounded variances (native unit, per sample).
+
+    ``floor`` is ``(tau, wv)``: an empirical WV (a limit of its interval, or the estimate) at
+    dyadic scales ``tau`` (log samples) that the consumer's WV must also reach there; the
+    target is the larger of the fitted model's and this floor at those scales. ``tc_fix`` (s)
+    fixes a Gauss-Markov bias's correlation time (no search): a file that takes one ``T_c``
+    for several channels.
 
     Returns a dictionary with ``split`` (:class:`Split`), ``plain`` (the plain conversion),
     ``target_at`` (the target WV as a function of scales), ``target`` (at ``tau``), ``x``
@@ -226,7 +250,10 @@ def solve(
 
     def target_at(t: np.ndarray) -> np.ndarray:
         base = tmodel.wv(t, fs) if tmodel is not None else np.zeros_like(t)
-        return base * target_ratio(t, n, confidence)
+        base = base * target_ratio(t, n, confidence)
+        if floor is None:
+            return base
+        return np.maximum(base, floor_at(t, *floor))
 
     target = target_at(tau)
     out["target_at"] = target_at
@@ -254,6 +281,15 @@ def solve(
             if fp <= f + 1e-9:
                 x, f = xp, fp
         out["x"], out["T_c"], out["A"], out["log_excess"] = x, None, a, f
+        return out
+    if tc_fix is not None:
+        a = columns(consumer, tau, fs, tc_fix)
+        x, f = least_inflation(columns(consumer, fine, fs, tc_fix), ft, a, target)
+        if not math.isfinite(f):
+            raise ExportError(
+                f"no Gauss-Markov bias of T_c {tc_fix:g} s bounds the WV over the band"
+            )
+        out["x"], out["T_c"], out["A"], out["log_excess"] = x, float(tc_fix), a, f
         return out
     # Gauss-Markov bias: 1-D search over log T_c of the least inflation, from the band's
     # shortest scale to ten horizons

@@ -5,8 +5,17 @@
   ``corrtime`` [hr]. KF-GINS models each bias as a first-order Gauss-Markov process with
   stationary std ``gbstd``/``abstd`` and correlation time ``corrtime`` (its process noise is
   ``2 std^2 / corrtime``). So ``arw``/``vrw`` = N in the datasheet display units (ARW, VRW of
-  :data:`engine.units.DISPLAY`), ``gbstd``/``abstd`` = ``sigma_gm`` of the most persistent GM
-  term and ``corrtime`` = its ``T_c`` (the largest over the channels: KF-GINS takes one).
+  :data:`engine.units.DISPLAY`), ``gbstd``/``abstd`` = ``sigma_b`` of the projected
+  Gauss-Markov bias and ``corrtime`` = its ``T_c``. KF-GINS takes **one** ``corrtime`` for
+  every bias, so the file has one bias model: with the bound (the default), the ``T_c`` of
+  the least total inflation over the file's channels (the sum of each channel's log
+  geometric-mean ratio, searched over the channels' own ``T_c`` and a log grid between
+  them), each channel's ``sigma_b`` then bounded at that ``T_c``; with ``--projection
+  plain``/``fit``, the largest ``T_c`` with each channel's driving noise ``q = 2 sigma_b^2 /
+  T_c`` kept (``sigma_b`` scaled by ``sqrt(T_c / T_c,own)``), which bounds each channel's GM
+  spectrum at every frequency. (Pairing the largest ``T_c`` with each channel's own
+  ``sigma_b`` lowers ``q``: the file's WV was 0.065-0.15 of the fitted WV at 160-5000 s on
+  the ADIS16405 gyros, issue 28.)
 * ``sensor_msgs/Imu`` (ROS message definition): row-major 3x3 covariances (x, y, z) of the
   measurement in (rad/s)^2 and (m/s^2)^2; ``orientation_covariance[0] = -1`` when the message
   has no orientation. We write the per-sample variance of the white noise at the log's rate,
@@ -15,13 +24,17 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from ..fit import GMWMResult
-from ..units import DISPLAY
+from ..units import DISPLAY, ExportError
 from .common import text_lines, yaml_float
 from .noise import noise_for
+from .projection import project
 
 __all__ = ["MGAL", "kfgins_yaml", "ros_imu_yaml"]
 
@@ -36,24 +49,45 @@ def _flow(vals: list[float]) -> str:
 def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
     one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
-    nz = noise_for(fits, "KF-GINS imunoise", kw, consumer="kf-gins")
+    bounded = (kw.get("projection") or "bound") == "bound"
+    # with the bound, a first pass without intervals gives each channel's own T_c
+    nz = noise_for(
+        fits, "KF-GINS imunoise", dict(kw, ci=None) if bounded else kw, consumer="kf-gins"
+    )
     nz.need("T_c", "the KF-GINS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
     ss = float(kw.get("scale_factor_std_ppm") or 1000.0)
 
     g, a = "gyroscope", "accelerometer"
-    tcs = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
+    own = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
+    if bounded:
+        tc = _least_total_tc(fits, kw, sorted(set(own.values())))
+        nz = noise_for(fits, "KF-GINS imunoise", dict(kw, tc=tc), consumer="kf-gins")
+        how = (
+            f"one T_c = {tc:.6g} s for every bias (KF-GINS's one corrtime): the least total "
+            "inflation over the channels; each gbstd/abstd bounds its channel at that T_c"
+        )
+    else:
+        tc = max(own.values())
+        for k in (g, a):
+            d = nz.values[k]
+            d["sigma_gm"] = {
+                ax: v * math.sqrt(tc / d["T_c"][ax]) for ax, v in d["sigma_gm"].items()
+            }
+            d["T_c"] = dict.fromkeys(d["T_c"], tc)
+        how = (
+            f"one T_c = {tc:.6g} s (the largest; KF-GINS's one corrtime), each channel's "
+            "driving noise 2 sigma^2 / T_c kept (gbstd/abstd x sqrt(T_c / its own T_c))"
+        )
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines += [
-        "# arw/vrw = N; gbstd/abstd = sigma_gm of the most persistent GM term; corrtime = its",
-        "# T_c, the largest over the channels (per channel, s: "
-        + ", ".join(f"{k} {v:.6g}" for k, v in tcs.items())
-        + ")",
+        f"# arw/vrw = N; gbstd/abstd = sigma_b of the Gauss-Markov bias; corrtime: {how}",
+        "# (each channel's own T_c, s: " + ", ".join(f"{k} {v:.6g}" for k, v in own.items()) + ")",
         "imunoise:",
         f"  arw: {_flow(nz.xyz(g, 'N', DISPLAY[(g, 'N')].factor))}  # [deg/sqrt(hr)]",
         f"  vrw: {_flow(nz.xyz(a, 'N', DISPLAY[(a, 'N')].factor))}  # [m/s/sqrt(hr)]",
         f"  gbstd: {_flow(nz.xyz(g, 'sigma_gm', DISPLAY[(g, 'B')].factor))}  # [deg/hr]",
         f"  abstd: {_flow(nz.xyz(a, 'sigma_gm', 1.0 / MGAL))}  # [mGal]",
-        f"  corrtime: {yaml_float(max(tcs.values()) / _HOUR)}  # [hr]",
+        f"  corrtime: {yaml_float(tc / _HOUR)}  # [hr]",
         f"  gsstd: {_flow([ss] * 3)}  # [ppm] scale-factor std: NOT estimated by GMWM (a "
         "placeholder: set it from your IMU's datasheet)",
         f"  asstd: {_flow([ss] * 3)}  # [ppm] scale-factor std: NOT estimated by GMWM (a "
@@ -64,14 +98,50 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines)
 
 
+def _least_total_tc(
+    fits: Mapping[str, GMWMResult], kw: Mapping[str, Any], own: list[float]
+) -> float:
+    """The one ``T_c`` (s) of least total inflation over the channels: the sum of each
+    channel's log geometric-mean ratio (:attr:`Projection.inflation`), over the channels' own
+    ``T_c`` and 9 log-spaced values between the smallest and the largest."""
+    cands = sorted(set(own) | set(np.geomspace(min(own), max(own), 9).tolist()))
+    units = kw.get("units") or {}
+    best, arg = math.inf, own[-1]
+    for c in cands:
+        total = 0.0
+        for ch, res in fits.items():
+            try:
+                p = project(
+                    res,
+                    "WN+GM",
+                    fs_filter=kw.get("filter_rate"),
+                    horizon_s=kw.get("horizon_s"),
+                    band=kw.get("band"),
+                    confidence=kw.get("confidence"),
+                    channel=ch,
+                    unit=units.get(ch),
+                    ci=None,
+                    data=kw.get("data") or "low",
+                    tc=c,
+                )
+            except ExportError:
+                total = math.inf
+                break
+            total += math.log(p.inflation["geometric_mean"])
+        if total < best:
+            best, arg = total, c
+    return float(arg)
+
+
 def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """``sensor_msgs/Imu`` covariance fields (YAML): diagonal per-sample WN variances in SI
     (``inflate**2`` applied), ``orientation_covariance[0] = -1``."""
     nz = noise_for(fits, "sensor_msgs/Imu covariances", kw, allow_partial=True, consumer="ros-imu")
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines.append(
-        f"# per-sample variance of the white noise at {nz.fs:g} Hz, sigma2_WN = N^2 fs (SI), "
-        "row-major 3x3, axes x y z (an axis not fitted gets the max over fitted ones)"
+        f"# per-sample variance of the white noise at {nz.rate:g} Hz (the consumer's IMU rate), "
+        "sigma2_WN = N^2 rate (SI), row-major 3x3, axes x y z (an axis not fitted gets the max "
+        "over fitted ones); the white part only: no bound on the bias (the estimator's states)"
     )
     lines.append("orientation_covariance: " + _flow([-1.0] + [0.0] * 8) + "  # -1: no orientation")
     for field, kind, u in (

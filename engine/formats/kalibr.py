@@ -81,7 +81,10 @@ class KalibrImu:
         lines = [f"# {c}" for c in self.comments]
         lines += [f"# warning: {w}" for w in self.warnings]
         lines.append(f"rostopic: {yaml_str(self.rostopic)}")
-        lines.append(f"update_rate: {yaml_float(self.update_rate)}  # Hz (the log's sampling rate)")
+        lines.append(
+            f"update_rate: {yaml_float(self.update_rate)}  # Hz (the IMU rate; densities do not "
+            "depend on it)"
+        )
         lines.append("")
         for key in _KALIBR_KEYS:
             if key not in self.values:

@@ -18,6 +18,7 @@ in the header it returns.
 from __future__ import annotations
 
 import math
+import warnings as _warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -66,6 +67,8 @@ class ImuNoise:
     warnings : list of str
     projections : dict of str to Projection
         Per channel (empty with ``projection="fit"``).
+    fs_filter : float or None
+        The consumer's rate (Hz): the filter rate given, else None (the log's rate).
     """
 
     values: dict[str, dict[str, dict[str, float]]]
@@ -74,6 +77,26 @@ class ImuNoise:
     header: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     projections: dict[str, Projection] = field(default_factory=dict)
+    fs_filter: float | None = None
+
+    @property
+    def rate(self) -> float:
+        """The consumer's rate (Hz) for per-sample and per-step values and the rate keys:
+        ``fs_filter`` when given, else the log's ``fs``. Densities do not depend on it."""
+        return self.fs if self.fs_filter is None else self.fs_filter
+
+    def rate_line(self) -> str:
+        """The header line that says which rate the file's per-sample values and rate keys
+        use."""
+        if self.fs_filter is None:
+            return (
+                f"consumer rate {self.fs:g} Hz: the log's sampling rate (--filter-rate HZ for "
+                "another)"
+            )
+        return (
+            f"consumer rate {self.rate:g} Hz (--filter-rate; the log's is {self.fs:g} Hz): "
+            "densities do not depend on it; per-sample values and rate keys use it"
+        )
 
     def conservative(self, kind: str, quantity: str) -> float:
         """Largest value over the axes (the file value of a one-number key)."""
@@ -118,6 +141,8 @@ def imu_noise(
     band: Any = None,
     confidence: float | None = None,
     ci: str | None = "asymptotic",
+    data: str = "low",
+    tc: float | None = None,
 ) -> ImuNoise:
     """Gather N, K, sigma2, B and the Gauss-Markov numbers per sensor and axis in SI (see
     :class:`ImuNoise` and the module docstring for ``projection``).
@@ -127,8 +152,9 @@ def imu_noise(
     projection : {"bound", "plain", "fit"}
     consumer : str
         The consumer's noise model or format (:func:`~engine.formats.projection.consumer_of`).
-    fs_filter, horizon_s, band, confidence, ci
-        Passed to :func:`~engine.formats.projection.project`.
+    fs_filter, horizon_s, band, confidence, ci, data, tc
+        Passed to :func:`~engine.formats.projection.project`. ``fs_filter`` is also the
+        consumer's rate of the per-sample values (``sigma2``; :attr:`ImuNoise.rate`).
 
     Raises
     ------
@@ -140,7 +166,7 @@ def imu_noise(
     if projection not in PROJECTIONS:
         raise ExportError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
     if projection == "fit":
-        return _fit_noise(fits, units, f, source, fmt, allow_partial)
+        return _fit_noise(fits, units, f, source, fmt, allow_partial, fs_filter)
     cons = consumer_of(consumer)
     if not fits:
         raise ExportError("no fitted channel to export")
@@ -155,6 +181,7 @@ def imu_noise(
     projs: dict[str, Projection] = {}
     warnings: list[str] = []
     chan_of: dict[tuple[str, str], str] = {}
+    fs_rate = None if fs_filter is None else float(fs_filter)
     for ch, res in fits.items():
         unit = (units or {}).get(ch, res.wv.unit) or ""
         kind, f_si = si_factor(unit, ch)
@@ -176,20 +203,24 @@ def imu_noise(
             channel=ch,
             unit=unit,
             ci=ci,
+            data=data,
+            tc=tc,
         )
         projs[ch] = p
         warnings += p.warnings
+        if p.misfit:
+            warnings.append(p.misfit)
         d = vals.setdefault(kind, {})
         n = p.value("N")
         d.setdefault("N", {})[ax] = n * f
-        d.setdefault("sigma2", {})[ax] = n * n * res.fs * f * f
+        d.setdefault("sigma2", {})[ax] = n * n * (fs_rate or res.fs) * f * f
         if "K" in p.params:
             d.setdefault("K", {})[ax] = p.value("K") * f
         if "T_c" in p.params:
-            tc, sb = p.value("T_c"), p.value("sigma_b")
-            d.setdefault("T_c", {})[ax] = tc
+            tcp, sb = p.value("T_c"), p.value("sigma_b")
+            d.setdefault("T_c", {})[ax] = tcp
             d.setdefault("sigma_gm", {})[ax] = sb * f
-            d.setdefault("sqrt(q)", {})[ax] = math.sqrt(2.0 / tc) * sb * f
+            d.setdefault("sqrt(q)", {})[ax] = math.sqrt(2.0 / tcp) * sb * f
         rows = datasheet_rows(res.model, res.fs, unit, channel=ch, n_levels=res.wv.n_levels)
         d.setdefault("B", {})[ax] = (
             _row(rows, "model", "bias instability (Allan floor, SI)", "B") * f
@@ -224,7 +255,11 @@ def imu_noise(
         f"inflate = {f!r}: every noise value below is the projected value x {f!r} "
         "(variances x inflate^2; times and rates unchanged)"
     )
-    return ImuNoise(vals, float(fs0), f, header, warnings, projs)
+    out = ImuNoise(vals, float(fs0), f, header, warnings, projs, fs_rate)
+    header.insert(3, out.rate_line())
+    for w in dict.fromkeys(w for p in projs.values() for w in p.warnings if "filter rate" in w):
+        _warnings.warn(w, UserWarning, stacklevel=3)
+    return out
 
 
 def _fit_noise(
@@ -234,6 +269,7 @@ def _fit_noise(
     source: str,
     fmt: str,
     allow_partial: bool,
+    fs_filter: float | None = None,
 ) -> ImuNoise:
     """``projection="fit"``: N and K as :func:`~engine.formats.kalibr.kalibr_imu` extracts
     them (K from the GM driving noise when a model has no RW, with a warning), the most
@@ -252,7 +288,10 @@ def _fit_noise(
         d = vals.setdefault(kind, {})
         labels, procs = res.model.labels, res.model.processes
         wn = [lab for lab, p in zip(labels, procs, strict=True) if p.code == WN.code][0]
-        d.setdefault("sigma2", {})[ax] = res.params[f"{wn}.sigma2"] * f_si**2 * f * f
+        rate = res.fs if fs_filter is None else float(fs_filter)  # N^2 x the consumer's rate
+        d.setdefault("sigma2", {})[ax] = (
+            res.params[f"{wn}.sigma2"] * f_si**2 * f * f * rate / res.fs
+        )
         d.setdefault("B", {})[ax] = (
             _row(rows, "model", "bias instability (Allan floor, SI)", "B") * f
         )
@@ -274,7 +313,9 @@ def _fit_noise(
         f"inflate = {f!r}: every noise value below is the fitted value x {f!r} "
         "(variances x inflate^2; times and rates unchanged)",
     ]
-    return ImuNoise(vals, kal.update_rate, f, header, list(kal.warnings))
+    out = ImuNoise(vals, kal.update_rate, f, header, list(kal.warnings), fs_filter=fs_filter)
+    header.insert(3, out.rate_line())
+    return out
 
 
 def noise_for(
@@ -286,7 +327,8 @@ def noise_for(
     fs_filter: float | None = None,
 ) -> ImuNoise:
     """:func:`imu_noise` with a writer's options (``units``, ``inflate``, ``source``,
-    ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``; ``filter_rate`` unless
+    ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``, ``data``, ``tc``;
+    ``filter_rate`` unless
     ``fs_filter`` is given)."""
     return imu_noise(
         fits,
@@ -302,4 +344,6 @@ def noise_for(
         band=options.get("band"),
         confidence=options.get("confidence"),
         ci=options.get("ci", "asymptotic"),
+        data=options.get("data") or "low",
+        tc=options.get("tc"),
     )

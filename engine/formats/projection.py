@@ -65,9 +65,20 @@ import numpy as np
 from ..fit import GMWMResult
 from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model
 from ..units import SI_UNIT, ExportError, si_factor
-from .bound import POINTS_PER_OCTAVE, Split, columns, fine_scales, solve
+from .bound import (
+    POINTS_PER_OCTAVE,
+    Split,
+    columns,
+    fine_scales,
+    floor_at,
+    solve,
+    split_terms,
+)
 
 __all__ = [
+    "DATA_BOUNDS",
+    "MISFIT_SHARE",
+    "misfit",
     "CONSUMER_PARAMS",
     "FORMAT_CONSUMERS",
     "ProjectedParam",
@@ -83,24 +94,65 @@ CONSUMER_PARAMS: dict[str, tuple[str, ...]] = {
     "WN": ("N",),
 }
 
-#: The consumer model of each filter format.
-FORMAT_CONSUMERS: dict[str, str] = {
-    "kalibr": "WN+RW",
-    "openvins": "WN+RW",
-    "basalt": "WN+RW",
-    "orbslam3": "WN+RW",
-    "vins": "WN+RW",
-    "px4": "WN+RW",
-    "ardupilot": "WN+RW",
-    "matlab": "WN+RW",
-    "gazebo": "WN+GM",
-    "gz-sim": "WN+GM",
-    "kf-gins": "WN+GM",
-    "ros-imu": "WN",
+#: The consumer model of each filter format: an index that
+#: :func:`engine.formats.registry.register` fills from each :class:`~engine.formats.Format`'s
+#: ``consumer`` (declared there, once).
+FORMAT_CONSUMERS: dict[str, str] = {}
+
+#: What of the empirical WV the bound covers besides the fitted model (``data=``): its interval's
+#: lower limit (the default: the data give no evidence that the sensor is quieter than the
+#: file there), its estimate, its upper limit, or nothing (the fitted model alone).
+DATA_BOUNDS: dict[str, str] = {
+    "low": "ci_low",
+    "estimate": "variance",
+    "high": "ci_high",
+    "none": "",
 }
+
+#: A fit disagrees with its data when its WV is outside the empirical interval at more than
+#: this share of the scales. If the fit were the truth, each scale would be outside with
+#: probability 0.05 (the interval's level), so with J = 19 scales 7 or more outside has
+#: binomial probability 2e-5. The share is not set lower because the best fits of real logs
+#: are outside at a few scales too (the ADIS16405 gyro_x 2*GM+WN+RW fit at 5 of 19, where the
+#: eta3 interval is a few percent wide); its WN+RW fit is outside at 14 of 19.
+MISFIT_SHARE = 1.0 / 3.0
 
 #: The sandwich covariance of each fit's free parameters (fits are immutable).
 _COV: weakref.WeakKeyDictionary[GMWMResult, np.ndarray] = weakref.WeakKeyDictionary()
+
+
+def misfit(fit: GMWMResult, channel: str = "") -> str:
+    """One line when the fitted WV is outside the empirical interval at more than
+    :data:`MISFIT_SHARE` of the scales (``""`` otherwise): how many scales, below and above,
+    and the smallest ratio fitted / empirical WV with its scale.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import engine as eg
+    >>> m = eg.parse_model("WN(1e-6) + GM(beta=0.5, sigma2_gm=1e-6)")
+    >>> x = m.simulate(2**15, rng=np.random.default_rng(3), fs=100.0)
+    >>> misfit(eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0), "WN"), "gyro_x")[:60]
+    'gyro_x (WN): model and data disagree: the fitted WV is outsi'
+    """
+    wv = fit.wv
+    tau = np.asarray(wv.tau_samples, float)
+    lo, hi = np.asarray(wv.ci_low, float), np.asarray(wv.ci_high, float)
+    mw = fit.model.wv(tau, float(fit.fs))
+    below, above = mw < lo, mw > hi
+    out = int(np.sum(below | above))
+    if out <= MISFIT_SHARE * tau.size:
+        return ""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = mw / np.asarray(wv.variance, float)
+    j = int(np.nanargmin(r))
+    return (
+        f"{channel or 'channel'} ({fit.model.spec()}): model and data disagree: the fitted WV "
+        f"is outside the empirical {100 * (1 - wv.alpha):g} % interval at {out} of {tau.size} "
+        f"scales ({int(np.sum(below))} below, {int(np.sum(above))} above; more than "
+        f"{100 * MISFIT_SHARE:.3g} % flags a misfit), down to x{r[j]:.2g} of the empirical WV "
+        f"at tau = {tau[j] / fit.fs:.4g} s"
+    )
 
 
 def consumer_of(consumer: str) -> str:
@@ -217,6 +269,11 @@ class Projection:
         The scales of the band (s) and the WVs there (unit^2): fitted model, bound target,
         exported consumer model.
     notes, warnings : list of str
+    data : str
+        What of the empirical WV the bound covers too (a key of :data:`DATA_BOUNDS`;
+        ``"none"``: the fitted model alone, or not bounded).
+    misfit : str
+        :func:`misfit` of the fit (``""`` when model and data agree).
     """
 
     channel: str
@@ -237,6 +294,8 @@ class Projection:
     consumer_wv: np.ndarray
     notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    data: str = "none"
+    misfit: str = ""
 
     def value(self, name: str) -> float:
         """The exported value of parameter ``name``."""
@@ -274,13 +333,26 @@ class Projection:
 
     def header_lines(self) -> list[str]:
         """Comment lines: what was projected, bounded, and each value with its interval."""
+        data = {
+            "low": " and the empirical WV's lower 95 % limit (at its dyadic scales)",
+            "estimate": " and the empirical WV (at its dyadic scales)",
+            "high": " and the empirical WV's upper 95 % limit (at its dyadic scales)",
+        }.get(self.data, "")
+        what = (
+            "the WV of the fitted terms that are white at the filter step ("
+            + (", ".join(k for k, v in self.assignment.items() if v.startswith("WN")) or "none")
+            + "; NOT the bias terms, which the estimator's states carry)"
+            if self.consumer == "WN"
+            else "the fitted model's "
+            + ("WV" if self.confidence is None else f"upper {100 * self.confidence:g} % limit")
+        )
         how = (
             "plain conversion (no bound)"
             if not self.bounded
             else (
-                f"bounded: its WV >= the fitted model's "
-                f"{'WV' if self.confidence is None else f'upper {100 * self.confidence:g} % limit'}"
-                f" at every scale tau = {self.band[0]:.4g} .. {self.band[1]:.4g} s "
+                f"bounded: its WV >= {what}{data} at every scale tau = "
+                f"{self.band[0]:.4g} .. {self.band[1]:.4g} s "
+                f"(horizon {self.horizon_s:.4g} s: the longest time the filter runs unaided) "
                 "with the least inflation (WV over target: geometric mean "
                 f"x{self.inflation['geometric_mean']:.3g}, largest "
                 f"x{self.inflation['max']:.3g} at tau = {self.inflation['max_tau_s']:.4g} s)"
@@ -293,6 +365,8 @@ class Projection:
         ]
         lines += [f"  {p.describe()}" for p in self.params.values()]
         lines += [f"  note: {n}" for n in self.notes]
+        if self.misfit:
+            lines.append(f"  warning: {self.misfit}")
         return lines
 
     def to_dict(self) -> dict[str, Any]:
@@ -314,6 +388,8 @@ class Projection:
             "assignment": dict(self.assignment),
             "notes": list(self.notes),
             "warnings": list(self.warnings),
+            "data": self.data,
+            "misfit": self.misfit,
         }
 
 
@@ -349,6 +425,8 @@ def project(
     unit: str | None = None,
     ci: str | None = "asymptotic",
     level: float = 0.95,
+    data: str = "low",
+    tc: float | None = None,
 ) -> Projection:
     """Project a fitted model onto a consumer's noise model and bound it (module docstring).
 
@@ -378,6 +456,14 @@ def project(
         skips them.
     level : float
         Interval level.
+    data : {"low", "estimate", "high", "none"}
+        The bound also covers this of the empirical WV (``fit.wv``) at its dyadic scales in
+        the band: the lower limit of its interval (default), the estimate, the upper limit,
+        or nothing (the fitted model alone). Not used by the ``WN`` consumer (white part only)
+        nor without ``bound``.
+    tc : float, optional
+        ``WN+GM`` with ``bound``: the Gauss-Markov bias's correlation time (s), fixed instead
+        of searched (a file with one ``T_c`` for several channels, as KF-GINS's ``corrtime``).
 
     Returns
     -------
@@ -436,11 +522,25 @@ def project(
     t0, t1 = lo_s * fs, max(hi_s * fs, lo_s * fs)
     k = max(int(math.ceil(POINTS_PER_OCTAVE * math.log2(t1 / t0))) + 1, 2)
     tau = np.unique(np.maximum(2.0 * np.round(np.geomspace(t0, t1, k) / 2.0), 2.0))
+    if data not in DATA_BOUNDS:
+        raise ExportError(f"data must be one of {', '.join(DATA_BOUNDS)}, got {data!r}")
+    use = data if bound and cons != "WN" else "none"
+    floor = None
+    if use != "none":
+        td = np.asarray(fit.wv.tau_samples, float)
+        wd = np.asarray(getattr(fit.wv, DATA_BOUNDS[use]), float)
+        inb = (td >= tau[0] * (1 - 1e-9)) & (td <= tau[-1] * (1 + 1e-9))
+        floor = (td[inb], wd[inb])
+        tau = np.unique(np.concatenate([tau, td[inb]]))
     conf = None if confidence is None else float(confidence)
     tau_h = hz * fs
-    sol = solve(fit.model, fs, fs_f, cons, tau, n, conf, tau_h, bound)
+    if tc is not None and not (math.isfinite(float(tc)) and float(tc) > 0):
+        raise ExportError(f"tc must be a positive correlation time in s, got {tc!r}")
+    tc_fixed = float(tc) if tc is not None and cons == "WN+GM" and bound else None
+    sol = solve(fit.model, fs, fs_f, cons, tau, n, conf, tau_h, bound, floor, tc_fixed)
     sp: Split = sol["split"]
     vals = _values(sol, cons, fs, f_si)
+    rate_warnings = _rate_warnings(fit, fs, fs_f, tau_h, sp, channel)
     plain_sol = dict(sol, x=None)
     pl = sol["plain"]
     plain_x = [pl["sigma2"]] + (
@@ -448,7 +548,7 @@ def project(
     )
     plain_sol["x"], plain_sol["T_c"] = np.array(plain_x), pl.get("T_c")
     plain = _values(plain_sol, cons, fs, f_si)
-    warnings: list[str] = []
+    warnings: list[str] = list(rate_warnings)
     notes: list[str] = []
     where = f"{channel or 'channel'} ({fit.model.spec()})"
     units = {
@@ -473,9 +573,17 @@ def project(
             share = x[i] * a[active, i] / cw[active]
             j = int(active[int(np.argmax(share))])
             dom = max(comps, key=lambda lab: comps[lab][j])
+            fl = 0.0 if floor is None else float(floor_at(fine[j : j + 1], *floor)[0])
+            if fl > 0 and fl >= cw[j] * (1.0 - 1e-3):
+                dom = f"the empirical WV's {_DATA_WORDS[use]}"
             binding[names[i]] = (float(fine[j] / fs), f"bounds {dom}")
         if cons == "WN+GM" and "sigma_b" in binding:
-            binding["T_c"] = (binding["sigma_b"][0], "least-inflation search over T_c")
+            binding["T_c"] = (
+                binding["sigma_b"][0],
+                "least-inflation search over T_c"
+                if tc_fixed is None
+                else "one T_c for the file's channels (their least total inflation)",
+            )
     # zero terms the consumer needs positive
     reasons: dict[str, str] = {}
     if vals["N"] <= 0:
@@ -523,7 +631,9 @@ def project(
     if ci is not None:
         if ci != "asymptotic":
             raise ExportError(f"ci must be 'asymptotic' or None, got {ci!r}")
-        ivs = _intervals(fit, cons, fs, fs_f, tau, n, conf, tau_h, bound, f_si, vals, level)
+        ivs = _intervals(
+            fit, cons, fs, fs_f, tau, n, conf, tau_h, bound, f_si, vals, level, floor, tc_fixed
+        )
     params: dict[str, ProjectedParam] = {}
     for name in CONSUMER_PARAMS[cons]:
         v, p0 = vals[name], plain[name]
@@ -568,7 +678,38 @@ def project(
         consumer_wv=cwv * f_si**2,
         notes=notes,
         warnings=warnings,
+        data=use,
+        misfit=misfit(fit, channel),
     )
+
+
+_DATA_WORDS = {"low": "lower limit", "estimate": "estimate", "high": "upper limit"}
+
+
+def _rate_warnings(
+    fit: GMWMResult, fs: float, fs_f: float, tau_h: float, sp: Split, channel: str
+) -> list[str]:
+    """A filter rate above the log's (the log says nothing about the noise above its Nyquist
+    frequency), and the fitted terms whose role (white noise or bias) the filter rate changes
+    against the log's rate."""
+    out: list[str] = []
+    if math.isclose(fs_f, fs, rel_tol=1e-9):
+        return out
+    where = f"{channel or 'channel'} ({fit.model.spec()})"
+    if fs_f > fs:
+        out.append(
+            f"{where}: the filter rate {fs_f:g} Hz exceeds the log's {fs:g} Hz: the log says "
+            f"nothing about the noise between {fs / 2:g} and {fs_f / 2:g} Hz; the per-sample "
+            "values assume its white noise continues there (record at the filter's rate)"
+        )
+    at_log = split_terms(fit.model, fs, fs, tau_h).assignment
+    for lab, role in sp.assignment.items():
+        if at_log.get(lab, role) != role:
+            out.append(
+                f"{where}: {lab} changes role with the filter rate: {role} at {fs_f:g} Hz, "
+                f"but {at_log[lab]} at the log's {fs:g} Hz"
+            )
+    return out
 
 
 def _x_of(vals: dict[str, float], cons: str, fs: float, f_si: float) -> np.ndarray:
@@ -594,6 +735,8 @@ def _intervals(
     f_si: float,
     vals: dict[str, float],
     level: float,
+    floor: tuple[np.ndarray, np.ndarray] | None = None,
+    tc: float | None = None,
 ) -> dict[str, tuple[float, float]]:
     """Delta-method intervals of the log of each exported value."""
     from ..fit.asymptotic import free_params, param_cov, wv_cov_model
@@ -619,7 +762,7 @@ def _intervals(
                 m = _with_u(fit.model, free, uu)
             except ValueError:
                 return {}
-            sol = solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound)
+            sol = solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound, floor, tc)
             v = _values(sol, cons, fs, f_si)
             logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
         grad[:, k] = (np.array(logs[0]) - np.array(logs[1])) / (2 * h)
@@ -629,5 +772,7 @@ def _intervals(
         if not np.all(np.isfinite(grad[i])):
             continue
         se = math.sqrt(max(float(grad[i] @ cov @ grad[i]), 0.0))
+        if not se > 0:  # set by the empirical WV (the data bound), not by the fit: no interval
+            continue
         out[nm] = (vals[nm] * math.exp(-z * se), vals[nm] * math.exp(z * se))
     return out

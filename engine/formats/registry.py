@@ -24,13 +24,22 @@ from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu
 from .noise import check_inflate, noise_for
+from .projection import CONSUMER_PARAMS, FORMAT_CONSUMERS
 from .report import curves_csv, fit_report
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
     from ..io import ImuLog
 
-__all__ = ["Format", "FORMATS", "register", "export"]
+__all__ = ["Format", "FORMATS", "VALUE_KINDS", "register", "export"]
+
+
+#: The values of :attr:`Format.values`: how a filter format's numbers relate to a rate.
+VALUE_KINDS = {
+    "density": "continuous-time densities (rate-free); the consumer's rate is written",
+    "per-sample": "per-sample standard deviations or variances at the consumer's IMU rate",
+    "per-step": "standard deviations per filter step at the filter's prediction rate",
+}
 
 
 @dataclass(frozen=True)
@@ -40,7 +49,23 @@ class Format:
     The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
     ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
     ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``,
-    ``consumers``.
+    ``consumers``, ``data``.
+
+    The capabilities of a filter format are declared here once and read by the writers'
+    callers, the CLI and the app:
+
+    Attributes
+    ----------
+    consumer : str or None
+        The consumer's noise model (``"WN+RW"``, ``"WN+GM"``, ``"WN"``;
+        :data:`~engine.formats.projection.CONSUMER_PARAMS`); None for the reports.
+    values : str or None
+        A key of :data:`VALUE_KINDS` (None for the reports).
+    needs_filter_rate : bool
+        The file is wrong without the filter's rate (``filter_rate`` required).
+    bias : str
+        The consumer's bias model in words (``"random walk"``, ``"Gauss-Markov, one T_c per
+        file"`` ...); ``""`` for none.
     """
 
     name: str
@@ -48,6 +73,15 @@ class Format:
     writer: Callable[..., str]
     reader: Callable[[Any], Any] | None = None
     suffix: str = ".txt"
+    consumer: str | None = None
+    values: str | None = None
+    needs_filter_rate: bool = False
+    bias: str = ""
+
+    @property
+    def is_filter(self) -> bool:
+        """A filter or simulator format (it has a consumer noise model)."""
+        return self.consumer is not None
 
 
 #: Registered formats by name, in registration order.
@@ -55,8 +89,17 @@ FORMATS: dict[str, Format] = {}
 
 
 def register(fmt: Format) -> Format:
-    """Add (or replace) a format; returns it."""
+    """Add (or replace) a format; returns it. A filter format's consumer model is indexed in
+    :data:`~engine.formats.projection.FORMAT_CONSUMERS` (what ``consumer_of`` reads)."""
+    if fmt.consumer is not None and fmt.consumer not in CONSUMER_PARAMS:
+        raise ValueError(f"format {fmt.name!r}: unknown consumer model {fmt.consumer!r}")
+    if fmt.values is not None and fmt.values not in VALUE_KINDS:
+        raise ValueError(f"format {fmt.name!r}: values must be one of {', '.join(VALUE_KINDS)}")
     FORMATS[fmt.name] = fmt
+    if fmt.consumer is not None:
+        FORMAT_CONSUMERS[fmt.name] = fmt.consumer
+    else:
+        FORMAT_CONSUMERS.pop(fmt.name, None)
     return fmt
 
 
@@ -104,7 +147,7 @@ def _kalibr(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         chosen=chosen,
         per_axis=per_axis,
         sources={},
-        update_rate=nz.fs,
+        update_rate=nz.rate,
         rostopic=kw.get("rostopic") or "/imu0",
         comments=nz.header,
         warnings=nz.warnings,
@@ -134,6 +177,7 @@ def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         band=kw.get("band"),
         confidence=kw.get("confidence"),
         ci=kw.get("ci", "asymptotic"),
+        data=kw.get("data") or "low",
     )
     return json.dumps(rep, indent=1, allow_nan=False) + "\n"
 
@@ -153,7 +197,10 @@ def _datasheet_csv(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     )
 
 
-register(Format("kalibr", "Kalibr imu.yaml", _kalibr, read_kalibr, ".yaml"))
+_RW, _GM = "random walk (one K per axis or per sensor)", "Gauss-Markov (T_c, sigma_b)"
+register(
+    Format("kalibr", "Kalibr imu.yaml", _kalibr, read_kalibr, ".yaml", "WN+RW", "density", bias=_RW)
+)
 register(Format("json", "JSON report", _json, None, ".json"))
 
 
@@ -165,11 +212,54 @@ def _curves(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 register(Format("csv", "CSV of the WV and implied curves", _curves, None, ".csv"))
 register(Format("datasheet", "readable datasheet table", _datasheet, None, ".txt"))
 register(Format("datasheet-csv", "datasheet CSV", _datasheet_csv, None, ".csv"))
-register(Format("openvins", "OpenVINS kalibr_imu_chain.yaml", vio.openvins_yaml, None, ".yaml"))
-register(Format("basalt", "Basalt calibration JSON (IMU noise)", vio.basalt_json, None, ".json"))
-register(Format("orbslam3", "ORB-SLAM3 settings IMU.* keys", vio.orbslam3_yaml, None, ".yaml"))
 register(
-    Format("px4", "PX4 EKF2 noise parameters (.params)", autopilot.px4_params, None, ".params")
+    Format(
+        "openvins",
+        "OpenVINS kalibr_imu_chain.yaml",
+        vio.openvins_yaml,
+        None,
+        ".yaml",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    )
+)
+register(
+    Format(
+        "basalt",
+        "Basalt calibration JSON (IMU noise)",
+        vio.basalt_json,
+        None,
+        ".json",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    )
+)
+register(
+    Format(
+        "orbslam3",
+        "ORB-SLAM3 settings IMU.* keys",
+        vio.orbslam3_yaml,
+        None,
+        ".yaml",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    )
+)
+register(
+    Format(
+        "px4",
+        "PX4 EKF2 noise parameters (.params)",
+        autopilot.px4_params,
+        None,
+        ".params",
+        "WN+RW",
+        "per-step",
+        needs_filter_rate=True,
+        bias=_RW,
+    )
 )
 register(
     Format(
@@ -178,16 +268,83 @@ register(
         autopilot.ardupilot_params,
         None,
         ".param",
+        "WN+RW",
+        "per-step",
+        needs_filter_rate=True,
+        bias=_RW,
     )
 )
-register(Format("matlab", "MATLAB gyroparams/accelparams .m", sim.matlab_m, None, ".m"))
 register(
-    Format("gazebo", "Gazebo classic PX4/RotorS IMU plugin (GM bias)", sim.gazebo_xml, None, ".xml")
+    Format(
+        "matlab",
+        "MATLAB gyroparams/accelparams .m",
+        sim.matlab_m,
+        None,
+        ".m",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    )
 )
-register(Format("gz-sim", "gz-sim SDF <imu> <noise> (GM bias)", sim.gz_sim_sdf, None, ".sdf"))
-register(Format("kf-gins", "KF-GINS imunoise (GM bias)", ins.kfgins_yaml, None, ".yaml"))
-register(Format("ros-imu", "sensor_msgs/Imu covariances", ins.ros_imu_yaml, None, ".yaml"))
-register(Format("vins", "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w", vio.vins_yaml, None, ".yaml"))
+register(
+    Format(
+        "gazebo",
+        "Gazebo classic PX4/RotorS IMU plugin (GM bias)",
+        sim.gazebo_xml,
+        None,
+        ".xml",
+        "WN+GM",
+        "density",
+        bias=f"{_GM}, one per sensor triad",
+    )
+)
+register(
+    Format(
+        "gz-sim",
+        "gz-sim SDF <imu> <noise> (GM bias)",
+        sim.gz_sim_sdf,
+        None,
+        ".sdf",
+        "WN+GM",
+        "per-sample",
+        bias=f"{_GM} per axis",
+    )
+)
+register(
+    Format(
+        "kf-gins",
+        "KF-GINS imunoise (GM bias)",
+        ins.kfgins_yaml,
+        None,
+        ".yaml",
+        "WN+GM",
+        "density",
+        bias=f"{_GM}, one T_c for the whole file",
+    )
+)
+register(
+    Format(
+        "ros-imu",
+        "sensor_msgs/Imu covariances",
+        ins.ros_imu_yaml,
+        None,
+        ".yaml",
+        "WN",
+        "per-sample",
+    )
+)
+register(
+    Format(
+        "vins",
+        "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w",
+        vio.vins_yaml,
+        None,
+        ".yaml",
+        "WN+RW",
+        "per-sample",
+        bias=_RW,
+    )
+)
 
 
 def export(
@@ -211,6 +368,7 @@ def export(
     vehicle_id: int = 1,
     scale_factor_std_ppm: float | None = None,
     consumers: Sequence[str] | None = None,
+    data: str = "low",
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -257,6 +415,11 @@ def export(
         JSON report: the consumer models or filter formats each fit is projected onto, with
         each value's interval and factor (default ``("WN+RW",)``; ``projection="fit"``:
         none); the filter formats use their own consumer.
+    data : {"low", "estimate", "high", "none"}
+        Filter formats and the JSON report's projections: the bound also covers the
+        empirical WV's lower interval limit (default), its estimate or its upper limit at the
+        dyadic scales of the band, or only the fitted model (``"none"``);
+        :func:`engine.formats.projection.project`.
 
     Examples
     --------
@@ -298,6 +461,7 @@ def export(
         vehicle_id=vehicle_id,
         scale_factor_std_ppm=scale_factor_std_ppm,
         consumers=consumers,
+        data=data,
     )
     if path is not None:
         write_atomic(path, text)  # the one write of every format (engine._files)

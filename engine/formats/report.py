@@ -21,7 +21,7 @@ from ..units import ExportError, allan_floor, si_factor, squared
 from .common import csv_cells, fmt_float, source_text
 from .datasheet import datasheet_table
 from .kalibr import kalibr_imu
-from .projection import consumer_of, project
+from .projection import consumer_of, misfit, project
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
@@ -48,6 +48,7 @@ def fit_report(
     band: Sequence[float] | None = None,
     confidence: float | None = None,
     ci: str | None = "asymptotic",
+    data: str = "low",
 ) -> dict[str, Any]:
     """A JSON-ready report of every channel's fit.
 
@@ -72,9 +73,10 @@ def fit_report(
     projection : {"bound", "plain", "fit"}
         ``"bound"`` (default): projected and over-bounded; ``"plain"``: the rule alone;
         ``"fit"``: no projections (the report of the fit alone).
-    filter_rate, horizon_s, band, confidence, ci
+    filter_rate, horizon_s, band, confidence, ci, data
         The projection's filter rate (Hz, default the log's), horizon (s), band (s),
-        confidence of the bounded WV limit and intervals (``"asymptotic"`` or None).
+        confidence of the bounded WV limit, intervals (``"asymptotic"`` or None) and what of
+        the empirical WV the bound covers (:data:`~engine.formats.projection.DATA_BOUNDS`).
 
     Returns
     -------
@@ -83,7 +85,9 @@ def fit_report(
         units, time report and notes when ``log`` is given), ``projection`` (mode, consumers
         and options), and ``channels``: per channel the unit, sensor kind and axis, the fit
         (:meth:`GMWMResult.to_dict`), its intervals, the datasheet rows, the Allan floor and
-        ``projections`` (per requested consumer :meth:`Projection.to_dict`: each value with
+        ``misfit`` (:func:`~engine.formats.projection.misfit`: one line when model and
+        data disagree, else ``""``), ``projections`` (per requested consumer
+        :meth:`Projection.to_dict`: each value with
         its plain conversion, factor, binding scale, interval and level; or ``{"error":
         reason}``); ``kalibr`` (or the reason it is missing). NaN values are ``null``.
 
@@ -107,6 +111,7 @@ def fit_report(
         "confidence": confidence,
         "ci": ci,
         "bound": projection == "bound",
+        "data": data,
     }
     chans: dict[str, Any] = {}
     for ch, res in fits.items():
@@ -129,6 +134,7 @@ def fit_report(
                 )
             ],
             "allan_floor": allan_floor(res.model, res.fs, res.wv.n_levels),
+            "misfit": misfit(res, ch),
             "projections": {c: _projection(res, c, ch, unit, opts) for c in cons},
         }
     out: dict[str, Any] = {
@@ -176,6 +182,7 @@ def _projection(
             channel=channel,
             unit=unit,
             ci=opts["ci"],
+            data=opts["data"],
         )
     except ExportError as e:
         return {"error": str(e)}

@@ -53,7 +53,7 @@ def matlab_m(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     ``imuSensor`` at the log's rate (an axis not fitted gets the max over fitted ones)."""
     nz = noise_for(fits, "MATLAB gyroparams/accelparams", kw, allow_partial=True, consumer="matlab")
     lines = [f"% {c}" for c in nz.header] + [f"% warning: {w}" for w in nz.warnings]
-    lines.append(f"fs = {nz.fs!r};  % Hz, the log's sampling rate")
+    lines.append(f"fs = {nz.rate!r};  % Hz, the IMU rate (the log's unless --filter-rate)")
     ctor = {
         "gyroscope": ("gyro", "gyroparams", "rad/s"),
         "accelerometer": ("accel", "accelparams", "m/s^2"),
@@ -91,7 +91,10 @@ def gazebo_xml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     lines += [f"  warning: {w.replace('--', '-')}" for w in nz.warnings]
     lines += [
         "  Gauss-Markov bias: RandomWalk = sqrt(2 beta sigma2_gm), BiasCorrelationTime = 1/beta",
-        "  of the GM term (max over axes); TurnOnBiasSigma is not identified by one static log",
+        "  of the projected GM bias, one per sensor triad: the max over axes of each (a GM of",
+        "  driving density sqrt(q) and time T_c has a PSD q / (1/T_c^2 + w^2) that grows with",
+        "  both, so the triad's bias bounds each axis's at every frequency);",
+        "  TurnOnBiasSigma is not identified by one static log",
         "  (set it from several runs or the datasheet). Add robotNamespace, linkName, imuTopic.",
         "  File name: PX4-classic's libgazebo_imu_plugin.so; for RotorS use",
         "  librotors_gazebo_imu_plugin.so. Both spellings of the random walk are written",
@@ -123,11 +126,11 @@ def gz_sim_sdf(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     sqrt(q) and ``dynamic_bias_correlation_time`` = T_c of the projected Gauss-Markov bias
     (module docstring). The sensor's ``<update_rate>`` must be the log's rate ``fs``."""
     nz = noise_for(fits, "gz-sim IMU <noise>", kw, consumer="gz-sim")
-    r = math.sqrt(nz.fs)
+    r = math.sqrt(nz.rate)
     lines = ["<!--", *(f"  {c.replace('--', '-')}" for c in nz.header)]
     lines += [f"  warning: {w.replace('--', '-')}" for w in nz.warnings]
     lines += [
-        f'  Put this <imu> inside <sensor type="imu"> with <update_rate>{nz.fs:g}</update_rate>:',
+        f'  Put this <imu> inside <sensor type="imu"> with <update_rate>{nz.rate:g}</update_rate>:',
         "  stddev = N sqrt(update_rate) (per sample);",
         "  dynamic_bias_stddev = sqrt(2 sigma_b^2 / T_c) (gz-sensors' GaussianNoiseModel:",
         "  stationary bias variance dynamic_bias_stddev^2 T_c / 2);",

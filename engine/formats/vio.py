@@ -59,7 +59,8 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """OpenVINS ``kalibr_imu_chain.yaml`` (OpenCV ``%YAML:1.0``): the ``imu0`` block with
     identity ``T_i_b``/``Tw``/``R_IMUtoGYRO``/``Ta``/``R_IMUtoACC``, zero ``Tg``, the four Kalibr
     densities (max over axes, SI), ``rostopic`` (``kw["rostopic"]``), ``time_offset: 0.0``,
-    ``update_rate`` (the log's rate) and ``model: "kalibr"``."""
+    ``update_rate`` (the consumer's rate: ``filter_rate``, default the log's) and
+    ``model: "kalibr"``."""
     nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", kw, consumer="openvins")
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
@@ -72,7 +73,8 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     lines += [
         f"  rostopic: {yaml_str(kw.get('rostopic') or '/imu0')}",
         "  time_offset: 0.0  # [s] (not estimated by GMWM)",
-        f"  update_rate: {yaml_float(nz.fs)}  # [Hz] the log's sampling rate",
+        f"  update_rate: {yaml_float(nz.rate)}  # [Hz] the consumer's IMU rate (densities "
+        "do not depend on it)",
         '  model: "kalibr"',
         "  # intrinsics not estimated by GMWM: identity, and zero gravity sensitivity Tg",
     ]
@@ -89,7 +91,7 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     axes. JSON has no comments: ``gmwm_export`` (a sibling of ``value0``, which Basalt does
     not read) holds the header and units. Merge ``value0``'s keys into the calib file."""
     nz = noise_for(fits, "Basalt calibration JSON", kw, consumer="basalt")
-    v0: dict[str, Any] = {"imu_update_rate": nz.fs}
+    v0: dict[str, Any] = {"imu_update_rate": nz.rate}
     units: dict[str, str] = {"imu_update_rate": "Hz"}
     for kind, short in (("accelerometer", "accel"), ("gyroscope", "gyro")):
         for q, key, u in (("N", "noise_std", _ND[kind]), ("K", "bias_std", _RW[kind])):
@@ -114,10 +116,10 @@ def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     nz = noise_for(fits, "ORB-SLAM3 IMU settings", kw, consumer="orbslam3")
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
-    freq = round(nz.fs)
-    if abs(freq - nz.fs) > 1e-9 * nz.fs:
+    freq = round(nz.rate)
+    if abs(freq - nz.rate) > 1e-9 * nz.rate:
         lines.append(
-            f"# warning: the log rate {nz.fs!r} Hz is not an integer; IMU.Frequency is an "
+            f"# warning: the IMU rate {nz.rate!r} Hz is not an integer; IMU.Frequency is an "
             f"integer in ORB-SLAM3: written as {freq}"
         )
     g, a = "gyroscope", "accelerometer"
@@ -133,16 +135,18 @@ def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
 
 def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     """VINS-Mono/Fusion IMU keys (``%YAML:1.0``): per-sample (discrete) standard deviations at
-    the log's rate, ``acc_n``/``gyr_n`` = ``N sqrt(fs)`` and ``acc_w``/``gyr_w`` =
-    ``K sqrt(fs)`` (max over axes, SI; module docstring), stated in the file."""
+    the consumer's IMU rate ``fs`` (``filter_rate``, default the log's), ``acc_n``/``gyr_n`` =
+    ``N sqrt(fs)`` and ``acc_w``/``gyr_w`` = ``K sqrt(fs)`` (max over axes, SI; module
+    docstring), stated in the file."""
     nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", kw, consumer="vins")
-    r = math.sqrt(nz.fs)
+    r = math.sqrt(nz.rate)
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     lines.append(
         f"# convention: VINS uses these as per-sample (discrete) standard deviations at the IMU "
         f"rate (integration_base.h): acc_n = N sqrt(fs), acc_w = K sqrt(fs) with fs = "
-        f"{nz.fs:g} Hz (x{r:.4g} the Kalibr densities); re-export if the IMU rate differs"
+        f"{nz.rate:g} Hz (x{r:.4g} the Kalibr densities); re-export with --filter-rate HZ if "
+        "your IMU rate differs"
     )
     g, a = "gyroscope", "accelerometer"
     lines += [

@@ -47,7 +47,7 @@ import numpy as np
 from .._files import read_regular
 from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
-from ..models import QN, RW, WN, Model
+from ..models import GM, QN, RW, WN, Model
 from ..units import (
     BI_FACTOR,
     DISPLAY,
@@ -104,6 +104,9 @@ class DatasheetSpec:
     also : DatasheetSpec or None
         The other sensor kind's values of the same datasheet (gyroscope and accelerometer
         items given together); :meth:`for_kind` picks one.
+    gm : tuple of (float, float)
+        Gauss-Markov terms ``(T_c [s], sigma_b [SI])`` (a filter file's Gauss-Markov bias, a
+        datasheet CSV's GM rows); each adds ``GM(beta = 1/T_c, sigma2_gm = sigma_b^2)``.
     """
 
     kind: str
@@ -112,6 +115,7 @@ class DatasheetSpec:
     source: str = ""
     bi_convention: str = "ieee"
     also: DatasheetSpec | None = None
+    gm: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in SI_UNIT:
@@ -119,7 +123,13 @@ class DatasheetSpec:
         bad = [k for k in self.values if k not in _ORDER]
         if bad:
             raise DatasheetError(f"unknown datasheet symbol(s) {bad}: use N, K, B, Q")
-        if not self.values:
+        for tc, sb in self.gm:
+            if not (math.isfinite(tc) and tc > 0 and math.isfinite(sb) and sb >= 0):
+                raise DatasheetError(
+                    f"{self.source or 'datasheet'}: a Gauss-Markov term needs T_c > 0 s and "
+                    f"sigma_b >= 0, got T_c {tc!r}, sigma_b {sb!r}"
+                )
+        if not self.values and not self.gm:
             raise DatasheetError(
                 "the datasheet has no value: give at least one of ARW/VRW, RRW, BI, Q"
             )
@@ -260,7 +270,14 @@ class DatasheetSpec:
         vals = self.in_unit(unit)
         cls = {"N": WN, "K": RW, "Q": QN}
         procs = [cls[s].from_datasheet({s: vals[s]}, fs) for s in ("Q", "N", "K") if s in vals]
+        f = self._factor(unit)
+        procs += [GM(beta=1.0 / tc, sigma2_gm=(sb / f) ** 2) for tc, sb in self.gm]
         return Model(tuple(procs)) if procs else None
+
+    def _factor(self, unit: str) -> float:
+        """SI per ``unit`` (checked as :meth:`in_unit` does)."""
+        self.in_unit(unit)
+        return si_factor(unit)[1]
 
     def floor_wv(self, unit: str) -> float:
         """The WV of the bias-instability floor, ``(BI_FACTOR B)^2 / 2`` [unit^2] (0 without B)."""
@@ -299,6 +316,7 @@ class DatasheetSpec:
             "values": {r["symbol"]: [r["si"], r["si_unit"]] for r in self.rows()},
             "rows": self.rows(),
             "bi_convention": self.bi_convention,
+            "gm": [{"T_c": tc, "sigma_b": sb, "sigma_b_unit": self.si_unit} for tc, sb in self.gm],
         }
         if self.also is not None:
             d["also"] = self.also.to_dict()
@@ -315,6 +333,7 @@ class DatasheetSpec:
                 parts.append(f"{r['symbol']} {r['si']:.4g} {r['si_unit']}")
             if r["symbol"] == "B" and self.bi_convention == "adev_min":
                 parts[-1] += f" (ADEV minimum {self.given.get('B', '').split(' (')[0]})"
+        parts += [f"GM T_c {tc:.4g} s sigma_b {sb:.4g} {self.si_unit}" for tc, sb in self.gm]
         text = ", ".join(parts)
         return text if self.also is None else f"{text}; {self.also.describe()}"
 

@@ -1,6 +1,18 @@
 """Proof in a filter (issue 23, item 4): are exported noise numbers consistent in a Kalman filter?
 
     python tests/benchmarks/bench_filter.py [--runs 100] [--minutes 20] [--fix 1 10 100]
+    python tests/benchmarks/bench_filter.py --recorded [--minutes 20] [--fix 1 10 100]
+        [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW]
+
+``--recorded`` (issue 28): the error fed to the filter is the *recorded* ADIS16405 signal, not
+a simulation: the six units' logs (all channels), each channel minus its mean over the whole
+log (the turn-on bias, removed as a calibration would), cut into segments of ``--minutes``.
+The filter's N and K are the default export (``project(fit, "WN+RW")``: bound on the fitted
+WV and the empirical WV's lower 95 % limit, per axis) of the fits of unit 1 (the calibrated
+unit); it runs on unit 1's segments and on units 2-6's (not calibrated). A filter rate above
+the log's holds each sample (zero-order hold). Its initial bias variance is the mean square,
+over every segment of the sensor kind, of the segment's first-10-s mean. Control: the same
+filter on errors simulated from its own WN + RW (100 runs), where only the filter is judged.
 
 The sensor errors are simulated from the ``2*GM+WN+RW`` model fitted to the real ADIS16405 log
 (``adis16405_imu1.h5``: gyro_x in deg/s, accel_x in g; its sub-sample GM and its slow GM), and a
@@ -31,7 +43,13 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 from conftest import real_data_dir  # noqa: E402
-from filtersim import filter_cases, run_monte_carlo  # noqa: E402
+from filtersim import (  # noqa: E402
+    FilterNoise,
+    filter_cases,
+    nees_band,
+    run_monte_carlo,
+    run_recorded,
+)
 
 import engine as eg  # noqa: E402
 
@@ -46,7 +64,13 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=20.0)
     ap.add_argument("--fix", type=float, nargs="+", default=[1.0, 10.0, 100.0])
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--recorded", action="store_true", help="the recorded errors (issue 28)")
+    ap.add_argument("--rates", type=float, nargs="+", default=[100.0, 200.0])
+    ap.add_argument("--models", nargs="+", default=["WN+RW", "GM+WN+RW", "2*GM+WN+RW"])
     args = ap.parse_args()
+    if args.recorded:
+        recorded(args)
+        return
     if not args.log.is_file():
         sys.exit(f"bench_filter: no log at {args.log}; give --log PATH (see README, Data)")
     log = eg.load_log(args.log)
@@ -91,6 +115,104 @@ def main() -> None:
                     f"| {100 * r.in_2sigma:.1f} % |"
                 )
         print(f"  (band of the {args.runs}-run average: {r.band[0]:.3f} .. {r.band[1]:.3f})")
+    print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
+
+
+def recorded(args: argparse.Namespace) -> None:
+    """The ``--recorded`` table (module docstring)."""
+    import numpy as np
+
+    data = args.log.parent
+    units = [data / f"adis16405_imu{i}.h5" for i in range(1, 7)]
+    if not all(u.is_file() for u in units):
+        sys.exit(f"bench_filter: the six ADIS16405 logs are needed in {data}")
+    t_all = time.perf_counter()
+    logs = [eg.load_log(u) for u in units]
+    fs = float(logs[0].fs)
+    seg = int(round(60.0 * args.minutes * fs))
+    print(
+        f"recorded ADIS16405 errors: 6 units, segments of {args.minutes:g} min at {fs:g} Hz; "
+        "noise numbers exported from unit 1's fits (default export: bound on the fit and the "
+        "data's lower 95 % limit)"
+    )
+    rows = []
+    for kind, chans in (
+        ("gyro", ("gyro_x", "gyro_y", "gyro_z")),
+        ("accel", ("accel_x", "accel_y", "accel_z")),
+    ):
+        fix_sigma = CHANNELS[f"{kind}_x"][0]
+        segs: dict[tuple[int, str], np.ndarray] = {}
+        for u, log in enumerate(logs):
+            for ch in chans:
+                x = np.asarray(log[ch], float)
+                x = x - x.mean()  # the turn-on bias, removed as a calibration would
+                k = x.size // seg
+                segs[(u, ch)] = x[: k * seg].reshape(k, seg)
+        first = np.concatenate([s[:, : int(10 * fs)].mean(axis=1) for s in segs.values()])
+        pb0 = float(np.mean(first**2))
+        for model in args.models:
+            fits = {ch: eg.fit_gmwm(logs[0].wavelet_variance(ch), model) for ch in chans}
+            for rate in args.rates:
+                hold = int(round(rate / fs))
+                noise = {}
+                for ch in chans:
+                    p = eg.project(fits[ch], "WN+RW", fs_filter=rate, unit="", ci=None)
+                    noise[ch] = FilterNoise(p.value("N"), p.value("K"), f"{model} @ {rate:g} Hz")
+                for t_fix in args.fix:
+                    for group, us in (("unit 1 (calibrated)", [0]), ("units 2-6", [1, 2, 3, 4, 5])):
+                        parts = []
+                        for u in us:
+                            for ch in chans:
+                                r = run_recorded(
+                                    segs[(u, ch)],
+                                    noise[ch],
+                                    fs=fs,
+                                    hold=hold,
+                                    t_fix_s=t_fix,
+                                    fix_sigma=fix_sigma,
+                                    pb0=pb0,
+                                    seed=args.seed + u,
+                                )
+                                parts.append((r.segments, r.nees))
+                        n_seg = sum(m for m, _ in parts)
+                        nees = sum(m * v for m, v in parts) / n_seg
+                        lo, hi = nees_band(1, n_seg)
+                        tot = float(nees.mean())
+                        cnt = float(np.mean(nees > hi))
+                        ok = 0.5 <= tot <= 1.3 and cnt <= 0.05
+                        rows.append(
+                            f"| {kind} | {model} | {rate:g} | {t_fix:g} | {group} | {n_seg} "
+                            f"| {tot:.3f} | {100 * float(np.mean(nees < lo)):.0f} / "
+                            f"{100 * cnt:.0f} % | {'yes' if ok else 'NO'} |"
+                        )
+                        print(rows[-1], flush=True)
+            # control: the filter on its own model (x axis, the first rate)
+            nz = noise[chans[0]]
+            own = eg.Model((eg.WN(sigma2=nz.N**2 * fs), eg.RW(gamma2=nz.K**2 / fs)))
+            for t_fix in args.fix:
+                r = run_monte_carlo(
+                    own,
+                    nz,
+                    fs=fs,
+                    duration_s=60.0 * args.minutes,
+                    t_fix_s=t_fix,
+                    fix_sigma=fix_sigma,
+                    runs=100,
+                    seed=args.seed,
+                )
+                lo, inside, hi = r.fractions()
+                rows.append(
+                    f"| {kind} | {model} (control: own WN+RW, simulated) | {fs:g} | {t_fix:g} "
+                    f"| - | 100 | {r.mean_nees:.3f} | {100 * lo:.0f} / {100 * hi:.0f} % | "
+                    f"{'yes' if 0.5 <= r.mean_nees <= 1.3 and hi <= 0.05 else 'NO'} |"
+                )
+                print(rows[-1], flush=True)
+    print(
+        "\n| sensor | model fitted to unit 1 | filter Hz | T_fix s | errors from | segments "
+        "| mean NEES | below / above band | NEES in [0.5, 1.3], <= 5 % above |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    print("\n".join(rows))
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
 
 
