@@ -1,6 +1,6 @@
 """engine's API is an explicit list (issue 20) and stays lazy; the structure of engine/ and
 gmwm_app/ has no import cycle, no back-edge between layers, no private
-import across modules and no module over 800 lines (tests/structure_check.py)."""
+import across modules (tests/structure_check.py; it also lists modules over 800 lines)."""
 
 from __future__ import annotations
 
@@ -109,14 +109,16 @@ def test_import_engine_stays_light():
     assert out == ["False", "False", "False"]
 
 
-def test_structure_has_no_cycle_no_private_import_no_big_module():
+def test_structure_has_no_cycle_and_no_private_import():
     spec = importlib.util.spec_from_file_location(
         "structure_check", ROOT / "tests" / "structure_check.py"
     )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    cycles, private, big = mod.analyse()
-    assert (cycles, private, big) == ([], [], [])
+    cycles, private, _big = mod.analyse()
+    # the size of a module is reported (structure_check prints it), not asserted: a line limit
+    # drove splits by size rather than by idea (issue 31)
+    assert (cycles, private) == ([], [])
 
 
 def _structure_check():
