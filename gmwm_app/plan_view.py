@@ -19,7 +19,7 @@ import param
 from bokeh.models import ColumnDataSource, Legend, LegendItem, Span
 
 import engine as eg
-from engine.inference import parse_targets, plan_precision
+from engine.inference import parse_targets
 
 from . import views
 from .state import AppState
@@ -28,7 +28,7 @@ from .tab_view import TabView
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
 
-__all__ = ["PlanView", "plan_sentences"]
+__all__ = ["PlanView"]
 
 #: Colours of the quantities' curves.
 COLORS = {
@@ -46,43 +46,6 @@ NOTE = (
     "covariance (no simulation). The dashed line is this log's length. Targets: e.g. "
     "`K within 10 %, N within 2 %` (N = ARW/VRW, B = bias instability, K = rate random walk)."
 )
-
-
-def _duration(seconds: float) -> str:
-    if seconds < 120:
-        return f"{seconds:.3g} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.3g} min"
-    return f"{seconds / 3600:.3g} h"
-
-
-def plan_sentences(plan: eg.RunPlan, n_log: int) -> list[str]:
-    """One sentence per target: the length it needs, and what a log of ``n_log`` samples gives.
-
-    Parameters
-    ----------
-    plan : RunPlan
-        The plan.
-    n_log : int
-        Length of the session's log (samples); 0 when unknown.
-    """
-    out = []
-    now = plan_precision(plan.model, plan.fs, n_log, unit=plan.unit) if n_log >= 16 else None
-    for t in plan.targets:
-        n = plan.required.get(t.key)
-        need = (
-            f"needs {_duration(n / plan.fs)} of log"
-            if n is not None
-            else f"is not reached within {_duration(plan.lengths[-1] / plan.fs)}"
-        )
-        have = ""
-        q = now.get(t.key) if now is not None else None
-        if q is not None and q.has_interval and q.value > 0:
-            rel = max(q.high / q.value - 1.0, 1.0 - q.low / q.value)
-            gives = f"+-{100 * rel:.3g} %" if rel < 9.99 else "no usable value (beyond a factor 10)"
-            have = f"; this log ({_duration(n_log / plan.fs)}) gives {gives}"
-        out.append(f"**{t}** {need}{have}.")
-    return out
 
 
 class PlanView(TabView):
@@ -175,7 +138,7 @@ class PlanView(TabView):
 
         def work() -> tuple[eg.RunPlan, list[str]]:
             plan = eg.plan_run(model, fs, targets, unit=unit)
-            return plan, plan_sentences(plan, n_log)
+            return plan, plan.sentences(n_log)
 
         self._compute(work, lambda out: self._apply(out, n_log), key="plan")
 

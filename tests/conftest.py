@@ -23,6 +23,7 @@ from typing import Any
 
 import h5py
 import pytest
+from _browser import chromium, require_chromium
 
 import engine as eg
 
@@ -220,3 +221,19 @@ def served_app(
             os.environ.pop("GMWM_APP_DEMO", None)
         else:
             os.environ["GMWM_APP_DEMO"] = old
+
+
+@pytest.fixture(scope="module")
+def server(app_demo_file: Path) -> Iterator[str]:
+    """The app served on the demo log in a background thread for a browser test module;
+    yields its URL; always shut down."""
+    require_chromium()
+    with served_app(app_demo_file) as (port, _thread):
+        yield f"http://127.0.0.1:{port}/"
+
+
+@pytest.fixture(scope="module")
+def browser(server: str) -> Iterator[Any]:
+    """A headless Chromium for the module's pages of :func:`server`."""
+    with chromium() as b:
+        yield b

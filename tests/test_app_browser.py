@@ -13,26 +13,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from _browser import chromium, require_chromium
-from conftest import served_app
 
 pytestmark = pytest.mark.browser
 
 TIMEOUT_MS = 20_000
-
-
-@pytest.fixture(scope="module")
-def server(app_demo_file: Path) -> Iterator[str]:
-    """The app served in a background thread; yields its URL; always shut down."""
-    require_chromium()
-    with served_app(app_demo_file) as (port, _thread):
-        yield f"http://127.0.0.1:{port}/"
-
-
-@pytest.fixture(scope="module")
-def browser(server: str) -> Iterator[Any]:
-    with chromium() as b:
-        yield b
 
 
 class Tab:

@@ -19,8 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from _browser import chromium, require_chromium
-from conftest import served_app
 
 TIMEOUT_MS = 20_000
 
@@ -41,19 +39,6 @@ _TEXT = """() => {
         : (n.shadowRoot ? walk(n.shadowRoot) : '') + walk(n)).join(' ');
     return walk(document.body);
 }"""
-
-
-@pytest.fixture(scope="module")
-def server(app_demo_file: Path) -> Iterator[str]:
-    require_chromium()
-    with served_app(app_demo_file) as (port, _thread):
-        yield f"http://127.0.0.1:{port}/"
-
-
-@pytest.fixture(scope="module")
-def browser(server: str) -> Iterator[Any]:
-    with chromium() as b:
-        yield b
 
 
 @pytest.fixture

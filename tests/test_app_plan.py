@@ -11,7 +11,7 @@ import pytest
 
 import engine as eg
 from engine.inference import plan_precision
-from gmwm_app.plan_view import PlanView, plan_sentences
+from gmwm_app.plan_view import PlanView
 
 
 def _rel(q: Any) -> float:
@@ -56,7 +56,7 @@ def test_a_bad_target_or_no_fit_is_a_message_not_an_error(app: Any) -> None:
 def test_a_twenty_minute_log_gives_no_rate_random_walk_sentence() -> None:
     m = eg.parse_datasheet("arw=0.15 deg/sqrt(h), rrw=2 deg/h/sqrt(h)").model(100.0, "deg/s")
     plan = eg.plan_run(m, 100.0, "K within 10 %", unit="deg/s")
-    (line,) = plan_sentences(plan, 20 * 60 * 100)
+    (line,) = plan.sentences(20 * 60 * 100)
     assert "needs 64.1 h of log" in line and "this log (20 min)" in line
     k = plan_precision(m, 100.0, 20 * 60 * 100, unit="deg/s")["K"]
     assert _rel(k) > 9.99 and "no usable value" in line

@@ -15,9 +15,7 @@ from engine.io.segments import still_segments
 FS = 250.0
 
 
-def test_a_flight_loaded_on_its_still_segments_shows_them_in_time(
-    app: Any, tmp_path: Path
-) -> None:
+def test_a_flight_loaded_on_its_still_segments_shows_them_in_time(app: Any, tmp_path: Path) -> None:
     pytest.importorskip("pyulog")
     assert not app.segments.box.visible  # the demo log is still: no strip
     fl = make.simulate_flight(FS, still_s=(20.0, 20.0), move_s=10.0, seed=7)

@@ -292,6 +292,38 @@ class RunPlan:
         lines += ["", "  values: " + ", ".join(vals)]
         return "\n".join(lines)
 
+    def sentences(self, n_log: int = 0) -> list[str]:
+        """One sentence per target: the length it needs and, for a log of ``n_log`` samples
+        (0: none), the precision that log gives (Markdown, the app's Plan tab).
+
+        Parameters
+        ----------
+        n_log : int
+            Length of the log at hand (samples).
+        """
+        now = (
+            plan_precision(self.model, self.fs, n_log, unit=self.unit, level=self.level)
+            if n_log >= 16
+            else None
+        )
+        out = []
+        for t in self.targets:
+            n = self.required.get(t.key)
+            if n is None:
+                need = f"is not reached within {_hours_text(self.lengths[-1] / self.fs)}"
+            else:
+                need = f"needs {_hours_text(n / self.fs)} of log"
+            have = ""
+            q = now.get(t.key) if now is not None else None
+            if q is not None and q.has_interval and q.value > 0:
+                rel = _rel(now, t.key) if now is not None else math.nan
+                gives = (
+                    f"+-{100 * rel:.3g} %" if rel < 9.99 else "no usable value (beyond a factor 10)"
+                )
+                have = f"; this log ({_hours_text(n_log / self.fs)}) gives {gives}"
+            out.append(f"**{t}** {need}{have}.")
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (``gmwm plan --json``)."""
 
