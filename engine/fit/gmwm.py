@@ -233,6 +233,8 @@ def fit_gmwm(
     levels: int | None = ...,
     robust: bool = ...,
     eff: float = ...,
+    optima: dict[Any, Any] | None = ...,
+    fixed: bool = ...,
     **options: Unpack[VOptions],
 ) -> GMWMResult: ...
 
@@ -247,6 +249,8 @@ def fit_gmwm(
     levels: int | None = ...,
     robust: bool = ...,
     eff: float = ...,
+    optima: dict[Any, Any] | None = ...,
+    fixed: bool = ...,
     **options: Unpack[VOptions],
 ) -> list[GMWMResult]: ...
 
@@ -261,6 +265,8 @@ def fit_gmwm(
     levels: int | None = ...,
     robust: bool = ...,
     eff: float = ...,
+    optima: dict[Any, Any] | None = ...,
+    fixed: bool = ...,
     **options: Unpack[VOptions],
 ) -> GMWMResult: ...
 

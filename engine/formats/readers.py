@@ -18,6 +18,7 @@ Hz, one prediction per 12 ms). :meth:`FilterNoise.spec` gives the
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -83,7 +84,7 @@ class FilterNoise:
         where = f"{source} ({self.fmt}{', ' + '; '.join(self.notes) if self.notes else ''})"
         vals: dict[str, float] = {k: v[k] for k in ("N", "K") if k in v}
         gm = ((v["T_c"], v["sigma_b"]),) if "T_c" in v and "sigma_b" in v else ()
-        return DatasheetSpec(kind, vals, {}, where, gm)
+        return DatasheetSpec(kind, vals, {}, where, gm=gm)
 
 
 def _xyz(v: Any) -> dict[str, float]:
@@ -401,7 +402,7 @@ def _with_gm(spec: DatasheetSpec, rows: Sequence[Mapping[str, Any]], where: str)
         gm.append((t["T_c"][0], v * f))
     if not gm:
         return spec
-    return DatasheetSpec(spec.kind, spec.values, spec.given, spec.source, tuple(gm))
+    return dataclasses.replace(spec, gm=tuple(gm))
 
 
 def _from_projection(projs: Any, kind: str | None, where: str) -> DatasheetSpec | None:
@@ -428,7 +429,7 @@ def _from_projection(projs: Any, kind: str | None, where: str) -> DatasheetSpec 
             return DatasheetSpec(p["sensor"], {"N": n, "K": val("K") or 0.0}, {}, src)
         if p.get("consumer") == "WN+GM" and val("T_c") and val("sigma_b") is not None:
             return DatasheetSpec(
-                p["sensor"], {"N": n}, {}, src, ((val("T_c") or 1.0, val("sigma_b") or 0.0),)
+                p["sensor"], {"N": n}, {}, src, gm=((val("T_c") or 1.0, val("sigma_b") or 0.0),)
             )
         if p.get("consumer") == "WN":
             return DatasheetSpec(p["sensor"], {"N": n}, {}, src)

@@ -38,7 +38,7 @@ import math
 import os
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -155,9 +155,7 @@ class DatasheetSpec:
         """
         for part in (self, self.also):
             if part is not None and part.kind == kind:
-                return DatasheetSpec(
-                    part.kind, part.values, part.given, part.source, part.bi_convention
-                )
+                return replace(part, also=None)  # its own values, GM terms and convention
         raise DatasheetError(
             f"the datasheet ({self.describe()}) has no {kind} value; give "
             f"{'arw/rrw' if kind == 'gyroscope' else 'vrw/accrw'} items for it"

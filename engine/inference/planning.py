@@ -16,6 +16,7 @@ import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -340,14 +341,10 @@ class RunPlan:
                 {
                     "key": t.key,
                     "within": t.rel,
-                    "samples": self.required.get(t.key),
-                    "hours": (
-                        None
-                        if self.required.get(t.key) is None
-                        else float(self.required[t.key] or 0) / self.fs / 3600.0  # type: ignore[operator]
-                    ),
+                    "samples": n,
+                    "hours": None if n is None else n / self.fs / 3600.0,
                 }
-                for t in self.targets
+                for t, n in ((t, self.required.get(t.key)) for t in self.targets)
             ],
             "record_samples": self.record_n,
             "caveats": list(self.caveats),
@@ -456,10 +453,10 @@ def plan_run(
                 f"target {t}: the model {m.spec()} has no {t.key} "
                 f"({IEEE_KEYS[t.key]}); the model's quantities: {', '.join(keys)}"
             )
-        required[t.key] = _shortest(lambda n, k=t.key: rel(table(n), k), t.rel, n_max)
+        required[t.key] = _shortest(partial(_rel_at, table, rel, t.key), t.rel, n_max)
     if lengths is None:
-        longest = max([4 * n for n in required.values() if n is not None], default=0)
-        top = min(n_max, max(longest, int(3600 * fs)))
+        longest_n = max([4 * n for n in required.values() if n is not None], default=0)
+        top = min(n_max, max(longest_n, int(3600 * fs)))
         secs = 60.0 * 2.0 ** np.arange(0, 64)
         grid = np.unique(np.round(secs[secs * fs <= top] * fs).astype(np.int64))
         grid = grid[grid >= 64] if grid.size else np.array([min(top, 64)], dtype=np.int64)
@@ -503,6 +500,16 @@ def _caveats(
                 f"spread can be 1.5x the plan's); record at least {_hours_text(SPAN_GM * tc)}"
             )
     return out
+
+
+def _rel_at(
+    table: Callable[[int], IeeeTable],
+    rel: Callable[[IeeeTable, str], float],
+    key: str,
+    n: int,
+) -> float:
+    """The precision of ``key`` at ``n`` samples."""
+    return rel(table(n), key)
 
 
 def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | None:
