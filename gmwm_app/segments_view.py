@@ -25,7 +25,8 @@ SEGMENT_COLOR = "#2CA02C"
 
 
 class SegmentsStrip:
-    """The strip of one session: a Bokeh figure in a box that is shown only for a flight.
+    """The strip of one session: a Bokeh figure in a box that is shown only for a flight (and
+    built on the first one).
 
     Attributes
     ----------
@@ -37,8 +38,12 @@ class SegmentsStrip:
     """
 
     def __init__(self) -> None:
+        self.figure: Any = None  # built on the first flight: a still log's page does without
         self.envelope = ColumnDataSource({"t": [], "low": [], "high": []}, name="segments_env")
         self.spans = ColumnDataSource({"left": [], "right": []}, name="segments_spans")
+        self.box = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
+
+    def _build(self) -> None:
         fig = views.log_figure(
             "segments_time",
             "The log in time; shaded: the still segments the WV pools",
@@ -70,12 +75,7 @@ class SegmentsStrip:
         fig.legend.location = "top_left"
         fig.legend.background_fill_alpha = 0.7
         self.figure = fig
-        self.box = pn.Column(
-            pn.pane.Bokeh(fig, sizing_mode="stretch_width"),
-            sizing_mode="stretch_width",
-            margin=0,
-            visible=False,
-        )
+        self.box[:] = [pn.pane.Bokeh(fig, sizing_mode="stretch_width")]
 
     def update(self, log: Any, channel: str) -> None:
         """Draw ``channel`` of ``log`` with its segments; hide the strip without segments."""
@@ -83,6 +83,8 @@ class SegmentsStrip:
         if log is None or not segments or channel not in getattr(log, "names", ()):
             self.box.visible = False
             return
+        if self.figure is None:
+            self._build()
         tl = timeline(np.asarray(log[channel]), float(log.fs), segments)
         lo, hi = float(np.min(tl.low)), float(np.max(tl.high))
         pad = 0.05 * (hi - lo) if hi > lo else 1.0
