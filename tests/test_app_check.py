@@ -19,9 +19,7 @@ import engine as eg
 
 BI_FACTOR = math.sqrt(2 * math.log(2) / math.pi)
 
-# the browser fixtures of tests/test_app_browser.py (a served app, chromium, a new page)
-browser = test_app_browser.browser
-server = test_app_browser.server
+# the browser fixtures: conftest's served app and chromium, test_app_browser's new page
 new_tab = test_app_browser.new_tab
 
 
