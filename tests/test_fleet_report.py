@@ -159,10 +159,8 @@ def test_the_table_equals_the_engines_batch_numbers(sim_report):
         # the fit's IEEE quantities follow (engine/fit/ieee.py)
         assert cols[3:] == [
             "IEEE|ARW|deg/sqrt(h)",
-            "IEEE|B|deg/h",
             "IEEE|ADEV min|deg/h",
             "IEEE|ADEV min (data)|deg/h",
-            "IEEE|RRW|deg/h/sqrt(h)",
         ]
         for lf in batch.fitted:
             name = Path(lf.source).name

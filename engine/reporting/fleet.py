@@ -247,6 +247,9 @@ def noise_terms(rows: Sequence[DatasheetRow], unit: str, channel: str = "") -> l
     return out
 
 
+#: The IEEE quantities with a fleet column of their own: those no process column holds (N with
+#: its disguised share, the ADEV minimum of the model and of the data).
+_IEEE_COLUMNS = ("N", "ADEV_min", "ADEV_data")
 #: Column labels of the IEEE quantities that have no display symbol of their own.
 _IEEE_LABEL = {"B": "B", "ADEV_min": "ADEV min", "ADEV_data": "ADEV min (data)", "Q": "Q", "R": "R"}
 
@@ -258,12 +261,15 @@ def _ieee_label(kind: str, key: str) -> str:
 
 
 def ieee_terms(fit: Any) -> list[TermValue]:
-    """The IEEE quantities of a fit (:attr:`engine.fit.GMWMResult.ieee`) as noise terms of
-    process ``IEEE``: ``ARW``/``VRW`` (N with its disguised share), ``RRW``/``AccRW`` (K),
-    ``B``, ``ADEV min`` (model and data), ``Q``, ``R``, in their datasheet units."""
+    """The IEEE quantities of a fit (:attr:`engine.fit.GMWMResult.ieee`) that no process term
+    holds, as noise terms of process ``IEEE``: ``ARW``/``VRW`` (N with its disguised share),
+    ``ADEV min`` and ``ADEV min (data)`` (the vendors' bias-instability convention), in their
+    datasheet units (B, K, Q, R are the process columns' own numbers)."""
     t = fit.ieee
     out = []
     for key, q in t.quantities.items():
+        if key not in _IEEE_COLUMNS:
+            continue  # B, K, Q, R: the process columns already hold them (same numbers)
         label = _ieee_label(t.kind, key)
         out.append(
             TermValue(
@@ -337,7 +343,6 @@ class FleetUnit:
                 "channel_errors": dict(self.log.channel_errors),
                 "verdict": self.verdict,
                 "reasons": list(self.reasons),
-                "warnings": self.warnings,
                 "terms": {
                     ch: [
                         {
