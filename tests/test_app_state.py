@@ -511,7 +511,9 @@ def test_page_without_server(app_demo: Path) -> None:
     app.model_panel.add_buttons["GM"].clicks += 1
     app.model_panel.add_buttons["WN"].clicks += 1
     assert s.model.spec() == "GM+WN"
-    assert list(app.tables.param_source.data["process"]) == ["GM", "GM", "WN"]
+    procs = list(app.tables.param_source.data["process"])
+    # the model's parameters, then the fit's IEEE quantities (rows of process "IEEE")
+    assert procs[:3] == ["GM", "GM", "WN"] and set(procs[3:]) == {"IEEE"}
     assert app.views.comp_renderers[0].visible and app.views.comp_items[0].label.value.startswith(
         "GM"
     )
