@@ -83,8 +83,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm report``; returns one line saying what was written."""
     # before any import or fit:
     check_output(args.output, "-o", suffixes=(".html", ".htm"), inputs=input_paths(args))
-    from pathlib import Path
-
+    from .._files import write_atomic
     from ..formats import FORMATS
     from ..reporting import gather_report, render_html
 
@@ -107,7 +106,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         command_line=shlex.join(["gmwm", *args.argv]),
     )
     page = render_html(rep, static=args.static)
-    Path(args.output).write_text(page, encoding="utf-8")
+    write_atomic(args.output, page)  # never a truncated page; a full disk names the file
     kind = "static" if args.static else "interactive"
     if args.json:
         return {
