@@ -224,10 +224,24 @@ def atomic_output(
     that writers that add one, such as ``numpy.save``, keep it), renamed over ``path`` when
     the block ends without an error; removed otherwise.
 
-    A symlink ``path`` stays a symlink: its target is replaced. An ``OSError`` while writing
-    or renaming (a full disk: ENOSPC) becomes ``error`` with one line naming ``path``.
+    A symlink ``path`` stays a symlink: its target is replaced. A ``path`` that exists and is
+    not a regular file (``/dev/null``, ``/dev/stdout``, a FIFO) is yielded as it is and written
+    in place: renaming over it would replace the device by a file (as root, ``-o /dev/null``
+    turned /dev/null into a regular file for every process of the machine). An ``OSError``
+    while writing or renaming (a full disk: ENOSPC) becomes ``error`` with one line naming
+    ``path``.
     """
     final = Path(os.path.realpath(path))
+    try:
+        special = not stat.S_ISREG(os.stat(final).st_mode)
+    except OSError:  # a new file
+        special = False
+    if special:  # /dev/null, /dev/stdout, a FIFO: in place (a rename would replace the device)
+        try:
+            yield final
+        except OSError as exc:
+            raise error(_write_refusal(path, exc)) from exc
+        return
     tmp = final.with_name(f".{final.name}.{secrets.token_hex(4)}.tmp{final.suffix}")
     try:
         # created here, so that the umask gives it a new file's mode, and no other file is
@@ -259,7 +273,8 @@ def write_atomic(
         with open(tmp, "wb") as fh:
             fh.write(raw)
             fh.flush()
-            os.fsync(fh.fileno())
+            if stat.S_ISREG(os.fstat(fh.fileno()).st_mode):  # a device has nothing to sync
+                os.fsync(fh.fileno())
     return Path(path)
 
 

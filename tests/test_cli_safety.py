@@ -233,3 +233,25 @@ def test_batch_workers_end_with_their_parent(tmp_path: Path) -> None:
                     os.kill(k, signal.SIGKILL)
         if proc.poll() is None:
             proc.kill()
+
+
+def test_writing_to_a_device_writes_in_place_and_keeps_the_device(
+    capsys: pytest.CaptureFixture[str], log: Path
+) -> None:
+    """`gmwm export LOG -o /dev/null`: the atomic writer renamed its temporary file over the
+    output, so as root it replaced /dev/null (a character device) with a regular file for every
+    process of the machine. A path that is not a regular file is written in place."""
+    import stat
+
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    try:
+        code, _, err = run(
+            capsys, "export", str(log), "--model", MODEL, "--format", "json", "-o", "/dev/null"
+        )
+        assert code == 0, err
+        assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    finally:  # never leave the machine without /dev/null, whatever the code under test did
+        if not stat.S_ISCHR(os.stat("/dev/null").st_mode) and os.geteuid() == 0:
+            os.remove("/dev/null")
+            os.mknod("/dev/null", 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+            os.chmod("/dev/null", 0o666)
