@@ -37,6 +37,8 @@ _API_NAME = (
 ALLOWED_LITERALS: dict[tuple[str, str], str] = {
     ("engine/formats/projection.py", "WN"): _CONSUMER,
     ("engine/formats/bound.py", "WN"): _CONSUMER,
+    ("engine/formats/readers.py", "WN"): _CONSUMER,  # a JSON report's stored projection
+    ("engine/formats/registry.py", "WN"): _CONSUMER,  # a Format record's consumer model
     **{("engine/__init__.py", code): _API_NAME for code in ("WN", "QN", "RW", "DR", "AR1", "GM")},
 }
 

@@ -373,8 +373,8 @@ def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
                     "no floor inside the analysed scales (minimum at their edge, "
                     f"T = {tau:.4g} s): an upper bound of the floor"
                 )
-        if key == "N" and s2 > 0 and not n_src == ("WN",):
-            folded = [s for s in n_src if s != "WN"]
+        if key == "N" and s2 > 0 and not n_src == (WN.code,):
+            folded = [s for s in n_src if s != WN.code]
             if folded:
                 note = (note + "; " if note else "") + (
                     f"includes the white-noise equivalent of {', '.join(folded)} (correlation "

@@ -55,6 +55,7 @@ from ..batch import (
     fit_log,
     options_fingerprint,
 )
+from ..models import WN
 from ..units import BI_FACTOR, DISPLAY, DatasheetRow, ExportError, si_factor
 from .data import CalibrationReport, ChannelReport, software_versions
 
@@ -647,7 +648,7 @@ def gather_fleet(
             for ch, c in rep.channels.items():
                 if c.fit is not None:
                     n = c.fit.ieee.get("N")
-                    fast[-1][ch] = tuple(s for s in (n.sources if n else ()) if s != "WN")
+                    fast[-1][ch] = tuple(s for s in (n.sources if n else ()) if s != WN.code)
                     t[ch] = noise_terms(c.rows, c.unit, ch) + ieee_terms(c.fit)
                     cols = columns.setdefault(ch, [])
                     cols += [v.column for v in t[ch] if v.column not in cols]
