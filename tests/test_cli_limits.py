@@ -185,7 +185,10 @@ def test_engine_warnings_are_one_line_cli_warnings(tmp_path) -> None:
     assert len(warn) == 1 and "outside its documented range [0.0001, 0.1]" in warn[0], r.stderr
     assert all(ln.startswith("gmwm export: warning: ") for ln in lines), r.stderr
     assert "UserWarning" not in r.stderr and ".py" not in r.stderr
-    assert r.stdout.strip() == f"wrote px4 export of 6 channel(s) ({', '.join(_chans())}) to {out}"
+    first, *misfits = r.stdout.strip().splitlines()
+    assert first == f"wrote px4 export of 6 channel(s) ({', '.join(_chans())}) to {out}"
+    # then one line per channel whose fit the data reject (issue 28: said next to the file)
+    assert all(": model and data disagree: " in ln for ln in misfits), r.stdout
     assert "# warning: EKF2_GYR_NOISE" in out.read_text()  # and in the file, as before
 
 
