@@ -453,40 +453,25 @@ def _quantity(
 ) -> IeeeQuantity:
     """One quantity from its value in the signal unit: SI and datasheet conversions."""
     u = unit or "u"
-    if not kind:  # unknown unit: everything in the signal's own unit
-        return IeeeQuantity(
-            key,
-            name,
-            value,
-            lo,
-            hi,
-            spell(u),
-            value,
-            lo,
-            hi,
-            spell(u),
-            value,
-            spell(u),
-            tau,
-            interval,
-            sources,
-            note,
-            upper_bound,
-        )
-    si = SI_UNIT[kind]
-    d = DISPLAY.get((kind, dsym))
-    c = f_si * (d.factor if d is not None else 1.0)
+    if kind:
+        d = DISPLAY.get((kind, dsym))
+        f, si_unit = f_si, spell(SI_UNIT[kind])
+        c = f_si * (d.factor if d is not None else 1.0)
+        ds_unit = d.unit if d is not None else si_unit
+    else:  # unknown unit: everything in the signal's own unit
+        f, c, si_unit = 1.0, 1.0, spell(u)
+        ds_unit = si_unit
     return IeeeQuantity(
         key,
         name,
-        value * f_si,
-        lo * f_si,
-        hi * f_si,
-        spell(si),
+        value * f,
+        lo * f,
+        hi * f,
+        si_unit,
         value * c,
         lo * c,
         hi * c,
-        d.unit if d is not None else spell(si),
+        ds_unit,
         value,
         spell(u),
         tau,
