@@ -15,7 +15,7 @@ bias-instability floor).
 
 Run from the repository root::
 
-    python tests/benchmarks/case_virtual.py [--out tests/benchmarks/figures/virtual_adis_gyro.png]
+    python tests/benchmarks/case_virtual.py [--out docs/figures/virtual_adis_gyro.png]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import engine as eg
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data"
-FIG = ROOT / "tests" / "benchmarks" / "figures" / "virtual_adis_gyro.png"
+FIG = ROOT / "docs" / "figures" / "virtual_adis_gyro.png"
 MODEL, SHARED = "GM+WN+RW", ["WN", "RW", "GM"]
 TABLE_SCALES = (0.16, 1.28, 10.24, 81.92, 655.36)  # s
 DEG_H = 3600.0  # deg/h per deg/s
