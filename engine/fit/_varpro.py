@@ -32,7 +32,7 @@ white noise in disguise at every Haar scale), but it is still a valid discrete-t
 with their neighbours only (the sensor's own low-pass or FIR filter; the ADIS16405 gyros have a
 lag-1 autocorrelation of 0.17 and none at lag 2) is fitted best with such a term. Bounding it at
 one sample would make the fit several times worse there and push the misfit into the other
-terms (measured: README, "Correlation times shorter than one sample"). So every fit keeps the
+terms (measured: docs/theory.md, "How the fit reaches the minimum"). So every fit keeps the
 minimum and *flags* the term instead (:func:`sub_sample_warnings`, ``TC_FLAG``): the warning
 says it is white noise in disguise, gives its white-noise equivalent (for the noise density)
 and, for a term whose variance is 0, that its correlation time means nothing.

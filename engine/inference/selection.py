@@ -81,7 +81,7 @@ __all__ = [
 #: model without such a term the top-ranked structure must not carry one).
 DISGUISE_LEVEL = 1e-3
 
-#: What the J column of a ranking is (the table's last line; the app and README say the same).
+#: What the J column of a ranking is (the table's last line; the app and docs/inference.md agree).
 JTEST_NOTE = (
     "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V of the WV's "
     "own estimator, classical or robust, with a drift's share, from the largest candidate, on "
