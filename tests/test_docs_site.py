@@ -81,3 +81,14 @@ def test_site_builds_strict_with_no_warning(tmp_path: Path) -> None:
     for name in engine.__all__:
         if not name.startswith("__"):
             assert any(i.endswith("." + name) for i in ids), name
+
+
+def test_front_page_links_resolve() -> None:
+    """README is the front page on GitHub and PyPI, outside the site's link check: every
+    relative link and image it has must name a file or folder of the repository."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", readme)
+    local = [t for t in targets if not re.match(r"[a-z]+://", t)]
+    assert len(local) >= 10, local  # the links into docs/
+    missing = [t for t in local if not (ROOT / t).exists()]
+    assert not missing, missing
