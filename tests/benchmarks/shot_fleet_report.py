@@ -1,4 +1,4 @@
-"""Screenshot of the fleet acceptance report for the README (``gmwm batch --report``).
+"""Screenshot of the fleet acceptance report for docs/reports.md (``gmwm batch --report``).
 
 Makes the fleet report of the six ADIS16405 logs of ``../shared/data`` (channels gyro_x and
 accel_x, model GM+WN+RW, limits ARW <= 0.3 deg/sqrt(h) and VRW <= 0.1 m/s/sqrt(h)) plus a

@@ -1,4 +1,4 @@
-"""Screenshot of the calibration report for the README (``gmwm report``, ``eg.report``).
+"""Screenshot of the calibration report for README and docs (``gmwm report``, ``eg.report``).
 
 Makes the report of the bundled demo log's gyro X (model GM+WN+RW, with a gyroscope
 datasheet to check), opens it in headless Chromium from ``file://`` with every other request
