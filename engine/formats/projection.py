@@ -723,7 +723,9 @@ def _intervals(
                 m = _with_u(fit.model, free, uu)
             except ValueError:
                 return {}
-            sol = solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound, floor, tc)
+            sol = solve(
+                m, fs, fs_f, cons, tau, n, confidence, tau_h, bound, floor, tc, vals.get("T_c")
+            )
             v = _values(sol, cons, fs, f_si)
             logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
         grad[:, k] = (np.array(logs[0]) - np.array(logs[1])) / (2 * h)
@@ -733,7 +735,9 @@ def _intervals(
         if not np.all(np.isfinite(grad[i])):
             continue
         se = math.sqrt(max(float(grad[i] @ cov @ grad[i]), 0.0))
-        if not se > 0:  # set by the empirical WV (the data bound), not by the fit: no interval
+        # set by the empirical WV (the data bound), not by the fit: no interval (a relative
+        # standard error below 1e-9 is the rounding of the vertex arithmetic, not the fit's)
+        if not se > 1e-9:
             continue
         out[nm] = (vals[nm] * math.exp(-z * se), vals[nm] * math.exp(z * se))
     return out

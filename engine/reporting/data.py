@@ -37,6 +37,7 @@ import numpy as np
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
+from ..formats import misfit
 from ..io import ImuLog, log_of
 from ..models import DR, QN, RW, WN
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
@@ -146,10 +147,15 @@ class ChannelReport:
     warnings: list[str] = field(default_factory=list)
     check: Any = None
     timeline: Timeline | None = None
+    #: :func:`engine.formats.misfit` of the fit: one line when model and data disagree
+    #: (``""`` when they agree, or without a fit); the page shows it beside the fit and the
+    #: export, whatever the export's format.
+    misfit: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the fit (as ``gmwm fit --json``), intervals, datasheet rows, J-test,
-        Allan deviation, slope guides, warnings, notes and the datasheet check."""
+        Allan deviation, slope guides, warnings, the misfit line, notes and the datasheet
+        check."""
         d: dict[str, Any] = {"channel": self.name, "unit": self.unit, "error": self.error}
         if self.fit is not None:
             d["fit"] = self.fit.to_dict()
@@ -163,6 +169,7 @@ class ChannelReport:
             d["psd"] = {"f": self.spectrum.f, "welch": self.spectrum.welch}
             d["psd"].update(model=self.spectrum.model, nperseg=self.spectrum.nperseg)
         d["warnings"], d["notes"] = list(self.warnings), dict(self.notes)
+        d["misfit"] = self.misfit
         d["datasheet_check"] = self.check.to_dict() if self.check is not None else None
         return json_ready(d)
 
@@ -446,6 +453,7 @@ def _channel(
         warn,
         check,
         timeline(log[name], log.fs, log.segments) if log.segments else None,
+        misfit(fit, name),
     )
 
 
