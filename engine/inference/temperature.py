@@ -170,9 +170,10 @@ def _newey_west(x: np.ndarray, e: np.ndarray, lag: int) -> np.ndarray:
     return np.asarray(xtx_inv @ s @ xtx_inv)
 
 
-def find_temperature(log: ImuLog, choice: str = "auto") -> str | None:
-    """The temperature channel of a log: ``"auto"`` (the first auxiliary or signal channel
-    named like a temperature), ``"none"``, or a channel name.
+def find_temperature(log: ImuLog, choice: str = "auto", *, channel: str = "") -> str | None:
+    """The temperature channel of a log: ``"auto"`` (an auxiliary or signal channel named
+    like a temperature: the one sharing ``channel``'s prefix, ``imu1_temperature`` for
+    ``imu1_gyro_x``, else the first), ``"none"``, or a channel name.
 
     Raises
     ------
@@ -183,7 +184,10 @@ def find_temperature(log: ImuLog, choice: str = "auto") -> str | None:
         return None
     names = list(log.aux) + list(log.channels)
     if choice == "auto":
-        return next((n for n in names if is_temperature(n)), None)
+        temps = [n for n in names if is_temperature(n) and n != channel]
+        prefix = channel.split("_", 1)[0] + "_" if "_" in channel else None
+        same = [n for n in temps if prefix and n.startswith(prefix)]
+        return (same or temps)[0] if temps else None
     if choice not in names:
         raise LoadError(
             f"file '{log.source}': temperature={choice!r} is not a channel of the log "
@@ -204,6 +208,9 @@ def fit_temperature(
     channel: str = "x",
     temperature: str = "temperature",
     levels: int | None = None,
+    robust: bool = False,
+    eff: float = 0.6,
+    alpha: float = 0.05,
     weights: str = "ci",
 ) -> TemperatureFit:
     """Fit the bias-temperature polynomial, then the GMWM of the compensated signal.
@@ -222,8 +229,9 @@ def fit_temperature(
         Interval level of the coefficients.
     unit, channel, temperature : str
         Signal unit and names, for the sensitivity's datasheet unit and the messages.
-    levels, weights
-        As :func:`engine.fit_gmwm` / :meth:`engine.io.ImuLog.wavelet_variance`.
+    levels, robust, eff, alpha, weights
+        As :func:`engine.fit_gmwm` / :meth:`engine.io.ImuLog.wavelet_variance` (the WVs of
+        both signals).
 
     Returns
     -------
@@ -294,8 +302,16 @@ def fit_temperature(
         notes=tuple(notes),
     )
     yc = tf.compensate(y, temp)
-    wv = wavelet_variance(yc, fs=fs, levels=levels, unit=unit)
-    wv_raw = wavelet_variance(y, fs=fs, levels=levels, unit=unit)
+    kw: dict[str, Any] = {
+        "fs": fs,
+        "levels": levels,
+        "unit": unit,
+        "robust": robust,
+        "eff": eff,
+        "alpha": alpha,
+    }
+    wv = wavelet_variance(yc, **kw)
+    wv_raw = wavelet_variance(y, **kw)
     fit = fit_raw = None
     if model is not None:
         fit = fit_gmwm(wv, model, weights=weights)
