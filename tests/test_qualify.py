@@ -26,6 +26,7 @@ def kinds(found):
     return [f.kind for f in found if f.severity == "warning"]
 
 
+@pytest.mark.slow  # Monte Carlo, 10-25 s
 def test_clean_logs_of_several_classes_have_no_warning():
     # 30 clean logs (3 model classes x 10 seeds, 2e5 samples): the checks' per-log false-alarm
     # rate is below 1 % in tests/benchmarks/qualify_mc.py, so 0 of 30 is expected and more

@@ -36,6 +36,7 @@ def test_sensitivity_units_are_datasheet_units():
     assert temperature_sensitivity(2.0, "counts")[1] == "counts/degC"
 
 
+@pytest.mark.slow  # Monte Carlo, 10-25 s
 def test_planted_sensitivity_coverage_and_rw_bias():
     # 40 simulated logs (2e5 samples at 100 Hz, WN + RW + 2e-3 deg/s per degC): the 95 %
     # interval covers the truth in 38 +- 2.8 of 40 (binomial SD sqrt(40 x 0.95 x 0.05) = 1.4);
