@@ -282,7 +282,7 @@ def _shocks(d: np.ndarray, s: float, channel: str, unit: str) -> list[Finding]:
             tuple(ranges[:_MAX_RANGES]),
             f"{len(ranges)} burst(s) of steps beyond {SHOCK_K:g} robust SDs "
             f"(largest {peak:.3g} SDs; {lam * d.size / w:.3g} expected isolated ones)",
-            "cut these samples out (segment=...) or fit a robust WV (robust=True)",
+            "cut these samples out (segments=...) or fit a robust WV (robust=True)",
             len(ranges),
             {"largest_sd": peak, "rate_per_window": lam},
         )
@@ -318,7 +318,7 @@ def _motion(d: np.ndarray, s: float, channel: str) -> list[Finding]:
             tuple(ranges[:_MAX_RANGES]),
             f"{len(ranges)} stretch(es) of {w}-sample windows whose step variance is up to "
             f"{worst:.3g} times (or 1/{worst:.3g} of) the log's",
-            "cut these samples out (segment=...): the sensor moved or the noise changed",
+            "cut these samples out (segments=...): the sensor moved or the noise changed",
             len(ranges),
             {"worst_ratio": worst},
         )
@@ -352,7 +352,7 @@ def _saturation(x: np.ndarray, channel: str, unit: str) -> list[Finding]:
                 tuple(ranges[:_MAX_RANGES]),
                 f"{k} samples ({100 * k / x.size:.3g} %) sit at the {side} {ext:.6g} {unit} "
                 f"(longest run {longest}), more than the {k_next} at the next value: clipped",
-                "cut the clipped samples out (segment=...) or record with a wider range",
+                "cut the clipped samples out (segments=...) or record with a wider range",
                 len(ranges),
                 {"value": float(ext), "samples": float(k), "longest_run": float(longest)},
             )
