@@ -1,17 +1,14 @@
-"""Small numerical kernels the fit path needs, without importing SciPy.
+"""Small numerical kernels of the fit path: SciPy's where it is as fast, the project's where not.
 
-Importing any part of SciPy 1.17 costs about 0.3 s (``scipy._lib`` clones the NumPy namespace
-for its array-API layer), which is a third of the ``gmwm fit`` command's 1 s budget. The fit of
-a composite model needs only three things from it, each small enough to write here and test
-against SciPy (``tests/test_optim.py``):
+Measured per call on the fit's own problems by ``tests/benchmarks/bench_optim.py`` (the table is
+in docs/performance.md); SciPy is imported by every command that loads a log anyway:
 
-* :func:`nnls`: non-negative least squares (Lawson and Hanson's active-set algorithm);
-* :func:`nelder_mead`: the Nelder-Mead simplex minimiser, step for step the algorithm of
-  ``scipy.optimize.minimize(method="Nelder-Mead")`` with a user initial simplex;
+* :func:`nnls`: non-negative least squares, :func:`scipy.optimize.nnls` (compiled);
+* the Nelder-Mead of the fit's local search is :func:`scipy.optimize.minimize` itself
+  (``engine.fit._varpro.local``; the former copy here made the same iterates in the same time);
 * :func:`least_squares`: box-bounded non-linear least squares (projected Levenberg-Marquardt),
-  for the wavelet functional moments fit;
-* :func:`chi2_isf`: the chi-square inverse survival function (``scipy.special.chdtri``),
-  from the regularised incomplete gamma function's power series, inverted by Newton's method.
+  for the wavelet functional moments fit, kept;
+* :func:`chi2_isf`: the chi-square inverse survival function, kept (accuracy, see there).
 """
 
 from __future__ import annotations
@@ -24,8 +21,6 @@ import numpy as np
 
 __all__ = [
     "nnls",
-    "nelder_mead",
-    "NMResult",
     "least_squares",
     "LSQResult",
     "chi2_isf",
@@ -36,10 +31,12 @@ __all__ = [
 # -----------------------------------------------------------------------------------------
 # non-negative least squares
 # -----------------------------------------------------------------------------------------
-def nnls(
-    a: np.ndarray, b: np.ndarray, maxiter: int | None = None, passive: np.ndarray | None = None
-) -> tuple[np.ndarray, float]:
-    """Solve ``min ||a x - b||_2`` subject to ``x >= 0`` (Lawson and Hanson, 1974).
+def nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None) -> tuple[np.ndarray, float]:
+    """Solve ``min ||a x - b||_2`` subject to ``x >= 0``: :func:`scipy.optimize.nnls`.
+
+    SciPy's compiled Lawson-Hanson solver: 22 us for a 19 x 6 problem from zero against
+    140 us for the former NumPy implementation warm-started at the previous positive set
+    (docs/performance.md).
 
     Parameters
     ----------
@@ -48,12 +45,7 @@ def nnls(
     b : ndarray, shape (m,)
         Right-hand side.
     maxiter : int, optional
-        Maximum number of inner (step-back) iterations; default ``3 n``.
-    passive : ndarray of bool, shape (n,), optional
-        A guess of the set of positive coefficients (e.g. the previous solution's, in a
-        sequence of close problems): when the least-squares solution on that set is positive
-        and optimal (Karush-Kuhn-Tucker conditions), it is returned after a single solve;
-        otherwise the active-set iterations start from zero as usual.
+        Maximum number of iterations; default ``3 n``.
 
     Returns
     -------
@@ -62,165 +54,10 @@ def nnls(
     rnorm : float
         The residual norm ``||a x - b||``.
     """
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    m, n = a.shape
-    # rounding level of the gradient a'(b - a x): relative to the columns' and b's norms
-    col = float(np.sqrt(np.max(np.sum(a * a, axis=0)))) if a.size else 0.0
-    tol = 10.0 * np.finfo(float).eps * max(m, n) * max(col * float(np.linalg.norm(b)), 1e-300)
+    from scipy.optimize import nnls as scipy_nnls  # on first use: `import engine` stays light
 
-    def ls(p: np.ndarray) -> np.ndarray:
-        out = np.zeros(n)
-        if p.any():
-            out[p] = np.linalg.lstsq(a[:, p], b, rcond=None)[0]
-        return out
-
-    if passive is not None and passive.any():
-        x = ls(passive)
-        if np.all(x[passive] > 0.0):
-            r = b - a @ x
-            w = a.T @ r
-            if passive.all() or float(np.max(w[~passive])) <= tol:
-                return x, float(math.sqrt(float(r @ r)))
-    maxiter = 3 * n if maxiter is None else int(maxiter)
-    x = np.zeros(n)
-    passive = np.zeros(n, dtype=bool)
-    skip = np.zeros(n, dtype=bool)  # entered and rejected at this x (a rounding artefact)
-    w = a.T @ b
-    inner = 0
-    for _ in range(10 * n + maxiter):
-        cand = np.where(passive | skip, -np.inf, w)
-        j = int(np.argmax(cand))
-        if cand[j] <= tol:
-            break
-        passive[j] = True
-        s = ls(passive)
-        if s[j] <= 0.0:  # Lawson and Hanson: the new coefficient must come out positive
-            passive[j] = False
-            skip[j] = True
-            continue
-        while np.any(s[passive] <= 0.0) and inner <= maxiter:
-            inner += 1
-            bad = np.flatnonzero(passive & (s <= 0.0))
-            ratios = x[bad] / (x[bad] - s[bad])
-            k = int(np.argmin(ratios))
-            x = x + float(ratios[k]) * (s - x)
-            x[bad[k]] = 0.0  # the step ends where this coefficient reaches 0 (no rounding)
-            passive &= x > 0.0
-            x[~passive] = 0.0
-            s = ls(passive)
-        if inner > maxiter:  # out of iterations: keep the last feasible point
-            break
-        x = s
-        skip[:] = False
-        w = a.T @ (b - a @ x)
-    x = np.maximum(x, 0.0)
-    r = b - a @ x
-    return x, float(math.sqrt(float(r @ r)))
-
-
-# -----------------------------------------------------------------------------------------
-# Nelder-Mead
-# -----------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class NMResult:
-    """Result of :func:`nelder_mead`: best point, its value, evaluations, stop reason."""
-
-    x: np.ndarray
-    fun: float
-    nfev: int
-    nit: int
-    success: bool
-
-
-def nelder_mead(
-    fun: Callable[[np.ndarray], float],
-    initial_simplex: np.ndarray,
-    *,
-    xatol: float = 1e-4,
-    fatol: float = 1e-4,
-    maxfev: int | None = None,
-) -> NMResult:
-    """Minimise ``fun`` by the Nelder-Mead simplex method from a given simplex.
-
-    The reflection (1), expansion (2), contraction (1/2) and shrink (1/2) steps, the order of
-    the tests and the stopping rule (every vertex within ``xatol`` of the best in every
-    coordinate and every value within ``fatol`` of the best) are SciPy's, so the iterates are
-    the same as ``scipy.optimize.minimize(fun, x0, method="Nelder-Mead",
-    options={"initial_simplex": s, "xatol": ..., "fatol": ..., "maxfev": ...})``.
-
-    Parameters
-    ----------
-    fun : callable
-        Objective of a 1-d array.
-    initial_simplex : ndarray, shape (n + 1, n)
-        Starting vertices.
-    xatol, fatol : float
-        Absolute tolerances on the vertices and on the values.
-    maxfev : int, optional
-        Maximum number of evaluations (default ``200 n``).
-
-    Returns
-    -------
-    NMResult
-    """
-    sim = np.array(initial_simplex, dtype=float)
-    npt, n = sim.shape
-    if npt != n + 1:
-        raise ValueError(f"initial_simplex must have shape (n + 1, n), got {sim.shape}")
-    maxfev = 200 * n if maxfev is None else int(maxfev)
-    nfev = 0
-
-    def f(v: np.ndarray) -> float:
-        nonlocal nfev
-        nfev += 1
-        return float(fun(v))
-
-    fsim = np.array([f(v) for v in sim])
-    order = np.argsort(fsim, kind="stable")
-    sim, fsim = sim[order], fsim[order]
-    nit = 1
-    while nfev < maxfev:
-        if (
-            np.max(np.abs(sim[1:] - sim[0])) <= xatol
-            and np.max(np.abs(fsim[0] - fsim[1:])) <= fatol
-        ):
-            break
-        xbar = sim[:-1].mean(axis=0)
-        xr = 2.0 * xbar - sim[-1]
-        fxr = f(xr)
-        shrink = False
-        if fxr < fsim[0]:
-            xe = 3.0 * xbar - 2.0 * sim[-1]
-            fxe = f(xe)
-            if fxe < fxr:
-                sim[-1], fsim[-1] = xe, fxe
-            else:
-                sim[-1], fsim[-1] = xr, fxr
-        elif fxr < fsim[-2]:
-            sim[-1], fsim[-1] = xr, fxr
-        elif fxr < fsim[-1]:
-            xc = 1.5 * xbar - 0.5 * sim[-1]
-            fxc = f(xc)
-            if fxc <= fxr:
-                sim[-1], fsim[-1] = xc, fxc
-            else:
-                shrink = True
-        else:
-            xcc = 0.5 * xbar + 0.5 * sim[-1]
-            fxcc = f(xcc)
-            if fxcc < fsim[-1]:
-                sim[-1], fsim[-1] = xcc, fxcc
-            else:
-                shrink = True
-        if shrink:
-            for j in range(1, npt):
-                sim[j] = sim[0] + 0.5 * (sim[j] - sim[0])
-                fsim[j] = f(sim[j])
-        order = np.argsort(fsim, kind="stable")
-        sim, fsim = sim[order], fsim[order]
-        nit += 1
-    return NMResult(x=sim[0].copy(), fun=float(fsim[0]), nfev=nfev, nit=nit, success=nfev < maxfev)
+    x, rnorm = scipy_nnls(a, b, maxiter=maxiter)
+    return x, float(rnorm)
 
 
 # -----------------------------------------------------------------------------------------
@@ -247,6 +84,9 @@ def least_squares(
     max_nfev: int = 2000,
 ) -> LSQResult:
     """Minimise ``0.5 ||fun(x)||^2`` subject to ``lb <= x <= ub`` (projected Levenberg-Marquardt).
+
+    Kept rather than :func:`scipy.optimize.least_squares`: 0.8x its CPU time on a bounded fit
+    of a log WV (``bench_optim.py``), to the same cost.
 
     Each iteration takes a central-difference Jacobian (one-sided next to a bound), freezes the
     variables held at a bound by the gradient, and solves the damped normal equations
@@ -542,6 +382,9 @@ def _acklam_tail(t: float) -> float:
 
 def chi2_isf(df: np.ndarray | float, p: np.ndarray | float) -> np.ndarray:
     """Chi-square inverse survival function: ``x`` with ``P(chi2_df > x) = p``.
+
+    Kept rather than ``scipy.special.chdtri`` (180x faster, but it loses ~1e-5 relative in the
+    far lower tail of ``df >= 1e8``, ``tests/test_optim.py``); it costs ~2 ms per WV's levels.
 
     Equals ``scipy.special.chdtri(df, p)`` (relative difference below 1e-12 over the
     degrees of freedom of wavelet variances, 1 to 1e8).

@@ -1,4 +1,5 @@
-"""The SciPy-free kernels of the fit path (engine._optim) against SciPy and analytic values."""
+"""The fit path's own kernels (engine._optim) against SciPy and analytic values; its NNLS (SciPy's)
+by the KKT conditions."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import optimize, special
 
-from engine._optim import chi2_isf, gamma_p, least_squares, nelder_mead, nnls
+from engine._optim import chi2_isf, gamma_p, least_squares, nnls
 
 DFS = [
     0.3,
@@ -106,28 +107,6 @@ def test_nnls_kkt_conditions() -> None:
     free = x > 0
     np.testing.assert_allclose(grad[free], 0.0, atol=1e-10)
     assert np.all(grad[~free] >= -1e-10)
-
-
-def test_nelder_mead_iterates_as_scipy() -> None:
-    def f(v: np.ndarray) -> float:
-        return float((1 - v[0]) ** 2 + 100 * (v[1] - v[0] ** 2) ** 2 + 0.1 * abs(v[0]))
-
-    for s0 in ([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]], [[2.0, -1.0], [2.5, -1.0], [2.0, 0.0]]):
-        s0 = np.array(s0)
-        ours = nelder_mead(f, s0, xatol=1e-8, fatol=1e-12, maxfev=2000)
-        ref = optimize.minimize(
-            f,
-            s0[0],
-            method="Nelder-Mead",
-            options={"initial_simplex": s0, "xatol": 1e-8, "fatol": 1e-12, "maxfev": 2000},
-        )
-        assert ours.nfev == ref.nfev
-        np.testing.assert_array_equal(ours.x, ref.x)
-        assert ours.success and ref.success
-    # budget exhausted: success is False
-    assert not nelder_mead(
-        f, np.array([[-1.2, 1.0], [-1.1, 1.0], [-1.2, 1.1]]), xatol=1e-12, fatol=0.0, maxfev=20
-    ).success
 
 
 def test_least_squares_reaches_scipy_cost_with_and_without_active_bounds() -> None:

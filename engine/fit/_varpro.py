@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .._optim import nelder_mead, nnls
+from .._optim import nnls
 from ..models import TC_MAX_FACTOR, TC_MIN, WN, Model, Process, ar1_wv_pos
 from ..units import param_unit
 from ..wv import WaveletVariance
@@ -141,8 +141,12 @@ class NNLSProblem:
                 self.x_fixed[:, i] = pr.basis(self.tau, self.fs)
         # basis = basis_scale(phi) x (AR1 WV per unit innovation): 1 for AR1, 1 - phi^2 for GM
         self.scale_of = {i: pr.basis_scale for i, pr in enumerate(model.processes) if pr.nonlinear}
+        # the weighted constant columns, once (a diagonal A, the usual case, as a vector)
+        diag = not np.count_nonzero(a - np.diag(np.diagonal(a)))
+        self._a_diag: np.ndarray | None = np.ascontiguousarray(np.diagonal(a)) if diag else None
+        self._c_fixed = self._weigh(self.x_fixed)
+        self._memo: dict[bytes, float] = {}
         self.n_eval = 0
-        self._passive: np.ndarray | None = None
 
     @classmethod
     def from_wv(cls, model: Model, wv: WaveletVariance, a: np.ndarray) -> NNLSProblem:
@@ -170,35 +174,58 @@ class NNLSProblem:
         """phi of every AR1/GM term from the search coordinates."""
         return tuple(self.phi_of(i, float(ui)) for i, ui in zip(self.nl_idx, u, strict=True))
 
+    def _column(self, i: int, phi: float) -> np.ndarray:
+        """The WV shape of AR1/GM term ``i`` at ``phi`` (unweighted, a new array)."""
+        if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
+            col = ar1_wv_pos(self.tau, phi)
+            scale = self.scale_of[i](phi)
+            return col if scale == 1.0 else col * scale
+        return np.asarray(self.model.processes[i].basis(self.tau, self.fs, phi), float)
+
     def design(self, phis: tuple[float, ...]) -> np.ndarray:
         """The (M, p) matrix of WV shapes for the AR1/GM coefficients ``phis``."""
         x = self.x_fixed.copy()
         for i, phi in zip(self.nl_idx, phis, strict=True):
-            if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
-                col = ar1_wv_pos(self.tau, phi)
-                scale = self.scale_of[i](phi)
-                x[:, i] = col if scale == 1.0 else col * scale
-            else:
-                x[:, i] = self.model.processes[i].basis(self.tau, self.fs, phi)
+            x[:, i] = self._column(i, phi)
         return x
+
+    def _weigh(self, x: np.ndarray) -> np.ndarray:
+        """``A x`` (rows of ``x`` are scales)."""
+        if self._a_diag is None:
+            return self.a @ x
+        return self._a_diag[:, None] * x if x.ndim == 2 else self._a_diag * x
+
+    def _inner(self, c: np.ndarray) -> tuple[float, np.ndarray]:
+        """Objective and ``h >= 0`` for the weighted design ``c = A X`` (NNLS on unit-norm
+        columns)."""
+        self.n_eval += 1
+        norms = np.sqrt(np.einsum("ij,ij->j", c, c))
+        norms[norms == 0] = 1.0
+        g, _ = nnls(c / norms, self.b, maxiter=50 * self.p)
+        h = g / norms
+        r = self.b - c @ h
+        return float(r @ r), h
 
     def solve(self, phis: tuple[float, ...]) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, h >= 0 and the design matrix for fixed non-linear values."""
-        self.n_eval += 1
         x = self.design(phis)
-        c = self.a @ x
-        norms = np.sqrt(np.sum(c * c, axis=0))
-        norms[norms == 0] = 1.0
-        # warm start from the previous solve's positive set (Nelder-Mead moves little)
-        g, _ = nnls(c / norms, self.b, maxiter=50 * self.p, passive=self._passive)
-        self._passive = g > 0
-        h = g / norms
-        r = self.b - c @ h
-        return float(r @ r), h, x
+        c = self._c_fixed.copy()
+        for i in self.nl_idx:
+            c[:, i] = self._weigh(x[:, i])
+        f, h = self._inner(c)
+        return f, h, x
 
     def profile(self, u: np.ndarray) -> float:
-        """The profiled objective at the search coordinates ``u``."""
-        return self.solve(self.phis_of(u))[0]
+        """The profiled objective at the search coordinates ``u`` (each point solved once: a
+        search comes back to its starts and anchors)."""
+        key = np.asarray(u, dtype=float).tobytes()
+        f = self._memo.get(key)
+        if f is None:
+            c = self._c_fixed.copy()
+            for i, ui in zip(self.nl_idx, u, strict=True):
+                c[:, i] = self._weigh(self._column(i, self.phi_of(i, float(ui))))
+            f = self._memo[key] = self._inner(c)[0]
+        return f
 
     def lower_bounds(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unconstrained weighted least squares of all candidates at once (batched QR).
@@ -269,7 +296,7 @@ def local(
 ) -> tuple[float, np.ndarray, bool]:
     """Local minimum of ``fun`` from ``u0`` (clipped into ``[lo, hi]``).
 
-    Nelder-Mead (:func:`engine._optim.nelder_mead`) from a simplex of side ``step``, restarted
+    Nelder-Mead (:func:`scipy.optimize.minimize`) from a simplex of side ``step``, restarted
     on a simplex 8x smaller until a restart no longer lowers the objective (Nelder-Mead copes
     with the kinks where the set of zero variances changes, where gradient methods stall).
     At most 8 restarts of at most ``maxfev`` evaluations each (default ``400 k``).
@@ -279,6 +306,8 @@ def local(
     f, u, converged
         The objective, the coordinates and whether the last run met its tolerance.
     """
+    from scipy import optimize  # on first use: `import engine` stays light (test_public_api)
+
     x = np.clip(np.asarray(u0, float), lo, hi)
     k = x.size
     maxfev = 400 * k if maxfev is None else maxfev
@@ -286,7 +315,17 @@ def local(
     converged = False
     for _ in range(8):
         simplex = np.vstack([x] + [x + step * e for e in np.eye(k)])
-        res = nelder_mead(fun, simplex, xatol=1e-6, fatol=1e-10 * max(f, 1e-300), maxfev=maxfev)
+        res = optimize.minimize(
+            fun,
+            x,
+            method="Nelder-Mead",
+            options={
+                "initial_simplex": simplex,
+                "xatol": 1e-6,
+                "fatol": 1e-10 * max(f, 1e-300),
+                "maxfev": maxfev,
+            },
+        )
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.asarray(res.x, float), fn

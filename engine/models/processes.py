@@ -35,13 +35,38 @@ TC_MIN = 1e-2
 TC_MAX_FACTOR = 1e4  # times the series length
 
 
+def _series_coefficients(t: np.ndarray) -> np.ndarray:
+    """The (4, J) coefficients ``c_k(t)`` of :func:`ar1_wv_pos`'s series ``sum_k c_k x^k``,
+    cached per scale vector (a fit evaluates thousands of ``phi`` on the same scales)."""
+    key = t.tobytes()
+    coef = _SERIES_CACHE.get(key)
+    if coef is None:
+        s = t
+        coef = np.array(
+            [
+                s / 12 + 1 / (6 * s),
+                -(s**2) / 32 + s / 12 + 1 / (6 * s),
+                7 * s**3 / 960 - s**2 / 32 + s / 48 + 1 / (20 * s),
+                -(s**4) / 768 + 7 * s**3 / 960 - s**2 / 128 - s / 144 - 1 / (180 * s),
+            ]
+        )
+        if len(_SERIES_CACHE) > 256:
+            _SERIES_CACHE.clear()
+        _SERIES_CACHE[key] = coef
+    return coef
+
+
+_SERIES_CACHE: dict[bytes, np.ndarray] = {}
+
+
 def ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
     """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path).
 
     Parameters
     ----------
     t : ndarray of float, shape (J,)
-        Scales in samples, increasing (the series branch is tested on ``t[0]``).
+        Scales in samples, increasing (the scales where the series applies, ``x t < 2e-3``,
+        are then the first ones).
     phi : float
         Autoregressive coefficient, ``0 < phi < 1``.
 
@@ -56,16 +81,10 @@ def ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
     out = (e_2 * t + 2 * phi * (np.expm1(-x * t) - 4 * np.expm1(-0.5 * x * t))) / (
         e_1**3 * (phi + 1) * t * t
     )
-    if x * t[0] < 2e-3:
-        small = x * t < 2e-3
-        s = t[small]
-        out[small] = (
-            s / 12
-            + 1 / (6 * s)
-            + x * (-(s**2) / 32 + s / 12 + 1 / (6 * s))
-            + x**2 * (7 * s**3 / 960 - s**2 / 32 + s / 48 + 1 / (20 * s))
-            + x**3 * (-(s**4) / 768 + 7 * s**3 / 960 - s**2 / 128 - s / 144 - 1 / (180 * s))
-        )
+    if x * t[0] < 2e-3:  # the series on the first scales (cached coefficients, Horner)
+        n = int(np.count_nonzero(x * t < 2e-3))
+        c = _series_coefficients(t)[:, :n]
+        out[:n] = ((c[3] * x + c[2]) * x + c[1]) * x + c[0]
     return out
 
 

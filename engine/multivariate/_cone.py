@@ -70,7 +70,6 @@ class ConeLSQ:
         self.n_inner = 0
         self.n_coupled = 0
         self._face: tuple[Any, np.ndarray] | None = None  # last certified face, solution
-        self._passive: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # NNLS warm starts
 
     def _matrices(self, c: np.ndarray) -> dict[int, np.ndarray]:
         """The PSD blocks' symmetric matrices of coefficients ``c``."""
@@ -106,18 +105,14 @@ class ConeLSQ:
                 c[keep] = self._relaxed_full(ax[:, keep], self.lower[keep])
                 return c
         if self.groups is not None:  # separable by row group
-            for gi, (rows, idx, nonneg) in enumerate(self.groups):
+            for rows, idx, nonneg in self.groups:
                 if keep is not None:
                     idx = [i for i in idx if keep[i]]
                 if not idx:
                     continue
                 a = ax[rows][:, idx]
                 if nonneg:
-                    # warm start from this group's previous positive set (the profile is
-                    # evaluated at nearby points)
-                    key = (gi, tuple(idx))
-                    c[idx] = _nnls(a, self.b[rows], self._passive.get(key))
-                    self._passive[key] = c[idx] > 0
+                    c[idx] = _nnls(a, self.b[rows])
                 else:
                     c[idx] = _lstsq(a, self.b[rows])
             return c
@@ -546,12 +541,11 @@ class ConeLSQ:
         return f, c, r
 
 
-def _nnls(a: np.ndarray, b: np.ndarray, passive: np.ndarray | None = None) -> np.ndarray:
-    """NNLS on unit-norm columns; ``passive``: the positive set of a previous, nearby solve
-    (one least squares when it is still optimal)."""
+def _nnls(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """NNLS on unit-norm columns."""
     norms = np.sqrt(np.sum(a * a, axis=0))
     norms[norms == 0] = 1.0
-    g, _ = nnls(a / norms, b, maxiter=50 * a.shape[1] + 50, passive=passive)
+    g, _ = nnls(a / norms, b, maxiter=50 * a.shape[1] + 50)
     return g / norms
 
 
