@@ -50,8 +50,12 @@ __all__ = [
     "color_label",
 ]
 
-#: Component renderers per cell (a model with more processes draws the first ones).
+#: Component renderers per cell at most (a model with more processes draws the first ones).
 N_CELL_COMPONENTS = 8
+#: ... built with the grid: a diagonal cell, an off-diagonal cell (GM+WN+RW draws 3 and 1);
+#: more are added when a fit draws more (a 6-channel grid is 21 cells: 2,676 Bokeh models
+#: with 8 per cell, 1,461 with these; docs/performance-app.md)
+N_CELL_INITIAL = {True: 3, False: 1}
 #: Points per octave of the smooth model curves.
 PER_OCTAVE = 8
 
@@ -312,23 +316,43 @@ class CellFigure:
                 ],
             )
         )
-        self.comps = [ColumnDataSource(_empty_comp()) for _ in range(N_CELL_COMPONENTS)]
-        self.comp_renderers = [
-            p.line("tau_s", "wv", source=s, line_width=1.6, line_dash="dashed", visible=False)
-            for s in self.comps
-        ]
-        self.total = ColumnDataSource(_empty_total())
-        p.line("tau_s", "pos", source=self.total, line_color=TOTAL_COLOR, line_width=2.2)
-        if not diag:
-            p.line(
-                "tau_s",
-                "neg",
-                source=self.total,
-                line_color=TOTAL_COLOR,
-                line_width=2.2,
-                line_dash="dotted",
-            )
         self.figure = p
+        self.comps: list[ColumnDataSource] = []
+        self.comp_renderers: list[Any] = []
+        self.total_renderers: list[Any] = []  # (drawn on top of the components)
+        self._grow(N_CELL_INITIAL[diag])
+        self.total = ColumnDataSource(_empty_total())
+        self.total_renderers = [
+            p.line("tau_s", "pos", source=self.total, line_color=TOTAL_COLOR, line_width=2.2)
+        ]
+        if not diag:
+            self.total_renderers.append(
+                p.line(
+                    "tau_s",
+                    "neg",
+                    source=self.total,
+                    line_color=TOTAL_COLOR,
+                    line_width=2.2,
+                    line_dash="dotted",
+                )
+            )
+
+    def _grow(self, n: int) -> None:
+        """Hold ``n`` component renderers (at most :data:`N_CELL_COMPONENTS`), the model's
+        total drawn on top of them."""
+        n = min(n, N_CELL_COMPONENTS)
+        if n <= len(self.comps):
+            return
+        p = self.figure
+        for _ in range(len(self.comps), n):
+            src = ColumnDataSource(_empty_comp())
+            self.comps.append(src)
+            self.comp_renderers.append(
+                p.line("tau_s", "wv", source=src, line_width=1.6, line_dash="dashed", visible=False)
+            )
+        totals = self.total_renderers
+        if totals:
+            p.renderers = [*(r for r in p.renderers if r not in totals), *totals]
 
     def update(self, data: dict[str, Any] | None, title: str, ylabel: str) -> None:
         self.figure.title.text = title
@@ -342,6 +366,7 @@ class CellFigure:
             self.emp.data = data["emp"]
             self.total.data = data["total"]
             comps = data["components"]
+            self._grow(len(comps))
         for i, (src, r) in enumerate(zip(self.comps, self.comp_renderers, strict=True)):
             if i < len(comps):
                 _key, lab, neg, d = comps[i]

@@ -5,7 +5,8 @@ sessions (an HTTP page request, then Bokeh's websocket protocol: ``bench_load.Se
 them. Checked: each session gets its own state and document (no model shared, a click in one
 never reaches the other), a page built ahead is the page built on demand (the same models, in
 the same order, with the same initial data), its first pull is the JSON made ahead, its first
-click redraws, a request with a query or another host is built on demand, the pool refills,
+click redraws, a request with a query is built on demand, one with another host name gets a
+page built ahead, the pool refills,
 and refilling pauses while a session is busy (counted steps, no timing).
 """
 
@@ -30,7 +31,9 @@ from gmwm_app.app import live_apps, set_listed
 
 REPO = Path(__file__).resolve().parents[1]
 POOL = 3
-WAIT_S = 120.0
+#: Wait limits (s), not latency bounds: the pool builds at the lowest priority, and at load 30
+#: three pages took over 120 s to build
+WAIT_S = 600.0
 
 
 def _bench() -> Any:
@@ -56,14 +59,17 @@ def _wait(predicate: Any, what: str, timeout: float = WAIT_S) -> None:
 
 @pytest.fixture(scope="module")
 def pooled(app_demo_file: Path) -> Iterator[dict[str, Any]]:
-    """The app served with ``prebuild=POOL`` for 127.0.0.1:PORT; yields its URL and pool."""
+    """The app served with ``prebuild=POOL``, pages built for localhost:PORT, opened by
+    127.0.0.1:PORT; yields its URL and pool."""
 
     n_pools = len(server.POOLS)
     pool = None
     try:
         with served_app(
             app_demo_file,
-            lambda port: server.create_application(prebuild=POOL, host=f"127.0.0.1:{port}"),
+            # the pages are built for "localhost" and every test opens them by "127.0.0.1":
+            # browsers may use another name than the one expected (issue #33)
+            lambda port: server.create_application(prebuild=POOL, host=f"localhost:{port}"),
             # a page request without its websocket (most tests here) counts as a session
             # opening, which pauses the refill until Bokeh discards it
             unused_session_lifetime_milliseconds=8000,
@@ -155,11 +161,17 @@ def test_pool_hands_out_distinct_fresh_states(pooled: dict[str, Any]) -> None:
 
 def test_pooled_page_equals_on_demand_page(pooled: dict[str, Any]) -> None:
     pool = pooled["pool"]
-    _wait(lambda: len(pool) > 0, "a page in the pool")
+    # (none being built: a page being built ahead is the newest of live_apps() meanwhile)
+    _wait(lambda: len(pool) > 0 and not pool.building, "a page in the pool")
     handed = pool.stats["handed"]
     _get(pooled["url"])
     assert pool.stats["handed"] == handed + 1
     ahead = live_apps()[-1]
+    # its document now: Bokeh discards a session without websocket after 8 s here (and
+    # destroys its document), which a build on demand at load 15 can take
+    doc_ahead = ahead.jobs.doc
+    types_ahead = sorted(type(m).__name__ for m in doc_ahead.models)
+    a = _doc_json(doc_ahead)
     size, pool.size = pool.size, 0  # the same request, built on demand
     try:
         _get(pooled["url"])
@@ -168,13 +180,26 @@ def test_pooled_page_equals_on_demand_page(pooled: dict[str, Any]) -> None:
     assert pool.stats["handed"] == handed + 1
     demand = live_apps()[-1]
     assert demand is not ahead
-    doc_ahead, doc_demand = ahead.jobs.doc, demand.jobs.doc
-    types_ahead = sorted(type(m).__name__ for m in doc_ahead.models)
+    doc_demand = demand.jobs.doc
     assert types_ahead == sorted(type(m).__name__ for m in doc_demand.models)
     assert len(types_ahead) > 200
-    # the same document, model for model, data included (ids aside)
-    a, b = _doc_json(doc_ahead), _doc_json(doc_demand)
+    # the same document, model for model, data included (ids aside), but for the location's
+    # host: built under "localhost", requested by "127.0.0.1" (the browser sets its own
+    # location on creation: test_pooled_page_in_a_browser)
+    b = _doc_json(doc_demand)
+    assert _location_host(a) == ("localhost", f"http://localhost:{pooled['port']}/")
+    assert _location_host(b) == ("127.0.0.1", pooled["url"])
+    _location_host(a, ("127.0.0.1", pooled["url"]))
     assert a == b, _first_difference(a, b)
+
+
+def _location_host(rep: Any, put: tuple[str, str] | None = None) -> tuple[str, str]:
+    """The (hostname, href) of the location root of a document's JSON (``put``: set them)."""
+    (loc,) = [r for r in rep["roots"] if r["attributes"].get("name") == "location"]
+    attrs = loc["attributes"]
+    if put is not None:
+        attrs["hostname"], attrs["href"] = put
+    return attrs["hostname"], attrs["href"]
 
 
 def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -> None:
@@ -236,26 +261,37 @@ def test_pooled_page_in_a_browser(pooled: dict[str, Any]) -> None:
         while "model=GM" not in page.url and time.time() < deadline:
             page.wait_for_timeout(50)
         assert "model=GM" in page.url, page.url
+        # built under "localhost", opened by 127.0.0.1: the location is the browser's
+        assert page.url.startswith(pooled["url"]), page.url
+        assert page.evaluate("window.location.host") == f"127.0.0.1:{pooled['port']}"
     assert errors == []
 
 
-def test_query_or_other_host_builds_on_demand(pooled: dict[str, Any]) -> None:
+def test_query_builds_on_demand(pooled: dict[str, Any]) -> None:
     pool = pooled["pool"]
     _wait(lambda: len(pool) > 0, "a page in the pool")
-    handed, released = pool.stats["handed"], pool.stats["released"]
+    handed = pool.stats["handed"]
     _get(pooled["url"] + "?channel=gyro_y")
     assert pool.stats["handed"] == handed  # built on demand
     assert live_apps()[-1]._query.get("channel") == "gyro_y"
-    # another host name: built on demand, and the pool serves that host from now on
-    _get(pooled["url"], host=f"localhost:{pooled['port']}")
-    assert pool.stats["handed"] == handed
-    assert pool.shape.host == f"localhost:{pooled['port']}"
-    assert pool.stats["released"] > released and len(pool) == 0
-    _wait(lambda: len(pool) > 0, "the pool to refill for the new host")
-    _get(pooled["url"], host=f"localhost:{pooled['port']}")
-    assert pool.stats["handed"] == handed + 1
-    doc = live_apps()[-1].jobs.doc
-    assert doc.session_context.request.host == f"localhost:{pooled['port']}"
+
+
+def test_other_host_name_gets_the_pages_built_ahead(pooled: dict[str, Any]) -> None:
+    """Browsers that use another name for the server (``localhost`` where ``127.0.0.1`` was
+    expected, an address for a host name) get the pages built ahead: nothing is released or
+    rebuilt (issue #33: a class with another host name lost the pool, p95 1.18 s -> 21.4 s).
+    The session's own request is the one with its host; Chromium's location is its own."""
+    pool = pooled["pool"]
+    _wait(lambda: len(pool) >= 2, "two pages in the pool")
+    handed, released, built = pool.stats["handed"], pool.stats["released"], pool.stats["built"]
+    for host in (f"localhost:{pooled['port']}", f"127.0.0.1:{pooled['port']}"):
+        _get(pooled["url"], host=host)
+        doc = live_apps()[-1].jobs.doc
+        assert doc.session_context.request.host == host
+    assert pool.stats["handed"] == handed + 2  # both from the pool
+    assert pool.stats["released"] == released  # no page thrown away
+    assert pool.stats["built"] - built <= 2  # (refills only)
+    assert pool.shape == server.RequestShape("/", "/")
 
 
 def test_an_ended_session_not_yet_collected_does_not_pause_the_refill(
@@ -267,7 +303,7 @@ def test_an_ended_session_not_yet_collected_does_not_pause_the_refill(
     pool = pooled["pool"]
     _wait(lambda: len(pool) > 0, "a page in the pool")
     handed = pool.stats["handed"]
-    _get(pooled["url"], host=pool.shape.host)  # (the host the pool serves now)
+    _get(pooled["url"])
     app = live_apps()[-1]
     assert pool.stats["handed"] == handed + 1 and app.served and not app.ready
     assert pool.busy()  # a session opening
@@ -301,7 +337,7 @@ def test_refill_pauses_while_a_session_is_busy_or_opening() -> None:
         2,
         build,
         None,
-        shape=server.RequestShape("http", "127.0.0.1:1", "/", "/"),
+        shape=server.RequestShape("/", "/"),
         on_demand=lambda: on_demand[0],
         sessions=lambda: [session],
     )
@@ -347,7 +383,7 @@ def test_refill_counts_only_the_sessions_being_served() -> None:
         1,
         lambda doc: _Session(),
         None,
-        shape=server.RequestShape("http", "h:1", "/", "/"),
+        shape=server.RequestShape("/", "/"),
         # these two among the served apps (other tests' sessions may be open meanwhile)
         sessions=lambda: [a for a in server.served_apps() if a in (ended, opening)],
     )
@@ -377,7 +413,9 @@ def test_request_shape_and_default_size() -> None:
         )
 
     shape = server.request_shape(proxy("/"))
-    assert shape == server.RequestShape("http", "lab-pc:5006", "/", "/")
+    assert shape == server.RequestShape("/", "/")
+    # the host name is not part of the shape (Chromium's Location sets its own on creation)
+    assert server.request_shape(proxy("/", host="10.0.0.7:5006")) == shape
     assert server.request_shape(proxy("/?source=path&path=x.h5")) is None
     assert server.request_shape(proxy("/ws")) == shape  # a session created by its websocket
     assert server.request_shape(proxy("/other")) != shape

@@ -2,7 +2,7 @@
 collect it).
 
     python tests/benchmarks/bench_load.py [--n 10 20 30] [--num-procs 1] [--clicks 8]
-        [--prebuild N] [--cold]
+        [--prebuild N] [--cold | --cold-and-warm] [--host-name NAME]
 
 It starts ``gmwm-app`` itself (``python -m gmwm_app --address 127.0.0.1 --no-show``, the
 demo log) on a free loopback port, once per measurement (a fresh server, so that one burst's
@@ -152,7 +152,11 @@ class Server:
 
     @property
     def url(self) -> str:
-        return f"http://{HOST}:{self.port}/"
+        return self.url_by(HOST)
+
+    def url_by(self, name: str) -> str:
+        """The page's URL by the host name ``name`` (the server expects ``HOST``)."""
+        return f"http://{name}:{self.port}/"
 
     def rss_mb(self) -> float:
         return _rss_mb(self.proc.pid)
@@ -232,11 +236,14 @@ class Session:
     """One page: its HTTP request, its websocket and the models the benchmark watches."""
 
     url: str
+    cpu: Any = None  # the server's CPU time (s), read at each phase of a page alone
     t0: float = 0.0
     t_html: float = float("nan")
     t_doc: float = float("nan")
     t_ready: float = float("nan")
     ids: dict[str, str] = field(default_factory=dict)
+    cpus: list[float] = field(default_factory=list)
+    n_models: int = 0
     error: str = ""
     _ws: Any = None
     _receiver: Any = None
@@ -262,17 +269,19 @@ class Session:
         from tornado.httpclient import AsyncHTTPClient, HTTPRequest
         from tornado.websocket import websocket_connect
 
+        self._cpu()
         self.t0 = time.perf_counter()
         resp = await AsyncHTTPClient().fetch(self.url, request_timeout=600, connect_timeout=600)
         html = resp.body.decode()
         self.t_html = time.perf_counter()
+        self._cpu()
         m = re.search(r'"token":\s*"([^"]+)"', html) or re.search(r"token\W+([\w.-]{40,})", html)
         if m is None:
             raise RuntimeError("no session token in the page's HTML")
-        port = self.url.split(":")[2].split("/")[0]
+        netloc = self.url.split("/")[2]  # the name the page was opened by (--host-name)
         req = HTTPRequest(
-            f"ws://{HOST}:{port}/ws",
-            headers={"Origin": f"http://{HOST}:{port}"},
+            f"ws://{netloc}/ws",
+            headers={"Origin": f"http://{netloc}"},
             request_timeout=600,
             connect_timeout=600,
         )
@@ -289,6 +298,7 @@ class Session:
             if msg.msgtype == "PULL-DOC-REPLY":
                 break
         self.t_doc = time.perf_counter()
+        self._cpu()
         self._index(msg.content["doc"])
         self._events = asyncio.Queue()
         self._reader = asyncio.ensure_future(self._read_forever())
@@ -296,10 +306,16 @@ class Session:
         while not (self._wv_seen and self._info_seen):
             await self._events.get()
         self.t_ready = time.perf_counter()
+        self._cpu()
+
+    def _cpu(self) -> None:
+        if self.cpu is not None:
+            self.cpus.append(self.cpu())
 
     def _index(self, doc: Any) -> None:
         """Ids of the watched models: data sources by name, the "+ GM" and remove buttons."""
         removes = []
+        self.n_models = sum(1 for _ in _walk(doc))
         for o in _walk(doc):
             attrs = _entries(o.get("attributes", {}))
             name, label = attrs.get("name"), attrs.get("label")
@@ -422,8 +438,9 @@ async def _burst(url: str, n: int, timeout: float) -> list[Session]:
     return sessions
 
 
-async def _single(url: str, timeout: float) -> Session:
-    (s,) = await _burst(url, 1, timeout)
+async def _single(url: str, timeout: float, cpu: Any = None) -> Session:
+    s = Session(url, cpu=cpu)
+    await s.open(timeout)
     await s.close()
     if s.error:
         raise RuntimeError(f"a single page did not open: {s.error}")
@@ -435,7 +452,12 @@ def _close_all(sessions: list[Session]) -> Any:
 
 
 async def measure_burst(
-    n: int, num_procs: int, timeout: float, prebuild: int | None = None, cold: bool = False
+    n: int,
+    num_procs: int,
+    timeout: float,
+    prebuild: int | None = None,
+    cold: bool = False,
+    name: str = HOST,
 ) -> dict[str, Any]:
     """A fresh server; warm: the pools full, one warm-up page, the reference (one page
     alone), the pools full again, then ``n`` at once; cold: ``n`` at once as soon as the
@@ -446,18 +468,19 @@ async def measure_burst(
             if prebuild != 0:
                 pool_s = await srv.wait_pools(max(timeout, 300))
             await _single(srv.url, timeout)  # warm-up: imports, first document
-            ref = await _single(srv.url, timeout)
+            ref = await _single(srv.url, timeout, srv.cpu_s)
             await asyncio.sleep(1.0)
             if prebuild != 0:
                 await srv.wait_pools(max(timeout, 300))
         rss0, cpu0 = srv.rss_mb(), srv.cpu_s()
         t = time.perf_counter()
-        sessions = await _burst(srv.url, n, timeout)
+        # (the burst by --host-name; the warm-up and the reference by the name expected)
+        sessions = await _burst(srv.url_by(name), n, timeout)
         wall = time.perf_counter() - t
         rss1, cpu1 = srv.rss_mb(), srv.cpu_s()
         await _close_all(sessions)
         if cold:
-            ref = await _single(srv.url, timeout)
+            ref = await _single(srv.url, timeout, srv.cpu_s)
     ok = [s for s in sessions if not s.error]
     ready = [s.ready_s for s in ok]
     return {
@@ -466,6 +489,8 @@ async def measure_burst(
         "errors": sorted({s.error for s in sessions if s.error}),
         "ref": ref.ready_s,
         "ref_parts": (ref.t_html - ref.t0, ref.t_doc - ref.t_html, ref.t_ready - ref.t_doc),
+        "ref_cpu": [b - a for a, b in zip(ref.cpus, ref.cpus[1:], strict=False)],
+        "models": ref.n_models,
         "p50": _pct(ready, 0.5) if ready else float("nan"),
         "p95": _pct(ready, 0.95) if ready else float("nan"),
         "max": max(ready) if ready else float("nan"),
@@ -538,6 +563,13 @@ def main(argv: list[str] | None = None) -> int:
         "--prebuild", type=int, default=None, help="gmwm-app --prebuild (default: the app's)"
     )
     ap.add_argument("--cold", action="store_true", help="burst at once, the pools empty")
+    ap.add_argument("--cold-and-warm", action="store_true", help="each burst size cold, then warm")
+    ap.add_argument(
+        "--host-name",
+        default=HOST,
+        help=f"the name the burst's sessions open the server by (it serves and expects {HOST}; "
+        "e.g. localhost: a class whose browsers use another name than the one expected)",
+    )
     ap.add_argument("--no-clicks", action="store_true", help="skip the click measurement")
     args = ap.parse_args(argv)
     if any(not 1 <= n <= MAX_SESSIONS for n in [*args.n, args.click_n]):
@@ -559,15 +591,20 @@ def main(argv: list[str] | None = None) -> int:
         f"bench_load: {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} "
         f"{load[2]:.2f}, --num-procs {args.num_procs}, --prebuild "
         f"{'default' if args.prebuild is None else args.prebuild}{', cold' if args.cold else ''}"
+        f", opened by {args.host_name}"
     )
     print("page ready = HTML + whole document over the websocket + the first data (WV) drawn")
     rows = []
-    for n in args.n:
-        r = asyncio.run(measure_burst(n, args.num_procs, args.timeout, args.prebuild, args.cold))
+    modes = [True, False] if args.cold_and_warm else [args.cold]
+    for n, cold in ((n, cold) for n in args.n for cold in modes):
+        r = asyncio.run(
+            measure_burst(n, args.num_procs, args.timeout, args.prebuild, cold, args.host_name)
+        )
         rows.append(r)
         err = f"  FAILED {r['n'] - r['ok']}: {r['errors']}" if r["errors"] else ""
         print(
-            f"N={n:3d}: page ready p50 {r['p50']:.2f} s, p95 {r['p95']:.2f} s, max "
+            f"N={n:3d} {'cold' if cold else 'warm'}: page ready p50 {r['p50']:.2f} s, p95 "
+            f"{r['p95']:.2f} s, max "
             f"{r['max']:.2f} s (x{r['p95'] / r['ref']:.1f} a single page's {r['ref']:.2f} s; "
             f"target p95 < {TARGET_P95_S:g} s); all in {r['wall']:.1f} s; memory "
             f"{r['mb_per_session']:.1f} MB/session (server {r['rss0']:.0f} MB before); server CPU "
@@ -575,7 +612,12 @@ def main(argv: list[str] | None = None) -> int:
             flush=True,
         )
         h, d, w = r["ref_parts"]
-        print(f"       single page: HTML {h:.2f} s, document {d:.2f} s, first data {w:.2f} s")
+        cpu = r["ref_cpu"] + [float("nan")] * (3 - len(r["ref_cpu"]))
+        print(
+            f"       single page: wall HTML {h:.2f} s, document {d:.2f} s, first data {w:.2f} "
+            f"s; server CPU {sum(r['ref_cpu']):.2f} s (HTML {cpu[0]:.2f} s, document "
+            f"{cpu[1]:.2f} s, first data {cpu[2]:.2f} s); {r['models']} Bokeh models"
+        )
     c = None
     if not args.no_clicks:
         c = asyncio.run(
