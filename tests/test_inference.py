@@ -188,8 +188,9 @@ def test_j_test_rejects_a_wrong_model():
     wv = eg.wavelet_variance(x, fs=100.0)
     assert j_test(fit_efficient(wv, "WN+RW")).p_value < 1e-6
     jt = j_test(fit_efficient(wv, "GM+WN"))
-    # the statistic leaves out the last two levels (M_j / 2^j = 1 and 3 < ETA_MIN = 4)
-    assert jt.p_value > 1e-3 and jt.df == jt.levels - 3 and jt.levels == wv.n_levels - 2
+    # the statistic leaves out the last three levels of a classical WV (M_j / 2^j = 1, 3 and 7
+    # < ETA_MIN = 10)
+    assert jt.p_value > 1e-3 and jt.df == jt.levels - 3 and jt.levels == wv.n_levels - 3
 
 
 def test_the_v_options_are_one_keyword_list_with_one_set_of_defaults():

@@ -85,7 +85,8 @@ DISGUISE_LEVEL = 1e-3
 JTEST_NOTE = (
     "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V of the WV's "
     "own estimator, classical or robust, with a drift's share, from the largest candidate, on "
-    f"the levels with M_j / 2^j >= {ETA_MIN:g}) against chi2(levels - p), whatever the "
+    f"the levels with eff M_j / 2^j >= {ETA_MIN:g}, eff 1 for a classical WV) against "
+    "chi2(levels - p), whatever the "
     "ranking's weights"
 )
 

@@ -1,0 +1,58 @@
+"""Which levels enter the J statistic: those whose WV estimator has at least ETA_MIN = 10
+equivalent degrees of freedom, ``eff * M_j / 2^j`` (eff the robust WV's Gaussian efficiency, 1
+for the classical WV).
+
+With the old rule (``M_j / 2^j >= 4`` for either estimator) the robust J-test rejected the true
+GM+WN at 5 % in 8.5-10 % of logs at 2^16 and 9.0 % at 2^13 (300 logs); the robust WV's levels
+with 7 and 15 classical degrees of freedom are biased upwards (+5.5 %, +2.8 %) and skewed.
+``docs/jtest.md`` has the Monte Carlo of both rules (``tests/benchmarks/jtest_mc.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import engine as eg
+from engine.inference import j_test
+from engine.inference.jtest import ETA_MIN, jtest_levels
+
+
+def _wv(n: int, robust: bool, eff: float = 0.6) -> eg.WaveletVariance:
+    x = np.random.default_rng(0).standard_normal(n)
+    return eg.wavelet_variance(x, fs=100.0, robust=robust, eff=eff)
+
+
+@pytest.mark.parametrize(
+    ("n", "robust", "eff", "levels"),
+    [
+        # N = 2^13: M_j / 2^j = 8192 / 2^j - 1 + 2^-j = ..., 31.0 (j = 8), 15.0, 7.0, 3.0, 1.0
+        (2**13, False, 1.0, 9),  # 15.0 >= 10 > 7.0: levels 1-9 of 12
+        (2**13, True, 0.6, 8),  # 0.6 * 15.0 = 9.0 < 10 <= 0.6 * 31.0 = 18.6: levels 1-8
+        (2**13, True, 0.8, 9),  # 0.8 * 15.0 = 12.0 >= 10
+        # N = 10^6 (the ADIS16405 logs): 14.26 at j = 16, 6.63 at j = 17, 29.5 at j = 15
+        (10**6, False, 1.0, 16),
+        (10**6, True, 0.6, 15),  # 0.6 * 14.26 = 8.6 < 10 <= 0.6 * 29.5 = 17.7
+    ],
+)
+def test_levels_with_ten_degrees_of_freedom_of_the_estimator(n, robust, eff, levels):
+    # the numbers in the comments are the rule worked by hand; the old rule (eta >= 4 for
+    # either estimator) gave 10, 10, 10, 17, 17
+    wv = _wv(n, robust, eff)
+    assert ETA_MIN == 10.0
+    assert jtest_levels(wv) == levels
+    eta = wv.n_coef / wv.tau_samples
+    scale = eff if robust else 1.0
+    assert scale * eta[levels - 1] >= ETA_MIN > scale * eta[levels]
+
+
+def test_the_j_test_uses_those_levels():
+    # the statistic, its df and the ranking's J column follow the rule for either estimator
+    truth = eg.parse_model("GM(beta=2, sigma2_gm=1)+WN(sigma2=1)")
+    x = truth.simulate(2**13, fs=100.0, rng=np.random.default_rng(3))
+    for robust, levels in ((False, 9), (True, 8)):
+        wv = eg.wavelet_variance(x, fs=100.0, robust=robust)
+        jt = j_test(eg.fit_gmwm(wv, "GM+WN"))
+        assert jt.levels == levels and jt.df == levels - 3
+        row = eg.rank_models(wv, ["GM+WN"]).candidates[0]
+        assert row.j_df == levels - 3
