@@ -64,7 +64,7 @@ def test_robust_jtest_size():
     # the ci-weighted fit): rejections at 5 % within the central 95 % binomial interval of a
     # calibrated test, 4-16 of 200 (2-8 %). Measured: 11 of 200; the old rule (levels with
     # M_j / 2^j >= 4: the robust levels with eta 7 and 15 kept) rejects 18 of these 200 logs
-    # and fails (9.6 % of 260 other logs, seed 22). About 20 s of CPU
+    # and fails (9.6 % of 260 other logs, seed 22)
     reps = 200
     truth = eg.parse_model("GM(beta=2, sigma2_gm=1)+WN(sigma2=1)")
     rng = np.random.default_rng(2712)
