@@ -29,6 +29,8 @@ from bokeh.models import (
     TableColumn,
 )
 
+from engine.inference.jtest import LEVELS_RULE
+
 from .jobs import ProgressThrottle, job_controls
 from .state import Inference, format_value
 from .tab_view import TabView
@@ -132,8 +134,8 @@ def jtest_badge(inf: Inference | None, pending: bool = False) -> str:
     verdict = "fits" if p >= 0.05 else "doubtful fit" if p >= 0.01 else "rejected"
     return (
         f'<span class="gmwm-jtest" style="{style.format(color)}" title="Goodness of fit: '
-        "efficient J-test (the model refitted with V^-1 on the levels with M_j / 2^j at least "
-        '4, whatever the weights of the fit) against chi-square(levels - p)">'
+        "efficient J-test (the model refitted with V^-1 on the levels with "
+        f'{LEVELS_RULE}, whatever the weights of the fit) against chi-square(levels - p)">'
         f"J-test: p = {format_value(p, 3)} ({verdict}), T = {format_value(jt.statistic)} "
         f"[1], df = {jt.df}</span>"
     )
@@ -305,8 +307,9 @@ class SelectionView(TabView):
             h(
                 "Click a row to load that model into the builder (Fit tab) and refit. Click a "
                 "column title to sort. J-test p: the efficient J-test of each candidate (refitted "
-                "with Omega = V^-1, V from the largest candidate, on the levels with M_j / 2^j "
-                ">= 4, V of the WV's own estimator with a drift's share), calibrated whatever "
+                "with Omega = V^-1, V from the largest candidate, on the levels with "
+                f"{LEVELS_RULE}, V of the WV's own estimator with a drift's "
+                "share), calibrated whatever "
                 "the weights, or empty with the reason in the note. A candidate whose AR1/GM is "
                 "faster than one sample is white noise in disguise: it is ranked as its WN twin "
                 "(note).",

@@ -579,6 +579,8 @@ def test_weights_switch_refits_with_efficient_weights(app_state: AppState, app_d
     # ci fit's badge no longer rejects the truth (it did, p < 0.01, with the ci weights' own
     # quadratic form against chi2(J - p)), and it is the same test as on the efficient fit
     jt_ci = s.compute_inference(s.result).j_test
+    # (levels: 15 of 17, those of the classical WV with M_j / 2^j >= ETA_MIN = 4; the last two
+    # have 2.1, 0.5)
     assert jt_ci.p_value >= 0.05 and jt_ci.levels == ref.n_levels - 2
     assert s.set_weights("efficient"), s.error
     assert s.weights == "efficient" and s.result.weights == "efficient"

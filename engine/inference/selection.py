@@ -37,7 +37,7 @@ from ..fit.asymptotic import free_params, jacobian
 from ..fit.covariance import inverse_cov, wv_cov
 from ..models import WN, Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
-from .jtest import ETA_MIN, calibration_note, efficient_j, jtest_levels
+from .jtest import LEVELS_RULE, calibration_note, efficient_j, jtest_levels
 
 __all__ = [
     "submodels",
@@ -59,7 +59,8 @@ DISGUISE_LEVEL = 1e-3
 JTEST_NOTE = (
     "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V of the WV's "
     "own estimator, classical or robust, with a drift's share, from the largest candidate, on "
-    f"the levels with M_j / 2^j >= {ETA_MIN:g}) against chi2(levels - p), whatever the "
+    f"the levels with {LEVELS_RULE}) against "
+    "chi2(levels - p), whatever the "
     "ranking's weights"
 )
 
