@@ -43,7 +43,7 @@ from test_app_load import _close_sessions, _in_session, _open, _Probe, _wait
 from test_app_security import _attack, _fragments, _gzip_zeros
 from test_hostile_inputs import _npz_bomb, _unwritten_h5, _wide_csv
 
-from gmwm_app import limits
+from gmwm_app import limits, server_guard
 
 pytestmark = pytest.mark.slow
 
@@ -100,6 +100,7 @@ def _children() -> list[int]:
 def served(app_demo_file: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     import panel as pn
 
+    server_guard.bound_messages()  # what gmwm-app installs in its process (idempotent)
     folder = tmp_path_factory.mktemp("hostile")
     files = _hostile_files(folder)
     limits.configure(data_dirs=[folder, app_demo_file.parent])
@@ -182,6 +183,8 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
 
     attacks = threading.Thread(target=messages)
     lags: list[float] = []
+    busy: list[float] = []  # share of the heavy sessions ranking, sampled after each refit
+    rankings = 3
     with _Probe(served["url"]) as probe:
         loads.start()
         attacks.start()
@@ -192,22 +195,28 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
             _in_session(student, lambda spec=spec: student.state.set_model(spec))
             _wait(lambda spec=spec: student.state.model.spec() == spec, "a refit", 10)
             lags.append(time.perf_counter() - t)
+            running = [view_of[id(a)].running for a in heavy]
+            busy.append(sum(running) / len(running))
+            for a, on in zip(heavy, running, strict=True):
+                if not on:  # a ranking ended: its student ranks again (the load stays)
+                    _in_session(a, lambda a=a: view_of[id(a)].start_ranking(HEAVY))
+                    rankings += 1
             time.sleep(0.2)  # a person, not a loop
         loads.join(timeout=120)
         attacks.join(timeout=120)
-    still = [view_of[id(a)].running for a in heavy]
     rise = _peak_mb() - base
     print(
         f"\nunder attack for {MEASURE_S:.0f} s: {len(lags)} refits of the student, slowest "
         f"{max(lags) * 1000:.0f} ms, median {sorted(lags)[len(lags) // 2] * 1000:.0f} ms; "
         f"server loop probe max {probe.worst * 1000:.0f} ms over {len(probe.times)} probes; "
-        f"peak memory +{rise:.0f} MB; rankings still running {still}; message close codes "
+        f"peak memory +{rise:.0f} MB; {rankings} rankings of {HEAVY} started, heavy sessions "
+        f"ranking {100 * sum(busy) / len(busy):.0f} % of the time; message close codes "
         f"{codes}; refusals:"
     )
     for what, err in load_errors.items():
         print(f"  {what}: {err[:150]}")
     assert not loads.is_alive() and not attacks.is_alive()
-    assert all(still), "the rankings ended before the measurement did: use a larger model"
+    assert sum(busy) / len(busy) > 0.8, "the heavy sessions were not ranking most of the time"
     assert max(lags) < MAX_LAG_S and probe.worst < MAX_LAG_S, (max(lags), probe.worst)
     assert codes == [10001, 10001], codes  # both messages closed their session only
     assert len(load_errors) >= len(served["files"]), load_errors  # every file at least by path
@@ -220,7 +229,7 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
     # sessions' apps are released
     t0 = time.perf_counter()
     _close_sessions(served["server"])
-    _wait(lambda: not any(v.running for v in view_of.values()), "the rankings to stop", 30)
+    _wait(lambda: not any(v.running for v in view_of.values()), "the rankings to stop", 60)
     stop_s = time.perf_counter() - t0
     assert all(a.jobs.closed for a in apps)
     _wait(lambda: not (set(_children()) - kids_before), "the loader processes to end", 30)
