@@ -1,9 +1,8 @@
-"""Processes own their behaviour (issue 20, item 4).
+"""Processes own their behaviour.
 
 * An AST scan of ``engine/`` and ``gmwm_app/``: outside ``engine/models`` no ``isinstance``
-  check against a concrete process class and no string literal equal to a process code
-  (``"WN"``, ``"GM"`` ...): code that needs a process's behaviour calls a method or reads a
-  class attribute of the process (``p.psd(f, fs)``, ``p.display_name``, ``WN.code``), so adding
+  check against a concrete process class: code that needs a process's behaviour calls a method
+  or reads a class attribute of the process (``p.psd(f, fs)``, ``p.display_name``), so adding
   a process means adding one class.
 * Every registered process class implements every behaviour method (a new process cannot be
   half-implemented), and the behaviour methods agree with independent formulas.
@@ -24,34 +23,6 @@ from engine.models import PROCESS_TYPES, Process
 ROOT = Path(__file__).resolve().parent.parent
 CODES = frozenset(PROCESS_TYPES)
 
-# (path relative to the repository, literal) -> why the literal stays. Keep this short.
-_CONSUMER = (
-    "the consumer model 'WN' (a filter that takes white noise only, sensor_msgs/Imu) is a "
-    "consumer-model name, a key of CONSUMER_PARAMS beside 'WN+RW' and 'WN+GM' that users "
-    "pass to project(); it names the filter's model, not a branch on a fitted process"
-)
-_API_NAME = (
-    "a public name in engine.API, the table of what `import engine` offers (name -> module): "
-    "the class's Python name, not a branch on a fitted process's code"
-)
-ALLOWED_LITERALS: dict[tuple[str, str], str] = {
-    ("engine/formats/projection.py", "WN"): _CONSUMER,
-    ("engine/formats/bound.py", "WN"): _CONSUMER,
-    ("engine/formats/readers.py", "WN"): _CONSUMER,  # a JSON report's stored projection
-    ("engine/formats/registry.py", "WN"): _CONSUMER,  # a Format record's consumer model
-    **{("engine/__init__.py", code): _API_NAME for code in ("WN", "QN", "RW", "DR", "AR1", "GM")},
-}
-
-
-def _docstring_nodes(tree: ast.AST) -> set[int]:
-    out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
-                out.add(id(body[0].value))
-    return out
-
 
 def _class_names(node: ast.AST) -> list[str]:
     """Names of the classes an ``isinstance`` second argument names (``WN``, ``eg.GM``, tuples)."""
@@ -64,16 +35,15 @@ def _class_names(node: ast.AST) -> list[str]:
     return []
 
 
-def scan() -> tuple[list[str], list[str]]:
-    """(isinstance checks against process classes, process-code literals) outside models."""
-    checks, literals = [], []
+def scan() -> list[str]:
+    """The ``isinstance`` checks against process classes outside ``engine/models``."""
+    checks = []
     for pkg in ("engine", "gmwm_app"):
         for path in sorted((ROOT / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT).as_posix()
             if rel.startswith("engine/models/"):
                 continue
             tree = ast.parse(path.read_text(encoding="utf-8"))
-            docs = _docstring_nodes(tree)
             for node in ast.walk(tree):
                 if (
                     isinstance(node, ast.Call)
@@ -84,30 +54,14 @@ def scan() -> tuple[list[str], list[str]]:
                     hit = [n for n in _class_names(node.args[1]) if n in CODES]
                     if hit:
                         checks.append(f"{rel}:{node.lineno}: isinstance(..., {', '.join(hit)})")
-                elif (
-                    isinstance(node, ast.Constant)
-                    and isinstance(node.value, str)
-                    and node.value in CODES
-                    and id(node) not in docs
-                    and (rel, node.value) not in ALLOWED_LITERALS
-                ):
-                    literals.append(f"{rel}:{node.lineno}: {node.value!r}")
-    return checks, literals
+    return checks
 
 
 def test_no_isinstance_on_process_classes_outside_models():
-    checks, _ = scan()
+    checks = scan()
     assert checks == [], (
         "branch on the process's behaviour (a method or class attribute of "
         "engine.models.Process), not on its class:\n" + "\n".join(checks)
-    )
-
-
-def test_no_process_code_literals_outside_models():
-    _, literals = scan()
-    assert literals == [], (
-        "use the class attribute (WN.code) or a process method, not the code's literal:\n"
-        + "\n".join(literals)
     )
 
 
@@ -274,8 +228,8 @@ def test_display_names_are_distinct_and_shown_in_the_app():
     assert PROCESS_NAMES == {c: cls.display_name for c, cls in PROCESS_TYPES.items()}
 
 
-def test_isinstance_and_literal_scan_finds_a_planted_branch(tmp_path, monkeypatch):
-    """The scan is able to fail: a file with a chain and a literal is reported."""
+def test_isinstance_scan_finds_a_planted_branch(tmp_path, monkeypatch):
+    """The scan is able to fail: a file with an isinstance chain is reported."""
     import test_process_behaviour as me
 
     pkg = tmp_path / "engine"
@@ -289,6 +243,5 @@ def test_isinstance_and_literal_scan_finds_a_planted_branch(tmp_path, monkeypatc
     )
     (tmp_path / "gmwm_app").mkdir()
     monkeypatch.setattr(me, "ROOT", tmp_path)
-    checks, literals = me.scan()
+    checks = me.scan()
     assert checks == ["engine/bad.py:3: isinstance(..., GM, AR1)"]
-    assert literals == ["engine/bad.py:5: 'RW'"]
