@@ -14,6 +14,9 @@ from typing import Any
 
 import pytest
 
+#: The three decisive tests (the page renders clean, a click adds a process and its curve, a bad
+#: upload is a message and the session goes on) run in the default tier; the rest of the tour is
+#: marked ``browser_tour`` (deselected by default, run by .ci/run's second step).
 pytestmark = pytest.mark.browser
 
 TIMEOUT_MS = 20_000
@@ -88,6 +91,7 @@ def test_page_renders_without_console_errors(server: str, new_tab: Callable[[], 
     assert t.errors == []
 
 
+@pytest.mark.browser_tour
 def test_url_state_is_honoured(server: str, new_tab: Callable[[], Tab]) -> None:
     t = new_tab().open(server + "?channel=gyro_y&model=WN%2BRW")
     page = t.page
@@ -155,6 +159,7 @@ def test_bad_upload_shows_a_message_and_the_app_keeps_working(
     assert t.errors == []
 
 
+@pytest.mark.browser_tour
 def test_two_tabs_do_not_share_state(browser: Any, server: str, new_tab: Callable[[], Tab]) -> None:
     context = browser.new_context(viewport={"width": 1400, "height": 1000})
     try:
@@ -175,6 +180,7 @@ def test_two_tabs_do_not_share_state(browser: Any, server: str, new_tab: Callabl
         context.close()
 
 
+@pytest.mark.browser_tour
 def test_whatif_slider_moves_the_curves_while_dragging(
     server: str, new_tab: Callable[[], Tab]
 ) -> None:
@@ -211,6 +217,7 @@ def test_whatif_slider_moves_the_curves_while_dragging(
     assert t.errors == []
 
 
+@pytest.mark.browser_tour
 def test_exports(server: str, new_tab: Callable[[], Tab]) -> None:
     import json
 
@@ -229,6 +236,7 @@ def test_exports(server: str, new_tab: Callable[[], Tab]) -> None:
     assert t.errors == []
 
 
+@pytest.mark.browser_tour
 def test_model_selection_tab_ranks_and_loads_a_row(server: str, new_tab: Callable[[], Tab]) -> None:
     t = new_tab().open(server + "?channel=gyro_y&model=WN")
     page = t.page

@@ -146,6 +146,7 @@ def test_engine_check_is_the_views(app: Any, view: Any) -> None:
 
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.browser
+@pytest.mark.browser_tour
 def test_browser_typed_value_redraws_the_check(server: str, new_tab: Any) -> None:
     from test_app_browser import TIMEOUT_MS, _app_for
 

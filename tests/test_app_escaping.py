@@ -65,6 +65,7 @@ def _wait_text(page: Any, text: str) -> str:
 
 
 @pytest.mark.browser
+@pytest.mark.browser_tour
 def test_the_detector_sees_a_planted_script(server: str, page: Any) -> None:
     """Control: the same markup set as HTML in this Chromium runs and is seen."""
     page.goto(server)
@@ -75,6 +76,7 @@ def test_the_detector_sees_a_planted_script(server: str, page: Any) -> None:
 
 
 @pytest.mark.browser
+@pytest.mark.browser_tour
 @pytest.mark.parametrize("name", ["source", "path", "channel", "fs", "weights", "model"])
 def test_url_parameters_are_text(server: str, page: Any, name: str) -> None:
     query = {"source": "path", "path": PAYLOAD} if name == "path" else {name: PAYLOAD}
@@ -84,6 +86,7 @@ def test_url_parameters_are_text(server: str, page: Any, name: str) -> None:
 
 
 @pytest.mark.browser
+@pytest.mark.browser_tour
 def test_file_name_and_channel_names_are_text(server: str, page: Any, tmp_path: Path) -> None:
     page.goto(server)
     _wait_text(page, "WV levels")

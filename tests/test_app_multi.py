@@ -408,6 +408,7 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
 # a real browser
 # -------------------------------------------------------------------------------------------
 @pytest.mark.browser
+@pytest.mark.browser_tour
 def test_browser_tab_renders_the_grid_and_the_table(app_demo_file: Path) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app

@@ -209,6 +209,8 @@ def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -
     assert len(models) == 2 and sum("GM" in m for m in models) == 1, models
 
 
+@pytest.mark.browser
+@pytest.mark.browser_tour
 def test_pooled_page_in_a_browser(pooled: dict[str, Any]) -> None:
     """Chromium draws a page built ahead, its first click redraws, and its URL follows the
     session's state (the location bound at hand-over)."""

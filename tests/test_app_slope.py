@@ -289,6 +289,7 @@ def test_pure_helpers_curves_and_table_rows() -> None:
 
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.browser
+@pytest.mark.browser_tour
 def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app

@@ -175,6 +175,7 @@ def numbers(text: str) -> list[float]:
 
 
 @pytest.mark.browser
+@pytest.mark.browser_tour
 def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Path) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app

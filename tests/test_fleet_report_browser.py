@@ -20,7 +20,7 @@ from PIL import Image
 from engine.reporting import gather_fleet, render_fleet_html
 from engine.reporting.render import fleet_figure_specs
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.browser_tour]  # minutes: CI's second step
 
 #: Size budget of the six-unit, six-channel interactive fleet report (measured 4.81 MB, 4.94 MB
 #: with the IEEE columns of issue 27/28, 05:25 UTC on the shared machine: BokehJS

@@ -66,6 +66,7 @@ def test_interactive_report_offline_every_figure_painted(browser, reports):
     assert errors == [], errors
 
 
+@pytest.mark.browser_tour
 def test_static_report_offline_every_image_painted(browser, reports):
     ctx, page, errors, outside = open_offline(browser, reports["static"])
     try:
