@@ -34,6 +34,10 @@ from conftest import served_app
 
 from gmwm_app.state import AppState
 
+#: Latency and memory under concurrent sessions: the load tier (deselected by default, run by
+#: .ci/run's second step), since a loaded machine fails a latency bound.
+pytestmark = pytest.mark.load
+
 N_SESSIONS = 8
 MAX_BLOCK_S = 1.0
 _MINE: list[weakref.ref] = []  # the apps of the sessions this module opened

@@ -321,6 +321,7 @@ def test_basic_auth_refuses_without_password(tmp_path: Path) -> None:
         assert page.status == 200 and b"GMWM" in page.body  # type: ignore[attr-defined]
 
 
+@pytest.mark.load  # three gmwm-app processes at once
 def test_num_procs_serves_pages_and_sessions(tmp_path: Path) -> None:
     import panel.models.file_dropper  # noqa: F401 - the page's models, for the client side
     from bokeh.client import pull_session

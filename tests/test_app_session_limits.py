@@ -231,6 +231,7 @@ def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
         yield {"url": f"http://127.0.0.1:{port}/", "server": find()}
 
 
+@pytest.mark.load  # a latency bound (1 s) under two concurrent rankings
 def test_rankings_leave_other_sessions_responsive_and_stop_with_their_session(
     served: dict[str, Any],
 ) -> None:
