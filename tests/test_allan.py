@@ -323,6 +323,7 @@ def composite_mc() -> dict[str, np.ndarray]:
     )
 
 
+@pytest.mark.slow  # Monte Carlo: 7 s of CPU
 def test_armav_is_biased_gmwm_is_not_with_the_same_fixed_weights(composite_mc):
     """The GMWM paper's section III comparison: same non-random Omega, f = x versus log10."""
     g, a = composite_mc["GMWM-id"], composite_mc["ARMAV-id"]

@@ -94,6 +94,7 @@ def test_grid_shows_the_engine_wv_and_wccv_and_the_fitted_model(app: Any) -> Non
     assert len({id(c.figure.x_range) for c in v.grid.cells.values()}) == 1
 
 
+@pytest.mark.slow  # six multivariate fits: 12 s of CPU
 def test_changing_channels_resizes_the_grid_and_reuses_figures(app: Any) -> None:
     v = open_view(app)
     g3 = v.grid
@@ -148,6 +149,7 @@ def test_data_changes_follow_cheaply_while_hidden(app: Any, tmp_path: Path) -> N
     assert abs(rho[1]) < 0.07
 
 
+@pytest.mark.slow  # multivariate fits: 7 s of CPU
 def test_robust_setting_gives_a_notice_and_keeps_the_classical_matrix(app: Any) -> None:
     v = open_view(app)
     before, wvms = v.wvm, v.n_wvm
@@ -239,6 +241,7 @@ def simulate_shared_rw(seed: int) -> np.ndarray:
     return rw + rng.standard_normal((SIM_N, 3)) * np.sqrt(SIM_WN)
 
 
+@pytest.mark.slow  # a recovery on a simulated log: 7 s of CPU
 def test_table_recovers_a_known_shared_random_walk_covariance(app: Any, tmp_path: Path) -> None:
     x = simulate_shared_rw(1000)
     names = ["imu_a", "imu_b", "imu_c"]
@@ -291,6 +294,7 @@ def test_bad_specs_are_messages_and_the_session_keeps_working(app: Any) -> None:
     assert app.state.error == ""  # the Fit tab is untouched
 
 
+@pytest.mark.slow  # multivariate fits: 5 s of CPU
 def test_too_short_and_uneven_logs_are_messages(app: Any) -> None:
     v = open_view(app)
     v.controls.spec_input.value = "WN+RW"
@@ -308,6 +312,7 @@ def test_too_short_and_uneven_logs_are_messages(app: Any) -> None:
     np.testing.assert_allclose(v.wvm.values, ref.values, rtol=1e-12)
 
 
+@pytest.mark.slow  # multivariate fit and a real log: 5 s of CPU
 def test_summary_file_is_a_message(app: Any, real_data: Path) -> None:
     v = open_view(app)
     v.controls.spec_input.value = "WN+RW"
@@ -343,6 +348,7 @@ def test_pure_helpers() -> None:
 # -------------------------------------------------------------------------------------------
 # coalescing: one fit at a time, the latest settings win, stale results are dropped
 # -------------------------------------------------------------------------------------------
+@pytest.mark.slow  # multivariate fits: 6 s of CPU
 def test_changes_during_a_fit_coalesce_into_one_more_fit(
     app: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -368,6 +374,7 @@ def test_changes_during_a_fit_coalesce_into_one_more_fit(
 # -------------------------------------------------------------------------------------------
 # the test of dependence
 # -------------------------------------------------------------------------------------------
+@pytest.mark.slow  # bootstrap replicates: 7 s of CPU
 def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> None:
     v = open_view(app)
     v.controls.spec_input.value = "WN+RW"  # RW shared by the three gyros (the default marks)

@@ -197,6 +197,7 @@ def test_cli_scheduler_local_runs_on_a_dask_local_cluster(fleet, tmp_path, capsy
             assert math.isclose(a[k], b[k], rel_tol=1e-12), (a, b)
 
 
+@pytest.mark.slow  # six real logs fitted: 6 s of CPU
 def test_cli_batch_surfaces_the_sub_sample_warning_on_the_adis_fleet(real_data, tmp_path, capsys):
     # the six ADIS16405 units fitted with GM+WN+RW: the GM lands below one sample (the gyros'
     # filter correlates neighbouring samples; WN takes nothing), which every front end must

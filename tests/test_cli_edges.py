@@ -156,6 +156,7 @@ def test_streamed_and_in_memory_wv_name_the_channel_alike(capsys, tmp_path, kind
 
 
 # ----------------------------------------------------------------------------- select --top
+@pytest.mark.slow  # four rankings of 11 candidates: 12 s of CPU
 def test_select_top_says_how_many_were_ranked(capsys, tmp_path):
     path = tmp_path / "s.h5"
     assert main(["simulate", "--model", SIM, "-n", "20000", "--fs", "100", "-o", str(path)]) == 0

@@ -164,6 +164,7 @@ def _walk(node, prefix: str = "") -> dict[str, object]:
     return out
 
 
+@pytest.mark.slow  # every OpenCV-YAML export: 8 s of CPU
 def test_every_opencv_yaml_format_is_covered(texts) -> None:
     assert {n for n, t in texts.items() if t.startswith("%YAML:1.0")} == set(OPENCV_KEYS)
 

@@ -352,6 +352,7 @@ def test_ros_imu_covariance(fits) -> None:
             assert close(m[i, i], 9.0 * n_si(fits[c]) ** 2 * fits[c].fs)
 
 
+@pytest.mark.slow  # 12 filter exports: 37 s of CPU today
 def test_every_registered_filter_format_records_inflate(fits) -> None:
     filt = ["kalibr", "openvins", "basalt", "orbslam3", "vins", "px4", "ardupilot", "matlab"]
     filt += ["gazebo", "gz-sim", "kf-gins", "ros-imu"]
