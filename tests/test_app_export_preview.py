@@ -1,4 +1,4 @@
-"""The export menu's preview (issue 23 item 6): what the filter will assume, before the
+"""The export menu's preview: what the filter will assume, before the
 download, computed by the engine's ``project`` (the app draws and tabulates it), tested
 without a browser on the page's objects."""
 
@@ -42,7 +42,7 @@ def test_preview_shows_the_engine_projection_before_the_download(app_demo: Path)
         for name in ("N", "K"):
             got = pv.projections[ch].params[name]
             assert got.value == want.value(name)
-            if "empirical WV" in got.binds:  # set by the data (issue 28): no fit interval
+            if "empirical WV" in got.binds:  # set by the data: no fit interval
                 assert math.isnan(got.low) and math.isnan(got.high)
             else:
                 assert got.low < got.value < got.high  # every value with its interval

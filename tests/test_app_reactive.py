@@ -1,4 +1,4 @@
-"""The Fit page follows the state declaratively (issue #20): each part depends on the state
+"""The Fit page follows the state declaratively: each part depends on the state
 parameters it draws, redraws once per action, widgets echo no state change, and every
 failure reaches the page as a message and the log.
 

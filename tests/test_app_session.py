@@ -1,4 +1,4 @@
-"""App sessions, exports, server limits and time gaps (issue 7, app part); no browser."""
+"""App sessions, exports, server limits and time gaps; no browser."""
 
 from __future__ import annotations
 
@@ -306,7 +306,7 @@ def test_page_export_menu_every_format_from_the_fitted_channels(app_demo: Path) 
     fs = s.fs
     wn = {r: next(p for p in r.model.processes if p.code == "WN") for r in (gyro, accel)}
     rad = math.pi / 180
-    # the app writes the engine's default export (since issue 28 it bounds the fit and the
+    # the app writes the engine's default export (it bounds the fit and the
     # empirical WV's lower 95 % limit): the fitted WN+RW's white noise raised where the data
     # need it (K may then go down: the least inflation trades; the engine's bound is tested
     # against formulas elsewhere)

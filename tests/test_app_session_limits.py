@@ -40,7 +40,7 @@ def test_ranking_refuses_too_many_candidates(app_state: Any, default_limits: Non
     # within the cap the ranking runs
     assert app_state.rank("WN+RW+QN"), app_state.error
     assert len(app_state.selection.candidates) == 7
-    # the default cap admits the tab's own example and refuses the 335 candidates
+    # the default cap admits the tab's own example and refuses a 335-candidate ranking
     limits.configure()
     assert limits.current().max_candidates == limits.DEFAULT_MAX_CANDIDATES == 128
     assert not app_state.rank("20*GM+WN+QN+RW+DR")

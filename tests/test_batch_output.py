@@ -1,4 +1,4 @@
-"""The output folder of ``gmwm batch`` (engine.batch.BatchFolder, issue 33 item 9).
+"""The output folder of ``gmwm batch`` (engine.batch.BatchFolder).
 
 Before: the reports and summaries were written at the very end (a killed batch left
 nothing), files of the same names were overwritten whoever wrote them (an input named

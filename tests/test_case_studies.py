@@ -58,7 +58,7 @@ def test_navchip_implied_wv_matches_closed_forms(navchip):
     np.testing.assert_allclose(fit.implied, expect, rtol=1e-9)
     # the paper's six components all contribute (sec. V: "the important contribution of all")
     assert all(p[k] > 0 for k in p)
-    # GM correlation times longer than the sampling interval (issue #13.4)
+    # GM correlation times longer than the sampling interval
     assert 1 / p["GM_1.beta"] > 1 / fs and 1 / p["GM_2.beta"] > 1 / fs
 
 

@@ -268,7 +268,7 @@ def _raised_texts(path: Path) -> list[tuple[int, str]]:
 
 
 def test_engine_messages_name_arguments_not_cli_flags():
-    # issue 20: 14 engine messages named --units, --inflate, --scheduler ... (the CLI's words)
+    # an older tree had 14 engine messages naming --units, --inflate ... (the CLI's words)
     import re
 
     root = Path(__file__).resolve().parents[1] / "engine"

@@ -1,4 +1,4 @@
-"""Edges of the ``gmwm`` command a newcomer meets first (issue #14, item 4).
+"""Edges of the ``gmwm`` command a newcomer meets first.
 
 * ``gmwm simulate -o x.npy`` keeps fs, channel name and unit (sidecar ``x.npy.json``) and
   ``gmwm fit x.npy`` reads them back; a log without fs gets a loud warning on stderr.

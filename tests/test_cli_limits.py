@@ -1,4 +1,4 @@
-"""``gmwm`` limits and late checks (issue 19, items 4 and 9).
+"""``gmwm`` limits and late checks.
 
 * Every subcommand that writes (simulate, export, virtual, batch, study) refuses an output it
   cannot write before any computation: one line, in a fraction of a second, where the
@@ -145,7 +145,7 @@ def test_simulate_3e9_refused_by_memory() -> None:
 
 
 def test_simulate_limit_follows_memory(monkeypatch, capsys) -> None:
-    """On the issue's 23 GB machine -n 3e9 (which reached 17 GB in 60 s) is refused."""
+    """On a 23 GB machine -n 3e9 (which reached 17 GB in 60 s) is refused."""
     monkeypatch.setattr(_limits, "available_memory", lambda: 23 * 10**9)
     assert main(["simulate", "--model", "WN(sigma2=1)", "-n", "3e9", "-o", "x.h5"]) == 2
     err = capsys.readouterr().err
@@ -187,7 +187,7 @@ def test_engine_warnings_are_one_line_cli_warnings(tmp_path) -> None:
     assert "UserWarning" not in r.stderr and ".py" not in r.stderr
     first, *misfits = r.stdout.strip().splitlines()
     assert first == f"wrote px4 export of 6 channel(s) ({', '.join(_chans())}) to {out}"
-    # then one line per channel whose fit the data reject (issue 28: said next to the file)
+    # then one line per channel whose fit the data reject
     assert all(": model and data disagree: " in ln for ln in misfits), r.stdout
     assert "# warning: EKF2_GYR_NOISE" in out.read_text()  # and in the file, as before
 

@@ -1,4 +1,4 @@
-"""One meaning per option name across the ``gmwm`` subcommands (issue 19, item 10).
+"""One meaning per option name across the ``gmwm`` subcommands.
 
 Before, ``--scale`` was a counts factor in most commands and seconds in ``gmwm virtual``,
 ``wv``/``virtual`` took ``--alpha`` where ``fit``/``export``/``check`` took ``--level`` for the
@@ -134,7 +134,7 @@ def test_every_option_has_one_meaning() -> None:
                 seen.setdefault(opt, set()).add(cmd)
     assert aliases == set(DEPRECATED)
     assert set(seen) == set(MEANINGS)  # no stale row
-    # the clashes of the issue are gone: a counts factor wherever --scale is an option
+    # the old clashes are gone: a counts factor wherever --scale is an option
     assert "virtual" not in seen["--scale"] and "--level" not in seen and "--alpha" not in seen
     assert seen["-o"] == {"simulate", "export", "virtual", "batch", "study", "report"}
 

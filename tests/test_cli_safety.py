@@ -1,4 +1,4 @@
-"""A ``gmwm`` command never destroys data (issue 33, item 9).
+"""A ``gmwm`` command never destroys data.
 
 Before: ``gmwm export LOG -o LOG`` (or through a symlink) overwrote the IMU log; on a full
 disk ``report``, ``export -o`` and ``simulate`` exited with "No space left on device" (no file

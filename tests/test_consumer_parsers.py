@@ -1,4 +1,4 @@
-"""Each filter format read by its consumer's own parser, where it runs here (issue 23 item 5).
+"""Each filter format read by its consumer's own parser, where it runs here.
 
 * OpenCV-YAML files (``%YAML:1.0``: OpenVINS, ORB-SLAM3, VINS-Mono/Fusion) are read with
   OpenCV's ``cv2.FileStorage``, the parser those programs use (OpenVINS ``ov_core::YamlParser``,

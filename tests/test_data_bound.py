@@ -1,4 +1,4 @@
-"""The export bound covers the data, not only the fit (issue 28, defect 1).
+"""The export bound covers the data, not only the fit.
 
 A WN+RW fit of an ADIS16405 channel misfits the log (its WV is below the empirical 95 %
 interval at 12-14 of 19 scales); the exported file must still have a WV at least the lower
@@ -48,7 +48,7 @@ def kalibr_wv(path, ch: str, tau: np.ndarray, fs: float) -> np.ndarray:
 def test_wn_rw_export_bounds_the_data_lower_limit_on_every_adis_channel(
     real_data, name, tmp_path, capsys
 ) -> None:
-    """Done criterion of issue 28: `gmwm export --model WN+RW` of every ADIS16405 channel
+    """The acceptance criterion: `gmwm export --model WN+RW` of every ADIS16405 channel
     writes a file whose WV is >= the lower end of the empirical 95 % interval at every scale
     from 2 filter steps (0.02 s at 100 Hz) to the horizon (default: the log, 10^4 s; the
     longest dyadic scale is 5243 s). Before: below at 12-14 of 19 scales on imu1's gyros."""

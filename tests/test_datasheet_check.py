@@ -366,7 +366,7 @@ def test_real_navchip_reproduces_the_case_study(real_data):
 
 
 def test_gyroscope_and_accelerometer_items_together(tmp_path):
-    """A full datasheet (issue 27: this failed with "'vrw' gives N a second time"): each
+    """A full datasheet (this once failed with "'vrw' gives N a second time"): each
     channel is checked against its own sensor's part; bi may come once per sensor."""
     text = "arw=2 deg/sqrt(h), bi=25.2 deg/h, vrw=0.2 m/s/sqrt(h), bi=0.2 mg"
     spec = eg.parse_datasheet(text)
@@ -401,7 +401,7 @@ def test_gyroscope_and_accelerometer_items_together(tmp_path):
 )
 def test_bias_instability_declared_as_the_adev_minimum(text):
     """A vendor's in-run bias stability is the ADEV minimum itself: its floor is drawn at
-    25.2 deg/h, not at 0.664 x 25.2 = 16.7 deg/h as for an IEEE B (issue 27)."""
+    25.2 deg/h, not at 0.664 x 25.2 = 16.7 deg/h as for an IEEE B."""
     spec = eg.parse_datasheet(text)
     ieee = eg.parse_datasheet("bi=25.2 deg/h")
     assert spec.bi_convention == "adev_min" and ieee.bi_convention == "ieee"

@@ -499,7 +499,7 @@ DEMO = demo_path()  # the bundled demo log (package data: always there)
     [("gyro_x", "2*GM+WN+RW"), ("accel_x", "QN+WN+RW+DR")],
 )
 def test_fit_and_export_datasheet_print_the_same_names_and_units(capsys, channel, spec):
-    """Issue 11: `gmwm fit` (text and JSON) and `gmwm export --format datasheet` name and unit
+    """`gmwm fit` (text and JSON) and `gmwm export --format datasheet` name and unit
     every quantity of every process alike (accel RW K: m/s^3/sqrt(Hz); gyro K:
     deg/s^2/sqrt(Hz); QN: m/s), with equal values."""
     assert main(["fit", str(DEMO), "--channel", channel, "--model", spec, "--json"]) == 0

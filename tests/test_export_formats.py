@@ -145,7 +145,7 @@ def test_openvins_round_trip_simulate_refit(log, tmp_path) -> None:
         c: eg.fit_gmwm(eg.wavelet_variance(log[c], fs=log.fs, unit=log.units[c]), "WN+RW")
         for c in ("gyro_x", "accel_x")
     }
-    # data="none": the fitted WN+RW itself (the default, issue 28, also bounds the data's
+    # data="none": the fitted WN+RW itself (the default also bounds the data's
     # lower 95 % limit and raises N where the fit is below it)
     d = _cv_yaml(export(tmp_path / "imu.yaml", wfits, "openvins", data="none"))["imu0"]
     assert close(d["gyroscope_noise_density"], n_si(wfits["gyro_x"]))
@@ -325,7 +325,7 @@ def test_kfgins(fits) -> None:
 
     def sgm_kept_q(r: eg.GMWMResult) -> float:
         # one corrtime (the largest) with each channel's driving noise 2 sigma^2 / T_c kept
-        # (issue 28, defect 3: its own sigma_gm with the largest T_c under-bounded it)
+        # (its own sigma_gm with the largest T_c under-bounded it)
         return sgm_si(r) * math.sqrt(t_max / tc(r))
 
     for key, chans, f, factor in (

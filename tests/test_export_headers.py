@@ -1,4 +1,4 @@
-"""User-given text in exports (issue 19, item 7): a file name, channel name or topic with a
+"""User-given text in exports: a file name, channel name or topic with a
 newline (or any control character) must not add a line to an export file: no PX4 parameter,
 no Kalibr key. Every registered format is written with hostile names and compared with the
 same export under clean names: same number of lines, no line starting with the injected text,

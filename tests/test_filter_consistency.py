@@ -1,4 +1,4 @@
-"""Proof in a filter (issue 23, item 4): exported noise numbers in a Kalman filter.
+"""Proof in a filter: exported noise numbers in a Kalman filter.
 
 The harness (``tests/filtersim.py``) is checked first against what it must reproduce exactly:
 its closed-form covariance against the step-by-step Riccati recursion, its consistency when the
@@ -210,14 +210,14 @@ def test_adis_projected_and_bounded_is_consistent_below_10x(adis, channel):
 
 
 # ------------------------------------------------------------------------------------------
-# the recorded signal (issue 28): the filter on the sensor, not on the fit
+# the recorded signal: the filter on the sensor, not on the fit
 # ------------------------------------------------------------------------------------------
 @pytest.mark.real_data
 def test_default_export_is_consistent_on_the_recorded_signal_of_another_unit(real_data):
     """The default export (bound on the fit and on the empirical WV's lower 95 % limit) of
     unit 1's WN+RW gyro_x fit, in the filter at 100 Hz with fixes every 10 s, fed the
     *recorded* gyro_x of unit 2 (not the calibrated unit; its turn-on bias, the log mean,
-    removed), 8 segments of 20 min: mean NEES in [0.5, 1.3] (issue 28's criterion) and at most
+    removed), 8 segments of 20 min: mean NEES in [0.5, 1.3] and at most
     5 % of epochs above the 95 % band of the 8-segment average. The initial bias variance is
     the mean square of the segments' first-10-s means. The full table (six units, three
     models, 100/200 Hz, fixes 1/10/100 s) is bench_filter.py --recorded (docs/filters.md)."""

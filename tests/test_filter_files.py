@@ -1,4 +1,4 @@
-"""Filter files against their own claims, on the real ADIS16405 log (issue 28, defects 3-5).
+"""Filter files against their own claims, on the real ADIS16405 log.
 
 Every filter format is written, read back by the reader ``gmwm check`` uses
 (:func:`engine.formats.readers.read_check_file`), and the noise model the file states is

@@ -45,7 +45,7 @@ def gyro_x_wv(imu1):
 
 @pytest.mark.real_data
 def test_two_gm_fit_reaches_the_point_of_two_gm_plus_qn(gyro_x_wv):
-    # issue 27 item 1: 2*GM reported 11.76 (one GM at zero variance) while the optimum of
+    # 2*GM once reported 11.76 (one GM at zero variance) while the optimum of
     # 2*GM+QN has q2 = 0, so it is a point of 2*GM with objective 9.61
     big = eg.fit_gmwm(gyro_x_wv, "2*GM+QN")
     assert big.params["QN.q2"] == 0.0

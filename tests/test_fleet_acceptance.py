@@ -1,4 +1,4 @@
-"""Fleet acceptance on quantities that exist (issue 28, "Acceptance on quantities that exist"):
+"""Fleet acceptance on quantities that exist:
 ``--spec`` limits are checked on the fits' IEEE quantities (white noise with its disguised
 share, B in the declared convention), a model that cannot answer is "cannot tell", the fits'
 warnings stand beside the verdict, and an outlier needs a relative size as well as a robust z.
@@ -24,7 +24,7 @@ def _term(z: float, rel: float) -> TermValue:
 
 
 def test_an_outlier_needs_a_relative_size_as_well_as_a_robust_z():
-    # issue 28: a 0.6 % difference with z = 4.5 was flagged in a tight fleet
+    # a 0.6 % difference with z = 4.5 was flagged in a tight fleet
     assert not _term(4.5, 0.006).outlier
     assert not _term(2.0, 0.5).outlier  # a large difference in a loose fleet: usual
     assert _term(4.5, 0.2).outlier and _term(-4.5, -0.2).outlier

@@ -1,4 +1,4 @@
-"""AR1/GM correlation times shorter than one sample: every fit flags them (issue #13, item 4).
+"""AR1/GM correlation times shorter than one sample: every fit flags them.
 
 The search is not bounded at one sample (see engine/fit/_varpro.py and README, "Correlation
 times shorter than one sample"): a sub-sample AR1/GM is white noise in disguise, but with

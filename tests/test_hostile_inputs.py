@@ -1,4 +1,4 @@
-"""Hostile files: each bound of the loaders proved on a small generated file (issue 33).
+"""Hostile files: each bound of the loaders proved on a small generated file.
 
 Before: a 1.5 KB HDF5 of one-sample chunks took 3.85 GB; a 1.5 KB HDF5 declaring 16 GB and a
 1.24 MB ``.npz`` inflating to 1.26 GB passed the memory check; a CSV of 1e5 columns took 63 s
@@ -62,7 +62,7 @@ def test_hdf5_declaring_gigabytes_of_fill_values_is_refused(tmp_path: Path) -> N
     msg = str(err)
     assert "bomb.h5" in msg and "declares far more data than it holds" in msg
     assert "(1 dataset column(s) of 32000000 samples) from 0 bytes on disk" in msg and dt < 2.0
-    # 16 GB declared (the issue's file): the same refusal, as fast
+    # 16 GB declared (a reported file): the same refusal, as fast
     p16 = _unwritten_h5(tmp_path / "bomb16.h5", 2_000_000_000)
     err, dt = _timed(lambda: load_log(p16))
     assert isinstance(err, LoadError) and "16 GB" in str(err) and dt < 2.0
@@ -85,7 +85,7 @@ def _npz_bomb(path: Path, n: int) -> Path:
 
 def test_npz_that_inflates_a_thousand_times_is_refused(tmp_path: Path) -> None:
     """256 MB of zeros deflate to about 250 KB: refused by the estimate, nothing inflated
-    (before: loaded, 256 MB; the issue's 1.24 MB file inflated to 1.26 GB)."""
+    (before: loaded, 256 MB; a reported 1.24 MB file inflated to 1.26 GB)."""
     p = _npz_bomb(tmp_path / "bomb.npz", 32_000_000)
     assert p.stat().st_size < 1_000_000
     err, dt = _timed(lambda: load_log(p, fs=100))

@@ -15,8 +15,8 @@ pytestmark = pytest.mark.real_data
 
 ADIS = [f"adis16405_imu{k}.h5" for k in range(1, 7)]
 MTIG = "mtig_cont_imu1.h5"
-#: The structures the report selects on these gyros today (issue 27: 2*GM+QN, with a GM
-#: faster than one sample and QN at 0) and the white-noise twin a fixed selection reports.
+#: The structures the report selects on these gyros today (2*GM+QN, with a GM faster than one
+#: sample and QN at 0) and the white-noise twin a fixed selection reports.
 MODELS = ("2*GM+QN", "GM+WN+QN+RW")
 
 
@@ -61,7 +61,7 @@ def test_adis_bias_instability_in_both_conventions(gyro_fits):
     minimum with its averaging time, from the model and from the data. The datasheet's
     in-run bias stability (ADEV minimum) is 25.2 deg/h; measured on the 18 gyros: data
     minimum 15.5-33.7 deg/h, model minimum (GM+WN+QN+RW) about 20-30 deg/h, so B is
-    1.5x larger (30-45 deg/h), the difference issue 27 describes."""
+    1.5x larger (30-45 deg/h), the difference seen on these logs."""
     data_min = []
     for (name, _ch), (_adev1, fits) in gyro_fits.items():
         if name == MTIG:

@@ -159,7 +159,7 @@ def test_j_test_size_under_a_correct_model():
 
 @pytest.mark.slow
 def test_j_test_of_a_ci_fit_is_calibrated_400_replicates():
-    """Issue 22, item 2: the J-test the app's Fit badge and the report show (j_test of the
+    """The J-test the app's Fit badge and the report show (j_test of the
     default ci fit) rejects the true QN+WN+RW+DR (with drift) at 5 % in 5 % of logs. 400
     replicates: binomial 95 % band 5 % +- 2.2 %. The old statistic (the ci fit's residuals in
     V^-1 on every level against chi2(J - p)) rejects far more often in the same logs.

@@ -1,6 +1,6 @@
 """What the readers refuse: anything but a regular file, content in messages, files too large.
 
-Issue 19: a FIFO made ``gmwm wv x.h5`` (and the app's ``?source=path``) wait forever,
+A FIFO once made ``gmwm wv x.h5`` (and the app's ``?source=path``) wait forever,
 ``/dev/zero`` grew memory until a MemoryError, messages quoted ``/etc/passwd`` and listed the
 server's folders, and nothing compared a file's needs with the available memory. Every reader
 now opens files through :mod:`engine._files`; these tests give each of them the hostile input.
@@ -245,7 +245,7 @@ def test_loader_messages_quote_no_content(tmp_path: Path) -> None:
 def test_app_path_source_quotes_no_content(
     app_state: AppState, tmp_path: Path, no_limits: None
 ) -> None:
-    """The issue's case: a server started in / lets ?source=path name any file under it."""
+    """The reported case: a server started in / lets ?source=path name any file under it."""
     limits.configure(data_dirs=[tmp_path])
     s = app_state
     for p in _passwd_like(tmp_path):

@@ -1,4 +1,4 @@
-"""Calibration of the J-test with a robust WV and with a drift (issue 27, item 6).
+"""Calibration of the J-test with a robust WV and with a drift.
 
 The covariance V of the WV (``wv_cov_model``) must be that of the WV's own estimator (a robust
 WV's variance is 1.3-1.5 times the classical one's) and must give a drift its first-order share

@@ -1,4 +1,4 @@
-"""Sample-count limits of the simulators (issue 19, item 4): ``n`` is an integer >= 1, at
+"""Sample-count limits of the simulators: ``n`` is an integer >= 1, at
 most 2^40, and at most what fits in half the available memory at 32 bytes per sample and
 channel (engine._limits); the messages name the argument ``n`` and the largest accepted
 count. Before, ``simulate(3e9)`` allocated for a minute and ``1e14`` ended in a MemoryError."""
@@ -15,7 +15,7 @@ from engine import _limits
 from engine._limits import BYTES_PER_SAMPLE, MAX_SAMPLES, check_sample_count, max_samples
 from engine.multivariate import MultiModel
 
-GB23 = 23 * 10**9  # the machine of the issue: 23 GB
+GB23 = 23 * 10**9  # a reported machine: 23 GB
 
 
 @pytest.fixture

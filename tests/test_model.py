@@ -121,7 +121,7 @@ def test_processes_register_in_canonical_order():
     assert eg.parse_model("DR+RW+WN+QN+AR1").spec() == "AR1+QN+WN+RW+DR"
 
 
-_LONG = 15_000  # a pasted string of the size (10-20 KB)
+_LONG = 15_000  # a pasted string of a reported size (10-20 KB)
 
 
 @pytest.mark.parametrize(

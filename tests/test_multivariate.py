@@ -82,7 +82,7 @@ def test_wccv_of_a_series_with_itself_is_its_wv():
 
 
 def test_wccv_units_are_spelled_like_the_wv_units():
-    """Issue 14: one spelling of a squared unit; the WCCV of two channels in g is g^2, like
+    """One spelling of a squared unit; the WCCV of two channels in g is g^2, like
     their WV (the pair used to build "(g)^2" by hand)."""
     rng = np.random.default_rng(4)
     xy = rng.standard_normal((4096, 2))

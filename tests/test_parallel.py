@@ -1,6 +1,6 @@
 """Every parallel path gives the same numbers in process, on the local process pool, on a
 thread pool and on a real Dask ``LocalCluster`` (processes); a worker killed mid-run loses no
-task (issue 16). Each task carries its own seed, so the results do not depend on the
+task. Each task carries its own seed, so the results do not depend on the
 executor, the number of workers, the chunking or the order in which tasks finish.
 
 Identical to the last bit for one BLAS thread per process, as the workers of the local pool

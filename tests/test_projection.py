@@ -137,7 +137,7 @@ def test_least_inflation_against_a_brute_force_grid(adis, adis_accel, channel, d
     accel_x its K was x9 the WN+RW fit's and its geometric-mean ratio 12.2 against the
     optimum's 1.25 (gyro_x: 1.447 against 1.437).
 
-    ``data="none"`` bounds the fitted WV alone (the default before issue 28); ``"low"`` (the
+    ``data="none"`` bounds the fitted WV alone (the former default); ``"low"`` (the
     default since) also the lower limit of the empirical 95 % interval at the WV's dyadic
     scales in the band, which then join the objective's scales with the larger target."""
     r = adis["2*GM+WN+RW"] if channel == "gyro_x" else adis_accel
@@ -297,13 +297,13 @@ def test_cli_export_projection_options(tmp_path, capsys) -> None:
 
 # ------------------------------------------------------------------------------ JSON report
 def test_json_report_carries_the_projections_with_intervals_and_factors(demo_fits) -> None:
-    """Issue 23 item 3: the JSON report holds, per channel and requested consumer, every
+    """The JSON report holds, per channel and requested consumer, every
     exported value with its plain conversion, factor, binding scale and 95 % interval; the
     values are ``project``'s and their WV bounds the fitted WV (checked with this file's
     formulas, not the engine's)."""
     fits = {c: demo_fits[c] for c in ("gyro_x", "accel_x")}
     # data="none": the bound of the fitted WV alone, whose values all depend on the fit (the
-    # default since issue 28 also bounds the data's lower limit; a value set by it has no
+    # default also bounds the data's lower limit; a value set by it has no
     # interval from the fit's covariance: checked at the end)
     rep = json.loads(export(None, fits, "json", data="none"))  # default: WN+RW
     assert rep["projection"]["mode"] == "bound" and rep["projection"]["consumers"] == ["WN+RW"]

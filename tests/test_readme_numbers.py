@@ -2,8 +2,8 @@
 
 The script is the named source of each number; this test recomputes the cheap ones (and, with
 the real logs, the ADIS16405 ranges) and compares them with README's text, so that the README
-cannot drift from the code again (issue #22 item 4: it had said 0.92-1.00 where the logs give
-0.86-1.14, and "within 7 %" of spikes at levels where the robust WV is 46 % low). The biweight
+cannot drift from the code again (it had said 0.92-1.00 where the logs give 0.86-1.14, and
+"within 7 %" of spikes at levels where the robust WV is 46 % low). The biweight
 constant's efficiency is also checked against an independent quadrature of the asymptotic
 variance of an M-estimate of scale.
 """

@@ -200,7 +200,7 @@ def _mcap_with_profile(path: Path, profile: str) -> Path:
     "profile, said", [("ros1", "'ros1' profile (ROS 1 messages in MCAP)"), ("", "empty profile")]
 )
 def test_mcap_of_another_profile_names_the_real_cause(tmp_path: Path, profile, said) -> None:
-    """Issue 12: an MCAP with the ROS 1 profile or none is not called a damaged bag."""
+    """An MCAP with the ROS 1 profile or none is not called a damaged bag."""
     f = _mcap_with_profile(tmp_path / "x.mcap", profile)
     assert mcap_profile(f) == profile
     with pytest.raises(LoadError, match="MCAP") as e:
@@ -217,7 +217,7 @@ def test_a_ros2_mcap_bag_reports_its_profile(tmp_path: Path, imu) -> None:
 
 
 def test_the_app_reads_a_ros2_bag_folder_by_server_path(tmp_path: Path, imu) -> None:
-    """Issue 12: a ROS 2 bag (a folder with metadata.yaml) can be chosen as a server path."""
+    """A ROS 2 bag (a folder with metadata.yaml) can be chosen as a server path."""
     from gmwm_app import limits
     from gmwm_app.state import AppState
 

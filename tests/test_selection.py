@@ -120,7 +120,7 @@ def test_cli_select_j_test_accepts_the_demo_accel_true_model_under_any_weights(c
         p[w] = c["QN+WN+RW+DR"]["j_p_value"]
         opt[w] = {m: (c[m]["optimism"], c[m]["n_params"]) for m in ("QN+WN+RW+DR", "QN+WN+RW")}
         # without the random walk: rejected (p 2.1e-5 since V has the drift's first-order
-        # share, issue 27; below 1e-6 before, when V left the drift out)
+        # share; below 1e-6 before, when V left the drift out)
         assert c["QN+WN"]["j_p_value"] < 1e-4
     assert p["ci"] >= 0.05 and p["ci"] == pytest.approx(p["efficient"], rel=1e-9)
     # with Omega = V^-1 the asymptotic optimism 2 tr(W A (A'WA)^-1 A' W V) is exactly 2p
@@ -131,7 +131,7 @@ def test_cli_select_j_test_accepts_the_demo_accel_true_model_under_any_weights(c
 
 @pytest.mark.slow
 def test_white_noise_in_disguise_never_ranks_first():
-    """Issue 22, item 7: a candidate whose GM is faster than one sample (the white noise
+    """A candidate whose GM is faster than one sample (the white noise
     relabelled) ranks as its WN twin. 20 logs of GM+WN+RW (2^14 samples, 100 Hz), every
     sub-model of 2*GM+WN+RW: the top-ranked structure never has such a term, while the WVIC
     alone (the old ranking) crowns one in several logs (2*GM+RW: the second GM is the WN).

@@ -1,5 +1,5 @@
 """The selected model is one a user can act on: no AR1/GM faster than one sample, no parameter
-at a bound (issue 27, item 2), on the real ADIS16405 log where the ranking's first row has both.
+at a bound, on the real ADIS16405 log where the ranking's first row has both.
 """
 
 from __future__ import annotations

@@ -254,7 +254,7 @@ def test_every_unit_spelling_is_dimensionally_right(unit):
 
 
 def test_squared_unit_one_spelling():
-    """One helper and one spelling for squared units (issue 14): ``u^2`` when unknown."""
+    """One helper and one spelling for squared units: ``u^2`` when unknown."""
     assert units.squared("") == "u^2"
     assert units.squared("deg/s") == "(deg/s)^2"
     assert units.squared("g") == "g^2"

@@ -177,7 +177,7 @@ def test_decimal_digits_suffice(monkeypatch, gap):
 
 
 def test_22_levels_in_milliseconds():
-    """T = 6.3e6 at 100 Hz (22 levels), the slow GM of the issue: was 13 s with the 2^23-node
+    """T = 6.3e6 at 100 Hz (22 levels), a slow GM: was 13 s with the 2^23-node
     quadrature; the bound is loose for a loaded machine."""
     model = eg.parse_model(
         "GM(beta=0.5, sigma2_gm=4e-4)+GM(beta=0.01, sigma2_gm=1e-4)+WN(sigma2=1e-2)"
