@@ -100,7 +100,11 @@ def test_the_selection_tab_draws_a_new_ranking_and_new_intervals(
     assert picks and set(picks) == {final}, picks
 
 
-@pytest.mark.parametrize("title", TITLES)
+@pytest.mark.parametrize(
+    "title",
+    # the Multi-channel tab's first multivariate fit: 11 s of CPU, the slow tier
+    [pytest.param(t, marks=pytest.mark.slow) if t == "Multi-channel" else t for t in TITLES],
+)
 def test_a_hidden_tab_waits_until_shown(
     app: Any, title: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:

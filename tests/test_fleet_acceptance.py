@@ -86,6 +86,7 @@ def test_disguised_white_noise_fails_an_arw_limit_and_a_missing_term_cannot_tell
         assert "has no K" in " ".join(u.reasons)
 
 
+@pytest.mark.slow  # six real logs fitted in worker processes: 24 s of CPU
 @pytest.mark.real_data
 def test_real_fleet_arw_limit_fails_and_no_tiny_outliers(real_data: Path):
     """Defect 28.2 on the real logs: the six ADIS16405 units' gyro_x fitted as GM+WN+RW

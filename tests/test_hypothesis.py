@@ -233,6 +233,7 @@ def csv_text(draw: st.DrawFn) -> str:
 
 
 @cfg(150)
+@pytest.mark.slow  # 11 s of CPU
 @given(
     text=csv_text(),
     ext=st.sampled_from([".csv", ".txt", ""]),

@@ -11,7 +11,7 @@ import pytest
 
 import engine as eg
 
-pytestmark = pytest.mark.real_data
+pytestmark = [pytest.mark.real_data, pytest.mark.slow]  # six units fitted: 14 s of CPU
 
 ADIS = [f"adis16405_imu{k}.h5" for k in range(1, 7)]
 MTIG = "mtig_cont_imu1.h5"
