@@ -130,7 +130,11 @@ def test_a_hidden_tab_waits_until_shown(
     assert len(calls) == n  # nothing changed meanwhile: nothing drawn
 
 
-@pytest.mark.parametrize("title", TITLES)
+@pytest.mark.parametrize(
+    "title",
+    # the Multi-channel tab's first multivariate fit: 7 s of CPU, the slow tier
+    [pytest.param(t, marks=pytest.mark.slow) if t == "Multi-channel" else t for t in TITLES],
+)
 def test_a_failing_refresh_is_a_message_and_a_log_record(
     app: Any, title: str, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -197,6 +201,7 @@ def test_check_fields_set_or_filled_from_a_file_compute_once(
     assert len(checks) == 3
 
 
+@pytest.mark.slow  # multivariate fits: 11 s of CPU
 def test_multi_channel_echoes_and_repeated_requests_do_not_refit(app: Any) -> None:
     view = _open(app, "Multi-channel")
     fits, result = view.n_fits, view.result

@@ -88,6 +88,7 @@ def test_view_shows_the_engine_virtual_sensor_of_the_fit(app: Any, array_log: Pa
     assert vv.figure.yaxis.axis_label == "WV [(deg/s)²]"
 
 
+@pytest.mark.slow  # multivariate fits: 16 s of CPU
 def test_scale_band_and_export(app: Any, array_log: Path) -> None:
     v = open_view(app)
     v.controls.spec_input.value = "GM+WN"
@@ -129,6 +130,7 @@ def test_scale_band_and_export(app: Any, array_log: Path) -> None:
     assert vv.error == "" and vv.sensor is not None
 
 
+@pytest.mark.slow  # multivariate fits: 9 s of CPU
 def test_no_fit_clears_the_view(app: Any) -> None:
     v = open_view(app)
     v.controls.spec_input.value = "WN+FOO"

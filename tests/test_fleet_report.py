@@ -255,6 +255,7 @@ def test_gather_report_takes_existing_fits_without_refitting(sim_fleet):
         eg.gather_report(log, fits={"nope": lf.fits["gx"]})
 
 
+@pytest.mark.slow  # a second fleet fitted and rendered through the CLI: 36 s of CPU
 def test_cli_batch_report(sim_fleet, tmp_path, capsys):
     out = tmp_path / "fleet.html"
     argv = ["batch", str(sim_fleet / "unit*.h5"), str(sim_fleet / "damaged.h5")]
@@ -278,6 +279,7 @@ def test_cli_batch_report(sim_fleet, tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------- real fleet
+@pytest.mark.slow  # six real logs fitted in worker processes: 27 s of CPU
 def test_real_fleet_numbers_equal_the_batch(real_data, tmp_path):
     files = [str(real_data / f"adis16405_imu{k}.h5") for k in range(1, 7)]
     fleet = gather_fleet(files, model="GM+WN+RW", channels=["gyro_x"], workers=2)
