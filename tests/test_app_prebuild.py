@@ -131,6 +131,7 @@ def _doc_json(doc: Any) -> Any:
     return _canonical(Document.to_json(doc, deferred=False), {})
 
 
+@pytest.mark.load  # a served pool filling in a background thread
 def test_pool_hands_out_distinct_fresh_states(pooled: dict[str, Any]) -> None:
     pool = pooled["pool"]
     handed = pool.stats["handed"]
@@ -153,6 +154,7 @@ def test_pool_hands_out_distinct_fresh_states(pooled: dict[str, Any]) -> None:
     assert not {id(m) for m in doc_a.models} & {id(m) for m in doc_b.models}
 
 
+@pytest.mark.load  # a served pool filling in a background thread
 def test_pooled_page_equals_on_demand_page(pooled: dict[str, Any]) -> None:
     pool = pooled["pool"]
     _wait(lambda: len(pool) > 0, "a page in the pool")
@@ -177,6 +179,7 @@ def test_pooled_page_equals_on_demand_page(pooled: dict[str, Any]) -> None:
     assert a == b, _first_difference(a, b)
 
 
+@pytest.mark.load  # a served pool filling in a background thread
 def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -> None:
     bench = _bench()
     pool = pooled["pool"]
@@ -209,6 +212,7 @@ def test_pooled_page_opens_and_its_first_click_redraws(pooled: dict[str, Any]) -
     assert len(models) == 2 and sum("GM" in m for m in models) == 1, models
 
 
+@pytest.mark.load  # a served pool filling in a background thread
 @pytest.mark.browser
 @pytest.mark.browser_tour
 def test_pooled_page_in_a_browser(pooled: dict[str, Any]) -> None:
@@ -241,6 +245,7 @@ def test_pooled_page_in_a_browser(pooled: dict[str, Any]) -> None:
     assert errors == []
 
 
+@pytest.mark.load  # a served pool filling in a background thread
 def test_query_or_other_host_builds_on_demand(pooled: dict[str, Any]) -> None:
     pool = pooled["pool"]
     _wait(lambda: len(pool) > 0, "a page in the pool")
@@ -260,6 +265,7 @@ def test_query_or_other_host_builds_on_demand(pooled: dict[str, Any]) -> None:
     assert doc.session_context.request.host == f"localhost:{pooled['port']}"
 
 
+@pytest.mark.load  # a served pool filling in a background thread
 def test_an_ended_session_not_yet_collected_does_not_pause_the_refill(
     pooled: dict[str, Any],
 ) -> None:
