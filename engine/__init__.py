@@ -5,11 +5,11 @@
 >>> res = eg.fit_gmwm(wv, eg.WN() + eg.RW() + 2 * eg.GM())  # doctest: +SKIP
 >>> print(res.summary())                                  # doctest: +SKIP
 
-The API is what a user calls, written out below (README, "The API"): :data:`API` maps each
-public name to the module that defines it, one place per name. A name is imported on first use
-(PEP 562), so that ``import engine`` and the ``gmwm`` command stay light (SciPy, h5py and the
-multivariate code cost tenths of a second). ``tests/test_public_api.py`` pins the list: adding
-a name is a deliberate act. Everything else lives in the subpackages (``engine.fit``,
+The API is what a user calls, written out below (docs/api.md is built from it): :data:`API`
+maps each public name to the module that defines it, one place per name. A name is imported on
+first use (PEP 562), so that ``import engine`` and the ``gmwm`` command stay light (SciPy, h5py
+and the multivariate code cost tenths of a second). ``tests/test_public_api.py`` pins the list:
+adding a name is a deliberate act. Everything else lives in the subpackages (``engine.fit``,
 ``engine.formats`` ...) for those who need it.
 """
 

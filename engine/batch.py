@@ -86,6 +86,9 @@ class LogFit:
         Not fitted again: its report was read back from the output folder of an earlier run
         with the same log and options (:class:`BatchFolder`); ``fits`` is then empty and
         ``values`` holds its summary quantities (:func:`unit_values`).
+    qualification : dict
+        What the log check found before the fit (:meth:`engine.io.Qualification.to_dict`),
+        empty when the log failed or was resumed.
     """
 
     source: str
@@ -98,6 +101,7 @@ class LogFit:
     elapsed_s: float = 0.0
     resumed: bool = False
     values: tuple[tuple[tuple[str, ...], float], ...] = ()
+    qualification: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -124,6 +128,7 @@ class LogFit:
                 "warnings": {ch: list(r.warnings) for ch, r in self.fits.items() if r.warnings},
                 "elapsed_s": self.elapsed_s,
                 "resumed": self.resumed,
+                "qualification": self.qualification or None,
             }
         )
 
@@ -171,8 +176,10 @@ def fit_log(
     levels: int | None = None,
     weights: str = "ci",
     load_options: Mapping[str, Any] | None = None,
+    drop_warmup: bool = False,
 ) -> LogFit:
-    """Load one log and fit every channel (or ``channels``).
+    """Load one log, check it (:func:`engine.io.qualify_log`) and fit every channel (or
+    ``channels``).
 
     Parameters
     ----------
@@ -194,6 +201,9 @@ def fit_log(
         GMWM weights (``efficient``: two-step ``Omega = V^-1``).
     load_options : mapping, optional
         More :func:`engine.io.load_log` keywords (``segment``, ``scale``, ``units``, ``topic``).
+    drop_warmup : bool
+        Drop the warm-up the log check finds (:attr:`engine.io.Qualification.suggested_start`)
+        before the fit.
 
     Returns
     -------
@@ -202,13 +212,18 @@ def fit_log(
         fails (:class:`engine.io.LoadError`, :class:`engine.fit.FitError` ...).
     """
     from .formats import export
-    from .io import log_of, pick_channel
+    from .io import drop_warmup as cut_warmup
+    from .io import log_of, pick_channel, qualify_log
 
     _check_choice(model, select)
     t0 = time.perf_counter()
     log = log_of(path, fs=fs, load_options=load_options, caller="fit_log")
     src = log.source if log is path else str(path)
     names = [pick_channel(src, log.names, c) for c in channels] if channels else log.names
+    check = qualify_log(log, names)
+    if drop_warmup and check.suggested_start:
+        log = cut_warmup(log, check.suggested_start)
+        check = qualify_log(log, names)
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}
     for ch in names:
@@ -222,11 +237,14 @@ def fit_log(
             "no channel could be fitted: " + "; ".join(f"{c}: {e}" for c, e in errors.items())
         )
     report = export(None, fits, "json", log=log, source=src)
-    return LogFit(src, fits, report, "", errors, float(log.fs), log.n, time.perf_counter() - t0)
+    elapsed = time.perf_counter() - t0
+    return LogFit(
+        src, fits, report, "", errors, float(log.fs), log.n, elapsed, qualification=check.to_dict()
+    )
 
 
 _FIT_LOG_OPTIONS = frozenset(
-    ("model", "select", "channels", "fs", "levels", "weights", "load_options")
+    ("model", "select", "channels", "fs", "levels", "weights", "load_options", "drop_warmup")
 )
 
 

@@ -4,53 +4,10 @@ Every datasheet number of the project (the ``gmwm fit`` text and JSON, ``gmwm ex
 app's datasheet table and its download, the Monte Carlo study, the slope method) comes from
 the quantities each process class declares (:attr:`engine.models.Process.quantities`, gathered
 in :data:`QUANTITIES`) and :data:`DISPLAY` below, so one quantity has one name, one symbol and
-one unit spelling everywhere.
-
-Conversions (``docs/conventions.md``, "Units and datasheet conversions"), ``dt = 1/fs``,
-signal unit ``u`` (``u`` itself when the unit is unknown), per-sample parameters:
-
-====  ========  ===================================  ==================  ======================
-code  symbol    forward                              inverse             unit
-====  ========  ===================================  ==================  ======================
-WN    N         ``sqrt(sigma2 dt)``                  ``N^2 / dt``        ``u/sqrt(Hz)``
-QN    Q         ``sqrt(q2) dt``                      ``(Q / dt)^2``      ``u*s`` (simplified)
-RW    K         ``sqrt(gamma2 / dt)``                ``K^2 dt``          ``u/s/sqrt(Hz)``
-DR    R         ``omega / dt``                       ``R dt``            ``u/s`` (simplified)
-GM    T_c       ``1 / beta``                         ``1 / T_c``         ``s``
-GM    sigma_gm  ``sqrt(sigma2_gm)``                  ``sigma_gm^2``      ``u``
-GM    q         ``2 beta sigma2_gm``                 --                  ``u^2/s``
-GM    sqrt(q)   ``sqrt(2 beta sigma2_gm)``           --                  ``u/s/sqrt(Hz)``
-BI    B         ``min ADEV / BI_FACTOR``             --                  ``u``
-====  ========  ===================================  ==================  ======================
-
-AR1 (``phi`` in (0, 1)) is reported as the GM it samples: ``beta = -ln(phi) fs``,
-``sigma2_gm = sigma2 / (1 - phi^2)``.
-
-Why these unit spellings (dimensional analysis; ``[x]`` is the unit of x):
-
-* WN: ``[sigma2] = u^2`` and the white noise of density N has per-sample variance
-  ``N^2 / dt``, so ``[N] = u sqrt(s) = u/sqrt(Hz)``; Allan variance ``N^2 / T`` is u^2.
-* RW: the rate integrates a white noise of density K, whose increment over dt has variance
-  ``gamma2 = K^2 dt``, so ``[K] = u/sqrt(s)``. Written per second per root hertz,
-  ``u/sqrt(s) = (u/s) sqrt(s) = u/s/sqrt(Hz)``: the spelling of the conventions page and Kalibr
-  (``rad/s^2/sqrt(Hz)``, ``m/s^3/sqrt(Hz)``), chosen here. The old ``u/sqrt(s)`` of
-  ``units.datasheet`` and the slope method was the same dimension in another spelling.
-  Allan variance ``K^2 T / 3`` is u^2.
-* QN: ``Q = sqrt(q2) dt`` is in ``u s``, which is spelled in integrated units (deg for a deg/s
-  gyro, m/s for an m/s^2 accelerometer, as the GMWM paper's Table I does); Allan variance
-  ``3 Q^2 / T^2`` is u^2.
-* DR: ``R = omega / dt`` is in ``u/s`` (deg/s^2, m/s^3); Allan variance ``R^2 T^2 / 2``.
-* GM: ``q`` is the PSD of the driving noise w of ``db/dt = -beta b + w``:
-  ``[q] = u^2/s`` and ``[sqrt(q)] = u/sqrt(s) = u/s/sqrt(Hz)``.
-
-Display variants (:data:`DISPLAY`), from the value in SI units (rad/s or m/s^2):
-ARW ``deg/sqrt(h) = 60 / (pi/180) x rad/s/sqrt(Hz)`` (``1/sqrt(s) = 60/sqrt(h)``), RRW
-``deg/h/sqrt(h)`` (``x 216000 = 3600 x 60`` from deg/s/sqrt(s)), VRW ``m/s/sqrt(h)`` (``x 60``),
-acceleration random walk ``m/s/h/sqrt(h)`` (``x 216000``), rate ramp ``deg/h^2`` and ``m/s/h^2``
-(``x 3600^2``), bias instability ``deg/h`` (``x 3600``) and ``mg``.
-
-``BI_FACTOR = sqrt(2 ln 2 / pi) = 0.6643``: the Allan deviation floor of flicker (bias
-instability) noise of coefficient B is ``BI_FACTOR B`` (IEEE Std 952, annex C).
+one unit spelling everywhere. ``BI_FACTOR = sqrt(2 ln 2 / pi) = 0.6643`` is the Allan
+deviation floor of bias-instability noise of coefficient B, over B (IEEE Std 952, annex C).
+The conversions, the unit spellings and why: docs/methods.md, "Datasheet units";
+docs/conventions.md, "Units and datasheet conversions".
 """
 
 from __future__ import annotations

@@ -292,6 +292,7 @@ class GMWMApp(pn.viewable.Viewer):
         # main area: the messages follow the state
         self.alert = hidden_alert("danger", s.param.error)
         self.notice = hidden_alert("info", s.param.notice)
+        self.log_check = hidden_alert("secondary", s.param.log_check)  # engine.io.qualify
         self.warning = hidden_alert("warning")  # (_show_warnings)
         self.status = pn.pane.Markdown(
             "",
@@ -387,6 +388,7 @@ class GMWMApp(pn.viewable.Viewer):
                 self.alert,
                 *self.session_panel.main(),
                 self.notice,
+                self.log_check,
                 self.warning,
                 self.status,
                 self.plot_box,

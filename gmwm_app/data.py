@@ -24,6 +24,7 @@ import numpy as np
 
 import engine as eg
 from engine._checks import check_fs as engine_check_fs
+from engine.io import qualify_log
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
 from gmwm_app.wv_cache import WVKey, store_wv, wv_from_cache
@@ -45,6 +46,7 @@ __all__ = [
     "read_demo",
     "shared_wvs",
     "clear_shared",
+    "log_check_line",
 ]
 
 log = logging.getLogger(__name__)
@@ -392,3 +394,24 @@ def wv_matrix_of(lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatr
     units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
     wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
     return wvm, note
+
+
+#: The log check's line per log and channel, computed once per loaded log (it dies with it).
+_CHECKS: weakref.WeakKeyDictionary[Any, dict[str, str]] = weakref.WeakKeyDictionary()
+_CHECKS_LOCK = threading.Lock()
+
+
+def log_check_line(lg: Any, channel: str) -> str:
+    """What the log check (:func:`engine.io.qualify_log`) found in one channel, in one line;
+    ``""`` for a clean channel or a WV summary (no samples). Cached per log and channel."""
+    if lg.is_summary:
+        return ""
+    with _CHECKS_LOCK:
+        done = _CHECKS.setdefault(lg, {})
+        if channel in done:
+            return done[channel]
+    q = qualify_log(lg, [channel])
+    line = q.line() if q.findings or q.dropped else ""
+    with _CHECKS_LOCK:
+        done[channel] = line
+    return line

@@ -36,6 +36,8 @@ def preview_projections(
     units: Mapping[str, str] | None = None,
     filter_rate: float | None = None,
     bound: bool = True,
+    data: str = "low",
+    horizon_s: float | None = None,
 ) -> dict[str, Projection]:
     """The projection of each fit onto ``fmt``'s consumer model, as the export computes it.
 
@@ -50,6 +52,9 @@ def preview_projections(
         The filter's rate (Hz; default the log's).
     bound : bool
         Over-bound the projection (the export's default); False: the projection rule alone.
+    data, horizon_s
+        What of the empirical WV the bound covers and the horizon (s) of the band, as
+        :func:`engine.formats.project` (defaults: the lower 95 % limit, the log length).
 
     Returns
     -------
@@ -71,6 +76,8 @@ def preview_projections(
             bound=bound,
             channel=ch,
             unit=(units or {}).get(ch, r.wv.unit) or "",
+            data=data,
+            horizon_s=horizon_s,
         )
         for ch, r in fits.items()
     }
@@ -164,11 +171,21 @@ class ExportPreview:
         units: Mapping[str, str] | None = None,
         filter_rate: float | None = None,
         projection: str = "bound",
+        data: str = "low",
+        horizon_s: float | None = None,
     ) -> None:
         """Recompute (when shown and changed) and redraw; an error becomes the note.
         ``projection`` is the export's (``"fit"``: the file writes the fit's own terms, and
-        nothing is projected)."""
-        key = (tuple((c, id(r)) for c, r in fits.items()), fmt, filter_rate, channel, projection)
+        nothing is projected); ``data`` and ``horizon_s`` its bound's (:func:`project`)."""
+        key = (
+            tuple((c, id(r)) for c, r in fits.items()),
+            fmt,
+            filter_rate,
+            channel,
+            projection,
+            data,
+            horizon_s,
+        )
         if not self.toggle.value:
             self.note.object, self.table.object, self.plot_box.visible = "", "", False
             self._key = None
@@ -192,7 +209,13 @@ class ExportPreview:
             return
         try:
             self.projections = preview_projections(
-                fits, fmt, units=units, filter_rate=filter_rate, bound=projection == "bound"
+                fits,
+                fmt,
+                units=units,
+                filter_rate=filter_rate,
+                bound=projection == "bound",
+                data=data,
+                horizon_s=horizon_s,
             )
         except (ExportError, ValueError) as e:
             self.note.object = f"Cannot project the fits for {fmt}: {e}"

@@ -9,7 +9,9 @@ supersedes a running one (the stale result is dropped), and :meth:`Jobs.cancel` 
 running job's result. Outside a server (tests, scripts) a job is waited for.
 
 Fair share: a session occupies at most ``session_jobs`` of the shared worker threads at once
-(:attr:`gmwm_app.limits.ServerLimits.session_jobs`); its other jobs wait their turn on the
+(:attr:`gmwm_app.limits.ServerLimits.session_jobs`), and long work (rankings, dependence
+tests) runs in a pool of its own (:data:`LONG_EXECUTOR`), so that long work of many sessions
+never holds the threads every session's loads and fits need; its other jobs wait their turn on the
 loop (not in a thread), and a job whose turn comes after a newer job of its key superseded
 it, or after its session ended, is skipped without running. When the session ends, the
 cancel events its views registered (:meth:`Jobs.abandon_on_close`) are set, so that a long
@@ -33,7 +35,15 @@ from panel.io.state import state as pn_state
 
 from gmwm_app.limits import current as current_limits
 
-__all__ = ["EXECUTOR", "Jobs", "ProgressThrottle", "lower_priority", "job_progress", "job_controls"]
+__all__ = [
+    "EXECUTOR",
+    "LONG_EXECUTOR",
+    "Jobs",
+    "ProgressThrottle",
+    "lower_priority",
+    "job_progress",
+    "job_controls",
+]
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +60,13 @@ def lower_priority() -> None:
 #: Worker threads for reading files, computing WVs and fits (shared by every session).
 EXECUTOR = ThreadPoolExecutor(
     max_workers=4, thread_name_prefix="gmwm-app", initializer=lower_priority
+)
+#: Worker threads for long computations (rankings, dependence tests), shared by every session:
+#: at most this many run at once in a process, the others wait their turn, so that long work
+#: never holds the threads of :data:`EXECUTOR` that every session's loads and fits need.
+LONG_WORKERS = 2
+LONG_EXECUTOR = ThreadPoolExecutor(
+    max_workers=LONG_WORKERS, thread_name_prefix="gmwm-app-long", initializer=lower_priority
 )
 
 
@@ -244,6 +261,7 @@ class Jobs:
         *,
         key: str | None = None,
         inline: bool = False,
+        long: bool = False,
     ) -> int:
         """Run ``work`` in a worker, then ``apply(result)`` (or ``fail(error)``) and ``done()``.
 
@@ -261,6 +279,10 @@ class Jobs:
             Run ``work`` at once in this thread (quick work). Otherwise it runs in a worker;
             outside a server this call still waits for it and its ``apply`` (no loop to
             hand back to).
+        long : bool
+            Long work (seconds to minutes: a ranking, a bootstrap): it runs in
+            :data:`LONG_EXECUTOR`, whose few threads every session's long work shares, never
+            in the threads that loads and fits need.
 
         Returns
         -------
@@ -280,7 +302,8 @@ class Jobs:
                 err = e
             self._finish(key, ticket, out, err, apply, fail, done)
             return ticket
-        self.spawn(partial(self._background, key, ticket, work, apply, fail, done))
+        pool = LONG_EXECUTOR if long else EXECUTOR
+        self.spawn(partial(self._background, key, ticket, work, apply, fail, done, pool))
         return ticket
 
     async def _background(
@@ -291,6 +314,7 @@ class Jobs:
         apply: Callable[[Any], Any],
         fail: Callable[[BaseException], Any] | None,
         done: Callable[[], Any] | None,
+        pool: ThreadPoolExecutor = EXECUTOR,
     ) -> None:
         out: Any = None
         err: BaseException | None = None
@@ -306,7 +330,7 @@ class Jobs:
                         if done is not None and not self.closed:
                             self.locked(done)
                         return
-                    out = await asyncio.get_running_loop().run_in_executor(EXECUTOR, work)
+                    out = await asyncio.get_running_loop().run_in_executor(pool, work)
         except asyncio.CancelledError:  # the session closed
             if done is not None:
                 self.locked(done)

@@ -173,6 +173,7 @@ class DependenceControls:
             partial(self._safely, apply),
             partial(self._safely, fail),
             lambda: self._set_running(False),
+            long=True,
         )
         return True
 

@@ -1,33 +1,15 @@
 """The "Multi-channel" tab: WV/WCCV grid and the multivariate GMWM (MGMWM) fit, live.
 
-As in the multivariate paper, Fig. 2: a k x k grid of small log-x figures for k = 2..6
-chosen channels of the loaded log, the empirical wavelet variance (WV) with its 95% interval
-on the diagonal and the wavelet cross-covariance (WCCV) with its interval below it, each
-with the model-implied total and one curve per latent process. The user types one latent
-model for every channel (optionally another per channel), marks which channels share each
-shareable process (WN, RW, AR1, GM; QN and DR are per channel only, the paper's section II),
-and every change refits; tables give the covariance and correlation of every shared process,
-the per-channel parameters and the objective.
-
-Display of the WCCV: it can be negative, so the cells below the diagonal draw ``|WCCV|`` on
-a log y axis with the sign in the markers (filled: positive, hollow: negative); the
-interval is a vertical whisker (one that contains 0 reaches the bottom of the cell); model
-curves are solid where positive and dotted where negative. The cells above the diagonal
-would repeat the ones below (the matrix is symmetric) and are left empty.
-
-Responsiveness: the WV/WCCV matrix is computed once per (log, channels, fs) and cached; the
-fit runs in the app's worker pool, off the server event loop. Requests are coalesced: while
-a fit runs, further changes only mark the view dirty, and one new fit with the latest
-settings starts when it ends (a result overtaken by a change is dropped, never shown); on a
-server, a change also waits 150 ms before starting a fit, so a burst of changes costs one
-fit; a request with the settings of the fit shown is a no-op. Data changes made while the tab
-is hidden only mark the view dirty; it refits when the tab is shown again. Figures are built
-once per grid size; updates replace ColumnDataSource ``data`` in place.
-
-Modules: the settings' widgets are :mod:`gmwm_app.multi_controls`, the figures and tables
-:mod:`gmwm_app.multi_figures`, the fit's pure helpers :mod:`gmwm_app.multi_fit`, the test of
-dependence :mod:`gmwm_app.multi_dependence` and the virtual sensor
-:mod:`gmwm_app.virtual_view`; this module is the tab that ties them to the session.
+As in the multivariate paper, Fig. 2: a k x k grid of small figures for k = 2..6 chosen
+channels, the empirical WV on the diagonal and the wavelet cross-covariance below it, each with
+the model-implied total and one curve per latent process; the user types the latent model,
+marks which channels share each shareable process, and every change refits off the event loop
+(requests coalesced). The settings' widgets are :mod:`gmwm_app.multi_controls`, the figures
+and tables :mod:`gmwm_app.multi_figures`, the fit's pure helpers :mod:`gmwm_app.multi_fit`,
+the test of dependence :mod:`gmwm_app.multi_dependence` and the virtual sensor
+:mod:`gmwm_app.virtual_view`; this module is the tab that ties them to the session. How the
+WCCV is drawn and how refits are scheduled: docs/methods.md, "The Multi-channel tab"; the
+user's view: docs/app.md.
 """
 
 from __future__ import annotations

@@ -45,15 +45,19 @@ class SelectionMixin:
     result: eg.GMWMResult | None
     _inference: dict[int, Inference]
 
-    def compute_ranking(
-        self, spec: str, *, progress: Callable[[int, int], None] | None = None
-    ) -> tuple[eg.WaveletVariance, Any]:
-        """Rank models by WVIC on the current WV: every sub-model of a maximal model
-        (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
-        from engine.inference import rank_models, submodels
+    def ranking_candidates(self, spec: str) -> list[str]:
+        """The parts of a ranking's text, checked (quick, on the loop: a ranking is refused
+        before it waits for a worker): one maximal model (``"3*GM+WN+QN+RW+DR"``) or
+        candidates separated by commas (``"WN+RW, GM+WN"``), within the server's cap.
 
-        wv = self.wv
-        if wv is None:
+        Raises
+        ------
+        ValueError
+            No data, no text, a model that cannot be read, or more candidates than the cap.
+        """
+        from engine.inference import submodels
+
+        if self.wv is None:
             raise ValueError("load data before ranking models")
         parts = [p.strip() for p in (spec or "").split(",") if p.strip()]
         if not parts:
@@ -64,9 +68,25 @@ class SelectionMixin:
         try:
             if len(parts) == 1:
                 check_candidates(len(submodels(parts[0])), parts[0])
-                sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
             else:
                 check_candidates(len(parts), "the list")
+        except eg.ModelError as e:
+            raise ValueError(message_of(e)) from None
+        return parts
+
+    def compute_ranking(
+        self, spec: str, *, progress: Callable[[int, int], None] | None = None
+    ) -> tuple[eg.WaveletVariance, Any]:
+        """Rank models by WVIC on the current WV: every sub-model of a maximal model
+        (``"3*GM+WN+QN+RW+DR"``) or candidates separated by commas (``"WN+RW, GM+WN"``)."""
+        from engine.inference import rank_models
+
+        wv = self.wv
+        parts = self.ranking_candidates(spec)
+        try:
+            if len(parts) == 1:
+                sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
+            else:
                 sel = rank_models(wv, parts, weights=self.weights, progress=progress)
         except (eg.ModelError, eg.FitError) as e:
             raise ValueError(message_of(e)) from None

@@ -368,10 +368,16 @@ class SelectionView(TabView):
             if spec is None and self.max_input.value_input
             else (spec if spec is not None else self.max_input.value)
         )
+        state = self.state
+        try:  # refused at once, not after waiting for a worker behind other rankings
+            state.ranking_candidates(spec)
+        except ValueError as e:
+            self.status.object = f"**Ranking failed:** {_message(e)}"
+            state.report_error(f"Could not rank the models: {_message(e)}")
+            return
         self._cancel.clear()
         self._set_running(True)
         self.status.object = f"⏳ Ranking the sub-models of {spec} ..."
-        state = self.state
 
         def work() -> Any:
             return state.compute_ranking(spec, progress=lambda d, t: self._progress(d, t, observer))
@@ -408,6 +414,7 @@ class SelectionView(TabView):
             self._guarded(fail),
             lambda: self._set_running(False),
             key="ranking",
+            long=True,
         )
 
     def cancel(self) -> None:

@@ -29,6 +29,7 @@ import param
 from engine.formats import FORMATS, export, misfit
 from engine.session import Session, SessionError, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
+from gmwm_app.export_bound import BoundOptions
 from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size, public_path
 from gmwm_app.state import AppState, demo_path
@@ -241,12 +242,20 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
     return True
 
 
-def export_text(state: AppState, fmt: str, *, projection: str = "bound") -> str:
+def export_text(
+    state: AppState,
+    fmt: str,
+    *,
+    projection: str = "bound",
+    data: str = "low",
+    horizon_s: float | None = None,
+) -> str:
     """The Kalibr ``imu.yaml`` (``fmt="kalibr"``) or datasheet (``"datasheet"``) of the fit.
 
     One channel (the shown one); the Kalibr file is partial (that axis only). ``projection``:
     how a filter format maps the fit onto its noise model (``engine.export``: ``"bound"``, the
-    default, ``"plain"`` or ``"fit"``, the fit's own terms).
+    default, ``"plain"`` or ``"fit"``, the fit's own terms); ``data`` and ``horizon_s``: what of
+    the empirical WV the bound covers and up to which scale (``engine.export``).
 
     Raises
     ------
@@ -267,6 +276,8 @@ def export_text(state: AppState, fmt: str, *, projection: str = "bound") -> str:
             source=src,
             allow_partial=True,
             projection=projection,
+            data=data,
+            horizon_s=horizon_s,
         )
     return export(None, fits, fmt, units=units, source=src)
 
@@ -285,6 +296,8 @@ def export_fits(
     inflate: float = 1.0,
     filter_rate: float | None = None,
     projection: str = "bound",
+    data: str = "low",
+    horizon_s: float | None = None,
 ) -> str:
     """The fits of several channels of the loaded log in any export format.
 
@@ -303,6 +316,10 @@ def export_fits(
     projection : {"bound", "plain", "fit"}
         Filter formats: the fit projected onto the consumer's noise model and over-bounded
         (default), projected only, or the fit's own terms one by one (``engine.export``).
+    data, horizon_s
+        Filter formats: what of the empirical WV the bound covers (``"low"``, the default,
+        ``"estimate"``, ``"high"``, ``"none"``) and the horizon in s (default the log length;
+        ``engine.export``).
 
     Raises
     ------
@@ -325,6 +342,8 @@ def export_fits(
         inflate=inflate,
         filter_rate=filter_rate,
         projection=projection,
+        data=data,
+        horizon_s=horizon_s,
     )
 
 
@@ -430,6 +449,7 @@ class SessionPanel(pn.viewable.Viewer):
         )
         self.fits_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
         self.preview = ExportPreview()  # the consumer's model before the download
+        self.bound = BoundOptions(self._on_format)  # data bound and horizon, built when opened
         for w in (
             self.format_select,
             self.inflate_input,
@@ -465,6 +485,7 @@ class SessionPanel(pn.viewable.Viewer):
                 self.format_select,
                 pn.Row(self.inflate_input, self.rate_input, margin=0),
                 self.projection_select,
+                self.bound.panel(),
                 self.preview.panel(),
                 self.format_download,
                 self.fits_note,
@@ -545,12 +566,17 @@ class SessionPanel(pn.viewable.Viewer):
         self.rate_input.placeholder = "required" if f.needs_filter_rate else "the log's rate"
         stem = Path(self.state.filename or "data").stem
         self.format_download.filename = f"{key}_{stem}{f.suffix}"
-        self.format_download.disabled = not self._fits
         names = ", ".join(self._fits) or "none yet"
         disagree = [line for ch, r in self._fits.items() if (line := misfit(r, ch))]
+        try:
+            opts, bad = self.bound.options, ""
+        except ValueError as e:
+            opts, bad = {}, f"\n\n**Not exported:** {e}"
+        self.format_download.disabled = not self._fits or bool(bad)
         self.fits_note.object = (
             f"Channels fitted in this session: **{names}**. Filter formats need a gyroscope "
             "and an accelerometer: show another channel and fit it to add it."
+            + bad
             + "".join(f"\n\n**Warning:** {line}" for line in disagree)
         )
         self.preview.update(
@@ -560,6 +586,7 @@ class SessionPanel(pn.viewable.Viewer):
             units=fit_units(self.state, self._fits),
             filter_rate=self.rate_input.value if self.rate_input.visible else None,
             projection=self.projection_select.value,
+            **opts,
         )
 
     # callbacks -------------------------------------------------------------------------------
@@ -574,7 +601,8 @@ class SessionPanel(pn.viewable.Viewer):
     def _export(self, fmt: str) -> io.StringIO:
         s = self.state
         try:
-            return io.StringIO(export_text(s, fmt, projection=self.projection_select.value))
+            opts = self.bound.options
+            return io.StringIO(export_text(s, fmt, projection=self.projection_select.value, **opts))
         except ValueError as e:
             s.report_error(f"Could not export ({fmt}): {e}")
             return io.StringIO(f"# could not export: {e}\n")
@@ -584,6 +612,7 @@ class SessionPanel(pn.viewable.Viewer):
         key = self.format_select.value
         rate = self.rate_input.value if self.rate_input.visible else None
         try:
+            opts = self.bound.options
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 text = export_fits(
@@ -593,6 +622,7 @@ class SessionPanel(pn.viewable.Viewer):
                     inflate=float(self.inflate_input.value or 1.0),
                     filter_rate=rate,
                     projection=self.projection_select.value,
+                    **opts,
                 )
         except ValueError as e:
             s.report_error(f"Could not export ({key}): {e}")

@@ -43,6 +43,7 @@ from gmwm_app.data import (
     check_fs,
     compute_wv,
     fs_source,
+    log_check_line,
     message_of,
     precompute,
     read_source,
@@ -168,6 +169,11 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # messages
     error = param.String(default="", doc="Last error, in words (empty when fine).")
     notice = param.String(default="", doc="Information (not an error), e.g. a URL fallback.")
+    log_check = param.String(
+        default="",
+        doc="What the log check (engine.io.qualify_log) found in the channel shown, one line; "
+        "empty for a clean log or a WV summary.",
+    )
 
     def __init__(self, **params: Any) -> None:
         super().__init__(**params)
@@ -450,7 +456,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
     def _data_info(self, lg: Any, ch: str, wv: eg.WaveletVariance) -> dict[str, Any]:
         n = int(wv.n if lg.is_summary else np.size(lg.channels[ch]))
-        return {"n": n, "duration_s": n / float(wv.fs), "unit": unit_of(lg, ch)}
+        info = {"n": n, "duration_s": n / float(wv.fs), "unit": unit_of(lg, ch)}
+        return {**info, "log_check": log_check_line(lg, ch)}
 
     def select_channel(self, channel: str) -> bool:
         """Show another channel: its cached WV (computed on first use) and a refit."""

@@ -49,6 +49,8 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--inflate": ("inflate", r"multiply every noise value by this factor"),
     "--json": ("json", r"^print one JSON object"),
     "--levels": ("levels", r"^number of WV levels J$"),
+    "--drop-warmup": ("drop_warmup", r"^drop the warm-up the log check finds"),
+    "--temperature": ("temperature", r"^temperature channel whose bias-temperature polynomial"),
     "--max-hours": ("max_hours", r"^longest log considered for a target"),
     "--max-model": ("max_model", r"sub-model of this model"),
     "--methods": ("methods", r"GMWM-efficient"),

@@ -220,7 +220,7 @@ def test_default_export_is_consistent_on_the_recorded_signal_of_another_unit(rea
     removed), 8 segments of 20 min: mean NEES in [0.5, 1.3] and at most
     5 % of epochs above the 95 % band of the 8-segment average. The initial bias variance is
     the mean square of the segments' first-10-s means. The full table (six units, three
-    models, 100/200 Hz, fixes 1/10/100 s) is bench_filter.py --recorded (docs/filters.md)."""
+    models, 100 Hz, fixes 1/10/100 s) is bench_filter.py --recorded (docs/filters.md)."""
     from filtersim import run_recorded
 
     fit = eg.fit_gmwm(

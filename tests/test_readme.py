@@ -1,13 +1,16 @@
-"""The README cannot rot: its code runs as written.
+"""README and the documentation pages cannot rot: their code runs as written.
 
-* Every ```python block runs, in order, in ONE interpreter session (cumulative, as the README
-  reads: later blocks use names of earlier ones), from the repository root, in a fresh
-  subprocess; every block must print something.
-* Every ```sh block whose commands are all ``gmwm ...`` runs in bash, as written, in an empty
+The pages are README.md (the front page) and the docs/ pages of :data:`PAGES`, in the order a
+reader meets them.
+
+* Every ```python block of a page runs, in order, in ONE interpreter session per page
+  (cumulative, as the page reads: later blocks use names of earlier ones), from the repository
+  root, in a fresh subprocess; every block must print something.
+* Every ```sh block whose commands are all ``gmwm ...`` runs in bash, as written, in one empty
   folder (``gmwm`` is this checkout's command, ``python`` this interpreter).
-* Every option named in the ```text synopsis of the ``gmwm`` command exists.
-* The key lists of the ``--json`` description are the keys the commands print.
-* The first two blocks are the app and the test command, and ``.ci/run`` runs the latter.
+* Every option named in a ```text synopsis of the ``gmwm`` command exists.
+* The key lists of the ``--json`` description (docs/cli.md) are the keys the commands print.
+* README's first two blocks are the app and the test command, and ``.ci/run`` runs the latter.
 """
 
 from __future__ import annotations
@@ -25,13 +28,30 @@ import pytest
 from engine.cli import build_parser, main
 
 REPO = Path(__file__).resolve().parents[1]
-README = (REPO / "README.md").read_text(encoding="utf-8")
+#: The pages whose code runs, in reading order: the front page, then the documentation.
+PAGES = (
+    "README.md",
+    "docs/getting-started.md",
+    "docs/inference.md",
+    "docs/multichannel.md",
+    "docs/cli.md",
+    "docs/datasheet-check.md",
+    "docs/reports.md",
+)
+TEXT = {page: (REPO / page).read_text(encoding="utf-8") for page in PAGES}
+README = TEXT["README.md"]
+CLI_PAGE = TEXT["docs/cli.md"]  # the `gmwm` command: synopsis and --json description
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.S | re.M)
-BLOCKS = [(m.group(1), m.group(2)) for m in FENCE.finditer(README)]
+PAGE_BLOCKS = {
+    page: [(m.group(1), m.group(2)) for m in FENCE.finditer(t)] for page, t in TEXT.items()
+}
+BLOCKS = PAGE_BLOCKS["README.md"]
 
 
-def blocks(lang: str) -> list[str]:
-    return [code for tag, code in BLOCKS if tag == lang]
+def blocks(lang: str, page: str | None = None) -> list[str]:
+    """The code of the ``lang`` blocks of one page, or of every page in reading order."""
+    pages = PAGES if page is None else (page,)
+    return [code for p in pages for tag, code in PAGE_BLOCKS[p] if tag == lang]
 
 
 def _env() -> dict[str, str]:
@@ -50,9 +70,9 @@ def test_the_first_two_commands_install_and_run_the_app_and_the_tests():
     assert ci.index("export GMWM_REQUIRE_REAL_DATA=1") < ci.index('eval "$TEST_CMD"')
 
 
-def test_python_blocks_run_as_written_in_order():
-    code = blocks("python")
-    assert len(code) >= 3
+def _run_page(page: str) -> str:
+    """Run one page's python blocks in one fresh session; return what they print."""
+    code = blocks("python", page)
     mark = "@@README-BLOCK-{}@@"
     script = "\n".join(f"print({mark.format(k)!r})\n{c}" for k, c in enumerate(code))
     p = subprocess.run(
@@ -63,13 +83,21 @@ def test_python_blocks_run_as_written_in_order():
         text=True,
         timeout=600,
     )
-    assert p.returncode == 0, p.stderr[-3000:]
+    assert p.returncode == 0, (page, p.stderr[-3000:])
     out = p.stdout
     pos = [out.index(mark.format(k)) for k in range(len(code))] + [len(out)]
     for k in range(len(code)):
         printed = out[pos[k] + len(mark.format(k)) : pos[k + 1]].strip()
-        assert printed, f"README python block {k + 1} prints nothing:\n{code[k]}"
-        assert "\\n" not in printed, f"block {k + 1} shows an escaped string, not text"
+        assert printed, f"{page}: python block {k + 1} prints nothing:\n{code[k]}"
+        assert "\\n" not in printed, f"{page}: block {k + 1} shows an escaped string, not text"
+    return out
+
+
+def test_python_blocks_run_as_written_in_order():
+    code = blocks("python")
+    assert len(code) >= 3
+    assert blocks("python", "README.md"), "the front page has no Python example"
+    out = "".join(_run_page(page) for page in PAGES if blocks("python", page))
     # what the tour prints is what it says: the demo, a ranked table, the replicate fit
     assert "demo_imu.h5" in out and "6 channel(s)" in out
     assert "WVIC ranking (63 candidates" in out
@@ -79,6 +107,8 @@ def test_python_blocks_run_as_written_in_order():
 def test_shell_examples_run_as_written(tmp_path):
     sh = [c for c in blocks("sh") if c.strip()]
     assert sh, "the README has no runnable gmwm example"
+    assert any(c.strip() for c in blocks("sh", "README.md")), "the front page has no gmwm example"
+    assert any("--filter-rate" in c for c in blocks("sh", "README.md"))
     outs = []
     for code in sh:
         lines = [ln for ln in code.splitlines() if ln.strip() and not ln.startswith("#")]
@@ -117,8 +147,8 @@ def test_synopsis_names_only_options_that_exist():
 
 
 def _described_keys(command: str) -> set[str]:
-    m = re.search(rf"^\* `gmwm {command} --json`:[^`]*`([^`]+)`", README, re.M)
-    assert m, f"the README does not describe gmwm {command} --json"
+    m = re.search(rf"^\* `gmwm {command} --json`:[^`]*`([^`]+)`", CLI_PAGE, re.M)
+    assert m, f"docs/cli.md does not describe gmwm {command} --json"
     return {k.strip() for k in m.group(1).split(",")}
 
 

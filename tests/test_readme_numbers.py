@@ -1,9 +1,12 @@
-"""README's robust-WV paragraph says what ``tests/benchmarks/robust_claims.py`` computes.
+"""The documentation's numbers are what their scripts compute.
 
-The script is the named source of each number; this test recomputes the cheap ones (and, with
-the real logs, the ADIS16405 ranges) and compares them with README's text, so that the README
-cannot drift from the code again (it had said 0.92-1.00 where the logs give 0.86-1.14, and
-"within 7 %" of spikes at levels where the robust WV is 46 % low). The biweight
+docs/calibrate.md's robust-WV paragraph says what ``tests/benchmarks/robust_claims.py``
+computes; docs/fit-to-filter.md's worked example and filter table are what
+``tests/benchmarks/projection_example.py`` and the engine's projection give. The scripts are
+the named source of each number; this test recomputes the cheap ones (and, with the real logs,
+the ADIS16405 ranges) and compares them with the pages' text, so that the docs cannot drift
+from the code again (they had said 0.92-1.00 where the logs give 0.86-1.14, and "within 7 %"
+of spikes at levels where the robust WV is 46 % low). The biweight
 constant's efficiency is also checked against an independent quadrature of the asymptotic
 variance of an M-estimate of scale.
 """
@@ -22,7 +25,10 @@ from scipy import integrate, stats
 import engine as eg
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text()
+#: docs/calibrate.md: the robust-WV paragraph
+CALIBRATE = (ROOT / "docs" / "calibrate.md").read_text(encoding="utf-8")
+#: docs/fit-to-filter.md: the projection, its worked example and the filter tables
+FIT_TO_FILTER = (ROOT / "docs" / "fit-to-filter.md").read_text(encoding="utf-8")
 
 
 def _load(name: str):
@@ -38,8 +44,8 @@ claims = _load("robust_claims")
 
 
 def _paragraph() -> str:
-    start = README.index("* **Robust WV.**")
-    return " ".join(README[start : README.index("\n* ", start + 1)].split())
+    start = CALIBRATE.index("* **Robust WV.**")
+    return " ".join(CALIBRATE[start : CALIBRATE.index("\n* ", start + 1)].split())
 
 
 def _range(lo: float, hi: float) -> str:
@@ -127,20 +133,21 @@ def test_adis_ranges_as_readme_says(real_data: Path) -> None:
     )
     assert f"and {_range(*lv39)} at levels 3-9" in text
     assert f"(gyroscopes {_range(*g['gyro levels 3-9'])})" in text
-    # the README numbers name their script
+    # the numbers name their script
     assert re.search(r"These numbers come from `tests/benchmarks/robust_claims.py`", text)
 
 
 # ------------------------------------------------------------------ "From a fit to a filter"
 def _filter_section() -> str:
-    start = README.index("### From a fit to a filter")
-    return README[start : README.index("\n### ", start + 1)]
+    start = FIT_TO_FILTER.index("## The projection onto a filter's noise model, and the bound")
+    end = FIT_TO_FILTER.find("\n## ", start + 1)
+    return FIT_TO_FILTER[start : end if end > 0 else len(FIT_TO_FILTER)]
 
 
 def test_projection_example_as_readme_says(real_data: Path) -> None:
-    """README's worked example is ``tests/benchmarks/projection_example.py``'s output, line by
-    line (the fitted models, where each term went, every exported value with its interval,
-    factor and binding scale), recomputed here on the real ADIS16405 log."""
+    """docs/fit-to-filter.md's worked example is ``tests/benchmarks/projection_example.py``'s
+    output, line by line (the fitted models, where each term went, every exported value with its
+    interval, factor and binding scale), recomputed here on the real ADIS16405 log."""
     example = _load("projection_example")
     text = _filter_section()
     lines = example.report_lines(example.example(real_data / "adis16405_imu1.h5"))
@@ -150,9 +157,9 @@ def test_projection_example_as_readme_says(real_data: Path) -> None:
 
 
 def test_filter_table_factors_as_readme_says(real_data: Path) -> None:
-    """The N/N_a and K/K_a columns of README's bench_filter tables (the fits and the engine's
-    projection, cheap to recompute; the Monte Carlo columns come from the benchmark run that
-    the text names)."""
+    """The N/N_a and K/K_a columns of docs/fit-to-filter.md's bench_filter tables (the fits and
+    the engine's projection, cheap to recompute; the Monte Carlo columns come from the benchmark
+    run that the text names)."""
     log = eg.load_log(real_data / "adis16405_imu1.h5")
     text = _filter_section()
     for ch in ("gyro_x", "accel_x"):

@@ -31,11 +31,13 @@ from .._files import write_atomic
 from .common import (
     CHANNELS_HELP,
     CliError,
+    add_check_options,
     add_deprecated_alias,
     add_log_options,
     add_weights_option,
     add_wv_options,
     check_output,
+    cli_text,
     input_paths,
     log_kwargs,
     positive,
@@ -127,6 +129,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     add_scheduler_option(bt)
     bt.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    add_check_options(bt, temperature=False)  # --drop-warmup
     bt.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     add_log_options(bt, stream=False)
     add_report_options(bt)
@@ -178,6 +181,7 @@ def _fit_kwargs(
         "workers": args.workers,
         "executor": executor,
         "progress": progress,
+        **({"drop_warmup": True} if getattr(args, "drop_warmup", False) else {}),
     }
 
 
@@ -250,6 +254,11 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             print(terminal_text(f"gmwm: batch: {lf.source}: {lf.error}"), file=sys.stderr)
         for ch, err in lf.channel_errors.items():
             print(terminal_text(f"gmwm: batch: {lf.source} [{ch}]: {err}"), file=sys.stderr)
+        q = lf.qualification
+        if q and (q["findings"] or q["dropped"]):  # what the log check found, one line a log
+            print(
+                terminal_text(f"gmwm batch: {lf.source}: {cli_text(q['summary'])}"), file=sys.stderr
+            )
     for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
         queue_warning(args, w)
     if not res.fitted:

@@ -13,6 +13,7 @@ import glob
 import math
 import os
 import re
+import sys
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -28,6 +29,10 @@ from ..wv import WaveletVariance
 
 __all__ = [
     "ARGUMENT_FLAGS",
+    "add_check_options",
+    "say",
+    "checked_log",
+    "temperature_fit",
     "cli_text",
     "CliError",
     "UsageError",
@@ -74,6 +79,9 @@ ARGUMENT_FLAGS: dict[str, str] = {
     "static": "--static",
     "levels": "--levels",
     "robust": "--robust",
+    "segments": "--segments",
+    "drop_warmup": "--drop-warmup",
+    "temperature": "--temperature",
 }
 
 _ARGUMENT = re.compile(
@@ -132,20 +140,118 @@ def positive(kind: type[int] | type[float], name: str) -> Callable[[str], float]
     return conv
 
 
-def load_wv(args: argparse.Namespace, alpha: float = 0.05) -> tuple[WaveletVariance, str]:
-    """The WV of the selected channel (computed, or read from a summary file)."""
+def load_wv(
+    args: argparse.Namespace, alpha: float = 0.05, *, check: bool = False
+) -> tuple[WaveletVariance, str]:
+    """The WV of the selected channel (computed, or read from a summary file).
+
+    With ``check`` (``gmwm fit``): the log check runs first (:func:`checked_log`), and with a
+    temperature channel (``--temperature``) the WV is that of the compensated signal; the
+    check and the temperature fit are left on ``args`` (``qualification``, ``temperature_fit``).
+    """
     from ..io import load_log
 
     if getattr(args, "stream", False):  # long logs: blocks from .npy/HDF5, bounded memory
+        if check:
+            say(args, "log check: skipped with --stream (the log is not held in memory)")
         return stream_wv(args, alpha)
     log = load_log(args.input, channel=args.channel, fs=args.fs, **log_kwargs(args))
     name = log.names[0]
+    if check:
+        log, args.qualification = checked_log(args, log, [name])
+        args.temperature_fit = temperature_fit(args, log, name, alpha=alpha)
+        if args.temperature_fit is not None:
+            if not log.is_summary and log.fs_source == "default":
+                warn_fs_unknown(args, args.input)
+            return args.temperature_fit.wv, name
     wv = log.wavelet_variance(
         name, robust=args.robust, eff=args.eff, levels=args.levels, alpha=alpha
     )
     if not log.is_summary and log.fs_source == "default":
         warn_fs_unknown(args, args.input)
     return wv, name
+
+
+def add_check_options(sp: argparse.ArgumentParser, *, temperature: bool = True) -> None:
+    """Add ``--drop-warmup`` (and ``--temperature``) to a sub-command that fits a log."""
+    sp.add_argument(
+        "--drop-warmup",
+        action="store_true",
+        help="drop the warm-up the log check finds (the samples before its suggested start) "
+        "before the fit",
+    )
+    if temperature:
+        sp.add_argument(
+            "--temperature",
+            default="auto",
+            metavar="auto|none|COLUMN",
+            help="temperature channel whose bias-temperature polynomial is fitted and removed "
+            "before the GMWM: auto (default: a channel named like temp/temperature, if any), "
+            "none, or its name",
+        )
+
+
+def say(args: argparse.Namespace, msg: str) -> None:
+    """Print one line on stderr now, as ``gmwm COMMAND: MSG`` in the command's words."""
+    print(terminal_text(f"gmwm {args.command}: {cli_text(msg)}"), file=sys.stderr)
+
+
+def checked_log(
+    args: argparse.Namespace, log: Any, channels: list[str] | None = None
+) -> tuple[Any, Any]:
+    """Run the log check (:func:`engine.io.qualify_log`) on a loaded log, drop the warm-up
+    with ``--drop-warmup``, and say what was found in one line on stderr (nothing for a
+    clean log).
+
+    Returns
+    -------
+    (ImuLog, Qualification)
+        The log (without its warm-up with ``--drop-warmup``) and the check of that log.
+    """
+    from ..io import drop_warmup, qualify_log
+
+    q = qualify_log(log, channels)
+    if getattr(args, "drop_warmup", False) and q.suggested_start:
+        log = drop_warmup(log, q.suggested_start)
+        q = qualify_log(log, channels)
+    if q.findings or q.dropped:  # a clean log is not worth a line (the JSON has the check)
+        say(args, q.line())
+    return log, q
+
+
+def temperature_fit(
+    args: argparse.Namespace, log: Any, name: str, *, alpha: float = 0.05, model: Any = None
+) -> Any:
+    """The temperature compensation of channel ``name`` (``--temperature``), or None when the
+    log has no temperature channel (or is a summary, or is cut into segments)."""
+    from ..inference.temperature import find_temperature, fit_temperature
+
+    choice = getattr(args, "temperature", "none") or "none"
+    if log.is_summary or choice == "none":
+        return None
+    tname = find_temperature(log, choice, channel=name)
+    if tname is None:
+        return None
+    if log.segments:
+        say(args, f"temperature: not fitted on a log cut into segments ('{tname}' ignored)")
+        return None
+    temp = log.aux[tname] if tname in log.aux else log.channels[tname]
+    tf = fit_temperature(
+        log[name],
+        temp,
+        fs=log.fs,
+        model=model,
+        unit=log.unit_of(name),
+        channel=name,
+        temperature=tname,
+        levels=args.levels,
+        robust=getattr(args, "robust", False),
+        eff=getattr(args, "eff", 0.6),
+        alpha=alpha,
+        weights=getattr(args, "weights", None) or "ci",
+    )
+    say(args, tf.line())
+    return tf
 
 
 class UsageError(ValueError):

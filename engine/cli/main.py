@@ -41,6 +41,7 @@ from ..models import ModelError, parse_model
 from .common import (
     CliError,
     add_bootstrap_options,
+    add_check_options,
     add_confidence_option,
     add_deprecated_alias,
     add_log_options,
@@ -120,6 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_confidence_option(fit, "the --ci parameter intervals", "--level")
     add_bootstrap_options(fit, replicates="bootstrap replicates")
+    add_check_options(fit)  # --drop-warmup --temperature
 
     sel = sub.add_parser("select", help="rank candidate models by WVIC")
     data_args(sel)
@@ -233,8 +235,11 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..units import datasheet_rows
 
     model = parse_model(args.model)
-    wv, name = load_wv(args)
+    wv, name = load_wv(args, check=True)  # the log check and --temperature first
     res = fit_gmwm(wv, model, weights=args.weights)
+    tf = getattr(args, "temperature_fit", None)
+    raw = fit_gmwm(tf.wv_raw, model, weights=args.weights) if tf is not None else None
+    q = getattr(args, "qualification", None)
     intervals = None
     if args.ci:
         from ..inference import param_intervals
@@ -248,6 +253,11 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     if args.json:
         d = res.to_dict()
         d["channel"] = name
+        d["qualification"] = q.to_dict() if q is not None else None
+        if tf is not None and raw is not None:  # the uncompensated fit beside it
+            d["temperature"] = {**tf.to_dict(), "fit_raw": raw.to_dict()}
+        else:
+            d["temperature"] = None
         if intervals is not None:
             d["intervals"] = [iv.to_dict() for iv in intervals]
         # the rows of `gmwm export --format datasheet` (one table: engine.units)
@@ -264,6 +274,11 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         ]
         return json_ready(d)
     text = f"{args.input} [{name}]\n{res.summary()}"
+    if tf is not None and raw is not None:
+        text += (
+            f"\n\n  {tf.line()}\n  the fit above is of the compensated signal; without "
+            f"compensation: {raw.model.spec(values=True)}"
+        )
     if intervals is not None:
         text += f"\n\n  {100 * args.confidence:g}% intervals ({args.ci}):\n"
         text += "\n".join(

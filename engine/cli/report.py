@@ -20,6 +20,7 @@ from typing import Any
 from .common import (
     CHANNELS_HELP,
     INPUT_HELP,
+    add_check_options,
     add_confidence_option,
     add_log_options,
     add_weights_option,
@@ -27,6 +28,7 @@ from .common import (
     check_output,
     input_paths,
     log_kwargs,
+    say,
     usage_error,
 )
 
@@ -76,6 +78,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     add_weights_option(rp)
     add_confidence_option(rp, "the parameter intervals")
     add_log_options(rp, stream=False)
+    add_check_options(rp, temperature=False)  # --drop-warmup
     return rp
 
 
@@ -104,13 +107,18 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         export_format=fmt,
         load_options=log_kwargs(args),
         command_line=shlex.join(["gmwm", *args.argv]),
+        drop_warmup=args.drop_warmup,
     )
+    check = rep.log.get("qualification") or {}
+    if check.get("findings") or check.get("dropped"):  # one line, as gmwm fit says it
+        say(args, check["summary"])
     page = render_html(rep, static=args.static)
     write_atomic(args.output, page)  # never a truncated page; a full disk names the file
     kind = "static" if args.static else "interactive"
     if args.json:
         return {
             "output": str(args.output),
+            "qualification": check or None,
             "channels": {
                 ch: (
                     {"model": c.fit.model.spec(values=True), "ieee": c.fit.ieee.to_dict()}

@@ -1,40 +1,12 @@
 """Closed form of the model-implied covariance of the Haar WV, in O(J^2) operations.
 
-:func:`engine.inference.wv_cov_model` needs, for every pair of levels ``j <= k``,
-
-``C_jk = int_{-1/2}^{1/2} |H_j(f)|^2 |H_k(f)|^2 S(f)^2 df``
-
-(``Cov(nu_j, nu_k) = 2 C_jk / max(M_j, M_k)``). With ``z = exp(2 pi i f)``, ``m = 2^(j-1)``,
-``M = 2^(k-1)`` the Haar squared gain is ``|H_j|^2 = |1 - z^m|^4 / (4 m^2 |1 - z|^2)`` and
-``|1 - z^m|^4 = sum_{d=-2..2} w_d z^(d m)`` with ``w = (1, -4, 6, -4, 1)``, so
-
-``C_jk = sum_{d, e} w_d w_e Q(d m + e M) / (16 m^2 M^2)``,
-
-``Q(n) = int z^n S^2 / |1 - z|^4 df``: 25 values of one function of the lag. ``S^2 / |1 - z|^4``
-is not integrable at f = 0, but the two gains vanish there to order ``f^8`` (the ``w_d w_e``
-annihilate even polynomials of degree 6 in n), so ``Q`` is needed only as a generalised
-autocovariance. With ``x = |1 - z|^2`` and, for an AR1 (phi, s), ``y = |1 - phi z|^2 =
-(1 - phi)^2 + phi x``, the model's spectrum is ``S = q2 x + sigma2 + gamma2 / x + sum s / y``
-(QN, WN, RW, AR1/GM; a drift adds nothing), and the pieces of ``S^2 / x^2`` have closed-form
-generalised autocovariances:
-
-* ``x^-p <-> K_p(n) = (-1)^p |n| prod_{i=1}^{p-1} (n^2 - i^2) / (2 (2p-1)!)`` (``K_0 = delta``):
-  integers over a factorial, summed exactly;
-* ``1 / y <-> phi^|n| / (1 - phi^2)`` and ``1 / y^2 <-> phi^|n| ((1 + phi^2) / (1 - phi^2)^3 +
-  |n| / (1 - phi^2)^2)`` (the AR1 and the twice-filtered AR1);
-* the mixed terms by partial fractions, ``c = (1 - phi)^2``:
-  ``1/(y x^p) = (x^-p - phi / (y x^(p-1))) / c``, ``1/(y^2 x^p) = (1/(y x^p) - phi /
-  (y^2 x^(p-1))) / c`` and ``1/(y_a y_b) = (phi_b / y_b - phi_a / y_a) / ((phi_b - phi_a)
-  (1 - phi_a phi_b))``.
-
-Every piece ``int |H_j|^2 |H_k|^2 x^-p ...`` of ``C_jk`` is the integral of a non-negative
-function, so adding the pieces in floating point loses nothing. Inside a piece, the sum over
-the 25 lags cancels (the kernels grow like ``n^7``) and the partial fractions cancel when phi is
-near 1: the polynomial pieces are therefore summed in exact integer arithmetic and the AR1
-pieces in decimal arithmetic with enough digits for the cancellation (up to ``(1 - phi)^-7``
-and ``n^7``), then rounded to floats. The result equals the exact infinite-lag value (the
-periodic trapezoid rule it replaces is exact for the polynomial pieces and has a wrap-around
-error of about ``phi^(2F)`` for an AR1 on ``2F`` nodes).
+:func:`engine.inference.wv_cov_model` needs, for every pair of levels ``j <= k``, the frequency
+integral ``C_jk`` of the two levels' squared Haar gains times the model's squared spectral
+density (``Cov(nu_j, nu_k) = 2 C_jk / max(M_j, M_k)``). It is a sum of 25 values of one
+generalised autocovariance of the lag, in closed form for QN, WN, RW and AR1/GM terms (partial
+fractions), summed in exact integer and decimal arithmetic where the terms cancel, so the
+result equals the exact infinite-lag value. The derivation: docs/methods.md, "The closed-form
+WV covariance".
 """
 
 from __future__ import annotations

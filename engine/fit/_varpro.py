@@ -3,62 +3,15 @@
 Each latent process has non-negative linear coefficients (variances) and AR1/GM terms also one
 non-linear parameter, searched as ``u = log(correlation time in samples)``. For fixed ``u`` the
 minimum over the linear part is an inner problem solved exactly (NNLS for a univariate or a
-replicate fit, a conic PSD solve for the multivariate fit); the outer search over ``u`` is:
-
-1. a grid of correlation times for every AR1/GM term (:func:`grid_axis`; the terms are
-   interchangeable, so candidates have decreasing correlation times, :func:`grid_candidates`),
-   plus any extra starts (the user's values, the replicates' own fits ...);
-2. the ``keep`` best candidates by the exact profiled objective, found by branch and bound when
-   the problem gives vectorised lower bounds (:func:`best_candidates`);
-3. a local Nelder-Mead (:func:`local`) from each of them, skipping a start within 1.5 grid
-   steps of a local minimum already found; each local search restarts on a smaller simplex
-   until a restart no longer lowers the objective;
-4. in :func:`engine.fit.fit_gmwm`, the *anchors*: the optima of the sub-models with one term
-   fewer, as points of this model (the degenerate corners, a term at zero:
-   :func:`nested_search`, :func:`corner_anchors`), each a result in its own right and the start
-   of a local search;
-5. the lowest objective wins (:func:`search`), so a fit is never above its anchors' sub-models
-   (docs/fitting.md).
-
-The fitted processes are then ordered most persistent first (:func:`persistent_first`) and the
-parameters on the boundary of their space are listed (:func:`at_bound`).
-
-Correlation times shorter than one sample
------------------------------------------
-The search explores correlation times down to ``TC_MIN`` (0.01 samples) and does not stop at one
-sample: an AR1/GM faster than the sampling interval has no physical correlation time (it is
-white noise in disguise at every Haar scale), but it is still a valid discrete-time AR1 whose
-``phi`` the data identify. Real sensors produce it: a static log whose samples are correlated
-with their neighbours only (the sensor's own low-pass or FIR filter; the ADIS16405 gyros have a
-lag-1 autocorrelation of 0.17 and none at lag 2) is fitted best with such a term. Bounding it at
-one sample would make the fit several times worse there and push the misfit into the other
-terms (measured: README, "Correlation times shorter than one sample"). So every fit keeps the
-minimum and *flags* the term instead (:func:`sub_sample_warnings`, ``TC_FLAG``): the warning
-says it is white noise in disguise, gives its white-noise equivalent (for the noise density)
-and, for a term whose variance is 0, that its correlation time means nothing.
-
-The problem protocol
---------------------
-:func:`search` (and :func:`best_candidates`, :func:`local`) need an object ``prob`` with
-
-``k : int``
-    Number of non-linear coordinates (AR1/GM terms searched).
-``lo, hi : float``
-    Bounds of every coordinate (``log tc_min``, ``log tc_max``); a start is clipped into them.
-``axis : ndarray``
-    The grid axis of one coordinate (:func:`grid_axis`); its spacing sets the simplex size.
-``profile(u: ndarray (k,)) -> float``
-    The profiled objective: the minimum over the linear part (variances, covariances) for the
-    non-linear coordinates ``u``. It must accept coordinates slightly outside ``[lo, hi]``
-    (Nelder-Mead vertices are not clipped): clamp them.
-``lower_bounds(u: ndarray (C, k)) -> (lower (C,), exact (C,) bool)`` (optional)
-    Lower bounds of ``profile`` for ``C`` candidates at once (e.g. the unconstrained least
-    squares), with ``exact[c]`` True when ``lower[c]`` is the profile itself. Without it, every
-    candidate is profiled.
-
-The inner solve is the problem's business: :class:`NNLSProblem` is the univariate one (also
-used with stacked moments by the replicate fit and for the design matrix by the GMWFM); the
-multivariate problem implements the same protocol with its conic inner solve.
+replicate fit, a conic PSD solve for the multivariate fit); the outer search over ``u`` is a
+grid of correlation times (:func:`grid_axis`, :func:`grid_candidates`), the best candidates by
+branch and bound (:func:`best_candidates`), local Nelder-Mead searches (:func:`local`) and, in
+:func:`engine.fit.fit_gmwm`, the sub-models' optima as anchors (:func:`nested_search`,
+:func:`corner_anchors`); the lowest objective wins (:func:`search`). Correlation times shorter
+than one sample are kept and flagged (:func:`sub_sample_warnings`). The steps, that choice and
+the protocol a problem object ``prob`` implements (``k``, ``lo``, ``hi``, ``axis``,
+``profile``, optional ``lower_bounds``): docs/methods.md, "The variable-projection search";
+why it reaches the global minimum: docs/fitting.md.
 
 Reference: Golub & Pereyra (2003), Separable nonlinear least squares: the variable projection
 method and its applications, Inverse Problems 19(2).

@@ -1,42 +1,13 @@
 """The IEEE Std 952 / 1293 quantities of a fit: the numbers an IMU user looks for first.
 
 One table per fitted channel, whatever structure was fitted (:func:`ieee_table`, carried by
-:attr:`engine.fit.GMWMResult.ieee`):
-
-=============  =================================================  =========================
-key            quantity                                           interval
-=============  =================================================  =========================
-``N``          angle / velocity random walk: ``sqrt(s2 / fs)``    delta method (fit)
-               with ``s2`` the WN variance plus the white-noise
-               equivalent ``S(0)`` of every AR1/GM term whose
-               correlation time is below one sample
-``B``          bias instability, IEEE 952: the model's Allan      delta method (fit)
-               floor / ``BI_FACTOR`` (0.664)
-``ADEV_min``   bias instability as vendors and allan_variance_ros delta method (fit)
-               quote it: the model's Allan-deviation minimum,
-               at ``tau_s``
-``ADEV_data``  the same minimum read off the data's Allan          chi-square (eta3) of the
-               deviation (dyadic averaging times), at ``tau_s``   WV at that scale
-``K``          rate / acceleration random walk ``sqrt(g2 fs)``    delta method (fit)
-``Q``          quantisation ``sqrt(q2) / fs``                     delta method (fit)
-``R``          rate ramp ``|omega| fs``                           delta method (fit)
-=============  =================================================  =========================
-
-``K``, ``Q`` and ``R`` are present only when the model has an RW, QN or DR term; ``N`` when it
-has a WN term or an AR1/GM faster than one sample (a model with neither cannot say what its
-white noise is: ``N`` is absent, not 0).
-
-Intervals (two-sided, ``level``): the delta method on the fit's sandwich covariance of the
-free parameters in their unconstrained coordinates (:func:`engine.fit.asymptotic.param_cov`
-with the model-implied WV covariance, as :meth:`GMWMResult.conf_int`), on the log of the
-quantity so that the interval stays positive. A quantity whose parameters are all on a bound
-(a variance at 0) has no interval (``low``/``high`` NaN, ``note`` says why). ``ADEV_data``
-uses the empirical WV's own interval at the scale of the minimum (Allan variance = 2 WV).
-
-Units (``docs/ieee.md``): ``value``/``low``/``high`` in SI (rad/s, m/s^2 based) when the
-signal unit is known, else in the signal unit ``u``; ``datasheet_*`` in the datasheet unit of
-:data:`engine.units.DISPLAY` (deg/sqrt(h), m/s/sqrt(h), deg/h, mg, deg/h/sqrt(h) ...) or SI
-where a quantity has none (Q). Conversions: :mod:`engine.units` (``docs/conventions.md``).
+:attr:`engine.fit.GMWMResult.ieee`): ``N`` (angle / velocity random walk, including the white
+noise of an AR1/GM faster than one sample), ``B`` (bias instability, IEEE 952: the model's
+Allan floor / 0.664), ``ADEV_min`` and ``ADEV_data`` (the Allan-deviation minimum of the model
+and of the data, as vendors quote it), and ``K``, ``Q``, ``R`` when the model has the term,
+each with a two-sided interval by the delta method (``ADEV_data``: the WV's own interval).
+The table of keys, intervals and units: docs/methods.md, "The IEEE quantities of a fit"; the
+user's view: docs/ieee.md.
 """
 
 from __future__ import annotations

@@ -1,54 +1,15 @@
 """From a fitted GMWM model to the noise model a navigation filter assumes: projection,
 over-bound and the uncertainty of every exported number (:func:`project`).
 
-API::
-
-    project(fit, consumer, *, fs_filter=None, horizon_s=None, band=None, confidence=None,
-            bound=True, channel="", unit=None, ci="asymptotic", level=0.95) -> Projection
-
-``consumer`` is a consumer model (``"WN+RW"``: white noise + bias random walk; ``"WN+GM"``:
-white noise + first-order Gauss-Markov bias; ``"WN"``: white noise only) or a format name of
-:data:`FORMAT_CONSUMERS`. :class:`Projection` holds per parameter (``N`` [u/sqrt(Hz)],
-``K`` [u/s/sqrt(Hz)], ``sigma_b`` [u], ``T_c`` [s], SI when the unit is known) the exported
-value, the plain conversion, the factor between them, the binding scale and what it bounds,
-and the 95 % interval; :attr:`Projection.per_sample` gives the same numbers per filter step.
-
-**The rule** (one rule for every filter format, the CLI and the app):
-
-* an AR1/GM whose correlation time is shorter than the filter's step ``1/fs_filter`` is white
-  noise: its white-noise equivalent ``sigma2_gm (1 + phi) / (1 - phi)`` (per log sample, its
-  spectrum at DC) joins WN; QN joins WN as the white noise with its WV at the filter's first
-  scale (``3 q2 / m``, m log samples per filter step; above QN's WV at every longer scale);
-* slower AR1/GM terms, RW and drift form the consumer's bias: a random walk (``WN+RW``) whose
-  PSD ``K^2 = sum 2 beta sigma2_gm + gamma2 fs`` bounds each GM's PSD (drift: the RW with its WV
-  at the horizon), or a Gauss-Markov bias (``WN+GM``) with the most persistent slow term's
-  correlation time and the summed driving noise; ``WN`` consumers (``sensor_msgs/Imu``) take
-  only the white part (the bias belongs to the estimator's states);
-* a term the consumer needs positive that comes out 0 is set with a warning (never a silent 0),
-  or refused with the reason when nothing in the fit can set it.
-
-That is the **plain conversion**. **The bound** (``bound=True``, the filter formats' default)
-then chooses the consumer's parameters so that its WV (Haar, docs/conventions.md) is at least the
-fitted model's, or its upper ``confidence`` limit (eta3: ``eta / chi2_{(1-c)/2}(eta)`` times
-the fitted WV), at every scale ``tau`` of ``band`` (default from two filter steps to the
-horizon, default the log length), with the least inflation: the least geometric-mean ratio
-consumer WV / target over the band's scales (:mod:`engine.formats.bound`: the integral over
-log-scale of the log excess, minimised exactly at a vertex of the feasible set); a
-Gauss-Markov bias adds a 1-D search over ``T_c``. :attr:`Projection.inflation` reports that
-geometric mean and the largest ratio over the band.
-
-**Reported factor and binding scale.** ``factor`` is ``value / plain``: the bounded value over
-the plain conversion of the rule. It is below 1 when the plain conversion over-bounds (a slow
-GM's random walk ``K^2 = 2 beta sigma2_gm`` bounds its PSD at every frequency, and its WV lies
-far above the GM's at scales beyond ``T_c``), above 1 when the bound needs more than the rule
-gives (a fast GM's white equivalent is below its WV near ``T_c``). At the optimum the bound is
-tight (consumer WV = target) at one or two scales; ``binding_tau_s`` is the tight scale where
-the parameter contributes the largest share of the consumer's WV (where lowering it alone
-breaks the bound first), and ``binds`` names the fitted term with the largest WV there.
-
-The 95 % intervals come from the asymptotic (sandwich) covariance of the fit's parameters
-(:func:`engine.inference.param_cov`) by the delta method on the log of each exported value,
-differentiating the whole projection (rule and bound) numerically.
+``project(fit, consumer, ...)`` maps a fit onto a consumer model (``"WN+RW"``, ``"WN+GM"``,
+``"WN"`` or a format name of :data:`FORMAT_CONSUMERS`) by one rule: an AR1/GM faster than the
+filter's step joins the white noise, slower terms, RW and drift form the consumer's bias. With
+``bound=True`` (the filter formats' default) the consumer's parameters are then chosen so that
+its WV covers the fitted model's at every scale of the band with the least inflation
+(:mod:`engine.formats.bound`). :class:`Projection` holds per exported parameter its value, the
+plain conversion, the factor between them, the binding scale and a delta-method interval. The
+rule, the bound, the factor and the intervals in detail: docs/methods.md, "The projection onto
+a filter's noise model"; the user's view and the filter tests: docs/fit-to-filter.md.
 """
 
 from __future__ import annotations
@@ -762,7 +723,9 @@ def _intervals(
                 m = _with_u(fit.model, free, uu)
             except ValueError:
                 return {}
-            sol = solve(m, fs, fs_f, cons, tau, n, confidence, tau_h, bound, floor, tc)
+            sol = solve(
+                m, fs, fs_f, cons, tau, n, confidence, tau_h, bound, floor, tc, vals.get("T_c")
+            )
             v = _values(sol, cons, fs, f_si)
             logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
         grad[:, k] = (np.array(logs[0]) - np.array(logs[1])) / (2 * h)
@@ -772,7 +735,9 @@ def _intervals(
         if not np.all(np.isfinite(grad[i])):
             continue
         se = math.sqrt(max(float(grad[i] @ cov @ grad[i]), 0.0))
-        if not se > 0:  # set by the empirical WV (the data bound), not by the fit: no interval
+        # set by the empirical WV (the data bound), not by the fit: no interval (a relative
+        # standard error below 1e-9 is the rounding of the vertex arithmetic, not the fit's)
+        if not se > 1e-9:
             continue
         out[nm] = (vals[nm] * math.exp(-z * se), vals[nm] * math.exp(z * se))
     return out

@@ -6,7 +6,7 @@ entries, a PX4 ``.params`` dump, an ArduPilot ``.param``).
 :func:`read_filter_noise` returns a :class:`FilterNoise`: per sensor kind and axis the
 consumer's parameters in SI (``N`` [u/sqrt(Hz)], ``K`` [u/s/sqrt(Hz)], or ``sigma_b`` [u] and
 ``T_c`` [s] of a Gauss-Markov bias), converted back with the same conventions the writers use
-(README, "Export formats"): per-sample values (VINS, gz-sim, ``sensor_msgs/Imu``) are divided
+(docs/fit-to-filter.md): per-sample values (VINS, gz-sim, ``sensor_msgs/Imu``) are divided
 by ``sqrt(rate)``, per-step values (PX4, ArduPilot) by ``sqrt(filter rate)``. The rate is the
 file's own when it states one (a rate key, ``EKF2_PREDICT_US``, our header's ``consumer
 rate``), else the log's (VINS, gz-sim, ROS files written by hand: the IMU rate is the log's),

@@ -382,7 +382,7 @@ def export(
         report), ``"csv"`` (WV and implied curves), ``"datasheet"`` (readable datasheet
         table), ``"datasheet-csv"``, and the filter formats ``"openvins"``, ``"basalt"``,
         ``"orbslam3"``, ``"vins"``, ``"px4"``, ``"ardupilot"``, ``"matlab"``, ``"gazebo"``,
-        ``"kf-gins"``, ``"ros-imu"`` (README, "Export formats").
+        ``"kf-gins"``, ``"ros-imu"`` (docs/fit-to-filter.md, "Export formats").
     intervals, log, units, source, rostopic, allow_partial
         Passed to the format's writer (parameter intervals per channel, the log for the JSON
         report, signal unit per channel, source name (a str or a path), Kalibr topic, partial

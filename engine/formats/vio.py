@@ -3,32 +3,11 @@ ORB-SLAM3 settings and VINS-Mono/Fusion config keys.
 
 OpenVINS, Basalt and ORB-SLAM3 take continuous-time densities in SI: the white-noise density
 ``N = sqrt(sigma2 / fs)`` and the random-walk density ``K = sqrt(gamma2 fs)`` of
-:mod:`engine.units` (docs/conventions.md, "Units and datasheet conversions"), as gathered by
-:func:`~engine.formats.noise.imu_noise`. Where a format takes one number per sensor it gets the
-conservative choice (max over axes); Basalt takes one per axis.
-
-Sources of the keys' meaning:
-
-* OpenVINS: ``config/euroc_mav/kalibr_imu_chain.yaml`` of rpng/open_vins (``%YAML:1.0``,
-  ``imu0:`` with ``T_i_b``, the Kalibr densities with units
-  ``[ rad / s / sqrt(Hz) ]`` ..., ``rostopic``, ``time_offset``, ``update_rate``,
-  ``model: "kalibr"``, identity ``Tw``, ``R_IMUtoGYRO``, ``Ta``, ``R_IMUtoACC`` and a zero
-  gravity sensitivity ``Tg``);
-* Basalt: ``data/euroc_ds_calib.json`` of VladyslavUsenko/basalt (``value0`` with
-  ``imu_update_rate`` and per-axis ``accel_noise_std``, ``gyro_noise_std``,
-  ``accel_bias_std``, ``gyro_bias_std``; ``calibration.hpp`` turns them into discrete-time
-  values by ``x sqrt(imu_update_rate)``, so they are continuous-time densities);
-* ORB-SLAM3: ``Examples/Monocular-Inertial/EuRoC.yaml`` (``IMU.NoiseGyro: 1.7e-4``,
-  ``IMU.NoiseAcc: 2.0e-3``, ``IMU.GyroWalk: 1.9393e-05``, ``IMU.AccWalk: 3.0e-03``,
-  ``IMU.Frequency: 200.0``: the Kalibr EuRoC densities; ``ImuTypes.cc`` multiplies them by
-  ``sqrt(freq)``);
-* VINS-Mono/Fusion: ``config/euroc/euroc_mono_imu_config.yaml`` (``acc_n``, ``gyr_n``,
-  ``acc_w``, ``gyr_w``). ``integration_base.h`` puts ``ACC_N^2`` and ``GYR_N^2`` into the
-  per-sample measurement-noise covariance and ``ACC_W^2 dt^2``/``GYR_W^2 dt^2`` into the bias
-  increment of one step: per-sample (discrete) standard deviations at the IMU rate. So
-  ``acc_n = N sqrt(fs)`` (the std of white noise of density N sampled at fs) and
-  ``acc_w = K sqrt(fs)`` (a random walk of density K grows by ``K sqrt(dt)`` per step,
-  ``= acc_w dt``): about 10x the Kalibr densities at 100 Hz.
+:mod:`engine.units`, as gathered by :func:`~engine.formats.noise.imu_noise`; one number per
+sensor gets the max over axes, Basalt one per axis. VINS-Mono/Fusion take per-sample standard
+deviations at the IMU rate (``acc_n = N sqrt(fs)``, ``acc_w = K sqrt(fs)``). The sources of
+each key's meaning (the projects' own example files and code): docs/methods.md,
+"Visual-inertial formats"; every format's keys and units: docs/fit-to-filter.md.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ unit ``u``, ``tau`` in samples:
 * bias instability B: **not a GMWM process**. It is drawn as its Allan-deviation floor, the
   constant ``AVAR = (BI_FACTOR B)^2`` with ``BI_FACTOR = 0.664`` (IEEE Std 952, flicker
   noise), i.e. the constant WV ``(0.664 B)^2 / 2`` at every scale (``nu2_j = AVAR / 2``), as
-  in the README's NavChip case study. Flicker noise reaches that floor only at averaging
+  in docs/case-studies.md (NavChip). Flicker noise reaches that floor only at averaging
   times well above its corner, and below it; the floor is therefore an upper bound of the
   flicker WV at short scales, where white noise dominates anyway. The verdict treats the
   floor like any other term: the datasheet WV is the sum of the four.

@@ -2,42 +2,13 @@
 
 The test is a test of the *model*, whatever the weights of the fit it is asked about: the model
 is refitted with efficient weights ``Omega = V^-1`` (V the model-implied covariance of the WV
-at the fit's estimate) on the levels whose WV is nearly Gaussian, and the minimised objective
-
-    T = min_theta (nu_hat - nu(theta))_K' (V_KK)^-1 (nu_hat - nu(theta))_K
-
-is compared with a chi-square with ``|K| - p`` degrees of freedom (``p`` the free parameters of
-that refit: a parameter on its boundary does not count).
-
-Why not the fit's own weights and every level (what the J-test did before)?
-
-* The chi-square holds only for the efficient weights: with the ci weights (the default of
-  :func:`engine.fit.fit_gmwm` and of model selection) the same quadratic form of the residuals
-  rejected the true QN+WN+RW+DR model in 46.5 % of logs at the 5 % level.
-* The coarsest levels have few equivalent degrees of freedom ``eta_j = M_j / 2^j`` (Percival
-  and Walden's eta3: 1 at the last level, 3 at the one before): their WV is far from Gaussian
-  (a chi-square with 1-3 degrees of freedom is skewed 1.6-2.8) and the asymptotic V there is
-  far off, so a quadratic form that weights them with ``V^-1`` has a chi-square reference only
-  in name. Measured (400 logs each, efficient weights, every level): 8.5 % rejections at 5 %
-  on QN+WN+RW+DR (N = 2^15) and 2.8 % on 2*GM+WN+RW (N = 2^15); without the levels with
-  ``eta_j < 4`` (:data:`ETA_MIN`, the last two at the default J): 5.0 % and 5.5 %
-  (``tests/benchmarks/bench_jtest.py``). Those levels carry one to three degrees of freedom of
-  evidence in any case, so the test loses little power by leaving them out.
-* V at the first-step estimate or at the truth made no difference once those levels are out
-  (within Monte Carlo error), so V is evaluated once, at the fit's estimate.
-
-V is :func:`engine.fit.wv_cov_model` at the fit's estimate: the covariance of the WV's own
-estimator (a robust WV's variance is 1.3-1.5 times the classical one's) with a drift's
-first-order share (up to 10^4 times the rest at the coarse levels of a log with a strong
-drift). Without them the test rejected the true model in 36-39 % of robust GM+WN logs and
-18 % of WN+RW+DR logs with a strong drift; ``docs/jtest.md`` has the Monte Carlo with them
-(``tests/benchmarks/jtest_mc.py``). A V without a chi-square reference (``v="data"``: the
-diagonal of the classical WV's variance, no covariance between levels) gives no p-value: the
-result says ``calibrated=False`` and why (``note``), and ``p_value`` is NaN (null in JSON).
-
-``method="bootstrap"`` compares the same statistic with its distribution over parametric-
-bootstrap replicates of the fitted model, each fitted with the fit's own weights and then
-tested the same way (no chi-square assumption; the same V for every replicate).
+of the WV's own estimator at the fit's estimate, with a drift's share) on the levels whose WV
+is nearly Gaussian (:data:`ETA_MIN`), and the minimised objective is compared with a
+chi-square with ``|K| - p`` degrees of freedom. A V without a chi-square reference gives no
+p-value (``calibrated=False`` and the reason in ``note``); ``method="bootstrap"`` compares the
+same statistic with parametric-bootstrap replicates. Why efficient weights and these levels,
+with the measured rejection rates: docs/methods.md, "The J-test"; the calibration Monte Carlo:
+docs/jtest.md.
 """
 
 from __future__ import annotations

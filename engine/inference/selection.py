@@ -2,40 +2,14 @@
 
 For a candidate model fitted by GMWM with weights Omega, the criterion estimates the expected
 distance between the model-implied WV and an independent new empirical WV:
-
-    WVIC = objective + optimism,   optimism = 2 tr(Omega Cov(nu_hat, nu(theta_hat))).
-
-* asymptotic optimism: with ``A = d nu / d theta`` and ``V = Cov(nu_hat)``,
-  ``Cov(nu_hat, nu(theta_hat)) = V Omega A (A' Omega A)^-1 A'`` (delta method), so
-  ``optimism = 2 tr(Omega A (A' Omega A)^-1 A' Omega V)``; parameters on a boundary do not
-  count (they are not free);
-* bootstrap optimism: ``2 tr(Omega C)`` with ``C`` the covariance of (nu_hat*, nu(theta_hat*))
-  over parametric-bootstrap replicates from the largest candidate.
-
-One V (from the largest candidate's fit, by default the analytic Gaussian one) serves all
-candidates, so every criterion is on the same scale.
-
-The J-test of every candidate is the calibrated one of :func:`engine.inference.j_test`
-(:func:`engine.inference.jtest.efficient_j`): the candidate refitted with ``Omega = V^-1`` on
-the levels with at least ``ETA_MIN`` equivalent degrees of freedom, whatever the ranking's
-weights, with the one V above.
-
-White noise in disguise: an AR1/GM whose correlation time is below one sample has the WV of
-white noise at every Haar scale, so a candidate with such a term (e.g. ``3*GM`` whose third GM
-is the white noise relabelled) is the same model in effect as its *WN twin*: the candidate with
-that term folded into WN (and a term fitted at zero variance dropped). It does not compete as
-a different model: it is ranked as its twin, immediately after it (the twin is fitted and added
-when it is not a candidate), and the table says so (``sub_sample``, ``twin``, ``as_twin``).
-The WVIC cannot tell them apart by itself: near ``phi = 0`` the implied WV hardly moves with
-the correlation time, so the asymptotic optimism counts the term's two parameters as about one
-and the disguised candidate wins by its extra freedom (``3*GM`` first on a 2*GM+WN+RW log).
-
-The exception is a term faster than one sample that is *not* white noise in effect: a sensor
-whose filter correlates neighbouring samples (the ADIS16405 gyros: lag-1 autocorrelation 0.17)
-is fitted far better with it than with WN (objective 10.7 against 938). The candidate then keeps
-its own rank when the distance test of the fold, ``J(twin) - J(candidate)`` (both efficient J
-statistics with the one V) against ``chi2(df_twin - df_candidate)``, rejects the twin at
-:data:`DISGUISE_LEVEL` (``twin_p``); the table still flags the term.
+``WVIC = objective + optimism``, ``optimism = 2 tr(Omega Cov(nu_hat, nu(theta_hat)))``,
+asymptotic (delta method) or by parametric bootstrap, with one V for all candidates so that
+every criterion is on the same scale. Each candidate's J-test is the calibrated one of
+:func:`engine.inference.j_test`. A candidate whose AR1/GM is white noise in disguise (faster
+than one sample) is ranked as its *WN twin* unless the distance test of the fold rejects the
+twin at :data:`DISGUISE_LEVEL`. The formulas and the twin rule: docs/methods.md, "Model
+selection by the WVIC"; the user's view and the Monte Carlo: docs/selection.md,
+docs/inference.md.
 
 Reference: Guerrier & Molinari, "Wavelet variance based model selection" (WVIC), and the GMWM
 model-selection work of the SMAC group.
@@ -81,7 +55,7 @@ __all__ = [
 #: model without such a term the top-ranked structure must not carry one).
 DISGUISE_LEVEL = 1e-3
 
-#: What the J column of a ranking is (the table's last line; the app and README say the same).
+#: What the J column of a ranking is (the table's last line; the app and docs/inference.md agree).
 JTEST_NOTE = (
     "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V of the WV's "
     "own estimator, classical or robust, with a drift's share, from the largest candidate, on "

@@ -12,6 +12,8 @@
   :mod:`engine.io.segments`: the still segments of a flight log.
 * :mod:`engine.io.save`: :func:`save_log`.
 * :mod:`engine.io.timecheck`: gaps, duplicates and jitter of time stamps.
+* :mod:`engine.io.qualify`: is the log fit to calibrate from (warm-up, shocks, motion,
+  saturation, quantisation, lines, slow trend, timing), checked before every fit.
 
 Numerics (:mod:`engine.wv`, :mod:`engine.models`, the fit) never import this package.
 """
@@ -21,6 +23,7 @@ from __future__ import annotations
 from .load import load_log, log_of
 from .log import ImuLog, LoadError, pick_channel
 from .npy import npy_sidecar_path, read_npy_sidecar, write_npy_sidecar
+from .qualify import Finding, Qualification, drop_warmup, qualify_log, qualify_signal
 from .rosbag import IMU_CHANNELS, ImuBag, imu_topics, mcap_profile, read_imu_bag, write_imu_bag
 from .save import save_log
 from .timecheck import GAP_FACTOR, TimeEvent, TimeReport, as_seconds, check_time, segment_fs
@@ -47,4 +50,9 @@ __all__ = [
     "segment_fs",
     "as_seconds",
     "GAP_FACTOR",
+    "Finding",
+    "Qualification",
+    "qualify_log",
+    "qualify_signal",
+    "drop_warmup",
 ]

@@ -1,36 +1,14 @@
 """The inner solve of the MGMWM: least squares over non-negative orthants and PSD cones.
 
-For fixed AR1/GM parameters the implied moments are linear in the coefficients ``c``:
-variances ``h >= 0`` of independent processes and the entries of the covariance matrices
-``Sigma`` (g x g, positive semi-definite) of shared ones. :class:`ConeLSQ` solves
-
-    min ||b - A c||^2  subject to  c_i >= lower_i (scalar columns),  Sigma(c) PSD (cones),
-
-a convex problem, in three stages (the multivariate paper's eq. 8 with the constraint of its
-Condition 2):
-
-1. relaxation: drop ``Sigma >= 0`` but keep ``diag(Sigma) >= 0``; with diagonal weights the
-   problem separates by row group (moment pair): a non-negative least squares per channel
-   (its WV) and an ordinary least squares per pair of channels (its WCCV). If every
-   ``Sigma`` of that solution is PSD it solves the constrained problem exactly (a
-   relaxation's minimiser that is feasible is optimal);
-2. otherwise the minimiser has a singular covariance (on the boundary of the cone). It is
-   found on its *face* (which variances are 0, the rank r of every covariance): with
-   ``Sigma = D F F' D`` (F of shape g x r, D a fixed diagonal scaling) the problem on the
-   face is regular and Newton's method converges in a few steps. Candidate faces: every
-   non-PSD covariance at 0 (a shared process absent from the data: exact, linear), the face
-   of the previous solve, and the faces met along a log-barrier interior-point path.
-   A candidate is accepted only with a certificate of optimality (the KKT conditions: the
-   gradient with respect to each covariance is PSD and annihilates it; the problem is
-   convex, so they are sufficient). Without a certificate, the end of the interior-point
-   path (duality gap below 1e-12 of the objective) is used. (A square factor also reaches
-   the minimum, since every local minimum of the factored problem is a global one, Burer &
-   Monteiro 2005, but its Jacobian is singular at a singular minimiser: hundreds of
-   evaluations per inner solve.)
-
-The solver knows nothing of channels or processes: columns are ``(block, a, b, group)``
-(entry ``[a, b]`` of block ``block``, row group ``group``), and the blocks listed in ``dims``
-are PSD cones.
+For fixed AR1/GM parameters the implied moments are linear in the coefficients ``c``
+(variances of independent processes, entries of the covariance matrices of shared ones), and
+:class:`ConeLSQ` solves ``min ||b - A c||^2`` subject to ``c_i >= lower_i`` and every shared
+covariance positive semi-definite: the relaxed problem first, then, when a covariance is not
+PSD, Newton's method on the face of the cone where the minimum lies, accepted with a KKT
+certificate, with an interior-point path as the fallback. The solver knows nothing of channels
+or processes: columns are ``(block, a, b, group)`` (entry ``[a, b]`` of block ``block``, row
+group ``group``), and the blocks listed in ``dims`` are PSD cones. The three stages in detail:
+docs/methods.md, "The MGMWM's inner solve".
 """
 
 from __future__ import annotations

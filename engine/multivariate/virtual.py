@@ -1,59 +1,16 @@
 """The optimal virtual sensor: the weighted mean of k redundant sensors with the smallest WV.
 
+k channels measure the same quantity (one axis of k IMUs); the virtual sensor is
+``v_t = sum_i w_i x_{i,t}`` with ``sum_i w_i = 1``. Its WV at level j is ``w' N(j) w``, with
+``N(j)`` the k x k matrix of WVs and cross-covariances (the fitted MGMWM's or the data's), so
+the optimal weights are ``N^-1 1 / (1' N^-1 1)`` for one scale or a band of levels; the
+virtual sensor's own latent model (:func:`virtual_model`) is exact for the WV, and it carries
+a sampling interval and a delta-method confidence interval. The formulas, the assumptions and
+the two intervals: docs/methods.md, "The optimal virtual sensor"; the user's view, with the
+shrinkage of estimated weights and the real-data case: docs/multichannel.md.
+
 Use of the MGMWM named by the multivariate paper (after Zhang et al., PLANS 2018, and
-Vaccaro & Zaki, Sensors 2017: a reduced-drift virtual gyroscope from an array of low-cost
-gyroscopes). k channels measure the same quantity (one axis of k IMUs); the virtual sensor is
-``v_t = sum_i w_i x_{i,t}`` with ``sum_i w_i = 1`` (so the signal itself is kept).
-
-Formula. The Haar filter is linear, so the wavelet coefficients of ``v`` are ``w' W_{j,t}``
-and its WV at level j is ``nu_v(j) = w' N(j) w``, with ``N(j)`` the k x k matrix of wavelet
-variances (diagonal) and cross-covariances (off-diagonal) at that level: the fitted model's
-(``MGMWMResult.implied``) or the data's (``WVMatrix.values``; for the data the identity is
-exact: the empirical WV of the combined series is ``w' N_hat(j) w``). Minimising
-``w' N w`` subject to ``1' w = 1`` (a Lagrange multiplier) gives
-
-    w = N^-1 1 / (1' N^-1 1),        min_w w' N w = 1 / (1' N^-1 1),
-
-with ``N = N(j)`` for one scale, or for a band of levels ``N = sum_j N(j) / a_j``:
-``a_j = 1`` (``relative=False``: the plain sum of WVs, dominated by the band's largest
-WV) or, by default, ``a_j = 1' N(j) 1 / k^2``, the plain average's WV at that level (each level
-counts by its ratio to the average, so the objective is the mean over the band of
-``nu_v(j) / nu_avg(j)``). Weights may be negative (a negatively correlated or a much noisier
-sensor). Independent sensors give inverse-WV weights; equal independent sensors give
-``1/k`` and ``nu(j)/k``; two sensors with WVs a, b and cross-covariance c give
-``w_1 = (b - c) / (a + b - 2c)`` and ``min = (ab - c^2) / (a + b - 2c)``.
-
-Assumptions: the k channels measure the same quantity with the same scale factor and
-alignment (their signals cancel out of the differences); the noise is the fitted latent
-model (processes independent of each other, shared WN/RW/AR1/GM with a k x k covariance); the
-weights are constant. The implied model of ``v`` (:func:`virtual_model`) is exact for the
-WV: a shared process contributes ``w' Sigma w`` (WN: white-noise variance; RW: gamma2; AR1 /
-GM with their common phi/beta: the innovation / stationary variance of one AR1/GM), a
-channel's own process ``w_i^2`` times its variance (QN: ``q2``; WN, RW likewise); processes
-of one kind (and, for AR1/GM, one phi) are summed into one term. An AR1/GM of one phi is
-again an AR1/GM; different phis stay separate terms (a sum of AR1s), the most persistent
-first. A drift (DR) is per channel in the MultiModel, whose WCCV of drifts is 0 (their
-signs are not identified by a WV), so the virtual drift is ``omega^2 = sum w_i^2 omega_i^2``,
-the value ``w' N w`` implies.
-
-Two intervals, both put in chi-square form as Percival's eta3 (``eta = 2 nu^2 / var``
-equivalent degrees of freedom):
-
-* sampling (``VirtualSensor.ci_low/ci_high``): where the empirical WV of the N-sample
-  combined series falls with probability ``1 - alpha`` if the fitted model is right,
-  ``[nu chi2_{a/2}(eta) / eta, nu chi2_{1-a/2}(eta) / eta]``. Its variance is
-  ``c_j' V_j c_j``, with ``V`` the model-implied Gaussian covariance of the stacked WV/WCCV
-  moments (:func:`engine.multivariate.moment_covariance`, Isserlis) and
-  ``c_pq = w_p w_q (2 - [p = q])``; it equals the univariate model-implied variance of the WV
-  of the virtual model (:func:`engine.inference.wv_cov_model`), which is what is computed.
-* confidence (``VirtualSensor.conf_low/conf_high``): the delta method. The MGMWM's
-  parameter covariance is the sandwich ``(A' W A)^-1 A' W V W A (A' W A)^-1`` (the one
-  :meth:`MGMWMResult.conf_int` uses, computed here with the analytic derivatives
-  :func:`implied_jacobian`: covariance entries and variances, and a central difference for
-  phi), and ``nu_v(j) = c_j' nu_j(theta)`` gives ``Var = (c_j' A_j) Cov (c_j' A_j)'``;
-  interval ``[eta nu / chi2_{1-a/2}(eta), eta nu / chi2_{a/2}(eta)]``. The weights are
-  taken as given (not re-estimated), and parameters on a boundary (a process with no
-  variance) are left out, so the interval is short where the fit put a process at zero.
+Vaccaro & Zaki, Sensors 2017).
 """
 
 from __future__ import annotations

@@ -37,6 +37,7 @@ import numpy as np
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
+from ..formats import misfit
 from ..io import ImuLog, log_of
 from ..models import DR, QN, RW, WN
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
@@ -146,10 +147,15 @@ class ChannelReport:
     warnings: list[str] = field(default_factory=list)
     check: Any = None
     timeline: Timeline | None = None
+    #: :func:`engine.formats.misfit` of the fit: one line when model and data disagree
+    #: (``""`` when they agree, or without a fit); the page shows it beside the fit and the
+    #: export, whatever the export's format.
+    misfit: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the fit (as ``gmwm fit --json``), intervals, datasheet rows, J-test,
-        Allan deviation, slope guides, warnings, notes and the datasheet check."""
+        Allan deviation, slope guides, warnings, the misfit line, notes and the datasheet
+        check."""
         d: dict[str, Any] = {"channel": self.name, "unit": self.unit, "error": self.error}
         if self.fit is not None:
             d["fit"] = self.fit.to_dict()
@@ -163,6 +169,7 @@ class ChannelReport:
             d["psd"] = {"f": self.spectrum.f, "welch": self.spectrum.welch}
             d["psd"].update(model=self.spectrum.model, nperseg=self.spectrum.nperseg)
         d["warnings"], d["notes"] = list(self.warnings), dict(self.notes)
+        d["misfit"] = self.misfit
         d["datasheet_check"] = self.check.to_dict() if self.check is not None else None
         return json_ready(d)
 
@@ -175,7 +182,8 @@ class CalibrationReport:
     ----------
     log : dict
         File (as given), name, size, sha256, format, channels, fs and its source, samples,
-        duration, units, time-column report, notes, sensor and description.
+        duration, units, time-column report, notes, sensor and description, and the log
+        check before the fit (``qualification``, :meth:`engine.io.Qualification.to_dict`).
     channels : dict of str to ChannelReport
     export : dict
         ``format`` and ``text`` (the export file), or ``error``; empty without a format.
@@ -446,6 +454,7 @@ def _channel(
         warn,
         check,
         timeline(log[name], log.fs, log.segments) if log.segments else None,
+        misfit(fit, name),
     )
 
 
@@ -464,6 +473,7 @@ def gather_report(
     load_options: dict[str, Any] | None = None,
     command_line: str = "",
     fits: Mapping[str, GMWMResult] | None = None,
+    drop_warmup: bool = False,
 ) -> CalibrationReport:
     """Load a log, fit every channel and compute everything a calibration report shows.
 
@@ -495,6 +505,8 @@ def gather_report(
         Fits already made of channels of ``source`` (an app session's, a batch's): reported
         as they are, nothing is refitted; ``model``, ``select``, ``channels``, ``levels`` and
         ``weights`` must then be left out (they were the fits').
+    drop_warmup : bool
+        Drop the warm-up the log check finds (:func:`engine.io.drop_warmup`) before fitting.
 
     Returns
     -------
@@ -511,6 +523,8 @@ def gather_report(
     from ..batch import fit_log
     from ..formats import export
     from ..inference.datasheet_check import DatasheetSpec, parse_datasheet
+    from ..io import drop_warmup as cut_warmup
+    from ..io import qualify_log
 
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
@@ -537,6 +551,10 @@ def gather_report(
             ds, ds_text = parse_datasheet(str(datasheet), source="datasheet"), str(datasheet)
     log = log_of(source, fs=fs, load_options=load_options, caller="gather_report")
     src = log.source or str(source)
+    if drop_warmup and fits is None:
+        log = cut_warmup(
+            log, qualify_log(log, list(channels) if channels else None).suggested_start
+        )
     if fits is not None:
         unknown = [ch for ch in fits if ch not in log.names]
         if unknown:
@@ -548,12 +566,14 @@ def gather_report(
         _warnings.simplefilter("always")
         if fits is not None:
             fitted, channel_errors = dict(fits), {}
+            check = qualify_log(log, list(fitted)).to_dict()
             weights = ", ".join(dict.fromkeys(f.weights for f in fitted.values()))
         else:
             lf = fit_log(
                 log, model=model, select=select, channels=channels, levels=levels, weights=weights
             )
             fitted, channel_errors = lf.fits, lf.channel_errors
+            check = lf.qualification
         chans: dict[str, ChannelReport] = {}
         for ch in list(fitted) + list(channel_errors):
             if ch in fitted:
@@ -591,4 +611,6 @@ def gather_report(
         "command_line": command_line,
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
-    return CalibrationReport(_log_info(log, src), chans, exp, ds_text, provenance, log_warnings)
+    info = _log_info(log, src)
+    info["qualification"] = check  # the log check before the fit (engine.io.qualify)
+    return CalibrationReport(info, chans, exp, ds_text, provenance, log_warnings)

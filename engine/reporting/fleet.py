@@ -1,34 +1,13 @@
 """Fleet acceptance: :func:`gather_fleet` fits a batch of logs and computes what a fleet
 report shows (pure numerics; :func:`engine.reporting.render.render_fleet_html` draws it).
 
-Per unit (log), in the worker that fits it (:func:`engine._parallel.parallel_map`: in process,
-local processes or any ``concurrent.futures.Executor``, like :func:`engine.batch.fit_batch`):
-the log is loaded once, fitted by :func:`engine.batch.fit_log` (the batch's own numbers) and
-its calibration report gathered from those fits (:func:`~.data.gather_report` with ``fits=``,
-nothing refitted). The caller then adds:
-
-* the noise terms of every unit, per channel, in datasheet units with their intervals
-  (:func:`noise_terms`: ARW/VRW, RRW/AccRW, the bias-instability floor B, Q, R, the GM
-  correlation times and standard deviations);
-* the verdicts: against limits (``--spec arw<=0.3 deg/sqrt(h)``, :func:`parse_limits`) each
-  limit is checked on the fit's IEEE quantity (:attr:`engine.fit.GMWMResult.ieee`: N with the
-  white noise an AR1/GM faster than one sample carries, B or the ADEV minimum as the limit
-  declares it, K, Q), never on a term that the model does not have: the quantity passes when
-  its interval's upper end is within the limit, fails when its estimate is over it, and is
-  ``marginal`` between; a unit whose model cannot answer (no such quantity, or an estimate
-  on a bound without an interval, or a floor outside the analysed scales above the limit) is
-  ``cannot tell``, never ``pass``; against a datasheet (:func:`engine.check_datasheet`)
-  a channel fails when the datasheet model is below the empirical interval at more scales
-  than a correct datasheet would give with probability ``level`` (binomial, each scale below
-  with probability ``(1 - level) / 2``), is ``marginal`` with fewer, passes with none; a
-  unit's verdict is its worst;
-* the robust z-scores of every term across the units, ``z = (x - median) / (1.4826 MAD)``
-  (:func:`robust_z`), outliers where ``|z| > 3.5`` (Iglewicz and Hoaglin) *and* the value
-  differs from the median by more than :data:`OUTLIER_REL` of it (a 0.6 % difference is no
-  outlier however tight the fleet); terms of an AR1/GM faster than one sample (white noise
-  in disguise: their correlation time means nothing) get no z-score.
-
-Units whose log cannot be read or fitted are in the report with their reason, never dropped.
+Per unit, in the worker that fits it, the log is loaded once, fitted by
+:func:`engine.batch.fit_log` and its calibration report gathered from those fits; the caller
+then adds the noise terms of every unit in datasheet units (:func:`noise_terms`), the verdicts
+against limits (:func:`parse_limits`, checked on the fit's IEEE quantities) or a datasheet,
+and the robust z-scores of every term across the units (:func:`robust_z`). Units whose log
+cannot be read or fitted are in the report with their reason, never dropped. The verdict and
+outlier rules: docs/methods.md, "Fleet acceptance"; the user's view: docs/reports.md.
 """
 
 from __future__ import annotations

@@ -1,34 +1,12 @@
 """Monte Carlo study of the slope method, ARMAV and GMWM (the GMWM paper, Fig. 1-2, Table I).
 
-For each sensor of Table I (a STIM-300 gyroscope and accelerometer as GMWM estimated them),
-each log length T and each replicate: simulate the true model at 250 Hz, compute the Haar WV
-(and from it the octave Allan variance, ``AVAR = 2 nu2``), and estimate the model by
-
-* ``GMWM``: :func:`engine.fit_gmwm`, default weights ``diag(1/(ci_high - ci_low)^2)``;
-* ``GMWM-efficient``: ``fit_gmwm(..., weights="efficient")``, two-step efficient weights
-  ``Omega = V^-1`` with V the WV covariance implied by the first (``ci``) fit's model
-  (the GMWM paper, Corollary 1);
-* ``ARMAV``: :func:`engine.fit.gmwfm.fit_armav` (``f = log10``, log-space interval weights);
-  optionally ``ARMAV-unweighted`` (``f = log10``, identity weights);
-* ``AVSM``: :func:`engine.teaching.avsm` on the regions a typical user picks
-  (:func:`typical_regions`);
-* optionally ``AVSM-auto``: :func:`engine.teaching.avsm_auto` (WN and RW only).
-
-Bias, SD and RMSE are reported per parameter and method in Table I's datasheet units. Every
-replicate draws from its own seed ``SeedSequence([seed, sensor, T, replicate])``, so the
-results do not depend on the number of worker processes.
-
-Table I (true values; parameters converted to the engine's per-sample parameters with
-:func:`from_datasheet`):
-
-=============  =========================  ===========================
-process        gyroscope (deg/s)          accelerometer (m/s^2)
-=============  =========================  ===========================
-QN (Q)         --                         1.79e-6 m/s
-WN (sigma)     1.57e-1 deg/sqrt(h)        4.70e-2 m/s/sqrt(h)
-RW (gamma)     1.34 deg/h/sqrt(h)         4.35e1 m/s/h/sqrt(h)
-DR (omega)     --                         4.14e1 m/s/h^2
-=============  =========================  ===========================
+For each sensor of Table I (a STIM-300 gyroscope and accelerometer), each log length and each
+replicate: simulate the true model at 250 Hz, compute the Haar WV and estimate the model by
+GMWM (ci and efficient weights), ARMAV and the slope method (hand-picked regions, optionally
+the ROS tools' automatic read-off); report bias, SD and RMSE per parameter and method in
+Table I's datasheet units. Every replicate draws from its own seed, so the results do not
+depend on the number of workers. The methods and Table I's values: docs/methods.md, "The slope
+method study"; the 500-replicate results: docs/benchmarks.md.
 """
 
 from __future__ import annotations

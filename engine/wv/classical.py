@@ -427,7 +427,7 @@ def wavelet_variance(
         classical WV's target ``E[W^2]`` under Gaussian noise, with or without a drift, whose
         coefficients have mean ``omega tau / 4``). On quantized logs, where many fine-level
         coefficients are tied, the robust WV is not the classical one even without outliers:
-        the coefficients are not Gaussian there (see README, "Robust WV").
+        the coefficients are not Gaussian there (see docs/calibrate.md, "Robust WV").
     eff : float
         Gaussian efficiency of the robust estimator, in (0, 0.99); 0.6 by default.
     alpha : float

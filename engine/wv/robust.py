@@ -1,50 +1,13 @@
 """Robust Haar wavelet variance: Tukey biweight M-estimates of location and scale per level.
 
-Definition (per level j, coefficients ``W_{j,t}``, biweight ``psi(r) = r (1 - r^2/c^2)^2`` on
-``|r| <= c``, 0 outside; ``c`` from :func:`biweight_constant`, so that the
-Gaussian efficiency of the scale estimate is ``eff``): the location ``mu_j`` and scale ``s_j``
-solve jointly
-
-    mean_t psi((W_{j,t} - mu) / s)   = 0                  (location, the same c)
-    mean_t psi((W_{j,t} - mu) / s)^2 = E[psi(Z)^2]        (scale, Z ~ N(0, 1))
-
-and the robust WV is ``nu_j = s_j^2 + mu_j^2``. Under Gaussian coefficients
-``W ~ N(mu, s^2)`` both equations hold at the true ``(mu, s)``, so ``nu_j`` is consistent for
-``E[W^2]``, the classical WV's target, with or without a mean in the coefficients (a drift
-``omega t`` gives ``mu_j = omega tau_j / 4``, i.e. ``mu_j^2 = omega^2 tau_j^2 / 16``, the DR
-term of the model-implied WV). The older definition (scale about zero, as in the R ``wv``
-package) is :func:`robust_scale_biweight`; it is biased when ``mu_j != 0``.
-
-The root is the one Newton's method reaches from the median/MAD start, accepted only if it is
-the upper (consistent) scale root, i.e. the scale equation decreases in ``s`` there; otherwise
-(and when the scale equation has no root: more than about 60 % of the coefficients tied, far
-beyond the breakdown point) the estimate comes from alternating the two one-dimensional
-problems (upper scale root by bracketing + Brent; location by reweighting), and with no scale
-root the scale is the maximiser of the left side of the scale equation (the least-squares
-solution of the equation, as before). One coefficient gives ``mu = W, s = 0``.
-
-Quantized logs: ties alone do not bias the estimate (white noise quantized with a step of
-1.5 sigma has 39 % of its level-1 coefficients exactly 0, and the estimator's limit is 0.998 of
-the classical WV), but coarse discreteness does: with a step of 2 sigma (52 % ties) the limit
-is 0.910 of it (tests/test_robust_wv.py computes both from the exact discrete law). Beyond
-about 60 % ties the scale equation has no root (the fallback above). On the six ADIS16405 logs
-(steps 0.15-0.9 sigma of the sample differences) the robust/classical ratio is 0.86-1.14 at
-levels 1-2 and 0.90-1.14 at levels 3-9 (gyroscopes 0.98-1.02 at levels 3-9; gyro_z 1.03-1.14 at
-levels 1-2; the accelerometers 0.86-0.99 at levels 1-2, mostly from their heavier tails, kurtosis
-3.2-3.5, which is what the estimator is meant to discount); ``tests/benchmarks/robust_claims.py``
-computes these ranges. At levels with few coefficients per scale (``M_j / 2^j`` below about 10)
-robust and classical WV can differ by a factor of several on such logs.
-
-Speed (:func:`robust_wv`), with the same numbers as the direct computation to about 1e-13:
-per level a pilot ``(mu0, s0)`` from a strided subsample (65,536 coefficients); then one pass
-over the level's coefficients in cache-sized blocks keeps the power sums ``sum y^k``,
-``k = 0..10``, of ``y = (W - mu0) / s0`` over the core ``|y| <= L`` and the few band
-coefficients ``L < |y| <= U`` explicitly. Every sum the Newton iteration needs is a polynomial
-of degree <= 10 in ``r = (y - d) / rho`` (``d = (mu - mu0)/s0``, ``rho = s/s0``) over the set
-``|r| <= c``: exact from the power sums (binomial shift) for the core, which lies inside the
-set for every ``(d, rho)`` of the trust region, plus a direct sum over the band; coefficients
-beyond ``U`` are outside the set for every ``(d, rho)`` of the region. An iterate leaving the
-region redoes the pass around it, then falls back to the direct computation.
+Per level j the location ``mu_j`` and scale ``s_j`` of the wavelet coefficients solve the
+biweight equations jointly (constant ``c`` from :func:`biweight_constant`, so that the scale's
+Gaussian efficiency is ``eff``), and the robust WV is ``nu_j = s_j^2 + mu_j^2``: consistent for
+the classical WV's target under Gaussian coefficients, with or without a drift.
+:func:`robust_wv` computes it in one blocked pass per level from power sums, with the numbers of
+the direct computation. The definition, the root finding, quantised logs, the ADIS16405 ratios
+and the algorithm: docs/methods.md, "The robust wavelet variance"; the user's view:
+docs/calibrate.md.
 
 Reference: Guerrier, Molinari & Victoria-Feser (2014), robust WV.
 """

@@ -1,42 +1,11 @@
 """Wavelet variance of logs larger than memory: NPY and HDF5 streamed in blocks.
 
 :func:`wavelet_variance_stream` gives the classical Haar WV of
-:func:`engine.wv.wavelet_variance` (same numbers to about 1e-14 relative; the cumulative
-sum is bitwise the same up to the last digits of the mean) while holding only a few blocks in
-memory, whatever the length of the log.
-
-Approach (``S`` the cumulative sum of the de-meaned series, ``S_0 = 0``, ``m = 2^(j-1)``,
-block length ``B`` a power of two; see ``docs/conventions.md``, "The Haar wavelet variance"):
-
-1. **Mean pass.** One pass over the samples: block sums combined with ``math.fsum``, and a
-   NaN/Inf check.
-2. **Main pass.** ``W_{j,t} = (S_t - 2 S_{t-m} + S_{t-2m}) / 2^j`` for ``t = 2m .. N``. The
-   positions t are visited block by block; each block's ``S`` is the running sum carried from
-   the previous block, ``cumsum([S_a, x_a - mean, x_{a+1} - mean, ...])``, which repeats the
-   in-memory arithmetic exactly.
-
-   * *Small levels* (``2m <= B``): ``S_{t-m}`` and ``S_{t-2m}`` lie in the current or the
-     previous block, kept in a history buffer of ``2B + 1`` values (a two-block ring).
-   * *Large levels* (``m >= B``): the history they would need is ``2m`` values (for the top
-     level of a 1e8-sample log, 2^26 float64 = 512 MB), so it is not kept. Because ``m`` is
-     a multiple of ``B``, the windows ``S_{t-m}`` and ``S_{t-2m}`` of a block are exactly
-     earlier blocks of ``S``. A *lagged stream* per distinct offset (``B, 2B, 4B, ...,
-     2^J``; level j uses offsets ``m`` and ``2m``, so consecutive levels share one) re-reads
-     the file ``offset`` samples behind the main pass and rebuilds those blocks of ``S`` with
-     its own running sum, starting from ``S_0 = 0``: the same operations in the same order,
-     hence bitwise the same values as the main pass. (So no table of ``S`` at the block
-     boundaries is needed to start a window: a lagged stream never jumps, it trails.)
-
-Memory is O(B x number of streams): for a float64 log of 1e8 samples with the default
-``B = 2^19``, eight streams of about 8 MB, whatever N. The price is re-reading: the lagged
-stream at offset o reads ``N - o`` samples, about ``(1 + number of large levels) N`` in all
-(from the page cache when the file fits there). Paths are read with ordinary file reads into
-preallocated buffers, not a memory map, because mapped pages count as resident memory.
-
-Measured with ``tests/benchmarks/bench_stream.py`` (1e8 float64 samples in a .npy file, 26
-levels): peak resident memory 176 MB, of which 96 MB are the interpreter and the imports,
-against 1.6 GB for the in-memory WV; largest relative difference 1.8e-13; 47 s of CPU on a
-shared 2-CPU machine (the small levels, the same work as in memory, dominate).
+:func:`engine.wv.wavelet_variance` (same numbers to about 1e-14 relative) while holding only a
+few blocks in memory, whatever the length of the log: a mean pass, then a main pass over the
+cumulative sum with, for the large levels, lagged streams that re-read the file behind it.
+The algorithm, its memory and its measured cost: docs/methods.md, "Streaming the wavelet
+variance".
 
 Reference: Percival & Walden (2000), ch. 8 (MODWT Haar WV).
 """

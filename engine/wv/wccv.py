@@ -1,53 +1,15 @@
 """Haar MODWT wavelet cross-covariance (WCCV) and the k x k matrix of WV and WCCV.
 
-For two channels ``x``, ``y`` of length N and level ``j = 1..J`` (scale ``tau_j = 2^j``
-samples, ``m = 2^(j-1)``), with ``W^x_{j,t} = (S^x_t - 2 S^x_{t-m} + S^x_{t-2m}) / 2^j`` the
-boundary-free Haar MODWT coefficients (``S`` the cumulative sum of the de-meaned series, as
-for the WV), the unbiased lag-0 WCCV is
-
-    nu_xy_j = (1 / M_j) sum_t W^x_{j,t} W^y_{j,t},       M_j = N - 2^j + 1.
-
-It is the WV when ``x`` is ``y``. All pairs of k channels come from one cumulative sum per
-channel: ``sum_t D_t D_t'`` with ``D_t`` the k-vector of second differences of the cumulative
-sums, in cache-sized blocks of t with every level inside a block (O(N J k^2) flops, the
-k x k products done by BLAS).
-
-Interval (the multivariate paper, Theorem 1): ``sqrt(M_j) (nu_hat - nu)`` is asymptotically
-normal with variance ``sigma2_LR = sum_h gamma_Z(h)``, the long-run variance (2 pi times the
-spectral density at frequency 0) of the product series ``Z_t = W^x_{j,t} W^y_{j,t}``. It is
-estimated by a lag-window (Parzen-type) estimator, computed as *weighted overlapping batch
-means*: with ``Z~ = Z - nu_hat``, the staircase-triangular moving sums
-``T_i = sum_l g_l Z~_{i+l}`` (g = a box of ``b`` samples convolved with ``r`` unit impulses
-``s`` samples apart: weights 1, 2, .., r, .., 2, 1, each ``s`` samples wide, ``b = r s``) give
-
-    sigma2_LR_hat = mean_i(T_i^2) / (||g||^2 - (sum g)^2 / M_j),
-
-which equals ``sum_h w(h) gamma_hat(h)`` with the lag window ``w = (g * g) / ||g||^2`` (a
-discrete Parzen window when ``s = 1``; always non-negative, so the estimate is too). The
-``(sum g)^2 / M`` term removes the bias of subtracting the estimated mean (exact for iid Z).
-Choice: ``s = 2^(j-1)``, ``r = 8``, ``b = 4 * 2^j`` samples (window half-width ``2b``): the
-autocovariance of ``Z`` vanishes beyond ``2^j`` lags for WN/QN/RW inputs, and the window's
-relative bias is then below 1.5 % (2.3 % for b = 2^(j+1)); the moving sums are computed
-on bins of ``s`` coefficients, so the interval costs one more O(N) pass per level.
-At the top levels, where ``M_j < 128 * 2^(j-1)`` (fewer than 30 equivalent degrees of
-freedom), the lag-window estimate is too noisy and biased low (Monte Carlo coverage of 84 %
-at 74 bins), and a Gaussian equivalent-degrees-of-freedom approximation is used instead,
-the analogue of Percival's eta3 for the WV: ``Var(nu_xy) = (nu_xx nu_yy + nu_xy^2) / eta_j``,
-``eta_j = max(M_j / 2^j, 1)`` (Isserlis' formula with the coefficients' autocorrelations
-replaced by an equivalent bandwidth; by Cauchy-Schwarz it errs on the wide side when the
-two channels have different spectral shapes, e.g. independent channels).
-
-The WCCV interval is ``nu_hat -/+ t_{1-alpha/2}(df_j) sqrt(sigma2_LR_hat / M_j)``: a
-Student quantile that accounts for the noise of the estimated long-run variance, with
-Priestley's equivalent degrees of freedom of the lag-window estimate,
-``df_j = 2 M_j / sum_h w(h)^2 = 2 M_j / (1.0658 b)`` (``eta_j`` for the Gaussian EDF
-levels); at the low levels df is large and the interval is the normal one. In
-:func:`wv_matrix` the diagonal (the WV) keeps Percival's eta3 chi-square interval, so that
-it is identical to :func:`engine.wavelet_variance`.
+For two channels the unbiased lag-0 WCCV at level j is ``(1 / M_j) sum_t W^x_{j,t} W^y_{j,t}``
+over the boundary-free Haar coefficients (the WV when ``x`` is ``y``); all pairs of k channels
+come from one cumulative sum per channel, in cache-sized blocks. Its interval uses the
+long-run variance of the product series (a lag-window estimate, Student quantile), or a
+Gaussian equivalent-degrees-of-freedom approximation at the top levels; the diagonal of
+:func:`wv_matrix` keeps the WV's eta3 interval. The estimator and the interval's choices:
+docs/methods.md, "The wavelet cross-covariance"; the user's view: docs/multichannel.md.
 
 References: Whitcher, Guttorp & Percival (2000), J. Geophys. Res. 105(D11) (the WCCV);
-Xu, Guerrier, Molinari & Karemera, the multivariate paper, section III; Politis & Romano
-(1995) and Meketon & Schmeiser (1984) for (weighted) overlapping batch means.
+Xu, Guerrier, Molinari & Karemera, the multivariate paper, section III.
 """
 
 from __future__ import annotations

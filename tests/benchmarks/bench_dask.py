@@ -165,7 +165,7 @@ def main() -> None:
         f"\nscaling on paper: wall(N) = max(ceil(T / N) t, T o) + start-up, o = {1e3 * o:.2f} ms "
         "(the scheduler hands out one task at a time)"
     )
-    paper_t = 0.9  # s per replicate at T = 6.3e6 with five methods (README, the 500-rep study)
+    paper_t = 0.9  # s per replicate at T = 6.3e6 with five methods (docs/benchmarks.md)
     paper_tasks = 3000 * 2 * 2  # the GMWM paper: 3000 replicates, 2 sensors, 2 lengths
     print(f"  {'N':>5} {'study here':>11} {'batch here':>11} {'paper study':>12} {'speed-up':>9}")
     for nw in (1, 2, 4, 8, 16, 32, 64, 128, 256):

@@ -29,7 +29,7 @@ problem separates by moment pair, see ``engine/multivariate/_cone.py``), so the 
 that matters for the variances is the efficient column.
 
 Prints the per-parameter bias, SD and MSE, MSE ratios with Monte Carlo standard errors, a
-markdown table ready for the README, and the wall time; ``--out`` keeps study.json (every
+markdown table ready for docs/multichannel.md, and the wall time; ``--out`` keeps study.json (every
 estimate) and study.md.
 """
 

@@ -5,7 +5,7 @@ Run: ``python tests/benchmarks/bench_study.py [--reps R] [--seed S] [--n 2.5e6,6
 
 Prints the per-replicate cost of each step on one replicate of each sensor at the longest
 length (simulation, WV, each estimator), then runs the study with a progress bar on stderr
-and prints the bias / SD / RMSE table, the markdown table for the README and the wall time;
+and prints the bias / SD / RMSE table, the markdown table for docs/benchmarks.md and the wall time;
 with ``--out`` it writes study.json, study.md, study.txt, boxplot.png and rmse.png there.
 """
 

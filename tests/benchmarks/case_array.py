@@ -18,7 +18,7 @@ The closest feasible study, done here:
 
 Run from the repository root::
 
-    python tests/benchmarks/case_array.py [--out tests/benchmarks/figures/array_adis_accel.png]
+    python tests/benchmarks/case_array.py [--out docs/figures/array_adis_accel.png]
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data"
 ADIS = DATA / "adis16405_imu1.h5"
 MTIG = DATA / "derived" / "mtig_imu6_wv.h5"
-FIG = ROOT / "tests" / "benchmarks" / "figures" / "array_adis_accel.png"
+FIG = ROOT / "docs" / "figures" / "array_adis_accel.png"
 CHANNELS = ["accel_x", "accel_y"]
 MODEL = "2*AR1+RW"  # the paper's per-channel model (sec. VI)
 

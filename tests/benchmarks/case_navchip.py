@@ -19,7 +19,7 @@ per-scale verdicts (inside, above or below the empirical 95 % interval).
 
 Run from the repository root::
 
-    python tests/benchmarks/case_navchip.py [--out tests/benchmarks/figures/case_navchip_gyro_x.png]
+    python tests/benchmarks/case_navchip.py [--out docs/figures/case_navchip_gyro_x.png]
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from engine.units import BI_FACTOR, DISPLAY, si_factor, to_datasheet
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data" / "derived" / "navchip_wv_av.h5"
-FIG = ROOT / "tests" / "benchmarks" / "figures" / "case_navchip_gyro_x.png"
+FIG = ROOT / "docs" / "figures" / "case_navchip_gyro_x.png"
 CHANNEL = "gyro_x"
 MODEL = "QN+WN+2*GM+RW+DR"  # the paper's model (sec. V)
 

@@ -15,7 +15,7 @@ bias-instability floor).
 
 Run from the repository root::
 
-    python tests/benchmarks/case_virtual.py [--out tests/benchmarks/figures/virtual_adis_gyro.png]
+    python tests/benchmarks/case_virtual.py [--out docs/figures/virtual_adis_gyro.png]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import engine as eg
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data"
-FIG = ROOT / "tests" / "benchmarks" / "figures" / "virtual_adis_gyro.png"
+FIG = ROOT / "docs" / "figures" / "virtual_adis_gyro.png"
 MODEL, SHARED = "GM+WN+RW", ["WN", "RW", "GM"]
 TABLE_SCALES = (0.16, 1.28, 10.24, 81.92, 655.36)  # s
 DEG_H = 3600.0  # deg/h per deg/s
@@ -59,7 +59,7 @@ def adev_deg_h(wv: float) -> float:
 
 
 def table(out: dict[str, Any]) -> str:
-    """The README table: Allan deviation (deg/h) of each sensor, the average and the
+    """The docs/multichannel.md table: Allan deviation (deg/h) of each sensor, the average and the
     virtual gyros at a few scales, with the weights."""
     vs, vs2 = out["band"], out["scale"]
     idx = [int(np.argmin(np.abs(vs.tau_s - s))) for s in TABLE_SCALES]
@@ -128,7 +128,7 @@ def plot(out: dict[str, Any], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Command-line entry: write the figure, print the summary and the README table."""
+    """Command-line entry: write the figure, print the summary and the docs table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=FIG, help="the figure (PNG)")
     fig_path = ap.parse_args(argv).out

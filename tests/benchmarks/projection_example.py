@@ -1,4 +1,4 @@
-"""README's worked example "From a fit to a filter": the ADIS16405 log projected and bounded.
+"""The worked example of docs/fit-to-filter.md: the ADIS16405 log projected and bounded.
 
     python tests/benchmarks/projection_example.py [--log PATH]
 
@@ -7,7 +7,7 @@ Fits ``2*GM+WN+RW`` (and ``WN+RW`` for reference) to ``gyro_x`` and ``accel_x`` 
 Kalibr/OpenVINS (``engine.formats.projection.project``, the filter formats' default: the rule,
 the bound from two filter steps to the log length, 95 % asymptotic intervals) and onto the
 WN + GM of KF-GINS/Gazebo. Prints the fitted model, where each term went, and each exported
-value with its interval, factor over the plain conversion and binding scale, in SI, as README
+value with its interval, factor over the plain conversion and binding scale, in SI, as the page
 shows them; ``tests/test_readme_numbers.py`` recomputes them (:func:`example`) and compares.
 """
 
@@ -55,7 +55,7 @@ def model_line(fit: Any) -> str:
 
 
 def param_line(p: Any) -> str:
-    """One exported value as README writes it."""
+    """One exported value as docs/fit-to-filter.md writes it."""
     iv = f" [{p.low:.3g}, {p.high:.3g}]" if p.low == p.low else ""
     s = f"{p.name} = {p.value:.3g}{iv} {p.unit}, x{p.factor:.3g} over the plain {p.plain:.3g}"
     if p.binding_tau_s == p.binding_tau_s:
@@ -64,7 +64,7 @@ def param_line(p: Any) -> str:
 
 
 def report_lines(ex: dict[str, dict[str, Any]]) -> list[str]:
-    """The lines the script prints (README quotes them)."""
+    """The lines the script prints (docs/fit-to-filter.md quotes them)."""
     out: list[str] = []
     for ch, d in ex.items():
         out += ["", f"{ch} [{d['unit']}], 2*GM+WN+RW: {model_line(d['full'])}"]

@@ -1,11 +1,11 @@
-"""The numbers README states about the robust WV, recomputed (issue #22 item 4).
+"""The numbers docs/calibrate.md states about the robust WV, recomputed.
 
 Run from the repository root::
 
     python tests/benchmarks/robust_claims.py [--json OUT]
 
-Prints three tables, each the source of a README sentence (``tests/test_readme_numbers.py``
-recomputes the cheap ones and compares them with README's text):
+Prints three tables, each the source of a sentence of that page
+(``tests/test_readme_numbers.py`` recomputes the cheap ones and compares them with its text):
 
 1. **The biweight constant.** ``c`` solves "the Gaussian efficiency of the biweight scale
    M-estimate, relative to the sample variance, is ``eff``" (``engine.wv.robust``): 4.40 at

@@ -1,4 +1,4 @@
-"""Screenshot of the fleet acceptance report for the README (``gmwm batch --report``).
+"""Screenshot of the fleet acceptance report for docs/reports.md (``gmwm batch --report``).
 
 Makes the fleet report of the six ADIS16405 logs of ``../shared/data`` (channels gyro_x and
 accel_x, model GM+WN+RW, limits ARW <= 0.3 deg/sqrt(h) and VRW <= 0.1 m/s/sqrt(h)) plus a
@@ -9,7 +9,7 @@ Chromium from ``file://`` with every other request aborted, and saves the top of
 Run from the repository root::
 
     python tests/benchmarks/shot_fleet_report.py [--data ../shared/data]
-        [--out tests/benchmarks/figures/fleet_report.png]
+        [--out docs/figures/fleet_report.png]
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ SPEC = ["arw<=0.3 deg/sqrt(h)", "vrw<=0.1 m/s/sqrt(h)"]
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
-    ap.add_argument("--out", default=str(ROOT / "tests/benchmarks/figures/fleet_report.png"))
+    ap.add_argument("--out", default=str(ROOT / "docs/figures/fleet_report.png"))
     ap.add_argument("--height", type=int, default=1700, help="pixels of the page to keep")
     args = ap.parse_args()
 

@@ -1,4 +1,4 @@
-"""Screenshot of the calibration report for the README (``gmwm report``, ``eg.report``).
+"""Screenshot of the calibration report for README and docs (``gmwm report``, ``eg.report``).
 
 Makes the report of the bundled demo log's gyro X (model GM+WN+RW, with a gyroscope
 datasheet to check), opens it in headless Chromium from ``file://`` with every other request
@@ -6,7 +6,7 @@ aborted, and saves the top of the page (the log and the channel's first figures)
 
 Run from the repository root::
 
-    python tests/benchmarks/shot_report.py [--out tests/benchmarks/figures/report_demo.png]
+    python tests/benchmarks/shot_report.py [--out docs/figures/report_demo.png]
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ DATASHEET = "arw=0.3 deg/sqrt(h), bi=6 deg/h, rrw=1 deg/h/sqrt(h)"
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(ROOT / "tests/benchmarks/figures/report_demo.png"))
+    ap.add_argument("--out", default=str(ROOT / "docs/figures/report_demo.png"))
     ap.add_argument("--height", type=int, default=1500, help="pixels of the page to keep")
     args = ap.parse_args()
 

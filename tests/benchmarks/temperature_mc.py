@@ -1,0 +1,91 @@
+"""Monte Carlo of the temperature compensation (engine.inference.temperature).
+
+R simulated gyro logs (2e5 samples at 100 Hz, 33 min) of WN (sigma2 1e-4 (deg/s)^2) + RW
+(gamma2 1e-10 (deg/s)^2) + a bias-temperature sensitivity of 2e-3 deg/s/degC (7.2 deg/h/degC)
+under a thermal profile (warm-up from 25 to 35 degC with a 300 s time constant, and a 2 degC
+cycle of 600 s). For each log: the sensitivity with its 95 % interval, the GMWM (WN+RW) of
+the compensated signal with asymptotic 95 % parameter intervals, and the same GMWM of the
+raw signal; and a WN+RW+DR fit of the raw signal (the drift users then see).
+
+Usage::
+
+    nice python tests/benchmarks/temperature_mc.py [--reps 200] [--seed 1]
+
+Prints a Markdown table (docs/qualify.md, section Temperature, holds its output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from scipy import stats
+
+import engine as eg
+from engine.inference import param_intervals
+from engine.inference.temperature import fit_temperature
+
+FS = 100.0
+N = 200_000
+TRUE = {"WN.sigma2": 1e-4, "RW.gamma2": 1e-10}
+C = 2e-3
+
+
+def band(k: int, n: int) -> str:
+    lo = stats.beta.ppf(0.025, k, n - k + 1) if k > 0 else 0.0
+    hi = stats.beta.ppf(0.975, k + 1, n - k) if k < n else 1.0
+    return f"{100 * k / n:.1f} [{100 * lo:.1f}, {100 * hi:.1f}]"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--reps", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=1)
+    a = ap.parse_args()
+    rng = np.random.default_rng(a.seed)
+    t = np.arange(N) / FS
+    temp = 25 + 10 * (1 - np.exp(-t / 300)) + 2 * np.sin(2 * np.pi * t / 600)
+    model = eg.parse_model("WN(sigma2=1e-4)+RW(gamma2=1e-10)")
+    cover = dict.fromkeys(["sensitivity", *TRUE], 0)
+    est: dict[str, list[float]] = {k: [] for k in ["sensitivity", *TRUE, "raw RW", "raw DR"]}
+    t0 = time.process_time()
+    for _ in range(a.reps):
+        y = model.simulate(N, fs=FS, rng=rng) + C * temp
+        tf = fit_temperature(y, temp, fs=FS, model="WN+RW", unit="deg/s", channel="gyro_x")
+        lo, hi = tf.interval[0]
+        cover["sensitivity"] += lo <= C <= hi
+        est["sensitivity"].append(tf.sensitivity)
+        for iv in param_intervals(tf.fit, method="asymptotic", level=0.95):
+            if iv.name in TRUE:
+                cover[iv.name] += iv.low <= TRUE[iv.name] <= iv.high
+                est[iv.name].append(iv.value)
+        est["raw RW"].append(tf.fit_raw.params["RW.gamma2"])
+        raw_dr = eg.fit_gmwm(tf.wv_raw, "WN+RW+DR")
+        est["raw DR"].append(raw_dr.params["DR.omega"])
+    cpu = time.process_time() - t0
+    r = a.reps
+    print(f"{r} logs; CPU {cpu:.0f} s\n")
+    print("| quantity | truth | median estimate | 95 % interval covers truth, % [95 % band] |")
+    print("|---|---|---|---|")
+    print(
+        f"| sensitivity (deg/h/degC) | 7.2 | {np.median(est['sensitivity']):.3g} "
+        f"| {band(cover['sensitivity'], r)} |"
+    )
+    for k, v in TRUE.items():
+        print(
+            f"| {k} compensated ((deg/s)^2) | {v:.3g} | {np.median(est[k]):.3g} "
+            f"| {band(cover[k], r)} |"
+        )
+    print(
+        f"| RW.gamma2 raw, no compensation ((deg/s)^2) | 1e-10 | {np.median(est['raw RW']):.3g} "
+        f"(x{np.median(est['raw RW']) / 1e-10:.2g}) | - |"
+    )
+    print(
+        f"| DR.omega raw, WN+RW+DR (deg/s per sample) | 0 | {np.median(np.abs(est['raw DR'])):.3g} "
+        "(median of the absolute value) | - |"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,96 @@
+"""Temperature compensation (engine.inference.temperature): the planted bias-temperature
+sensitivity is recovered within its interval, the noise parameters of the compensated fit are
+unbiased, and the uncompensated fit inflates the RW (the effect users see)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import engine as eg
+from engine.inference.temperature import (
+    find_temperature,
+    fit_temperature,
+    temperature_sensitivity,
+)
+
+FS = 100.0
+N = 200_000
+SPEC = "WN(sigma2=1e-4)+RW(gamma2=1e-10)"
+C = 2e-3  # deg/s per degC = 7.2 deg/h per degC
+
+
+def thermal_profile(n: int = N) -> np.ndarray:
+    """Warm-up from 25 to 35 degC (time constant 300 s) with a 2 degC cycle of 600 s."""
+    t = np.arange(n) / FS
+    return 25 + 10 * (1 - np.exp(-t / 300)) + 2 * np.sin(2 * np.pi * t / 600)
+
+
+def test_sensitivity_units_are_datasheet_units():
+    assert temperature_sensitivity(1e-3, "deg/s")[0] == pytest.approx(3.6)
+    assert temperature_sensitivity(1e-3, "deg/s")[1] == "deg/h/degC"
+    assert temperature_sensitivity(1e-3, "rad/s")[0] == pytest.approx(1e-3 * 180 / np.pi * 3600)
+    assert temperature_sensitivity(1e-3, "g") == (pytest.approx(1.0), "mg/degC")
+    assert temperature_sensitivity(9.80665e-3, "m/s^2")[0] == pytest.approx(1.0)
+    assert temperature_sensitivity(2.0, "counts")[1] == "counts/degC"
+
+
+@pytest.mark.slow  # Monte Carlo, 10-25 s
+def test_planted_sensitivity_coverage_and_rw_bias():
+    # 40 simulated logs (2e5 samples at 100 Hz, WN + RW + 2e-3 deg/s per degC): the 95 %
+    # interval covers the truth in 38 +- 2.8 of 40 (binomial SD sqrt(40 x 0.95 x 0.05) = 1.4);
+    # the band [34, 40] is the binomial 99.5 % range. The Newey-West intervals are slightly
+    # conservative (40/40 measured).
+    temp = thermal_profile()
+    model = eg.parse_model(SPEC)
+    cover, est, rw, rw_raw = 0, [], [], []
+    for seed in range(40):
+        y = model.simulate(N, fs=FS, rng=seed) + C * temp
+        tf = fit_temperature(y, temp, fs=FS, model="WN+RW", unit="deg/s", channel="gyro_x")
+        lo, hi = tf.interval[0]
+        cover += lo <= C <= hi
+        est.append(tf.coef[0])
+        rw.append(tf.fit.params["RW.gamma2"])
+        rw_raw.append(tf.fit_raw.params["RW.gamma2"])
+    assert stats.binom.ppf(0.005, 40, 0.95) <= cover <= 40
+    # unbiased: mean within 3 standard errors of the truth
+    assert abs(np.mean(est) - C) < 3 * np.std(est) / np.sqrt(40)
+    # the compensated RW is the planted one (median within 20 %); the raw one is inflated
+    assert np.median(rw) == pytest.approx(1e-10, rel=0.2)
+    assert np.median(rw_raw) > 2.5e-10, np.median(rw_raw)
+
+
+def test_sensitivity_line_and_dict():
+    temp = thermal_profile()
+    y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=99) + C * temp
+    tf = fit_temperature(y, temp, fs=FS, model="WN+RW", unit="deg/s", channel="gyro_x")
+    assert tf.sensitivity_unit == "deg/h/degC"
+    lo, hi = tf.sensitivity_interval
+    assert lo < 7.2 < hi and lo < tf.sensitivity < hi
+    d = tf.to_dict()
+    assert d["sensitivity"] == tf.sensitivity and d["fit"]["model"]
+    assert "deg/h/degC" in tf.line()
+
+
+def test_drift_is_not_taken_for_temperature():
+    # no temperature effect, a drift: the sensitivity's interval holds 0
+    temp = thermal_profile()
+    y = eg.parse_model("WN(sigma2=1e-4)+DR(omega=1e-7)").simulate(N, fs=FS, rng=3)
+    tf = fit_temperature(y, temp, fs=FS, unit="deg/s")
+    lo, hi = tf.interval[0]
+    assert lo <= 0 <= hi
+    assert tf.drift == pytest.approx(1e-7, rel=0.05)
+
+
+def test_bad_temperature_inputs_are_one_line_errors():
+    y = np.zeros(N)
+    with pytest.raises(ValueError, match="constant"):
+        fit_temperature(y + np.random.default_rng(0).normal(size=N), np.ones(N), fs=FS)
+    with pytest.raises(ValueError, match="sampled together"):
+        fit_temperature(y, np.ones(N - 1), fs=FS)
+    log = eg.ImuLog({"gx": y}, FS, aux={"imu_temp": y}, source="a.csv")
+    assert find_temperature(log) == "imu_temp"
+    assert find_temperature(log, "none") is None
+    with pytest.raises(eg.LoadError, match="temperature='T' is not a channel"):
+        find_temperature(log, "T")
