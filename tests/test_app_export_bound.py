@@ -1,4 +1,4 @@
-"""The export menu's bound options (issue 28): the data bound (the empirical WV's lower limit,
+"""The export menu's bound options: the data bound (the empirical WV's lower limit,
 estimate, upper limit or nothing) and the horizon, the engine's ``data=`` and ``horizon_s=``,
 reach the preview and the downloaded file; the widgets are built when the menu's toggle is
 first opened, not with the page; a bad horizon is a note, not a traceback. Tested without a

@@ -51,7 +51,7 @@ def test_vertices_equal_brute_force_on_random_rows(seed):
 
 
 def test_vertices_of_a_gauss_markov_consumer_over_six_decades():
-    """The case that made exports slow (issue 30): a WN+GM consumer (T_c 1000 s) on the fine
+    """The case that made exports slow: a WN+GM consumer (T_c 1000 s) on the fine
     grid of a 0.02 s .. 10^4 s band over the demo gyro_x's true 2*GM+WN+RW WV, 5 % higher at
     the dyadic scales (a data floor): hundreds of rows, a hundred of them hull vertices."""
     fs = 100.0

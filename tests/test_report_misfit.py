@@ -1,6 +1,6 @@
 """The calibration report says when model and data disagree: the misfit line beside the fit
-and beside the export, whatever the export's format (issue 28: a datasheet or CSV file has no
-place for the warning the filter files carry as a comment)."""
+and beside the export, whatever the export's format (a datasheet or CSV file has no place for
+the warning the filter files carry as a comment)."""
 
 from __future__ import annotations
 
