@@ -114,7 +114,7 @@ def test_dask_is_imported_only_when_a_cluster_is_asked_for():
         "eg.param_intervals; eg.run_slope_study; eg.dependence_test; "
         "print('dask' in sys.modules, 'distributed' in sys.modules)"
     )
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root
     )

@@ -17,7 +17,7 @@ import pytest
 import engine as eg
 from engine.fit.gmwm import gmwm_objective
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _load():

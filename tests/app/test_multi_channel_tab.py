@@ -419,7 +419,7 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
 def test_browser_tab_renders_the_grid_and_the_table(app_demo_file: Path) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app
-    from test_app_browser import TIMEOUT_MS
+    from test_in_browser import TIMEOUT_MS
 
     from gmwm_app.app import live_apps
 

@@ -24,7 +24,7 @@ from scipy import integrate, stats
 
 import engine as eg
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: docs/calibrate.md: the robust-WV paragraph
 CALIBRATE = (ROOT / "docs" / "calibrate.md").read_text(encoding="utf-8")
 #: docs/fit-to-filter.md: the projection, its worked example and the filter tables

@@ -15,7 +15,7 @@ from engine.demo import demo_path
 from gmwm_app import hdf5_guard as guard
 from gmwm_app.data import read_source
 
-DAMAGED = Path(__file__).parent / "fixtures" / "damaged_heap.h5"
+DAMAGED = Path(__file__).resolve().parents[1] / "fixtures" / "damaged_heap.h5"
 
 
 @pytest.fixture(autouse=True)

@@ -21,7 +21,7 @@ from engine.models import RW, WN, Model
 from engine.teaching import avsm
 from engine.wv.allan import allan_variance
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 for _peer in ("allantools", "allan_variance", "avar", "allan_variance_analyzer"):
     pytest.importorskip(_peer, reason="the Allan-variance peers come with the bench extra")

@@ -20,7 +20,7 @@ import pytest
 import engine as eg
 from engine.models import PROCESS_TYPES, Process
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CODES = frozenset(PROCESS_TYPES)
 
 

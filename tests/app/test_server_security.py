@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_app_server import _gmwm_app, _login, _request
+from test_server_options import _gmwm_app, _login, _request
 
 from gmwm_app import server_guard
 from gmwm_app.limits import MAX_MESSAGE_BYTES

@@ -27,7 +27,7 @@ import pytest
 
 from engine.cli import build_parser, main
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 #: The pages whose code runs, in reading order: the front page, then the documentation.
 PAGES = (
     "README.md",

@@ -13,7 +13,7 @@ import pytest
 import engine as eg
 from engine.demo import demo_path, demo_truth
 
-DATA = Path(__file__).resolve().parents[1] / "data"  # the generator
+DATA = Path(__file__).resolve().parents[2] / "data"  # the generator
 DEMO = demo_path().parent  # the package data it writes
 
 

@@ -25,7 +25,7 @@ from engine.cli import main
 from engine.demo import demo_path
 
 DEMO = str(demo_path())
-ENV = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+ENV = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
 FAST = 0.5  # s: a refusal; each command below computes for several seconds to minutes
 
 

@@ -220,7 +220,7 @@ MEASURE_S = 8.0
 def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
     """The app on 127.0.0.1 in a background thread (as ``tests/test_app_load.py`` serves it)."""
     import panel as pn
-    from test_app_load import _wait
+    from test_server_load import _wait
 
     with served_app(app_demo_file, unused_session_lifetime_milliseconds=120_000) as (port, _t):
 
@@ -235,7 +235,7 @@ def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
 def test_rankings_leave_other_sessions_responsive_and_stop_with_their_session(
     served: dict[str, Any],
 ) -> None:
-    from test_app_load import _close_sessions, _in_session, _open, _Probe, _wait
+    from test_server_load import _close_sessions, _in_session, _open, _Probe, _wait
 
     apps, _ = _open(served, [{"model": "WN"}, {"model": "WN"}, {"model": "WN"}])
     heavy, clicker = apps[:2], apps[2]

@@ -181,7 +181,7 @@ def numbers(text: str) -> list[float]:
 def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Path) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app
-    from test_app_browser import TIMEOUT_MS, Tab
+    from test_in_browser import TIMEOUT_MS, Tab
 
     from gmwm_app.app import live_apps
 

@@ -271,7 +271,7 @@ def test_engine_messages_name_arguments_not_cli_flags():
     # an older tree had 14 engine messages naming --units, --inflate ... (the CLI's words)
     import re
 
-    root = Path(__file__).resolve().parents[1] / "engine"
+    root = Path(__file__).resolve().parents[2] / "engine"
     found = [
         f"{p.relative_to(root.parent)}:{line}: {text}"
         for p in sorted(root.rglob("*.py"))

@@ -14,7 +14,7 @@ import pytest
 
 import engine as eg
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 #: The API (engine/__init__.py, README "The API"), written out: adding or removing a name is a

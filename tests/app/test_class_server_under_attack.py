@@ -39,9 +39,9 @@ from typing import Any
 import h5py
 import pytest
 from conftest import served_app
-from test_app_load import _close_sessions, _in_session, _open, _Probe, _wait
-from test_app_security import _attack, _fragments, _gzip_zeros
 from test_hostile_inputs import _npz_bomb, _unwritten_h5, _wide_csv
+from test_server_load import _close_sessions, _in_session, _open, _Probe, _wait
+from test_server_security import _attack, _fragments, _gzip_zeros
 
 from gmwm_app import limits
 

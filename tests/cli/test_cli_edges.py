@@ -24,7 +24,7 @@ import pytest
 import engine as eg
 from engine.cli import build_parser, main
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SIM = "GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)"
 
 

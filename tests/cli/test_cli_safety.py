@@ -202,7 +202,7 @@ def test_batch_workers_end_with_their_parent(tmp_path: Path) -> None:
     for k in range(6):
         x = rng.normal(size=200_000) + np.cumsum(rng.normal(scale=1e-3, size=200_000))
         logs.append(str(save_log(tmp_path / f"u{k}.h5", {"gyro_x": x}, 100.0)))
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     argv = ["-m", "engine.cli", "batch", *logs, "--model", "3*GM+WN+RW", "--workers", "2"]
     proc = subprocess.Popen(
         [sys.executable, *argv, "--quiet", "-o", str(tmp_path / "out")],

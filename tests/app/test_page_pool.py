@@ -28,7 +28,7 @@ from conftest import served_app
 from gmwm_app import server
 from gmwm_app.app import live_apps, set_listed
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 POOL = 3
 WAIT_S = 120.0
 

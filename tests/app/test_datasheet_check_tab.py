@@ -13,14 +13,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-import test_app_browser
+import test_in_browser
 
 import engine as eg
 
 BI_FACTOR = math.sqrt(2 * math.log(2) / math.pi)
 
-# the browser fixtures: conftest's served app and chromium, test_app_browser's new page
-new_tab = test_app_browser.new_tab
+# the browser fixtures: conftest's served app and chromium, test_in_browser's new page
+new_tab = test_in_browser.new_tab
 
 
 @pytest.fixture
@@ -148,7 +148,7 @@ def test_engine_check_is_the_views(app: Any, view: Any) -> None:
 @pytest.mark.browser
 @pytest.mark.browser_tour
 def test_browser_typed_value_redraws_the_check(server: str, new_tab: Any) -> None:
-    from test_app_browser import TIMEOUT_MS, _app_for
+    from test_in_browser import TIMEOUT_MS, _app_for
 
     t = new_tab().open(f"{server}?model=GM%2BWN%2BRW")
     page = t.page

@@ -293,7 +293,7 @@ def test_pure_helpers_curves_and_table_rows() -> None:
 def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app
-    from test_app_browser import TIMEOUT_MS, Tab, _app_for
+    from test_in_browser import TIMEOUT_MS, Tab, _app_for
 
     require_chromium()
     from playwright.sync_api import sync_playwright

@@ -31,7 +31,7 @@ from engine.io import LoadError, load_log
 from engine.io._assemble import MAX_CHANNELS, ordered_names
 from engine.io.hdf5 import H5_MAX_CHUNKS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _unwritten_h5(path: Path, n: int, chunks: tuple[int, ...] | None = (65536,), **kw) -> Path:
