@@ -1,7 +1,7 @@
 """A class under attack: every hostile action at once against one served app, while a student
 keeps working.
 
-One app served on loopback (in a thread of this process, as ``tests/test_app_load.py`` serves
+One app served on loopback (in a thread of this process, as ``tests/app/test_server_load.py`` serves
 it) and, during :data:`MEASURE_S` seconds, all at the same time:
 
 * three sessions each rank the 127 candidates of :data:`HEAVY` (the largest family under the

@@ -218,7 +218,8 @@ MEASURE_S = 8.0
 
 @pytest.fixture(scope="module")
 def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
-    """The app on 127.0.0.1 in a background thread (as ``tests/test_app_load.py`` serves it)."""
+    """The app on 127.0.0.1 in a background thread (as ``tests/app/test_server_load.py``
+    serves it)."""
     import panel as pn
     from test_server_load import _wait
 

@@ -188,7 +188,7 @@ def test_cli_scheduler_local_runs_on_a_dask_local_cluster(fleet, tmp_path, capsy
     assert main([*argv, "-o", str(tmp_path / "b"), "--workers", "1"]) == 0
     local = json.loads(capsys.readouterr().out)
     # the same fits (to the last bits: this process's BLAS may have two threads, the workers'
-    # one; tests/test_parallel.py checks bit equality with one thread)
+    # one; tests/engine/test_parallel.py checks bit equality with one thread)
     assert [(r["channel"], r["quantity"]) for r in on_dask["summary"]] == [
         (r["channel"], r["quantity"]) for r in local["summary"]
     ]

@@ -2,7 +2,7 @@
 ``--spec`` limits are checked on the fits' IEEE quantities (white noise with its disguised
 share, B in the declared convention), a model that cannot answer is "cannot tell", the fits'
 warnings stand beside the verdict, and an outlier needs a relative size as well as a robust z.
-The page-level numbers of the fleet report are in tests/test_fleet_report.py."""
+The page-level numbers of the fleet report are in tests/engine/test_fleet_report.py."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ against the engine's batch, the robust z-score against its formula and a planted
 the verdicts against limits, a damaged log listed with its reason, the anchors, the CLI.
 
 The browser test (the page opens offline, every figure painted, size) is in
-``tests/test_fleet_report_browser.py``.
+``tests/engine/test_fleet_report_in_browser.py``.
 """
 
 from __future__ import annotations

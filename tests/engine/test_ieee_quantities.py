@@ -1,6 +1,6 @@
 """The IEEE quantities of a fit (engine/fit/ieee.py): N with its disguised share, B in both
 conventions, K, Q, R, their intervals and units; checked by hand calculations, the model's own
-Allan variance and Monte Carlo (the real logs: tests/test_ieee_real.py)."""
+Allan variance and Monte Carlo (the real logs: tests/engine/test_ieee_quantities_real_logs.py)."""
 
 from __future__ import annotations
 

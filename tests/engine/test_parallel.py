@@ -284,7 +284,7 @@ def test_tasks_run_in_process_with_one_blas_thread_and_the_count_is_restored():
     """In process, the tasks see one BLAS thread as in a worker (the WV kernel sums in chunks
     on a multi-threaded BLAS, so the last bit would depend on where a task ran); the caller's
     setting is back afterwards. The study with workers=1 then equals the pooled study to the
-    bit (tests/test_study.py)."""
+    bit (tests/engine/test_slope_study.py)."""
     if blas_threads() is None:
         pytest.skip("no OpenBLAS thread control in this process")
     prev = blas_threads()

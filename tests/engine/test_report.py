@@ -2,7 +2,7 @@
 --json`` and the engine, its pieces against formulas, its size budget, and the real logs.
 
 The browser tests (the page opens offline, every figure painted) are in
-``tests/test_report_browser.py``.
+``tests/engine/test_report_in_browser.py``.
 """
 
 from __future__ import annotations
