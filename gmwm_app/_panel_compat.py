@@ -1,5 +1,5 @@
 """Every use of Panel internals by the app, in one place, for the Panel versions it was
-written for (:data:`PANEL_VERSIONS`; ``tests/test_app_state.py`` fails on another version, so
+written for (:data:`PANEL_VERSIONS`; ``tests/app/test_state.py`` fails on another version, so
 that an upgrade forces a re-check of what is here).
 
 * :func:`light_text_updates`: a text pane's ``object`` change sends its text only (Panel

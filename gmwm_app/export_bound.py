@@ -19,7 +19,7 @@ import panel as pn
 __all__ = ["DATA_CHOICES", "BoundOptions"]
 
 #: The labels of the data-bound choices (values: the keys of ``engine.formats.DATA_BOUNDS``,
-#: tests/test_app_export_bound.py checks they are the same).
+#: tests/app/test_export_bound_options.py checks they are the same).
 DATA_CHOICES: dict[str, str] = {
     "The data's lower 95 % limit (default)": "low",
     "The data's estimate": "estimate",

@@ -67,7 +67,7 @@ def favour_loop_latency(interval_s: float = SWITCH_INTERVAL_S) -> float:
     queued behind the page builds: a burst of nine page opens held the loop 1.1-1.4 s on
     this 2-core machine (py-spy: the loop thread's samples were GIL waits in socket calls).
     At 0.5 ms the loop answered within 0.10-0.16 s, idle or with the other core busy, and the
-    nine pages took the same 5.4-5.7 s to open (tests/test_app_load.py).
+    nine pages took the same 5.4-5.7 s to open (tests/app/test_server_load.py).
     """
     previous = sys.getswitchinterval()
     sys.setswitchinterval(interval_s)
@@ -104,7 +104,7 @@ def warm_engine() -> None:
     the server loop for the first time: the lazy imports of the fit and of its IEEE table
     (``scipy.optimize``, ``scipy.stats``: about a second). ``import engine`` stays light for
     the CLI; on a server that one-time cost would block the loop while the first pages open
-    (tests/test_app_load.py: loop probe 0.4-0.6 s before the IEEE rows, 1.2-1.8 s after them
+    (tests/app/test_server_load.py: loop probe 0.4-0.6 s before the IEEE rows, 1.2-1.8 s after them
     without this)."""
     x = np.random.default_rng(0).normal(size=4096)
     eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0, unit="deg/s"), "GM+WN+RW").ieee  # noqa: B018
@@ -564,7 +564,7 @@ def create_application(
     title = "GMWM: stochastic calibration of inertial sensors"
     # one page built (and dropped) before serving: the first-time costs of a page (lazy
     # imports, templates, the first fit's IEEE table) are paid here, not on the loop while the
-    # first students' pages open (tests/test_app_load.py: loop probe 1.2-1.8 -> 0.4-0.6 s)
+    # first students' pages open (tests/app/test_server_load.py: loop probe 1.2-1.8 -> 0.4-0.6 s)
     set_listed(factory().gmwm_app, False)
 
     class OffLoopHandler(FunctionHandler):

@@ -27,6 +27,12 @@ from _browser import chromium, require_chromium
 
 import engine as eg
 
+# The test modules live in concept folders (engine/, app/, cli/, project/) and a few import
+# helpers from another module by its name (``from test_server_load import _wait``): every folder
+# is on the path, whichever module pytest imports first.
+for _folder in ("engine", "app", "cli", "project"):
+    sys.path.insert(0, str(Path(__file__).resolve().parent / _folder))
+
 REAL_DATA_ENV = "GMWM_REAL_DATA"
 REQUIRE_REAL_DATA_ENV = "GMWM_REQUIRE_REAL_DATA"
 

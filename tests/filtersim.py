@@ -1,4 +1,4 @@
-"""A small Kalman filter that proves exported noise numbers in a filter (issue 23, item 4).
+"""A small Kalman filter that proves exported noise numbers in a filter.
 
 One axis, two states: the integral of the sensor's output (an angle for a gyro, a velocity for an
 accelerometer) and the sensor's bias. The filter propagates at the sensor rate ``fs`` with the
@@ -39,7 +39,7 @@ the truth it depends on which terms one calls bias (a 0.3 s GM is neither the fi
 noise nor its random walk), so it is kept for the sanity checks, not for the table.
 
 Case (b), the projected and bounded numbers, comes from the engine's projection
-(``engine.formats.projection.project``, issue 23 items 1-2; :func:`projected_noise`).
+(``engine.formats.projection.project``; :func:`projected_noise`).
 :func:`local_bound`, a minimal PSD bound written before the engine had one, is kept as an
 independent reference (tested as a PSD bound; not used for case (b)).
 """
@@ -289,7 +289,7 @@ def projected_noise(
 
 @dataclass
 class FilterCases:
-    """One channel's truth and the filter numbers of the cases of issue 23.
+    """One channel's truth and the filter numbers of the export cases.
 
     ``truth`` is the full fit (the simulated sensor); ``cases`` maps a key to the numbers:
     ``"a"`` the plain conversion of the ``WN+RW`` fit (what the Kalibr export writes), ``"b"``

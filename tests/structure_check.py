@@ -1,8 +1,9 @@
-"""Structure check over ``engine/`` and ``gmwm_app/``: import cycles, private imports, big modules.
+"""Structure check over ``engine/`` and ``gmwm_app/``: import cycles, private imports, layers.
 
 Run ``python tests/structure_check.py`` from the repository root. It prints one line per finding
-and a closing ``cycles/private imports/big modules: C/P/B`` line; ``tests/test_structure.py``
-asserts ``0/0/0``.
+and closing ``cycles/private imports: C/P`` and ``layer violations: L`` lines; the public-API
+tests assert no finding. The size of a module is not checked: a module splits where its ideas
+split, not at a line count.
 
 * **Cycles**: strongly connected components of more than one module in the graph of every
   import statement of the project (top level, inside functions and under ``TYPE_CHECKING``
@@ -11,7 +12,6 @@ asserts ``0/0/0``.
 * **Private imports**: ``from module import _name`` where ``module`` is another project module
   and ``_name`` is not a dunder. A helper shared by two modules is public, or lives in a private
   *module* (``_optim.py``) whose names are public.
-* **Big modules**: more than ``MAX_LINES`` lines.
 * **Layers** (:func:`layer_violations`): the packages of ``engine`` run one way, in the order of
   :data:`LAYERS`; an import (anywhere in the module, as for cycles) of a package of the same or
   a higher layer is a finding, and so is a package missing from the table. Only the shared
@@ -27,7 +27,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("engine", "gmwm_app")
-MAX_LINES = 800
 
 #: The layers of the project, lowest first: a package imports only packages of lower layers.
 #: ``engine.io`` sits low (loaders need no fit); the API (``engine/__init__.py``) sits above
@@ -75,16 +74,10 @@ def _resolve(importer: str, is_pkg: bool, level: int, module: str | None) -> str
     return ".".join(base + ([module] if module else []))
 
 
-def analyse() -> tuple[list[list[str]], list[str], list[str]]:
-    """Return (cycles, private imports, big modules), each as a list of readable findings."""
-    mods, graph, private = _graph()
-    cycles = _sccs(graph)
-    big = [
-        f"{p.relative_to(ROOT)}: {n} lines"
-        for p in mods.values()
-        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES
-    ]
-    return cycles, private, big
+def analyse() -> tuple[list[list[str]], list[str]]:
+    """Return (cycles, private imports), each as a list of readable findings."""
+    _mods, graph, private = _graph()
+    return _sccs(graph), private
 
 
 def package_of(module: str) -> str:
@@ -206,19 +199,17 @@ def _sccs(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def main() -> int:
-    cycles, private, big = analyse()
+    cycles, private = analyse()
     for c in cycles:
         print("cycle:", " <-> ".join(c))
     for p in private:
         print("private import:", p)
-    for b in big:
-        print("big module:", b)
     layers = layer_violations()
     for v in layers:
         print("layer:", v)
-    print(f"cycles/private imports/big modules: {len(cycles)}/{len(private)}/{len(big)}")
+    print(f"cycles/private imports: {len(cycles)}/{len(private)}")
     print(f"layer violations: {len(layers)}")
-    return 0 if not (cycles or private or layers) else 1  # a big module is information
+    return 0 if not (cycles or private or layers) else 1
 
 
 if __name__ == "__main__":

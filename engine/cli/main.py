@@ -16,7 +16,7 @@ Without ``--json`` a readable table with units is printed; with ``--json`` exact
 object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
 Warnings (queued by the subcommands, or issued by the engine as Python warnings) are printed
 after the result as ``gmwm COMMAND: warning: ...``, one line each. An option name has one
-meaning in every subcommand (tests/test_cli_options.py holds the table); old spellings
+meaning in every subcommand (tests/cli/test_cli_options.py holds the table); old spellings
 (``--alpha``, ``--level``, ``--out``, ``--select``, ``gmwm virtual --scale``) still work and
 print a deprecation warning naming the new option.
 """

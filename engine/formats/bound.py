@@ -21,7 +21,7 @@ gyro it puts the slow GM into white noise (N x1.9): a filter with fixes every 1-
 twice too cautious (mean NEES 0.47). The sum of squared factors over the plain conversion
 (the first design) depends on the plain conversion's scale: with the ADIS16405 accelerometer's
 0.29 s GM the plain K is 20x the data's, so K x9 looked cheap (mean NEES 0.2 at 10 s fixes).
-The geometric mean keeps both filters consistent (tests/test_filter_consistency.py,
+The geometric mean keeps both filters consistent (tests/engine/test_filter_consistency.py,
 docs/fit-to-filter.md).
 """
 

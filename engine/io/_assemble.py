@@ -107,7 +107,7 @@ def array_memory_need(shape: tuple[int, ...], dtype: np.dtype) -> int:
     it (:func:`finish_log`): the array, plus the float64 copy of integer, boolean or
     long-double data (or of each field of a structured array), else plus the contiguous copies
     of the columns of a 2-D ``(N, k)`` array. Measured with tracemalloc in
-    tests/test_io_safety.py."""
+    tests/engine/test_io_safety.py."""
     dtype = np.dtype(dtype)
     count = math.prod(int(d) for d in shape)
     raw = count * dtype.itemsize

@@ -102,7 +102,7 @@ def fleet_figure_specs(fleet: FleetReport) -> dict[str, FigureSpec]:
 def _spread_drawn(col: tuple[str, str, str]) -> bool:
     """Whether a fleet column gets a spread plot: every process term; the IEEE quantities
     (the tables' ``IEEE`` columns) are in the tables only, which keeps the six-unit page
-    within its size budget (tests/test_fleet_report_browser.py: 5.18 MB with a spread plot
+    within its size budget (tests/engine/test_fleet_report_in_browser.py: 5.18 MB with a spread plot
     of the IEEE ARW/VRW and an IEEE table in every unit's section, over the 5 MB budget)."""
     return col[0] != "IEEE"
 

@@ -18,7 +18,7 @@ The pitfalls (the GMWM paper, Guerrier et al. 2020, sec. I; El-Sheimy, Hou & Niu
 * ``short_log``: a log a few minutes long; the random walk is read off the last octaves of the
   Allan deviation, where a few clusters make it noisy and the log-average biased.
 
-``tests/test_teaching.py`` checks by Monte Carlo that the slope method with these regions is
+``tests/engine/test_teaching.py`` checks by Monte Carlo that the slope method with these regions is
 biased (or erratic) while the GMWM fit of the same processes is close to the truth.
 """
 

@@ -8,7 +8,7 @@ Kalibr/OpenVINS (``engine.formats.projection.project``, the filter formats' defa
 the bound from two filter steps to the log length, 95 % asymptotic intervals) and onto the
 WN + GM of KF-GINS/Gazebo. Prints the fitted model, where each term went, and each exported
 value with its interval, factor over the plain conversion and binding scale, in SI, as the page
-shows them; ``tests/test_readme_numbers.py`` recomputes them (:func:`example`) and compares.
+shows them; ``tests/project/test_readme_numbers.py`` recomputes them (:func:`example`) and compares.
 """
 
 from __future__ import annotations

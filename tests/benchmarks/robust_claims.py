@@ -5,7 +5,8 @@ Run from the repository root::
     python tests/benchmarks/robust_claims.py [--json OUT]
 
 Prints three tables, each the source of a sentence of that page
-(``tests/test_readme_numbers.py`` recomputes the cheap ones and compares them with its text):
+(``tests/project/test_readme_numbers.py`` recomputes the cheap ones and compares them with its
+text):
 
 1. **The biweight constant.** ``c`` solves "the Gaussian efficiency of the biweight scale
    M-estimate, relative to the sample variance, is ``eff``" (``engine.wv.robust``): 4.40 at

@@ -1,0 +1,286 @@
+"""The Fit page follows the state declaratively: each part depends on the state
+parameters it draws, redraws once per action, widgets echo no state change, and every
+failure reaches the page as a message and the log.
+
+Counts, not timings: a part's redraws are counted by wrapping the object it calls.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import engine as eg
+from gmwm_app import data as data_mod
+from gmwm_app import state as state_mod
+from gmwm_app.state import AppState
+from gmwm_app.wv_cache import N_WV_MATRICES, WVCache
+
+
+def _count(monkeypatch: pytest.MonkeyPatch, obj: Any, name: str) -> list[int]:
+    """Count the calls of ``obj.name`` (still called)."""
+    calls: list[int] = []
+    real = getattr(obj, name)
+
+    def counting(*a: Any, **kw: Any) -> Any:
+        calls.append(1)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(obj, name, counting)
+    return calls
+
+
+def _csv(names: tuple[str, ...], n: int = 4096, seed: int = 0) -> bytes:
+    x = np.random.default_rng(seed).standard_normal((n, len(names)))
+    rows = [f"{i / 100.0},{','.join(f'{v:.17g}' for v in r)}" for i, r in enumerate(x)]
+    return ("time," + ",".join(names) + "\n" + "\n".join(rows) + "\n").encode()
+
+
+# ---------------------------------------------------------------------------------------------
+# what depends on what
+# ---------------------------------------------------------------------------------------------
+def test_the_fit_page_watches_no_revision(app: Any) -> None:
+    s = app.state
+    watched = set(s.param.watchers)  # parameter name -> its watchers (this instance)
+    assert not hasattr(s.param, "revision")  # no catch-all counter: each view names its parameters
+    assert {"wv", "model", "result", "error", "inferred", "show_intervals"} <= watched
+
+
+def test_each_part_redraws_once_per_action(app: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    s = app.state
+    plot = _count(monkeypatch, app.views, "update")
+    tables = _count(monkeypatch, app.tables, "update")
+    # a model change sets model, result, whatif_values and error in one update
+    assert s.set_model("GM+WN"), s.error
+    assert (len(plot), len(tables)) == (1, 1)
+    # a channel sets ten parameters at once: still one redraw of each
+    assert s.select_channel("accel_x"), s.error
+    assert (len(plot), len(tables)) == (2, 2)
+    # an error alone redraws neither the plot nor the tables (it was a full refresh)
+    s.report_error("something")
+    assert (len(plot), len(tables)) == (2, 2)
+    assert app.alert.visible and app.alert.object == "something"
+    # the intervals: the tables (and the J-test badge), never the plot
+    assert s.set_show_intervals(True)
+    assert len(plot) == 2 and len(tables) >= 3
+    assert s.inferred is not None and s.inferred.result is s.result  # computed (no server)
+    assert list(app.tables.param_source.data["low"]) and all(app.tables.param_source.data["low"])
+    assert app.jtest_pane.visible and "J-test" in app.jtest_pane.object
+
+
+def test_a_batch_of_parameters_wakes_each_watcher_once(app_state: AppState) -> None:
+    """param.update calls a watcher of several parameters once, with every event."""
+    s = app_state
+    seen: list[tuple[str, ...]] = []
+    s.param.watch(lambda *ev: seen.append(tuple(e.name for e in ev)), ["model", "result", "error"])
+    assert s.set_model("WN+RW")
+    assert len(seen) == 1 and set(seen[0]) == {"model", "result"}  # (error was already "")
+
+
+def test_a_repeated_error_is_reported_again(app: Any) -> None:
+    s = app.state
+    reported: list[str] = []
+    s.param.watch(lambda e: reported.append(e.new), "error")
+    s.report_error("Type the path of a log file on the server first")
+    s.report_error("Type the path of a log file on the server first")
+    assert reported == ["Type the path of a log file on the server first"] * 2
+    app.path_input.value = ""
+    app._on_path()  # the same click again: the same message, once more
+    assert len(reported) == 3 and app.alert.visible
+
+
+def test_state_updates_of_widgets_echo_no_action(app: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A new log with other channels: options and value in one update (no intermediate first
+    channel that would start a WV job); the what-if sliders set by the state change nothing."""
+    s = app.state
+    jobs = _count(monkeypatch, app.jobs, "load")
+    loaded = s.read("upload", data=_csv(("p", "q", "r")), filename="pqr.csv")
+    assert s.install(loaded, channel="r"), s.error
+    assert list(app.channel_select.options) == ["p", "q", "r"]
+    assert app.channel_select.value == "r" == s.channel
+    assert jobs == []  # no channel job from the state's own update
+    # the what-if sliders: set from the state, they set no what-if value
+    assert s.set_model("WN+RW"), s.error
+    mp = app.model_panel
+    mp.whatif_toggle.value = True
+    assert s.whatif
+    before = dict(s.whatif_values)
+    changes: list[Any] = []
+    s.param.watch(lambda e: changes.append(e.new), "whatif_values")
+    mp._reset_whatif()  # the sliders go back to the fit's positions
+    assert s.whatif_values == before
+    assert len(changes) <= 1  # the reset itself (equal values: none), not one per slider
+    slider = mp.sliders.objects[0]
+    x0 = slider.value
+    slider.value = x0 + 1.0  # one decade up
+    assert s.whatif_values["WN.sigma2"] == pytest.approx(10 * before["WN.sigma2"], rel=1e-9)
+    slider.value = x0  # and back: the user's move, not an echo
+    assert s.whatif_values["WN.sigma2"] == pytest.approx(before["WN.sigma2"], rel=1e-9)
+    assert jobs == []
+
+
+# ---------------------------------------------------------------------------------------------
+# failures reach the page and the log
+# ---------------------------------------------------------------------------------------------
+def test_a_failed_wv_job_is_shown_and_logged(
+    app: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    calls = []
+
+    def broken(lg: Any, ch: str, fs: float, robust: bool, progress: Any = None) -> Any:
+        calls.append(ch)
+        raise ValueError(f"channel {ch}: the series has 3 NaN values")
+
+    monkeypatch.setattr(state_mod, "compute_wv", broken)
+    with caplog.at_level(logging.WARNING):
+        app.channel_select.value = "accel_x"  # warm in a job (inline without a server)
+    s = app.state
+    assert "accel_x: the series has 3 NaN values" in s.error
+    assert app.alert.visible and "3 NaN values" in app.alert.object
+    assert any("3 NaN values" in r.getMessage() for r in caplog.records)
+    assert calls == ["accel_x"]  # computed once (warm), not again by select_channel
+    assert s.channel == "gyro_x"  # the session keeps its channel
+
+
+def test_a_failed_precompute_is_reported_once_and_logged(
+    app_demo: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    calls = []
+
+    def broken(lg: Any, ch: str, fs: float, robust: bool, progress: Any = None) -> Any:
+        calls.append(ch)
+        raise ValueError(f"channel {ch}: fewer than 8 samples")
+
+    monkeypatch.setattr(data_mod, "compute_wv", broken)
+    monkeypatch.setattr(state_mod, "compute_wv", broken)
+    s = AppState()
+    with caplog.at_level(logging.WARNING):
+        assert not s.from_query({"channel": "accel_y"})
+    assert "accel_y: fewer than 8 samples" in s.error and s.wv is None
+    assert calls == ["accel_y"]  # the install reports precompute's failure, no second try
+    assert any("fewer than 8 samples" in r.getMessage() for r in caplog.records)
+
+
+def test_a_failed_redraw_is_shown_and_logged_and_the_action_stands(
+    app: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def broken(_state: Any) -> None:
+        raise RuntimeError("glyph trouble")
+
+    monkeypatch.setattr(app.views, "update", broken)
+    with caplog.at_level(logging.ERROR):
+        assert app.state.set_model("WN+RW")  # the action succeeded
+    s = app.state
+    assert s.model.spec() == "WN+RW" and s.result is not None
+    assert "Display error in the WV plot: RuntimeError: glyph trouble" in s.error
+    assert app.alert.visible and "glyph trouble" in app.alert.object
+    rec = [r for r in caplog.records if "drawing the WV plot failed" in r.getMessage()]
+    assert rec and rec[0].exc_info is not None  # with its traceback
+    # the other parts were drawn
+    procs = list(app.tables.param_source.data["process"])
+    # the model's parameters, then the fit's IEEE quantities (engine/fit/ieee.py)
+    assert procs[:2] == ["WN", "RW"] and set(procs[2:]) == {"IEEE"}
+
+
+def test_a_failed_session_panel_refresh_is_shown_and_logged(
+    app: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def broken(*_a: Any, **_kw: Any) -> None:
+        raise KeyError("no such format")
+
+    monkeypatch.setattr(app.session_panel.preview, "update", broken)
+    with caplog.at_level(logging.ERROR):
+        assert app.state.set_model("WN+RW")
+    assert "Display error in the export and session buttons" in app.state.error
+    assert any(r.exc_info for r in caplog.records if "export and session" in r.getMessage())
+
+
+def test_unexpected_errors_are_logged_with_their_traceback(
+    app: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    s = app.state
+
+    def broken(*_a: Any, **_kw: Any) -> None:
+        raise RuntimeError("solver exploded")
+
+    monkeypatch.setattr(AppState, "_fit_or_none", broken)
+    with caplog.at_level(logging.ERROR):
+        assert not s.set_model("WN+RW")
+    assert s.error == "Could not set the model: unexpected RuntimeError: solver exploded"
+    assert app.alert.visible and "solver exploded" in app.alert.object
+    assert any(r.exc_info and "Could not set the model" in r.getMessage() for r in caplog.records)
+    # a job's unexpected failure, too
+    caplog.clear()
+    with caplog.at_level(logging.ERROR):
+        app._load_failed("Reading x.csv", MemoryError("no room"))
+    assert s.error == "Reading x.csv: unexpected MemoryError: no room"
+    assert any(r.exc_info for r in caplog.records)
+
+
+# ---------------------------------------------------------------------------------------------
+# the WV cache
+# ---------------------------------------------------------------------------------------------
+def test_wv_cache_maps_and_eviction() -> None:
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal(2**12)
+    wv = eg.wavelet_variance(x, fs=100.0)
+    rob = eg.wavelet_variance(x, fs=100.0, robust=True)
+    c = WVCache()
+    assert c.find("a", 100.0, False) is None
+    c.store("a", 100.0, True, rob)  # the robust WV carries the classical one
+    assert c.find("a", 100.0, True) is rob
+    assert c.find("a", 100.0, False) is rob.classical
+    relabelled = c.find("a", 50.0, False)  # another fs: the same WV re-labelled, kept
+    assert relabelled is not None and relabelled.fs == 50.0
+    np.testing.assert_array_equal(relabelled.variance, rob.classical.variance)
+    assert c.wvs[("a", 50.0, False)] is relabelled
+    assert c.find("b", 100.0, False) is None
+    c.store("b", 100.0, False, wv)
+    # matrices: their own map, the latest N_WV_MATRICES kept
+    for k in range(N_WV_MATRICES + 2):
+        c.store_matrix(("a", "b"), float(k + 1), (k, f"note {k}"))  # type: ignore[arg-type]
+    assert list(c.matrices) == [(("a", "b"), float(k + 1)) for k in range(2, N_WV_MATRICES + 2)]
+    assert c.matrix(["a", "b"], 1.0) is None and c.matrix(["a", "b"], 3.0) == (2, "note 2")
+    assert set(c.wvs) == {("a", 100.0, True), ("a", 100.0, False), ("a", 50.0, False),
+                          ("b", 100.0, False)}  # fmt: skip
+
+
+def test_a_state_change_reaches_the_page_as_one_held_batch(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Every part a click redraws is drawn while the session's document is held, so Bokeh
+    sends one message (a button's callback is not held by Panel: 19 messages a click)."""
+    from bokeh.document import Document
+    from panel.io.state import set_curdoc
+
+    from gmwm_app.app import create_app
+
+    doc = Document()
+    with set_curdoc(doc):
+        page = create_app(load=False)
+        page.server_doc(doc)
+        app = page.gmwm_app
+        app.start_sync()
+        held: list[Any] = []
+        for obj, name in ((app.views, "update"), (app.tables, "update")):
+            real = getattr(obj, name)
+
+            def seen(*a: Any, _real: Any = real, **kw: Any) -> Any:
+                held.append(doc.callbacks.hold_value)
+                return _real(*a, **kw)
+
+            monkeypatch.setattr(obj, name, seen)
+        assert app.jobs.doc is doc
+        assert app.state.add_process("GM"), app.state.error
+        assert held == ["combine", "combine"]  # the plot and the tables, inside one hold
+        assert doc.callbacks.hold_value is None  # released after the change
+        # the loading indicator of a job: its text and widgets together, one message
+        held.clear()
+        app.status.param.watch(lambda _e: held.append(doc.callbacks.hold_value), "object")
+        app._busy(True, "Reading x")
+        app._busy(False)
+        assert held == ["combine", "combine"] and doc.callbacks.hold_value is None

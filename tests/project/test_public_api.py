@@ -1,0 +1,154 @@
+"""engine's API is an explicit list and stays lazy; the structure of engine/ and gmwm_app/ has
+no import cycle, no back-edge between layers, no private import across modules
+(tests/structure_check.py)."""
+
+from __future__ import annotations
+
+import importlib
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+import engine as eg
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+#: The API (engine/__init__.py, README "The API"), written out: adding or removing a name is a
+#: deliberate act that changes this list.
+API = """
+    AR1 AllanVariance BI_FACTOR BatchResult CalibrationReport Candidate DR DatasheetCheck
+    DatasheetError DatasheetSpec DependenceTest ExportError FORMATS FitError FitResult
+    FleetReport GM GMWFMResult GMWMResult ImuLog JTest LoadError LogFit MGMWMResult
+    MethodEstimate Model ModelError MultiModel PROCESS_TYPES ParamInterval ParamRecord
+    ParamTable Process Projection QN RW ReplicateResult ReportError SCENARIOS Scenario
+    SelectionResult Session SessionError SharedEstimate SharedProcess Summary TimeReport
+    VirtualSensor WN WVMatrix WaveletCrossCovariance WaveletVariance __version__ allan_variance
+    ar1_wv avsm avsm_auto biweight_constant check_datasheet check_time compare_table datasheet
+    datasheet_table default_levels demo_dir demo_path demo_truth dependence_test export
+    fit_armav fit_batch fit_efficient fit_gmwfm fit_gmwm fit_log fit_mgmwm fit_replicates
+    fit_report fleet_report from_datasheet from_gmwm gather_fleet gather_report gmwm_objective
+    haar_coefficients imu_topics j_test kalibr_imu kalibr_models load_log load_session
+    moment_covariance optimal_weights param_intervals param_unit parse_datasheet parse_model
+    process_values project rank_models read_datasheet read_imu_bag read_kalibr render_fleet_html
+    plan_run RunPlan
+    render_html report robust_scale_biweight run_slope_study save_log save_session si_factor
+    simulate_scenario starting_values submodels to_datasheet virtual_model virtual_sensor
+    virtual_signal wavelet_cross_covariance wavelet_variance wavelet_variance_stream
+    weight_matrix write_kalibr wv_cov wv_cov_bootstrap wv_cov_data wv_cov_model wv_matrix
+    pooled_wavelet_variance still_segments with_segments
+""".split()
+
+
+def test_the_api_is_the_written_list():
+    assert sorted(eg.__all__) == sorted(API) == sorted(eg.API)
+    assert len(API) == len(set(API))  # each name once
+
+
+def test_every_public_name_resolves_to_the_one_module_that_holds_it():
+    for name, module in eg.API.items():
+        obj = getattr(importlib.import_module(module), name)
+        assert getattr(eg, name) is obj, name
+        # the module named is where the object is defined (or the package re-exporting it)
+        home = getattr(obj, "__module__", None)
+        if home is not None and isinstance(obj, type | types.FunctionType):
+            assert home == module or home.startswith(module + "."), (name, home, module)
+
+
+def test_engine_export_and_report_are_functions_not_modules():
+    assert (
+        isinstance(eg.export, types.FunctionType)
+        and eg.export.__module__ == "engine.formats.registry"
+    )
+    assert isinstance(eg.report, types.FunctionType) and eg.report.__module__ == "engine.reporting"
+    assert isinstance(eg.fleet_report, types.FunctionType)
+    # the subpackages have other names and stay ordinary modules
+    import engine.formats
+    import engine.reporting
+
+    assert type(engine.formats) is types.ModuleType and type(engine.reporting) is types.ModuleType
+    assert eg.export is engine.formats.export
+
+
+def test_subpackages_are_reachable_but_not_in_the_api():
+    assert eg.units.datasheet_rows is importlib.import_module("engine.units").datasheet_rows
+    assert not set(eg.SUBMODULES) & set(eg.__all__)
+    with pytest.raises(AttributeError, match="no attribute 'parallel_map'"):
+        eg.parallel_map  # noqa: B018 - a helper, not in the API
+
+
+def test_the_names_users_had_are_still_there():
+    # the names engine exported before the redesign (README, app, scripts rely on them)
+    before = """AR1 DR GM QN RW WN Process Model ModelError parse_model WaveletVariance
+    wavelet_variance default_levels haar_coefficients biweight_constant robust_scale_biweight
+    ar1_wv fit_gmwm GMWMResult ParamRecord FitError FitResult ParamTable Summary weight_matrix
+    datasheet param_unit ImuLog LoadError load_log save_log AllanVariance allan_variance
+    MethodEstimate from_gmwm avsm avsm_auto fit_gmwfm fit_armav compare_table run_slope_study
+    ExportError datasheet_table export fit_report kalibr_imu kalibr_models read_kalibr
+    write_kalibr Session SessionError load_session save_session wavelet_variance_stream
+    TimeReport check_time WaveletCrossCovariance WVMatrix wavelet_cross_covariance wv_matrix
+    MultiModel SharedProcess fit_mgmwm MGMWMResult SharedEstimate moment_covariance
+    dependence_test DependenceTest fit_replicates ReplicateResult Scenario SCENARIOS
+    simulate_scenario fit_efficient param_intervals ParamInterval j_test JTest wv_cov_model
+    wv_cov_data wv_cov_bootstrap rank_models submodels SelectionResult Candidate""".split()
+    assert not [n for n in before if n not in eg.__all__]
+
+
+def test_import_engine_stays_light():
+    code = (
+        "import sys, engine as eg; eg.fit_gmwm; eg.WN; eg.wavelet_variance;"
+        "print('scipy' in sys.modules, 'h5py' in sys.modules, 'engine.multivariate' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    ).stdout.split()
+    assert out == ["False", "False", "False"]
+
+
+def test_structure_has_no_cycle_and_no_private_import():
+    spec = importlib.util.spec_from_file_location(
+        "structure_check", ROOT / "tests" / "structure_check.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cycles, private = mod.analyse()
+    assert (cycles, private) == ([], [])
+
+
+def _structure_check():
+    spec = importlib.util.spec_from_file_location(
+        "structure_check", ROOT / "tests" / "structure_check.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_packages_run_one_way_through_the_layers():
+    # every import, inside functions and under TYPE_CHECKING too (an older tree had
+    # fit.gmwm -> inference.asymptotic and io.session -> fit/inference: 3 findings)
+    assert _structure_check().layer_violations() == []
+
+
+def test_a_back_edge_between_packages_is_a_finding():
+    sc = _structure_check()
+    graph = {
+        "engine.fit.gmwm": {"engine.inference.asymptotic", "engine.wv.classical", "engine._optim"},
+        "engine.inference.asymptotic": {"engine.fit.result"},
+        "engine.wv.classical": {"engine._blas"},
+        "engine._optim": {"engine._limits"},
+        "engine.fit.result": set(),
+        "engine._blas": set(),
+        "engine._limits": set(),
+        "engine.formats.kalibr": {"engine.multivariate.fit"},  # same layer: a finding too
+        "engine.multivariate.fit": set(),
+        "engine.newpkg.mod": set(),
+    }
+    found = sc.layer_violations(graph)
+    assert len(found) == 3, found
+    assert found[0].startswith("engine.newpkg: not in LAYERS")
+    assert any(f.startswith("engine.fit.gmwm imports engine.inference.asymptotic") for f in found)
+    assert any(f.startswith("engine.formats.kalibr imports engine.multivariate.fit") for f in found)
