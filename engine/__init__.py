@@ -8,9 +8,9 @@
 The API is what a user calls, written out below (docs/api.md is built from it): :data:`API`
 maps each public name to the module that defines it, one place per name. A name is imported on
 first use (PEP 562), so that ``import engine`` and the ``gmwm`` command stay light (SciPy, h5py
-and the multivariate code cost tenths of a second). ``tests/project/test_public_api.py`` pins the list:
-adding a name is a deliberate act. Everything else lives in the subpackages (``engine.fit``,
-``engine.formats`` ...) for those who need it.
+and the multivariate code cost tenths of a second). ``tests/project/test_public_api.py`` pins
+the list: adding a name is a deliberate act. Everything else lives in the subpackages
+(``engine.fit``, ``engine.formats`` ...) for those who need it.
 """
 
 from __future__ import annotations

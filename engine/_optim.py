@@ -384,7 +384,8 @@ def chi2_isf(df: np.ndarray | float, p: np.ndarray | float) -> np.ndarray:
     """Chi-square inverse survival function: ``x`` with ``P(chi2_df > x) = p``.
 
     Kept rather than ``scipy.special.chdtri`` (180x faster, but it loses ~1e-5 relative in the
-    far lower tail of ``df >= 1e8``, ``tests/engine/test_optim.py``); it costs ~2 ms per WV's levels.
+    far lower tail of ``df >= 1e8``, ``tests/engine/test_optim.py``); it costs ~2 ms per WV's
+    levels.
 
     Equals ``scipy.special.chdtri(df, p)`` (relative difference below 1e-12 over the
     degrees of freedom of wavelet variances, 1 to 1e8).

@@ -173,8 +173,8 @@ def _parse_rows(
 
 
 #: Peak memory of loading a text log (bytes), measured with tracemalloc over CSV/TSV/whitespace
-#: files of 1 to 12 columns and 5e4 to 2e5 rows (tests/engine/test_io_safety.py): per byte of the file
-#: (its bytes, held while the rows are parsed block by block), per line (its line number), per
+#: files of 1 to 12 columns and 5e4 to 2e5 rows (tests/engine/test_io_safety.py): per byte of the
+#: file (its bytes, held while the rows are parsed block by block), per line (its line number), per
 #: value (the float64 column and the log's checks), plus a fixed part (one chunk of
 #: :data:`CHUNK_ROWS` rows as text and the parser's buffer).
 PEAK_PER_BYTE, PEAK_PER_LINE, PEAK_PER_VALUE, PEAK_FIXED = 1.5, 4, 10, 8_000_000
