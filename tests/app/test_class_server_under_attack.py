@@ -40,7 +40,7 @@ import h5py
 import pytest
 from conftest import served_app
 from test_hostile_inputs import _npz_bomb, _unwritten_h5, _wide_csv
-from test_server_load import _close_sessions, _in_session, _open, _Probe, _wait
+from test_server_load import _close_sessions, _in_session, _open, _Probe, _refit, _wait
 from test_server_security import _attack, _fragments, _gzip_zeros
 
 from gmwm_app import limits, server_guard
@@ -204,11 +204,7 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
         attacks.start()
         specs = ["GM+WN", "WN"]
         while time.perf_counter() < t_end:
-            spec = specs[len(lags) % 2]
-            t = time.perf_counter()
-            _in_session(student, lambda spec=spec: student.state.set_model(spec))
-            _wait(lambda spec=spec: student.state.model.spec() == spec, "a refit", 10)
-            lags.append(time.perf_counter() - t)
+            lags.append(_refit(student, specs[len(lags) % 2], 10))
             running = [view_of[id(a)].running for a in heavy]
             busy.append(sum(running) / len(running))
             for a, on in zip(heavy, running, strict=True):

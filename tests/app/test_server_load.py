@@ -237,6 +237,15 @@ def _in_session(app: Any, fn: Any) -> None:
     app.jobs.doc.add_next_tick_callback(run)
 
 
+def _refit(app: Any, spec: str, timeout: float = WAIT_S) -> float:
+    """Seconds from asking ``app``'s session for the model ``spec`` (as the model box does)
+    until its state has fitted it (waiting at most ``timeout`` s)."""
+    t = time.perf_counter()
+    _in_session(app, lambda: app.state.set_model(spec))
+    _wait(lambda: app.state.model.spec() == spec, "a refit", timeout)
+    return time.perf_counter() - t
+
+
 class _Probe:
     """Answers of the server loop to an HTTP request every 20 ms, in a thread."""
 
@@ -316,10 +325,7 @@ def _work(served: dict[str, Any], logs: dict[str, Any]) -> dict[str, Any]:
         # ... while each other session refits twice (request -> done, measured)
         for spec in ("GM+WN", MODEL):
             for a in others:
-                t = time.perf_counter()
-                _in_session(a, lambda a=a, spec=spec: a.state.set_model(spec))
-                _wait(lambda a=a, spec=spec: a.state.model.spec() == spec, "a refit")
-                lags.append(time.perf_counter() - t)
+                lags.append(_refit(a, spec))
         overlap = heavy_app.busy
         _wait(lambda: heavy_app.state.robust and not heavy_app.busy, "the robust WV")
     assert heavy_app.state.filename == "heavy.h5" and heavy_app.state.error == ""

@@ -236,7 +236,7 @@ def served(app_demo_file: Path) -> Iterator[dict[str, Any]]:
 def test_rankings_leave_other_sessions_responsive_and_stop_with_their_session(
     served: dict[str, Any],
 ) -> None:
-    from test_server_load import _close_sessions, _in_session, _open, _Probe, _wait
+    from test_server_load import _close_sessions, _in_session, _open, _Probe, _refit, _wait
 
     apps, _ = _open(served, [{"model": "WN"}, {"model": "WN"}, {"model": "WN"}])
     heavy, clicker = apps[:2], apps[2]
@@ -252,11 +252,7 @@ def test_rankings_leave_other_sessions_responsive_and_stop_with_their_session(
     with _Probe(served["url"]) as probe:
         specs = ["GM+WN", "WN"]
         while time.perf_counter() < t_end:
-            spec = specs[len(lags) % 2]
-            t = time.perf_counter()
-            _in_session(clicker, lambda spec=spec: clicker.state.set_model(spec))
-            _wait(lambda spec=spec: clicker.state.model.spec() == spec, "a refit", 10)
-            lags.append(time.perf_counter() - t)
+            lags.append(_refit(clicker, specs[len(lags) % 2], 10))
     still = [v.running for v in views]
     print(
         f"\nwhile 2 sessions ranked {HEAVY}: {len(lags)} refits of a third session, slowest "
