@@ -29,6 +29,7 @@ __all__ = [
     "check_hdf5",
     "start_helper",
     "stop_helper",
+    "helper_pid",
 ]
 
 #: The HDF5 signature (at offset 0 in the files h5py writes; 512, 1024 ... after a user block).
@@ -124,6 +125,13 @@ def stop_helper() -> None:
     if proc is not None and proc.is_alive():
         proc.kill()
         proc.join(5)
+
+
+def helper_pid() -> int | None:
+    """The process id of this process's helper while it is alive (the one process the app
+    keeps), else None."""
+    proc = _HELPER.get("proc") if _HELPER.get("pid") == os.getpid() else None
+    return proc.pid if proc is not None and proc.is_alive() else None
 
 
 def start_helper() -> None:

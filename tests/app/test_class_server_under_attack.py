@@ -43,7 +43,7 @@ from test_hostile_inputs import _npz_bomb, _unwritten_h5, _wide_csv
 from test_server_load import _close_sessions, _in_session, _open, _Probe, _refit, _wait
 from test_server_security import _attack, _fragments, _gzip_zeros
 
-from gmwm_app import limits, server_guard
+from gmwm_app import hdf5_guard, limits, server_guard
 
 pytestmark = pytest.mark.load
 
@@ -61,13 +61,16 @@ MAX_LAG_S = 1.0
 MAX_RISE_MB = 250
 
 
-#: What each hostile file's refusal says (the loaders' messages, as a page shows them).
+#: What each hostile file's refusal says (the loaders' messages, as a page shows them). An HDF5
+#: file is first read by the app's watchdog process (``gmwm_app.hdf5_guard``): on a busy
+#: machine its time limit may refuse the file before the loader's own bound does.
+_SLOW_HDF5 = "the HDF5 library did not finish reading its metadata"
 REASON = {
-    "HDF5, 1e6 one-sample chunks": "more than 262144 chunks",
-    "HDF5, (1e6, 1e6) dataset": "more than the 10000 channels a log may have",
-    "CSV, 1e5 columns": "more than the 10000 channels a log may have",
-    "NPZ inflating 1000x": "declares far more data than it holds",
-    "sparse 2 GB .csv": "is not a text file",
+    "HDF5, 1e6 one-sample chunks": ("more than 262144 chunks", _SLOW_HDF5),
+    "HDF5, (1e6, 1e6) dataset": ("more than the 10000 channels a log may have", _SLOW_HDF5),
+    "CSV, 1e5 columns": ("more than the 10000 channels a log may have",),
+    "NPZ inflating 1000x": ("declares far more data than it holds",),
+    "sparse 2 GB .csv": ("is not a text file",),
 }
 
 
@@ -92,6 +95,21 @@ def _peak_mb() -> float:
     with open("/proc/self/status", encoding="ascii") as f:
         kb = next(int(ln.split()[1]) for ln in f if ln.startswith("VmHWM:"))
     return kb / 1024
+
+
+def _left(before: set[int]) -> set[int]:
+    """Processes started during the test that are still alive, but the one HDF5 helper the
+    app keeps by design (started once, replaced when a file times it out or kills it) and
+    multiprocessing's resource tracker."""
+    kept = {hdf5_guard.helper_pid()}
+    for pid in set(_children()) - before:
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                if b"resource_tracker" in f.read():
+                    kept.add(pid)
+        except OSError:  # ended meanwhile
+            kept.add(pid)
+    return set(_children()) - before - kept
 
 
 def _children() -> list[int]:
@@ -231,7 +249,7 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
     assert codes == [10001, 10001], codes  # both messages closed their session only
     assert len(load_errors) >= len(served["files"]), load_errors  # every file at least by path
     for what, err in load_errors.items():  # each refused for its own reason, in one line
-        assert REASON[what.rsplit(" (", 1)[0]] in err, (what, err)
+        assert any(r in err for r in REASON[what.rsplit(" (", 1)[0]]), (what, err)
         assert "\n" not in err and "Traceback" not in err and "unexpected" not in err, (what, err)
     assert rise < MAX_RISE_MB, rise
 
@@ -242,7 +260,7 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
     _wait(lambda: not any(v.running for v in view_of.values()), "the rankings to stop", 60)
     stop_s = time.perf_counter() - t0
     assert all(a.jobs.closed for a in apps)
-    _wait(lambda: not (set(_children()) - kids_before), "the loader processes to end", 30)
+    _wait(lambda: not _left(kids_before), "the loader processes to end", 30)
     print(f"  after the tabs closed: rankings stopped in {stop_s:.1f} s; no loader left")
     return [weakref.ref(a) for a in apps]
 
