@@ -255,6 +255,12 @@ def _run(served: dict[str, Any], kids_before: set[int], base: float) -> list[wea
 
     # every tab closes: the rankings stop, the workers idle, no loader process stays, the
     # sessions' apps are released
+    ctx = served["server"]._tornado._applications["/"]  # as _close_sessions finds them
+    _wait(  # the attackers' sockets, closed by the server, are detached from their sessions
+        lambda: all(s.connection_count == 0 for s in list(ctx.sessions)),
+        "the attackers' connections to close",
+        30,
+    )
     t0 = time.perf_counter()
     _close_sessions(served["server"])
     _wait(lambda: not any(v.running for v in view_of.values()), "the rankings to stop", 60)
