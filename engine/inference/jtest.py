@@ -55,10 +55,7 @@ ETA_MIN = 4.0
 #: measured) that the classical WV's do not (:func:`jtest_levels`, docs/jtest.md).
 ETA_MIN_ROBUST = 10.0
 #: The levels rule in words (messages, the app's help).
-LEVELS_RULE = (
-    f"M_j / 2^j >= {ETA_MIN:g} for a classical WV, eff M_j / 2^j >= {ETA_MIN_ROBUST:g} for a "
-    "robust one"
-)
+LEVELS_RULE = f"M_j / 2^j >= {ETA_MIN:g}, robust WV: eff M_j / 2^j >= {ETA_MIN_ROBUST:g}"
 
 
 @dataclass(frozen=True)

@@ -58,10 +58,8 @@ DISGUISE_LEVEL = 1e-3
 #: What the J column of a ranking is (the table's last line; the app and docs/inference.md agree).
 JTEST_NOTE = (
     "J-test p: efficient J-test of each candidate (refitted with Omega = V^-1, V of the WV's "
-    "own estimator, classical or robust, with a drift's share, from the largest candidate, on "
-    f"the levels with {LEVELS_RULE}) against "
-    "chi2(levels - p), whatever the "
-    "ranking's weights"
+    "own estimator with a drift's share, from the largest candidate, on the levels with "
+    f"{LEVELS_RULE}) against chi2(levels - p), whatever the ranking's weights"
 )
 
 
