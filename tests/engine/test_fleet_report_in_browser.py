@@ -23,9 +23,10 @@ from engine.reporting.render import fleet_figure_specs
 pytestmark = [pytest.mark.browser, pytest.mark.browser_tour]  # minutes: CI's second step
 
 #: Size budget of the six-unit, six-channel interactive fleet report (measured 4.81 MB, 4.94 MB
-#: with the IEEE columns, 05:25 UTC on the shared machine: BokehJS
-#: 1.3 MB once, ~0.5 MB of figures and tables per unit, the fleet figures and tables).
-BUDGET_MB = 5.0
+#: with the IEEE columns, 5.04 MB with each unit's log check and each channel's misfit lines
+#: (CI, 2026-11-28): BokehJS 1.3 MB once, ~0.5 MB of figures and tables per unit, the fleet
+#: figures and tables). The budget follows content a user reads, not a trimmed file.
+BUDGET_MB = 5.2
 
 
 def _marker_pixels(png: bytes) -> int:
