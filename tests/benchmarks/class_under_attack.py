@@ -1,5 +1,11 @@
 """A class under attack: every hostile action at once against one served app, while a student
-keeps working.
+keeps working (a bounded load run, not collected by the test suite: run it alone, in a process
+of its own, with
+
+    python -m pytest tests/benchmarks/class_under_attack.py -m load -s -p no:cacheprovider
+
+In one process with other tests it left Bokeh's patched current document and its sessions'
+threads behind when it failed, which broke the tests after it).
 
 One app served on loopback (in a thread of this process, as ``tests/app/test_server_load.py`` serves
 it) and, during :data:`MEASURE_S` seconds, all at the same time:
