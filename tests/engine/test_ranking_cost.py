@@ -1,16 +1,12 @@
-"""What model selection costs, and the pieces of the profiled objective that make it cheaper.
-
-The CPU figure is a ratio to a reference timed in the same test (a bare NumPy Haar WV of the same
-channel), so that it holds on a loaded machine; tests/benchmarks/bench_ranking.py prints it for
-any channel and docs/performance.md has the before/after table.
+"""The pieces of the profiled objective that make model selection cheaper, checked against
+independent computations. What selection costs is a benchmark, not a test:
+tests/benchmarks/bench_ranking.py prints it (a ratio to a bare NumPy Haar WV timed in the same
+run) and docs/performance.md has the before/after table.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,22 +17,6 @@ import engine as eg
 from engine.fit._varpro import NNLSProblem, sqrt_weight
 from engine.fit.gmwm import weight_matrix
 from engine.models.processes import ar1_wv, ar1_wv_pos
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _bench():
-    spec = importlib.util.spec_from_file_location(
-        "bench_ranking", ROOT / "tests" / "benchmarks" / "bench_ranking.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["bench_ranking"] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def _bench_wv(x: np.ndarray, levels: int) -> np.ndarray:
-    return sys.modules["bench_ranking"].bare_wv(x, levels)
 
 
 def test_ar1_series_branch_equals_the_vectorised_formula() -> None:
