@@ -11,7 +11,6 @@ import math
 import numpy as np
 import pytest
 import scipy.optimize
-import scipy.stats  # noqa: F401  (its first import is not the ranking's cost)
 
 import engine as eg
 from engine.fit._varpro import NNLSProblem, sqrt_weight
