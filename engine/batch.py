@@ -26,7 +26,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -89,6 +89,10 @@ class LogFit:
     qualification : dict
         What the log check found before the fit (:meth:`engine.io.Qualification.to_dict`),
         empty when the log failed or was resumed.
+    temperature : dict of str to TemperatureFit
+        Per channel with a temperature channel beside it (``temperature=`` of
+        :func:`fit_log`), its bias-temperature fit; the channel's fit in :attr:`fits` is then
+        that of the compensated signal (:mod:`engine.inference.temperature`).
     """
 
     source: str
@@ -102,6 +106,7 @@ class LogFit:
     resumed: bool = False
     values: tuple[tuple[tuple[str, ...], float], ...] = ()
     qualification: dict[str, Any] = field(default_factory=dict)
+    temperature: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -129,6 +134,20 @@ class LogFit:
                 "elapsed_s": self.elapsed_s,
                 "resumed": self.resumed,
                 "qualification": self.qualification or None,
+                "temperature": {
+                    ch: {
+                        "line": tf.line(),
+                        "temperature": tf.temperature,
+                        "sensitivity": tf.sensitivity,
+                        "sensitivity_interval": list(tf.sensitivity_interval),
+                        "sensitivity_unit": tf.sensitivity_unit,
+                        "fit_raw_model": tf.fit_raw.model.spec(values=True)
+                        if tf.fit_raw is not None
+                        else None,
+                    }
+                    for ch, tf in self.temperature.items()
+                }
+                or None,
             }
         )
 
@@ -177,6 +196,7 @@ def fit_log(
     weights: str = "ci",
     load_options: Mapping[str, Any] | None = None,
     drop_warmup: bool = False,
+    temperature: str | None = "auto",
 ) -> LogFit:
     """Load one log, check it (:func:`engine.io.qualify_log`) and fit every channel (or
     ``channels``).
@@ -204,6 +224,11 @@ def fit_log(
     drop_warmup : bool
         Drop the warm-up the log check finds (:attr:`engine.io.Qualification.suggested_start`)
         before the fit.
+    temperature : str, optional
+        The temperature channel (:func:`engine.inference.temperature.fit_log_temperature`):
+        ``"auto"`` (the default; None too: a channel named like a temperature, if any),
+        ``"none"`` or its name. Each channel with one is fitted on its compensated signal,
+        and the same model on the raw signal beside it (:attr:`LogFit.temperature`).
 
     Returns
     -------
@@ -212,6 +237,7 @@ def fit_log(
         fails (:class:`engine.io.LoadError`, :class:`engine.fit.FitError` ...).
     """
     from .formats import export
+    from .inference.temperature import find_temperature, fit_log_temperature
     from .io import drop_warmup as cut_warmup
     from .io import log_of, pick_channel, qualify_log
 
@@ -220,16 +246,23 @@ def fit_log(
     log = log_of(path, fs=fs, load_options=load_options, caller="fit_log")
     src = log.source if log is path else str(path)
     names = [pick_channel(src, log.names, c) for c in channels] if channels else log.names
+    if temperature not in (None, "auto", "none"):  # a name the log lacks: the log's error
+        find_temperature(log, temperature)
     check = qualify_log(log, names)
     if drop_warmup and check.suggested_start:
         log = cut_warmup(log, check.suggested_start)
         check = qualify_log(log, names)
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}
+    temps: dict[str, Any] = {}
     for ch in names:
         try:
-            wv = log.wavelet_variance(ch, levels=levels)
+            tf = fit_log_temperature(log, ch, temperature or "auto", levels=levels, weights=weights)
+            wv = tf.wv if tf is not None else log.wavelet_variance(ch, levels=levels)
             fits[ch] = _fit_channel(wv, model, select, weights)
+            if tf is not None:  # the same model on the raw signal, for the page's comparison
+                raw = fit_gmwm(tf.wv_raw, parse_model(fits[ch].model.spec()), weights=weights)
+                temps[ch] = replace(tf, fit=fits[ch], fit_raw=raw)
         except (FitError, ModelError, ValueError) as e:
             errors[ch] = f"{type(e).__name__}: {e}"
     if not fits:
@@ -239,12 +272,31 @@ def fit_log(
     report = export(None, fits, "json", log=log, source=src)
     elapsed = time.perf_counter() - t0
     return LogFit(
-        src, fits, report, "", errors, float(log.fs), log.n, elapsed, qualification=check.to_dict()
+        src,
+        fits,
+        report,
+        "",
+        errors,
+        float(log.fs),
+        log.n,
+        elapsed,
+        qualification=check.to_dict(),
+        temperature=temps,
     )
 
 
 _FIT_LOG_OPTIONS = frozenset(
-    ("model", "select", "channels", "fs", "levels", "weights", "load_options", "drop_warmup")
+    (
+        "model",
+        "select",
+        "channels",
+        "fs",
+        "levels",
+        "weights",
+        "load_options",
+        "drop_warmup",
+        "temperature",
+    )
 )
 
 
@@ -323,7 +375,8 @@ def fit_batch(
         (ValueError before any fit). The summaries are written by :meth:`BatchResult.save`.
     **options
         The keywords of :func:`fit_log`, the same for every log: ``model`` or ``select``,
-        ``channels``, ``fs``, ``levels``, ``weights``, ``load_options``.
+        ``channels``, ``fs``, ``levels``, ``weights``, ``load_options``, ``drop_warmup``,
+        ``temperature``.
 
     Returns
     -------
@@ -350,6 +403,7 @@ def fit_batch(
     kw["weights"] = kw["weights"] or "ci"
     kw["channels"] = list(kw["channels"]) if kw["channels"] else None
     kw["load_options"] = dict(kw["load_options"] or {})
+    kw["temperature"] = kw["temperature"] or "auto"
     _check_choice(kw["model"], kw["select"])
     if kw["weights"] not in ("ci", "identity", "efficient"):
         raise ValueError(f"unknown weights {kw['weights']!r}: use 'ci', 'identity' or 'efficient'")

@@ -293,6 +293,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.alert = hidden_alert("danger", s.param.error)
         self.notice = hidden_alert("info", s.param.notice)
         self.log_check = hidden_alert("secondary", s.param.log_check)  # engine.io.qualify
+        self.temperature = hidden_alert("info", s.param.temperature)  # compensated signal
         self.warning = hidden_alert("warning")  # (_show_warnings)
         self.status = pn.pane.Markdown(
             "",
@@ -389,6 +390,7 @@ class GMWMApp(pn.viewable.Viewer):
                 *self.session_panel.main(),
                 self.notice,
                 self.log_check,
+                self.temperature,
                 self.warning,
                 self.status,
                 self.plot_box,

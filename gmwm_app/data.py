@@ -24,6 +24,7 @@ import numpy as np
 
 import engine as eg
 from engine._checks import check_fs as engine_check_fs
+from engine.inference.temperature import fit_log_temperature, temperature_series
 from engine.io import qualify_log
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
@@ -47,6 +48,8 @@ __all__ = [
     "shared_wvs",
     "clear_shared",
     "log_check_line",
+    "temperature_fit_of",
+    "temperature_line",
 ]
 
 log = logging.getLogger(__name__)
@@ -348,7 +351,9 @@ def compute_wv(
     robust: bool,
     progress: Callable[[int, int], object] | None = None,
 ) -> eg.WaveletVariance:
-    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``).
+    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``); with a
+    temperature channel beside it (:func:`temperature_fit_of`), the WV of its compensated
+    signal.
 
     ``progress(j, J)`` is called as each level of a computed WV is done (see
     :func:`engine.wavelet_variance`); not for a summary file's stored WV.
@@ -356,6 +361,12 @@ def compute_wv(
     if lg is None:
         raise ValueError("load a log first")
     try:
+        tf = temperature_fit_of(lg, ch)
+        if tf is not None:  # the compensated signal, as `gmwm fit --temperature auto` fits it
+            y = tf.compensate(lg[ch], temperature_series(lg, tf.temperature))
+            return eg.wavelet_variance(
+                y, fs=fs, robust=robust, unit=lg.unit_of(ch), progress=progress
+            )
         return lg.wavelet_variance(ch, robust=robust, fs=fs, progress=progress)
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
@@ -415,3 +426,38 @@ def log_check_line(lg: Any, channel: str) -> str:
     with _CHECKS_LOCK:
         done[channel] = line
     return line
+
+
+#: The temperature fit per log and channel (None: none to fit), once per loaded log.
+_TEMPS: weakref.WeakKeyDictionary[Any, dict[str, Any]] = weakref.WeakKeyDictionary()
+
+
+def temperature_fit_of(lg: Any, channel: str) -> Any:
+    """The bias-temperature fit of one channel of a log
+    (:func:`engine.inference.temperature.fit_log_temperature`, temperature channel found
+    automatically), or None: no temperature channel, a WV summary, a log cut into segments,
+    or a relation that cannot be fitted (a constant temperature, too few samples). Cached per
+    log and channel."""
+    if lg.is_summary:
+        return None
+    with _CHECKS_LOCK:
+        done = _TEMPS.setdefault(lg, {})
+        if channel in done:
+            return done[channel]
+    try:
+        tf = fit_log_temperature(lg, channel, "auto")
+    except ValueError:  # constant temperature, too short, NaN: nothing to compensate
+        tf = None
+    with _CHECKS_LOCK:
+        done[channel] = tf
+    return tf
+
+
+def temperature_line(lg: Any, channel: str) -> str:
+    """The one line the Fit view says of a channel with a temperature channel beside it: the
+    sensitivity with its interval in datasheet units, and that the WV and the fit are of the
+    compensated signal; ``""`` without one."""
+    tf = temperature_fit_of(lg, channel)
+    if tf is None:
+        return ""
+    return f"{tf.line()}; the WV and the fit are of the temperature-compensated signal"

@@ -12,10 +12,11 @@ from __future__ import annotations
 import html
 import io
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 from engine.reporting import gather_report, render_html
-from gmwm_app.data import message_of
+from gmwm_app.data import message_of, temperature_fit_of
 from gmwm_app.state import AppState
 
 __all__ = ["session_report", "report_filename", "report_file"]
@@ -36,9 +37,11 @@ def session_report(state: AppState) -> str:
         raise ValueError("load a log first: the report is of the session's log and fit")
     if res is None or not state.channel:
         raise ValueError("fit a model first (add a process): the report shows the session's fit")
+    tf = temperature_fit_of(lg, state.channel)  # the fit is then of the compensated signal
     rep = gather_report(
         lg,
         fits={state.channel: res},
+        temperatures={state.channel: replace(tf, fit=res)} if tf is not None else None,
         command_line=f"gmwm-app: {state.filename or 'log'}, channel {state.channel}, "
         f"model {res.model.spec()}, {res.weights} weights",
     )

@@ -48,6 +48,7 @@ from gmwm_app.data import (
     precompute,
     read_source,
     summary_has_robust,
+    temperature_line,
     unit_of,
     wv_matrix_of,
 )
@@ -173,6 +174,12 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         default="",
         doc="What the log check (engine.io.qualify_log) found in the channel shown, one line; "
         "empty for a clean log or a WV summary.",
+    )
+    temperature = param.String(
+        default="",
+        doc="With a temperature channel beside the channel shown: its bias-temperature "
+        "sensitivity with its interval, one line (the WV and the fit are then of the "
+        "compensated signal); empty otherwise.",
     )
 
     def __init__(self, **params: Any) -> None:
@@ -457,7 +464,11 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     def _data_info(self, lg: Any, ch: str, wv: eg.WaveletVariance) -> dict[str, Any]:
         n = int(wv.n if lg.is_summary else np.size(lg.channels[ch]))
         info = {"n": n, "duration_s": n / float(wv.fs), "unit": unit_of(lg, ch)}
-        return {**info, "log_check": log_check_line(lg, ch)}
+        return {
+            **info,
+            "log_check": log_check_line(lg, ch),
+            "temperature": temperature_line(lg, ch),
+        }
 
     def select_channel(self, channel: str) -> bool:
         """Show another channel: its cached WV (computed on first use) and a refit."""

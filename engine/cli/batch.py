@@ -5,6 +5,7 @@
                [--workers N] [--scheduler local|ADDRESS] [--quiet] [--json]
                [--datasheet VALUES | --datasheet-file FILE] [--spec 'KEY<=VALUE UNIT' ...]
                [--segment ...] [--scale ...] [--units ...] [--topic T]
+               [--drop-warmup] [--temperature auto|none|COLUMN]
 
 Every channel of every log is fitted (:func:`engine.batch.fit_batch`); DIR receives one JSON
 report per log and ``summary.csv``/``summary.json`` (the spread of every parameter and
@@ -129,7 +130,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     add_scheduler_option(bt)
     bt.add_argument("--quiet", action="store_true", help="no progress line on stderr")
-    add_check_options(bt, temperature=False)  # --drop-warmup
+    add_check_options(bt)  # --drop-warmup --temperature (per log)
     bt.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     add_log_options(bt, stream=False)
     add_report_options(bt)
@@ -182,6 +183,7 @@ def _fit_kwargs(
         "executor": executor,
         "progress": progress,
         **({"drop_warmup": True} if getattr(args, "drop_warmup", False) else {}),
+        "temperature": getattr(args, "temperature", None),
     }
 
 
@@ -251,7 +253,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     files = res.save(args.output) if args.output is not None else {}
     for lf in res.logs:
         if lf.error:
-            print(terminal_text(f"gmwm: batch: {lf.source}: {lf.error}"), file=sys.stderr)
+            print(terminal_text(f"gmwm: batch: {lf.source}: {cli_text(lf.error)}"), file=sys.stderr)
         for ch, err in lf.channel_errors.items():
             print(terminal_text(f"gmwm: batch: {lf.source} [{ch}]: {err}"), file=sys.stderr)
         q = lf.qualification
@@ -259,6 +261,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             print(
                 terminal_text(f"gmwm batch: {lf.source}: {cli_text(q['summary'])}"), file=sys.stderr
             )
+        for tf in lf.temperature.values():  # each compensated channel, one line
+            print(terminal_text(f"gmwm batch: {lf.source}: {tf.line()}"), file=sys.stderr)
     for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
         queue_warning(args, w)
     if not res.fitted:

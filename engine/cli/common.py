@@ -141,13 +141,15 @@ def positive(kind: type[int] | type[float], name: str) -> Callable[[str], float]
 
 
 def load_wv(
-    args: argparse.Namespace, alpha: float = 0.05, *, check: bool = False
+    args: argparse.Namespace, alpha: float = 0.05, *, check: bool = False, label: str = ""
 ) -> tuple[WaveletVariance, str]:
     """The WV of the selected channel (computed, or read from a summary file).
 
-    With ``check`` (``gmwm fit``): the log check runs first (:func:`checked_log`), and with a
-    temperature channel (``--temperature``) the WV is that of the compensated signal; the
-    check and the temperature fit are left on ``args`` (``qualification``, ``temperature_fit``).
+    With ``check`` (``gmwm fit``, ``gmwm select``): the log check runs first
+    (:func:`checked_log`), and with a temperature channel (``--temperature``) the WV is that
+    of the compensated signal; the check and the temperature fit are left on ``args``
+    (``qualification``, ``temperature_fit``). ``label`` starts the lines said on stderr (the
+    file's name, when a command reads several).
     """
     from ..io import load_log
 
@@ -158,8 +160,8 @@ def load_wv(
     log = load_log(args.input, channel=args.channel, fs=args.fs, **log_kwargs(args))
     name = log.names[0]
     if check:
-        log, args.qualification = checked_log(args, log, [name])
-        args.temperature_fit = temperature_fit(args, log, name, alpha=alpha)
+        log, args.qualification = checked_log(args, log, [name], label=label)
+        args.temperature_fit = temperature_fit(args, log, name, alpha=alpha, label=label)
         if args.temperature_fit is not None:
             if not log.is_summary and log.fs_source == "default":
                 warn_fs_unknown(args, args.input)
@@ -197,11 +199,11 @@ def say(args: argparse.Namespace, msg: str) -> None:
 
 
 def checked_log(
-    args: argparse.Namespace, log: Any, channels: list[str] | None = None
+    args: argparse.Namespace, log: Any, channels: list[str] | None = None, *, label: str = ""
 ) -> tuple[Any, Any]:
     """Run the log check (:func:`engine.io.qualify_log`) on a loaded log, drop the warm-up
     with ``--drop-warmup``, and say what was found in one line on stderr (nothing for a
-    clean log).
+    clean log), after ``label`` (the file's name when a command reads several).
 
     Returns
     -------
@@ -215,42 +217,53 @@ def checked_log(
         log = drop_warmup(log, q.suggested_start)
         q = qualify_log(log, channels)
     if q.findings or q.dropped:  # a clean log is not worth a line (the JSON has the check)
-        say(args, q.line())
+        say(args, label + q.line())
     return log, q
 
 
 def temperature_fit(
-    args: argparse.Namespace, log: Any, name: str, *, alpha: float = 0.05, model: Any = None
+    args: argparse.Namespace,
+    log: Any,
+    name: str,
+    *,
+    alpha: float = 0.05,
+    model: Any = None,
+    label: str = "",
 ) -> Any:
-    """The temperature compensation of channel ``name`` (``--temperature``), or None when the
-    log has no temperature channel (or is a summary, or is cut into segments)."""
-    from ..inference.temperature import find_temperature, fit_temperature
+    """The temperature compensation of channel ``name`` (``--temperature``,
+    :func:`engine.inference.temperature.fit_log_temperature`), said in one line on stderr; None
+    when the log has no temperature channel (or is a summary, or is cut into segments)."""
+    from ..inference.temperature import find_temperature, fit_log_temperature
 
     choice = getattr(args, "temperature", "none") or "none"
-    if log.is_summary or choice == "none":
+    if log.segments and not log.is_summary and choice != "none":
+        tname = find_temperature(log, choice, channel=name)
+        if tname is not None:
+            say(
+                args,
+                f"{label}temperature: not fitted on a log cut into segments ('{tname}' ignored)",
+            )
         return None
-    tname = find_temperature(log, choice, channel=name)
-    if tname is None:
+    tname = None if log.is_summary else find_temperature(log, choice, channel=name)
+    try:
+        tf = fit_log_temperature(
+            log,
+            name,
+            tname or "none",
+            model=model,
+            levels=args.levels,
+            robust=getattr(args, "robust", False),
+            eff=getattr(args, "eff", 0.6),
+            alpha=alpha,
+            weights=getattr(args, "weights", None) or "ci",
+        )
+    except ValueError as e:
+        if choice != "auto":
+            raise
+        say(args, f"{label}temperature: '{tname}' not used ({e})")  # too short, constant ...
         return None
-    if log.segments:
-        say(args, f"temperature: not fitted on a log cut into segments ('{tname}' ignored)")
-        return None
-    temp = log.aux[tname] if tname in log.aux else log.channels[tname]
-    tf = fit_temperature(
-        log[name],
-        temp,
-        fs=log.fs,
-        model=model,
-        unit=log.unit_of(name),
-        channel=name,
-        temperature=tname,
-        levels=args.levels,
-        robust=getattr(args, "robust", False),
-        eff=getattr(args, "eff", 0.6),
-        alpha=alpha,
-        weights=getattr(args, "weights", None) or "ci",
-    )
-    say(args, tf.line())
+    if tf is not None:
+        say(args, label + tf.line())
     return tf
 
 

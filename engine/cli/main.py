@@ -150,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     sel.add_argument(
         "--top", type=positive(int, "--top"), help="show only the best N (all are ranked)"
     )
+    add_check_options(sel)  # --drop-warmup --temperature
 
     sim = sub.add_parser("simulate", help="simulate a model with given values")
     sim.add_argument(
@@ -293,7 +294,7 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
 
     if not args.max_model and not args.models:
         raise CliError("give --max-model SPEC or --models 'SPEC1,SPEC2,...'")
-    wv, name = load_wv(args)
+    wv, name = load_wv(args, check=True)  # the log check and --temperature first
     cands = [m for m in args.models.split(",") if m.strip()] if args.models else None
 
     def progress(done: int, total: int) -> None:
@@ -323,6 +324,9 @@ def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
         # the IEEE quantities of the selected model (engine.fit.ieee), as gmwm fit --json
         d["ieee"] = best.ieee.to_dict() if best is not None else None
         d["ieee_model"] = sel.best.model
+        q, tf = getattr(args, "qualification", None), getattr(args, "temperature_fit", None)
+        d["qualification"] = q.to_dict() if q is not None else None
+        d["temperature"] = tf.to_dict() if tf is not None else None
         return d
     table = dataclasses.replace(sel, candidates=shown).table()
     if len(shown) < n_ranked:  # say how many were ranked, not only how many are shown

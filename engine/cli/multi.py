@@ -54,19 +54,25 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             raise FitError(
                 "--weights efficient is not available for replicate fits; use ci or identity"
             )
-        wvs, names = [], []
+        wvs, names, checks, temps = [], [], [], []
         for f in files:
             one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
-            wv, name = load_wv(one)
+            # the log check (and --temperature) of each file, one stderr line each
+            wv, name = load_wv(one, check=True, label=f"{f}: ")
             for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
                 queue_warning(args, w)
             wvs.append(wv)
             names.append(name)
+            q, tf = getattr(one, "qualification", None), getattr(one, "temperature_fit", None)
+            checks.append(q.to_dict() if q is not None else None)
+            temps.append(tf.to_dict() if tf is not None else None)
         res = fit_replicates(wvs, args.model, weights=args.weights)
         if args.json:
             d = res.to_dict()
             d["inputs"] = files
             d["channels"] = names
+            d["qualification"] = checks  # per input, in order (None: not checked, --stream)
+            d["temperature"] = temps
             return json_ready(d)
         head = "\n".join(f"{f} [{n}]" for f, n in zip(files, names, strict=True))
         return f"{head}\n{res.summary()}"

@@ -4,11 +4,13 @@
                 [--datasheet VALUES | --datasheet-file FILE] [--format kalibr] [--static]
                 [--fs HZ] [--levels J] [--weights ci|identity|efficient] [--confidence 0.95]
                 [--segment ...] [--scale ...] [--units ...] [--topic T] [--json]
+                [--drop-warmup] [--temperature auto|none|COLUMN]
 
 One self-contained HTML file (:func:`engine.report`): the log, per channel the Allan deviation,
 the WV with the fit, its decomposition and residuals, the PSD, the parameters and datasheet
 quantities with intervals, the J-test and every warning, the datasheet check, the export file,
-and how it was made. ``--static`` draws PNG figures (matplotlib) instead of interactive ones.
+and how it was made; with a temperature channel, its sensitivity and both WVs (raw and
+compensated). ``--static`` draws PNG figures (matplotlib) instead of interactive ones.
 """
 
 from __future__ import annotations
@@ -78,7 +80,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     add_weights_option(rp)
     add_confidence_option(rp, "the parameter intervals")
     add_log_options(rp, stream=False)
-    add_check_options(rp, temperature=False)  # --drop-warmup
+    add_check_options(rp)  # --drop-warmup --temperature
     return rp
 
 
@@ -108,10 +110,14 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         load_options=log_kwargs(args),
         command_line=shlex.join(["gmwm", *args.argv]),
         drop_warmup=args.drop_warmup,
+        temperature=args.temperature,
     )
     check = rep.log.get("qualification") or {}
     if check.get("findings") or check.get("dropped"):  # one line, as gmwm fit says it
         say(args, check["summary"])
+    for c in rep.channels.values():  # one line per compensated channel, as gmwm fit says it
+        if c.temperature is not None:
+            say(args, c.temperature.line())
     page = render_html(rep, static=args.static)
     write_atomic(args.output, page)  # never a truncated page; a full disk names the file
     kind = "static" if args.static else "interactive"
@@ -121,7 +127,11 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             "qualification": check or None,
             "channels": {
                 ch: (
-                    {"model": c.fit.model.spec(values=True), "ieee": c.fit.ieee.to_dict()}
+                    {
+                        "model": c.fit.model.spec(values=True),
+                        "ieee": c.fit.ieee.to_dict(),
+                        "temperature": c.temperature.to_dict() if c.temperature else None,
+                    }
                     if c.fit is not None
                     else {"error": c.error}
                 )

@@ -11,6 +11,12 @@ shorter than a block) is covered by Newey-West standard errors (lag 4). A temper
 rises linearly over the whole log is, in these differences, a constant: it cannot be told
 from a drift, and the fit says so (its interval is then very wide).
 
+A sensor's own temperature may lag the logged one (a board sensor, a case): with
+``lag="auto"`` (the default) the fit also tries a first-order thermal lag, the polynomial in
+``T_lag`` with ``dT_lag/dt = (T - T_lag) / tau`` (:func:`lagged_temperature`), ``tau`` by
+profiling the same regression's residual sum of squares, and keeps it only when the data
+support it: a BIC lower than the polynomial's on the differenced block means.
+
 The GMWM is then fitted on ``y_t - sum_p c_p (T_t - T_ref)^p``; :class:`TemperatureFit`
 keeps both wavelet variances (raw and compensated). Sensitivities are reported in datasheet
 units: deg/h per degC for gyroscopes, mg per degC for accelerometers (``engine.units``).
@@ -31,7 +37,15 @@ from ..models import Model
 from ..units import ExportError, si_factor
 from ..wv import WaveletVariance
 
-__all__ = ["TemperatureFit", "fit_temperature", "temperature_sensitivity", "find_temperature"]
+__all__ = [
+    "TemperatureFit",
+    "fit_temperature",
+    "fit_log_temperature",
+    "temperature_sensitivity",
+    "find_temperature",
+    "temperature_series",
+    "lagged_temperature",
+]
 
 BLOCKS = 256
 NW_LAG = 4
@@ -67,6 +81,20 @@ class TemperatureFit:
         The GMWM of the compensated signal, and of the raw one (same model).
     wv, wv_raw : WaveletVariance
         Their wavelet variances.
+    notes : tuple of str
+        What the fit could not tell (a temperature rising at a constant rate, like a drift).
+    tau_s : float
+        Time constant (s) of the first-order thermal lag the polynomial is in (``T`` replaced
+        by :func:`lagged_temperature`); 0: the temperature as logged.
+    tau_interval : (float, float)
+        Profile-likelihood interval of ``tau_s`` at ``level`` (``0`` as its low end: a lag
+        shorter than the data can tell; ``inf`` as its high end: longer than the log); ``(0,
+        0)`` without a lag.
+    lag_bic : float
+        BIC of the best lag minus that of the polynomial alone, on the differenced block means
+        (the lag is kept when it is negative); NaN when no lag was tried.
+    fs : float
+        Sampling frequency (Hz) of the fitted log (the lag's time step).
     """
 
     channel: str
@@ -87,6 +115,10 @@ class TemperatureFit:
     wv: WaveletVariance | None = None
     wv_raw: WaveletVariance | None = None
     notes: tuple[str, ...] = field(default=())
+    tau_s: float = 0.0
+    tau_interval: tuple[float, float] = (0.0, 0.0)
+    lag_bic: float = math.nan
+    fs: float = math.nan
 
     @property
     def interval(self) -> np.ndarray:
@@ -100,10 +132,14 @@ class TemperatureFit:
         """One line: the sensitivity with its interval and the temperature range."""
         lo, hi = self.sensitivity_interval
         t0, t1 = self.temperature_range
+        lag = ""
+        if self.tau_s > 0:
+            a, b = self.tau_interval
+            lag = f", lagging it by tau = {self.tau_s:.3g} s [{a:.3g}, {b:.3g}]"
         return (
             f"{self.channel}: temperature sensitivity {self.sensitivity:.4g} "
             f"[{lo:.4g}, {hi:.4g}] {self.sensitivity_unit} ({100 * self.level:g} %, "
-            f"'{self.temperature}' from {t0:.3g} to {t1:.3g} degC)"
+            f"'{self.temperature}' from {t0:.3g} to {t1:.3g} degC{lag})"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -127,14 +163,21 @@ class TemperatureFit:
             "sensitivity_unit": self.sensitivity_unit,
             "fit": self.fit.to_dict() if self.fit is not None else None,
             "fit_raw_model": self.fit_raw.model.spec(values=True) if self.fit_raw else None,
+            "fit_raw": self.fit_raw.to_dict() if self.fit_raw is not None else None,
             "wv_raw": self.wv_raw.to_dict() if self.wv_raw is not None else None,
             "notes": list(self.notes),
+            "lag_tau_s": self.tau_s,
+            "lag_tau_interval_s": list(self.tau_interval),
+            "lag_bic": self.lag_bic,
             "summary": self.line(),
         }
 
     def compensate(self, y: np.ndarray, temp: np.ndarray) -> np.ndarray:
-        """``y - sum_p c_p (T - T_ref)^p``."""
-        dt = np.asarray(temp, dtype=float) - self.t_ref
+        """``y - sum_p c_p (T - T_ref)^p``, ``T`` lagged by :attr:`tau_s` when it is > 0."""
+        t = np.asarray(temp, dtype=float)
+        if self.tau_s > 0:
+            t = lagged_temperature(t, self.tau_s, self.fs)
+        dt = t - self.t_ref
         out = np.asarray(y, dtype=float).copy()
         for p, c in enumerate(self.coef, start=1):
             out -= c * dt**p
@@ -151,6 +194,30 @@ def temperature_sensitivity(value: float, unit: str, channel: str = "") -> tuple
     if kind == "gyroscope":
         return float(value) * factor * 180 / math.pi * 3600, "deg/h/degC"
     return float(value) * factor / _G * 1000, "mg/degC"
+
+
+def lagged_temperature(temp: np.ndarray, tau_s: float, fs: float) -> np.ndarray:
+    """The temperature seen through a first-order lag: ``dT_lag/dt = (T - T_lag) / tau``.
+
+    Exact for a temperature constant over each sample interval:
+    ``T_lag[t] = a T_lag[t-1] + (1 - a) T[t]`` with ``a = exp(-1 / (tau fs))``, starting at
+    ``T_lag[0] = T[0]`` (the sensor at the logged temperature when the log starts).
+
+    Parameters
+    ----------
+    temp : ndarray, shape (n,)
+        The logged temperature (degC).
+    tau_s : float
+        Time constant (s), > 0.
+    fs : float
+        Sampling frequency (Hz).
+    """
+    from scipy.signal import lfilter
+
+    t = np.asarray(temp, dtype=float)
+    a = math.exp(-1.0 / (tau_s * fs))
+    out, _ = lfilter([1.0 - a], [1.0, -a], t, zi=[a * t[0]])
+    return np.asarray(out)
 
 
 def _block_means(a: np.ndarray, k: int) -> np.ndarray:
@@ -196,6 +263,137 @@ def find_temperature(log: ImuLog, choice: str = "auto", *, channel: str = "") ->
     return choice
 
 
+def temperature_series(log: ImuLog, name: str) -> np.ndarray:
+    """The samples of the temperature channel ``name`` of a log (an auxiliary channel, or a
+    signal channel named like a temperature)."""
+    return np.asarray(log.aux[name] if name in log.aux else log.channels[name], dtype=float)
+
+
+#: Time constants tried for the lag, per log: from a quarter of a block to twice the log.
+LAG_GRID = 48
+
+
+def _profile_lag(
+    temp: np.ndarray,
+    fs: float,
+    block_s: float,
+    rss: Any,
+    k: int,
+    level: float,
+) -> tuple[float, tuple[float, float], float]:
+    """The lag's time constant minimising ``rss`` (the differenced block-means regression's
+    residual sum of squares with the lagged temperature), its profile-likelihood interval
+    (``k log(RSS(tau) / RSS_min) <= chi2_1(level)``, ``k`` differences) and the BIC of the
+    lag minus that of no lag (``k log(RSS_lag / RSS_0) + log k``: one more parameter)."""
+    from scipy import optimize, stats
+
+    duration = temp.size / fs
+    grid = np.geomspace(block_s / 4, 2 * duration, LAG_GRID)
+
+    def f(log_tau: float) -> float:
+        return rss(lagged_temperature(temp, math.exp(log_tau), fs))
+
+    vals = np.array([f(math.log(t)) for t in grid])
+    i = int(np.argmin(vals))
+    lo_i, hi_i = max(i - 1, 0), min(i + 1, grid.size - 1)
+    best = optimize.minimize_scalar(
+        f,
+        bounds=(math.log(grid[lo_i]), math.log(grid[hi_i])),
+        method="bounded",
+        options={"xatol": 1e-3},
+    )
+    tau, r_min = math.exp(best.x), min(float(best.fun), float(vals[i]))
+    if vals[i] < best.fun:
+        tau = float(grid[i])
+    r0 = rss(temp)
+    dbic = k * math.log(r_min / r0) + math.log(k) if r0 > 0 else math.nan
+    crit = float(stats.chi2.ppf(level, 1))
+    excess = k * np.log(vals / r_min) - crit  # > 0 outside the interval
+
+    def g(log_tau: float) -> float:
+        return k * math.log(f(log_tau) / r_min) - crit
+
+    def edge(side: range, default: float) -> float:
+        prev = math.log(tau)
+        for j in side:
+            if excess[j] > 0:
+                return math.exp(optimize.brentq(g, *sorted((prev, math.log(grid[j]))), xtol=1e-3))
+            prev = math.log(grid[j])
+        return default
+
+    below = range(int(np.searchsorted(grid, tau)) - 1, -1, -1)
+    above = range(int(np.searchsorted(grid, tau)), grid.size)
+    return tau, (edge(below, 0.0), edge(above, math.inf)), dbic
+
+
+def fit_log_temperature(
+    log: ImuLog,
+    name: str,
+    choice: str = "auto",
+    *,
+    model: Model | str | None = None,
+    levels: int | None = None,
+    robust: bool = False,
+    eff: float = 0.6,
+    alpha: float = 0.05,
+    weights: str = "ci",
+) -> TemperatureFit | None:
+    """The temperature compensation of channel ``name`` of a log (:func:`fit_temperature` on
+    the log's temperature channel, its fs, unit and names), or None when there is none to fit.
+
+    Parameters
+    ----------
+    log : ImuLog
+        The loaded log.
+    name : str
+        The signal channel.
+    choice : str or None
+        The temperature channel (:func:`find_temperature`): ``"auto"``, ``"none"`` or a
+        channel name.
+    model, levels, robust, eff, alpha, weights
+        As :func:`fit_temperature`.
+
+    Returns
+    -------
+    TemperatureFit or None
+        None for ``"none"``, a log without a temperature channel, a WV summary (no samples),
+        a log cut into still segments (the relation would be fitted across the gaps), and,
+        with ``"auto"``, a temperature channel the fit cannot use (constant, NaN samples, a
+        log shorter than 4096 samples).
+
+    Raises
+    ------
+    LoadError
+        A named temperature channel that the log does not have.
+    ValueError
+        A named temperature channel the fit cannot use (as :func:`fit_temperature`).
+    """
+    if log.is_summary or choice == "none":
+        return None
+    tname = find_temperature(log, choice, channel=name)
+    if tname is None or log.segments:
+        return None
+    try:
+        return fit_temperature(
+            log[name],
+            temperature_series(log, tname),
+            fs=log.fs,
+            model=model,
+            unit=log.unit_of(name),
+            channel=name,
+            temperature=tname,
+            levels=levels,
+            robust=robust,
+            eff=eff,
+            alpha=alpha,
+            weights=weights,
+        )
+    except ValueError:
+        if choice != "auto":
+            raise
+        return None  # found by its name but unusable (constant, too short, NaN): none
+
+
 def fit_temperature(
     y: np.ndarray,
     temp: np.ndarray,
@@ -212,6 +410,7 @@ def fit_temperature(
     eff: float = 0.6,
     alpha: float = 0.05,
     weights: str = "ci",
+    lag: bool | str = "auto",
 ) -> TemperatureFit:
     """Fit the bias-temperature polynomial, then the GMWM of the compensated signal.
 
@@ -232,6 +431,10 @@ def fit_temperature(
     levels, robust, eff, alpha, weights
         As :func:`engine.fit_gmwm` / :meth:`engine.io.ImuLog.wavelet_variance` (the WVs of
         both signals).
+    lag : {"auto", True, False}
+        The first-order thermal lag: ``"auto"`` fits it and keeps it when its BIC is lower
+        than the polynomial's alone (:attr:`TemperatureFit.lag_bic`), True always keeps it,
+        False (or ``"none"``) does not try it.
 
     Returns
     -------
@@ -241,7 +444,7 @@ def fit_temperature(
     ------
     ValueError
         Lengths differ, NaN temperatures, a constant temperature, fewer than 16 x 256 samples,
-        or a degree other than 1 or 2.
+        a degree other than 1 or 2, or another ``lag``.
     """
     from ..wv import wavelet_variance
 
@@ -249,6 +452,8 @@ def fit_temperature(
     temp = np.asarray(temp, dtype=float)
     if degree not in (1, 2):
         raise ValueError(f"degree must be 1 or 2, got {degree}")
+    if lag not in ("auto", "none", True, False):
+        raise ValueError(f"lag must be 'auto', True or False, got {lag!r}")
     if y.shape != temp.shape or y.ndim != 1:
         raise ValueError(
             f"the temperature '{temperature}' has {temp.size} samples and {channel} "
@@ -261,14 +466,32 @@ def fit_temperature(
     if np.ptp(temp) == 0:
         raise ValueError(f"the temperature '{temperature}' is constant: nothing to fit")
     t_ref = float(np.mean(temp))
-    dt = temp - t_ref
-    yb = _block_means(y, BLOCKS)
-    xb = np.column_stack([_block_means(dt**p, BLOCKS) for p in range(1, degree + 1)])
-    dy = np.diff(yb)
-    dx = np.column_stack([np.ones(dy.size), np.diff(xb, axis=0)])
+    dy = np.diff(_block_means(y, BLOCKS))
+
+    def design(t: np.ndarray) -> np.ndarray:
+        xb = np.column_stack([_block_means((t - t_ref) ** p, BLOCKS) for p in range(1, degree + 1)])
+        return np.column_stack([np.ones(dy.size), np.diff(xb, axis=0)])
+
+    def rss(t: np.ndarray) -> float:
+        d = design(t)
+        r = dy - d @ np.linalg.lstsq(d, dy, rcond=None)[0]
+        return float(r @ r)
+
+    tau, tau_iv, dbic = 0.0, (0.0, 0.0), math.nan
+    if lag not in (False, "none"):
+        tau, tau_iv, dbic = _profile_lag(temp, fs, y.size / BLOCKS / fs, rss, dy.size, level)
+        if not (lag is True or dbic < 0):
+            tau, tau_iv = 0.0, (0.0, 0.0)
+    dx = design(lagged_temperature(temp, tau, fs) if tau > 0 else temp)
     beta, *_ = np.linalg.lstsq(dx, dy, rcond=None)
     resid = dy - dx @ beta
-    cov = _newey_west(dx, resid, NW_LAG)
+    jac = dx
+    if tau > 0:  # tau estimated too: its column (d/d log tau) in the sandwich widens the SEs
+        h = 0.05
+        up = design(lagged_temperature(temp, tau * math.exp(h), fs))
+        down = design(lagged_temperature(temp, tau * math.exp(-h), fs))
+        jac = np.column_stack([dx, (up - down)[:, 1:] @ beta[1:] / (2 * h)])
+    cov = _newey_west(jac, resid, NW_LAG)[: dx.shape[1], : dx.shape[1]]
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     b = y.size // BLOCKS
     coef, se_c = beta[1:], se[1:]
@@ -300,6 +523,10 @@ def fit_temperature(
         (min(lo, hi), max(lo, hi)),
         sunit,
         notes=tuple(notes),
+        tau_s=tau,
+        tau_interval=tau_iv,
+        lag_bic=dbic,
+        fs=float(fs),
     )
     yc = tf.compensate(y, temp)
     kw: dict[str, Any] = {

@@ -151,11 +151,14 @@ class ChannelReport:
     #: (``""`` when they agree, or without a fit); the page shows it beside the fit and the
     #: export, whatever the export's format.
     misfit: str = ""
+    #: The bias-temperature fit (:class:`engine.inference.temperature.TemperatureFit`) when
+    #: the log has a temperature channel: :attr:`fit` is then that of the compensated signal.
+    temperature: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the fit (as ``gmwm fit --json``), intervals, datasheet rows, J-test,
-        Allan deviation, slope guides, warnings, the misfit line, notes and the datasheet
-        check."""
+        Allan deviation, slope guides, warnings, the misfit line, notes, the datasheet
+        check and the temperature fit (None without a temperature channel)."""
         d: dict[str, Any] = {"channel": self.name, "unit": self.unit, "error": self.error}
         if self.fit is not None:
             d["fit"] = self.fit.to_dict()
@@ -171,6 +174,7 @@ class ChannelReport:
         d["warnings"], d["notes"] = list(self.warnings), dict(self.notes)
         d["misfit"] = self.misfit
         d["datasheet_check"] = self.check.to_dict() if self.check is not None else None
+        d["temperature"] = self.temperature.to_dict() if self.temperature is not None else None
         return json_ready(d)
 
 
@@ -382,10 +386,14 @@ def _channel(
     *,
     level: float,
     datasheet: Any,
+    temperature: Any = None,
 ) -> ChannelReport:
-    """The numbers of one fitted channel; a step that cannot be done leaves a note."""
+    """The numbers of one fitted channel; a step that cannot be done leaves a note.
+    ``temperature``: its :class:`~engine.inference.temperature.TemperatureFit` (the PSD is
+    then that of the compensated signal, as the fit is)."""
     from ..inference import j_test, param_intervals
     from ..inference.datasheet_check import DatasheetError, check_datasheet, read_datasheet
+    from ..inference.temperature import temperature_series
 
     wv = fit.wv
     notes: dict[str, str] = {}
@@ -413,6 +421,8 @@ def _channel(
         notes["psd"] = "a WV summary file holds no samples: no PSD"
     else:
         x = log[name]
+        if temperature is not None:
+            x = temperature.compensate(x, temperature_series(log, temperature.temperature))
         if log.segments:  # a flight: the PSD of its longest still segment, not of the motion
             a, b = max(log.segments, key=lambda ab: ab[1] - ab[0])
             notes["psd"] = f"the PSD is that of the longest still segment, samples {a} to {b}"
@@ -455,6 +465,7 @@ def _channel(
         check,
         timeline(log[name], log.fs, log.segments) if log.segments else None,
         misfit(fit, name),
+        temperature,
     )
 
 
@@ -474,6 +485,8 @@ def gather_report(
     command_line: str = "",
     fits: Mapping[str, GMWMResult] | None = None,
     drop_warmup: bool = False,
+    temperature: str | None = "auto",
+    temperatures: Mapping[str, Any] | None = None,
 ) -> CalibrationReport:
     """Load a log, fit every channel and compute everything a calibration report shows.
 
@@ -507,6 +520,14 @@ def gather_report(
         ``weights`` must then be left out (they were the fits').
     drop_warmup : bool
         Drop the warm-up the log check finds (:func:`engine.io.drop_warmup`) before fitting.
+    temperature : str, optional
+        The temperature channel, as :func:`engine.batch.fit_log`'s: ``"auto"`` (the default:
+        a channel named like a temperature, if any), ``"none"`` or its name. Each channel with
+        one is fitted on its compensated signal, and its page shows the sensitivity in
+        datasheet units and both WVs (raw and compensated). Not used with ``fits``.
+    temperatures : mapping of str to TemperatureFit, optional
+        With ``fits``: the temperature fits those fits were made with (a batch's
+        :attr:`engine.batch.LogFit.temperature`, an app session's).
 
     Returns
     -------
@@ -566,18 +587,27 @@ def gather_report(
         _warnings.simplefilter("always")
         if fits is not None:
             fitted, channel_errors = dict(fits), {}
+            temps = dict(temperatures or {})
             check = qualify_log(log, list(fitted)).to_dict()
             weights = ", ".join(dict.fromkeys(f.weights for f in fitted.values()))
         else:
             lf = fit_log(
-                log, model=model, select=select, channels=channels, levels=levels, weights=weights
+                log,
+                model=model,
+                select=select,
+                channels=channels,
+                levels=levels,
+                weights=weights,
+                temperature=temperature,
             )
-            fitted, channel_errors = lf.fits, lf.channel_errors
+            fitted, channel_errors, temps = lf.fits, lf.channel_errors, lf.temperature
             check = lf.qualification
         chans: dict[str, ChannelReport] = {}
         for ch in list(fitted) + list(channel_errors):
             if ch in fitted:
-                chans[ch] = _channel(log, ch, fitted[ch], level=level, datasheet=ds)
+                chans[ch] = _channel(
+                    log, ch, fitted[ch], level=level, datasheet=ds, temperature=temps.get(ch)
+                )
             else:
                 chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=channel_errors[ch])
         chans = {ch: chans[ch] for ch in log.names if ch in chans}

@@ -38,7 +38,7 @@ PALETTE = (
     "#bcbd22",
     "#17becf",
 )
-_DATA, _MODEL = "#1f77b4", "#d62728"
+_DATA, _MODEL, _RAW = "#1f77b4", "#d62728", "#7f7f7f"
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +128,7 @@ def channel_figures(ch: ChannelReport, prefix: str = "") -> list[FigureSpec]:
     for i, (lab, c) in enumerate(comps.items()):
         if np.any(c > 0):
             layers.append(Layer("dashed", tau, c, lab, PALETTE[(i + 2) % 10]))
+    layers += _raw_wv_layers(ch)
     out.append(
         FigureSpec(
             f"{key}-wv",
@@ -197,6 +198,19 @@ def channel_figures(ch: ChannelReport, prefix: str = "") -> list[FigureSpec]:
             )
         )
     return out
+
+
+def _raw_wv_layers(ch: ChannelReport) -> list[Layer]:
+    """With a temperature fit, the WV of the raw (uncompensated) signal beside the fitted,
+    compensated one: its points and interval, in grey (none without a temperature fit)."""
+    tf = ch.temperature
+    if tf is None or tf.wv_raw is None:
+        return []
+    raw = tf.wv_raw
+    return [
+        Layer("band", raw.tau_s, raw.ci_low, "", _RAW, raw.ci_high),
+        Layer("points", raw.tau_s, raw.variance, "WV before temperature compensation", _RAW),
+    ]
 
 
 def check_figure(ch: ChannelReport, prefix: str = "") -> FigureSpec | None:

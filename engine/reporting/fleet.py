@@ -421,7 +421,7 @@ def _unit_task(
             "",
         )
     try:
-        rep = gather_report(log, fits=lf.fits, **rkw)
+        rep = gather_report(log, fits=lf.fits, temperatures=lf.temperature, **rkw)
     except Exception as e:  # noqa: BLE001 - the fits stay in the batch
         return lf, None, f"{type(e).__name__}: {' '.join(str(e).split())}"
     if lf.channel_errors:  # channels not fitted stay in the report, in the log's order
@@ -582,6 +582,7 @@ def gather_fleet(
     kw["weights"] = kw["weights"] or "ci"
     kw["channels"] = list(kw["channels"]) if kw["channels"] else None
     kw["load_options"] = dict(kw["load_options"] or {})
+    kw["temperature"] = kw["temperature"] or "auto"
     if (kw["model"] is None) == (kw["select"] is None):
         raise ModelError("give a model to fit (model=) or a maximal model to select from (select=)")
     if kw["weights"] not in ("ci", "identity", "efficient"):

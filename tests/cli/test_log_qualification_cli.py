@@ -117,3 +117,93 @@ def test_report_and_batch_run_the_check(files, capsys, tmp_path):
     assert len(lines) == 1 and "shock (gyro_x)" in lines[0]
     (status,) = json.loads(out)["logs"]
     assert status["qualification"]["findings"][0]["kind"] == "shock"
+
+
+def test_report_and_batch_fit_the_temperature_per_log(files, capsys, tmp_path):
+    """`gmwm report` and `gmwm batch` (its JSON and its fleet report) take --temperature as
+    `gmwm fit` does: one stderr line per compensated channel, the sensitivity in deg/h/degC
+    whose interval covers the planted 7.2, the page's temperature paragraph; `--temperature
+    none` fits the raw signal and says nothing of it."""
+    csv = str(files / "thermal.csv")
+    opts = ["--channels", "gyro_x", "--units", "deg/s", "--model", "WN+RW"]
+    code, out, err = run(
+        capsys, "report", csv, "-o", str(tmp_path / "r.html"), *opts, "--format", "none", "--json"
+    )
+    assert code == 0
+    lines = [ln for ln in err.splitlines() if "temperature sensitivity" in ln]
+    assert len(lines) == 1 and lines[0].startswith("gmwm report: gyro_x: ")
+    t = json.loads(out)["channels"]["gyro_x"]["temperature"]
+    lo, hi = t["sensitivity_interval"]
+    assert t["sensitivity_unit"] == "deg/h/degC" and lo < 7.2 < hi
+    page = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert page.count('<p class="temperature" data-channel="gyro_x">') == 1
+
+    fleet = tmp_path / "fleet.html"
+    code, out, err = run(
+        capsys, "batch", csv, *opts, "-o", str(tmp_path / "b"), "--report", str(fleet),
+        "--quiet", "--json", "--workers", "1",
+    )  # fmt: skip
+    assert code == 0
+    lines = [ln for ln in err.splitlines() if "temperature sensitivity" in ln]
+    assert len(lines) == 1 and lines[0].startswith(f"gmwm batch: {csv}: gyro_x: ")
+    (status,) = json.loads(out)["logs"]
+    bt = status["temperature"]["gyro_x"]
+    assert bt["sensitivity"] == t["sensitivity"]  # the same fit as the report's
+    assert bt["sensitivity_unit"] == "deg/h/degC" and bt["temperature"] == "temperature"
+    assert 'class="temperature" data-channel="gyro_x"' in fleet.read_text(encoding="utf-8")
+
+    code, out, err = run(
+        capsys, "report", csv, "-o", str(tmp_path / "r2.html"), *opts, "--format", "none",
+        "--json", "--temperature", "none",
+    )  # fmt: skip
+    assert code == 0 and "temperature sensitivity" not in err
+    assert json.loads(out)["channels"]["gyro_x"]["temperature"] is None
+    code, out, err = run(
+        capsys, "batch", csv, *opts, "-o", str(tmp_path / "b2"), "--quiet", "--json",
+        "--workers", "1", "--temperature", "T",
+    )  # fmt: skip
+    errors = [ln for ln in err.splitlines() if "--temperature T is not a channel" in ln]
+    assert code == 2 and len(errors) == 1, err
+
+
+def test_select_runs_the_check_and_the_temperature_fit(files, capsys):
+    """`gmwm select` checks the log as `gmwm fit` does (one stderr line, JSON
+    ``qualification``) and ranks the candidates on the compensated WV of a log with a
+    temperature channel (JSON ``temperature``, the sensitivity's interval covers 7.2)."""
+    code, out, err = run(
+        capsys, "select", str(files / "shock.h5"), "--models", "WN+RW,WN", "--json"
+    )
+    assert code == 0
+    lines = [ln for ln in err.splitlines() if ln.startswith("gmwm select: log check")]
+    assert len(lines) == 1 and "shock (gyro_x)" in lines[0] and "samples 60,000-" in lines[0]
+    d = json.loads(out)
+    assert [f["kind"] for f in d["qualification"]["findings"]] == ["shock"]
+    assert d["temperature"] is None
+    csv = str(files / "thermal.csv")
+    code, out, err = run(
+        capsys, "select", csv, "--channel", "gyro_x", "--units", "deg/s", "--models", "WN+RW,WN",
+        "--json",
+    )  # fmt: skip
+    d = json.loads(out)
+    lo, hi = d["temperature"]["sensitivity_interval"]
+    assert code == 0 and lo < 7.2 < hi and "gmwm select: gyro_x: temperature sensitivity" in err
+    wv = d["temperature"]["wv_raw"]["variance"]
+    assert d["wv"]["variance"][-1] < wv[-1]  # ranked on the compensated WV, not the raw one
+
+
+def test_fit_of_several_files_checks_each(files, capsys):
+    """`gmwm fit A B --model M` (one model fitted to several recordings) checks every file:
+    one stderr line per file with a finding, naming the file; JSON ``qualification`` in the
+    order of the inputs."""
+    shock, warm = str(files / "shock.h5"), str(files / "warm.h5")
+    code, out, err = run(capsys, "fit", shock, warm, "--model", "WN+RW", "--json")
+    assert code == 0
+    lines = [ln for ln in err.splitlines() if "log check" in ln]
+    assert len(lines) == 2
+    assert lines[0].startswith(f"gmwm fit: {shock}: log check") and "shock (gyro_x)" in lines[0]
+    assert lines[1].startswith(f"gmwm fit: {warm}: log check") and "--drop-warmup" in lines[1]
+    d = json.loads(out)
+    assert d["inputs"] == [shock, warm]
+    kinds = [[f["kind"] for f in q["findings"]] for q in d["qualification"]]
+    assert kinds[0] == ["shock"] and "warmup" in kinds[1]
+    assert d["temperature"] == [None, None]

@@ -94,3 +94,74 @@ def test_bad_temperature_inputs_are_one_line_errors():
     assert find_temperature(log, "none") is None
     with pytest.raises(eg.LoadError, match="temperature='T' is not a channel"):
         find_temperature(log, "T")
+
+
+TAU = 120.0  # s
+
+
+def _lagged_profile(t: np.ndarray, tau: float) -> np.ndarray:
+    """thermal_profile through dT_lag/dt = (T - T_lag) / tau, integrated by solve_ivp on the
+    continuous profile (independent of the engine's discretisation)."""
+    from scipy.integrate import solve_ivp
+
+    def temp(s):
+        return 25 + 10 * (1 - np.exp(-s / 300)) + 2 * np.sin(2 * np.pi * s / 600)
+
+    sol = solve_ivp(
+        lambda s, x: (temp(s) - x) / tau, (0.0, t[-1]), [25.0], t_eval=t, rtol=1e-9,
+        atol=1e-9, max_step=5.0,
+    )  # fmt: skip
+    return sol.y[0]
+
+
+def test_lagged_temperature_solves_the_first_order_lag():
+    # the engine's recursion is exact for a temperature held over each sample; the profile
+    # moves by at most 0.05 degC per sample, so it agrees with the ODE to a few mdegC
+    from engine.inference.temperature import lagged_temperature
+
+    t = np.arange(N) / FS
+    ode = _lagged_profile(t, TAU)
+    lag = lagged_temperature(thermal_profile(), TAU, FS)
+    assert np.max(np.abs(lag - ode)) < 2e-3
+    assert np.max(np.abs(thermal_profile() - ode)) > 1.0  # the lag matters: > 1 degC
+
+
+def test_planted_thermal_lag_is_recovered_and_the_polynomial_alone_is_biased():
+    """A bias following the temperature through a 120 s lag (7.2 deg/h per degC): the fit keeps
+    the lag (BIC lower by more than 10), its profile interval covers 120 s, the sensitivity's
+    interval covers 7.2; the polynomial in the logged temperature (lag=False) reads about half
+    the sensitivity, its interval far from the truth (one seed; docs/qualify.md has the
+    Monte Carlo: tests/benchmarks/temperature_mc.py --lag 120)."""
+    t = np.arange(N) / FS
+    temp = thermal_profile()
+    y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=2) + C * _lagged_profile(t, TAU)
+    tf = fit_temperature(y, temp, fs=FS, model="WN+RW", unit="deg/s", channel="gyro_x")
+    assert tf.tau_s > 0 and tf.lag_bic < -10
+    lo, hi = tf.tau_interval
+    assert lo < TAU < hi and hi < 5 * TAU
+    slo, shi = tf.sensitivity_interval
+    assert slo < 7.2 < shi
+    assert "lagging it by tau" in tf.line() and tf.to_dict()["lag_tau_s"] == tf.tau_s
+    (rw,) = [iv for iv in eg.param_intervals(tf.fit, method="asymptotic") if iv.name == "RW.gamma2"]
+    assert rw.low <= 1e-10 <= rw.high
+    poly = fit_temperature(y, temp, fs=FS, unit="deg/s", lag=False)
+    assert poly.tau_s == 0 and poly.sensitivity_interval[1] < 5.0  # the truth is 7.2
+    # compensate() applies the lag: what is left of the temperature effect (the compensated
+    # signal minus the noise) is less than half what the polynomial alone leaves
+    noise = y - C * _lagged_profile(t, TAU)
+    left, left_poly = (
+        np.std(tf.compensate(y, temp) - noise),
+        np.std(poly.compensate(y, temp) - noise),
+    )
+    assert left < 0.5 * left_poly, (left, left_poly)
+
+
+def test_no_lag_is_kept_without_one():
+    # the logs of the tests above (no lag planted): the BIC keeps the plain polynomial
+    temp = thermal_profile()
+    for seed in (3, 99):
+        y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=seed) + C * temp
+        tf = fit_temperature(y, temp, fs=FS, unit="deg/s")
+        assert tf.tau_s == 0 and tf.lag_bic > 0 and tf.tau_interval == (0.0, 0.0)
+    with pytest.raises(ValueError, match="lag must be"):
+        fit_temperature(y, temp, fs=FS, lag="yes")
