@@ -271,6 +271,16 @@ def temperature_series(log: ImuLog, name: str) -> np.ndarray:
 
 #: Time constants tried for the lag, per log: from a quarter of a block to twice the log.
 LAG_GRID = 48
+#: Windows per block of the temperature the lag's profile filters (its exact window means).
+LAG_WINDOWS = 16
+
+
+def _window_means(a: np.ndarray, count: int, length: float) -> np.ndarray:
+    """Means of ``a`` over ``count`` consecutive windows of ``length`` samples (a fraction
+    allowed: the samples are taken as held over their interval), from sample 0."""
+    c = np.concatenate([[0.0], np.cumsum(a - a[0])])  # de-meaned: no digits lost
+    edges = np.interp(np.arange(count + 1) * length, np.arange(c.size), c)
+    return np.diff(edges) / length + a[0]
 
 
 def _profile_lag(
@@ -289,9 +299,13 @@ def _profile_lag(
 
     duration = temp.size / fs
     grid = np.geomspace(block_s / 4, 2 * duration, LAG_GRID)
+    # the lag filters the temperature's means over LAG_WINDOWS windows per block (their block
+    # means are the samples' exactly): 4096 values whatever the log's length
+    coarse = _window_means(temp, BLOCKS * LAG_WINDOWS, block_s * fs / LAG_WINDOWS)
+    fs_c = LAG_WINDOWS / block_s
 
     def f(log_tau: float) -> float:
-        return rss(lagged_temperature(temp, math.exp(log_tau), fs))
+        return rss(lagged_temperature(coarse, math.exp(log_tau), fs_c))
 
     vals = np.array([f(math.log(t)) for t in grid])
     i = int(np.argmin(vals))
@@ -305,7 +319,7 @@ def _profile_lag(
     tau, r_min = math.exp(best.x), min(float(best.fun), float(vals[i]))
     if vals[i] < best.fun:
         tau = float(grid[i])
-    r0 = rss(temp)
+    r0 = rss(coarse)
     dbic = k * math.log(r_min / r0) + math.log(k) if r0 > 0 else math.nan
     crit = float(stats.chi2.ppf(level, 1))
     excess = k * np.log(vals / r_min) - crit  # > 0 outside the interval
@@ -479,7 +493,8 @@ def fit_temperature(
 
     tau, tau_iv, dbic = 0.0, (0.0, 0.0), math.nan
     if lag not in (False, "none"):
-        tau, tau_iv, dbic = _profile_lag(temp, fs, y.size / BLOCKS / fs, rss, dy.size, level)
+        block_s = (y.size // BLOCKS) / fs
+        tau, tau_iv, dbic = _profile_lag(temp, fs, block_s, rss, dy.size, level)
         if not (lag is True or dbic < 0):
             tau, tau_iv = 0.0, (0.0, 0.0)
     dx = design(lagged_temperature(temp, tau, fs) if tau > 0 else temp)
