@@ -442,8 +442,8 @@ def fit_batch(
 
 def unit_values(lf: LogFit) -> list[tuple[tuple[str, ...], float]]:
     """The summary quantities of one fitted log: ``((channel, kind, process, quantity,
-    symbol, unit), value)`` for every parameter and datasheet quantity (see
-    :func:`fleet_summary`)."""
+    symbol, unit), value)`` for every parameter and datasheet quantity, and the bias-temperature
+    sensitivity of a compensated channel (process ``temperature``; see :func:`fleet_summary`)."""
     out: list[tuple[tuple[str, ...], float]] = []
     for ch, res in lf.fits.items():
         for r in res.param_records:
@@ -452,6 +452,10 @@ def unit_values(lf: LogFit) -> list[tuple[tuple[str, ...], float]]:
             res.model, res.fs, res.wv.unit, channel=ch, n_levels=res.wv.n_levels
         ):
             out.append(((ch, "datasheet", d.process, d.quantity, d.symbol, d.unit), float(d.value)))
+        tf = lf.temperature.get(ch)
+        if tf is not None:  # the bias-temperature sensitivity, a datasheet figure too
+            key = (ch, "datasheet", "temperature", "bias temperature sensitivity", "S_T")
+            out.append(((*key, tf.sensitivity_unit), float(tf.sensitivity)))
     return out
 
 

@@ -146,8 +146,12 @@ def test_report_and_batch_fit_the_temperature_per_log(files, capsys, tmp_path):
     assert code == 0
     lines = [ln for ln in err.splitlines() if "temperature sensitivity" in ln]
     assert len(lines) == 1 and lines[0].startswith(f"gmwm batch: {csv}: gyro_x: ")
-    (status,) = json.loads(out)["logs"]
+    d = json.loads(out)
+    (status,) = d["logs"]
     bt = status["temperature"]["gyro_x"]
+    (row,) = [r for r in d["summary"] if r["process"] == "temperature"]  # the fleet's spread
+    assert row["unit"] == "deg/h/degC" and row["n_units"] == 1 and row["mean"] == t["sensitivity"]
+    assert "bias temperature sensitivity" in (tmp_path / "b" / "summary.csv").read_text()
     assert bt["sensitivity"] == t["sensitivity"]  # the same fit as the report's
     assert bt["sensitivity_unit"] == "deg/h/degC" and bt["temperature"] == "temperature"
     assert 'class="temperature" data-channel="gyro_x"' in fleet.read_text(encoding="utf-8")
