@@ -132,3 +132,18 @@ def test_a_log_without_temperature_shows_nothing_new():
     np.testing.assert_allclose(
         rep.channels["gyro_x"].fit.wv.variance, eg.wavelet_variance(x, fs=FS).variance
     )
+
+
+@pytest.mark.real_data
+def test_a_real_log_without_temperature_is_reported_as_before(real_data):
+    """ADIS16405 unit 1 (no temperature channel), gyro_x: the report with the temperature
+    channel looked for (the default) fits the raw signal's WV and its page and JSON hold no
+    temperature figure."""
+    log = eg.load_log(real_data / "adis16405_imu1.h5")
+    assert not any("temp" in n for n in [*log.names, *log.aux])  # the premise
+    rep = gather_report(log, model="WN+QN+RW", channels=["gyro_x"], export_format=None)
+    c = rep.channels["gyro_x"]
+    assert c.temperature is None and rep.to_dict()["channels"]["gyro_x"]["temperature"] is None
+    np.testing.assert_array_equal(c.fit.wv.variance, log.wavelet_variance("gyro_x").variance)
+    page = render_html(rep)
+    assert 'class="temperature"' not in page and "temperature compensation" not in page
