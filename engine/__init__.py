@@ -23,10 +23,22 @@ from ._version import __version__ as __version__
 #: Every public name and the module that defines it.
 API: dict[str, str] = {
     "__version__": "engine._version",
-    # processes and models
+    # errors: one base class (catch it to stop on any engine error), one class per kind
     **dict.fromkeys(
-        ("Process", "Model", "ModelError", "parse_model", "PROCESS_TYPES"), "engine.models"
+        (
+            "GmwmError",
+            "LoadError",
+            "ModelError",
+            "FitError",
+            "ExportError",
+            "DatasheetError",
+            "SessionError",
+            "ReportError",
+        ),
+        "engine.errors",
     ),
+    # processes and models
+    **dict.fromkeys(("Process", "Model", "parse_model", "PROCESS_TYPES"), "engine.models"),
     **dict.fromkeys(("WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv"), "engine.models.processes"),
     # wavelet variance, Allan variance, cross-covariance
     **dict.fromkeys(
@@ -56,7 +68,6 @@ API: dict[str, str] = {
             "weight_matrix",
             "gmwm_objective",
             "FitResult",
-            "FitError",
             "ParamRecord",
             "ParamTable",
             "Summary",
@@ -87,7 +98,6 @@ API: dict[str, str] = {
             "parse_datasheet",
             "DatasheetSpec",
             "DatasheetCheck",
-            "DatasheetError",
             "plan_run",
             "RunPlan",
         ),
@@ -118,7 +128,6 @@ API: dict[str, str] = {
             "load_log",
             "save_log",
             "ImuLog",
-            "LoadError",
             "check_time",
             "TimeReport",
             "read_imu_bag",
@@ -128,7 +137,7 @@ API: dict[str, str] = {
     ),
     "read_kalibr": "engine.io.kalibr",
     **dict.fromkeys(("still_segments", "with_segments"), "engine.io.segments"),
-    **dict.fromkeys(("Session", "SessionError", "load_session", "save_session"), "engine.session"),
+    **dict.fromkeys(("Session", "load_session", "save_session"), "engine.session"),
     # export formats and the projection onto a filter's noise model
     **dict.fromkeys(
         (
@@ -155,7 +164,6 @@ API: dict[str, str] = {
             "render_fleet_html",
             "CalibrationReport",
             "FleetReport",
-            "ReportError",
         ),
         "engine.reporting",
     ),
@@ -169,7 +177,6 @@ API: dict[str, str] = {
             "from_datasheet",
             "process_values",
             "BI_FACTOR",
-            "ExportError",
         ),
         "engine.units",
     ),
@@ -188,6 +195,7 @@ __all__ = sorted(API)
 
 #: The subpackages and modules, reachable as attributes (``eg.units.datasheet_rows``).
 SUBMODULES: tuple[str, ...] = (
+    "errors",
     "models",
     "units",
     "wv",

@@ -259,7 +259,7 @@ class CheckView(TabView):
             spec = read_check_file(
                 tmp, channel=self.state.channel, kind=self.kind or None, fs=self.state.fs
             )
-        except (ExportError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (ExportError ...) or numpy's
             self._show([str(e).replace(tmp, filename)])
             return
         finally:

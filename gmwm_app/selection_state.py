@@ -88,7 +88,7 @@ class SelectionMixin:
                 sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
             else:
                 sel = rank_models(wv, parts, weights=self.weights, progress=progress)
-        except (eg.ModelError, eg.FitError) as e:
+        except eg.GmwmError as e:  # any engine error: its one-line message
             raise ValueError(message_of(e)) from None
         return wv, sel
 
@@ -113,11 +113,11 @@ class SelectionMixin:
 
         try:
             intervals = param_intervals(result, method="asymptotic", level=0.95)
-        except (eg.FitError, np.linalg.LinAlgError) as e:
+        except (eg.GmwmError, np.linalg.LinAlgError) as e:
             raise ValueError(f"no intervals for {result.model.spec()}: {message_of(e)}") from None
         try:
             return Inference(result, intervals, j_test(result), "")
-        except (eg.FitError, ValueError, np.linalg.LinAlgError) as e:
+        except (ValueError, np.linalg.LinAlgError) as e:  # eg.GmwmError or numpy's
             return Inference(result, intervals, None, message_of(e))
 
     def install_inference(self, inf: Inference) -> bool:

@@ -27,7 +27,7 @@ import panel as pn
 import param
 
 from engine.formats import FORMATS, export, misfit
-from engine.session import Session, SessionError, session_from_json, session_to_json
+from engine.session import Session, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.export_bound import BoundOptions
 from gmwm_app.export_preview import ExportPreview
@@ -594,7 +594,7 @@ class SessionPanel(pn.viewable.Viewer):
         s = self.state
         try:
             return io.StringIO(session_json(s, self._load))
-        except (SessionError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (SessionError, LoadError ...) or numpy's
             s.report_error(f"Could not write the session: {e}")
             return io.StringIO(f"# could not write the session: {e}\n")
 

@@ -549,7 +549,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         m = start if start is not None else model.cleared()
         try:
             return eg.fit_gmwm(wv, m, weights=weights or self.weights)
-        except (eg.ModelError, eg.FitError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (bad model, unidentifiable, short) or numpy's
             return message_of(e)
 
     def _model_update(self, model: eg.Model, result: eg.GMWMResult | None) -> dict[str, Any]:

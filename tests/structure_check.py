@@ -32,6 +32,7 @@ PACKAGES = ("engine", "gmwm_app")
 #: ``engine.io`` sits low (loaders need no fit); the API (``engine/__init__.py``) sits above
 #: the engine's packages and below the app.
 LAYERS: tuple[tuple[str, ...], ...] = (
+    ("engine.errors",),  # the error classes (imports nothing of the project)
     ("engine._*",),  # shared private modules: _files, _limits, _parallel, _optim ...
     ("engine.models",),
     ("engine.units",),

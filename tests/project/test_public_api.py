@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 API = """
     AR1 AllanVariance BI_FACTOR BatchResult CalibrationReport Candidate DR DatasheetCheck
     DatasheetError DatasheetSpec DependenceTest ExportError FORMATS FitError FitResult
-    FleetReport GM GMWFMResult GMWMResult ImuLog JTest LoadError LogFit MGMWMResult
+    FleetReport GM GMWFMResult GmwmError GMWMResult ImuLog JTest LoadError LogFit MGMWMResult
     MethodEstimate Model ModelError MultiModel PROCESS_TYPES ParamInterval ParamRecord
     ParamTable Process Projection QN RW ReplicateResult ReportError SCENARIOS Scenario
     SelectionResult Session SessionError SharedEstimate SharedProcess Summary TimeReport
