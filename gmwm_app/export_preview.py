@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import panel as pn
-from bokeh.models import BoxAnnotation, Span
+from bokeh.models.annotations import BoxAnnotation, Span
 from bokeh.plotting import figure
 
 from engine.formats import FORMAT_CONSUMERS, Projection, project

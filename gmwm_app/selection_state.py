@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,6 +21,11 @@ from gmwm_app.data import message_of
 from gmwm_app.limits import check_candidates
 
 __all__ = ["Inference", "SelectionMixin", "N_INFERENCES"]
+
+if TYPE_CHECKING:  # the state's names this mixin uses (AppState defines them)
+    from gmwm_app.state_fields import StateFields
+else:
+    StateFields = object
 
 #: Fits whose intervals and J-test a session keeps.
 N_INFERENCES = 32
@@ -36,7 +41,7 @@ class Inference:
     j_error: str = ""
 
 
-class SelectionMixin:
+class SelectionMixin(StateFields):
     """Ranking and inference actions of :class:`gmwm_app.state.AppState`."""
 
     param: Any
@@ -82,6 +87,8 @@ class SelectionMixin:
         from engine.inference import rank_models
 
         wv = self.wv
+        if wv is None:
+            raise ValueError("load data before ranking models")
         parts = self.ranking_candidates(spec)
         try:
             if len(parts) == 1:
