@@ -607,9 +607,9 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self, m: eg.Model, start: eg.Model | None = None, weights: str | None = None
     ) -> bool:
         """Fit ``m`` (with ``weights``, the session's by default) and show it: one update."""
-        if len(m) and self.wv is None:
-            raise ValueError("load data before building a model")
         if len(m):
+            if self.wv is None:
+                raise ValueError("load data before building a model")
             m.validate(self.wv.n_levels)
         fit = self._fit_or_none(self.wv, m, start, weights) if self.wv is not None else None
         if isinstance(fit, str):
@@ -712,7 +712,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     def display_objective(self) -> float | None:
         """GMWM objective of the drawn model (the fit's, or the what-if values')."""
         m = self.display_model()
-        if m is None:
+        if m is None or self.wv is None:
             return None
         if not self.whatif and self.result is not None:
             return float(self.result.objective)

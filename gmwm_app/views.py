@@ -497,7 +497,7 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
                 {
                     "process": lab,
                     "parameter": name,
-                    "value": format_value(float(v)),
+                    "value": format_value(float(v)) if v is not None else "",
                     "low": format_value(i.low) if i else "",
                     "high": format_value(i.high) if i else "",
                     "unit": _pretty(eg.param_unit(p.code, name, state.unit)),

@@ -292,8 +292,9 @@ class WVFigures:
         if wv is not self._shown_wv:
             self._shown_wv = wv
             self.emp.data = wv_data(wv)
-            robust_pair = wv is not None and wv.robust and wv.classical is not None
-            self.alt.data = wv_data(wv.classical if robust_pair else None)
+            classical = wv.classical if wv is not None and wv.robust else None
+            robust_pair = classical is not None
+            self.alt.data = wv_data(classical)
             self.alt_item.visible = bool(robust_pair)
             self.emp_item.label = value(
                 "robust WV (biweight)" if wv is not None and wv.robust else "empirical WV"
