@@ -5,6 +5,7 @@ own output read back, and a one-line error for a file that is not YAML."""
 
 from __future__ import annotations
 
+import json
 import math
 import warnings
 from pathlib import Path
@@ -193,3 +194,33 @@ def test_pyyaml_is_a_declared_dependency() -> None:
     assert any(
         d.replace(" ", "").lower().startswith("pyyaml>=6") for d in deps["project"]["dependencies"]
     )
+
+
+@pytest.mark.real_data
+def test_a_restyled_kalibr_file_checks_the_real_log_as_the_original(real_data, tmp_path, capsys):
+    # the Kalibr file of adis16405_imu1's WN+RW fits, and the same mapping as one YAML flow map
+    # with comments (as another tool or a person may write it): gmwm check reads both to the
+    # same datasheet and gives the same verdicts against the log
+    log = eg.load_log(real_data / "adis16405_imu1.h5")
+    fits = {c: eg.fit_gmwm(log.wavelet_variance(c), "WN+RW") for c in log.names}
+    text = export(None, fits, "kalibr", ci=None)
+    original = tmp_path / "imu.yaml"
+    original.write_text(text)
+    restyled = tmp_path / "imu_flow.yaml"
+    restyled.write_text(
+        "# the same noise model, one flow mapping\n"
+        + yaml.safe_dump(yaml.safe_load(text), default_flow_style=True, width=60)
+    )
+    assert restyled.read_text().count("\n") > 3 and "{" in restyled.read_text()
+    out = {}
+    for path in (original, restyled):
+        argv = ["check", str(log.source), "--channel", "gyro_x", "--datasheet-file", str(path)]
+        assert main([*argv, "--json"]) == 0, capsys.readouterr().err
+        out[path.name] = json.loads(capsys.readouterr().out)
+    a, b = out["imu.yaml"], out["imu_flow.yaml"]
+    assert a["datasheet"]["values"] == b["datasheet"]["values"]
+    assert a["verdict"] == b["verdict"] and a["summary"] == b["summary"]
+    # the datasheet read is the file's gyro_x values as PyYAML reads them (SI)
+    ref = yaml.safe_load(text)
+    assert a["datasheet"]["values"]["N"][0] == ref["gyroscope_noise_density_per_axis"]["x"]
+    assert a["datasheet"]["values"]["K"][0] == ref["gyroscope_random_walk_per_axis"]["x"]
