@@ -16,17 +16,29 @@ the list: adding a name is a deliberate act. Everything else lives in the subpac
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ._version import __version__ as __version__
 
 #: Every public name and the module that defines it.
 API: dict[str, str] = {
     "__version__": "engine._version",
-    # processes and models
+    # errors: one base class (catch it to stop on any engine error), one class per kind
     **dict.fromkeys(
-        ("Process", "Model", "ModelError", "parse_model", "PROCESS_TYPES"), "engine.models"
+        (
+            "GmwmError",
+            "LoadError",
+            "ModelError",
+            "FitError",
+            "ExportError",
+            "DatasheetError",
+            "SessionError",
+            "ReportError",
+        ),
+        "engine.errors",
     ),
+    # processes and models
+    **dict.fromkeys(("Process", "Model", "parse_model", "PROCESS_TYPES"), "engine.models"),
     **dict.fromkeys(("WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv"), "engine.models.processes"),
     # wavelet variance, Allan variance, cross-covariance
     **dict.fromkeys(
@@ -56,7 +68,6 @@ API: dict[str, str] = {
             "weight_matrix",
             "gmwm_objective",
             "FitResult",
-            "FitError",
             "ParamRecord",
             "ParamTable",
             "Summary",
@@ -87,7 +98,6 @@ API: dict[str, str] = {
             "parse_datasheet",
             "DatasheetSpec",
             "DatasheetCheck",
-            "DatasheetError",
             "plan_run",
             "RunPlan",
         ),
@@ -118,7 +128,6 @@ API: dict[str, str] = {
             "load_log",
             "save_log",
             "ImuLog",
-            "LoadError",
             "check_time",
             "TimeReport",
             "read_imu_bag",
@@ -128,7 +137,7 @@ API: dict[str, str] = {
     ),
     "read_kalibr": "engine.io.kalibr",
     **dict.fromkeys(("still_segments", "with_segments"), "engine.io.segments"),
-    **dict.fromkeys(("Session", "SessionError", "load_session", "save_session"), "engine.session"),
+    **dict.fromkeys(("Session", "load_session", "save_session"), "engine.session"),
     # export formats and the projection onto a filter's noise model
     **dict.fromkeys(
         (
@@ -155,7 +164,6 @@ API: dict[str, str] = {
             "render_fleet_html",
             "CalibrationReport",
             "FleetReport",
-            "ReportError",
         ),
         "engine.reporting",
     ),
@@ -169,7 +177,6 @@ API: dict[str, str] = {
             "from_datasheet",
             "process_values",
             "BI_FACTOR",
-            "ExportError",
         ),
         "engine.units",
     ),
@@ -186,8 +193,125 @@ API: dict[str, str] = {
 
 __all__ = sorted(API)
 
+# The same names for type checkers, which cannot follow __getattr__ (at run time each is
+# imported on first use): tests/project/test_public_api.py checks that they match API.
+if TYPE_CHECKING:  # pragma: no cover
+    from .batch import BatchResult, LogFit, fit_batch, fit_log
+    from .demo import demo_dir, demo_path, demo_truth
+    from .errors import (
+        DatasheetError,
+        ExportError,
+        FitError,
+        GmwmError,
+        LoadError,
+        ModelError,
+        ReportError,
+        SessionError,
+    )
+    from .fit import (
+        FitResult,
+        GMWMResult,
+        ParamRecord,
+        ParamTable,
+        Summary,
+        fit_efficient,
+        fit_gmwm,
+        gmwm_objective,
+        starting_values,
+        weight_matrix,
+        wv_cov,
+        wv_cov_bootstrap,
+        wv_cov_data,
+        wv_cov_model,
+    )
+    from .fit.estimate import MethodEstimate, compare_table, from_gmwm
+    from .fit.gmwfm import GMWFMResult, fit_armav, fit_gmwfm
+    from .fit.replicates import ReplicateResult, fit_replicates
+    from .formats import (
+        FORMATS,
+        Projection,
+        datasheet_table,
+        export,
+        fit_report,
+        kalibr_imu,
+        kalibr_models,
+        project,
+        write_kalibr,
+    )
+    from .inference import (
+        Candidate,
+        DatasheetCheck,
+        DatasheetSpec,
+        JTest,
+        ParamInterval,
+        RunPlan,
+        SelectionResult,
+        check_datasheet,
+        j_test,
+        param_intervals,
+        parse_datasheet,
+        plan_run,
+        rank_models,
+        read_datasheet,
+        submodels,
+    )
+    from .io import ImuLog, TimeReport, check_time, imu_topics, load_log, read_imu_bag, save_log
+    from .io.kalibr import read_kalibr
+    from .io.segments import still_segments, with_segments
+    from .models import PROCESS_TYPES, Model, Process, parse_model
+    from .models.processes import AR1, DR, GM, QN, RW, WN, ar1_wv
+    from .multivariate import (
+        DependenceTest,
+        MGMWMResult,
+        MultiModel,
+        SharedEstimate,
+        SharedProcess,
+        VirtualSensor,
+        dependence_test,
+        fit_mgmwm,
+        moment_covariance,
+        optimal_weights,
+        virtual_model,
+        virtual_sensor,
+        virtual_signal,
+    )
+    from .reporting import (
+        CalibrationReport,
+        FleetReport,
+        fleet_report,
+        gather_fleet,
+        gather_report,
+        render_fleet_html,
+        render_html,
+        report,
+    )
+    from .session import Session, load_session, save_session
+    from .teaching import SCENARIOS, Scenario, avsm, avsm_auto, run_slope_study, simulate_scenario
+    from .units import (
+        BI_FACTOR,
+        datasheet,
+        from_datasheet,
+        param_unit,
+        process_values,
+        si_factor,
+        to_datasheet,
+    )
+    from .wv import (
+        WaveletVariance,
+        biweight_constant,
+        default_levels,
+        haar_coefficients,
+        robust_scale_biweight,
+        wavelet_variance,
+    )
+    from .wv.allan import AllanVariance, allan_variance
+    from .wv.pooled import pooled_wavelet_variance
+    from .wv.stream import wavelet_variance_stream
+    from .wv.wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix
+
 #: The subpackages and modules, reachable as attributes (``eg.units.datasheet_rows``).
 SUBMODULES: tuple[str, ...] = (
+    "errors",
     "models",
     "units",
     "wv",

@@ -32,6 +32,7 @@ import numpy as np
 from ._files import open_regular, read_regular, write_atomic
 from ._jsonutil import json_ready
 from ._version import __version__
+from .errors import SessionError
 from .fit import FitError, GMWMResult, weight_matrix
 from .inference import ParamInterval
 from .io import load_log
@@ -54,10 +55,6 @@ __all__ = [
 
 SCHEMA = "gmwm-session/1"
 _LOAD_KEYS = ("channel", "fs", "segment", "scale", "units", "topic")
-
-
-class SessionError(ValueError):
-    """A session file cannot be read or does not match its data; the message says why."""
 
 
 def _arr(v: Any, dtype: Any = float) -> np.ndarray:

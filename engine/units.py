@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ._quantity import Quantity, per_s, squared, times_s
+from .errors import ExportError
 from .models import PROCESS_TYPES
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -57,11 +58,6 @@ __all__ = [
 BI_FACTOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 G0 = 9.80665  # standard gravity, m/s^2
 _DEG = math.pi / 180.0
-
-
-class ExportError(ValueError):
-    """A fit cannot be converted or exported as asked (unknown unit, missing process ...);
-    the message says how to fix it."""
 
 
 def param_unit(code: str, name: str, unit: str = "") -> str:

@@ -104,7 +104,7 @@ def light_text_updates() -> bool:
         model.update(**props)
 
     _update._gmwm_light = True  # type: ignore[attr-defined]
-    HTMLBasePane._update = _update
+    HTMLBasePane._update = _update  # type: ignore[method-assign]  # the patch itself
     return True
 
 
@@ -180,6 +180,7 @@ def placeholder_session(
     the page will have; its own request (cookies, headers, user) and its session id replace
     this context when the page is handed over (:func:`hand_over_sessions`).
     """
+    from bokeh.core.types import ID
     from bokeh.server.contexts import BokehSessionContext, _RequestProxy
     from tornado.httputil import HTTPHeaders, HTTPServerRequest, RequestStartLine
 
@@ -188,7 +189,7 @@ def placeholder_session(
     )
     request.protocol = protocol
     request.app_path = app_path  # type: ignore[attr-defined]
-    context = BokehSessionContext("gmwm-page-built-ahead", server_context, doc, logout_url=None)
+    context = BokehSessionContext(ID("gmwm-page-built-ahead"), server_context, doc, logout_url=None)
     context._request = _RequestProxy(request, arguments={}, cookies={}, headers={"Host": host})
     doc._session_context = weakref.ref(context)
     return context
@@ -221,7 +222,8 @@ def hand_over_sessions(application_context: Any, take: Any) -> None:
             raise ProtocolError("Session ID must not be empty")
 
         if session_id not in self._sessions and session_id not in self._pending_sessions:
-            future = self._pending_sessions[session_id] = gen.Future()
+            future: gen.Future[Any] = gen.Future()
+            self._pending_sessions[session_id] = future
 
             proxy = None
             if request is not None:
@@ -332,6 +334,6 @@ def wrap_basic_login(
         return set_user(self, user)
 
     throttled_post._gmwm_throttled = True  # type: ignore[attr-defined]
-    BasicLoginHandler.post = throttled_post
-    BasicLoginHandler.set_current_user = set_current_user
+    BasicLoginHandler.post = throttled_post  # type: ignore[method-assign]  # the patch itself
+    BasicLoginHandler.set_current_user = set_current_user  # type: ignore[method-assign]
     return True

@@ -55,6 +55,7 @@ from gmwm_app.session_view import SessionPanel, download_button  # noqa: E402
 from gmwm_app.state import (  # noqa: E402
     AppState,
     format_value,
+    state_param,
 )
 from gmwm_app.upload import BoundedFileDropper  # noqa: E402
 from gmwm_app.views import (  # noqa: E402
@@ -65,7 +66,7 @@ from gmwm_app.views import (  # noqa: E402
 )
 from gmwm_app.wv_figures import WVFigures  # noqa: E402
 
-__all__ = ["GMWMApp", "create_app", "live_apps", "set_listed"]
+__all__ = ["GMWMApp", "app_of", "create_app", "live_apps", "set_listed"]
 
 log = logging.getLogger(__name__)
 
@@ -185,7 +186,7 @@ class GMWMApp(pn.viewable.Viewer):
         Server path loaded when ``default_source == "path"`` (the ``gmwm-app FILE`` argument).
     """
 
-    state = param.ClassSelector(class_=AppState, constant=True, doc="The session state.")
+    state = state_param()
 
     def __init__(
         self, state: AppState | None = None, *, default_source: str = "demo", default_path: str = ""
@@ -384,7 +385,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.plot_box = pn.Column(
             self.plot_pane, self.resid_box, self.segments.box, sizing_mode="stretch_width", margin=0
         )
-        main = [
+        main: list[Any] = [
             pn.Column(
                 self.alert,
                 *self.session_panel.main(),
@@ -485,7 +486,8 @@ class GMWMApp(pn.viewable.Viewer):
     # -------------------------------------------------------------------------------------
     # state -> page: each part depends on the state parameters it draws
     # -------------------------------------------------------------------------------------
-    def __panel__(self) -> pn.template.BootstrapTemplate:
+    def __panel__(self) -> pn.template.BootstrapTemplate:  # type: ignore[override]
+        # a template, which Panel renders as a page (Panel types __panel__ as a Viewable)
         return self.template
 
     def refresh(self) -> None:
@@ -621,18 +623,19 @@ class GMWMApp(pn.viewable.Viewer):
         self.ready = True
         self._sync_url()
 
-    def prefetch(self) -> None:
-        """Start reading the data the URL names in a worker thread, while the page loads."""
+    def prefetch(self) -> Future:
+        """Start reading the data the URL names in a worker thread, while the page loads;
+        returns the read's future."""
         query = dict(self._location.query_params) if self._location is not None else {}
         self._query = query
         self._prefetched = self.jobs.submit(
             partial(self.state.prepare_query, query, self.default_source, self.default_path)
         )
+        return self._prefetched
 
     async def start(self) -> None:
         """Show the data named by the URL (or the default) once the page has opened."""
-        if self._prefetched is None:
-            self.prefetch()
+        prefetched = self._prefetched if self._prefetched is not None else self.prefetch()
         query = self._query
 
         def apply(prepared: Any) -> None:
@@ -644,9 +647,7 @@ class GMWMApp(pn.viewable.Viewer):
                     default_path=self.default_path,
                 )
 
-        self.jobs.load(
-            "Loading the data and computing its wavelet variance", self._prefetched, apply
-        )
+        self.jobs.load("Loading the data and computing its wavelet variance", prefetched, apply)
 
     def start_sync(self) -> None:
         """Synchronous :meth:`start` (no server: tests, notebooks)."""
@@ -751,7 +752,9 @@ class GMWMApp(pn.viewable.Viewer):
         return report_file(self.state)
 
 
-def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn.viewable.Viewable:
+def create_app(
+    *, source: str = "demo", path: str = "", load: bool = True
+) -> pn.template.BootstrapTemplate:
     """Build the page of one browser session (a fresh :class:`AppState`).
 
     Parameters
@@ -783,3 +786,9 @@ def create_app(*, source: str = "demo", path: str = "", load: bool = True) -> pn
 
 if __name__.startswith("bokeh"):  # `panel serve gmwm_app/app.py`
     create_app().servable(title="GMWM")
+
+
+def app_of(page: Any) -> GMWMApp:
+    """The :class:`GMWMApp` of a page built by :func:`create_app` (its ``gmwm_app``)."""
+    app: GMWMApp = page.gmwm_app
+    return app

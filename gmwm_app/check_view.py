@@ -26,7 +26,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import panel as pn
 import param
-from bokeh.models import ColumnDataSource, Legend, LegendItem, StringFormatter, TableColumn
+from bokeh.models import ColumnDataSource
+from bokeh.models.annotations import Legend, LegendItem
+from bokeh.models.widgets import StringFormatter, TableColumn
 
 import engine as eg
 from engine.formats.readers import read_check_file
@@ -259,7 +261,7 @@ class CheckView(TabView):
             spec = read_check_file(
                 tmp, channel=self.state.channel, kind=self.kind or None, fs=self.state.fs
             )
-        except (ExportError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (ExportError ...) or numpy's
             self._show([str(e).replace(tmp, filename)])
             return
         finally:
@@ -368,7 +370,7 @@ class CheckView(TabView):
             self._clear([str(e)])
             return
         fit = s.result if s.result is not None and s.result.wv is s.wv else None
-        self._compute(partial(eg.check_datasheet, s.wv, spec, fit=fit), self.show, "check")
+        self._compute(partial(eg.check_datasheet, s.wv, spec, fit=fit), self.draw, "check")
 
     def _failed(self, err: BaseException) -> None:
         self._clear([f"could not check: {err}"])
@@ -381,7 +383,7 @@ class CheckView(TabView):
         self.status.object = ""
         self._show(msgs)
 
-    def show(self, chk: Any) -> None:
+    def draw(self, chk: Any) -> None:
         """Draw a check: both figures, the table, the summary."""
         self.result = chk
         colors = [VERDICT_COLORS[v] for v in chk.verdict]

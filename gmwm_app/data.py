@@ -23,9 +23,9 @@ from typing import Any
 import numpy as np
 
 import engine as eg
-from engine._checks import check_fs as engine_check_fs
-from engine.inference.temperature import fit_log_temperature, temperature_series
-from engine.io import qualify_log
+from engine.inference.temperature import TemperatureFit, fit_log_temperature, temperature_series
+from engine.io import ImuLog, qualify_log
+from engine.wv import check_fs as engine_check_fs
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
 from gmwm_app.wv_cache import WVKey, store_wv, wv_from_cache
@@ -55,7 +55,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> Any:
+def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> ImuLog:
     """Read an IMU log with the engine's loader (``engine.load_log``, imported on first use:
     the app module loads without h5py work).
 
@@ -88,13 +88,13 @@ def read_log(path: str | os.PathLike[str] | bytes, **options: Any) -> Any:
 # read-only, so that no session can change another's data; each session gets its own WV
 # cache (a copy of the shared one), to which it adds what it computes.
 _SHARED_LOCK = threading.Lock()
-_SHARED_DEMO: dict[tuple[str, int, int], Any] = {}  # (path, mtime_ns, size) -> ImuLog
-_SHARED_WVS: weakref.WeakKeyDictionary[Any, dict[WVKey, eg.WaveletVariance]] = (
+_SHARED_DEMO: dict[tuple[str, int, int], ImuLog] = {}  # (path, mtime_ns, size) -> log
+_SHARED_WVS: weakref.WeakKeyDictionary[ImuLog, dict[WVKey, eg.WaveletVariance]] = (
     weakref.WeakKeyDictionary()
 )
 
 
-def read_demo(path: str | os.PathLike[str]) -> Any:
+def read_demo(path: str | os.PathLike[str]) -> ImuLog:
     """The demo log at ``path``, read once per process while the file is unchanged.
 
     Parameters
@@ -127,7 +127,7 @@ def read_demo(path: str | os.PathLike[str]) -> Any:
         return _SHARED_DEMO[key]
 
 
-def shared_wvs(lg: Any) -> dict[WVKey, eg.WaveletVariance] | None:
+def shared_wvs(lg: ImuLog) -> dict[WVKey, eg.WaveletVariance] | None:
     """A copy of the WVs shared with every session for ``lg`` (None: ``lg`` is not shared)."""
     with _SHARED_LOCK:
         wvs = _SHARED_WVS.get(lg)
@@ -168,7 +168,7 @@ class LoadedData:
         install reports the message instead of computing the WV again).
     """
 
-    log: Any
+    log: ImuLog
     source: str
     name: str
     path: str = ""
@@ -323,29 +323,29 @@ def check_fs(fs: Any) -> float:
         raise ValueError(f"fs must be a positive number of Hz, got {fs!r}") from None
 
 
-def channel_names(lg: Any) -> list[str]:
+def channel_names(lg: ImuLog) -> list[str]:
     """Channel names of a log (raw or WV summary), in file order."""
     return list(lg.names)
 
 
-def summary_has_robust(lg: Any, ch: str) -> bool:
+def summary_has_robust(lg: ImuLog, ch: str) -> bool:
     """Whether a WV summary file holds a robust WV for ``ch``."""
     wv = lg.wv.get(ch)
     return wv is not None and bool(wv.robust)
 
 
-def fs_source(lg: Any) -> str:
+def fs_source(lg: ImuLog) -> str:
     """Where a log's fs came from (``"file"``, ``"time column"`` ...)."""
     return str(getattr(lg, "fs_source", "file") or "file")
 
 
-def unit_of(lg: Any, ch: str) -> str:
+def unit_of(lg: ImuLog, ch: str) -> str:
     """Unit of channel ``ch`` of a log (empty when the file names none)."""
     return str(lg.unit_of(ch))
 
 
 def compute_wv(
-    lg: Any,
+    lg: ImuLog,
     ch: str,
     fs: float,
     robust: bool,
@@ -372,7 +372,7 @@ def compute_wv(
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
 
 
-def wv_matrix_of(lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
+def wv_matrix_of(lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
     """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
 
     Channels of different lengths are truncated to the shortest (the notice says so).
@@ -408,11 +408,11 @@ def wv_matrix_of(lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatr
 
 
 #: The log check's line per log and channel, computed once per loaded log (it dies with it).
-_CHECKS: weakref.WeakKeyDictionary[Any, dict[str, str]] = weakref.WeakKeyDictionary()
+_CHECKS: weakref.WeakKeyDictionary[ImuLog, dict[str, str]] = weakref.WeakKeyDictionary()
 _CHECKS_LOCK = threading.Lock()
 
 
-def log_check_line(lg: Any, channel: str) -> str:
+def log_check_line(lg: ImuLog, channel: str) -> str:
     """What the log check (:func:`engine.io.qualify_log`) found in one channel, in one line;
     ``""`` for a clean channel or a WV summary (no samples). Cached per log and channel."""
     if lg.is_summary:
@@ -429,10 +429,12 @@ def log_check_line(lg: Any, channel: str) -> str:
 
 
 #: The temperature fit per log and channel (None: none to fit), once per loaded log.
-_TEMPS: weakref.WeakKeyDictionary[Any, dict[str, Any]] = weakref.WeakKeyDictionary()
+_TEMPS: weakref.WeakKeyDictionary[ImuLog, dict[str, TemperatureFit | None]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
-def temperature_fit_of(lg: Any, channel: str) -> Any:
+def temperature_fit_of(lg: ImuLog, channel: str) -> TemperatureFit | None:
     """The bias-temperature fit of one channel of a log
     (:func:`engine.inference.temperature.fit_log_temperature`, temperature channel found
     automatically), or None: no temperature channel, a WV summary, a log cut into segments,
@@ -453,7 +455,7 @@ def temperature_fit_of(lg: Any, channel: str) -> Any:
     return tf
 
 
-def temperature_line(lg: Any, channel: str) -> str:
+def temperature_line(lg: ImuLog, channel: str) -> str:
     """The one line the Fit view says of a channel with a temperature channel beside it: the
     sensitivity with its interval in datasheet units, and that the WV and the fit are of the
     compensated signal; ``""`` without one."""

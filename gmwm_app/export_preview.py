@@ -21,10 +21,10 @@ from typing import Any
 
 import numpy as np
 import panel as pn
-from bokeh.models import BoxAnnotation, Span
+from bokeh.models.annotations import BoxAnnotation, Span
 from bokeh.plotting import figure
 
-from engine.formats import FORMAT_CONSUMERS, ExportError, Projection, project
+from engine.formats import FORMAT_CONSUMERS, Projection, project
 
 __all__ = ["preview_projections", "preview_table", "preview_figure", "ExportPreview"]
 
@@ -217,7 +217,7 @@ class ExportPreview:
                 data=data,
                 horizon_s=horizon_s,
             )
-        except (ExportError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (ExportError ...) or numpy's
             self.note.object = f"Cannot project the fits for {fmt}: {e}"
             return
         shown = channel if channel in self.projections else next(iter(self.projections))

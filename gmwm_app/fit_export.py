@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,8 +18,13 @@ import engine as eg
 
 __all__ = ["ExportMixin"]
 
+if TYPE_CHECKING:  # the state's names this mixin uses (AppState defines them)
+    from gmwm_app.state_fields import StateFields
+else:
+    StateFields = object
 
-class ExportMixin:
+
+class ExportMixin(StateFields):
     """JSON export methods of :class:`gmwm_app.state.AppState`."""
 
     param: Any
@@ -34,7 +39,7 @@ class ExportMixin:
             "query": self.to_query(),
             "data": self.data_info(),
         }
-        if self.result is not None:
+        if self.result is not None and self.fs is not None:  # a fit implies data and fs
             out["fit"] = self.result.to_dict()
             out["datasheet"] = eg.datasheet(
                 self.result.model, float(self.fs), self.unit, n_levels=self.result.wv.n_levels

@@ -30,6 +30,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from functools import partial
 from typing import Any
 
+from bokeh.document import Document
 from panel.io.state import set_curdoc
 from panel.io.state import state as pn_state
 
@@ -148,7 +149,7 @@ class Jobs:
         self._slots: asyncio.Semaphore | None = None
         self._on_close: list[Callable[[], Any]] = []
         if self.served:
-            self.doc.on_session_destroyed(self._session_ended)
+            self._served_doc().on_session_destroyed(self._session_ended)
 
     def _session_ended(self, session_context: Any) -> None:
         """The session ended (Bokeh's session-destroyed callback, whose signature Bokeh
@@ -177,6 +178,12 @@ class Jobs:
         """True when the session is served (a server loop applies the results)."""
         return self.doc is not None and self.doc.session_context is not None
 
+    def _served_doc(self) -> Document:
+        """The session's document (called when :attr:`served`, which implies one)."""
+        if self.doc is None:  # pragma: no cover - served implies a document
+            raise RuntimeError("the session has no document")
+        return self.doc
+
     # ------------------------------------------------------------------------------------
     # the page: lock, spawn, timers
     # ------------------------------------------------------------------------------------
@@ -189,7 +196,7 @@ class Jobs:
         if not self.served:
             fn()
             return
-        doc = self.doc
+        doc = self._served_doc()
 
         def run() -> None:
             with set_curdoc(doc):
@@ -219,20 +226,20 @@ class Jobs:
         if not self.served:
             fn()
             return
-        self.doc.add_timeout_callback(fn, ms)
+        self._served_doc().add_timeout_callback(fn, ms)
 
     def every(self, fn: Callable[[], Any], ms: int) -> Any:
         """Run ``fn`` every ``ms`` milliseconds on the loop; returns a handle (None unserved)."""
         if not self.served:
             return None
-        return self.doc.add_periodic_callback(fn, ms)
+        return self._served_doc().add_periodic_callback(fn, ms)
 
     def stop(self, handle: Any) -> None:
         """Stop a periodic callback of :meth:`every`."""
         if handle is None or not self.served:
             return
         try:
-            self.doc.remove_periodic_callback(handle)
+            self._served_doc().remove_periodic_callback(handle)
         except ValueError:  # already removed
             pass
 

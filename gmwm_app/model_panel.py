@@ -12,6 +12,7 @@ panel's own updates of its widgets are no-ops.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any
 
 import panel as pn
@@ -19,7 +20,7 @@ import param
 from bokeh.models import CustomJSTickFormatter
 
 import engine as eg
-from gmwm_app.state import PROCESS_CODES, PROCESS_NAMES, AppState
+from gmwm_app.state import PROCESS_CODES, PROCESS_NAMES, AppState, state_param
 from gmwm_app.views import component_color, redraws
 from gmwm_app.whatif import SliderSpec
 
@@ -49,7 +50,7 @@ class ModelPanel(pn.viewable.Viewer):
         The session state (every change goes through its actions).
     """
 
-    state = param.ClassSelector(class_=AppState, constant=True, doc="The session state.")
+    state = state_param()
 
     def __init__(self, state: AppState) -> None:
         super().__init__(state=state)
@@ -65,7 +66,7 @@ class ModelPanel(pn.viewable.Viewer):
                 width=82,
                 margin=(3, 3),
             )
-            b.on_click(lambda _e, c=code: self._add(c))
+            b.on_click(partial(self._add, code))
             self.add_buttons[code] = b
         self.spec_input = pn.widgets.TextInput(
             label="Model (type a spec, press Enter)",
@@ -86,7 +87,7 @@ class ModelPanel(pn.viewable.Viewer):
         self.clear_button = pn.widgets.Button(
             label="Remove all", color="light", width=100, margin=(3, 3)
         )
-        self.clear_button.on_click(lambda _e: self.state.clear_model())
+        self.clear_button.on_click(self._clear)
         self.weights_select = pn.widgets.RadioButtonGroup(
             label="Weights",
             options=dict(_WEIGHTS),
@@ -211,7 +212,7 @@ class ModelPanel(pn.viewable.Viewer):
             css_classes=["gmwm-remove"],
             description="Remove this process",
         )
-        btn.on_click(lambda _e, i=i: self._remove(i))
+        btn.on_click(partial(self._remove, i))
         row = pn.Row(label, btn, sizing_mode="stretch_width", margin=0, visible=False)
         self._proc_rows.append((row, label, btn))
         self.process_list.append(row)
@@ -254,9 +255,9 @@ class ModelPanel(pn.viewable.Viewer):
                 margin=(2, 10),
                 visible=False,
             )
-            w.param.watch(lambda e, i=i: self._on_slider(i, e.new), "value")
+            w.param.watch(partial(self._slider_moved, i), "value")
             self._slider_pool.append(w)
-            self._slider_x.append(w.value)
+            self._slider_x.append(float(w.value or 0.0))
             self.sliders.append(w)
         self._slider_specs = specs
         for i, w in enumerate(self._slider_pool):
@@ -278,11 +279,17 @@ class ModelPanel(pn.viewable.Viewer):
             elif w.visible:
                 w.visible = False
 
-    def _add(self, code: str) -> None:
+    def _add(self, code: str, _event: Any = None) -> None:
         self.state.add_process(code)
 
-    def _remove(self, index: int) -> None:
+    def _remove(self, index: int, _event: Any = None) -> None:
         self.state.remove_process(index)
+
+    def _clear(self, _event: Any = None) -> None:
+        self.state.clear_model()
+
+    def _slider_moved(self, slot: int, event: Any) -> None:
+        self._on_slider(slot, event.new)
 
     def _on_spec(self, _event: Any = None) -> None:
         spec = (

@@ -118,8 +118,8 @@ class MultiControls:
         groups = self.shared_groups
         return (
             tuple(self.channels),
-            self.spec_input.value,
-            self.override_input.value,
+            self.spec_input.value or "",
+            self.override_input.value or "",
             tuple(sorted((k, tuple(v)) for k, v in groups.items())),
         )
 
@@ -176,8 +176,8 @@ class MultiControls:
         chans = self.channels
         models: dict[str, eg.Model] = {}
         try:
-            base = parse_model(self.spec_input.value)
-            per = parse_overrides(self.override_input.value, chans)
+            base = parse_model(self.spec_input.value or "")
+            per = parse_overrides(self.override_input.value or "", chans)
             models = {c: parse_model(per[c]) if c in per else base for c in chans}
         except ValueError:
             models = {}  # the fit reports the problem

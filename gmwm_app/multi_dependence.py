@@ -101,12 +101,12 @@ class DependenceControls:
         value = self._throttle.step(done, total, observer, self._cancel, Cancelled)
         if value is not None:
             text = f"⏳ Bootstrap replicate {done} of {total} ..."
-            self.jobs.locked(
-                lambda: (
-                    self.progress.param.update(value=value),
-                    setattr(self.text, "object", text),
-                )
-            )
+
+            def show() -> None:
+                self.progress.param.update(value=value)
+                self.text.object = text
+
+            self.jobs.locked(show)
 
     def start(
         self,

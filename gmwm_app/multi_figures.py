@@ -11,14 +11,9 @@ from typing import Any
 import numpy as np
 import panel as pn
 from bokeh.layouts import gridplot
-from bokeh.models import (
-    ColumnDataSource,
-    DataRange1d,
-    DataTable,
-    HoverTool,
-    StringFormatter,
-    TableColumn,
-)
+from bokeh.models import ColumnDataSource, DataRange1d, HoverTool
+from bokeh.models.annotations import Title
+from bokeh.models.widgets import DataTable, StringFormatter, TableColumn
 from bokeh.plotting import figure
 
 import engine as eg
@@ -283,7 +278,8 @@ class CellFigure:
             min_border_left=5,
             min_border_right=5,
         )
-        p.title.text_font_size = "12px"
+        if isinstance(p.title, Title):  # a figure's title is a Title model
+            p.title.text_font_size = "12px"
         p.grid.grid_line_alpha = 0.35
         p.axis.major_label_text_font_size = "10px"
         self.diag = diag
@@ -355,7 +351,8 @@ class CellFigure:
             p.renderers = [*(r for r in p.renderers if r not in totals), *totals]
 
     def update(self, data: dict[str, Any] | None, title: str, ylabel: str) -> None:
-        self.figure.title.text = title
+        if isinstance(self.figure.title, Title):  # a figure's title is a Title model
+            self.figure.title.text = title
         if self.figure.yaxis[0].axis_label != ylabel:
             self.figure.yaxis.axis_label = ylabel
         if data is None:

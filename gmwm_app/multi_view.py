@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import panel as pn
 import param
-from bokeh.models import NumberFormatter, ScientificFormatter
+from bokeh.models.widgets import NumberFormatter, ScientificFormatter
 
 import engine as eg
 
@@ -307,7 +307,8 @@ class MultiView(TabView):
             self._refuse(f"Choose at least {MIN_CHANNELS} channels (at most {MAX_CHANNELS}).")
             return
         c = self.controls
-        spec, over, groups = c.spec_input.value, c.override_input.value, c.shared_groups
+        spec, over = c.spec_input.value or "", c.override_input.value or ""
+        groups = c.shared_groups
         self._running = True
         self._refit = False
         self._idle.clear()

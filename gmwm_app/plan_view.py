@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import panel as pn
 import param
-from bokeh.models import ColumnDataSource, Legend, LegendItem, Span
+from bokeh.models import ColumnDataSource
+from bokeh.models.annotations import Legend, LegendItem, Span
 
 import engine as eg
 from engine.inference import parse_targets
@@ -128,7 +129,7 @@ class PlanView(TabView):
             self.status.object = ""
             return
         try:
-            targets = parse_targets(self.targets.value)
+            targets = parse_targets(self.targets.value or "")
         except ValueError as e:
             self.show_message([str(e)], level="warning")
             return

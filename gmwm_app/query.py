@@ -7,14 +7,19 @@ state's parameters, ``read``, ``precompute``, ``install``, ``set_model`` and ``_
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gmwm_app.data import PreparedQuery, check_fs, message_of
 
 __all__ = ["QueryMixin"]
 
+if TYPE_CHECKING:  # the state's names this mixin uses (AppState defines them)
+    from gmwm_app.state_fields import StateFields
+else:
+    StateFields = object
 
-class QueryMixin:
+
+class QueryMixin(StateFields):
     """URL query methods of :class:`gmwm_app.state.AppState`."""
 
     param: Any

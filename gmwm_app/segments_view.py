@@ -15,6 +15,7 @@ import numpy as np
 import panel as pn
 from bokeh.models import ColumnDataSource
 
+from engine.io import ImuLog
 from engine.reporting.data import timeline
 
 from . import views
@@ -77,7 +78,7 @@ class SegmentsStrip:
         self.figure = fig
         self.box[:] = [pn.pane.Bokeh(fig, sizing_mode="stretch_width")]
 
-    def update(self, log: Any, channel: str) -> None:
+    def update(self, log: ImuLog | None, channel: str) -> None:
         """Draw ``channel`` of ``log`` with its segments; hide the strip without segments."""
         segments = list(getattr(log, "segments", None) or ())
         if log is None or not segments or channel not in getattr(log, "names", ()):

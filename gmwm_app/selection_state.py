@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,6 +21,11 @@ from gmwm_app.data import message_of
 from gmwm_app.limits import check_candidates
 
 __all__ = ["Inference", "SelectionMixin", "N_INFERENCES"]
+
+if TYPE_CHECKING:  # the state's names this mixin uses (AppState defines them)
+    from gmwm_app.state_fields import StateFields
+else:
+    StateFields = object
 
 #: Fits whose intervals and J-test a session keeps.
 N_INFERENCES = 32
@@ -36,7 +41,7 @@ class Inference:
     j_error: str = ""
 
 
-class SelectionMixin:
+class SelectionMixin(StateFields):
     """Ranking and inference actions of :class:`gmwm_app.state.AppState`."""
 
     param: Any
@@ -82,13 +87,15 @@ class SelectionMixin:
         from engine.inference import rank_models
 
         wv = self.wv
+        if wv is None:
+            raise ValueError("load data before ranking models")
         parts = self.ranking_candidates(spec)
         try:
             if len(parts) == 1:
                 sel = rank_models(wv, max_model=parts[0], weights=self.weights, progress=progress)
             else:
                 sel = rank_models(wv, parts, weights=self.weights, progress=progress)
-        except (eg.ModelError, eg.FitError) as e:
+        except eg.GmwmError as e:  # any engine error: its one-line message
             raise ValueError(message_of(e)) from None
         return wv, sel
 
@@ -113,11 +120,11 @@ class SelectionMixin:
 
         try:
             intervals = param_intervals(result, method="asymptotic", level=0.95)
-        except (eg.FitError, np.linalg.LinAlgError) as e:
+        except (eg.GmwmError, np.linalg.LinAlgError) as e:
             raise ValueError(f"no intervals for {result.model.spec()}: {message_of(e)}") from None
         try:
             return Inference(result, intervals, j_test(result), "")
-        except (eg.FitError, ValueError, np.linalg.LinAlgError) as e:
+        except (ValueError, np.linalg.LinAlgError) as e:  # eg.GmwmError or numpy's
             return Inference(result, intervals, None, message_of(e))
 
     def install_inference(self, inf: Inference) -> bool:

@@ -21,13 +21,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import panel as pn
 import param
-from bokeh.models import (
-    ColumnDataSource,
-    NumberFormatter,
-    ScientificFormatter,
-    StringFormatter,
-    TableColumn,
-)
+from bokeh.models import ColumnDataSource
+from bokeh.models.widgets import NumberFormatter, ScientificFormatter, StringFormatter, TableColumn
 
 from engine.inference.jtest import LEVELS_RULE
 
@@ -369,7 +364,7 @@ class SelectionView(TabView):
         spec = (
             self.max_input.value_input
             if spec is None and self.max_input.value_input
-            else (spec if spec is not None else self.max_input.value)
+            else (spec if spec is not None else self.max_input.value or "")
         )
         state = self.state
         try:  # refused at once, not after waiting for a worker behind other rankings

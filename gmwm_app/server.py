@@ -27,10 +27,11 @@ from bokeh.document import Document
 from bokeh.document.events import SessionCallbackAdded, SessionCallbackRemoved
 
 import engine as eg
+from engine.wv import set_blas_threads
 from gmwm_app import _panel_compat as compat
 from gmwm_app import hdf5_guard
 from gmwm_app._panel_compat import building_off_loop
-from gmwm_app.app import GMWMApp, create_app, live_apps, set_listed
+from gmwm_app.app import GMWMApp, app_of, create_app, live_apps, set_listed
 
 __all__ = [
     "create_application",
@@ -80,11 +81,9 @@ def limit_blas_threads(n: int = 1) -> bool:
     In a server, the event loop thread is busy while a worker computes a WV; OpenBLAS's own
     threads then fight them for the cores at every small ``np.dot``, which made a 1e6-sample
     WV 30x slower (1 s instead of 30 ms) on a 2-core machine. The engine's matrices are small,
-    so one BLAS thread loses nothing (:func:`engine._blas.set_blas_threads`). Returns True
+    so one BLAS thread loses nothing (:func:`engine.wv.set_blas_threads`). Returns True
     when a limit was set.
     """
-    from engine._blas import set_blas_threads
-
     return set_blas_threads(n)
 
 
@@ -110,12 +109,14 @@ def warm_engine() -> None:
     eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0, unit="deg/s"), "GM+WN+RW").ieee  # noqa: B018
 
 
-def create_app_factory(path: str | None = None) -> Callable[[], pn.viewable.Viewable]:
+def create_app_factory(
+    path: str | None = None,
+) -> Callable[[], pn.template.BootstrapTemplate]:
     """A function that builds a fresh page per session (for ``pn.serve``), preloading ``path``
     (and warming the engine's lazy imports first: :func:`warm_engine`)."""
     warm_engine()
 
-    def factory() -> pn.viewable.Viewable:
+    def factory() -> pn.template.BootstrapTemplate:
         if path:
             return create_app(source="path", path=str(path))
         return create_app()
@@ -212,7 +213,11 @@ def serialize_ahead(doc: Any) -> None:
         doc.remove_on_change(on_change)
         if changed or not deferred:
             PULLS["fresh"] += 1
-            return Document.to_json(doc, deferred=deferred)
+            return (
+                Document.to_json(doc, deferred=True)
+                if deferred
+                else Document.to_json(doc, deferred=False)
+            )
         PULLS["ahead"] += 1
         return serialized
 
@@ -417,6 +422,10 @@ class PagePool:
             return True
         return any(app.busy or not app.ready for app in apps)
 
+    def _tick(self) -> None:
+        """:meth:`step`, as the periodic callback of :meth:`start_stepping`."""
+        self.step()
+
     def step(self) -> bool:
         """Start building one page if the pool is short and the server idle (on the loop);
         whether a build started."""
@@ -449,13 +458,14 @@ class PagePool:
             return
         self._failures = 0
         set_listed(app, False)  # not a session's yet
+        kept = False
         with self._lock:
             if shape == self.shape:
                 self._ready.append((doc, context, app))
                 self.stats["built"] += 1
                 full = len(self._ready) >= self.size
-                doc = None
-        if doc is not None:  # the pool moved to another shape meanwhile
+                kept = True
+        if not kept:  # the pool moved to another shape meanwhile
             self._release(doc, context)
         elif full and self._on_full is not None:
             self._on_full(self.size)
@@ -496,7 +506,7 @@ class PagePool:
         """Call :meth:`step` every ``period_ms`` on the current (the server's) event loop."""
         from tornado.ioloop import PeriodicCallback
 
-        self._stepper = PeriodicCallback(self.step, period_ms)
+        self._stepper = PeriodicCallback(self._tick, period_ms)
         self._stepper.start()
 
     def close(self) -> None:
@@ -565,7 +575,7 @@ def create_application(
     # one page built (and dropped) before serving: the first-time costs of a page (lazy
     # imports, templates, the first fit's IEEE table) are paid here, not on the loop while the
     # first students' pages open (tests/app/test_server_load.py: loop probe 1.2-1.8 -> 0.4-0.6 s)
-    set_listed(factory().gmwm_app, False)
+    set_listed(app_of(factory()), False)
 
     class OffLoopHandler(FunctionHandler):
         on_demand = 0  # pages being built on demand now
@@ -637,7 +647,7 @@ def create_application(
                 return pages[-1]
 
             self._build(doc, app, partial(compat.eval_panel, page, title))
-            return pages[0].gmwm_app
+            return app_of(pages[0])
 
         def modify_document(self, doc: Any) -> None:
             if doc in _PREBUILT:

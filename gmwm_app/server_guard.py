@@ -20,6 +20,12 @@ public method of Bokeh or Tornado, never a copy of it:
   answered 403 with a line saying what to add.
 * :class:`LoginThrottle`: after failed logins from one address, the next attempt from it is
   refused (without checking the password) for a delay that doubles at each failure.
+* :func:`restore_curdoc_on_error`: Bokeh runs every document callback, and every PATCH-DOC a
+  browser sends, inside ``bokeh.io.doc.patch_curdoc``, which does not restore the process's
+  current document when the code inside raises. One bad patch (a slider value set to text from
+  the browser's console) left the session's document on the process-wide stack; once that
+  session closed, every later ``curdoc()`` outside a callback raised "Patched curdoc has been
+  previously destroyed", so every classmate's HTML report download failed until a restart.
 
 Allowed names: loopback names and addresses (``localhost``, ``127.x.y.z``, ``::1``), any IP
 address literal (a rebinding site is a *name*: a browser that typed an address sends it), and
@@ -36,6 +42,7 @@ import threading
 import time
 import zlib
 from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -50,6 +57,7 @@ __all__ = [
     "guard_hosts",
     "LoginThrottle",
     "throttle_logins",
+    "restore_curdoc_on_error",
     "install",
 ]
 
@@ -325,10 +333,45 @@ def throttle_logins(throttle: LoginThrottle = THROTTLE) -> bool:
     return wrap_basic_login(throttle.wait_s, throttle.failed, throttle.succeeded)
 
 
+# ---------------------------------------------------------------------------------------------
+# The current document after a failing callback
+# ---------------------------------------------------------------------------------------------
+def restore_curdoc_on_error() -> bool:
+    """Make ``bokeh.io.doc.patch_curdoc`` restore the current document however the code it
+    wraps ends (once per process).
+
+    Bokeh's ``invoke_with_curdoc`` looks ``patch_curdoc`` up at each call, so wrapping the
+    module's function covers every callback and every PATCH-DOC a browser sends. The wrapper
+    enters Bokeh's own context manager and, in a ``finally``, resumes it as on success, which
+    runs its restoring step; the exception then goes on to Bokeh's handler as before. Returns
+    whether the wrapper is in place.
+    """
+    import bokeh.io.doc as bokeh_doc
+
+    current = bokeh_doc.patch_curdoc
+    if getattr(current, "_gmwm_restores", False):
+        return True
+
+    @contextmanager
+    def patch_curdoc(doc: Any) -> Iterator[None]:
+        patched = current(doc)
+        patched.__enter__()
+        try:
+            yield
+        finally:
+            patched.__exit__(None, None, None)
+
+    patch_curdoc._gmwm_restores = True  # type: ignore[attr-defined]
+    bokeh_doc.patch_curdoc = patch_curdoc
+    return True
+
+
 def install(origins: Sequence[str] = (), port: int = 80, *, login: bool = False) -> None:
     """Every guard of a ``gmwm-app`` server process: bounded messages, the host policy of
-    ``origins`` and ``port`` and, with ``login``, the login throttle."""
+    ``origins`` and ``port``, the current document restored after a failing callback and,
+    with ``login``, the login throttle."""
     bound_messages()
+    restore_curdoc_on_error()
     guard_hosts(HostPolicy(origins, port))
     if login:
         throttle_logins()

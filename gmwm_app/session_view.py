@@ -27,12 +27,13 @@ import panel as pn
 import param
 
 from engine.formats import FORMATS, export, misfit
-from engine.session import Session, SessionError, session_from_json, session_to_json
+from engine.io import ImuLog
+from engine.session import Session, session_from_json, session_to_json
 from gmwm_app.data import LoadedData
 from gmwm_app.export_bound import BoundOptions
 from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size, public_path
-from gmwm_app.state import AppState, demo_path
+from gmwm_app.state import AppState, demo_path, state_param
 from gmwm_app.views import redraws
 
 if TYPE_CHECKING:
@@ -404,7 +405,7 @@ class SessionPanel(pn.viewable.Viewer):
     parameters they show (``param.depends(..., watch=True)``).
     """
 
-    state = param.ClassSelector(class_=AppState, constant=True, doc="The session state.")
+    state = state_param()
 
     def __init__(self, state: AppState, jobs: Jobs) -> None:
         super().__init__(state=state)
@@ -427,7 +428,7 @@ class SessionPanel(pn.viewable.Viewer):
         self.export_note = pn.pane.Markdown("", margin=(0, 10), styles=_SMALL)
         # every format of the registry, from the fits of the channels fitted in this session
         self._fits: dict[str, Any] = {}  # channel -> its latest fit (this log, this fs)
-        self._fits_log: Any = None
+        self._fits_log: ImuLog | None = None
         self._fits_of: tuple[Any, ...] = ()  # (load, fs, robust) of the kept fits
         self.format_select = pn.widgets.Select(
             label="Format",
@@ -594,7 +595,7 @@ class SessionPanel(pn.viewable.Viewer):
         s = self.state
         try:
             return io.StringIO(session_json(s, self._load))
-        except (SessionError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (SessionError, LoadError ...) or numpy's
             s.report_error(f"Could not write the session: {e}")
             return io.StringIO(f"# could not write the session: {e}\n")
 

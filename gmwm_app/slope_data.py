@@ -248,7 +248,7 @@ def comparison_values(
         datasheet quantity (``engine.datasheet``: N, Q, K, R, GM correlation time ...;
         the slope method's bias instability B), in the order QN, WN, BI, GM, RW, DR.
     """
-    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    rows: dict[tuple[str, str, str], dict[str, Any]] = {}
     sources: list[tuple[str, list[dict[str, Any]]]] = []
     for col in METHODS:
         e = estimates.get(col)

@@ -30,15 +30,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import panel as pn
 import param
-from bokeh.models import (
-    BoxAnnotation,
-    BoxSelectTool,
-    ColumnDataSource,
-    Legend,
-    LegendItem,
-    StringFormatter,
-    TableColumn,
-)
+from bokeh.models import BoxSelectTool, ColumnDataSource
+from bokeh.models.annotations import BoxAnnotation, Legend, LegendItem
+from bokeh.models.widgets import StringFormatter, TableColumn
 
 import engine as eg
 from engine.fit.estimate import MethodEstimate, from_gmwm
@@ -372,7 +366,7 @@ class SlopeView(TabView):
         self.status.object = "⏳ Reading the slopes and fitting GMWM ..."
         # compute_slope reports bad regions itself, anything else is shown by _failed
         self._compute(
-            partial(compute_slope, wv, regions, truth, gmwm=self._gmwm), self.show, "slope"
+            partial(compute_slope, wv, regions, truth, gmwm=self._gmwm), self.draw, "slope"
         )
 
     def _gmwm(self, wv: eg.WaveletVariance, spec: str) -> MethodEstimate:
@@ -390,7 +384,7 @@ class SlopeView(TabView):
         self.status.object = ""
         self._show_messages([f"could not compute: {type(err).__name__}: {err}"])
 
-    def show(self, result: SlopeResult) -> None:
+    def draw(self, result: SlopeResult) -> None:
         """Draw a result: points, regions, lines, implied curves, table, messages."""
         self.result = result
         av = result.av
@@ -422,12 +416,12 @@ class SlopeView(TabView):
         for col, data in implied_adev_curves(result).items():
             self.curve_srcs[col].data = data
         fs = float(av.fs) if av is not None else float(self.state.fs or 1.0)
-        data = comparison_rows(
+        rows = comparison_rows(
             comparison_values(result.estimates, result.truth, fs, self.state.unit)
         )
-        if data != self.table_src.data:
-            same = len(data["process"]) == len(self.table_src.data.get("process", []))
-            self.table_src.data = data
+        if rows != self.table_src.data:
+            same = len(rows["process"]) == len(self.table_src.data.get("process", []))
+            self.table_src.data = rows
             if same:
                 redraw_table(self.table)
         self._show_messages(result.messages)

@@ -31,12 +31,13 @@ import threading
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import param
 
 import engine as eg
+from engine.io import ImuLog
 from gmwm_app.data import (
     LoadedData,
     channel_names,
@@ -64,6 +65,7 @@ __all__ = [
     "PROCESS_CODES",
     "demo_path",
     "format_value",
+    "state_param",
 ]
 
 log = logging.getLogger(__name__)
@@ -116,7 +118,9 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     """
 
     # data
-    source = param.Selector(default="demo", objects=list(SOURCES), doc="Where the data came from.")
+    source: param.Selector[str] = param.Selector(
+        default="demo", objects=list(SOURCES), doc="Where the data came from."
+    )
     path = param.String(
         default="",
         doc="Server path of the loaded file (source 'path'); "
@@ -184,7 +188,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
     def __init__(self, **params: Any) -> None:
         super().__init__(**params)
-        self._log: Any = None
+        self._log: ImuLog | None = None
         self._wv_cache = WVCache()  # of self._log (the two change together, under _lock)
         self._lock = threading.Lock()
         #: How a front end sends the redraws of one change together (the app: Panel's hold of
@@ -198,7 +202,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # ---------------------------------------------------------------------------------
     # helpers
     # ---------------------------------------------------------------------------------
-    def wv_matrix(self, lg: Any, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
+    def wv_matrix(self, lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
         """:func:`gmwm_app.data.wv_matrix_of`, cached in the session's WV cache while ``lg``
         is the session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
         """
@@ -220,9 +224,21 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             return dict(self._wv_cache.wvs)
 
     @property
-    def log(self) -> Any:
+    def log(self) -> ImuLog | None:
         """The loaded ``ImuLog`` (None before the first load)."""
         return self._log
+
+    def _loaded_log(self) -> ImuLog:
+        """The loaded log, for an action that needs data (ValueError before the first load)."""
+        if self._log is None:
+            raise ValueError("load data first")
+        return self._log
+
+    def _data_fs(self) -> float:
+        """The sampling frequency of the data (ValueError before the first load)."""
+        if self.fs is None:
+            raise ValueError("load data first: no sampling frequency yet")
+        return float(self.fs)
 
     def _publish(self, **changes: Any) -> None:
         """Set parameters in one ``param.update``: each watcher of them runs once, with the
@@ -340,7 +356,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             wv = self._wv_cache.find(channel, fs, robust)
         if wv is not None:
             return wv
-        wv = compute_wv(self._log, channel, fs, robust)
+        wv = compute_wv(self._loaded_log(), channel, fs, robust)
         with self._lock:
             self._wv_cache.store(channel, fs, robust, wv)
             self.wv_computations += 1
@@ -461,7 +477,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
         return self._guard(f"Could not use {loaded.name}", run)
 
-    def _data_info(self, lg: Any, ch: str, wv: eg.WaveletVariance) -> dict[str, Any]:
+    def _data_info(self, lg: ImuLog, ch: str, wv: eg.WaveletVariance) -> dict[str, Any]:
         n = int(wv.n if lg.is_summary else np.size(lg.channels[ch]))
         info = {"n": n, "duration_s": n / float(wv.fs), "unit": unit_of(lg, ch)}
         return {
@@ -485,7 +501,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             if self.is_summary and rob and not summary_has_robust(self._log, channel):
                 rob = False
                 msgs.append("this summary file has no robust WV; showing the classical one")
-            wv = self.get_wv(channel, float(self.fs), rob)
+            wv = self.get_wv(channel, self._data_fs(), rob)
             return self._switch_wv(wv, channel=channel, robust=rob, msgs=msgs)
 
         return self._guard(f"Could not show channel {channel}", run)
@@ -515,7 +531,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                 raise ValueError(
                     "this file holds a classical WV summary only; the robust WV needs the raw log"
                 )
-            wv = self.get_wv(self.channel, float(self.fs), bool(robust))
+            wv = self.get_wv(self.channel, self._data_fs(), bool(robust))
             return self._switch_wv(wv, robust=bool(robust))
 
         return self._guard("Could not switch the robust WV", run)
@@ -535,7 +551,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self._publish(
             wv=wv,
             **changes,
-            **self._data_info(self._log, ch, wv),
+            **self._data_info(self._loaded_log(), ch, wv),
             **self._model_update(model, result),
             error="; ".join(msgs),
         )
@@ -560,7 +576,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         m = start if start is not None else model.cleared()
         try:
             return eg.fit_gmwm(wv, m, weights=weights or self.weights)
-        except (eg.ModelError, eg.FitError, ValueError) as e:
+        except ValueError as e:  # eg.GmwmError (bad model, unidentifiable, short) or numpy's
             return message_of(e)
 
     def _model_update(self, model: eg.Model, result: eg.GMWMResult | None) -> dict[str, Any]:
@@ -602,9 +618,9 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self, m: eg.Model, start: eg.Model | None = None, weights: str | None = None
     ) -> bool:
         """Fit ``m`` (with ``weights``, the session's by default) and show it: one update."""
-        if len(m) and self.wv is None:
-            raise ValueError("load data before building a model")
         if len(m):
+            if self.wv is None:
+                raise ValueError("load data before building a model")
             m.validate(self.wv.n_levels)
         fit = self._fit_or_none(self.wv, m, start, weights) if self.wv is not None else None
         if isinstance(fit, str):
@@ -707,7 +723,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     def display_objective(self) -> float | None:
         """GMWM objective of the drawn model (the fit's, or the what-if values')."""
         m = self.display_model()
-        if m is None:
+        if m is None or self.wv is None:
             return None
         if not self.whatif and self.result is not None:
             return float(self.result.objective)
@@ -731,3 +747,11 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         if not res.converged:
             out.append(f"not converged: {res.message}")
         return out
+
+
+def state_param(doc: str = "The session state.") -> AppState:
+    """The ``state`` parameter of a view: the session's :class:`AppState`, given to the view's
+    constructor and never replaced (``constant``). Typed as the state itself, not ``AppState |
+    None`` (param's type for a selector without a default): no view exists without one."""
+    selector = param.ClassSelector(class_=AppState, constant=True, instantiate=False, doc=doc)
+    return cast(AppState, selector)

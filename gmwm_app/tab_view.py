@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import panel as pn
 import param
 
-from .state import AppState
+from .state import AppState, state_param
 from .views import hidden_alert
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -71,9 +71,7 @@ class TabView(pn.viewable.Viewer):
     """
 
     active = param.Boolean(default=True, doc="Whether the tab is shown.")
-    state = param.ClassSelector(
-        class_=AppState, constant=True, instantiate=False, doc="The session state."
-    )
+    state = state_param()
 
     #: The tab's short name: in the log, and in the CSS class of its message
     #: (``gmwm-<slug>-message``).

@@ -29,7 +29,7 @@ from typing import Any
 import panel as pn
 import param
 
-from engine._limits import available_memory
+from engine.io import available_memory
 from gmwm_app.limits import UPLOAD_CHUNK_BYTES, upload_refusal
 from gmwm_app.limits import current as current_limits
 
@@ -47,7 +47,7 @@ def uploads_budget() -> int:
     """Bytes the unfinished uploads of every session of this process may hold together: a
     quarter of the memory available now (at least one upload of the configured limit).
 
-    Integration point: when ``engine._limits`` offers the process-wide memory budget shared
+    Integration point: when the engine offers the process-wide memory budget shared
     by the loaders, this is the share of it the uploads take."""
     limit = current_limits().max_upload_bytes
     mem = available_memory()

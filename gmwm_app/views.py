@@ -14,18 +14,12 @@ import functools
 import logging
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
-from bokeh.models import (
-    ColumnDataSource,
-    DataTable,
-    GlyphRenderer,
-    Line,
-    Scatter,
-    TableColumn,
-    VArea,
-)
+from bokeh.models import ColumnDataSource, Line, Scatter, VArea
+from bokeh.models.renderers import GlyphRenderer
+from bokeh.models.widgets import DataTable, TableColumn
 from bokeh.plotting import figure
 
 import engine as eg
@@ -169,8 +163,8 @@ def log_figure(
     x_label: str,
     *,
     tools: str = "pan,wheel_zoom,box_zoom,reset,save",
-    y_axis_type: str = "log",
-    x_axis_type: str = "log",
+    y_axis_type: Literal["log", "linear", "auto"] = "log",
+    x_axis_type: Literal["log", "linear", "auto"] = "log",
     **kw: Any,
 ) -> Any:
     """A full-width plot over a log scale axis in the app's style (toolbar above, plain
@@ -219,7 +213,10 @@ def data_table(
     name: str,
     css: str,
     height: int,
-    **flags: bool,
+    *,
+    sortable: bool = False,
+    selectable: bool = False,
+    reorderable: bool = False,
 ) -> DataTable:
     """A full-width table in the app's style: no index column, 26 px rows.
 
@@ -231,16 +228,14 @@ def data_table(
         The model name (tests find the table by it) and its CSS class.
     height
         Height in pixels.
-    **flags
-        ``sortable``, ``selectable``, ``reorderable``: passed to Bokeh's ``DataTable``, each
-        False unless given.
+    sortable, selectable, reorderable
+        Bokeh's ``DataTable`` settings.
 
     Returns
     -------
     DataTable
         The table.
     """
-    flags = {"sortable": False, "selectable": False, "reorderable": False, **flags}
     # autosize_mode "fit_columns" throws "row is not defined" on data updates in BokehJS 3.9.2
     return DataTable(
         source=source,
@@ -252,7 +247,9 @@ def data_table(
         sizing_mode="stretch_width",
         name=name,
         css_classes=[css],
-        **flags,
+        sortable=sortable,
+        selectable=selectable,
+        reorderable=reorderable,
     )
 
 
@@ -402,6 +399,7 @@ def hidden_alert(alert_type: str, text: Any = None, **kw: Any) -> Any:
     import panel as pn
     import param
 
+    visible: Any  # False, or the parameter's truth (a reactive expression)
     if text is None:
         text, visible = "", False
     else:
@@ -499,7 +497,7 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
                 {
                     "process": lab,
                     "parameter": name,
-                    "value": format_value(float(v)),
+                    "value": format_value(float(v)) if v is not None else "",
                     "low": format_value(i.low) if i else "",
                     "high": format_value(i.high) if i else "",
                     "unit": _pretty(eg.param_unit(p.code, name, state.unit)),

@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import panel as pn
-from bokeh.models import ColumnDataSource, NumberFormatter, ScientificFormatter
+from bokeh.models import ColumnDataSource
+from bokeh.models.widgets import NumberFormatter, ScientificFormatter
 
 import engine as eg
 from engine.formats import FORMATS, export
@@ -221,7 +222,7 @@ class VirtualView:
             self._show(None, "")
             return
         try:
-            kw = parse_target(self.target_input.value)
+            kw = parse_target(self.target_input.value or "")
         except ValueError as e:
             self._show(None, str(e))
             return
@@ -261,7 +262,7 @@ class VirtualView:
         vs = self.sensor
         if vs is None:
             raise ValueError("no virtual sensor yet: fit a model of at least 2 channels")
-        name = self.name_input.value.strip() or "virtual"
+        name = (self.name_input.value or "").strip() or "virtual"
         return export(
             None,
             {name: vs.as_fit()},

@@ -10,11 +10,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import engine as eg
 
 __all__ = ["SliderSpec", "WhatIfMixin"]
+
+if TYPE_CHECKING:  # the state's names this mixin uses (AppState defines them)
+    from gmwm_app.state_fields import StateFields
+else:
+    StateFields = object
 
 
 @dataclass(frozen=True)
@@ -46,7 +51,7 @@ class SliderSpec:
         return math.log10(abs(value))
 
 
-class WhatIfMixin:
+class WhatIfMixin(StateFields):
     """What-if actions of :class:`gmwm_app.state.AppState` (its parameters ``model``,
     ``result``, ``wv``, ``whatif``, ``whatif_values``; its ``_publish``, ``_guard``,
     ``_model_update`` and ``_apply_model``)."""

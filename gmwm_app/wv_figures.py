@@ -15,18 +15,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from bokeh.core.properties import value
-from bokeh.models import (
-    ColumnDataSource,
-    DataRange1d,
-    GlyphRenderer,
-    HoverTool,
-    Legend,
-    LegendItem,
-    Line,
-    SaveTool,
-    Scatter,
-    Span,
-)
+from bokeh.models import ColumnDataSource, DataRange1d, HoverTool, Line, SaveTool, Scatter
+from bokeh.models.annotations import Legend, LegendItem, Span
+from bokeh.models.renderers import GlyphRenderer
 
 from .state import PROCESS_NAMES
 from .views import (
@@ -180,7 +171,7 @@ class WVFigures:
             click_policy="hide",
             label_text_font_size="12px",
             spacing=1,
-            padding=6,
+            padding=6,  # type: ignore[arg-type]  # an int is a padding (Bokeh types it as a Property)
             border_line_alpha=0.3,
             background_fill_alpha=0.85,
             label_width=LEGEND_LABEL_WIDTH,
@@ -240,7 +231,7 @@ class WVFigures:
                 location="top_left",
                 label_text_font_size="12px",
                 spacing=1,
-                padding=6,
+                padding=6,  # type: ignore[arg-type]  # as above
                 border_line_alpha=0.3,
                 label_width=LEGEND_LABEL_WIDTH,
             ),
@@ -267,7 +258,7 @@ class WVFigures:
 
     # ------------------------------------------------------------------------------------
     @staticmethod
-    def _formatters() -> dict[str, str]:
+    def _formatters() -> dict[str, Any]:
         return {f"@{k}": "printf" for k in ("tau_s", "variance", "ci_low", "ci_high")}
 
     @staticmethod
@@ -301,8 +292,9 @@ class WVFigures:
         if wv is not self._shown_wv:
             self._shown_wv = wv
             self.emp.data = wv_data(wv)
-            robust_pair = wv is not None and wv.robust and wv.classical is not None
-            self.alt.data = wv_data(wv.classical if robust_pair else None)
+            classical = wv.classical if wv is not None and wv.robust else None
+            robust_pair = classical is not None
+            self.alt.data = wv_data(classical)
             self.alt_item.visible = bool(robust_pair)
             self.emp_item.label = value(
                 "robust WV (biweight)" if wv is not None and wv.robust else "empirical WV"

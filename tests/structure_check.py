@@ -11,7 +11,9 @@ split, not at a line count.
   to ``pkg.name`` when that is a module, else to ``pkg`` (its ``__init__``).
 * **Private imports**: ``from module import _name`` where ``module`` is another project module
   and ``_name`` is not a dunder. A helper shared by two modules is public, or lives in a private
-  *module* (``_optim.py``) whose names are public.
+  *module* (``_optim.py``) whose names are public. ``gmwm_app`` uses the engine's public API
+  only: its import of a private engine module (``engine._checks``, ``engine.wv._kernel``) is
+  a finding too.
 * **Layers** (:func:`layer_violations`): the packages of ``engine`` run one way, in the order of
   :data:`LAYERS`; an import (anywhere in the module, as for cycles) of a package of the same or
   a higher layer is a finding, and so is a package missing from the table. Only the shared
@@ -32,6 +34,7 @@ PACKAGES = ("engine", "gmwm_app")
 #: ``engine.io`` sits low (loaders need no fit); the API (``engine/__init__.py``) sits above
 #: the engine's packages and below the app.
 LAYERS: tuple[tuple[str, ...], ...] = (
+    ("engine.errors",),  # the error classes (imports nothing of the project)
     ("engine._*",),  # shared private modules: _files, _limits, _parallel, _optim ...
     ("engine.models",),
     ("engine.units",),
@@ -150,6 +153,12 @@ def _graph() -> tuple[dict[str, Path], dict[str, set[str]], list[str]]:
                         and src != name
                     ):
                         private.append(f"{path.relative_to(ROOT)}:{node.lineno}: {src}.{n}")
+        if name.startswith("gmwm_app"):  # the app uses the engine's public API only
+            private += [
+                f"{path.relative_to(ROOT)}: imports the private engine module {t}"
+                for t in sorted(graph[name])
+                if t.startswith("engine.") and any(p.startswith("_") for p in t.split("."))
+            ]
     return mods, graph, private
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from .._checks import check_fs
 from .._files import check_not_input
 from .._limits import check_replicates, check_sample_count
+from ..errors import CliError, UsageError
 from ..formats.common import text_lines
 from ..wv import WaveletVariance
 
@@ -116,10 +117,6 @@ def terminal_text(text: str) -> str:
     cannot retitle, recolour or rewrite the user's terminal
     (:func:`engine.formats.common.clean_text`, line by line)."""
     return text_lines(text.split("\n"), end="")
-
-
-class CliError(Exception):
-    """A user error: printed as one line, exit status 2."""
 
 
 def positive(kind: type[int] | type[float], name: str) -> Callable[[str], float]:
@@ -265,15 +262,6 @@ def temperature_fit(
     if tf is not None:
         say(args, label + tf.line())
     return tf
-
-
-class UsageError(ValueError):
-    """A command-line usage error; ``gmwm`` prints it as one line and exits with status 2.
-
-    A ValueError (which ``gmwm`` catches) rather than ``engine.cli.CliError``: under
-    ``python -m engine.cli`` the CLI module runs as ``__main__`` and its CliError is another
-    class than ``engine.cli.CliError``.
-    """
 
 
 def usage_error(msg: str) -> Exception:

@@ -36,8 +36,9 @@ from typing import Any, NoReturn
 
 from .._jsonutil import json_ready
 from .._limits import check_sample_count
-from ..fit import FitError, fit_gmwm
-from ..models import ModelError, parse_model
+from ..errors import GmwmError
+from ..fit import fit_gmwm
+from ..models import parse_model
 from .common import (
     CliError,
     add_bootstrap_options,
@@ -400,7 +401,6 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``gmwm`` console script; returns the exit status."""
     from .._blas import set_blas_threads
-    from ..io import LoadError
 
     if argv is None:  # the command itself (not a call from Python): see engine._blas
         set_blas_threads(1)
@@ -420,7 +420,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             out = handler(args)
         for w in caught:
             queue_warning(args, _one_line(w.message))
-    except (CliError, LoadError, ModelError, FitError) as e:
+    except GmwmError as e:  # every engine error (engine.errors): one line, exit status 2
         print(terminal_text(f"gmwm: error: {_one_line(e)}"), file=sys.stderr)
         return 2
     except (ValueError, OSError, TypeError) as e:  # data-dependent errors from numpy/h5py

@@ -21,6 +21,7 @@ from typing import Any, Generic, Protocol, TypeVar
 import numpy as np
 
 from .._jsonutil import JsonFields
+from ..errors import FitError
 from ..models import Model
 from ..units import param_unit
 from ..wv import WaveletVariance
@@ -36,10 +37,6 @@ __all__ = [
     "UnivariateFit",
     "warning_lines",
 ]
-
-
-class FitError(ValueError):
-    """The data or the settings do not allow a fit (says what and how to fix it)."""
 
 
 @dataclass(frozen=True)

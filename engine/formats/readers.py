@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import json
 import math
@@ -31,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from .._files import read_regular
+from .._yaml import read_yaml_mapping
 from ..inference.datasheet_check import DatasheetError, DatasheetSpec, read_datasheet
 from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
@@ -99,20 +101,47 @@ def _rate_comment(text: str) -> float | None:
     return float(m.group(1)) if m else None
 
 
+@functools.lru_cache(maxsize=8)
+def _yaml_doc(text: str) -> dict[Any, Any]:
+    """The mapping of a YAML (or OpenCV ``%YAML:1.0``) settings file, parsed once for the
+    readers that try it; empty when the text is not a YAML mapping (another reader's format)."""
+    try:
+        return read_yaml_mapping(text, "the file", error=ExportError)
+    except ExportError:
+        return {}
+
+
+def _find(doc: Any, key: str) -> Any:
+    """The value of ``key`` at any depth of a YAML document (the first in document order),
+    else None."""
+    if isinstance(doc, dict):
+        if key in doc:
+            return doc[key]
+        doc = list(doc.values())
+    if isinstance(doc, list):
+        for v in doc:
+            found = _find(v, key)
+            if found is not None:
+                return found
+    return None
+
+
+def _number(v: Any) -> float | None:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+
+
 def _scalar(text: str, key: str) -> float | None:
-    """``key: value`` of a YAML/OpenCV settings file read line by line (a hand-written file
-    may hold ``!!opencv-matrix`` entries that a YAML parser refuses)."""
-    m = re.search(r"^[ \t]*" + re.escape(key) + r"[ \t]*:[ \t]*" + _NUM, text, re.M)
-    return float(m.group(1)) if m else None
+    """The number of ``key`` in a YAML/OpenCV settings file (at any depth), else None."""
+    return _number(_find(_yaml_doc(text), key))
 
 
 def _flow(text: str, key: str) -> list[float] | float | None:
-    """``key: [a, b, c]`` (a YAML flow list of numbers) or ``key: a``, line by line (no YAML
-    library: PyYAML is not an engine dependency)."""
-    m = re.search(r"^[ \t]*" + re.escape(key) + r"[ \t]*:[ \t]*\[([^\]]*)\]", text, re.M)
-    if m:
-        return [float(v) for v in m.group(1).split(",") if v.strip()]
-    return _scalar(text, key)
+    """The list of numbers (``key: [a, b, c]``) or the number of ``key`` in a YAML settings
+    file (at any depth), else None."""
+    v = _find(_yaml_doc(text), key)
+    if isinstance(v, list) and v and all(_number(x) is not None for x in v):
+        return [float(x) for x in v]
+    return _number(v)
 
 
 def _vins(text: str, fs: float | None) -> FilterNoise:
@@ -302,7 +331,7 @@ def _gz_sim(text: str, fs: float | None) -> FilterNoise:
 
 
 def _kfgins(text: str, fs: float | None) -> FilterNoise:
-    if not re.search(r"^imunoise[ \t]*:", text, re.M):
+    if "imunoise" not in _yaml_doc(text):
         raise ExportError("no imunoise")
     d = {k: _flow(text, k) for k in ("arw", "vrw", "gbstd", "abstd", "corrtime")}
     if d["arw"] is None or d["vrw"] is None or not isinstance(d["corrtime"], float):
@@ -366,10 +395,9 @@ def read_filter_noise(text: str, fs: float | None = None) -> FilterNoise:
     ExportError
         No reader recognises the text (the message lists the formats tried).
     """
-    body = text.split("\n", 1)[1] if text.startswith("%YAML:1.0") else text
     for reader in READERS.values():
         try:
-            return reader(body, fs)
+            return reader(text, fs)
         except (ExportError, ValueError, TypeError, KeyError, AttributeError):
             continue
         except (ET.ParseError, json.JSONDecodeError):

@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 import re
 
-from ..units import DISPLAY, QUANTITIES, ExportError, si_factor
+from ..errors import DatasheetError
+from ..units import DISPLAY, QUANTITIES, si_factor
 
 __all__ = [
     "DATASHEET_KEYS",
@@ -27,10 +28,6 @@ __all__ = [
     "convert_value",
     "unit_table",
 ]
-
-
-class DatasheetError(ExportError):
-    """Datasheet values or a datasheet file that cannot be used; the message says which."""
 
 
 #: Accepted keys (lower case) -> datasheet symbol of :data:`engine.units.QUANTITIES`.

@@ -20,6 +20,7 @@ Numerics (:mod:`engine.wv`, :mod:`engine.models`, the fit) never import this pac
 
 from __future__ import annotations
 
+from .._limits import available_memory
 from .load import load_log, log_of
 from .log import ImuLog, LoadError, pick_channel
 from .npy import npy_sidecar_path, read_npy_sidecar, write_npy_sidecar
@@ -29,6 +30,7 @@ from .save import save_log
 from .timecheck import GAP_FACTOR, TimeEvent, TimeReport, as_seconds, check_time, segment_fs
 
 __all__ = [
+    "available_memory",  # what the loaders' size checks compare a log with
     "ImuLog",
     "LoadError",
     "load_log",

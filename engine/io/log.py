@@ -14,14 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import LoadError
 from ..wv.classical import WaveletVariance, wavelet_variance
 from ..wv.pooled import pooled_wavelet_variance
 
 __all__ = ["LoadError", "ImuLog", "pick_channel", "channel_axis"]
-
-
-class LoadError(ValueError):
-    """A log could not be loaded (or saved); the message says which file, where, and the fix."""
 
 
 @dataclass(frozen=True, eq=False)

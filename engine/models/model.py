@@ -23,6 +23,7 @@ import numpy as np
 
 from .._limits import check_sample_count
 from .._quantity import Quantity
+from ..errors import ModelError
 from .spectrum import FilterTerms, PsdTerms, Spectral
 
 __all__ = [
@@ -389,10 +390,6 @@ def _shown(text: str) -> str:
     if len(t) <= _ECHO:
         return repr(t)
     return f"{t[:_ECHO]!r}... ({len(t)} characters)"
-
-
-class ModelError(ValueError):
-    """A model specification that cannot be parsed or cannot be identified."""
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+from ..errors import ReportError
 from .data import CalibrationReport
 from .figures import (
     FigureSpec,
@@ -34,10 +35,6 @@ from .figures import (
 from .fleet import MIN_UNITS_Z, OUTLIER_REL, OUTLIER_Z, FleetReport
 
 __all__ = ["ReportError", "render_html", "render_fleet_html", "figure_specs", "fleet_figure_specs"]
-
-
-class ReportError(ValueError):
-    """A report that cannot be made as asked (the message says what to do)."""
 
 
 def figure_specs(rep: CalibrationReport, prefix: str = "") -> dict[str, FigureSpec]:

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from .._blas import set_blas_threads
+from .._checks import check_fs
 from .._lazy import lazy_attributes
 from ._kernel import as_series
 from .classical import (
@@ -54,5 +56,9 @@ __all__ = [
     "robust_wv",
     "max_levels",
     "as_series",
+    # the sampling-frequency check of every WV (and of the loaders), and the BLAS thread limit
+    # under which the WV kernel runs fastest (one thread: the gmwm command and the app set it)
+    "check_fs",
+    "set_blas_threads",
     *_lazy_names,
 ]

@@ -16,8 +16,8 @@ websocket client speaking Bokeh's protocol:
 * failed logins from one address are throttled (exponential delay), the right password works
   after the delay.
 
-Plus the guards' units: the message bound, the bounded inflate, the host policy and the
-throttle's schedule.
+Plus the guards' units: the message bound, the bounded inflate, the host policy, the
+throttle's schedule, and the current document after a browser's patch fails validation.
 """
 
 from __future__ import annotations
@@ -160,6 +160,35 @@ def test_login_throttle_schedule() -> None:
     assert total == pytest.approx(1 + 2 + 4 + 8 + 16 + 32 + 60 * 11)
     t.succeeded("10.0.0.7")
     assert t.wait_s("10.0.0.7") == 0.0
+
+
+def test_a_failing_patch_leaves_the_current_document_as_it_was() -> None:
+    """A PATCH-DOC that fails validation (a slider's value set to text, as a student can send
+    from the browser's console) raises inside Bokeh's ``patch_curdoc``. Without the guard the
+    session's document stayed on the process-wide stack, and once it was collected every
+    ``components()`` (the HTML report download of every other session) raised "Patched curdoc
+    has been previously destroyed"."""
+    import gc
+
+    from bokeh.document import Document
+    from bokeh.embed import components
+    from bokeh.models import Slider
+    from bokeh.plotting import figure
+    from bokeh.protocol.messages.patch_doc import patch_doc
+
+    assert server_guard.restore_curdoc_on_error()
+    doc = Document()
+    slider = Slider(start=0, end=1, value=0)
+    doc.add_root(slider)
+    event = {"kind": "ModelChanged", "model": {"id": slider.id}, "attr": "value", "new": "abc"}
+    bad = patch_doc({"msgid": "m1", "msgtype": "PATCH-DOC"}, {}, {"events": [event]})
+    with pytest.raises(ValueError, match="failed to validate"):
+        bad.apply_to_document(doc)
+    del doc, slider, bad
+    gc.collect()  # the closed session's document is gone
+    script, divs = components(figure())
+    assert "<script" in script and "<div" in divs
+    assert server_guard.restore_curdoc_on_error()  # a second install keeps the one wrapper
 
 
 # ---------------------------------------------------------------------------------------------

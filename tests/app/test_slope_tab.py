@@ -195,7 +195,7 @@ def test_a_stale_result_does_not_overwrite_a_newer_one(app: Any, view: Any) -> N
         view.set_region("WN", 0.02, 1.0)  # a newer computation starts (and ends) meanwhile
         return stale
 
-    view.jobs.run(slow, view.show, key="slope")
+    view.jobs.run(slow, view.draw, key="slope")
     shown = view.result
     assert shown is not stale and shown.regions["WN"][0] == pytest.approx(0.02)
     assert "stale" not in view.message.object and not view.computing

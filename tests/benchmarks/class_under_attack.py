@@ -135,6 +135,7 @@ def served(app_demo_file: Path, tmp_path_factory: pytest.TempPathFactory) -> Ite
     import panel as pn
 
     server_guard.bound_messages()  # what gmwm-app installs in its process (idempotent)
+    server_guard.restore_curdoc_on_error()
     folder = tmp_path_factory.mktemp("hostile")
     files = _hostile_files(folder)
     limits.configure(data_dirs=[folder, app_demo_file.parent])

@@ -4,6 +4,7 @@ no import cycle, no back-edge between layers, no private import across modules
 
 from __future__ import annotations
 
+import ast
 import importlib
 import subprocess
 import sys
@@ -22,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 API = """
     AR1 AllanVariance BI_FACTOR BatchResult CalibrationReport Candidate DR DatasheetCheck
     DatasheetError DatasheetSpec DependenceTest ExportError FORMATS FitError FitResult
-    FleetReport GM GMWFMResult GMWMResult ImuLog JTest LoadError LogFit MGMWMResult
+    FleetReport GM GMWFMResult GmwmError GMWMResult ImuLog JTest LoadError LogFit MGMWMResult
     MethodEstimate Model ModelError MultiModel PROCESS_TYPES ParamInterval ParamRecord
     ParamTable Process Projection QN RW ReplicateResult ReportError SCENARIOS Scenario
     SelectionResult Session SessionError SharedEstimate SharedProcess Summary TimeReport
@@ -56,6 +57,21 @@ def test_every_public_name_resolves_to_the_one_module_that_holds_it():
         home = getattr(obj, "__module__", None)
         if home is not None and isinstance(obj, type | types.FunctionType):
             assert home == module or home.startswith(module + "."), (name, home, module)
+
+
+def test_type_checkers_see_every_name_of_the_api_from_its_module():
+    # mypy cannot follow the lazy __getattr__ (PEP 562): engine/__init__.py imports each name
+    # of API under TYPE_CHECKING, from the module API gives (else eg.X is Any to the app)
+    tree = ast.parse((ROOT / "engine" / "__init__.py").read_text(encoding="utf-8"))
+    seen: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.If) and ast.unparse(node.test) == "TYPE_CHECKING":
+            for imp in node.body:
+                assert isinstance(imp, ast.ImportFrom) and imp.level == 1, ast.unparse(imp)
+                for alias in imp.names:
+                    assert alias.name not in seen, alias.name
+                    seen[alias.name] = f"engine.{imp.module}"
+    assert seen == {n: m for n, m in eg.API.items() if n != "__version__"}
 
 
 def test_engine_export_and_report_are_functions_not_modules():
