@@ -177,6 +177,7 @@ def fit_log(
     weights: str = "ci",
     load_options: Mapping[str, Any] | None = None,
     drop_warmup: bool = False,
+    progress: Callable[[int, int], None] | None = None,
 ) -> LogFit:
     """Load one log, check it (:func:`engine.io.qualify_log`) and fit every channel (or
     ``channels``).
@@ -204,6 +205,8 @@ def fit_log(
     drop_warmup : bool
         Drop the warm-up the log check finds (:attr:`engine.io.Qualification.suggested_start`)
         before the fit.
+    progress : callable (done, total), optional
+        Called after each channel's fit (or failure).
 
     Returns
     -------
@@ -226,12 +229,16 @@ def fit_log(
         check = qualify_log(log, names)
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}
-    for ch in names:
+    if progress is not None:
+        progress(0, len(names))
+    for k, ch in enumerate(names):
         try:
             wv = log.wavelet_variance(ch, levels=levels)
             fits[ch] = _fit_channel(wv, model, select, weights)
         except (FitError, ModelError, ValueError) as e:
             errors[ch] = f"{type(e).__name__}: {e}"
+        if progress is not None:
+            progress(k + 1, len(names))
     if not fits:
         raise FitError(
             "no channel could be fitted: " + "; ".join(f"{c}: {e}" for c, e in errors.items())

@@ -17,6 +17,7 @@ from ..io import load_log
 from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
 from .common import bootstrap_kwargs, load_wv, log_kwargs, queue_warning, warn_fs_unknown
+from .progress import Bar
 
 __all__ = ["cli_fit"]
 
@@ -55,13 +56,15 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
                 "--weights efficient is not available for replicate fits; use ci or identity"
             )
         wvs, names = [], []
-        for f in files:
-            one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
-            wv, name = load_wv(one)
-            for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
-                queue_warning(args, w)
-            wvs.append(wv)
-            names.append(name)
+        with Bar("gmwm fit: files", "file", total=len(files)) as bar:  # on a terminal only
+            for f in files:
+                one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
+                wv, name = load_wv(one)
+                for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
+                    queue_warning(args, w)
+                wvs.append(wv)
+                names.append(name)
+                bar.step()
         res = fit_replicates(wvs, args.model, weights=args.weights)
         if args.json:
             d = res.to_dict()

@@ -27,8 +27,9 @@ import math
 import os
 import platform
 import warnings as _warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +58,11 @@ __all__ = [
 
 #: The maximal model whose WVIC-best sub-model is fitted when no model is given.
 DEFAULT_SELECT = "2*GM+WN+QN+RW+DR"
+
+#: A report's progress callback, ``progress(stage, done, total)``: stage ``"fits"`` (a step per
+#: channel), ``"intervals"`` (a step per channel's numbers, and the export), ``"figures"`` and
+#: ``"writing"`` (:func:`~.render.render_html`); the command line draws a bar per stage.
+Progress = Callable[[str, int, int], None]
 
 #: Frequency bands per decade of the displayed PSD (the Welch estimate averaged over each).
 PSD_BANDS_PER_DECADE = 24
@@ -474,6 +480,7 @@ def gather_report(
     command_line: str = "",
     fits: Mapping[str, GMWMResult] | None = None,
     drop_warmup: bool = False,
+    progress: Progress | None = None,
 ) -> CalibrationReport:
     """Load a log, fit every channel and compute everything a calibration report shows.
 
@@ -507,6 +514,9 @@ def gather_report(
         ``weights`` must then be left out (they were the fits').
     drop_warmup : bool
         Drop the warm-up the log check finds (:func:`engine.io.drop_warmup`) before fitting.
+    progress : callable (stage, done, total), optional
+        Called after each channel's fit (stage ``"fits"``) and each channel's numbers and the
+        export (``"intervals"``): :data:`Progress`.
 
     Returns
     -------
@@ -570,16 +580,28 @@ def gather_report(
             weights = ", ".join(dict.fromkeys(f.weights for f in fitted.values()))
         else:
             lf = fit_log(
-                log, model=model, select=select, channels=channels, levels=levels, weights=weights
+                log,
+                model=model,
+                select=select,
+                channels=channels,
+                levels=levels,
+                weights=weights,
+                progress=None if progress is None else partial(progress, "fits"),
             )
             fitted, channel_errors = lf.fits, lf.channel_errors
             check = lf.qualification
         chans: dict[str, ChannelReport] = {}
-        for ch in list(fitted) + list(channel_errors):
+        todo = list(fitted) + list(channel_errors)
+        steps = len(todo) + bool(export_format)
+        if progress is not None:
+            progress("intervals", 0, steps)
+        for k, ch in enumerate(todo):
             if ch in fitted:
                 chans[ch] = _channel(log, ch, fitted[ch], level=level, datasheet=ds)
             else:
                 chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=channel_errors[ch])
+            if progress is not None:
+                progress("intervals", k + 1, steps)
         chans = {ch: chans[ch] for ch in log.names if ch in chans}
     log_warnings = [f"{w.category.__name__}: {w.message}" for w in caught]
     if log.fs_source == "default":
@@ -595,6 +617,8 @@ def gather_report(
             exp["text"] = export(None, fitted, export_format, log=log, allow_partial=True)
         except (ExportError, ValueError) as e:
             exp["error"] = str(e)
+        if progress is not None:
+            progress("intervals", steps, steps)
     provenance = {
         "versions": software_versions(),
         "model": model or "",
