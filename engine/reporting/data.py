@@ -481,6 +481,7 @@ def gather_report(
     fits: Mapping[str, GMWMResult] | None = None,
     drop_warmup: bool = False,
     progress: Progress | None = None,
+    qualification: Mapping[str, Any] | None = None,
 ) -> CalibrationReport:
     """Load a log, fit every channel and compute everything a calibration report shows.
 
@@ -517,6 +518,10 @@ def gather_report(
     progress : callable (stage, done, total), optional
         Called after each channel's fit (stage ``"fits"``) and each channel's numbers and the
         export (``"intervals"``): :data:`Progress`.
+    qualification : mapping, optional
+        With ``fits``: the log check those fits were made after (a batch's
+        :attr:`engine.batch.LogFit.qualification`), reported as it is instead of checking
+        the log again.
 
     Returns
     -------
@@ -550,6 +555,10 @@ def gather_report(
             raise TypeError("gather_report(): fits= is empty; give at least one channel's fit")
     elif model is None and select is None:
         select = DEFAULT_SELECT
+    if qualification is not None and fits is None:
+        raise TypeError(
+            "gather_report(): qualification= goes with fits= (the check those fits followed)"
+        )
     ds: Any = None
     ds_text = ""
     if isinstance(datasheet, DatasheetSpec):
@@ -576,7 +585,11 @@ def gather_report(
         _warnings.simplefilter("always")
         if fits is not None:
             fitted, channel_errors = dict(fits), {}
-            check = qualify_log(log, list(fitted)).to_dict()
+            check = (
+                dict(qualification)
+                if qualification is not None
+                else qualify_log(log, list(fitted)).to_dict()
+            )
             weights = ", ".join(dict.fromkeys(f.weights for f in fitted.values()))
         else:
             lf = fit_log(
