@@ -178,6 +178,7 @@ def fit_log(
     load_options: Mapping[str, Any] | None = None,
     drop_warmup: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    json_report: bool = True,
 ) -> LogFit:
     """Load one log, check it (:func:`engine.io.qualify_log`) and fit every channel (or
     ``channels``).
@@ -207,6 +208,10 @@ def fit_log(
         before the fit.
     progress : callable (done, total), optional
         Called after each channel's fit (or failure).
+    json_report : bool
+        Make the log's JSON report (:attr:`LogFit.report`, the ``json`` export of the fits);
+        False leaves it empty, for a caller that reports the fits itself
+        (:func:`engine.reporting.gather_report`).
 
     Returns
     -------
@@ -243,7 +248,7 @@ def fit_log(
         raise FitError(
             "no channel could be fitted: " + "; ".join(f"{c}: {e}" for c, e in errors.items())
         )
-    report = export(None, fits, "json", log=log, source=src)
+    report = export(None, fits, "json", log=log, source=src) if json_report else ""
     elapsed = time.perf_counter() - t0
     return LogFit(
         src, fits, report, "", errors, float(log.fs), log.n, elapsed, qualification=check.to_dict()

@@ -600,6 +600,7 @@ def gather_report(
                 levels=levels,
                 weights=weights,
                 progress=None if progress is None else partial(progress, "fits"),
+                json_report=False,  # the report's own numbers follow; fit_log's JSON unused
             )
             fitted, channel_errors = lf.fits, lf.channel_errors
             check = lf.qualification

@@ -9,6 +9,7 @@ import pytest
 from bokeh.document.models import DocumentModelManager
 
 import engine as eg
+import engine.formats
 import engine.io
 from engine.reporting import gather_fleet, gather_report, render_fleet_html, render_html
 
@@ -74,3 +75,20 @@ def test_fleet_unit_log_check_is_made_once_and_reported(tmp_path, monkeypatch):
 def test_qualification_goes_with_fits_only(small_report):
     with pytest.raises(TypeError, match="qualification= goes with fits="):
         gather_report(eg.demo_path(), model="WN", qualification={"n": 1})
+
+
+def test_report_exports_only_its_own_format(monkeypatch):
+    """A report fits through ``fit_log`` without its JSON report (the report computes its own
+    numbers): the only export made is the format the report includes."""
+    made = []
+    real = engine.formats.export
+
+    def counted(output, fits, fmt, **kw):
+        made.append(fmt)
+        return real(output, fits, fmt, **kw)
+
+    monkeypatch.setattr(engine.formats, "export", counted)
+    x = eg.parse_model("WN(1e-6) + RW(1e-12)").simulate(2**13, rng=np.random.default_rng(5))
+    sim = eg.ImuLog({"gyro_x": x}, fs=100.0, units={"gyro_x": "rad/s"}, source="sim.h5")
+    rep = gather_report(sim, model="WN+RW", export_format="kalibr")
+    assert made == ["kalibr"] and "gyroscope_noise_density" in rep.export["text"]
