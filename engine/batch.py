@@ -197,6 +197,8 @@ def fit_log(
     load_options: Mapping[str, Any] | None = None,
     drop_warmup: bool = False,
     temperature: str | None = "auto",
+    progress: Callable[[int, int], None] | None = None,
+    json_report: bool = True,
 ) -> LogFit:
     """Load one log, check it (:func:`engine.io.qualify_log`) and fit every channel (or
     ``channels``).
@@ -229,6 +231,12 @@ def fit_log(
         ``"auto"`` (the default; None too: a channel named like a temperature, if any),
         ``"none"`` or its name. Each channel with one is fitted on its compensated signal,
         and the same model on the raw signal beside it (:attr:`LogFit.temperature`).
+    progress : callable (done, total), optional
+        Called after each channel's fit (or failure).
+    json_report : bool
+        Make the log's JSON report (:attr:`LogFit.report`, the ``json`` export of the fits);
+        False leaves it empty, for a caller that reports the fits itself
+        (:func:`engine.reporting.gather_report`).
 
     Returns
     -------
@@ -255,7 +263,9 @@ def fit_log(
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}
     temps: dict[str, Any] = {}
-    for ch in names:
+    if progress is not None:
+        progress(0, len(names))
+    for k, ch in enumerate(names):
         try:
             tf = fit_log_temperature(log, ch, temperature or "auto", levels=levels, weights=weights)
             wv = tf.wv if tf is not None else log.wavelet_variance(ch, levels=levels)
@@ -265,11 +275,13 @@ def fit_log(
                 temps[ch] = replace(tf, fit=fits[ch], fit_raw=raw)
         except (FitError, ModelError, ValueError) as e:
             errors[ch] = f"{type(e).__name__}: {e}"
+        if progress is not None:
+            progress(k + 1, len(names))
     if not fits:
         raise FitError(
             "no channel could be fitted: " + "; ".join(f"{c}: {e}" for c, e in errors.items())
         )
-    report = export(None, fits, "json", log=log, source=src)
+    report = export(None, fits, "json", log=log, source=src) if json_report else ""
     elapsed = time.perf_counter() - t0
     return LogFit(
         src,

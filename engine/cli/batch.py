@@ -129,7 +129,11 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="local worker processes, or the LocalCluster's with --scheduler local (2)",
     )
     add_scheduler_option(bt)
-    bt.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    bt.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress line on stderr (the bar drawn on a terminal)",
+    )
     add_check_options(bt)  # --drop-warmup --temperature (per log)
     bt.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     add_log_options(bt, stream=False)
@@ -198,6 +202,7 @@ def run_fleet(
 
     from ..inference.datasheet_check import DatasheetError
     from ..reporting import ReportError, gather_fleet, render_fleet_html
+    from .progress import Stages
 
     try:
         fleet = gather_fleet(
@@ -209,7 +214,10 @@ def run_fleet(
             command_line=shlex.join(["gmwm", *getattr(args, "argv", [])]),
             output=args.output,  # each unit's report written as it completes
         )
-        page = render_fleet_html(fleet)
+        progress.close()  # the logs' bar ends; the page's bars follow
+        units = {"figures": "figure", "writing": "step"}
+        with Stages("gmwm batch: report", units, quiet=args.quiet) as bars:
+            page = render_fleet_html(fleet, progress=bars)
     except (DatasheetError, ReportError) as e:
         raise CliError(str(e)) from None
     write_atomic(args.report, page)
@@ -235,15 +243,14 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         check_output(args.output, "-o", kind="dir")
     if args.report is not None:
         check_output(args.report, "--report", suffixes=(".html", ".htm"), inputs=input_paths(args))
-    from .._parallel import ProgressLine
     from ..batch import BatchFolder, fit_batch
+    from .progress import Bar
 
     if args.output is not None:  # files it did not write: refused before any fit
         BatchFolder(args.output, "").check_summaries()
 
     channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
-    bar = None if args.quiet else ProgressLine(0, sys.stderr, "gmwm batch", "logs")
-    with scheduler_executor(args) as ex:
+    with scheduler_executor(args) as ex, Bar("gmwm batch: logs", "log", quiet=args.quiet) as bar:
         if args.report is not None:
             res = run_fleet(args, channels, ex, bar)
         else:

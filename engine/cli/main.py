@@ -292,27 +292,23 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
 
 def _cmd_select(args: argparse.Namespace) -> dict[str, Any] | str:
     from ..inference import rank_models
+    from .progress import Bar
 
     if not args.max_model and not args.models:
         raise CliError("give --max-model SPEC or --models 'SPEC1,SPEC2,...'")
     wv, name = load_wv(args, check=True)  # the log check and --temperature first
     cands = [m for m in args.models.split(",") if m.strip()] if args.models else None
 
-    def progress(done: int, total: int) -> None:
-        if sys.stderr.isatty():
-            print(f"\rfitting candidates: {done}/{total}", end="", file=sys.stderr, flush=True)
-
-    sel = rank_models(
-        wv,
-        cands,
-        max_model=args.max_model,
-        weights=args.weights,
-        optimism=args.optimism,
-        **bootstrap_kwargs(args),
-        progress=progress,
-    )
-    if sys.stderr.isatty():
-        print(file=sys.stderr)
+    with Bar("gmwm select: candidates", "fit") as bar:  # on a terminal only
+        sel = rank_models(
+            wv,
+            cands,
+            max_model=args.max_model,
+            weights=args.weights,
+            optimism=args.optimism,
+            **bootstrap_kwargs(args),
+            progress=bar,
+        )
     n_ranked = len(sel.candidates)
     shown = sel.candidates[: args.top] if args.top else sel.candidates
     if args.json:
@@ -376,18 +372,19 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
             raise CliError(f"--n takes sample counts, got {v}")
         check_sample_count(int(round(v)), name="--n", copies=args.workers)
     from ..teaching import run_slope_study
+    from .progress import Bar
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     from .batch import scheduler_executor
 
-    with scheduler_executor(args) as ex:
+    with scheduler_executor(args) as ex, Bar("gmwm study slope", "replicate") as bar:
         res = run_slope_study(
             args.reps,
             seed=args.seed,
             n_values=n_values,
             methods=methods,
             workers=args.workers,
-            progress=True,
+            progress=bar,  # a bar on a terminal only
             executor=ex,
         )
     paths = res.save(args.output) if args.output else {}

@@ -17,6 +17,7 @@ from ..io import load_log
 from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
 from .common import bootstrap_kwargs, load_wv, log_kwargs, queue_warning, warn_fs_unknown
+from .progress import Bar
 
 __all__ = ["cli_fit"]
 
@@ -55,17 +56,19 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
                 "--weights efficient is not available for replicate fits; use ci or identity"
             )
         wvs, names, checks, temps = [], [], [], []
-        for f in files:
-            one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
-            # the log check (and --temperature) of each file, one stderr line each
-            wv, name = load_wv(one, check=True, label=f"{f}: ")
-            for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
-                queue_warning(args, w)
-            wvs.append(wv)
-            names.append(name)
-            q, tf = getattr(one, "qualification", None), getattr(one, "temperature_fit", None)
-            checks.append(q.to_dict() if q is not None else None)
-            temps.append(tf.to_dict() if tf is not None else None)
+        with Bar("gmwm fit: files", "file", total=len(files)) as bar:  # on a terminal only
+            for f in files:
+                one = argparse.Namespace(**{**vars(args), "input": f, "warnings": []})
+                # the log check (and --temperature) of each file, one stderr line each
+                wv, name = load_wv(one, check=True, label=f"{f}: ")
+                for w in one.warnings:  # e.g. this file's fs is unknown: printed with the result
+                    queue_warning(args, w)
+                wvs.append(wv)
+                names.append(name)
+                q, tf = getattr(one, "qualification", None), getattr(one, "temperature_fit", None)
+                checks.append(q.to_dict() if q is not None else None)
+                temps.append(tf.to_dict() if tf is not None else None)
+                bar.step()
         res = fit_replicates(wvs, args.model, weights=args.weights)
         if args.json:
             d = res.to_dict()

@@ -91,35 +91,40 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     from .._files import write_atomic
     from ..formats import FORMATS
     from ..reporting import gather_report, render_html
+    from .progress import Stages
 
     fmt = None if args.format.lower() == "none" else args.format
     if fmt is not None and fmt not in FORMATS:
         raise usage_error(f"--format {fmt!r}: use one of {', '.join(FORMATS)} or none")
     channels = [c.strip() for c in args.channels.split(",") if c.strip()] if args.channels else None
-    rep = gather_report(
-        args.input,
-        model=args.model,
-        select=args.max_model,
-        channels=channels,
-        fs=args.fs,
-        levels=args.levels,
-        weights=args.weights,
-        level=args.confidence,
-        datasheet=args.datasheet_file or args.datasheet,
-        export_format=fmt,
-        load_options=log_kwargs(args),
-        command_line=shlex.join(["gmwm", *args.argv]),
-        drop_warmup=args.drop_warmup,
-        temperature=args.temperature,
-    )
-    check = rep.log.get("qualification") or {}
-    if check.get("findings") or check.get("dropped"):  # one line, as gmwm fit says it
-        say(args, check["summary"])
-    for c in rep.channels.values():  # one line per compensated channel, as gmwm fit says it
-        if c.temperature is not None:
-            say(args, c.temperature.line())
-    page = render_html(rep, static=args.static)
-    write_atomic(args.output, page)  # never a truncated page; a full disk names the file
+    units = {"fits": "channel", "intervals": "step", "figures": "figure", "writing": "step"}
+    with Stages("gmwm report", units) as bars:  # on a terminal only
+        rep = gather_report(
+            args.input,
+            model=args.model,
+            select=args.max_model,
+            channels=channels,
+            fs=args.fs,
+            levels=args.levels,
+            weights=args.weights,
+            level=args.confidence,
+            datasheet=args.datasheet_file or args.datasheet,
+            export_format=fmt,
+            load_options=log_kwargs(args),
+            command_line=shlex.join(["gmwm", *args.argv]),
+            drop_warmup=args.drop_warmup,
+            temperature=args.temperature,
+            progress=bars,
+        )
+        bars.close()
+        check = rep.log.get("qualification") or {}
+        if check.get("findings") or check.get("dropped"):  # one line, as gmwm fit says it
+            say(args, check["summary"])
+        for c in rep.channels.values():  # one line per compensated channel, as gmwm fit says it
+            if c.temperature is not None:
+                say(args, c.temperature.line())
+        page = render_html(rep, static=args.static, progress=bars)
+        write_atomic(args.output, page)  # never a truncated page; a full disk names the file
     kind = "static" if args.static else "interactive"
     if args.json:
         return {

@@ -75,7 +75,8 @@ def report(
     **options
         The keywords of :func:`gather_report`: ``model`` or ``select``, ``channels``, ``fs``,
         ``levels``, ``weights``, ``level``, ``datasheet``, ``export_format``,
-        ``load_options``, ``command_line``.
+        ``load_options``, ``command_line``, and ``progress`` (``progress(stage, done,
+        total)``, called through every stage: fits, intervals, figures, writing).
 
     Returns
     -------
@@ -98,7 +99,8 @@ def report(
     """
     if output is not None:  # before the fits: a bad path fails at once
         _check_html_output(output)
-    page = render_html(gather_report(source, **options), static=static, title=title)
+    rep = gather_report(source, **options)
+    page = render_html(rep, static=static, title=title, progress=options.get("progress"))
     if output is not None:
         write_atomic(output, page)
     return page

@@ -27,8 +27,9 @@ import math
 import os
 import platform
 import warnings as _warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +58,11 @@ __all__ = [
 
 #: The maximal model whose WVIC-best sub-model is fitted when no model is given.
 DEFAULT_SELECT = "2*GM+WN+QN+RW+DR"
+
+#: A report's progress callback, ``progress(stage, done, total)``: stage ``"fits"`` (a step per
+#: channel), ``"intervals"`` (a step per channel's numbers, and the export), ``"figures"`` and
+#: ``"writing"`` (:func:`~.render.render_html`); the command line draws a bar per stage.
+Progress = Callable[[str, int, int], None]
 
 #: Frequency bands per decade of the displayed PSD (the Welch estimate averaged over each).
 PSD_BANDS_PER_DECADE = 24
@@ -487,6 +493,8 @@ def gather_report(
     drop_warmup: bool = False,
     temperature: str | None = "auto",
     temperatures: Mapping[str, Any] | None = None,
+    progress: Progress | None = None,
+    qualification: Mapping[str, Any] | None = None,
 ) -> CalibrationReport:
     """Load a log, fit every channel and compute everything a calibration report shows.
 
@@ -528,6 +536,13 @@ def gather_report(
     temperatures : mapping of str to TemperatureFit, optional
         With ``fits``: the temperature fits those fits were made with (a batch's
         :attr:`engine.batch.LogFit.temperature`, an app session's).
+    progress : callable (stage, done, total), optional
+        Called after each channel's fit (stage ``"fits"``) and each channel's numbers and the
+        export (``"intervals"``): :data:`Progress`.
+    qualification : mapping, optional
+        With ``fits``: the log check those fits were made after (a batch's
+        :attr:`engine.batch.LogFit.qualification`), reported as it is instead of checking
+        the log again.
 
     Returns
     -------
@@ -561,6 +576,10 @@ def gather_report(
             raise TypeError("gather_report(): fits= is empty; give at least one channel's fit")
     elif model is None and select is None:
         select = DEFAULT_SELECT
+    if qualification is not None and fits is None:
+        raise TypeError(
+            "gather_report(): qualification= goes with fits= (the check those fits followed)"
+        )
     ds: Any = None
     ds_text = ""
     if isinstance(datasheet, DatasheetSpec):
@@ -588,7 +607,11 @@ def gather_report(
         if fits is not None:
             fitted, channel_errors = dict(fits), {}
             temps = dict(temperatures or {})
-            check = qualify_log(log, list(fitted)).to_dict()
+            check = (
+                dict(qualification)
+                if qualification is not None
+                else qualify_log(log, list(fitted)).to_dict()
+            )
             weights = ", ".join(dict.fromkeys(f.weights for f in fitted.values()))
         else:
             lf = fit_log(
@@ -599,17 +622,25 @@ def gather_report(
                 levels=levels,
                 weights=weights,
                 temperature=temperature,
+                progress=None if progress is None else partial(progress, "fits"),
+                json_report=False,  # the report's own numbers follow; fit_log's JSON unused
             )
             fitted, channel_errors, temps = lf.fits, lf.channel_errors, lf.temperature
             check = lf.qualification
         chans: dict[str, ChannelReport] = {}
-        for ch in list(fitted) + list(channel_errors):
+        todo = list(fitted) + list(channel_errors)
+        steps = len(todo) + bool(export_format)
+        if progress is not None:
+            progress("intervals", 0, steps)
+        for k, ch in enumerate(todo):
             if ch in fitted:
                 chans[ch] = _channel(
                     log, ch, fitted[ch], level=level, datasheet=ds, temperature=temps.get(ch)
                 )
             else:
                 chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=channel_errors[ch])
+            if progress is not None:
+                progress("intervals", k + 1, steps)
         chans = {ch: chans[ch] for ch in log.names if ch in chans}
     log_warnings = [f"{w.category.__name__}: {w.message}" for w in caught]
     if log.fs_source == "default":
@@ -625,6 +656,8 @@ def gather_report(
             exp["text"] = export(None, fitted, export_format, log=log, allow_partial=True)
         except (ExportError, ValueError) as e:
             exp["error"] = str(e)
+        if progress is not None:
+            progress("intervals", steps, steps)
     provenance = {
         "versions": software_versions(),
         "model": model or "",

@@ -421,7 +421,10 @@ def _unit_task(
             "",
         )
     try:
-        rep = gather_report(log, fits=lf.fits, temperatures=lf.temperature, **rkw)
+        # the log check fit_log made is the report's: not made twice (1 s per 1e6 x 6 samples)
+        rep = gather_report(
+            log, fits=lf.fits, temperatures=lf.temperature, qualification=lf.qualification, **rkw
+        )
     except Exception as e:  # noqa: BLE001 - the fits stay in the batch
         return lf, None, f"{type(e).__name__}: {' '.join(str(e).split())}"
     if lf.channel_errors:  # channels not fitted stay in the report, in the log's order

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..errors import ReportError
-from .data import CalibrationReport
+from .data import CalibrationReport, Progress
 from .figures import (
     FigureSpec,
     channel_figures,
@@ -119,7 +119,8 @@ def _kind_of(fleet: FleetReport, channel: str) -> str | None:
 
 
 # ----------------------------------------------------------------------------- Bokeh
-def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
+def _bokeh_figures(specs: dict[str, FigureSpec], step: Callable[[], None]) -> dict[str, Any]:
+    """A Bokeh figure per spec (``step()`` after each)."""
     from bokeh.models import ColumnDataSource, DataRange1d, HoverTool
     from bokeh.models.renderers import DataRenderer
     from bokeh.plotting import figure
@@ -175,18 +176,33 @@ def _bokeh_figures(specs: dict[str, FigureSpec]) -> dict[str, Any]:
             p.legend.label_text_font_size = "9pt"
             p.add_layout(p.legend[0], "right")  # beside the plot, never over the data
         figs[key] = p
+        step()
     return figs
 
 
-def _interactive(specs: dict[str, FigureSpec]) -> tuple[dict[str, str], str, str]:
-    """(div per figure key, the figures' script, the inline BokehJS) of the figures."""
+def _interactive(
+    specs: dict[str, FigureSpec], step: Callable[[], None]
+) -> tuple[dict[str, str], str, str]:
+    """(div per figure key, the figures' script, the inline BokehJS) of the figures
+    (``step()`` after each figure and after their serialisation)."""
     from bokeh.core.templates import CSS_RESOURCES, JS_RESOURCES
+    from bokeh.document import Document
     from bokeh.embed import components
     from bokeh.resources import Resources
 
     if not specs:
         return {}, "", ""
-    script, divs = components(_bokeh_figures(specs))
+    figs = _bokeh_figures(specs, step)
+    # one document holding every figure, its model graph computed once: components() of
+    # figures without a document adds them one root at a time and recomputes the graph after
+    # each root (a cost growing with the square of the figures: 24 of a six-channel report,
+    # ~150 of a six-unit fleet); given the whole set of a document's roots it uses that document
+    doc = Document()
+    with doc.models.freeze():
+        for fig in figs.values():
+            doc.add_root(fig)
+    script, divs = components(figs)
+    step()
     # BokehJS inline, and no file: Resources' js_files/css_files also list the external files
     # of every model class loaded in this process (Panel's widgets, when the app renders the
     # report), which the report's core figures never use and an offline page cannot fetch
@@ -198,8 +214,9 @@ def _interactive(specs: dict[str, FigureSpec]) -> tuple[dict[str, str], str, str
 
 
 # ----------------------------------------------------------------------------- matplotlib
-def _static(specs: dict[str, FigureSpec]) -> dict[str, str]:
-    """An ``<img>`` data URI (PNG) per figure key, drawn by matplotlib (no pyplot state)."""
+def _static(specs: dict[str, FigureSpec], step: Callable[[], None]) -> dict[str, str]:
+    """An ``<img>`` data URI (PNG) per figure key, drawn by matplotlib (no pyplot state;
+    ``step()`` after each)."""
     try:
         from matplotlib.figure import Figure
     except ImportError:
@@ -243,6 +260,7 @@ def _static(specs: dict[str, FigureSpec]) -> dict[str, str]:
         buf = _io.BytesIO()
         fig.savefig(buf, format="png", metadata={"Software": None})
         out[key] = "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+        step()
     return out
 
 
@@ -288,23 +306,43 @@ def _json_script(d: dict[str, Any]) -> str:
     return text
 
 
-def _figures(specs: dict[str, FigureSpec], static: bool) -> tuple[dict[str, Any], str, str]:
+def _figures(
+    specs: dict[str, FigureSpec], static: bool, progress: Progress | None
+) -> tuple[dict[str, Any], str, str]:
     """(markup per figure key, the Bokeh script, the inline BokehJS): PNG ``<img>`` tags
-    when ``static`` (no script, no BokehJS), else Bokeh divs."""
+    when ``static`` (no script, no BokehJS), else Bokeh divs. ``progress("figures", done,
+    total)`` after each figure (and after the interactive figures' serialisation)."""
     from markupsafe import Markup
 
+    total = len(specs) + (0 if static else 1)
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress("figures", done, total)
+
+    if progress is not None:
+        progress("figures", 0, total)
     if static:
-        images = _static(specs)
+        images = _static(specs, step)
         figures = {
             k: Markup('<img class="fig" alt="{}" src="{}">').format(specs[k].title, v)
             for k, v in images.items()
         }
         return figures, "", ""
-    divs, script, resources = _interactive(specs)
+    divs, script, resources = _interactive(specs, step)
     return {k: Markup(v) for k, v in divs.items()}, script, resources
 
 
-def render_html(rep: CalibrationReport, *, static: bool = False, title: str | None = None) -> str:
+def render_html(
+    rep: CalibrationReport,
+    *,
+    static: bool = False,
+    title: str | None = None,
+    progress: Progress | None = None,
+) -> str:
     """The report as one self-contained HTML page.
 
     Parameters
@@ -315,6 +353,9 @@ def render_html(rep: CalibrationReport, *, static: bool = False, title: str | No
         Figures as PNG images (matplotlib) instead of interactive Bokeh plots.
     title : str, optional
         Page title (default: ``"Calibration report: <file name>"``).
+    progress : callable (stage, done, total), optional
+        Called as the figures are drawn (stage ``"figures"``) and the page is written
+        (``"writing"``).
 
     Raises
     ------
@@ -324,13 +365,15 @@ def render_html(rep: CalibrationReport, *, static: bool = False, title: str | No
     from markupsafe import Markup
 
     specs = figure_specs(rep)
-    figures, script, resources = _figures(specs, static)
+    figures, script, resources = _figures(specs, static, progress)
     by_channel: dict[str, list[str]] = {ch: [] for ch in rep.channels}
     for key in specs:
         by_channel[key.rsplit("-", 1)[0]].append(key)
+    if progress is not None:
+        progress("writing", 0, 1)
     page = _environment().get_template("report.html.jinja")
     render: Callable[..., str] = page.render
-    return render(
+    html = render(
         title=title or f"Calibration report: {rep.log.get('name', '')}",
         rep=rep,
         log=rep.log,
@@ -341,9 +384,18 @@ def render_html(rep: CalibrationReport, *, static: bool = False, title: str | No
         bokeh_script=Markup(script),
         data_json=Markup(_json_script(rep.to_dict())),
     )
+    if progress is not None:
+        progress("writing", 1, 1)
+    return html
 
 
-def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | None = None) -> str:
+def render_fleet_html(
+    fleet: FleetReport,
+    *,
+    static: bool = False,
+    title: str | None = None,
+    progress: Progress | None = None,
+) -> str:
     """The fleet acceptance report as one self-contained HTML page.
 
     The acceptance table (a row per unit, its verdict and why), per channel the table of
@@ -360,6 +412,8 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         Figures as PNG images (matplotlib) instead of interactive Bokeh plots.
     title : str, optional
         Page title (default: ``"Fleet acceptance report: <n> units"``).
+    progress : callable (stage, done, total), optional
+        As :func:`render_html`'s.
 
     Raises
     ------
@@ -369,7 +423,7 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
     from markupsafe import Markup
 
     specs = fleet_figure_specs(fleet)
-    figures, script, resources = _figures(specs, static)
+    figures, script, resources = _figures(specs, static, progress)
     unit_keys: dict[str, dict[str, list[str]]] = {}
     for u in fleet.units:
         if u.report is None:
@@ -388,9 +442,11 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         ch: [f"fleet-{ch}-{k}" for k, c in enumerate(cols) if _spread_drawn(c)]
         for ch, cols in fleet.columns.items()
     }
+    if progress is not None:
+        progress("writing", 0, 1)
     page = _environment().get_template("fleet.html.jinja")
     render: Callable[..., str] = page.render
-    return render(
+    html = render(
         title=title or f"Fleet acceptance report: {len(fleet.units)} units",
         fleet=fleet,
         figures=figures,
@@ -405,3 +461,6 @@ def render_fleet_html(fleet: FleetReport, *, static: bool = False, title: str | 
         bokeh_script=Markup(script),
         data_json=Markup(_json_script(fleet.to_dict())),
     )
+    if progress is not None:
+        progress("writing", 1, 1)
+    return html

@@ -15,7 +15,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Executor
 from dataclasses import replace
 from typing import Any, TextIO
@@ -144,7 +144,7 @@ def run_slope_study(
     fs: float = STUDY_FS,
     workers: int | None = 2,
     regions: dict[str, dict[str, tuple[float, float]]] | None = None,
-    progress: bool | TextIO = True,
+    progress: bool | TextIO | Callable[[int, int], None] = True,
     executor: Executor | None = None,
 ) -> StudyResult:
     """Run the Monte Carlo of the GMWM paper's Fig. 1-2 with Table I's true values.
@@ -170,8 +170,9 @@ def run_slope_study(
     regions : dict, optional
         AVSM regions per sensor (``{"gyro": {"WN": (lo, hi), ...}}``, seconds); default
         :func:`typical_regions` for each log length.
-    progress : bool or stream
-        Progress bar on stderr (True), on a given stream, or none (False).
+    progress : bool, stream or callable (done, total)
+        Progress line on stderr (True), on a given stream, none (False), or a callback
+        called after each replicate.
     executor : concurrent.futures.Executor, optional
         Runs the replicates instead of the local processes, e.g. a Dask cluster's
         ``Client.get_executor()`` (``gmwm study --scheduler``); the estimates do not depend
@@ -208,8 +209,12 @@ def run_slope_study(
         for s in sensors
         for r in range(reps)
     ]
-    stream = sys.stderr if progress is True else (progress or None)
-    bar = ProgressLine(len(tasks), stream, label="gmwm study slope")
+    bar: Callable[[int, int], None]
+    if callable(progress):  # the caller's callback (the command line's bar)
+        bar = progress
+    else:
+        stream = sys.stderr if progress is True else (progress or None)
+        bar = ProgressLine(len(tasks), stream, label="gmwm study slope")
     est: dict[int, dict[str, dict[str, dict[str, np.ndarray]]]] = {
         n: {
             s: {m: {c: np.full(reps, np.nan) for c, *_ in TABLE_I[s]["params"]} for m in methods}
