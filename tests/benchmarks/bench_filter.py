@@ -46,9 +46,11 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
+import numpy as np  # noqa: E402
 from conftest import real_data_dir  # noqa: E402
 from filtersim import (  # noqa: E402
     FilterNoise,
+    block_fraction,
     filter_cases,
     nees_band,
     run_monte_carlo,
@@ -56,9 +58,15 @@ from filtersim import (  # noqa: E402
 )
 
 import engine as eg  # noqa: E402
+from engine.formats.tails import tail_factors  # noqa: E402
 
 #: channel -> (fix standard deviation in the integral's unit, that unit)
 CHANNELS = {"gyro_x": (0.01, "deg"), "accel_x": (1e-3, "g s")}
+#: sensor kind -> its three axes
+KINDS = {
+    "gyro": ("gyro_x", "gyro_y", "gyro_z"),
+    "accel": ("accel_x", "accel_y", "accel_z"),
+}
 
 
 def main() -> None:
@@ -71,6 +79,21 @@ def main() -> None:
     ap.add_argument("--recorded", action="store_true", help="the recorded errors (issue 28)")
     ap.add_argument("--rates", type=float, nargs="+", default=[100.0])
     ap.add_argument("--models", nargs="+", default=["WN+RW", "GM+WN+RW", "2*GM+WN+RW"])
+    ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
+    ap.add_argument(
+        "--min-fixes",
+        type=int,
+        default=100,
+        help="--recorded: segments hold at least this many fix intervals (longer than "
+        "--minutes when needed, at most the log)",
+    )
+    ap.add_argument("--control-runs", type=int, default=100)
+    ap.add_argument(
+        "--tails",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="--recorded: the export's tail factors (eg.tail_factors of unit 1's channels)",
+    )
     args = ap.parse_args()
     if args.recorded:
         recorded(args)
@@ -122,53 +145,65 @@ def main() -> None:
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
 
 
+def _segments(x: np.ndarray, seg: int) -> np.ndarray:
+    """``x`` cut into whole segments of ``seg`` samples (segments x samples)."""
+    k = x.size // seg
+    return x[: k * seg].reshape(k, seg)
+
+
 def recorded(args: argparse.Namespace) -> None:
     """The ``--recorded`` table (module docstring)."""
-    import numpy as np
-
     data = args.log.parent
     units = [data / f"adis16405_imu{i}.h5" for i in range(1, 7)]
     if not all(u.is_file() for u in units):
         sys.exit(f"bench_filter: the six ADIS16405 logs are needed in {data}")
     t_all = time.perf_counter()
+    c_all = time.process_time()
     logs = [eg.load_log(u) for u in units]
     fs = float(logs[0].fs)
-    seg = int(round(60.0 * args.minutes * fs))
+    n_log = min(int(log.n) for log in logs)
+    seg20 = int(round(60.0 * args.minutes * fs))
     print(
-        f"recorded ADIS16405 errors: 6 units, segments of {args.minutes:g} min at {fs:g} Hz; "
-        "noise numbers exported from unit 1's fits (default export: bound on the fit and the "
-        "data's lower 95 % limit)"
+        f"recorded ADIS16405 errors: 6 units at {fs:g} Hz, segments of {args.minutes:g} min or "
+        f"{args.min_fixes} fix intervals (the longer, at most the log); noise numbers exported "
+        f"from unit 1's fits (default export: bound on the fit and the data's lower 95 % "
+        f"limit; tails: {args.tails})"
     )
     rows = []
-    for kind, chans in (
-        ("gyro", ("gyro_x", "gyro_y", "gyro_z")),
-        ("accel", ("accel_x", "accel_y", "accel_z")),
-    ):
+    for kind, chans in KINDS.items():
+        if kind not in args.kinds:
+            continue
         fix_sigma = CHANNELS[f"{kind}_x"][0]
-        segs: dict[tuple[int, str], np.ndarray] = {}
+        errs: dict[tuple[int, str], np.ndarray] = {}
         for u, log in enumerate(logs):
             for ch in chans:
                 x = np.asarray(log[ch], float)
-                x = x - x.mean()  # the turn-on bias, removed as a calibration would
-                k = x.size // seg
-                segs[(u, ch)] = x[: k * seg].reshape(k, seg)
-        first = np.concatenate([s[:, : int(10 * fs)].mean(axis=1) for s in segs.values()])
+                errs[(u, ch)] = x - x.mean()  # the turn-on bias, removed as a calibration would
+        # the filter's initial bias variance: the sensor kind's, from the 20 min segments
+        first = np.concatenate(
+            [_segments(e, seg20)[:, : int(10 * fs)].mean(axis=1) for e in errs.values()]
+        )
         pb0 = float(np.mean(first**2))
+        tails = (
+            {ch: tail_factors(logs[0][ch], fs=fs, channel=ch) for ch in chans} if args.tails else {}
+        )
         for model in args.models:
             fits = {ch: eg.fit_gmwm(logs[0].wavelet_variance(ch), model) for ch in chans}
             for rate in args.rates:
                 hold = int(round(rate / fs))
                 noise = {}
                 for ch in chans:
-                    p = eg.project(fits[ch], "WN+RW", fs_filter=rate, unit="", ci=None)
+                    kw = {"tails": tails[ch]} if args.tails else {}
+                    p = eg.project(fits[ch], "WN+RW", fs_filter=rate, unit="", ci=None, **kw)
                     noise[ch] = FilterNoise(p.value("N"), p.value("K"), f"{model} @ {rate:g} Hz")
                 for t_fix in args.fix:
+                    seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
                     for group, us in (("unit 1 (calibrated)", [0]), ("units 2-6", [1, 2, 3, 4, 5])):
                         parts = []
                         for u in us:
                             for ch in chans:
                                 r = run_recorded(
-                                    segs[(u, ch)],
+                                    _segments(errs[(u, ch)], seg),
                                     noise[ch],
                                     fs=fs,
                                     hold=hold,
@@ -182,42 +217,53 @@ def recorded(args: argparse.Namespace) -> None:
                         nees = sum(m * v for m, v in parts) / n_seg
                         lo, hi = nees_band(1, n_seg)
                         tot = float(nees.mean())
-                        cnt = float(np.mean(nees > hi))
+                        cnt, se, nfix = block_fraction(nees > hi, int(round(t_fix * fs)))
                         ok = 0.5 <= tot <= 1.3 and cnt <= 0.05
                         rows.append(
-                            f"| {kind} | {model} | {rate:g} | {t_fix:g} | {group} | {n_seg} "
-                            f"| {tot:.3f} | {100 * float(np.mean(nees < lo)):.0f} / "
-                            f"{100 * cnt:.0f} % | {'yes' if ok else 'NO'} |"
+                            f"| {kind} | {model} | {rate:g} | {t_fix:g} | {group} "
+                            f"| {n_seg} x {seg / fs / 60:.0f} min | {nfix} | {tot:.3f} "
+                            f"| {100 * float(np.mean(nees < lo)):.1f} % | {100 * cnt:.1f} "
+                            f"± {100 * se:.1f} % | {'yes' if ok else 'NO'} |"
                         )
                         print(rows[-1], flush=True)
-            # control: the filter on its own model (x axis, the first rate)
+            # control: the filter on its own model (x axis, the first rate), runs as long as
+            # the recorded segments of the cell
             nz = noise[chans[0]]
             own = eg.Model((eg.WN(sigma2=nz.N**2 * fs), eg.RW(gamma2=nz.K**2 / fs)))
             for t_fix in args.fix:
+                seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
                 r = run_monte_carlo(
                     own,
                     nz,
                     fs=fs,
-                    duration_s=60.0 * args.minutes,
+                    duration_s=seg / fs,
                     t_fix_s=t_fix,
                     fix_sigma=fix_sigma,
-                    runs=100,
+                    runs=args.control_runs,
+                    groups=max(10, args.control_runs * seg // 4_000_000),
                     seed=args.seed,
                 )
-                lo, inside, hi = r.fractions()
+                lo_f, _, _ = r.fractions()
+                cnt, se, nfix = r.above_with_error()
+                ok = 0.5 <= r.mean_nees <= 1.3 and cnt <= 0.05
                 rows.append(
                     f"| {kind} | {model} (control: own WN+RW, simulated) | {fs:g} | {t_fix:g} "
-                    f"| - | 100 | {r.mean_nees:.3f} | {100 * lo:.0f} / {100 * hi:.0f} % | "
-                    f"{'yes' if 0.5 <= r.mean_nees <= 1.3 and hi <= 0.05 else 'NO'} |"
+                    f"| - | {args.control_runs} x {seg / fs / 60:.0f} min | {nfix} "
+                    f"| {r.mean_nees:.3f} | {100 * lo_f:.1f} % "
+                    f"| {100 * cnt:.1f} ± {100 * se:.1f} % "
+                    f"| {'yes' if ok else 'NO'} |"
                 )
                 print(rows[-1], flush=True)
     print(
         "\n| sensor | model fitted to unit 1 | filter Hz | T_fix s | errors from | segments "
-        "| mean NEES | below / above band | NEES in [0.5, 1.3], <= 5 % above |"
+        "| fix intervals per segment | mean NEES | below band | above band ± s.e. "
+        "| NEES in [0.5, 1.3], <= 5 % above |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
-    print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
+    print(
+        f"\ntotal {time.perf_counter() - t_all:.0f} s wall, {time.process_time() - c_all:.0f} s CPU"
+    )
 
 
 if __name__ == "__main__":
