@@ -89,6 +89,17 @@ def main() -> None:
     )
     ap.add_argument("--control-runs", type=int, default=100)
     ap.add_argument(
+        "--data",
+        default="low",
+        choices=["low", "estimate", "high", "none"],
+        help="--recorded: the export's data bound (project(..., data=))",
+    )
+    ap.add_argument(
+        "--fleet",
+        action="store_true",
+        help="--recorded: a fleet file, per axis the largest N and K of the six units' exports",
+    )
+    ap.add_argument(
         "--tails",
         action=argparse.BooleanOptionalAction,
         default=False,
@@ -167,7 +178,7 @@ def recorded(args: argparse.Namespace) -> None:
         f"recorded ADIS16405 errors: 6 units at {fs:g} Hz, segments of {args.minutes:g} min or "
         f"{args.min_fixes} fix intervals (the longer, at most the log); noise numbers exported "
         f"from unit 1's fits (default export: bound on the fit and the data's lower 95 % "
-        f"limit; tails: {args.tails})"
+        f"limit; data={args.data}, tails: {args.tails}, fleet file: {args.fleet})"
     )
     rows = []
     for kind, chans in KINDS.items():
@@ -184,21 +195,47 @@ def recorded(args: argparse.Namespace) -> None:
             [_segments(e, seg20)[:, : int(10 * fs)].mean(axis=1) for e in errs.values()]
         )
         pb0 = float(np.mean(first**2))
-        tails = (
-            {ch: tail_factors(logs[0][ch], fs=fs, channel=ch) for ch in chans} if args.tails else {}
-        )
+        # the files' sources: unit 1 (the calibrated unit), or with --fleet every unit (the
+        # fleet file: per axis the largest N and the largest K of the six units' exports)
+        src = range(len(logs)) if args.fleet else [0]
+        tails = {
+            (u, ch): tail_factors(logs[u][ch], fs=fs, channel=ch) if args.tails else None
+            for u in src
+            for ch in chans
+        }
         for model in args.models:
-            fits = {ch: eg.fit_gmwm(logs[0].wavelet_variance(ch), model) for ch in chans}
+            fits = {
+                (u, ch): eg.fit_gmwm(logs[u].wavelet_variance(ch), model)
+                for u in src
+                for ch in chans
+            }
             for rate in args.rates:
                 hold = int(round(rate / fs))
                 noise = {}
                 for ch in chans:
-                    kw = {"tails": tails[ch]} if args.tails else {}
-                    p = eg.project(fits[ch], "WN+RW", fs_filter=rate, unit="", ci=None, **kw)
-                    noise[ch] = FilterNoise(p.value("N"), p.value("K"), f"{model} @ {rate:g} Hz")
+                    ps = [
+                        eg.project(
+                            fits[(u, ch)],
+                            "WN+RW",
+                            fs_filter=rate,
+                            unit="",
+                            ci=None,
+                            data=args.data,
+                            tails=tails[(u, ch)],
+                        )
+                        for u in src
+                    ]
+                    noise[ch] = FilterNoise(
+                        max(p.value("N") for p in ps),
+                        max(p.value("K") for p in ps),
+                        f"{model} @ {rate:g} Hz",
+                    )
                 for t_fix in args.fix:
                     seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
-                    for group, us in (("unit 1 (calibrated)", [0]), ("units 2-6", [1, 2, 3, 4, 5])):
+                    for group, us in (
+                        ("unit 1" if args.fleet else "unit 1 (calibrated)", [0]),
+                        ("units 2-6", [1, 2, 3, 4, 5]),
+                    ):
                         parts = []
                         for u in us:
                             for ch in chans:

@@ -13,11 +13,13 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 from filtersim import FilterNoise, block_fraction, nees_band, run_recorded
 from scipy.stats import norm
 from scipy.stats import t as student
 
 import engine as eg
+from engine.cli import main
 from engine.formats.projection import project
 from engine.formats.tails import TAIL_LEVEL, TailFactors, quantile_factor, tail_factors
 from engine.units import ExportError
@@ -171,3 +173,30 @@ def test_tail_factors_make_the_accelerometer_file_consistent_on_another_unit(rea
     assert above0 > 0.05, above0  # the data bound alone misses the criterion
     assert above1 + 2 * se1 <= 0.05, (above1, se1)
     assert 0.5 <= mean1 <= 1.3 and mean1 < mean0, (mean1, mean0)
+
+
+@pytest.mark.real_data
+def test_gmwm_export_applies_the_tail_factors_and_no_tails_turns_them_off(real_data, tmp_path):
+    """`gmwm export` of adis16405_imu1 accel_y (WN+RW, Kalibr): by default the file's header
+    names the tail factor (x2.18 at 20.48 s) and its random walk K is the tail-bound one (x2.10
+    over the data bound alone, docs/filters.md "Tails"); with --no-tails the header has no
+    tails line and K is the data bound's alone, the value of eg.project without tails."""
+    log = eg.load_log(real_data / "adis16405_imu1.h5")
+    fit = eg.fit_gmwm(log.wavelet_variance("accel_y"), "WN+RW")
+    k_data = project(fit, "WN+RW", ci=None).value("K")
+    k_tail = project(fit, "WN+RW", ci=None, tails=tail_factors(log["accel_y"], fs=log.fs)).value(
+        "K"
+    )
+    assert k_tail > 2.0 * k_data
+    argv = ["export", str(real_data / "adis16405_imu1.h5"), "--model", "WN+RW"]
+    argv += ["--channels", "accel_y", "--format", "kalibr", "--partial", "--no-intervals"]
+    texts = {}
+    for flag in ([], ["--no-tails"]):
+        out = tmp_path / f"imu{len(flag)}.yaml"
+        assert main([*argv, *flag, "-o", str(out)]) == 0
+        texts[bool(flag)] = out.read_text()
+    for off, k in ((False, k_tail), (True, k_data)):
+        d = yaml.safe_load(texts[off])
+        assert math.isclose(d["accelerometer_random_walk"], k, rel_tol=1e-6), (off, d)
+    assert "tails: the data bound's variance x2.18 at tau = 20.48 s" in texts[False]
+    assert "tails:" not in texts[True]
