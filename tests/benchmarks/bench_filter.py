@@ -2,21 +2,33 @@
 
     python tests/benchmarks/bench_filter.py [--runs 100] [--minutes 20] [--fix 1 10 100]
     python tests/benchmarks/bench_filter.py --recorded [--minutes 20] [--fix 1 10 100]
-        [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW]
+        [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW] [--kinds gyro accel]
+        [--min-fixes 100] [--control-runs 100] [--no-tails] [--data low|estimate|high|none]
+        [--fleet | --own]
 
 ``--recorded`` (issue 28): the error fed to the filter is the *recorded* ADIS16405 signal, not
 a simulation: the six units' logs (all channels), each channel minus its mean over the whole
-log (the turn-on bias, removed as a calibration would), cut into segments of ``--minutes``.
-The filter's N and K are the default export (``project(fit, "WN+RW")``: bound on the fitted
-WV and the empirical WV's lower 95 % limit, per axis) of the fits of unit 1 (the calibrated
-unit); it runs on unit 1's segments and on units 2-6's (not calibrated). A filter rate above
+log (the turn-on bias, removed as a calibration would), cut into segments of ``--minutes`` or
+of ``--min-fixes`` fix intervals, the longer (at most the log: fixes every 100 s take the whole
+167 min log as one segment per channel, so that the fraction of epochs above the band is
+averaged over 100 nearly independent fix intervals, not 12). The filter's N and K are the
+default export (``project(fit, "WN+RW", data=, tails=)``: bound on the fitted WV and the
+empirical WV's lower 95 % limit times the tail factors of :mod:`engine.formats.tails`, per
+axis; ``--no-tails``: the data bound alone, ``--data``: another data bound) of the fits of unit
+1 (the calibrated unit); it runs on unit 1's segments and on units 2-6's (not calibrated).
+``--fleet``: a fleet file, per axis the largest N and the largest K of the six units' default
+exports, run on every unit; ``--own``: every unit's own default export on its own signal.
+A filter rate above
 the log's holds each sample (zero-order hold): its NEES at the IMU's epochs equals the log
 rate's (same densities, same covariance over one IMU period; the 200 Hz rows of the first table
 repeated the 100 Hz ones to the last digit), so ``--rates`` defaults to the log's 100 Hz; a
 200 Hz filter on a 200 Hz recording needs a 200 Hz log, which the ADIS16405 data do not have.
-Its initial bias variance is the mean square, over every segment of the sensor kind, of the
-segment's first-10-s mean. Control: the same filter on errors simulated from its own WN + RW
-(100 runs), where only the filter is judged.
+Its initial bias variance is the mean square, over the sensor kind's 20 min segments, of the
+segments' first-10-s means. Per cell: the mean NEES, the fraction of epochs below the band,
+the fraction above with its standard error from the spread over fix intervals
+(``filtersim.block_fraction``). Control: the same filter on errors simulated from its own
+WN + RW (``--control-runs`` runs as long as the cell's segments), where only the filter is
+judged.
 
 The sensor errors are simulated from the ``2*GM+WN+RW`` model fitted to the real ADIS16405 log
 (``adis16405_imu1.h5``: gyro_x in deg/s, accel_x in g; its sub-sample GM and its slow GM), and a
@@ -95,6 +107,11 @@ def main() -> None:
         help="--recorded: the export's data bound (project(..., data=))",
     )
     ap.add_argument(
+        "--own",
+        action="store_true",
+        help="--recorded: every unit's own default export on its own signal (all calibrated)",
+    )
+    ap.add_argument(
         "--fleet",
         action="store_true",
         help="--recorded: a fleet file, per axis the largest N and K of the six units' exports",
@@ -102,8 +119,9 @@ def main() -> None:
     ap.add_argument(
         "--tails",
         action=argparse.BooleanOptionalAction,
-        default=False,
-        help="--recorded: the export's tail factors (eg.tail_factors of unit 1's channels)",
+        default=True,
+        help="--recorded: the default export's tail factors (engine.formats.tails.tail_factors "
+        "of the exporting unit's channels; --no-tails: the data bound alone, the export before)",
     )
     args = ap.parse_args()
     if args.recorded:
@@ -178,7 +196,8 @@ def recorded(args: argparse.Namespace) -> None:
         f"recorded ADIS16405 errors: 6 units at {fs:g} Hz, segments of {args.minutes:g} min or "
         f"{args.min_fixes} fix intervals (the longer, at most the log); noise numbers exported "
         f"from unit 1's fits (default export: bound on the fit and the data's lower 95 % "
-        f"limit; data={args.data}, tails: {args.tails}, fleet file: {args.fleet})"
+        f"limit; data={args.data}, tails: {args.tails}, fleet file: {args.fleet}, "
+        f"each unit's own file: {args.own})"
     )
     rows = []
     for kind, chans in KINDS.items():
@@ -197,7 +216,8 @@ def recorded(args: argparse.Namespace) -> None:
         pb0 = float(np.mean(first**2))
         # the files' sources: unit 1 (the calibrated unit), or with --fleet every unit (the
         # fleet file: per axis the largest N and the largest K of the six units' exports)
-        src = range(len(logs)) if args.fleet else [0]
+        # with --own each unit's own file (every unit calibrated)
+        src = range(len(logs)) if args.fleet or args.own else [0]
         tails = {
             (u, ch): tail_factors(logs[u][ch], fs=fs, channel=ch) if args.tails else None
             for u in src
@@ -211,29 +231,37 @@ def recorded(args: argparse.Namespace) -> None:
             }
             for rate in args.rates:
                 hold = int(round(rate / fs))
+                proj = {
+                    (u, ch): eg.project(
+                        fits[(u, ch)],
+                        "WN+RW",
+                        fs_filter=rate,
+                        unit="",
+                        ci=None,
+                        data=args.data,
+                        tails=tails[(u, ch)],
+                    )
+                    for u in src
+                    for ch in chans
+                }
                 noise = {}
                 for ch in chans:
-                    ps = [
-                        eg.project(
-                            fits[(u, ch)],
-                            "WN+RW",
-                            fs_filter=rate,
-                            unit="",
-                            ci=None,
-                            data=args.data,
-                            tails=tails[(u, ch)],
-                        )
-                        for u in src
-                    ]
-                    noise[ch] = FilterNoise(
-                        max(p.value("N") for p in ps),
-                        max(p.value("K") for p in ps),
+                    fleet = FilterNoise(
+                        max(proj[(u, ch)].value("N") for u in src),
+                        max(proj[(u, ch)].value("K") for u in src),
                         f"{model} @ {rate:g} Hz",
                     )
+                    for u in range(len(logs)):
+                        own = proj[(u, ch)] if args.own else None
+                        noise[(u, ch)] = (
+                            fleet
+                            if own is None
+                            else FilterNoise(own.value("N"), own.value("K"), fleet.label)
+                        )
                 for t_fix in args.fix:
                     seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
                     for group, us in (
-                        ("unit 1" if args.fleet else "unit 1 (calibrated)", [0]),
+                        ("unit 1" if args.fleet or args.own else "unit 1 (calibrated)", [0]),
                         ("units 2-6", [1, 2, 3, 4, 5]),
                     ):
                         parts = []
@@ -241,7 +269,7 @@ def recorded(args: argparse.Namespace) -> None:
                             for ch in chans:
                                 r = run_recorded(
                                     _segments(errs[(u, ch)], seg),
-                                    noise[ch],
+                                    noise[(u, ch)],
                                     fs=fs,
                                     hold=hold,
                                     t_fix_s=t_fix,
@@ -265,7 +293,7 @@ def recorded(args: argparse.Namespace) -> None:
                         print(rows[-1], flush=True)
             # control: the filter on its own model (x axis, the first rate), runs as long as
             # the recorded segments of the cell
-            nz = noise[chans[0]]
+            nz = noise[(0, chans[0])]
             own = eg.Model((eg.WN(sigma2=nz.N**2 * fs), eg.RW(gamma2=nz.K**2 / fs)))
             for t_fix in args.fix:
                 seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
