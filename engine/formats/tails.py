@@ -30,7 +30,7 @@ accelerometers' quantile ratios are 0.72-1.14, Gaussian's or less (a heavy-taile
 right variance has a narrower core), so no factor; at 0.99 the factors are at most 1.4 and the
 10 s aiding cells keep 9-14 % of epochs above the NEES band; at 0.995 5-6 %; at 0.999 the
 factors are 1.5-3.6 at 10-41 s on the accelerometers and at most 1.05 on the gyros, the cells
-1-2 % above with a mean NEES of 0.71-0.75. The level was chosen on that benchmark, and is a
+1.2-2.4 % above with a mean NEES of 0.71-0.75. The level was chosen on that benchmark, and is a
 parameter.
 """
 
