@@ -123,6 +123,8 @@ class TailFactors:
         Sampling rate (Hz) of the signal.
     level : float
     confidence : float or None
+    channel : str
+        The channel's name (messages).
     """
 
     tau_samples: np.ndarray
