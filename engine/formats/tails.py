@@ -36,6 +36,7 @@ parameter.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -52,6 +53,14 @@ __all__ = ["TAIL_LEVEL", "TailFactors", "quantile_factor", "tail_factors", "log_
 
 #: Default two-sided level of the quantile the file must cover (module docstring).
 TAIL_LEVEL = 0.999
+
+
+@functools.lru_cache(maxsize=16)
+def _gauss_quantile(level: float) -> float:
+    """``Phi^-1((1 + level) / 2)``: the two-sided ``level`` quantile of a standard normal."""
+    from scipy.stats import norm
+
+    return float(norm.ppf(0.5 + level / 2.0))
 
 
 def quantile_factor(
@@ -79,7 +88,7 @@ def quantile_factor(
     ratio, factor : float
         ``q / (z rms)`` (1 for Gaussian data) and ``max(1, ratio^2)``.
     """
-    from scipy.stats import binom, norm
+    from scipy.stats import binom
 
     a = np.abs(np.asarray(w, float))
     if a.size < 2:
@@ -103,7 +112,7 @@ def quantile_factor(
             return 0.0, 1.0  # too few values to show anything at this level
         p = k / n
     q = float(np.quantile(a, p))
-    ratio = q / (float(norm.ppf(0.5 + level / 2.0)) * rms)
+    ratio = q / (_gauss_quantile(level) * rms)
     return ratio, max(1.0, ratio * ratio)
 
 
