@@ -455,7 +455,12 @@ def export(
         raise ExportError(f"unknown export format {fmt!r}: use one of {', '.join(FORMATS)}")
     tail_map = (
         log_tail_factors(log, fits)
-        if tails and log is not None and projection == "bound" and data != "none"
+        if tails
+        and log is not None
+        and projection == "bound"
+        and data != "none"
+        # the formats whose projection has a data bound (not the white part of sensor_msgs/Imu)
+        and (f.consumer not in (None, "WN") or fmt == "json")
         else None
     )
     text = f.writer(
