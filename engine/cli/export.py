@@ -7,7 +7,7 @@
                 [--topic T] [--stream] [--rostopic /imu0] [--partial] [--json]
                 [--inflate F] [--filter-rate HZ] [--projection bound|plain|fit]
                 [--horizon S] [--bound-band S1:S2] [--bound-confidence C] [--no-intervals]
-                [--bound-data low|estimate|high|none]
+                [--bound-data low|estimate|high|none] [--no-tails]
                 [--vehicle-id ID] [--scale-factor-std PPM] [--consumer NAME ...]
 
 The log options and the streamed WV are shared with the other subcommands
@@ -141,6 +141,13 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "high its upper limit, none the fitted model alone",
     )
     ex.add_argument(
+        "--no-tails",
+        action="store_true",
+        help="filter formats: the data bound without its tail factors (by default the bound's "
+        "variance covers the data's 99.9 %% quantile at each scale, not only its variance: "
+        "docs/filters.md, Tails)",
+    )
+    ex.add_argument(
         "--bound-band",
         metavar="S1:S2",
         help="filter formats: the WV scales S1:S2 (s) the bound covers (default: two filter "
@@ -270,6 +277,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         scale_factor_std_ppm=args.scale_factor_std,
         consumers=args.consumer,
         data=args.bound_data,
+        tails=not args.no_tails,
     )
     disagree = [line for ch, r in fits.items() if (line := misfit(r, ch))]
     if out is None:

@@ -14,6 +14,8 @@ the formats it writes.
   EKF3), :mod:`.sim` (MATLAB, Gazebo/RotorS), :mod:`.ins` (KF-GINS, ``sensor_msgs/Imu``);
 * :mod:`.projection`: :func:`project` (a fit onto a filter's noise model, over-bounded, with
   intervals), used by every filter format;
+* :mod:`.tails`: :func:`~.tails.tail_factors` (per scale, the factor on the data bound's
+  variance that makes the file's Gaussian quantile cover the data's);
 * :mod:`.registry`: the formats by name (:data:`FORMATS`) and :func:`export`.
 """
 

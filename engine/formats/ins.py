@@ -123,6 +123,7 @@ def _least_total_tc(
                     ci=None,
                     data=kw.get("data") or "low",
                     tc=c,
+                    tails=(kw.get("tails") or {}).get(ch),
                 )
             except ExportError:
                 total = math.inf

@@ -29,6 +29,7 @@ from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
 from .kalibr import kalibr_imu
 from .projection import Projection, consumer_of, project
+from .tails import TailFactors
 
 __all__ = ["ImuNoise", "imu_noise", "noise_for", "check_inflate", "SENSORS", "PROJECTIONS"]
 
@@ -143,6 +144,7 @@ def imu_noise(
     ci: str | None = "asymptotic",
     data: str = "low",
     tc: float | None = None,
+    tails: Mapping[str, TailFactors] | None = None,
 ) -> ImuNoise:
     """Gather N, K, sigma2, B and the Gauss-Markov numbers per sensor and axis in SI (see
     :class:`ImuNoise` and the module docstring for ``projection``).
@@ -153,7 +155,8 @@ def imu_noise(
     consumer : str
         The consumer's noise model or format (:func:`~engine.formats.projection.consumer_of`).
     fs_filter, horizon_s, band, confidence, ci, data, tc
-        Passed to :func:`~engine.formats.projection.project`. ``fs_filter`` is also the
+        Passed to :func:`~engine.formats.projection.project`; ``tails`` per channel (its
+        ``tails``; a channel without one has none). ``fs_filter`` is also the
         consumer's rate of the per-sample values (``sigma2``; :attr:`ImuNoise.rate`).
 
     Raises
@@ -205,6 +208,7 @@ def imu_noise(
             ci=ci,
             data=data,
             tc=tc,
+            tails=(tails or {}).get(ch),
         )
         projs[ch] = p
         warnings += p.warnings
@@ -327,7 +331,8 @@ def noise_for(
     fs_filter: float | None = None,
 ) -> ImuNoise:
     """:func:`imu_noise` with a writer's options (``units``, ``inflate``, ``source``,
-    ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``, ``data``, ``tc``;
+    ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``, ``data``, ``tc``,
+    ``tails``;
     ``filter_rate`` unless
     ``fs_filter`` is given)."""
     return imu_noise(
@@ -346,4 +351,5 @@ def noise_for(
         ci=options.get("ci", "asymptotic"),
         data=options.get("data") or "low",
         tc=options.get("tc"),
+        tails=options.get("tails"),
     )

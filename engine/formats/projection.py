@@ -35,6 +35,7 @@ from .bound import (
     solve,
     split_terms,
 )
+from .tails import TailFactors
 
 __all__ = [
     "DATA_BOUNDS",
@@ -235,6 +236,10 @@ class Projection:
         ``"none"``: the fitted model alone, or not bounded).
     misfit : str
         :func:`misfit` of the fit (``""`` when model and data agree).
+    tail_factor, tail_tau_s, tail_level : float
+        The largest tail factor (:mod:`engine.formats.tails`) applied to the data bound in the
+        band, its scale (s; nan when none exceeds 1) and the quantile's two-sided level (nan:
+        no tail factors).
     """
 
     channel: str
@@ -257,6 +262,9 @@ class Projection:
     warnings: list[str] = field(default_factory=list)
     data: str = "none"
     misfit: str = ""
+    tail_factor: float = 1.0
+    tail_tau_s: float = math.nan
+    tail_level: float = math.nan
 
     def value(self, name: str) -> float:
         """The exported value of parameter ``name``."""
@@ -324,6 +332,16 @@ class Projection:
             f"{self.fs_filter:g} Hz; {how}",
             "  " + "; ".join(f"{k} -> {v}" for k, v in self.assignment.items()),
         ]
+        if math.isfinite(self.tail_level):
+            lines.append(
+                "  tails: the data bound's variance x"
+                f"{self.tail_factor:.3g} at tau = {self.tail_tau_s:.4g} s (the largest tail "
+                f"factor: the Gaussian {100 * self.tail_level:g} % quantile of the file covers "
+                "the data's Haar coefficients' at every dyadic scale of the band)"
+                if math.isfinite(self.tail_tau_s)
+                else "  tails: no scale of the band needs more than the data bound's variance "
+                f"(the data's {100 * self.tail_level:g} % quantiles are Gaussian's or less)"
+            )
         lines += [f"  {p.describe()}" for p in self.params.values()]
         lines += [f"  note: {n}" for n in self.notes]
         if self.misfit:
@@ -351,6 +369,15 @@ class Projection:
             "warnings": list(self.warnings),
             "data": self.data,
             "misfit": self.misfit,
+            "tails": (
+                None
+                if not math.isfinite(self.tail_level)
+                else {
+                    "level": self.tail_level,
+                    "factor": self.tail_factor,
+                    "tau_s": self.tail_tau_s if math.isfinite(self.tail_tau_s) else None,
+                }
+            ),
         }
 
 
@@ -388,6 +415,7 @@ def project(
     level: float = 0.95,
     data: str = "low",
     tc: float | None = None,
+    tails: TailFactors | None = None,
 ) -> Projection:
     """Project a fitted model onto a consumer's noise model and bound it (module docstring).
 
@@ -425,6 +453,11 @@ def project(
     tc : float, optional
         ``WN+GM`` with ``bound``: the Gauss-Markov bias's correlation time (s), fixed instead
         of searched (a file with one ``T_c`` for several channels, as KF-GINS's ``corrtime``).
+    tails : TailFactors, optional
+        The channel's tail factors (:func:`engine.formats.tails.tail_factors` of the signal
+        the fit was made from): the data bound's variance at each dyadic scale is multiplied
+        by its factor, so that the Gaussian quantile of the file covers the data's. Used
+        only with a data bound (``data`` not ``"none"``); None: no tail factor.
 
     Returns
     -------
@@ -493,6 +526,17 @@ def project(
         inb = (td >= tau[0] * (1 - 1e-9)) & (td <= tau[-1] * (1 + 1e-9))
         floor = (td[inb], wd[inb])
         tau = np.unique(np.concatenate([tau, td[inb]]))
+    tail = (1.0, math.nan, math.nan)
+    if tails is not None:
+        if not math.isclose(float(tails.fs), fs, rel_tol=1e-9):
+            raise ExportError(
+                f"tails were computed at {tails.fs:g} Hz, the fit at {fs:g} Hz: compute them "
+                "from the signal the fit was made from"
+            )
+        if floor is not None:
+            floor = (floor[0], floor[1] * tails.at(floor[0]))
+            tf, tt = tails.largest(float(floor[0][0] / fs), float(floor[0][-1] / fs))
+            tail = (tf, tt, float(tails.level))
     conf = None if confidence is None else float(confidence)
     tau_h = hz * fs
     if tc is not None and not (math.isfinite(float(tc)) and float(tc) > 0):
@@ -537,6 +581,9 @@ def project(
             fl = 0.0 if floor is None else float(floor_at(fine[j : j + 1], *floor)[0])
             if fl > 0 and fl >= cw[j] * (1.0 - 1e-3):
                 dom = f"the empirical WV's {_DATA_WORDS[use]}"
+                ft = 1.0 if tails is None else float(tails.at(fine[j : j + 1])[0])
+                if ft > 1.0:
+                    dom += f" x tail factor {ft:.3g}"
             binding[names[i]] = (float(fine[j] / fs), f"bounds {dom}")
         if cons == "WN+GM" and "sigma_b" in binding:
             binding["T_c"] = (
@@ -641,6 +688,9 @@ def project(
         warnings=warnings,
         data=use,
         misfit=misfit(fit, channel),
+        tail_factor=tail[0],
+        tail_tau_s=tail[1],
+        tail_level=tail[2],
     )
 
 

@@ -26,6 +26,7 @@ from .kalibr import KalibrImu, kalibr_imu
 from .noise import check_inflate, noise_for
 from .projection import CONSUMER_PARAMS, FORMAT_CONSUMERS
 from .report import curves_csv, fit_report
+from .tails import log_tail_factors
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
@@ -178,6 +179,7 @@ def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         confidence=kw.get("confidence"),
         ci=kw.get("ci", "asymptotic"),
         data=kw.get("data") or "low",
+        tails=kw.get("tails"),
     )
     return json.dumps(rep, indent=1, allow_nan=False) + "\n"
 
@@ -369,6 +371,7 @@ def export(
     scale_factor_std_ppm: float | None = None,
     consumers: Sequence[str] | None = None,
     data: str = "low",
+    tails: bool = True,
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -420,6 +423,13 @@ def export(
         empirical WV's lower interval limit (default), its estimate or its upper limit at the
         dyadic scales of the band, or only the fitted model (``"none"``);
         :func:`engine.formats.projection.project`.
+    tails : bool
+        Filter formats and the JSON report's projections, with a data bound and ``log``
+        given: the data bound's variance at each dyadic scale times the channel's tail factor
+        (:func:`engine.formats.tails.tail_factors` of ``log``'s channel: the least factor that
+        makes the file's Gaussian 99.9 % quantile cover the data's Haar coefficients'), so
+        that a sensor with heavier-than-Gaussian errors is not exported overconfident
+        (docs/filters.md, "Tails"). Default True; False: the data bound alone.
 
     Examples
     --------
@@ -443,6 +453,16 @@ def export(
     f = FORMATS.get(fmt)
     if f is None:
         raise ExportError(f"unknown export format {fmt!r}: use one of {', '.join(FORMATS)}")
+    tail_map = (
+        log_tail_factors(log, fits)
+        if tails
+        and log is not None
+        and projection == "bound"
+        and data != "none"
+        # the formats whose projection has a data bound (not the white part of sensor_msgs/Imu)
+        and (f.consumer not in (None, "WN") or fmt == "json")
+        else None
+    )
     text = f.writer(
         fits,
         intervals=intervals,
@@ -462,6 +482,7 @@ def export(
         scale_factor_std_ppm=scale_factor_std_ppm,
         consumers=consumers,
         data=data,
+        tails=tail_map,
     )
     if path is not None:
         write_atomic(path, text)  # the one write of every format (engine._files)

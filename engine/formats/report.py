@@ -22,6 +22,7 @@ from .common import csv_cells, fmt_float, source_text
 from .datasheet import datasheet_table
 from .kalibr import kalibr_imu
 from .projection import consumer_of, misfit, project
+from .tails import TailFactors
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
@@ -49,6 +50,7 @@ def fit_report(
     confidence: float | None = None,
     ci: str | None = "asymptotic",
     data: str = "low",
+    tails: Mapping[str, TailFactors] | None = None,
 ) -> dict[str, Any]:
     """A JSON-ready report of every channel's fit.
 
@@ -77,6 +79,8 @@ def fit_report(
         The projection's filter rate (Hz, default the log's), horizon (s), band (s),
         confidence of the bounded WV limit, intervals (``"asymptotic"`` or None) and what of
         the empirical WV the bound covers (:data:`~engine.formats.projection.DATA_BOUNDS`).
+    tails : mapping of channel name to TailFactors, optional
+        The projections' tail factors (:mod:`engine.formats.tails`; none by default).
 
     Returns
     -------
@@ -135,7 +139,9 @@ def fit_report(
             ],
             "allan_floor": allan_floor(res.model, res.fs, res.wv.n_levels),
             "misfit": misfit(res, ch),
-            "projections": {c: _projection(res, c, ch, unit, opts) for c in cons},
+            "projections": {
+                c: _projection(res, c, ch, unit, opts, (tails or {}).get(ch)) for c in cons
+            },
         }
     out: dict[str, Any] = {
         "schema": "gmwm-report/1",
@@ -167,7 +173,12 @@ def fit_report(
 
 
 def _projection(
-    res: GMWMResult, consumer: str, channel: str, unit: str, opts: Mapping[str, Any]
+    res: GMWMResult,
+    consumer: str,
+    channel: str,
+    unit: str,
+    opts: Mapping[str, Any],
+    tails: TailFactors | None = None,
 ) -> dict[str, Any]:
     """One channel's projection as a dictionary, or ``{"error": reason}``."""
     try:
@@ -183,6 +194,7 @@ def _projection(
             unit=unit,
             ci=opts["ci"],
             data=opts["data"],
+            tails=tails,
         )
     except ExportError as e:
         return {"error": str(e)}

@@ -27,6 +27,7 @@ from .classical import (
     eta3_interval,
     haar_coefficients,
     max_levels,
+    sampled_haar_coefficients,
     wavelet_variance,
 )
 from .robust import biweight_constant, robust_scale_biweight, robust_wv
@@ -49,6 +50,7 @@ __all__ = [
     "wavelet_variance",
     "default_levels",
     "haar_coefficients",
+    "sampled_haar_coefficients",
     "eta3_interval",
     "LevelScales",
     "biweight_constant",

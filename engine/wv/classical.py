@@ -42,6 +42,7 @@ __all__ = [
     "default_levels",
     "max_levels",
     "haar_coefficients",
+    "sampled_haar_coefficients",
     "eta3_interval",
     "LevelScales",
     "SeriesSettings",
@@ -330,6 +331,29 @@ def haar_coefficients(x: Any, level: int) -> np.ndarray:
     if 2 * m > a.size:
         raise ValueError(f"level {level} needs at least {2 * m} samples, the series has {a.size}")
     return haar_from_cumsum(cumsum_demeaned(a), m)
+
+
+def sampled_haar_coefficients(x: Any, levels: int, per_scale: int = 8) -> list[np.ndarray]:
+    """Boundary-free Haar MODWT coefficients of levels ``1 .. levels``, every
+    ``max(1, 2^j // per_scale)``-th at level ``j`` (one cumulative sum for every level).
+
+    The coefficients ``2^j`` apart are the nearly independent ones, so ``per_scale`` of them
+    per such span keep the information of the whole level at ``O(N / 2^j)`` cost: what a
+    statistic of a level's distribution (a quantile) needs, in ``O(N)`` for all levels.
+    """
+    a = as_series(x)
+    if levels < 1 or 1 << levels > a.size:
+        raise ValueError(f"levels must be in 1..log2(N) = {int(np.log2(a.size))}, got {levels}")
+    s = cumsum_demeaned(a)
+    out = []
+    for j in range(1, levels + 1):
+        m = 1 << (j - 1)
+        step = max(1, (2 * m) // per_scale)
+        if step < 8:  # slices are cheaper than gathering this many offsets
+            out.append(haar_from_cumsum(s, m)[::step])
+        else:
+            out.append(haar_from_cumsum(s, m, np.arange(0, a.size - 2 * m + 1, step)))
+    return out
 
 
 def axis_columns(x: Any) -> np.ndarray | None:

@@ -2,21 +2,33 @@
 
     python tests/benchmarks/bench_filter.py [--runs 100] [--minutes 20] [--fix 1 10 100]
     python tests/benchmarks/bench_filter.py --recorded [--minutes 20] [--fix 1 10 100]
-        [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW]
+        [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW] [--kinds gyro accel]
+        [--min-fixes 100] [--control-runs 100] [--no-tails] [--data low|estimate|high|none]
+        [--fleet | --own]
 
 ``--recorded`` (issue 28): the error fed to the filter is the *recorded* ADIS16405 signal, not
 a simulation: the six units' logs (all channels), each channel minus its mean over the whole
-log (the turn-on bias, removed as a calibration would), cut into segments of ``--minutes``.
-The filter's N and K are the default export (``project(fit, "WN+RW")``: bound on the fitted
-WV and the empirical WV's lower 95 % limit, per axis) of the fits of unit 1 (the calibrated
-unit); it runs on unit 1's segments and on units 2-6's (not calibrated). A filter rate above
+log (the turn-on bias, removed as a calibration would), cut into segments of ``--minutes`` or
+of ``--min-fixes`` fix intervals, the longer (at most the log: fixes every 100 s take the whole
+167 min log as one segment per channel, so that the fraction of epochs above the band is
+averaged over 100 nearly independent fix intervals, not 12). The filter's N and K are the
+default export (``project(fit, "WN+RW", data=, tails=)``: bound on the fitted WV and the
+empirical WV's lower 95 % limit times the tail factors of :mod:`engine.formats.tails`, per
+axis; ``--no-tails``: the data bound alone, ``--data``: another data bound) of the fits of unit
+1 (the calibrated unit); it runs on unit 1's segments and on units 2-6's (not calibrated).
+``--fleet``: a fleet file, per axis the largest N and the largest K of the six units' default
+exports, run on every unit; ``--own``: every unit's own default export on its own signal.
+A filter rate above
 the log's holds each sample (zero-order hold): its NEES at the IMU's epochs equals the log
 rate's (same densities, same covariance over one IMU period; the 200 Hz rows of the first table
 repeated the 100 Hz ones to the last digit), so ``--rates`` defaults to the log's 100 Hz; a
 200 Hz filter on a 200 Hz recording needs a 200 Hz log, which the ADIS16405 data do not have.
-Its initial bias variance is the mean square, over every segment of the sensor kind, of the
-segment's first-10-s mean. Control: the same filter on errors simulated from its own WN + RW
-(100 runs), where only the filter is judged.
+Its initial bias variance is the mean square, over the sensor kind's 20 min segments, of the
+segments' first-10-s means. Per cell: the mean NEES, the fraction of epochs below the band,
+the fraction above with its standard error from the spread over fix intervals
+(``filtersim.block_fraction``). Control: the same filter on errors simulated from its own
+WN + RW (``--control-runs`` runs as long as the cell's segments), where only the filter is
+judged.
 
 The sensor errors are simulated from the ``2*GM+WN+RW`` model fitted to the real ADIS16405 log
 (``adis16405_imu1.h5``: gyro_x in deg/s, accel_x in g; its sub-sample GM and its slow GM), and a
@@ -46,9 +58,11 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
+import numpy as np  # noqa: E402
 from conftest import real_data_dir  # noqa: E402
 from filtersim import (  # noqa: E402
     FilterNoise,
+    block_fraction,
     filter_cases,
     nees_band,
     run_monte_carlo,
@@ -56,9 +70,15 @@ from filtersim import (  # noqa: E402
 )
 
 import engine as eg  # noqa: E402
+from engine.formats.tails import tail_factors  # noqa: E402
 
 #: channel -> (fix standard deviation in the integral's unit, that unit)
 CHANNELS = {"gyro_x": (0.01, "deg"), "accel_x": (1e-3, "g s")}
+#: sensor kind -> its three axes
+KINDS = {
+    "gyro": ("gyro_x", "gyro_y", "gyro_z"),
+    "accel": ("accel_x", "accel_y", "accel_z"),
+}
 
 
 def main() -> None:
@@ -71,6 +91,38 @@ def main() -> None:
     ap.add_argument("--recorded", action="store_true", help="the recorded errors (issue 28)")
     ap.add_argument("--rates", type=float, nargs="+", default=[100.0])
     ap.add_argument("--models", nargs="+", default=["WN+RW", "GM+WN+RW", "2*GM+WN+RW"])
+    ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
+    ap.add_argument(
+        "--min-fixes",
+        type=int,
+        default=100,
+        help="--recorded: segments hold at least this many fix intervals (longer than "
+        "--minutes when needed, at most the log)",
+    )
+    ap.add_argument("--control-runs", type=int, default=100)
+    ap.add_argument(
+        "--data",
+        default="low",
+        choices=["low", "estimate", "high", "none"],
+        help="--recorded: the export's data bound (project(..., data=))",
+    )
+    ap.add_argument(
+        "--own",
+        action="store_true",
+        help="--recorded: every unit's own default export on its own signal (all calibrated)",
+    )
+    ap.add_argument(
+        "--fleet",
+        action="store_true",
+        help="--recorded: a fleet file, per axis the largest N and K of the six units' exports",
+    )
+    ap.add_argument(
+        "--tails",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="--recorded: the default export's tail factors (engine.formats.tails.tail_factors "
+        "of the exporting unit's channels; --no-tails: the data bound alone, the export before)",
+    )
     args = ap.parse_args()
     if args.recorded:
         recorded(args)
@@ -122,54 +174,102 @@ def main() -> None:
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
 
 
+def _segments(x: np.ndarray, seg: int) -> np.ndarray:
+    """``x`` cut into whole segments of ``seg`` samples (segments x samples)."""
+    k = x.size // seg
+    return x[: k * seg].reshape(k, seg)
+
+
 def recorded(args: argparse.Namespace) -> None:
     """The ``--recorded`` table (module docstring)."""
-    import numpy as np
-
     data = args.log.parent
     units = [data / f"adis16405_imu{i}.h5" for i in range(1, 7)]
     if not all(u.is_file() for u in units):
         sys.exit(f"bench_filter: the six ADIS16405 logs are needed in {data}")
     t_all = time.perf_counter()
+    c_all = time.process_time()
     logs = [eg.load_log(u) for u in units]
     fs = float(logs[0].fs)
-    seg = int(round(60.0 * args.minutes * fs))
+    n_log = min(int(log.n) for log in logs)
+    seg20 = int(round(60.0 * args.minutes * fs))
     print(
-        f"recorded ADIS16405 errors: 6 units, segments of {args.minutes:g} min at {fs:g} Hz; "
-        "noise numbers exported from unit 1's fits (default export: bound on the fit and the "
-        "data's lower 95 % limit)"
+        f"recorded ADIS16405 errors: 6 units at {fs:g} Hz, segments of {args.minutes:g} min or "
+        f"{args.min_fixes} fix intervals (the longer, at most the log); noise numbers exported "
+        f"from unit 1's fits (default export: bound on the fit and the data's lower 95 % "
+        f"limit; data={args.data}, tails: {args.tails}, fleet file: {args.fleet}, "
+        f"each unit's own file: {args.own})"
     )
     rows = []
-    for kind, chans in (
-        ("gyro", ("gyro_x", "gyro_y", "gyro_z")),
-        ("accel", ("accel_x", "accel_y", "accel_z")),
-    ):
+    for kind, chans in KINDS.items():
+        if kind not in args.kinds:
+            continue
         fix_sigma = CHANNELS[f"{kind}_x"][0]
-        segs: dict[tuple[int, str], np.ndarray] = {}
+        errs: dict[tuple[int, str], np.ndarray] = {}
         for u, log in enumerate(logs):
             for ch in chans:
                 x = np.asarray(log[ch], float)
-                x = x - x.mean()  # the turn-on bias, removed as a calibration would
-                k = x.size // seg
-                segs[(u, ch)] = x[: k * seg].reshape(k, seg)
-        first = np.concatenate([s[:, : int(10 * fs)].mean(axis=1) for s in segs.values()])
+                errs[(u, ch)] = x - x.mean()  # the turn-on bias, removed as a calibration would
+        # the filter's initial bias variance: the sensor kind's, from the 20 min segments
+        first = np.concatenate(
+            [_segments(e, seg20)[:, : int(10 * fs)].mean(axis=1) for e in errs.values()]
+        )
         pb0 = float(np.mean(first**2))
+        # the files' sources: unit 1 (the calibrated unit), or with --fleet every unit (the
+        # fleet file: per axis the largest N and the largest K of the six units' exports)
+        # with --own each unit's own file (every unit calibrated)
+        src = range(len(logs)) if args.fleet or args.own else [0]
+        tails = {
+            (u, ch): tail_factors(logs[u][ch], fs=fs, channel=ch) if args.tails else None
+            for u in src
+            for ch in chans
+        }
         for model in args.models:
-            fits = {ch: eg.fit_gmwm(logs[0].wavelet_variance(ch), model) for ch in chans}
+            fits = {
+                (u, ch): eg.fit_gmwm(logs[u].wavelet_variance(ch), model)
+                for u in src
+                for ch in chans
+            }
             for rate in args.rates:
                 hold = int(round(rate / fs))
+                proj = {
+                    (u, ch): eg.project(
+                        fits[(u, ch)],
+                        "WN+RW",
+                        fs_filter=rate,
+                        unit="",
+                        ci=None,
+                        data=args.data,
+                        tails=tails[(u, ch)],
+                    )
+                    for u in src
+                    for ch in chans
+                }
                 noise = {}
                 for ch in chans:
-                    p = eg.project(fits[ch], "WN+RW", fs_filter=rate, unit="", ci=None)
-                    noise[ch] = FilterNoise(p.value("N"), p.value("K"), f"{model} @ {rate:g} Hz")
+                    fleet = FilterNoise(
+                        max(proj[(u, ch)].value("N") for u in src),
+                        max(proj[(u, ch)].value("K") for u in src),
+                        f"{model} @ {rate:g} Hz",
+                    )
+                    for u in range(len(logs)):
+                        own = proj[(u, ch)] if args.own else None
+                        noise[(u, ch)] = (
+                            fleet
+                            if own is None
+                            else FilterNoise(own.value("N"), own.value("K"), fleet.label)
+                        )
                 for t_fix in args.fix:
-                    for group, us in (("unit 1 (calibrated)", [0]), ("units 2-6", [1, 2, 3, 4, 5])):
+                    seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
+                    for group, us in (
+                        ("unit 1" if args.fleet or args.own else "unit 1 (calibrated)", [0]),
+                        ("units 2-6", [1, 2, 3, 4, 5]),
+                    ):
                         parts = []
                         for u in us:
                             for ch in chans:
                                 r = run_recorded(
-                                    segs[(u, ch)],
-                                    noise[ch],
+                                    _segments(errs[(u, ch)], seg),
+                                    noise[(u, ch)],
                                     fs=fs,
                                     hold=hold,
                                     t_fix_s=t_fix,
@@ -182,42 +282,53 @@ def recorded(args: argparse.Namespace) -> None:
                         nees = sum(m * v for m, v in parts) / n_seg
                         lo, hi = nees_band(1, n_seg)
                         tot = float(nees.mean())
-                        cnt = float(np.mean(nees > hi))
+                        cnt, se, nfix = block_fraction(nees > hi, int(round(t_fix * fs)))
                         ok = 0.5 <= tot <= 1.3 and cnt <= 0.05
                         rows.append(
-                            f"| {kind} | {model} | {rate:g} | {t_fix:g} | {group} | {n_seg} "
-                            f"| {tot:.3f} | {100 * float(np.mean(nees < lo)):.0f} / "
-                            f"{100 * cnt:.0f} % | {'yes' if ok else 'NO'} |"
+                            f"| {kind} | {model} | {rate:g} | {t_fix:g} | {group} "
+                            f"| {n_seg} x {seg / fs / 60:.0f} min | {nfix} | {tot:.3f} "
+                            f"| {100 * float(np.mean(nees < lo)):.1f} % | {100 * cnt:.1f} "
+                            f"± {100 * se:.1f} % | {'yes' if ok else 'NO'} |"
                         )
                         print(rows[-1], flush=True)
-            # control: the filter on its own model (x axis, the first rate)
-            nz = noise[chans[0]]
+            # control: the filter on its own model (x axis, the first rate), runs as long as
+            # the recorded segments of the cell
+            nz = noise[(0, chans[0])]
             own = eg.Model((eg.WN(sigma2=nz.N**2 * fs), eg.RW(gamma2=nz.K**2 / fs)))
             for t_fix in args.fix:
+                seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
                 r = run_monte_carlo(
                     own,
                     nz,
                     fs=fs,
-                    duration_s=60.0 * args.minutes,
+                    duration_s=seg / fs,
                     t_fix_s=t_fix,
                     fix_sigma=fix_sigma,
-                    runs=100,
+                    runs=args.control_runs,
+                    groups=max(10, args.control_runs * seg // 4_000_000),
                     seed=args.seed,
                 )
-                lo, inside, hi = r.fractions()
+                lo_f, _, _ = r.fractions()
+                cnt, se, nfix = r.above_with_error()
+                ok = 0.5 <= r.mean_nees <= 1.3 and cnt <= 0.05
                 rows.append(
                     f"| {kind} | {model} (control: own WN+RW, simulated) | {fs:g} | {t_fix:g} "
-                    f"| - | 100 | {r.mean_nees:.3f} | {100 * lo:.0f} / {100 * hi:.0f} % | "
-                    f"{'yes' if 0.5 <= r.mean_nees <= 1.3 and hi <= 0.05 else 'NO'} |"
+                    f"| - | {args.control_runs} x {seg / fs / 60:.0f} min | {nfix} "
+                    f"| {r.mean_nees:.3f} | {100 * lo_f:.1f} % "
+                    f"| {100 * cnt:.1f} ± {100 * se:.1f} % "
+                    f"| {'yes' if ok else 'NO'} |"
                 )
                 print(rows[-1], flush=True)
     print(
         "\n| sensor | model fitted to unit 1 | filter Hz | T_fix s | errors from | segments "
-        "| mean NEES | below / above band | NEES in [0.5, 1.3], <= 5 % above |"
+        "| fix intervals per segment | mean NEES | below band | above band ± s.e. "
+        "| NEES in [0.5, 1.3], <= 5 % above |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
-    print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
+    print(
+        f"\ntotal {time.perf_counter() - t_all:.0f} s wall, {time.process_time() - c_all:.0f} s CPU"
+    )
 
 
 if __name__ == "__main__":

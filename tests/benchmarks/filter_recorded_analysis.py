@@ -3,16 +3,23 @@
     python tests/benchmarks/filter_recorded_analysis.py kurtosis
     python tests/benchmarks/filter_recorded_analysis.py cells accel 10 1
     python tests/benchmarks/filter_recorded_analysis.py cells gyro 100
+    python tests/benchmarks/filter_recorded_analysis.py quantiles
+
+``quantiles``: per ADIS16405 unit and channel, the ratio of the 0.95 and 0.99 quantiles of the
+absolute Haar coefficients at each scale 2^j (j = 1..15) to the Gaussian's (1.96 and 2.576 times
+their root mean square), point estimates: where the tails are heavier than Gaussian.
 
 ``kurtosis``: per ADIS16405 unit and channel (each minus its whole-log mean), the kurtosis of the
 differences of consecutive 1 s and 10 s block means (3.0 for Gaussian errors; a simulated WN+RW
 for reference): how Gaussian the error is at the scale of the aiding interval.
 
-``cells KIND T_FIX ...``: the one-axis filter of ``tests/filtersim.py`` with unit 1's default
+``cells KIND T_FIX ...``: the one-axis filter of ``tests/filtersim.py`` with unit 1's
 WN+RW export (per axis, 100 Hz), on the recorded segments of 20 min (as
 ``bench_filter.py --recorded``), split by unit, by axis, without unit 4 (its bursts at samples
 11,710-11,900, 404,530-404,640 and 514,580-514,690), and with other exports of the same fits
-(``data="estimate"``, ``data="high"``, the horizon equal to the aiding interval). Per cell: the
+(``data="estimate"``, ``data="high"``, the horizon equal to the aiding interval) and with the
+tail factors of :mod:`engine.formats.tails` at the levels 0.99, 0.995 and 0.999 (the "default"
+rows are the data bound alone, the export before the tail factors). Per cell: the
 segment count M, the mean NEES, the fractions of epochs below / above the 95 % band
 ``chi2_M / M`` and the variance of the segment-averaged NEES over epochs divided by the ``2 / M``
 it has when the M segments are independent and the filter consistent ("var ratio": 1 for a
@@ -24,6 +31,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.stats import kurtosis
@@ -36,6 +44,7 @@ from conftest import real_data_dir  # noqa: E402
 from filtersim import FilterNoise, nees_band, run_recorded  # noqa: E402
 
 import engine as eg  # noqa: E402
+from engine.formats.tails import quantile_factor, tail_factors  # noqa: E402
 
 FS, SEG = 100.0, 120_000  # 20 min at 100 Hz
 CHANNELS = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
@@ -81,10 +90,11 @@ def cells(kind: str, fixes: list[float]) -> None:
     pb0 = float(np.mean(first**2))
     fits = {ch: eg.fit_gmwm(logs[0].wavelet_variance(ch), "WN+RW") for ch in chans}
 
-    def noise_of(**kw: object) -> dict[str, FilterNoise]:
+    def noise_of(level: float | None = None, **kw: Any) -> dict[str, FilterNoise]:
         out = {}
         for ch in chans:
-            p = eg.project(fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None, **kw)
+            tails = None if level is None else tail_factors(logs[0][ch], fs=FS, level=level)
+            p = eg.project(fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None, tails=tails, **kw)
             out[ch] = FilterNoise(p.value("N"), p.value("K"), ch)
         return out
 
@@ -129,14 +139,35 @@ def cells(kind: str, fixes: list[float]) -> None:
             ("data=estimate", "units 2-6", noise_of(data="estimate"), others, chans),
             ("data=high", "units 2-6", noise_of(data="high"), others, chans),
         ]
+        for lev in (0.99, 0.995, 0.999):  # the tail factors' level (engine.formats.tails)
+            nz = noise_of(level=lev)
+            rows += [
+                (f"tails {lev:g}", "unit 1 (calibrated)", nz, [0], chans),
+                (f"tails {lev:g}", "units 2-6", nz, others, chans),
+            ]
         for what, who, nz, us, chs in rows:
             print(f"| {kind} | {t_fix:g} | {what} | {who} " + cell(nz, us, chs, t_fix), flush=True)
     print(f"\nCPU {time.process_time() - t0:.0f} s")
 
 
+def quantiles_table() -> None:
+    print("| unit | channel | j: q95 ratio / q99 ratio ... |")
+    print("|---|---|---|")
+    for i, log in enumerate(_logs(), 1):
+        for ch in CHANNELS:
+            cells = []
+            for j in range(1, 16):
+                ratio95 = quantile_factor(eg.haar_coefficients(log[ch], j), 0.95, None)[0]
+                ratio99 = quantile_factor(eg.haar_coefficients(log[ch], j), 0.99, None)[0]
+                cells.append(f"{j}: {ratio95:.2f} / {ratio99:.2f}")
+            print(f"| {i} | {ch} | " + ", ".join(cells) + " |")
+
+
 if __name__ == "__main__":
     if sys.argv[1:2] == ["kurtosis"]:
         kurtosis_table()
+    elif sys.argv[1:2] == ["quantiles"]:
+        quantiles_table()
     elif sys.argv[1:2] == ["cells"] and len(sys.argv) >= 4:
         cells(sys.argv[2], [float(v) for v in sys.argv[3:]])
     else:
