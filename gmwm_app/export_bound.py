@@ -1,7 +1,8 @@
 """The export menu's bound options (issue 28): what of the data a filter file bounds besides the
 fitted model (``data``: the empirical WV's lower 95 % limit, its estimate, its upper limit or
-nothing) and over which horizon (the longest time the filter runs unaided), the engine's
-``engine.export(..., data=, horizon_s=)`` options.
+nothing), over which horizon (the longest time the filter runs unaided) and whether the data
+bound covers the data's heavy tails, the engine's ``engine.export(..., data=, horizon_s=,
+tails=)`` options.
 
 The widgets are built when the menu's "Bound options" toggle is first opened, not with the
 page (a page that never exports pays nothing for them); until then, and whenever the menu is
@@ -47,6 +48,7 @@ class BoundOptions:
         self.box = pn.Column(margin=0, sizing_mode="stretch_width")
         self.data_select: Any = None  # built on first opening
         self.horizon_input: Any = None
+        self.tails_check: Any = None
         self.toggle.param.watch(self._on_toggle, "value")
 
     def panel(self) -> Any:
@@ -72,15 +74,21 @@ class BoundOptions:
             placeholder="the log length",
             sizing_mode="stretch_width",
         )
-        for w in (self.data_select, self.horizon_input):
+        self.tails_check = pn.widgets.Checkbox(
+            label="Cover the data's heavy tails (tail factors, default)", value=True
+        )
+        for w in (self.data_select, self.horizon_input, self.tails_check):
             w.param.watch(lambda _e: self._on_change(), "value")
         self.box.objects = [
             self.data_select,
             self.horizon_input,
+            self.tails_check,
             pn.pane.Markdown(
                 "The filter file's WV is at least the fitted model's and this of the "
                 "empirical WV at every scale from two filter steps to the horizon (a GNSS "
-                "outage, a visual dropout: the longest time your filter runs without aiding).",
+                "outage, a visual dropout: the longest time your filter runs without aiding). "
+                "With tail factors, the data bound is raised where the sensor's errors are "
+                "heavier-tailed than a Gaussian's (docs: Filter files, Tails).",
                 margin=(0, 10),
                 styles=_SMALL,
             ),
@@ -94,8 +102,8 @@ class BoundOptions:
 
     @property
     def options(self) -> dict[str, Any]:
-        """The engine keywords (``data``, ``horizon_s``) of the chosen options; ``{}`` (the
-        engine's defaults) while the menu is closed.
+        """The engine keywords (``data``, ``horizon_s``, ``tails``) of the chosen options;
+        ``{}`` (the engine's defaults) while the menu is closed.
 
         Raises
         ------
@@ -105,6 +113,8 @@ class BoundOptions:
         if not (self.toggle.value and self.built):
             return {}
         out: dict[str, Any] = {"data": self.data_select.value}
+        if not self.tails_check.value:
+            out["tails"] = False
         h = self.horizon_input.value
         if h is not None:
             if not (math.isfinite(float(h)) and float(h) > 0):

@@ -24,7 +24,8 @@ import panel as pn
 from bokeh.models.annotations import BoxAnnotation, Span
 from bokeh.plotting import figure
 
-from engine.formats import FORMAT_CONSUMERS, Projection, project
+from engine.formats import FORMAT_CONSUMERS, Projection, TailFactors, log_tail_factors, project
+from engine.io import ImuLog
 
 __all__ = ["preview_projections", "preview_table", "preview_figure", "ExportPreview"]
 
@@ -38,6 +39,7 @@ def preview_projections(
     bound: bool = True,
     data: str = "low",
     horizon_s: float | None = None,
+    tails: Mapping[str, TailFactors] | None = None,
 ) -> dict[str, Projection]:
     """The projection of each fit onto ``fmt``'s consumer model, as the export computes it.
 
@@ -55,6 +57,9 @@ def preview_projections(
     data, horizon_s
         What of the empirical WV the bound covers and the horizon (s) of the band, as
         :func:`engine.formats.project` (defaults: the lower 95 % limit, the log length).
+    tails : mapping of channel to TailFactors, optional
+        The loaded log's tail factors (:func:`engine.formats.log_tail_factors`), applied to
+        the data bound as the export applies them; default none.
 
     Returns
     -------
@@ -78,6 +83,7 @@ def preview_projections(
             unit=(units or {}).get(ch, r.wv.unit) or "",
             data=data,
             horizon_s=horizon_s,
+            tails=(tails or {}).get(ch),
         )
         for ch, r in fits.items()
     }
@@ -157,6 +163,19 @@ class ExportPreview:
         self.plot_box = pn.Column(self.plot, visible=False, margin=0)  # hides the figure
         self.projections: dict[str, Projection] = {}
         self._key: tuple[Any, ...] | None = None
+        self._tails_log: ImuLog | None = None  # the log whose channels' tail factors are kept
+        self._tails: dict[str, TailFactors] = {}  # per channel: about 1 s of CPU per 1e6 samples
+
+    def _tail_factors(
+        self, log: ImuLog | None, fits: Mapping[str, Any]
+    ) -> dict[str, TailFactors] | None:
+        """The tail factors of ``log``'s fitted channels, each computed once per log."""
+        if log is None:
+            return None
+        if log is not self._tails_log:
+            self._tails_log, self._tails = log, {}
+        self._tails.update(log_tail_factors(log, [ch for ch in fits if ch not in self._tails]))
+        return {ch: self._tails[ch] for ch in fits if ch in self._tails}
 
     def panel(self) -> Any:
         """The preview's layout."""
@@ -173,10 +192,14 @@ class ExportPreview:
         projection: str = "bound",
         data: str = "low",
         horizon_s: float | None = None,
+        log: ImuLog | None = None,
+        tails: bool = True,
     ) -> None:
         """Recompute (when shown and changed) and redraw; an error becomes the note.
         ``projection`` is the export's (``"fit"``: the file writes the fit's own terms, and
-        nothing is projected); ``data`` and ``horizon_s`` its bound's (:func:`project`)."""
+        nothing is projected); ``data``, ``horizon_s`` and ``tails`` its bound's
+        (:func:`project`), with the tail factors of ``log`` (the loaded log), as the download
+        computes them."""
         key = (
             tuple((c, id(r)) for c, r in fits.items()),
             fmt,
@@ -185,6 +208,8 @@ class ExportPreview:
             projection,
             data,
             horizon_s,
+            id(log),
+            tails,
         )
         if not self.toggle.value:
             self.note.object, self.table.object, self.plot_box.visible = "", "", False
@@ -216,6 +241,11 @@ class ExportPreview:
                 bound=projection == "bound",
                 data=data,
                 horizon_s=horizon_s,
+                tails=(
+                    self._tail_factors(log, fits)
+                    if tails and projection == "bound" and data != "none"
+                    else None
+                ),
             )
         except ValueError as e:  # eg.GmwmError (ExportError ...) or numpy's
             self.note.object = f"Cannot project the fits for {fmt}: {e}"

@@ -250,13 +250,15 @@ def export_text(
     projection: str = "bound",
     data: str = "low",
     horizon_s: float | None = None,
+    tails: bool = True,
 ) -> str:
     """The Kalibr ``imu.yaml`` (``fmt="kalibr"``) or datasheet (``"datasheet"``) of the fit.
 
     One channel (the shown one); the Kalibr file is partial (that axis only). ``projection``:
     how a filter format maps the fit onto its noise model (``engine.export``: ``"bound"``, the
-    default, ``"plain"`` or ``"fit"``, the fit's own terms); ``data`` and ``horizon_s``: what of
-    the empirical WV the bound covers and up to which scale (``engine.export``).
+    default, ``"plain"`` or ``"fit"``, the fit's own terms); ``data``, ``horizon_s`` and
+    ``tails``: what of the empirical WV the bound covers, up to which scale, and whether the
+    loaded log's tail factors raise it (``engine.export``, as ``gmwm export`` does).
 
     Raises
     ------
@@ -279,6 +281,8 @@ def export_text(
             projection=projection,
             data=data,
             horizon_s=horizon_s,
+            log=state.log,
+            tails=tails,
         )
     return export(None, fits, fmt, units=units, source=src)
 
@@ -299,6 +303,7 @@ def export_fits(
     projection: str = "bound",
     data: str = "low",
     horizon_s: float | None = None,
+    tails: bool = True,
 ) -> str:
     """The fits of several channels of the loaded log in any export format.
 
@@ -321,6 +326,9 @@ def export_fits(
         Filter formats: what of the empirical WV the bound covers (``"low"``, the default,
         ``"estimate"``, ``"high"``, ``"none"``) and the horizon in s (default the log length;
         ``engine.export``).
+    tails : bool
+        Filter formats: the data bound times the loaded log's tail factors (the default, as
+        ``gmwm export``); False: ``--no-tails``.
 
     Raises
     ------
@@ -345,6 +353,8 @@ def export_fits(
         projection=projection,
         data=data,
         horizon_s=horizon_s,
+        log=log,
+        tails=tails,
     )
 
 
@@ -587,6 +597,7 @@ class SessionPanel(pn.viewable.Viewer):
             units=fit_units(self.state, self._fits),
             filter_rate=self.rate_input.value if self.rate_input.visible else None,
             projection=self.projection_select.value,
+            log=self.state.log,
             **opts,
         )
 

@@ -37,6 +37,7 @@ from .projection import (
 )
 from .registry import FORMATS, Format, export, register
 from .report import curves_csv, fit_report, write_report
+from .tails import TailFactors, log_tail_factors, tail_factors
 
 __all__ = [
     "ExportError",
@@ -67,4 +68,7 @@ __all__ = [
     "DATA_BOUNDS",
     "MISFIT_SHARE",
     "misfit",
+    "TailFactors",
+    "tail_factors",
+    "log_tail_factors",
 ]

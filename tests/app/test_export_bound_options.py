@@ -121,3 +121,47 @@ def test_misfit_line_is_shown_next_to_the_file(app_demo: Path) -> None:
     s.set_model("2*GM+WN+RW")  # the truth's form: no line
     assert misfit(s.result, "gyro_x") == ""
     assert "model and data disagree" not in sp.fits_note.object
+
+
+def test_the_app_file_covers_heavy_tails_as_gmwm_export_does(app_demo: Path) -> None:
+    """A log whose errors are heavier-tailed than a Gaussian's (Student t, 3 degrees of
+    freedom, plus a random walk): the app's filter file is ``gmwm export``'s (the data bound
+    times the log's tail factors, ``tails=True``), larger than the data bound alone; the
+    options' checkbox gives ``--no-tails``'s file, and the preview follows both. Before, the
+    app exported without the log, so its file was the data bound alone whatever the tails."""
+    from gmwm_app.app import create_app
+    from gmwm_app.data import LoadedData
+
+    from engine.formats import log_tail_factors
+    from engine.io import ImuLog
+
+    rng = np.random.default_rng(7)
+    n, fs = 2**17, 100.0
+    rw = np.cumsum(rng.standard_normal(n)) * 1e-3
+    chans = {
+        "gyro_x": rng.standard_t(3, n) * 0.01 + rw,
+        "accel_x": rng.standard_t(3, n) * 0.02 + rw,
+    }
+    log = ImuLog(channels=chans, fs=fs, units={"gyro_x": "rad/s", "accel_x": "m/s^2"})
+    app = create_app().gmwm_app
+    s, sp, b = app.state, app.session_panel, app.session_panel.bound
+    assert s.install(LoadedData(log, "upload", "tails.h5")), s.error
+    gyro, accel = _fit_two(app)
+    fits = {"gyro_x": gyro, "accel_x": accel}
+    tf = log_tail_factors(log, fits)
+    assert tf["gyro_x"].largest()[0] > 1.2  # heavy tails: the factor raises the data bound
+    sp.format_select.value = "kalibr"
+    sp.preview.toggle.value = True
+    b.toggle.value = True
+    kw = {"units": log.units, "allow_partial": True, "log": log}
+    with_tails = yaml.safe_load(eg.export(None, fits, "kalibr", **kw))
+    without = yaml.safe_load(eg.export(None, fits, "kalibr", tails=False, **kw))
+    key = "gyroscope_noise_density"
+    assert with_tails[key] > without[key] * 1.05
+    d = yaml.safe_load(sp.format_download.callback().getvalue())
+    assert d == with_tails
+    assert sp.preview.projections["gyro_x"].value("N") == with_tails[key]
+    b.tails_check.value = False
+    assert b.options == {"data": "low", "tails": False}
+    assert yaml.safe_load(sp.format_download.callback().getvalue()) == without
+    assert sp.preview.projections["gyro_x"].value("N") == without[key]
