@@ -129,11 +129,10 @@ def test_the_app_file_covers_heavy_tails_as_gmwm_export_does(app_demo: Path) -> 
     times the log's tail factors, ``tails=True``), larger than the data bound alone; the
     options' checkbox gives ``--no-tails``'s file, and the preview follows both. Before, the
     app exported without the log, so its file was the data bound alone whatever the tails."""
-    from gmwm_app.app import create_app
-    from gmwm_app.data import LoadedData
-
     from engine.formats import log_tail_factors
     from engine.io import ImuLog
+    from gmwm_app.app import create_app
+    from gmwm_app.data import LoadedData
 
     rng = np.random.default_rng(7)
     n, fs = 2**17, 100.0
