@@ -59,22 +59,40 @@ def _series_coefficients(t: np.ndarray) -> np.ndarray:
 _SERIES_CACHE: dict[bytes, np.ndarray] = {}
 
 
-def ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
-    """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path).
+def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
+    """:func:`ar1_wv` for ``0 < phi < 1``, unit innovation variance (the fit's hot path).
 
     Parameters
     ----------
     t : ndarray of float, shape (J,)
         Scales in samples, increasing (the scales where the series applies, ``x t < 2e-3``,
         are then the first ones).
-    phi : float
-        Autoregressive coefficient, ``0 < phi < 1``.
+    phi : float or ndarray, shape (k,)
+        Autoregressive coefficient(s), ``0 < phi < 1``.
 
     Returns
     -------
-    ndarray, shape (J,)
+    ndarray, shape (J,), or (k, J) for an array ``phi``
         The WV per unit innovation variance (a new array).
     """
+    if isinstance(phi, np.ndarray):  # several at once, one row each (the search's hot path)
+        # phi^t - 4 phi^(t/2) + 3 = B (B - 2) with B = phi^(t/2) - 1 (t even): one expm1
+        xs = [-math.log(p) for p in phi.tolist()]
+        coef = np.array(
+            [
+                [math.expm1(-2 * x), 2 * p, 1.0 / (math.expm1(-x) ** 3 * (p + 1))]
+                for x, p in zip(xs, phi.tolist(), strict=True)
+            ]
+        )
+        xt = np.multiply.outer(xs, t)
+        half = np.expm1(-0.5 * xt)
+        out = (coef[:, :1] * t + coef[:, 1:2] * half * (half - 2)) * coef[:, 2:] / (t * t)
+        if min(xs) * t[0] < 2e-3:  # the series on the first scales of some row
+            c = _series_coefficients(t)
+            xc = xt[:, :1] / t[0]
+            series = ((c[3] * xc + c[2]) * xc + c[1]) * xc + c[0]
+            out = np.where(xt < 2e-3, series, out)
+        return out
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
     e_1 = math.expm1(-x)
