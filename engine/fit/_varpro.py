@@ -158,7 +158,7 @@ class NNLSProblem:
         self._c_work = self._c_fixed.copy()  # the weighted design of the point profiled
         # the positive set of the last NNLS and the other columns: the next point's, most
         # often (see _inner)
-        self._active: tuple[np.ndarray, np.ndarray] | None = None
+        self._active: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._tol = 1e-12 * math.sqrt(self.bb)
         from scipy.linalg.lapack import dposv  # on first use: `import engine` stays light
 
@@ -223,26 +223,34 @@ class NNLSProblem:
         self.n_eval += 1
         gram = c.T @ c
         cb = c.T @ self.b
-        h = None
-        if self._active is not None:
-            s, rest = self._active
-            _, hs, info = self._dposv(gram[s[:, None], s], cb[s])  # Cholesky: 3 us, not 15
-            if info == 0 and (not s.size or hs.min() > 0):
-                h = np.zeros(self.p)
-                h[s] = hs
-                if rest.size:
-                    grad = cb[rest] - gram[rest] @ h
-                    if np.any(grad > self._tol * np.sqrt(gram[rest, rest])):
-                        h = None
+        h = None if self._active is None else self._on_active_set(gram, cb)
         if h is None:
             norms = np.sqrt(np.diagonal(gram))
             norms = np.where(norms == 0, 1.0, norms)
             g, _ = nnls(c / norms, self.b, maxiter=50 * self.p)
             h = g / norms
             pos = h > 0
-            self._active = (np.flatnonzero(pos), np.flatnonzero(~pos))
+            s = np.flatnonzero(pos)
+            self._active = (s, s[:, None], np.flatnonzero(~pos))
         r = self.b - c @ h
         return float(r @ r), h
+
+    def _on_active_set(self, gram: np.ndarray, cb: np.ndarray) -> np.ndarray | None:
+        """The NNLS solution if the last positive set is still its positive set, else None
+        (normal equations ``gram h = cb`` on the set, by Cholesky; KKT on the others)."""
+        assert self._active is not None
+        s, s_col, rest = self._active
+        h = np.zeros(self.p)
+        if s.size:
+            _, hs, info = self._dposv(gram[s_col, s], cb[s])  # 3 us, np.linalg.solve 15
+            if info or hs.min() <= 0:
+                return None
+            h[s] = hs
+        if rest.size:
+            grad = (cb - gram @ h)[rest]
+            if grad.max() > 0 and np.any(grad > self._tol * np.sqrt(gram[rest, rest])):
+                return None
+        return h
 
     def solve(self, phis: tuple[float, ...]) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, h >= 0 and the design matrix for fixed non-linear values."""
@@ -431,14 +439,21 @@ def search(
             continue
         results.append(local(prob.profile, u0, spacing / 2, prob.lo, prob.hi))
     # the anchors (the sub-models' optima), best first: each is a result in its own right, so
-    # the fit is at or below every one of them; a local search starts from the best one and
-    # from every other that is not next to a start or a minimum already searched
+    # the fit is at or below every one of them; a local search starts from the best one,
+    # unless a local minimum already found is next to it and not above it (the same basin:
+    # a sub-model's optimum with the larger model's extra term at 0 is often the larger
+    # model's too), and from every other that is not next to a start or a minimum searched
     pts = [np.clip(np.asarray(a, float), prob.lo, prob.hi) for a in anchors]
     ranked = sorted(((prob.profile(a), a) for a in pts), key=lambda t: t[0])
+    minima = list(results)
     seen = [np.asarray(u0, float) for _, u0 in best] + [r[1] for r in results]
     for k, (fa, a0) in enumerate(ranked):
         results.append((fa, a0, True))
         if k and any(np.max(np.abs(a0 - d)) < 1.5 * spacing for d in seen):
+            continue
+        if not k and any(
+            r[0] <= fa * (1 + 1e-8) and np.max(np.abs(a0 - r[1])) < 1.5 * spacing for r in minima
+        ):
             continue
         seen.append(a0)
         results.append(local(prob.profile, a0, spacing / 2, prob.lo, prob.hi))
