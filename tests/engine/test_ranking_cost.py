@@ -129,3 +129,27 @@ def test_polished_refit_reaches_the_searched_minimum() -> None:
     start = eg.gmwm_objective(wv.truncate(k), first.model, omega)
     assert polished.objective <= start
     assert polished.n_evaluations < full.n_evaluations  # both count their sub-models (190, 327)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("channel", ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"])
+def test_ranking_j_column_is_the_full_searchs(real_data, channel: str) -> None:
+    # the ranking's J-test refits are polished from each fitted candidate (no grid): on every
+    # imu1 channel each of the 47 J statistics equals the one of a refit by the full search
+    # (grid, multi-starts, its own sub-models), to 1e-6 relative (measured: <= 7e-8)
+    from engine.inference.jtest import efficient_j
+
+    log = eg.load_log(real_data / "adis16405_imu1.h5", channel=channel)
+    wv = eg.wavelet_variance(log[channel], fs=log.fs)
+    ranking = eg.rank_models(wv, max_model="2*GM+WN+QN+RW+DR")
+    fitted = [c for c in ranking.candidates if c.result is not None]
+    largest = max(fitted, key=lambda c: (c.n_params, -c.objective))
+    vmat = eg.wv_cov(largest.result)
+    checked = 0
+    for c in fitted:
+        if not math.isfinite(c.j_stat):
+            continue
+        full, _, _, _ = efficient_j(wv, c.result.model, vmat)
+        assert c.j_stat == pytest.approx(full, rel=1e-6), c.model
+        checked += 1
+    assert checked >= 40
