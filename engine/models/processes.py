@@ -65,8 +65,7 @@ def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
     Parameters
     ----------
     t : ndarray of float, shape (J,)
-        Scales in samples, increasing (the scales where the series applies, ``x t < 2e-3``,
-        are then the first ones).
+        Scales in samples, in any order (a replicate fit stacks several scale vectors).
     phi : float or ndarray, shape (k,)
         Autoregressive coefficient(s), ``0 < phi < 1``.
 
@@ -87,9 +86,9 @@ def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
         xt = np.multiply.outer(xs, t)
         half = np.expm1(-0.5 * xt)
         out = (coef[:, :1] * t + coef[:, 1:2] * half * (half - 2)) * coef[:, 2:] / (t * t)
-        if min(xs) * t[0] < 2e-3:  # the series on the first scales of some row
+        if min(xs) * t.min() < 2e-3:  # the series where x t < 2e-3, in some row
             c = _series_coefficients(t)
-            xc = xt[:, :1] / t[0]
+            xc = np.array(xs)[:, None]
             series = ((c[3] * xc + c[2]) * xc + c[1]) * xc + c[0]
             out = np.where(xt < 2e-3, series, out)
         return out
@@ -99,10 +98,10 @@ def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
     out = (e_2 * t + 2 * phi * (np.expm1(-x * t) - 4 * np.expm1(-0.5 * x * t))) / (
         e_1**3 * (phi + 1) * t * t
     )
-    if x * t[0] < 2e-3:  # the series on the first scales (cached coefficients, Horner)
-        n = int(np.count_nonzero(x * t < 2e-3))
-        c = _series_coefficients(t)[:, :n]
-        out[:n] = ((c[3] * x + c[2]) * x + c[1]) * x + c[0]
+    if x * t.min() < 2e-3:  # the series where x t < 2e-3 (cached coefficients, Horner)
+        near = x * t < 2e-3
+        c = _series_coefficients(t)[:, near]
+        out[near] = ((c[3] * x + c[2]) * x + c[1]) * x + c[0]
     return out
 
 

@@ -153,3 +153,17 @@ def test_ranking_j_column_is_the_full_searchs(real_data, channel: str) -> None:
         assert c.j_stat == pytest.approx(full, rel=1e-6), c.model
         checked += 1
     assert checked >= 40
+
+
+def test_ar1_columns_on_stacked_scales() -> None:
+    # a replicate fit stacks the scale vectors of its recordings (six logs: 2 .. 2^19 six
+    # times): the series must go where x tau < 2e-3, not to as many of the first scales of the
+    # stacked vector (it went there before: with the slow GM of the six ADIS gyro_x, 6,580
+    # samples, to the first 18 scales, 2 .. 2^18 of the first log, off by 10^5 at the
+    # coarsest; their replicate fit of 2*GM+WN+RW stopped at 630.28, it reaches 630.09 now)
+    tau = np.tile(2.0 ** np.arange(1, 20), 6)
+    for tc in (600.0, 6580.0, 1e5, 1e7):
+        phi = math.exp(-1.0 / tc)
+        ref = ar1_wv(tau, np.array([phi, 0.5]))
+        np.testing.assert_allclose(ar1_wv_pos(tau, phi), ref[0], rtol=1e-9, atol=0)
+        np.testing.assert_allclose(ar1_wv_pos(tau, np.array([phi, 0.5])), ref, rtol=1e-9, atol=0)
