@@ -59,6 +59,8 @@ TC_FLAG = 1.0
 # (log correlation times) and objective (relative).
 CHECK_XATOL = 1e-4
 CHECK_FATOL = 1e-8
+# Candidates whose exact profile branch and bound computes at once (``profile_many``).
+_CHUNK = 32
 
 
 def sqrt_weight(omega: np.ndarray) -> np.ndarray:
@@ -284,6 +286,66 @@ class NNLSProblem:
             f = self._memo[key] = self._inner(c)[0]
         return f
 
+    def profile_many(self, u: np.ndarray) -> np.ndarray:
+        """:meth:`profile` at each row of ``u`` (C, k), the exact NNLS of all rows at once.
+
+        Every positive set of the ``p`` columns is solved by least squares (unit-norm columns,
+        one batched solve) and the objective is the smallest ``||b - c h||^2`` among the
+        solutions with ``h > 0`` on their set: each is a feasible point, and the NNLS solution
+        is the least-squares solution on its own positive set, so that minimum is the NNLS
+        optimum. For the grid's exact profiles (:func:`best_candidates`).
+        """
+        u = np.asarray(u, dtype=float)
+        keys = [row.tobytes() for row in u]
+        out = np.array([self._memo.get(key, math.nan) for key in keys])
+        todo = np.flatnonzero(np.isnan(out))
+        if not todo.size:
+            return out
+        if not (self._fast and self.k) or self.p > 6:
+            for i in todo:
+                out[i] = self.profile(u[i])
+            return out
+        uu = u[todo]
+        phis = np.exp(-1.0 / np.exp(np.clip(uu, self.lo, self.hi)))  # (B, k)
+        cols = ar1_wv_pos(self.tau, phis.ravel()).reshape(todo.size, self.k, -1)
+        for j, scale in enumerate(self._scales):
+            cols[:, j] *= np.asarray(scale(phis[:, j]), dtype=float).reshape(-1, 1)
+        c = np.repeat(self._c_fixed[None], todo.size, axis=0)  # (B, M, p)
+        c[:, :, self._nl] = (
+            self._weigh(cols.transpose(2, 0, 1).reshape(self.tau.size, -1))
+            .reshape(self.tau.size, todo.size, self.k)
+            .transpose(1, 0, 2)
+        )
+        norms = np.sqrt(np.einsum("bmi,bmi->bi", c, c))
+        norms[norms == 0] = 1.0
+        cn = c / norms[:, None, :]
+        gram = np.einsum("bmi,bmj->bij", cn, cn)
+        cb = np.einsum("bmi,m->bi", cn, self.b)
+        masks = self._subsets()  # (S, p)
+        both = masks[:, :, None] & masks[:, None, :]
+        eye = np.eye(self.p, dtype=bool)
+        g = np.where(both, gram[:, None], np.where(eye, 1.0, 0.0))  # (B, S, p, p)
+        rhs = np.where(masks, cb[:, None, :], 0.0)
+        try:
+            h = np.linalg.solve(g, rhs[..., None])[..., 0]  # (B, S, p), 0 off the set
+        except np.linalg.LinAlgError:
+            for i in todo:
+                out[i] = self.profile(u[i])
+            return out
+        ok = np.all((h > 0) | ~masks, axis=2)
+        r = self.b[None, None, :] - np.einsum("bmp,bsp->bsm", cn, h)
+        f = np.where(ok, np.einsum("bsm,bsm->bs", r, r), np.inf).min(axis=1)
+        f = np.minimum(f, self.bb)  # h = 0
+        self.n_eval += todo.size
+        for i, val in zip(todo, f.tolist(), strict=True):
+            out[i] = self._memo[keys[i]] = val
+        return out
+
+    def _subsets(self) -> np.ndarray:
+        """Every non-empty subset of the ``p`` columns, as (2^p - 1, p) masks."""
+        n = np.arange(1, 2**self.p)
+        return (n[:, None] >> np.arange(self.p)) & 1 == 1
+
     def lower_bounds(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unconstrained weighted least squares of all candidates at once (batched QR).
 
@@ -332,10 +394,18 @@ def best_candidates(
         exact = np.ones(u.shape[0], dtype=bool)
     order = np.argsort(lower, kind="stable")
     best: list[tuple[float, tuple[float, ...]]] = []
-    for c in order:
+    many = getattr(prob, "profile_many", None)
+    vals: dict[int, float] = {}
+    for n, c in enumerate(order):
         if len(best) >= keep and lower[c] > best[-1][0] * (1 + 1e-12):
             break
-        val = float(lower[c]) if exact[c] else prob.profile(u[c])
+        if not exact[c] and c not in vals and many is not None:  # the next few at once
+            nxt = [int(d) for d in order[n : n + _CHUNK] if not exact[d]]
+            vals.update(zip(nxt, many(u[nxt]).tolist(), strict=True))
+        if exact[c]:
+            val = float(lower[c])
+        else:
+            val = vals[c] if c in vals else prob.profile(u[c])
         best.append((val, tuple(u[c])))
         best.sort(key=lambda t: t[0])
         best = best[:keep]

@@ -59,6 +59,19 @@ def _series_coefficients(t: np.ndarray) -> np.ndarray:
 _SERIES_CACHE: dict[bytes, np.ndarray] = {}
 
 
+def _scale_terms(t: np.ndarray) -> np.ndarray:
+    """``-t / 2``, ``1 / t`` and ``1 / t^2`` as a (3, J) array, cached like
+    :func:`_series_coefficients`."""
+    key = b"scale" + t.tobytes()
+    terms = _SERIES_CACHE.get(key)
+    if terms is None:
+        terms = np.array([-0.5 * t, 1.0 / t, 1.0 / (t * t)])
+        if len(_SERIES_CACHE) > 256:
+            _SERIES_CACHE.clear()
+        _SERIES_CACHE[key] = terms
+    return terms
+
+
 def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
     """:func:`ar1_wv` for ``0 < phi < 1``, unit innovation variance (the fit's hot path).
 
@@ -75,22 +88,24 @@ def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
         The WV per unit innovation variance (a new array).
     """
     if isinstance(phi, np.ndarray):  # several at once, one row each (the search's hot path)
-        # phi^t - 4 phi^(t/2) + 3 = B (B - 2) with B = phi^(t/2) - 1 (t even): one expm1
-        xs = [-math.log(p) for p in phi.tolist()]
-        coef = np.array(
-            [
-                [math.expm1(-2 * x), 2 * p, 1.0 / (math.expm1(-x) ** 3 * (p + 1))]
-                for x, p in zip(xs, phi.tolist(), strict=True)
-            ]
-        )
-        xt = np.multiply.outer(xs, t)
-        half = np.expm1(-0.5 * xt)
-        out = (coef[:, :1] * t + coef[:, 1:2] * half * (half - 2)) * coef[:, 2:] / (t * t)
+        # phi^t - 4 phi^(t/2) + 3 = B (B - 2) with B = phi^(t/2) - 1 (t even): one expm1;
+        # the row's constants divided by e_1^3 (phi + 1) once, as Python floats
+        ps = phi.tolist()
+        xs = [-math.log(p) for p in ps]
+        co = []
+        for x, p in zip(xs, ps, strict=True):
+            d = 1.0 / (math.expm1(-x) ** 3 * (p + 1))
+            co.append((math.expm1(-2 * x) * d, 2 * p * d))
+        coef = np.array(co)
+        neg_half_t, inv_t, inv_t2 = _scale_terms(t)
+        hx = np.multiply.outer(xs, neg_half_t)  # -x t / 2
+        half = np.expm1(hx)
+        out = coef[:, :1] * inv_t + coef[:, 1:] * (half * (half - 2)) * inv_t2
         if min(xs) * t.min() < 2e-3:  # the series where x t < 2e-3, in some row
             c = _series_coefficients(t)
             xc = np.array(xs)[:, None]
             series = ((c[3] * xc + c[2]) * xc + c[1]) * xc + c[0]
-            out = np.where(xt < 2e-3, series, out)
+            out = np.where(hx > -1e-3, series, out)
         return out
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
