@@ -74,13 +74,14 @@ def main() -> None:
         return profile(self, u)
 
     _varpro.NNLSProblem.profile = counted  # type: ignore[method-assign]
-    profile_many = _varpro.NNLSProblem.profile_many
+    profile_many = getattr(_varpro.NNLSProblem, "profile_many", None)  # not in older trees
 
     def counted_many(self, u):  # type: ignore[no-untyped-def]
         n_eval[0] += len(u)
         return profile_many(self, u)
 
-    _varpro.NNLSProblem.profile_many = counted_many  # type: ignore[method-assign]
+    if profile_many is not None:
+        _varpro.NNLSProblem.profile_many = counted_many  # type: ignore[method-assign]
     numbers: dict[str, dict[str, list[float | None]]] = {}
     print(f"rank_models, every sub-model of {args.max_model}, {Path(args.log).name}")
     print(
