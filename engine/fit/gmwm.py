@@ -235,6 +235,7 @@ def fit_gmwm(
     eff: float = ...,
     optima: dict[Any, Any] | None = ...,
     fixed: bool = ...,
+    polish: bool = ...,
     **options: Unpack[VOptions],
 ) -> GMWMResult: ...
 
@@ -251,6 +252,7 @@ def fit_gmwm(
     eff: float = ...,
     optima: dict[Any, Any] | None = ...,
     fixed: bool = ...,
+    polish: bool = ...,
     **options: Unpack[VOptions],
 ) -> list[GMWMResult]: ...
 
@@ -267,6 +269,7 @@ def fit_gmwm(
     eff: float = ...,
     optima: dict[Any, Any] | None = ...,
     fixed: bool = ...,
+    polish: bool = ...,
     **options: Unpack[VOptions],
 ) -> GMWMResult: ...
 
@@ -282,6 +285,7 @@ def fit_gmwm(
     eff: float = 0.6,
     optima: dict[Any, Any] | None = None,
     fixed: bool = False,
+    polish: bool = False,
     **options: Unpack[VOptions],
 ) -> GMWMResult | list[GMWMResult]:
     """Fit a latent model by GMWM.
@@ -316,6 +320,11 @@ def fit_gmwm(
         No search: the result of ``model`` with every value given (its objective, implied WV,
         flags), e.g. a model derived from another fit, as the model a ranking selects
         (:func:`engine.inference.actionable`).
+    polish : bool
+        A refit near a known optimum (the J-test's efficient refit of each candidate a ranking
+        has fitted): no grid of correlation times, local searches from the model's values
+        and from the sub-models' optima in ``optima`` only, so the fit is at or below each of
+        them (docs/fitting.md). Ignored when the model's AR1/GM values are not all given.
     **options
         With ``weights="efficient"``, how V is estimated (:class:`VOptions`: ``v``, ``x``,
         ``B``, ``seed``, ``workers``, ``executor``): by default from the first fit
@@ -376,7 +385,7 @@ def fit_gmwm(
             "weights='efficient' uses"
         )
     if efficient:
-        kw: dict[str, Any] = {"optima": optima, "fixed": fixed}
+        kw: dict[str, Any] = {"optima": optima, "fixed": fixed, "polish": polish}
         first = fit_gmwm(wv, m, **kw)
         vmat = wv_cov(first, **v_options(options))
         res = fit_gmwm(wv, first.model, weights=inverse_cov(vmat), **kw)
@@ -412,7 +421,12 @@ def fit_gmwm(
         key = (wv.tau_samples.tobytes(), wv.variance.tobytes(), omega.tobytes())
         cache = optima.setdefault(key, {}) if optima is not None else {}
         _, u, converged, prob, n_eval = nested_search(
-            m, lambda sub: NNLSProblem.from_wv(sub, wv, a), cache, extra, keep=3
+            m,
+            lambda sub: NNLSProblem.from_wv(sub, wv, a),
+            cache,
+            extra,
+            keep=3,
+            polish=polish and bool(extra),
         )
         fitted = fitted_model(prob, u, wv.fs)
         method, msg = "grid+nelder-mead", search_message(converged)

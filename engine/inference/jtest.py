@@ -161,7 +161,8 @@ def efficient_j(
         Covariance of the WV; only its block on the levels used matters.
     optima : dict, optional
         Shared by the refits of several models (a ranking's candidates), as in
-        :func:`engine.fit.fit_gmwm`.
+        :func:`engine.fit.fit_gmwm`; each refit is then a polish from the values of ``start``
+        (``fit_gmwm(polish=True)``: its optimum moves little from the fitted candidate's).
 
     Returns
     -------
@@ -182,7 +183,14 @@ def efficient_j(
             f"have enough equivalent degrees of freedom ({LEVELS_RULE}), the model "
             f"has {p} parameters; use a longer log or a smaller model"
         )
-    fit = fit_gmwm(wv, start, weights=inverse_cov(vmat[:k, :k]), levels=k, optima=optima)
+    fit = fit_gmwm(
+        wv,
+        start,
+        weights=inverse_cov(vmat[:k, :k]),
+        levels=k,
+        optima=optima,
+        polish=optima is not None,
+    )
     df = k - len(free_params(fit))
     return float(fit.objective), df, k, fit
 

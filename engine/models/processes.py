@@ -59,32 +59,64 @@ def _series_coefficients(t: np.ndarray) -> np.ndarray:
 _SERIES_CACHE: dict[bytes, np.ndarray] = {}
 
 
-def ar1_wv_pos(t: np.ndarray, phi: float) -> np.ndarray:
-    """:func:`ar1_wv` for one ``0 < phi < 1``, unit innovation variance (the fit's hot path).
+def _scale_terms(t: np.ndarray) -> np.ndarray:
+    """``-t / 2``, ``1 / t`` and ``1 / t^2`` as a (3, J) array, cached like
+    :func:`_series_coefficients`."""
+    key = b"scale" + t.tobytes()
+    terms = _SERIES_CACHE.get(key)
+    if terms is None:
+        terms = np.array([-0.5 * t, 1.0 / t, 1.0 / (t * t)])
+        if len(_SERIES_CACHE) > 256:
+            _SERIES_CACHE.clear()
+        _SERIES_CACHE[key] = terms
+    return terms
+
+
+def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
+    """:func:`ar1_wv` for ``0 < phi < 1``, unit innovation variance (the fit's hot path).
 
     Parameters
     ----------
     t : ndarray of float, shape (J,)
-        Scales in samples, increasing (the scales where the series applies, ``x t < 2e-3``,
-        are then the first ones).
-    phi : float
-        Autoregressive coefficient, ``0 < phi < 1``.
+        Scales in samples, in any order (a replicate fit stacks several scale vectors).
+    phi : float or ndarray, shape (k,)
+        Autoregressive coefficient(s), ``0 < phi < 1``.
 
     Returns
     -------
-    ndarray, shape (J,)
+    ndarray, shape (J,), or (k, J) for an array ``phi``
         The WV per unit innovation variance (a new array).
     """
+    if isinstance(phi, np.ndarray):  # several at once, one row each (the search's hot path)
+        # phi^t - 4 phi^(t/2) + 3 = B (B - 2) with B = phi^(t/2) - 1 (t even): one expm1;
+        # the row's constants divided by e_1^3 (phi + 1) once, as Python floats
+        ps = phi.tolist()
+        xs = [-math.log(p) for p in ps]
+        co = []
+        for x, p in zip(xs, ps, strict=True):
+            d = 1.0 / (math.expm1(-x) ** 3 * (p + 1))
+            co.append((math.expm1(-2 * x) * d, 2 * p * d))
+        coef = np.array(co)
+        neg_half_t, inv_t, inv_t2 = _scale_terms(t)
+        hx = np.multiply.outer(xs, neg_half_t)  # -x t / 2
+        half = np.expm1(hx)
+        out = coef[:, :1] * inv_t + coef[:, 1:] * (half * (half - 2)) * inv_t2
+        if min(xs) * t.min() < 2e-3:  # the series where x t < 2e-3, in some row
+            c = _series_coefficients(t)
+            xc = np.array(xs)[:, None]
+            series = ((c[3] * xc + c[2]) * xc + c[1]) * xc + c[0]
+            out = np.where(hx > -1e-3, series, out)
+        return out
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
     e_1 = math.expm1(-x)
     out = (e_2 * t + 2 * phi * (np.expm1(-x * t) - 4 * np.expm1(-0.5 * x * t))) / (
         e_1**3 * (phi + 1) * t * t
     )
-    if x * t[0] < 2e-3:  # the series on the first scales (cached coefficients, Horner)
-        n = int(np.count_nonzero(x * t < 2e-3))
-        c = _series_coefficients(t)[:, :n]
-        out[:n] = ((c[3] * x + c[2]) * x + c[1]) * x + c[0]
+    if x * t.min() < 2e-3:  # the series where x t < 2e-3 (cached coefficients, Horner)
+        near = x * t < 2e-3
+        c = _series_coefficients(t)[:, near]
+        out[near] = ((c[3] * x + c[2]) * x + c[1]) * x + c[0]
     return out
 
 

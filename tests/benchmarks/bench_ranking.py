@@ -7,9 +7,10 @@ repository root:
 For each channel: the CPU time (``time.process_time``, this process) of
 :func:`engine.inference.rank_models` over every sub-model of ``--max-model`` (47 for the
 default: the fits, the efficient J-test refits, the selection), the profile evaluations of its
-searches, and its ratio to a reference measured in the same run, a bare NumPy Haar WV of the
-same channel (one cumulative sum, every level), so that figures taken at different loads of
-this shared machine compare. SciPy is imported before the clock starts (its import is paid once
+searches (points of the profile asked for, one by one or in a batch, memo hits included), and
+its ratio to a reference measured in the same run, a bare NumPy Haar WV of the same channel
+(one cumulative sum, every level), so that figures taken at different loads of this shared
+machine compare. SciPy is imported before the clock starts (its import is paid once
 per process, not per channel).
 
 ``--save`` writes every candidate's objective, WVIC and J statistic; ``--compare`` prints the
@@ -73,6 +74,14 @@ def main() -> None:
         return profile(self, u)
 
     _varpro.NNLSProblem.profile = counted  # type: ignore[method-assign]
+    profile_many = getattr(_varpro.NNLSProblem, "profile_many", None)  # not in older trees
+
+    def counted_many(self, u):  # type: ignore[no-untyped-def]
+        n_eval[0] += len(u)
+        return profile_many(self, u)
+
+    if profile_many is not None:
+        _varpro.NNLSProblem.profile_many = counted_many  # type: ignore[method-assign]
     numbers: dict[str, dict[str, list[float | None]]] = {}
     print(f"rank_models, every sub-model of {args.max_model}, {Path(args.log).name}")
     print(

@@ -72,3 +72,115 @@ def test_each_point_of_the_profile_is_solved_once() -> None:
     assert prob.profile(u.copy()) == first and prob.n_eval == n
     prob.profile(u + [1e-9, 0.0])
     assert prob.n_eval == n + 1
+
+
+def test_ar1_rows_equal_the_term_by_term_formula() -> None:
+    # several phi at once (the search's hot path: one expm1, B (B - 2) for the powers) against
+    # ar1_wv's array branch, which evaluates the closed form and the series term by term; both
+    # lose digits to the closed form's cancellation near x tau = 2e-3 (measured 4e-10 against
+    # 50-digit arithmetic for either), hence 1e-9
+    tau = 2.0 ** np.arange(1, 21)
+    tc = np.array([0.01, 0.7, 30.0, 600.0, 999.0, 1001.0, 3e3, 1e5, 1e7, 1e9, 1e10])
+    phis = np.exp(-1.0 / tc)
+    rows = ar1_wv_pos(tau, phis)
+    assert rows.shape == (tc.size, tau.size)
+    np.testing.assert_allclose(rows, ar1_wv(tau, phis), rtol=1e-9, atol=0)
+    # one row at a time gives the same rows (the series applies to some rows only)
+    for k in (0, 3, 6):
+        np.testing.assert_array_equal(ar1_wv_pos(tau, phis[k : k + 2]), rows[k : k + 2])
+
+
+@pytest.mark.parametrize("weights", ["ci", "full"])
+def test_profile_along_a_path_is_the_nnls_at_every_point(weights: str) -> None:
+    # the profile tries the previous point's positive set first (normal equations + KKT): along
+    # a path that crosses active-set changes (a GM's variance going to 0 and back, the QN and
+    # DR columns in and out), every value equals SciPy's NNLS of the same design from scratch
+    prob = _problem("2*GM+WN+QN+RW+DR", weights)
+    rng = np.random.default_rng(2)
+    path = np.log([2000.0, 3.0]) + np.cumsum(rng.normal(0.0, 0.15, (300, 2)), axis=0)
+    path = np.sort(np.clip(path, prob.lo, prob.hi), axis=1)[:, ::-1]
+    warm, supports = 0, set()
+    for u in path:
+        phis = np.exp(-1.0 / np.exp(u))
+        c = prob.a @ prob.design(tuple(phis))
+        norms = np.linalg.norm(c, axis=0)
+        g, rnorm = scipy.optimize.nnls(c / norms, prob.b)
+        supports.add(tuple(g > 0))
+        n_before = prob._active
+        assert prob.profile(u) == pytest.approx(rnorm**2, rel=1e-10)
+        warm += prob._active is n_before
+    assert len(supports) >= 3  # the path does cross changes of the positive set
+    assert warm > len(path) // 2  # and most points were answered by the previous set
+
+
+def test_polished_refit_reaches_the_searched_minimum() -> None:
+    # the J-test's efficient refit of a fitted candidate (Omega = V^-1, fewer levels) starts
+    # from the candidate's values with no grid: it reaches the same minimum as the full search
+    # (grid, multi-starts, anchors), and never lies above its
+    # start (the anchor argument)
+    x = eg.parse_model("GM(beta=0.05, sigma2_gm=1e-4)+GM(beta=5, sigma2_gm=1e-3)+WN(sigma2=1e-2)")
+    wv = eg.wavelet_variance(x.simulate(2**16, fs=100.0, rng=np.random.default_rng(7)), fs=100.0)
+    first = eg.fit_gmwm(wv, "2*GM+WN")
+    k = wv.n_levels - 3
+    omega = np.linalg.inv(eg.wv_cov(first)[:k, :k])
+    full = eg.fit_gmwm(wv, "2*GM+WN", weights=omega, levels=k)
+    polished = eg.fit_gmwm(wv, first.model, weights=omega, levels=k, optima={}, polish=True)
+    assert polished.objective == pytest.approx(full.objective, rel=1e-8)
+    start = eg.gmwm_objective(wv.truncate(k), first.model, omega)
+    assert polished.objective <= start
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("channel", ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"])
+def test_ranking_j_column_is_the_full_searchs(real_data, channel: str) -> None:
+    # the ranking's J-test refits are polished from each fitted candidate (no grid): on every
+    # imu1 channel each of the 47 J statistics equals the one of a refit by the full search
+    # (grid, multi-starts, its own sub-models), to 1e-6 relative (measured: <= 7e-8)
+    from engine.inference.jtest import efficient_j
+
+    log = eg.load_log(real_data / "adis16405_imu1.h5", channel=channel)
+    wv = eg.wavelet_variance(log[channel], fs=log.fs)
+    ranking = eg.rank_models(wv, max_model="2*GM+WN+QN+RW+DR")
+    fitted = [c for c in ranking.candidates if c.result is not None]
+    largest = max(fitted, key=lambda c: (c.n_params, -c.objective))
+    vmat = eg.wv_cov(largest.result)
+    checked = 0
+    for c in fitted:
+        if not math.isfinite(c.j_stat):
+            continue
+        full, _, _, _ = efficient_j(wv, c.result.model, vmat)
+        assert c.j_stat == pytest.approx(full, rel=1e-6), c.model
+        checked += 1
+    assert checked >= 40
+
+
+def test_ar1_columns_on_stacked_scales() -> None:
+    # a replicate fit stacks the scale vectors of its recordings (six logs: 2 .. 2^19 six
+    # times): the series must go where x tau < 2e-3, not to as many of the first scales of the
+    # stacked vector (it went there before: with the slow GM of the six ADIS gyro_x, 6,580
+    # samples, to the first 18 scales, 2 .. 2^18 of the first log, off by 10^5 at the
+    # coarsest; their replicate fit of 2*GM+WN+RW stopped at 630.28, it reaches 630.09 now)
+    tau = np.tile(2.0 ** np.arange(1, 20), 6)
+    for tc in (600.0, 6580.0, 1e5, 1e7):
+        phi = math.exp(-1.0 / tc)
+        ref = ar1_wv(tau, np.array([phi, 0.5]))
+        np.testing.assert_allclose(ar1_wv_pos(tau, phi), ref[0], rtol=1e-9, atol=0)
+        np.testing.assert_allclose(ar1_wv_pos(tau, np.array([phi, 0.5])), ref, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("weights", ["ci", "full"])
+@pytest.mark.parametrize("model", ["2*GM+WN+QN+RW+DR", "GM+WN", "2*GM+RW", "GM+QN+WN+RW+DR"])
+def test_profile_of_many_points_is_the_nnls_of_each(weights: str, model: str) -> None:
+    # the grid's exact profiles at once (every positive set solved, the best feasible one)
+    # against SciPy's NNLS of each point's design, at 200 random correlation times from 0.1
+    # samples to 9e6
+    prob = _problem(model, weights)
+    rng = np.random.default_rng(1)
+    u = np.sort(rng.uniform(-2.0, 16.0, (200, prob.k)), axis=1)[:, ::-1].copy()
+    many = prob.profile_many(u)
+    for row, value in zip(u, many, strict=True):
+        c = prob.a @ prob.design(tuple(np.exp(-1.0 / np.exp(row))))
+        norms = np.linalg.norm(c, axis=0)
+        _, rnorm = scipy.optimize.nnls(c / norms, prob.b)
+        assert value == pytest.approx(rnorm**2, rel=1e-10)
+    assert np.array_equal(prob.profile_many(u), many)  # memoised
