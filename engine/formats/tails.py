@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -173,6 +173,7 @@ def tail_factors(
     confidence: float | None = 0.95,
     levels: int | None = None,
     channel: str = "",
+    segments: Sequence[tuple[int, int]] = (),
 ) -> TailFactors:
     """Per dyadic scale, the least factor on the variance whose Gaussian ``level`` quantile
     covers the data's (module docstring).
@@ -191,6 +192,10 @@ def tail_factors(
         Number of scales (default ``floor(log2(N - 1))``, docs/conventions.md).
     channel : str
         Its name, for messages.
+    segments : sequence of (start, stop), optional
+        Sample ranges to use (the still parts of a flight, :attr:`engine.io.ImuLog.segments`):
+        each scale's coefficients are pooled over the ranges, as the segmented WV pools them,
+        and no coefficient spans two ranges. Default: the whole signal.
 
     Returns
     -------
@@ -213,17 +218,24 @@ def tail_factors(
     1.0
     """
     a = as_series(x)
-    n = a.size
+    parts = [a[s:e] for s, e in segments] if segments else [a]
+    n = max(p.size for p in parts)
     if n < 3:
-        raise ValueError(f"tail_factors needs at least 3 samples, got {n}")
+        raise ValueError(f"tail_factors needs at least 3 samples (in one segment), got {n}")
+    parts = [p for p in parts if p.size >= 3]
     big = int(math.floor(math.log2(n - 1)))
     nl = big if levels is None else int(levels)
     if not 1 <= nl <= big:
         raise ValueError(f"levels must be in 1..{big} for {n} samples, got {levels!r}")
+    coefs = [
+        sampled_haar_coefficients(p, min(nl, int(math.floor(math.log2(p.size - 1)))), per_scale=8)
+        for p in parts
+    ]
     taus, ratios, factors = [], [], []
-    for j, w in enumerate(sampled_haar_coefficients(a, nl, per_scale=8), start=1):
+    for j in range(1, nl + 1):
         tau = 1 << j
-        eta = max((n - tau + 1) / tau, 1.0)
+        w = np.concatenate([c[j - 1] for c in coefs if len(c) >= j])
+        eta = max(sum(max((p.size - tau + 1) / tau, 0.0) for p in parts), 1.0)
         ratio, f = quantile_factor(w, level, confidence, eta)
         taus.append(float(tau))
         ratios.append(ratio)
@@ -245,5 +257,7 @@ def log_tail_factors(log: ImuLog, channels: Iterable[str]) -> dict[str, TailFact
     given the log."""
     names = set(log.names)
     return {
-        ch: tail_factors(log[ch], fs=float(log.fs), channel=ch) for ch in channels if ch in names
+        ch: tail_factors(log[ch], fs=float(log.fs), channel=ch, segments=log.segments)
+        for ch in channels
+        if ch in names
     }

@@ -148,14 +148,21 @@ def test_exports_of_the_fit(app_state: AppState) -> None:
     assert doc["gyroscope_noise_density"] == pytest.approx(
         np.sqrt(wn / s.fs) * np.pi / 180, rel=1e-9
     )
-    # by default the app writes what the engine's export writes by default: the projected and
+    # by default the app writes what the engine's export writes by default from the loaded log
+    # (as gmwm export does: the data bound with the log's tail factors): the projected and
     # over-bounded numbers, never below the fit's own white noise density here
     from engine.formats import export
 
     y_bound = sv.export_text(s, "kalibr")
     fits = {s.channel: s.result}
     ref = export(
-        None, fits, "kalibr", units={s.channel: s.unit}, source=s.filename, allow_partial=True
+        None,
+        fits,
+        "kalibr",
+        units={s.channel: s.unit},
+        source=s.filename,
+        allow_partial=True,
+        log=s.log,
     )
     assert y_bound == ref
     assert yaml.safe_load(y_bound)["gyroscope_noise_density"] >= doc["gyroscope_noise_density"]

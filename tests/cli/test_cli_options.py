@@ -61,6 +61,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--n": ("n", r"^log lengths in samples"),  # study: several sample counts
     "--name": ("name", r"virtual channel's name"),
     "--no-intervals": ("no_intervals", r"^filter formats: skip the 95 %"),
+    "--no-tails": ("no_tails", r"^filter formats: the data bound without its tail factors"),
     "--optimism": ("optimism", r"^optimism term of the WVIC"),
     "-o": ("output", r"output file|^folder for"),
     "--output": ("output", r"output file|^folder for"),

@@ -79,6 +79,30 @@ def _wnrw_fit(seed: int = 2) -> tuple[np.ndarray, eg.GMWMResult]:
     return x, eg.fit_gmwm(eg.wavelet_variance(x, fs=FS), "WN+RW")
 
 
+def test_segments_keep_the_motion_between_them_out():
+    """A flight's still parts (``ImuLog.segments``) are what the segmented WV and fit use, so
+    the tail factors pool their coefficients only: Gaussian still parts separated by a burst
+    of motion need no factor, while the whole signal does. Before, ``log_tail_factors`` read
+    the whole log, so ``gmwm export --segments auto`` of a flight raised the PX4 file's noise
+    by the motion's tails (EKF2_ACC_NOISE 1.6x the checked value)."""
+    from engine.formats import log_tail_factors
+    from engine.io import ImuLog
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=3 * 2**14)
+    x[2**14 : 2**14 + 500] += 10.0 * rng.normal(size=500)  # motion between the still parts
+    segs = ((0, 2**14), (2**15, 3 * 2**14))
+    whole = tail_factors(x, fs=100.0)
+    still = tail_factors(x, fs=100.0, segments=segs)
+    assert whole.largest()[0] > 5.0  # 10.3 (at 0.02 s)
+    assert still.largest()[0] == 1.0  # no scale above its Gaussian quantile
+    assert still.tau_samples.size == 13  # floor(log2(2^14 - 1)): the longest part's scales
+    log = ImuLog(channels={"a": x}, fs=100.0, segments=segs)
+    np.testing.assert_array_equal(log_tail_factors(log, ["a"])["a"].factor, still.factor)
+    with pytest.raises(ValueError, match="at least 3 samples"):
+        tail_factors(x, segments=((0, 2), (5, 7)))
+
+
 def test_projection_multiplies_the_data_floor_by_the_factor():
     """A factor 3 at one dyadic scale (2^8 samples, 2.56 s): the exported WV there is at
     least 3 x the empirical lower limit, the header and the dictionary name the factor and its
