@@ -39,7 +39,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``report`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..reporting import DEFAULT_SELECT
+    from ..inference.selection import DEFAULT_SELECT
 
     rp = sub.add_parser(
         "report",

@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Sequence
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -502,12 +503,10 @@ def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[fl
     level : float
         Two-sided coverage in (0, 1).
     """
-    from scipy import stats
-
     free = free_params(res)
     cov = param_cov(res, vmat, free)
     se = np.sqrt(np.maximum(np.diagonal(cov), 0.0))
-    z = stats.norm.ppf(0.5 + level / 2)
+    z = NormalDist().inv_cdf(0.5 + level / 2)
     u0 = _u0(res.model, free)
     bounds = {}
     for k, (i, name) in enumerate(free):
@@ -554,8 +553,6 @@ def delta_bounds(
         NaN bounds for a quantity that is not positive or that depends on no free parameter
         (all its terms on a bound).
     """
-    from scipy import stats
-
     free = free_params(res)
     if not free:
         return [(math.nan, math.nan)] * len(fns)
@@ -563,7 +560,7 @@ def delta_bounds(
         cov = param_cov(res, wv_cov_model(res.model, res.wv) if vmat is None else vmat, free)
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate V
         return [(math.nan, math.nan)] * len(fns)
-    z = float(stats.norm.ppf(0.5 + level / 2))
+    z = NormalDist().inv_cdf(0.5 + level / 2)
     u0 = _u0(res.model, free)
     steps = [1e-5 * max(1.0, abs(u)) for u in u0]
     shifted = []

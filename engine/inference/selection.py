@@ -48,7 +48,12 @@ __all__ = [
     "actionable",
     "JTEST_NOTE",
     "DISGUISE_LEVEL",
+    "DEFAULT_SELECT",
 ]
+
+#: The maximal model whose WVIC-best sub-model is fitted when no model is given (``gmwm
+#: report``, ``gmwm batch``, :func:`engine.reporting.gather_report`).
+DEFAULT_SELECT = "2*GM+WN+QN+RW+DR"
 
 #: A candidate with an AR1/GM faster than one sample keeps its own rank only when the distance
 #: test of folding that term into WN rejects the fold at this level (a small level: under a

@@ -39,6 +39,7 @@ from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
 from ..formats import misfit
+from ..inference.selection import DEFAULT_SELECT
 from ..io import ImuLog, log_of
 from ..models import DR, QN, RW, WN
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
@@ -55,9 +56,6 @@ __all__ = [
     "welch_psd",
     "gather_report",
 ]
-
-#: The maximal model whose WVIC-best sub-model is fitted when no model is given.
-DEFAULT_SELECT = "2*GM+WN+QN+RW+DR"
 
 #: A report's progress callback, ``progress(stage, done, total)``: stage ``"fits"`` (a step per
 #: channel), ``"intervals"`` (a step per channel's numbers, and the export), ``"figures"`` and
