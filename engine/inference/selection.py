@@ -64,8 +64,9 @@ DISGUISE_LEVEL = 1e-3
 TIE_Z = 1.0
 
 #: A GM/AR1 whose correlation time exceeds this fraction of the log's length mimics a random
-#: walk at the scales of the log (:func:`tie_choice`).
-SLOW_GM = 1.0 / 32.0
+#: walk at the scales of the log (:func:`tie_choice`): 1, a correlation time beyond the log
+#: (docs/selection.md: a smaller fraction swaps real GMs for random walks on simulated logs).
+SLOW_GM = 1.0
 
 #: What the J column of a ranking is (the table's last line; the app and docs/inference.md agree).
 JTEST_NOTE = (

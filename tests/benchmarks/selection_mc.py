@@ -78,7 +78,7 @@ FAMILY = {
 }
 
 #: the tie rules' settings scored by ``--variants`` (z, slow-GM fraction); inf: no GM swap
-VARIANTS = [(z, g) for z in (0.5, 1.0, 2.0) for g in (1 / 16, 1 / 32, 1 / 64, math.inf)]
+VARIANTS = [(z, g) for z in (0.5, 1.0, 2.0) for g in (1.0, 1 / 16, 1 / 32, 1 / 64, math.inf)]
 
 
 def quantities(model: eg.Model, fs: float, tau: np.ndarray) -> tuple[float, float, float]:
