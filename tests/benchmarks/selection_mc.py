@@ -12,8 +12,10 @@ alone), the first row made actionable (``SelectionResult.first_actionable``: no 
 than one sample, nothing at a bound; the selection before the tie rules) and the selection
 ``SelectionResult.best`` (with the tie rules of :func:`engine.inference.selection.tie_choice`).
 Each log's ranking is saved in ``--cache`` (a pickle per log; a log already there is not
-ranked again), so that ``--variants`` scores the tie rules with other bands (``z``) and
-slow-GM fractions on the same logs at no cost. Printed per setting and choice:
+ranked again: delete the cache when the ranking's code changes; ``--cached-only`` scores the
+cached logs alone, for a run stopped part way), so that ``--variants`` scores the tie rules
+with other bands (``z``) and slow-GM fractions on the same logs at no cost.
+Printed per setting and choice:
 
 * ``true``: how often the chosen structure is the true one;
 * ``in band``: how often the chosen model's implied WV lies within the true WV's 95 % band
@@ -112,9 +114,10 @@ def structure(model: eg.Model) -> Counter[str]:
 
 
 def ranked_logs(
-    name: str, logs: int, max_model: str, seed: int, cache: Path | None
+    name: str, logs: int, max_model: str, seed: int, cache: Path | None, cached_only: bool = False
 ) -> list[SelectionResult]:
-    """The rankings of ``logs`` simulated logs of a setting (from the cache when there)."""
+    """The rankings of ``logs`` simulated logs of a setting (from the cache when there; with
+    ``cached_only``, only the cached ones: a run stopped part way is scored as it stands)."""
     truth_spec, n = SETTINGS[name]
     truth = eg.parse_model(truth_spec)
     rng = np.random.default_rng(seed)
@@ -124,6 +127,8 @@ def ranked_logs(
         path = cache / f"{name}_{max_model}_{seed}_{i:03d}.pkl" if cache else None
         if path is not None and path.exists():
             out.append(pickle.loads(path.read_bytes()))
+            continue
+        if cached_only:
             continue
         sel = rank_models(eg.wavelet_variance(x, fs=FS), max_model=max_model)
         if path is not None:
@@ -186,6 +191,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--cache", type=Path, default=None, help="directory of saved rankings")
     ap.add_argument("--variants", action="store_true", help="score the tie rules' variants")
+    ap.add_argument("--cached-only", action="store_true", help="score the cached logs only")
     args = ap.parse_args()
     if args.cache is not None:
         args.cache.mkdir(parents=True, exist_ok=True)
@@ -203,15 +209,13 @@ def main() -> None:
         truth, n = SETTINGS[name]
         family = args.max_model or FAMILY[name]
         t0 = time.perf_counter()
-        rankings = ranked_logs(
-            name, args.logs, family, args.seed + list(SETTINGS).index(name), args.cache
-        )
+        seed = args.seed + list(SETTINGS).index(name)
+        rankings = ranked_logs(name, args.logs, family, seed, args.cache, args.cached_only)
+        logs = len(rankings)
         dt = time.perf_counter() - t0
         for choice in ("WVIC first row", "actionable first row", "selection"):
             chosen = [choices(sel)[choice] for sel in rankings]
-            print(
-                row(name, n, choice, score(truth, n, chosen, rankings), args.logs, dt), flush=True
-            )
+            print(row(name, n, choice, score(truth, n, chosen, rankings), logs, dt), flush=True)
         if args.variants:
             for z, g in VARIANTS:
                 chosen = [
@@ -223,12 +227,13 @@ def main() -> None:
                 variants[(name, z, g)] = score(truth, n, chosen, rankings)
     if args.variants:
         print("\nTie rules' variants (in band / true / K missed / over, per setting):")
-        print(f"| z | slow GM | {' | '.join(args.settings)} | in band, all |")
-        print("|---" * (len(args.settings) + 3) + "|")
+        print(f"| z | slow GM | {' | '.join(args.settings)} | in band | K missed | over |")
+        print("|---" * (len(args.settings) + 5) + "|")
         for z, g in VARIANTS:
             cells = [variants[(nm, z, g)] for nm in args.settings]
             txt = " | ".join(f"{o['band']}/{o['true']}/{o['Kmiss']}/{o['over']}" for o in cells)
-            print(f"| {z:g} | {g:.3g} | {txt} | {sum(o['band'] for o in cells)} |")
+            tot = [sum(o[k] for o in cells) for k in ("band", "Kmiss", "over")]
+            print(f"| {z:g} | {g:.3g} | {txt} | {' | '.join(map(str, tot))} |")
 
 
 if __name__ == "__main__":
