@@ -196,7 +196,8 @@ def main() -> None:
     if args.cache is not None:
         args.cache.mkdir(parents=True, exist_ok=True)
     print(
-        f"Selection on simulated logs: {args.logs} logs per setting at {FS:g} Hz, every "
+        f"Selection on simulated logs: {'the cached' if args.cached_only else args.logs} logs per "
+        f"setting at {FS:g} Hz, every "
         f"sub-model of the family ranked (ci weights, asymptotic optimism); tie rules: band "
         f"{TIE_Z:g} SE, slow GM > {SLOW_GM:.3g} of the log"
     )
