@@ -680,7 +680,8 @@ def tie_choice(
     """The selection among the candidates that the WVIC does not tell apart from the first row.
 
     The WVIC has a sampling distribution: a candidate whose WVIC exceeds the first row's by at
-    most ``z`` standard errors of the difference (:func:`_wvic_se`) is *tied* with it. Among
+    most ``z`` standard errors of the difference (delta method plus the second-order term of
+    nested fits: docs/selection.md) is *tied* with it. Among
     the actionable ranked candidates tied with the first row (never one ranked as its WN
     twin), starting from ``selected`` (the first row, or the model a user can act on derived
     from it):
@@ -713,8 +714,8 @@ def tie_choice(
         first row) and ``derivation`` (``selected``'s derivation, then what the rules did,
         with the WVIC difference and the band).
     """
-    top = ranked[0]
-    if top.result is None or selected.result is None:
+    top, res = ranked[0], selected.result
+    if top.result is None or res is None:
         return selected
     eff = _rank_criteria(ranked)
     ties: list[tuple[Candidate, Counter[str], str]] = []
@@ -733,18 +734,17 @@ def tie_choice(
         return c, how
 
     cur, why = selected, list(selected.derivation)
-    have = _structure(cur.result.model) if cur.result is not None else Counter()
+    have = _structure(res.model)
     if not have["RW"]:
         swaps: list[tuple[Counter[str], str]] = []
         if have["DR"]:
             swaps.append((have - Counter(["DR"]) + Counter(["RW"]), "its drift DR"))
-        fitted = cur.result.model if cur.result is not None else None
         slow = [
-            (_correlation_time(q, top.result.wv.fs), q.code)
-            for q in (fitted.processes if fitted is not None else ())
+            (_correlation_time(q, res.wv.fs), q.code)
+            for q in res.model.processes
             if q.nonlinear is not None and q.linear_coef() > 0
         ]
-        if slow and max(slow)[0] > slow_gm * top.result.wv.n:
+        if slow and max(slow)[0] > slow_gm * res.wv.n:
             tc, code = max(slow)
             swaps.append(
                 (have - Counter([code]) + Counter(["RW"]), f"its {code} of {tc:.3g} samples")
