@@ -48,6 +48,7 @@ __all__ = [
     "wn_twin",
     "actionable",
     "tie_choice",
+    "wvic_se",
     "JTEST_NOTE",
     "DISGUISE_LEVEL",
     "TIE_Z",
@@ -651,8 +652,9 @@ def _structure(model: Model) -> Counter[str]:
     return Counter(q.code for q in model.processes if q.linear_coef() > 0)
 
 
-def _wvic_se(c: GMWMResult, top: GMWMResult, opt_c: float, opt_top: float, v: np.ndarray) -> float:
-    """Standard error of the WVIC difference of two fits with the same weights Omega.
+def wvic_se(c: GMWMResult, top: GMWMResult, opt_c: float, opt_top: float, v: np.ndarray) -> float:
+    """Standard error of the WVIC difference of two fits with the same weights Omega
+    (``c.objective + opt_c - top.objective - opt_top``; V the covariance of the WV).
 
     First order (delta method): the gradient of a fit's objective in the empirical WV is
     ``2 Omega (nu_hat - nu(theta_hat))``, so the difference's is ``2 Omega (nu_top - nu_c)``
@@ -723,7 +725,7 @@ def tie_choice(
         if c.as_twin or not c.is_actionable or c.result is None:
             continue
         diff = eff[c.model] - eff[top.model]
-        se = _wvic_se(c.result, top.result, c.optimism, top.optimism, v)
+        se = wvic_se(c.result, top.result, c.optimism, top.optimism, v)
         if diff <= z * se:
             ties.append(
                 (c, _structure(c.result.model), f"WVIC {diff:+.3g} within {z:g} SE = {z * se:.3g}")

@@ -47,7 +47,7 @@ from scipy import stats
 
 import engine as eg
 from engine.inference import SelectionResult, rank_models
-from engine.inference.selection import SLOW_GM, TIE_Z, tie_choice
+from engine.inference.selection import SLOW_GM, TIE_Z, tie_choice, wvic_se
 
 FS = 100.0
 
@@ -77,6 +77,17 @@ FAMILY = {
     "2*GM+WN": "2*GM+WN+RW",
     "WN+RW+DR": "GM+WN+QN+RW+DR",
     "GM+QN+WN+RW": "GM+WN+QN+RW+DR",
+}
+
+#: pairs of candidates whose WVIC difference's spread over the logs ``--se-check`` compares
+#: with :func:`engine.inference.selection.wvic_se` (per setting: (reference, other))
+SE_PAIRS = {
+    "slow-GM+WN+RW": [("GM+WN+RW", "GM+WN"), ("GM+WN+RW", "WN+RW")],
+    "GM+WN+RW": [("GM+WN+RW", "GM+WN+DR"), ("GM+WN+RW", "GM+WN+RW+DR"), ("GM+WN+RW", "GM+WN")],
+    "QN+WN+RW": [("QN+WN+RW", "QN+WN+RW+DR"), ("QN+WN+RW", "GM+QN+WN+RW")],
+    "2*GM+WN": [("2*GM+WN", "2*GM+WN+RW"), ("2*GM+WN", "GM+WN+RW")],
+    "WN+RW+DR": [("WN+RW+DR", "WN+RW"), ("WN+RW+DR", "QN+WN+RW+DR")],
+    "GM+QN+WN+RW": [("GM+QN+WN+RW", "GM+QN+WN"), ("GM+QN+WN+RW", "QN+WN+RW")],
 }
 
 #: the tie rules' settings scored by ``--variants`` (z, slow-GM fraction); inf: no GM swap
@@ -173,6 +184,28 @@ def choices(sel: SelectionResult) -> dict[str, eg.Candidate]:
     }
 
 
+def se_check(name: str, rankings: list[SelectionResult]) -> list[str]:
+    """Rows: the sd over the logs of a pair's WVIC difference against the formula's SE."""
+    out = []
+    for a, b in SE_PAIRS[name]:
+        d, se = [], []
+        for sel in rankings:
+            by = {c.model: c for c in sel.candidates}
+            ca, cb = by.get(a), by.get(b)
+            if ca is None or cb is None or ca.result is None or cb.result is None:
+                continue
+            d.append(cb.criterion - ca.criterion)
+            se.append(wvic_se(cb.result, ca.result, cb.optimism, ca.optimism, sel.v))
+        if len(d) < 3:
+            continue
+        sd, rms = float(np.std(d, ddof=1)), float(np.sqrt(np.mean(np.square(se))))
+        out.append(
+            f"| {name} | {b} - {a} | {len(d)} | {np.mean(d):.4f} | {sd:.4f} | {rms:.4f} "
+            f"| {sd / rms:.2f} |"
+        )
+    return out
+
+
 def row(name: str, n: int, choice: str, o: dict, logs: int, dt: float) -> str:
     med = {q: (f"{100 * np.median(o[q]):.1f} %" if o[q] else "-") for q in "NKB"}
     rw = "RW" in SETTINGS[name][0]
@@ -192,6 +225,7 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=None, help="directory of saved rankings")
     ap.add_argument("--variants", action="store_true", help="score the tie rules' variants")
     ap.add_argument("--cached-only", action="store_true", help="score the cached logs only")
+    ap.add_argument("--se-check", action="store_true", help="the tie band's SE against the logs")
     args = ap.parse_args()
     if args.cache is not None:
         args.cache.mkdir(parents=True, exist_ok=True)
@@ -206,6 +240,7 @@ def main() -> None:
         "| over | s |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     )
     variants: dict = {}
+    checks: list[str] = []
     for name in args.settings:
         truth, n = SETTINGS[name]
         family = args.max_model or FAMILY[name]
@@ -217,6 +252,8 @@ def main() -> None:
         for choice in ("WVIC first row", "actionable first row", "selection"):
             chosen = [choices(sel)[choice] for sel in rankings]
             print(row(name, n, choice, score(truth, n, chosen, rankings), logs, dt), flush=True)
+        if args.se_check:
+            checks += se_check(name, rankings)
         if args.variants:
             for z, g in VARIANTS:
                 chosen = [
@@ -235,6 +272,12 @@ def main() -> None:
             txt = " | ".join(f"{o['band']}/{o['true']}/{o['Kmiss']}/{o['over']}" for o in cells)
             tot = [sum(o[k] for o in cells) for k in ("band", "Kmiss", "over")]
             print(f"| {z:g} | {g:.3g} | {txt} | {' | '.join(map(str, tot))} |")
+
+    if args.se_check:
+        print("\nThe WVIC difference of a pair over the logs against wvic_se (the tie band's SE):")
+        print("| setting | difference | logs | mean | sd over the logs | SE (rms) | sd / SE |")
+        print("|---|---|---|---|---|---|---|")
+        print("\n".join(checks))
 
 
 if __name__ == "__main__":
