@@ -106,10 +106,10 @@ def test_a_random_walk_is_no_longer_read_as_a_drift_on_fresh_logs():
     """30 fresh logs of selection_mc.py's GM+WN+RW setting (2^16 samples; seed 2027, not one of
     the logs the rules were chosen on), every sub-model of GM+WN+RW+DR, scored on the same logs
     for the previous selection (``first_actionable``) and the selection. On the 100 logs of
-    docs/selection.md the previous selection read the RW as a drift in about 15 % of the logs
-    and the tie rules in about 1 %: with 30 logs, 2 or fewer at 1 % has probability 0.997, and
-    the true structure must gain (the previous rule's 82 % against 97 %: an expected gain of
-    4.5 logs, sd 2). About 45 s of CPU."""
+    docs/selection.md the previous selection read the RW as a drift in 16 % of the logs and the
+    tie rules in 1 %: with 30 logs, 2 or fewer at 1 % has probability 0.997; and the true
+    structure must gain (82 % against 95 % there: an expected gain of 3.9 logs, sd 2). About 35 s
+    of CPU."""
     mc = _selection_mc()
     truth, n = mc.SETTINGS["GM+WN+RW"]
     rankings = mc.ranked_logs("GM+WN+RW", 30, mc.FAMILY["GM+WN+RW"], 2027, None)
