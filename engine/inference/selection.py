@@ -23,6 +23,7 @@ import itertools
 import math
 import textwrap
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
@@ -46,9 +47,13 @@ __all__ = [
     "Candidate",
     "wn_twin",
     "actionable",
+    "tie_choice",
+    "wvic_se",
     "JTEST_NOTE",
     "DISGUISE_LEVEL",
     "DEFAULT_SELECT",
+    "TIE_Z",
+    "SLOW_GM",
 ]
 
 #: The maximal model whose WVIC-best sub-model is fitted when no model is given (``gmwm
@@ -59,6 +64,15 @@ DEFAULT_SELECT = "2*GM+WN+QN+RW+DR"
 #: test of folding that term into WN rejects the fold at this level (a small level: under a
 #: model without such a term the top-ranked structure must not carry one).
 DISGUISE_LEVEL = 1e-3
+
+#: The WVIC's tie band, in standard errors of the difference from the first row
+#: (:func:`tie_choice`): a candidate within it is not told apart from the first row by the data.
+TIE_Z = 1.0
+
+#: A GM/AR1 whose correlation time exceeds this fraction of the log's length mimics a random
+#: walk at the scales of the log (:func:`tie_choice`): 1, a correlation time beyond the log
+#: (docs/selection.md: a smaller fraction swaps real GMs for random walks on simulated logs).
+SLOW_GM = 1.0
 
 #: What the J column of a ranking is (the table's last line; the app and docs/inference.md agree).
 JTEST_NOTE = (
@@ -278,10 +292,13 @@ class SelectionResult:
     """Candidates ranked by WVIC (smallest first), with the settings used.
 
     ``best`` is the selection, a model a user can act on (:attr:`Candidate.is_actionable`):
-    the first row when it is actionable, else ``selected``, derived from the first row by
+    the first row when it is actionable, else the model derived from the first row by
     :func:`actionable` (each AR1/GM faster than one sample folded into WN, each term at a bound
     dropped; the other values kept: the implied WV is the first row's at every scale longer
-    than a few samples).
+    than a few samples: ``first_actionable``); then, among the candidates the WVIC does not
+    tell apart from the first row, a RW for a drift or for a GM slower than the log, and the
+    fewer parameters among over-fitted ties (:func:`tie_choice`). ``selected`` is the
+    selection when it is not the first row.
     """
 
     candidates: list[Candidate]
@@ -291,6 +308,11 @@ class SelectionResult:
     selected: Candidate | None = None
     #: why the J column has no p-values (``"not calibrated: ..."``), or ``""``
     j_note: str = ""
+    #: the model a user can act on derived from the first row, before the tie rules of
+    #: :func:`tie_choice` (None when the first row is actionable)
+    first_actionable: Candidate | None = None
+    #: the covariance of the WV (J, J) of the optimism, the J column and the tie band
+    v: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def best(self) -> Candidate:
@@ -585,16 +607,7 @@ def rank_models(
         if math.isfinite(c.j_stat) and math.isfinite(t.j_stat):
             tp = float(stats.chi2.sf(t.j_stat - c.j_stat, max(t.j_df - c.j_df, 1)))
         cands[k] = dataclasses.replace(c, twin_p=tp, as_twin=not tp < DISGUISE_LEVEL)
-    by_spec = {c.model: c for c in cands}
-
-    def rank_criterion(c: Candidate) -> float:
-        seen = set()
-        while c.as_twin and c.model not in seen:
-            seen.add(c.model)
-            c = by_spec[c.twin]
-        return c.criterion
-
-    eff = {c.model: rank_criterion(c) for c in cands}
+    eff = _rank_criteria(cands)
 
     # candidates whose extra terms are fitted at zero tie with the smaller model: within a
     # relative 1e-6 of each other, the one with fewer parameters ranks first
@@ -610,10 +623,158 @@ def rank_models(
 
     cands.sort(key=functools.cmp_to_key(order))
     wname = "efficient" if efficient else (weights if isinstance(weights, str) else "user")
-    selected = _selection(wv, cands[0], weights, vmat, j_note)
+    derived = _selection(wv, cands[0], weights, vmat, j_note)
+    chosen = tie_choice(cands, derived if derived is not None else cands[0], vmat)
     return SelectionResult(
-        cands, optimism, wname, time.perf_counter() - t0, selected=selected, j_note=j_note
+        cands,
+        optimism,
+        wname,
+        time.perf_counter() - t0,
+        selected=None if chosen is cands[0] else chosen,
+        j_note=j_note,
+        first_actionable=derived,
+        v=vmat,
     )
+
+
+def _rank_criteria(cands: list[Candidate]) -> dict[str, float]:
+    """The criterion each candidate ranks by: its WVIC, or its WN twin's when it is ranked as
+    its twin (resolved through twins of twins)."""
+    by_spec = {c.model: c for c in cands}
+
+    def rank_criterion(c: Candidate) -> float:
+        seen = set()
+        while c.as_twin and c.model not in seen:
+            seen.add(c.model)
+            c = by_spec[c.twin]
+        return c.criterion
+
+    return {c.model: rank_criterion(c) for c in cands}
+
+
+def _structure(model: Model) -> Counter[str]:
+    """The terms of a fitted model with a positive variance, counted by code."""
+    return Counter(q.code for q in model.processes if q.linear_coef() > 0)
+
+
+def wvic_se(c: GMWMResult, top: GMWMResult, opt_c: float, opt_top: float, v: np.ndarray) -> float:
+    """Standard error of the WVIC difference of two fits with the same weights Omega
+    (``c.objective + opt_c - top.objective - opt_top``; V the covariance of the WV).
+
+    First order (delta method): the gradient of a fit's objective in the empirical WV is
+    ``2 Omega (nu_hat - nu(theta_hat))``, so the difference's is ``2 Omega (nu_top - nu_c)``
+    and its variance ``4 d' Omega V Omega d`` with ``d = nu_c - nu_top``. Second order, which
+    dominates when the two implied WVs nearly coincide (nested models): the extra fit of
+    ``k = |p_c - p_top|`` parameters lowers the objective by a sum of ``k`` chi-square(1)-like
+    terms whose mean is half the optimisms' difference; with ``Omega = V^-1`` it is
+    ``chi2(k)``, of standard deviation ``sqrt(2 k) = |optimism_c - optimism_top| / sqrt(2 k)``.
+    """
+    d = c.implied - top.implied
+    w = top.omega
+    first = 2.0 * math.sqrt(max(float(d @ w @ v @ w @ d), 0.0))
+    k = max(abs(c.model.n_params - top.model.n_params), 1)
+    return math.hypot(first, abs(opt_c - opt_top) / math.sqrt(2.0 * k))
+
+
+def tie_choice(
+    ranked: list[Candidate],
+    selected: Candidate,
+    v: np.ndarray,
+    *,
+    z: float = TIE_Z,
+    slow_gm: float = SLOW_GM,
+) -> Candidate:
+    """The selection among the candidates that the WVIC does not tell apart from the first row.
+
+    The WVIC has a sampling distribution: a candidate whose WVIC exceeds the first row's by at
+    most ``z`` standard errors of the difference (delta method plus the second-order term of
+    nested fits: docs/selection.md) is *tied* with it. Among
+    the actionable ranked candidates tied with the first row (never one ranked as its WN
+    twin), starting from ``selected`` (the first row, or the model a user can act on derived
+    from it):
+
+    1. **a random walk bounds the long scales** (the filter's horizon): when ``selected`` has
+       no RW and a tie is ``selected`` with its drift DR, or its slowest AR1/GM if that one's
+       correlation time exceeds ``slow_gm`` times the log's length, replaced by a RW, that
+       tie is chosen (fewest parameters, then smallest WVIC);
+    2. **the fewer parameters among over-fitted ties**: a tie whose terms are a strict part
+       of the choice's (keeping its RW) replaces it (fewest parameters, then smallest WVIC).
+
+    Parameters
+    ----------
+    ranked : list of Candidate
+        The ranked candidates, first row first (:attr:`SelectionResult.candidates`).
+    selected : Candidate
+        The selection before the tie rules (the first row when it is actionable).
+    v : ndarray (J, J)
+        Covariance of the WV, the ranking's V.
+    z : float
+        The tie band in standard errors (:data:`TIE_Z`).
+    slow_gm : float
+        Fraction of the log's length beyond which a correlation time mimics a random walk
+        (:data:`SLOW_GM`).
+
+    Returns
+    -------
+    Candidate
+        ``selected`` when no rule applies; else the tie chosen, with ``derived_from`` (the
+        first row) and ``derivation`` (``selected``'s derivation, then what the rules did,
+        with the WVIC difference and the band).
+    """
+    top, res = ranked[0], selected.result
+    if top.result is None or res is None:
+        return selected
+    eff = _rank_criteria(ranked)
+    ties: list[tuple[Candidate, Counter[str], str]] = []
+    for c in ranked:
+        if c.as_twin or not c.is_actionable or c.result is None:
+            continue
+        diff = eff[c.model] - eff[top.model]
+        se = wvic_se(c.result, top.result, c.optimism, top.optimism, v)
+        if diff <= z * se:
+            ties.append(
+                (c, _structure(c.result.model), f"WVIC {diff:+.3g} within {z:g} SE = {z * se:.3g}")
+            )
+
+    def pick(options: list[tuple[Candidate, Counter[str], str]]) -> tuple[Candidate, str]:
+        c, _, how = min(options, key=lambda t: (t[0].n_params, eff[t[0].model]))
+        return c, how
+
+    cur, why = selected, list(selected.derivation)
+    have = _structure(res.model)
+    if not have["RW"]:
+        swaps: list[tuple[Counter[str], str]] = []
+        if have["DR"]:
+            swaps.append((have - Counter(["DR"]) + Counter(["RW"]), "its drift DR"))
+        slow = [
+            (_correlation_time(q, res.wv.fs), q.code)
+            for q in res.model.processes
+            if q.nonlinear is not None and q.linear_coef() > 0
+        ]
+        if slow and max(slow)[0] > slow_gm * res.wv.n:
+            tc, code = max(slow)
+            swaps.append(
+                (have - Counter([code]) + Counter(["RW"]), f"its {code} of {tc:.3g} samples")
+            )
+        for target, what in swaps:
+            options = [t for t in ties if t[1] == target]
+            if options:
+                c, how = pick(options)
+                why.append(f"{c.model} for {cur.model}: a RW for {what}, tied ({how})")
+                cur, have = c, target
+                break
+    parts = [
+        t
+        for t in ties
+        if t[1] != have and all(t[1][k] <= have[k] for k in t[1]) and (t[1]["RW"] or not have["RW"])
+    ]
+    if parts:
+        c, how = pick(parts)
+        why.append(f"{c.model} for {cur.model}: fewer parameters, tied ({how})")
+        cur = c
+    if cur is selected:
+        return selected
+    return dataclasses.replace(cur, derived_from=top.model, derivation=tuple(why))
 
 
 def _selection(
