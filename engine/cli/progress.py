@@ -11,6 +11,7 @@ be read by a program.
 from __future__ import annotations
 
 import sys
+from contextlib import AbstractContextManager
 from types import TracebackType
 
 from tqdm import tqdm
@@ -24,7 +25,22 @@ def shown(quiet: bool = False) -> bool:
     return not quiet and isatty is not None and bool(isatty())
 
 
-class Bar:
+class _ClosedOnExit(AbstractContextManager):
+    """A ``with`` block that calls :meth:`close` at its end (an exception goes on)."""
+
+    def close(self) -> None:  # pragma: no cover - every subclass closes its own bar
+        raise NotImplementedError
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class Bar(_ClosedOnExit):
     """One tqdm bar on stderr, fed as a ``progress(done, total)`` callback or by :meth:`step`.
 
     Parameters
@@ -68,19 +84,8 @@ class Bar:
         """End the bar's line (a bar left open is closed at exit)."""
         self._bar.close()
 
-    def __enter__(self) -> Bar:
-        return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-
-class Stages:
+class Stages(_ClosedOnExit):
     """One :class:`Bar` per stage of a report, as its ``progress(stage, done, total)`` callback.
 
     A stage's bar opens at its first call and closes when the next stage starts (or at
@@ -115,14 +120,3 @@ class Stages:
         if self._bar is not None:
             self._bar.close()
             self._bar = None
-
-    def __enter__(self) -> Stages:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
