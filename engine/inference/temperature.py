@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -119,6 +119,12 @@ class TemperatureFit:
     tau_interval: tuple[float, float] = (0.0, 0.0)
     lag_bic: float = math.nan
     fs: float = math.nan
+
+    #: The sensitivity as a datasheet figure of a fleet (``engine.batch.unit_values``, the
+    #: fleet report's tables): its process, quantity and symbol.
+    PROCESS: ClassVar[str] = "temperature"
+    QUANTITY: ClassVar[str] = "bias temperature sensitivity"
+    SYMBOL: ClassVar[str] = "S_T"
 
     @property
     def interval(self) -> np.ndarray:
