@@ -229,18 +229,11 @@ def temperature_fit(
 ) -> Any:
     """The temperature compensation of channel ``name`` (``--temperature``,
     :func:`engine.inference.temperature.fit_log_temperature`), said in one line on stderr; None
-    when the log has no temperature channel (or is a summary, or is cut into segments)."""
+    when the log has no temperature channel (or is a summary). A log cut into still segments
+    (``--segments``) is compensated on its segments, each with its own offset."""
     from ..inference.temperature import find_temperature, fit_log_temperature
 
     choice = getattr(args, "temperature", "none") or "none"
-    if log.segments and not log.is_summary and choice != "none":
-        tname = find_temperature(log, choice, channel=name)
-        if tname is not None:
-            say(
-                args,
-                f"{label}temperature: not fitted on a log cut into segments ('{tname}' ignored)",
-            )
-        return None
     tname = None if log.is_summary else find_temperature(log, choice, channel=name)
     try:
         tf = fit_log_temperature(
