@@ -199,3 +199,28 @@ def test_a_real_log_without_temperature_shows_no_switch_and_no_grey_wv(real_data
     assert "temperature" not in s.to_query()
     want = s.log.wavelet_variance("gyro_x", fs=s.fs).variance
     np.testing.assert_array_equal(s.wv.variance, want)
+
+
+def test_a_saved_session_keeps_the_switch(logs):
+    """A session saved with the compensation off restores with it off: the same raw WV and
+    the same fit (a session file without the key restores with it on, as before)."""
+    import json
+
+    from gmwm_app import session_view as sv
+
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    s.compensate = False
+    text = sv.session_json(s)
+    assert json.loads(text)["app"]["compensate"] is False
+    other = AppState()
+    assert sv.apply_restore(other, sv.prepare_restore(text, "s.json")), other.error
+    assert not other.compensate and other.wv_raw is None
+    np.testing.assert_allclose(other.wv.variance, s.wv.variance, rtol=1e-12)
+    assert _rw(other) == pytest.approx(_rw(s), rel=1e-9)
+    doc = json.loads(text)
+    del doc["app"]["compensate"]
+    old = AppState()
+    assert sv.apply_restore(old, sv.prepare_restore(json.dumps(doc), "s.json")), old.error
+    assert old.compensate and old.wv_raw is not None
