@@ -225,6 +225,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
+        self._reverting = False  # a failed compensation switch is being put back
 
     # ---------------------------------------------------------------------------------
     # helpers
@@ -628,7 +629,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         """The compensation switched (by its widget, a URL, a restored session): show the WV
         of the compensated or of the raw signal and refit on it (nothing to do when the WV
         shown is already that one, e.g. an install that set both)."""
-        if self._log is None or self.wv is None or not self.channel:
+        if self._log is None or self.wv is None or not self.channel or self._reverting:
             return
 
         def run() -> bool:
@@ -637,7 +638,14 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                 return True
             return self._switch_wv(wv)
 
-        self._guard("Could not switch the temperature compensation", run)
+        before = self.wv
+        if not self._guard("Could not switch the temperature compensation", run):
+            if self.wv is before:  # nothing switched: the switch (and its widget) go back
+                self._reverting = True
+                try:
+                    self.compensate = not self.compensate
+                finally:
+                    self._reverting = False
 
     # ---------------------------------------------------------------------------------
     # model actions

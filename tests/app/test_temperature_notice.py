@@ -224,3 +224,25 @@ def test_a_saved_session_keeps_the_switch(logs):
     old = AppState()
     assert sv.apply_restore(old, sv.prepare_restore(json.dumps(doc), "s.json")), old.error
     assert old.compensate and old.wv_raw is not None
+
+
+def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
+    """When the other WV cannot be computed, the page says why in one line, the switch goes
+    back (its widget with it) and the session keeps its WV and fit."""
+    from gmwm_app import state as state_mod
+
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    wv, res = s.wv, s.result
+    for key in [k for k in s._wv_cache.wvs if not k[3]]:  # the raw WV must be computed
+        del s._wv_cache.wvs[key]  # again, and that fails
+
+    def broken(*a, **kw):
+        raise ValueError("channel gyro_x: no memory left for its WV")
+
+    monkeypatch.setattr(state_mod, "compute_wv", broken)
+    s.compensate = False
+    why = "channel gyro_x: no memory left for its WV"
+    assert s.error == f"Could not switch the temperature compensation: {why}"
+    assert s.compensate and s.wv is wv and s.result is res
