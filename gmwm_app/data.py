@@ -400,11 +400,12 @@ def is_compensated(lg: ImuLog | None, ch: str, compensate: bool) -> bool:
 def wv_matrix_of(
     lg: ImuLog, channels: Sequence[str], fs: float, compensate: bool = False
 ) -> tuple[eg.WVMatrix, str]:
-    """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
+    """The WV/WCCV matrix of some channels of a log, and a notice (truncation, compensation).
 
     Channels of different lengths are truncated to the shortest (the notice says so). With
     ``compensate``, each channel with a temperature fit (:func:`temperature_fit_of`) is
-    taken with its bias-temperature relation taken out, as the Fit tab's WV is.
+    taken with its bias-temperature relation taken out, as the Fit tab's WV is (the notice
+    names them).
 
     Raises
     ------
@@ -420,23 +421,27 @@ def wv_matrix_of(
             "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
         )
     chans = tuple(channels)
-    series = {
-        c: compensated_series(lg, c, temperature_fit_of(lg, c) if compensate else None)
-        for c in chans
-    }
+    fits = {c: temperature_fit_of(lg, c) if compensate else None for c in chans}
+    series = {c: compensated_series(lg, c, fits[c]) for c in chans}
     sizes = {c: int(a.size) for c, a in series.items()}
     n = min(sizes.values())
-    note = ""
+    notes = []
     if len(set(sizes.values())) > 1:
         desc = ", ".join(f"{c}: {v:,}" for c, v in sizes.items())
-        note = (
+        notes.append(
             f"The channels have different lengths ({desc} samples); all are "
             f"truncated to the shortest, {n:,} samples."
         )
         series = {c: a[:n] for c, a in series.items()}
+    done = [f"{c} ('{tf.temperature}')" for c, tf in fits.items() if tf is not None]
+    if done:
+        notes.append(
+            f"Temperature-compensated, as on the Fit tab: {', '.join(done)}; the sidebar's "
+            "'Compensate temperature' box turns it off."
+        )
     units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
     wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
-    return wvm, note
+    return wvm, " ".join(notes)
 
 
 #: The log check's line per log and channel, computed once per loaded log (it dies with it).

@@ -141,9 +141,11 @@ def test_the_multi_channel_matrix_follows_the_switch(logs):
     s = AppState()
     assert s.load_path(d / "thermal2.csv"), s.error
     chans = ["gyro_x", "gyro_y"]
-    on, _ = s.wv_matrix(s.log, chans, FS)
+    on, note_on = s.wv_matrix(s.log, chans, FS)
+    assert "Temperature-compensated" in note_on and "gyro_y ('temperature')" in note_on
     s.compensate = False
-    off, _ = s.wv_matrix(s.log, chans, FS)
+    off, note_off = s.wv_matrix(s.log, chans, FS)
+    assert note_off == ""
     for i, ch in enumerate(chans):
         comp = s.get_wv(ch, FS, False, True).variance
         raw = s.get_wv(ch, FS, False, False).variance
