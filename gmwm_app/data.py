@@ -480,7 +480,9 @@ def _temperature_of(lg: ImuLog, channel: str) -> tuple[TemperatureFit | None, st
             return done[channel]
     tname = None if lg.is_summary else find_temperature(lg, "auto", channel=channel)
     out: tuple[TemperatureFit | None, str] = (None, "")
-    if tname is not None:
+    if tname is not None and lg.segments:  # as `--temperature auto` (segments_note)
+        out = (None, f"'{tname}' is not fitted on a log cut into still segments")
+    elif tname is not None:
         try:  # by its name: a channel the fit cannot use says why
             out = (fit_log_temperature(lg, channel, tname), "")
         except ValueError as e:  # constant temperature, too short, NaN
@@ -493,9 +495,10 @@ def _temperature_of(lg: ImuLog, channel: str) -> tuple[TemperatureFit | None, st
 def temperature_fit_of(lg: ImuLog, channel: str) -> TemperatureFit | None:
     """The bias-temperature fit of one channel of a log
     (:func:`engine.inference.temperature.fit_log_temperature`, temperature channel found
-    automatically; on a log cut into still segments, fitted on them), or None: no temperature
-    channel, a WV summary, or a relation that cannot be fitted (a constant temperature, too
-    few samples; :func:`temperature_unusable` says why). Cached per log and channel."""
+    automatically), or None: no temperature channel, a WV summary, a log cut into still
+    segments (as ``gmwm fit --temperature auto``), or a relation that cannot be fitted (a
+    constant temperature, too few samples; :func:`temperature_unusable` says why). Cached per
+    log and channel."""
     return _temperature_of(lg, channel)[0]
 
 

@@ -22,7 +22,11 @@ means are taken within each segment and differenced within it only, so that each
 keeps its own offset (the bias may move while the vehicle moves), and the differences of
 every segment are pooled in one regression; the compensated signal's WV pools the segments
 as the log's own WV does. The lag is not tried there (its profile filters the whole log's
-block structure).
+block structure). :func:`fit_log_temperature` does this only for a temperature channel named
+by the caller: with ``"auto"`` a segmented log is not compensated (:func:`segments_note` says
+so in one line), because a flight's still parts seldom see the temperature change more than
+its noise and a slow ramp, and a sensitivity fitted from those only adds its own error, times
+the temperature's range, to the signal (a simulated ArduPilot flight: RW 3.4 times larger).
 
 The GMWM is then fitted on ``y_t - sum_p c_p (T_t - T_ref)^p``; :class:`TemperatureFit`
 keeps both wavelet variances (raw and compensated). Sensitivities are reported in datasheet
@@ -53,6 +57,7 @@ __all__ = [
     "find_temperature",
     "temperature_series",
     "lagged_temperature",
+    "segments_note",
 ]
 
 BLOCKS = 256
@@ -296,6 +301,24 @@ def find_temperature(log: ImuLog, choice: str = "auto", *, channel: str = "") ->
     return choice
 
 
+def segments_note(log: ImuLog, name: str, choice: str = "auto") -> str:
+    """Why the temperature channel beside ``name`` is not fitted on a log cut into still
+    segments with ``choice="auto"``, in one phrase (what the CLI prints after
+    ``temperature:``, the report as the channel's note); ``""`` otherwise (a log in one piece,
+    no temperature channel, or a channel named: then fitted on the segments)."""
+    if choice != "auto" or not log.segments or log.is_summary:
+        return ""
+    tname = find_temperature(log, "auto", channel=name)
+    if tname is None:
+        return ""
+    return (
+        f"'{tname}' not fitted on a log cut into still segments with temperature='auto' "
+        "(still parts seldom see the temperature change more than its noise and a slow ramp, "
+        f"and an unsure sensitivity adds error); name it, temperature='{tname}', to fit it "
+        "on the segments, each with its own offset"
+    )
+
+
 def temperature_series(log: ImuLog, name: str) -> np.ndarray:
     """The samples of the temperature channel ``name`` of a log (an auxiliary channel, or a
     signal channel named like a temperature)."""
@@ -404,9 +427,10 @@ def fit_log_temperature(
     -------
     TemperatureFit or None
         None for ``"none"``, a log without a temperature channel, a WV summary (no samples),
-        and, with ``"auto"``, a temperature channel the fit cannot use (constant, NaN samples,
-        fewer than 4096 samples). On a log cut into still segments the relation is fitted on
-        the segments, each with its own offset (:func:`fit_temperature`'s ``segments``).
+        and, with ``"auto"``, a log cut into still segments (:func:`segments_note`) or a
+        temperature channel the fit cannot use (constant, NaN samples, fewer than 4096
+        samples). A channel named on a log cut into still segments is fitted on the
+        segments, each with its own offset (:func:`fit_temperature`'s ``segments``).
 
     Raises
     ------
@@ -418,7 +442,7 @@ def fit_log_temperature(
     if log.is_summary or choice == "none":
         return None
     tname = find_temperature(log, choice, channel=name)
-    if tname is None:
+    if tname is None or segments_note(log, name, choice):
         return None
     try:
         return fit_temperature(

@@ -248,3 +248,17 @@ def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
     why = "channel gyro_x: no memory left for its WV"
     assert s.error == f"Could not switch the temperature compensation: {why}"
     assert s.compensate and s.wv is wv and s.result is res
+
+
+def test_a_log_cut_into_segments_is_not_compensated_and_says_why(logs):
+    """A log loaded on its still segments is not compensated, as `--temperature auto` does not
+    (docs/qualify.md): its WV is the pooled raw one, and the switch is disabled with that
+    reason."""
+    d, x, temp = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv", segments="0:90000,110000:200000"), s.error
+    assert s.temperature_channel == "temperature" and s.wv_raw is None and s.temperature == ""
+    assert "not fitted on a log cut into still segments" in s.compensation_unavailable
+    np.testing.assert_allclose(
+        s.wv.variance, s.log.wavelet_variance("gyro_x", fs=s.fs).variance, rtol=1e-12
+    )

@@ -200,13 +200,19 @@ def test_a_log_cut_into_segments_is_compensated_on_its_segments():
     compensated WV pools the segments as the log's own WV does, and at the long scales, where
     the temperature term makes the raw WV 2 to 10 times the noise's, it is the noise's within
     30 %; the WN+RW fit of it has the planted RW within 30 %, the raw one more than twice it.
-    (Before, a segmented log was not compensated at all: None.)"""
-    from engine.inference.temperature import fit_log_temperature
+    This for the temperature channel named; with "auto" a segmented log is not compensated,
+    and one line says so and how to (before, it could not be compensated at all: None)."""
+    from engine.inference.temperature import fit_log_temperature, segments_note
     from engine.wv.pooled import pooled_wavelet_variance
 
     log, noise = _segmented_log(31)
-    tf = fit_log_temperature(log, "gyro_x", "auto", model="WN+RW")
+    assert fit_log_temperature(log, "gyro_x", "auto") is None
+    note = segments_note(log, "gyro_x")
+    assert "not fitted on a log cut into still segments" in note
+    assert "temperature='temperature'" in note
+    tf = fit_log_temperature(log, "gyro_x", "temperature", model="WN+RW")
     assert tf is not None and tf.tau_s == 0
+    assert segments_note(log, "gyro_x", "temperature") == ""
     lo, hi = tf.sensitivity_interval
     assert lo < 7.2 < hi and hi - lo < 7.2, (lo, hi)
     pieces = [slice(a, b) for a, b in SEGMENTS]
