@@ -466,8 +466,8 @@ def unit_values(lf: LogFit) -> list[tuple[tuple[str, ...], float]]:
             out.append(((ch, "datasheet", d.process, d.quantity, d.symbol, d.unit), float(d.value)))
         tf = lf.temperature.get(ch)
         if tf is not None:  # the bias-temperature sensitivity, a datasheet figure too
-            key = (ch, "datasheet", "temperature", "bias temperature sensitivity", "S_T")
-            out.append(((*key, tf.sensitivity_unit), float(tf.sensitivity)))
+            key = (ch, "datasheet", tf.PROCESS, tf.QUANTITY, tf.SYMBOL, tf.sensitivity_unit)
+            out.append((key, float(tf.sensitivity)))
     return out
 
 

@@ -131,7 +131,17 @@ def set_listed(app: GMWMApp, listed: bool) -> None:
 
 
 #: The state parameters the WV plot and the residual strip draw.
-_PLOT = ("wv", "unit", "channel", "filename", "model", "result", "whatif", "whatif_values")
+_PLOT = (
+    "wv",
+    "wv_raw",
+    "unit",
+    "channel",
+    "filename",
+    "model",
+    "result",
+    "whatif",
+    "whatif_values",
+)
 #: ... the parameter and datasheet tables and the J-test badge.
 _TABLES = (
     "wv",
@@ -163,7 +173,10 @@ _SUMMARY = ("wv", "model", "result", "whatif", "whatif_values", "weights")
 #: ... the file names of the downloads (:meth:`AppState.export_filename`).
 _FILENAMES = ("filename", "channel", "model")
 #: ... the URL (:meth:`AppState.to_query`).
-_QUERY = ("source", "path", "channel", "fs", "robust", "weights", "model")
+_QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "weights", "model")
+#: ... the temperature compensation switch (shown with a temperature channel beside the
+#: channel, disabled with the reason when it cannot be used).
+_COMPENSATION = ("temperature_channel", "compensation_unavailable")
 #: ... the "Model selection" tab (its refresh, called while the tab is not its own watcher).
 _SELECTION = ("selection", "inferred", "unit")
 
@@ -266,6 +279,10 @@ class GMWMApp(pn.viewable.Viewer):
             css_classes=["gmwm-robust"],
         )
         self.robust_check.param.watch(self._on_robust, "value")
+        # the state's own parameter: switching it refits on the compensated or the raw WV
+        self.compensate_check = pn.widgets.Checkbox.from_param(
+            s.param.compensate, css_classes=["gmwm-compensate"], visible=False
+        )
         self.data_info.object = self._data_info_text
 
         self.model_panel = ModelPanel(self.state)
@@ -349,6 +366,7 @@ class GMWMApp(pn.viewable.Viewer):
             self.fs_input,
             self.data_info,
             self.robust_check,
+            self.compensate_check,
             pn.layout.Divider(),
             *self.model_panel.sidebar(),
             h("### Export", margin=(0, 10)),
@@ -498,6 +516,7 @@ class GMWMApp(pn.viewable.Viewer):
             self._draw_segments()
             self._draw_tables()
             self._sync_data_widgets()
+            self._sync_compensation()
             self._sync_filenames()
             self._show_warnings()
             self.model_panel.refresh()
@@ -549,6 +568,18 @@ class GMWMApp(pn.viewable.Viewer):
         if s.fs is not None:
             self.fs_input.value = s.fs
         self.robust_check.value = s.robust
+
+    @_on_state(*_COMPENSATION)
+    @redraws("the temperature compensation switch")
+    def _sync_compensation(self) -> None:
+        s = self.state
+        why = s.compensation_unavailable
+        label = f"Compensate temperature ('{s.temperature_channel}')"
+        self.compensate_check.param.update(
+            visible=bool(s.temperature_channel),
+            disabled=bool(why),
+            name=f"{label}: not available, {why}" if why else label,
+        )
 
     @param.depends(*(f"state.{n}" for n in _DATA_INFO))
     @redraws("the data description")

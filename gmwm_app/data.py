@@ -23,7 +23,11 @@ from typing import Any
 import numpy as np
 
 import engine as eg
-from engine.inference.temperature import TemperatureFit, fit_log_temperature, temperature_series
+from engine.inference.temperature import (
+    TemperatureFit,
+    find_temperature,
+    fit_log_temperature,
+)
 from engine.io import ImuLog, qualify_log
 from engine.wv import check_fs as engine_check_fs
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
@@ -50,6 +54,9 @@ __all__ = [
     "log_check_line",
     "temperature_fit_of",
     "temperature_line",
+    "compensated_series",
+    "is_compensated",
+    "temperature_unusable",
 ]
 
 log = logging.getLogger(__name__)
@@ -156,7 +163,7 @@ class LoadedData:
     path : str
         Server path (empty for uploads).
     wv_cache : dict
-        ``(channel, fs, robust) -> WaveletVariance``.
+        ``(channel, fs, robust, compensated) -> WaveletVariance``.
     elapsed_s : float
         Time spent reading the file (s).
     computations : int
@@ -164,8 +171,8 @@ class LoadedData:
     load : dict
         The ``load_log`` options it was read with (``segment``).
     wv_errors : dict
-        ``(channel, fs, robust) -> message``: WVs :func:`precompute` could not compute (the
-        install reports the message instead of computing the WV again).
+        ``(channel, fs, robust, compensated) -> message``: WVs :func:`precompute` could not
+        compute (the install reports the message instead of computing the WV again).
     """
 
     log: ImuLog
@@ -276,8 +283,12 @@ def precompute(
     channel: str | None = None,
     fs: float | None = None,
     robust: bool = False,
+    compensate: bool = True,
 ) -> None:
-    """Compute the WV of one channel of ``loaded`` into its cache (worker-thread safe).
+    """Compute the WV of one channel of ``loaded`` into its cache (worker-thread safe): that of
+    the temperature-compensated signal with ``compensate`` when the channel has a temperature
+    channel beside it (:func:`is_compensated`), and then the raw signal's too (the Fit view
+    draws it in grey beside it).
 
     A WV that cannot be computed (e.g. a channel of NaN) is not raised here: its message is
     kept in ``loaded.wv_errors`` (and logged), and the install that follows reports it on the
@@ -289,19 +300,21 @@ def precompute(
         return
     ch = channel if channel in names else names[0]
     f = float(fs) if fs else float(lg.fs)
-    if wv_from_cache(loaded.wv_cache, ch, f, robust) is not None:
-        return
-    try:
-        wv = compute_wv(lg, ch, f, robust)
-    except ValueError as e:
-        log.warning("%s: no WV of %s: %s", loaded.name, ch, message_of(e))
-        loaded.wv_errors[(ch, f, robust)] = message_of(e)
-        return
-    store_wv(loaded.wv_cache, ch, f, robust, wv)
-    loaded.computations += 1
-    with _SHARED_LOCK:  # a shared log: the next sessions find this WV computed
-        if lg in _SHARED_WVS:
-            store_wv(_SHARED_WVS[lg], ch, f, robust, wv)
+    comp = is_compensated(lg, ch, compensate)
+    for c in (comp, False) if comp else (False,):
+        if wv_from_cache(loaded.wv_cache, ch, f, robust, c) is not None:
+            continue
+        try:
+            wv = compute_wv(lg, ch, f, robust, compensate=c)
+        except ValueError as e:
+            log.warning("%s: no WV of %s: %s", loaded.name, ch, message_of(e))
+            loaded.wv_errors[(ch, f, robust, c)] = message_of(e)
+            return
+        store_wv(loaded.wv_cache, ch, f, robust, c, wv)
+        loaded.computations += 1
+        with _SHARED_LOCK:  # a shared log: the next sessions find this WV computed
+            if lg in _SHARED_WVS:
+                store_wv(_SHARED_WVS[lg], ch, f, robust, c, wv)
 
 
 def message_of(e: BaseException) -> str:
@@ -350,10 +363,11 @@ def compute_wv(
     fs: float,
     robust: bool,
     progress: Callable[[int, int], object] | None = None,
+    compensate: bool = True,
 ) -> eg.WaveletVariance:
-    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``); with a
-    temperature channel beside it (:func:`temperature_fit_of`), the WV of its compensated
-    signal.
+    """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``); with
+    ``compensate`` and a temperature channel beside it (:func:`temperature_fit_of`), the WV of
+    its compensated signal.
 
     ``progress(j, J)`` is called as each level of a computed WV is done (see
     :func:`engine.wavelet_variance`); not for a summary file's stored WV.
@@ -361,21 +375,37 @@ def compute_wv(
     if lg is None:
         raise ValueError("load a log first")
     try:
-        tf = temperature_fit_of(lg, ch)
+        tf = temperature_fit_of(lg, ch) if compensate else None
         if tf is not None:  # the compensated signal, as `gmwm fit --temperature auto` fits it
-            y = tf.compensate(lg[ch], temperature_series(lg, tf.temperature))
-            return eg.wavelet_variance(
-                y, fs=fs, robust=robust, unit=lg.unit_of(ch), progress=progress
-            )
+            lg = tf.compensated_log(lg)  # (a log cut into segments: still pooled)
         return lg.wavelet_variance(ch, robust=robust, fs=fs, progress=progress)
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
 
 
-def wv_matrix_of(lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
-    """The WV/WCCV matrix of some channels of a log, and a notice (truncation).
+def compensated_series(lg: ImuLog, ch: str, tf: TemperatureFit | None) -> np.ndarray:
+    """The samples of channel ``ch`` with the bias-temperature relation ``tf`` taken out
+    (:meth:`~engine.inference.temperature.TemperatureFit.compensate`); the raw samples when
+    ``tf`` is None."""
+    return np.asarray((lg if tf is None else tf.compensated_log(lg)).channels[ch])
 
-    Channels of different lengths are truncated to the shortest (the notice says so).
+
+def is_compensated(lg: ImuLog | None, ch: str, compensate: bool) -> bool:
+    """Whether the WV of ``ch`` that a session asking for ``compensate`` shows is that of a
+    temperature-compensated signal: asked for, and a temperature fit of the channel exists
+    (:func:`temperature_fit_of`). The fourth element of the session's WV keys."""
+    return bool(compensate and lg is not None and temperature_fit_of(lg, ch) is not None)
+
+
+def wv_matrix_of(
+    lg: ImuLog, channels: Sequence[str], fs: float, compensate: bool = False
+) -> tuple[eg.WVMatrix, str]:
+    """The WV/WCCV matrix of some channels of a log, and a notice (truncation, compensation).
+
+    Channels of different lengths are truncated to the shortest (the notice says so). With
+    ``compensate``, each channel with a temperature fit (:func:`temperature_fit_of`) is
+    taken with its bias-temperature relation taken out, as the Fit tab's WV is (the notice
+    names them).
 
     Raises
     ------
@@ -391,20 +421,27 @@ def wv_matrix_of(lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVM
             "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
         )
     chans = tuple(channels)
-    series = {c: np.asarray(lg.channels[c]) for c in chans}
+    fits = {c: temperature_fit_of(lg, c) if compensate else None for c in chans}
+    series = {c: compensated_series(lg, c, fits[c]) for c in chans}
     sizes = {c: int(a.size) for c, a in series.items()}
     n = min(sizes.values())
-    note = ""
+    notes = []
     if len(set(sizes.values())) > 1:
         desc = ", ".join(f"{c}: {v:,}" for c, v in sizes.items())
-        note = (
+        notes.append(
             f"The channels have different lengths ({desc} samples); all are "
             f"truncated to the shortest, {n:,} samples."
         )
         series = {c: a[:n] for c, a in series.items()}
+    done = [f"{c} ('{tf.temperature}')" for c, tf in fits.items() if tf is not None]
+    if done:
+        notes.append(
+            f"Temperature-compensated, as on the Fit tab: {', '.join(done)}; the sidebar's "
+            "'Compensate temperature' box turns it off."
+        )
     units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
     wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
-    return wvm, note
+    return wvm, " ".join(notes)
 
 
 #: The log check's line per log and channel, computed once per loaded log (it dies with it).
@@ -428,38 +465,59 @@ def log_check_line(lg: ImuLog, channel: str) -> str:
     return line
 
 
-#: The temperature fit per log and channel (None: none to fit), once per loaded log.
-_TEMPS: weakref.WeakKeyDictionary[ImuLog, dict[str, TemperatureFit | None]] = (
+#: The temperature fit per log and channel, or why there is none (once per loaded log).
+_TEMPS: weakref.WeakKeyDictionary[ImuLog, dict[str, tuple[TemperatureFit | None, str]]] = (
     weakref.WeakKeyDictionary()
 )
+
+
+def _temperature_of(lg: ImuLog, channel: str) -> tuple[TemperatureFit | None, str]:
+    """The temperature fit of a channel and ``""``, or None and why there is none (``""``:
+    no temperature channel beside it). Cached per log and channel."""
+    with _CHECKS_LOCK:
+        done = _TEMPS.setdefault(lg, {})
+        if channel in done:
+            return done[channel]
+    tname = None if lg.is_summary else find_temperature(lg, "auto", channel=channel)
+    out: tuple[TemperatureFit | None, str] = (None, "")
+    if tname is not None and lg.segments:  # as `--temperature auto` (segments_note)
+        out = (None, f"'{tname}' is not fitted on a log cut into still segments")
+    elif tname is not None:
+        try:  # by its name: a channel the fit cannot use says why
+            out = (fit_log_temperature(lg, channel, tname), "")
+        except ValueError as e:  # constant temperature, too short, NaN
+            out = (None, message_of(e))
+    with _CHECKS_LOCK:
+        done[channel] = out
+    return out
 
 
 def temperature_fit_of(lg: ImuLog, channel: str) -> TemperatureFit | None:
     """The bias-temperature fit of one channel of a log
     (:func:`engine.inference.temperature.fit_log_temperature`, temperature channel found
-    automatically), or None: no temperature channel, a WV summary, a log cut into segments,
-    or a relation that cannot be fitted (a constant temperature, too few samples). Cached per
+    automatically), or None: no temperature channel, a WV summary, a log cut into still
+    segments (as ``gmwm fit --temperature auto``), or a relation that cannot be fitted (a
+    constant temperature, too few samples; :func:`temperature_unusable` says why). Cached per
     log and channel."""
-    if lg.is_summary:
-        return None
-    with _CHECKS_LOCK:
-        done = _TEMPS.setdefault(lg, {})
-        if channel in done:
-            return done[channel]
-    try:
-        tf = fit_log_temperature(lg, channel, "auto")
-    except ValueError:  # constant temperature, too short, NaN: nothing to compensate
-        tf = None
-    with _CHECKS_LOCK:
-        done[channel] = tf
-    return tf
+    return _temperature_of(lg, channel)[0]
 
 
-def temperature_line(lg: ImuLog, channel: str) -> str:
+def temperature_unusable(lg: ImuLog, channel: str) -> str:
+    """Why a channel with a temperature channel beside it cannot be compensated, in one
+    phrase (``""``: it can, or it has no temperature channel)."""
+    return _temperature_of(lg, channel)[1]
+
+
+def temperature_line(lg: ImuLog, channel: str, compensate: bool = True) -> str:
     """The one line the Fit view says of a channel with a temperature channel beside it: the
-    sensitivity with its interval in datasheet units, and that the WV and the fit are of the
-    compensated signal; ``""`` without one."""
+    sensitivity with its interval in datasheet units, and whether the WV and the fit are of
+    the compensated signal (``compensate``) or of the raw one; ``""`` without one."""
     tf = temperature_fit_of(lg, channel)
     if tf is None:
         return ""
-    return f"{tf.line()}; the WV and the fit are of the temperature-compensated signal"
+    if not compensate:
+        return f"{tf.line()}; compensation is off: the WV and the fit are of the raw signal"
+    return (
+        f"{tf.line()}; the WV and the fit are of the temperature-compensated signal "
+        "(the raw signal's WV in grey)"
+    )

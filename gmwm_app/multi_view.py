@@ -105,10 +105,12 @@ class MultiView(TabView):
         self._build_layout()
         self.refresh()
 
-    @param.depends("state.wv", "state.fs", "state.robust", watch=True)
+    @param.depends("state.wv", "state.fs", "state.robust", "state.compensate", watch=True)
     def _on_state(self) -> None:
         """New data (every load sets a new WV: the log itself is no parameter), another
-        sampling frequency, or the robust WV (a notice here)."""
+        sampling frequency, the robust WV (a notice here), or the temperature compensation
+        switched (the channels' WVs and WCCVs are then of the compensated or the raw
+        signals)."""
         super()._on_state()
 
     def _visible(self) -> bool:
@@ -243,7 +245,7 @@ class MultiView(TabView):
     # ------------------------------------------------------------------------------------
     def _settings(self) -> tuple:
         s = self.state
-        return (id(s.log), s.fs, s.robust, *self.controls.settings())
+        return (id(s.log), s.fs, s.robust, s.compensate, *self.controls.settings())
 
     @property
     def n_wvm(self) -> int:

@@ -28,7 +28,8 @@ class QueryMixin(StateFields):
         """The shareable state as URL query parameters (all strings).
 
         E.g. ``{"source": "demo", "channel": "gyro_x", "fs": "100", "robust": "0",
-        "model": "2*GM+WN+RW"}``; ``path`` is added for a server file.
+        "model": "2*GM+WN+RW"}``; ``path`` is added for a server file, ``temperature=0`` when
+        the temperature compensation is off (on is the default: no parameter).
         """
         q = {"source": self.source}
         if self.source == "path" and self.path:
@@ -40,6 +41,8 @@ class QueryMixin(StateFields):
         if self.fs:
             q["fs"] = f"{self.fs:.12g}"
         q["robust"] = "1" if self.robust else "0"
+        if not self.compensate:
+            q["temperature"] = "0"
         if self.weights != "ci":
             q["weights"] = self.weights
         if len(self.model):
@@ -49,8 +52,8 @@ class QueryMixin(StateFields):
     def parse_query(self, query: Mapping[str, Any]) -> dict[str, Any]:
         """Read URL query parameters (strings or lists of strings) into settings.
 
-        Returns ``{"source", "path", "channel", "fs", "robust", "weights", "model",
-        "problems"}``;
+        Returns ``{"source", "path", "channel", "fs", "robust", "compensate", "weights",
+        "model", "problems"}``;
         unreadable values are left out and described in ``problems``.
         """
         q = {k: (v[-1] if isinstance(v, (list, tuple)) and v else v) for k, v in query.items()}
@@ -87,6 +90,17 @@ class QueryMixin(StateFields):
                 out["robust"] = False
             else:
                 out["problems"].append(f"robust={q['robust']!r} in the link is not 0 or 1")
+        if "temperature" in q:
+            r = q["temperature"].strip().lower()
+            if r in ("1", "true", "yes", "on", "auto"):
+                out["compensate"] = True
+            elif r in ("0", "false", "no", "off", "none"):
+                out["compensate"] = False
+            else:
+                out["problems"].append(
+                    f"temperature={q['temperature']!r} in the link is not 0 (compensation off) "
+                    "or 1 (on)"
+                )
         if "weights" in q:
             w = q["weights"].strip().lower()
             if w in ("ci", "identity", "efficient"):
@@ -122,7 +136,13 @@ class QueryMixin(StateFields):
                 except ValueError as e2:
                     problems.append(message_of(e2))
         if loaded is not None:
-            self.precompute(loaded, s.get("channel"), s.get("fs"), bool(s.get("robust", False)))
+            self.precompute(
+                loaded,
+                s.get("channel"),
+                s.get("fs"),
+                bool(s.get("robust", False)),
+                bool(s.get("compensate", True)),
+            )
         return PreparedQuery(s, loaded, problems)
 
     def from_query(
@@ -155,12 +175,19 @@ class QueryMixin(StateFields):
         problems = list(prepared.problems)
         if prepared.loaded is not None:
             self.install(
-                prepared.loaded, channel=s.get("channel"), fs=s.get("fs"), robust=s.get("robust")
+                prepared.loaded,
+                channel=s.get("channel"),
+                fs=s.get("fs"),
+                robust=s.get("robust"),
+                compensate=s.get("compensate", True),
             )
             if self.error:
                 problems.append(self.error)
-        elif s.get("robust") is not None:
-            self._publish(robust=s["robust"])
+        else:
+            if s.get("robust") is not None:
+                self._publish(robust=s["robust"])
+            if s.get("compensate") is not None:
+                self._publish(compensate=s["compensate"])
         if s.get("weights") is not None and s["weights"] != self.weights:
             self._publish(weights=s["weights"])  # before the model: one fit
             if s.get("model") is None and len(self.model) and not self.set_model(self.model):
@@ -187,5 +214,6 @@ class QueryMixin(StateFields):
             "duration_s": self.duration_s,
             "unit": self.unit,
             "robust_wv": self.robust,
+            "temperature_compensated": bool(self.wv_raw is not None),
             "wv_summary_file": self.is_summary,
         }

@@ -37,7 +37,8 @@ def session_report(state: AppState) -> str:
         raise ValueError("load a log first: the report is of the session's log and fit")
     if res is None or not state.channel:
         raise ValueError("fit a model first (add a process): the report shows the session's fit")
-    tf = temperature_fit_of(lg, state.channel)  # the fit is then of the compensated signal
+    # with the compensation on, the fit is of the compensated signal: the report says so
+    tf = temperature_fit_of(lg, state.channel) if state.compensate else None
     rep = gather_report(
         lg,
         fits={state.channel: res},

@@ -74,7 +74,8 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
     """The session of ``state`` as JSON text (:func:`engine.session.session_to_json`).
 
     ``load``: the ``load_log`` options the data were read with (e.g. ``{"segment": "longest"}``).
-    The app part holds the source, file name, channel, fs, robust flag and model spec.
+    The app part holds the source, file name, channel, fs, robust flag, temperature
+    compensation switch and model spec.
     """
     ch = state.channel
     models = {ch: state.model.spec()} if ch and len(state.model) else {}
@@ -87,6 +88,7 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
         "fs": state.fs,
         "fs_source": state.fs_source,
         "robust": bool(state.robust),
+        "compensate": bool(state.compensate),
         "model": state.model.spec(),
         "query": state.to_query(),
     }
@@ -145,6 +147,7 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
     channel = app.get("channel") or next(iter(sess.models), None)
     fs = app.get("fs")
     robust = bool(app.get("robust", False))
+    compensate = bool(app.get("compensate", True))  # (sessions saved before: on, as then)
     segment = sess.load.get("segment")
     segment = segment if isinstance(segment, str) else None
     plan = RestorePlan(sess, None)
@@ -164,7 +167,7 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
                 f"the session's teaching scenario {key!r} could not be simulated: {e}"
             )
             return plan
-        AppState.precompute(loaded, channel, fs, robust)
+        AppState.precompute(loaded, channel, fs, robust, compensate)
         plan.loaded = loaded
         return plan
     given = sess.data_path
@@ -194,7 +197,7 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
     except ValueError as e:
         plan.problems.append(f"the session's data file could not be read: {e}")
         return plan
-    AppState.precompute(loaded, channel, fs, robust)
+    AppState.precompute(loaded, channel, fs, robust, compensate)
     plan.loaded = loaded
     return plan
 
@@ -228,6 +231,7 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
             channel=app.get("channel") or None,
             fs=user_fs,
             robust=bool(app.get("robust", False)),
+            compensate=bool(app.get("compensate", True)),
         )
         if state.error:
             problems.append(state.error)

@@ -37,6 +37,7 @@ import numpy as np
 import param
 
 import engine as eg
+from engine.inference.temperature import find_temperature
 from engine.io import ImuLog
 from gmwm_app.data import (
     LoadedData,
@@ -44,12 +45,14 @@ from gmwm_app.data import (
     check_fs,
     compute_wv,
     fs_source,
+    is_compensated,
     log_check_line,
     message_of,
     precompute,
     read_source,
     summary_has_robust,
     temperature_line,
+    temperature_unusable,
     unit_of,
     wv_matrix_of,
 )
@@ -183,7 +186,31 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         default="",
         doc="With a temperature channel beside the channel shown: its bias-temperature "
         "sensitivity with its interval, one line (the WV and the fit are then of the "
-        "compensated signal); empty otherwise.",
+        "compensated signal, unless compensate is off); empty otherwise.",
+    )
+    compensate = param.Boolean(
+        default=True,
+        label="Compensate temperature",
+        doc="Fit the WV of the temperature-compensated signal when the channel shown has a "
+        "temperature channel beside it (its bias-temperature relation taken out, "
+        "engine.inference.temperature); off: the raw signal's. No effect without one.",
+    )
+    temperature_channel = param.String(
+        default="",
+        doc="The temperature channel beside the channel shown ('' when none: the "
+        "compensation switch is hidden).",
+    )
+    compensation_unavailable = param.String(
+        default="",
+        doc="Why the temperature channel beside the channel shown cannot compensate it, one "
+        "phrase ('' when it can, or when there is none): the switch is then disabled.",
+    )
+    wv_raw = param.ClassSelector(
+        class_=eg.WaveletVariance,
+        default=None,
+        allow_None=True,
+        doc="With the compensation on: the WV of the raw (uncompensated) signal, drawn "
+        "beside the fitted one; None otherwise.",
     )
 
     def __init__(self, **params: Any) -> None:
@@ -198,28 +225,32 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
+        self._reverting = False  # a failed compensation switch is being put back
 
     # ---------------------------------------------------------------------------------
     # helpers
     # ---------------------------------------------------------------------------------
     def wv_matrix(self, lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
-        """:func:`gmwm_app.data.wv_matrix_of`, cached in the session's WV cache while ``lg``
-        is the session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
+        """:func:`gmwm_app.data.wv_matrix_of` (of the temperature-compensated signals when
+        :attr:`compensate` is on), cached in the session's WV cache while ``lg`` is the
+        session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
         """
+        comp = bool(self.compensate)
         with self._lock:
             cache = self._wv_cache if self._log is lg else None
-            hit = cache.matrix(channels, fs) if cache is not None else None
+            hit = cache.matrix(channels, fs, comp) if cache is not None else None
         if hit is not None:
             return hit
-        out = wv_matrix_of(lg, channels, fs)
+        out = wv_matrix_of(lg, channels, fs, compensate=comp)
         with self._lock:
             self.wvm_computations += 1
             if cache is not None and self._log is lg:
-                cache.store_matrix(channels, fs, out)
+                cache.store_matrix(channels, fs, out, comp)
         return out
 
     def cached_wvs(self) -> dict[WVKey, eg.WaveletVariance]:
-        """A copy of the session's WVs, ``(channel, fs, robust) -> WaveletVariance``."""
+        """A copy of the session's WVs, ``(channel, fs, robust, compensated) ->
+        WaveletVariance``."""
         with self._lock:
             return dict(self._wv_cache.wvs)
 
@@ -303,7 +334,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         except ValueError as e:
             e.gmwm_read = (source, kw)  # type: ignore[attr-defined]
             raise
-        self.precompute(loaded, self.channel, None, self.robust)
+        self.precompute(loaded, self.channel, None, self.robust, self.compensate)
         return loaded
 
     def warm(
@@ -313,7 +344,9 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         robust: bool | None = None,
         progress: Callable[[int, int], object] | None = None,
     ) -> None:
-        """Compute a WV of the current log into the cache (worker-thread safe, no state change).
+        """Compute a WV of the current log into the cache (worker-thread safe, no state change):
+        that of the compensated signal when :attr:`compensate` is on and the channel has a
+        temperature channel beside it, and then the raw one too (:func:`gmwm_app.data.precompute`).
 
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
         ``progress(j, J)`` is called as each level is done (a robust WV of a long log takes
@@ -332,19 +365,25 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         ch = channel or self.channel
         f = float(fs or self.fs or lg.fs)
         rob = self.robust if robust is None else bool(robust)
-        with self._lock:
-            if cache.find(ch, f, rob) is not None:
-                return
-        wv = compute_wv(lg, ch, f, rob, progress)
-        with self._lock:
-            cache.store(ch, f, rob, wv)
-            self.wv_computations += 1
+        comp = is_compensated(lg, ch, self.compensate)
+        for c in (comp, False) if comp else (False,):
+            with self._lock:
+                if cache.find(ch, f, rob, c) is not None:
+                    continue
+            wv = compute_wv(lg, ch, f, rob, progress, compensate=c)
+            with self._lock:
+                cache.store(ch, f, rob, c, wv)
+                self.wv_computations += 1
 
     # ---------------------------------------------------------------------------------
     # WV cache
     # ---------------------------------------------------------------------------------
-    def get_wv(self, channel: str, fs: float, robust: bool) -> eg.WaveletVariance:
-        """The WV of a channel: from the cache, or computed once and cached.
+    def get_wv(
+        self, channel: str, fs: float, robust: bool, compensate: bool | None = None
+    ) -> eg.WaveletVariance:
+        """The WV of a channel: from the cache, or computed once and cached; that of its
+        temperature-compensated signal when ``compensate`` (:attr:`compensate` by default) and
+        the channel has a temperature channel beside it (:func:`gmwm_app.data.is_compensated`).
 
         Raises
         ------
@@ -352,13 +391,15 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             Channel unknown, series unusable (NaN, too short), or a robust WV asked of a
             summary file.
         """
+        lg = self._loaded_log()
+        comp = is_compensated(lg, channel, self.compensate if compensate is None else compensate)
         with self._lock:
-            wv = self._wv_cache.find(channel, fs, robust)
+            wv = self._wv_cache.find(channel, fs, robust, comp)
         if wv is not None:
             return wv
-        wv = compute_wv(self._loaded_log(), channel, fs, robust)
+        wv = compute_wv(lg, channel, fs, robust, compensate=comp)
         with self._lock:
-            self._wv_cache.store(channel, fs, robust, wv)
+            self._wv_cache.store(channel, fs, robust, comp, wv)
             self.wv_computations += 1
         return wv
 
@@ -396,8 +437,11 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         channel: str | None = None,
         fs: float | None = None,
         robust: bool | None = None,
+        compensate: bool | None = None,
     ) -> bool:
-        """Make a read log the session's data; select a channel, compute (or reuse) its WV.
+        """Make a read log the session's data; select a channel, compute (or reuse) its WV
+        (with ``compensate``, :attr:`compensate` by default: of the temperature-compensated
+        signal when the channel has a temperature channel beside it, and the raw one beside).
 
         The channel is ``channel`` if given, else the current one if the new log has it, else
         the first. The model is kept and refitted (an empty model becomes the form of a teaching
@@ -428,16 +472,22 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                     "the robust WV needs the raw log"
                 )
                 rob = False
+            want = self.compensate if compensate is None else bool(compensate)
+            comp = is_compensated(lg, ch, want)
             cache = WVCache(loaded.wv_cache)
-            wv = wv_from_cache(cache.wvs, ch, f, rob)
             computed = 0
-            if wv is None:
-                failed = loaded.wv_errors.get((ch, f, rob))
-                if failed is not None:  # precompute tried (and logged it): not again
-                    raise ValueError(failed)
-                wv = compute_wv(lg, ch, f, rob)
-                computed = 1
-            cache.store(ch, f, rob, wv)
+            wvs = []  # the WV shown, then the raw one beside a compensated one
+            for c in (comp, False) if comp else (False,):
+                got = wv_from_cache(cache.wvs, ch, f, rob, c)
+                if got is None:
+                    failed = loaded.wv_errors.get((ch, f, rob, c))
+                    if failed is not None:  # precompute tried (and logged it): not again
+                        raise ValueError(failed)
+                    got = compute_wv(lg, ch, f, rob, compensate=c)
+                    computed += 1
+                cache.store(ch, f, rob, c, got)
+                wvs.append(got)
+            wv = wvs[0]
             model = self.model
             if loaded.source == "scenario" and not len(model):
                 # a teaching scenario starts with the form of its true model
@@ -468,7 +518,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                 robust=rob,
                 is_summary=bool(lg.is_summary),
                 wv=wv,
-                **self._data_info(lg, ch, wv),
+                compensate=want,
+                **self._data_info(lg, ch, wv, want, wvs[1] if comp else None),
                 **self._model_update(new_model, result),
                 error="; ".join(msgs),
                 notice="; ".join(lg.meta.get("notes", []) or []),
@@ -477,13 +528,24 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
         return self._guard(f"Could not use {loaded.name}", run)
 
-    def _data_info(self, lg: ImuLog, ch: str, wv: eg.WaveletVariance) -> dict[str, Any]:
+    def _data_info(
+        self,
+        lg: ImuLog,
+        ch: str,
+        wv: eg.WaveletVariance,
+        compensate: bool,
+        wv_raw: eg.WaveletVariance | None,
+    ) -> dict[str, Any]:
         n = int(wv.n if lg.is_summary else np.size(lg.channels[ch]))
         info = {"n": n, "duration_s": n / float(wv.fs), "unit": unit_of(lg, ch)}
+        tname = None if lg.is_summary else find_temperature(lg, "auto", channel=ch)
         return {
             **info,
             "log_check": log_check_line(lg, ch),
-            "temperature": temperature_line(lg, ch),
+            "temperature": temperature_line(lg, ch, compensate),
+            "temperature_channel": tname or "",
+            "compensation_unavailable": temperature_unusable(lg, ch),
+            "wv_raw": wv_raw,
         }
 
     def select_channel(self, channel: str) -> bool:
@@ -548,14 +610,42 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             msgs.append(f"the model {self.model.spec()} was cleared: {fit}")
             model, result = eg.Model(), None
         ch = changes.get("channel", self.channel)
+        lg = self._loaded_log()
+        raw = None
+        if is_compensated(lg, ch, self.compensate):  # the raw signal's WV, drawn beside it
+            rob = bool(changes.get("robust", self.robust))
+            raw = self.get_wv(ch, changes.get("fs", self._data_fs()), rob, False)
         self._publish(
             wv=wv,
             **changes,
-            **self._data_info(self._loaded_log(), ch, wv),
+            **self._data_info(lg, ch, wv, self.compensate, raw),
             **self._model_update(model, result),
             error="; ".join(msgs),
         )
         return not msgs
+
+    @param.depends("compensate", watch=True)
+    def _compensate_changed(self) -> None:
+        """The compensation switched (by its widget, a URL, a restored session): show the WV
+        of the compensated or of the raw signal and refit on it (nothing to do when the WV
+        shown is already that one, e.g. an install that set both)."""
+        if self._log is None or self.wv is None or not self.channel or self._reverting:
+            return
+
+        def run() -> bool:
+            wv = self.get_wv(self.channel, self._data_fs(), self.robust)
+            if wv is self.wv:
+                return True
+            return self._switch_wv(wv)
+
+        before = self.wv
+        if not self._guard("Could not switch the temperature compensation", run):
+            if self.wv is before:  # nothing switched: the switch (and its widget) go back
+                self._reverting = True
+                try:
+                    self.compensate = not self.compensate
+                finally:
+                    self._reverting = False
 
     # ---------------------------------------------------------------------------------
     # model actions

@@ -36,7 +36,9 @@ class StateFields(Protocol):
     unit: str
     is_summary: bool
     robust: bool
+    compensate: bool
     wv: eg.WaveletVariance | None
+    wv_raw: eg.WaveletVariance | None
     model: eg.Model
     result: eg.GMWMResult | None
     whatif: bool
@@ -60,6 +62,7 @@ class StateFields(Protocol):
         channel: str | None = None,
         fs: float | None = None,
         robust: bool | None = None,
+        compensate: bool | None = None,
     ) -> bool: ...
     def set_model(self, model: eg.Model | str) -> bool: ...
     def display_objective(self) -> float | None: ...

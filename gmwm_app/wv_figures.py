@@ -19,6 +19,8 @@ from bokeh.models import ColumnDataSource, DataRange1d, HoverTool, Line, SaveToo
 from bokeh.models.annotations import Legend, LegendItem, Span
 from bokeh.models.renderers import GlyphRenderer
 
+from engine.reporting.figures import RAW_WV_COLOR, RAW_WV_LABEL
+
 from .state import PROCESS_NAMES
 from .views import (
     CLASSICAL_COLOR,
@@ -69,6 +71,10 @@ class WVFigures:
     emp, alt, total, resid : ColumnDataSource
         Empirical WV (robust one when robust is on), classical WV (robust mode only), model
         total on a fine grid, residual ratio.
+    raw, raw_item : ColumnDataSource, LegendItem or None
+        The raw signal's WV beside a temperature-compensated one (``AppState.wv_raw``) and its
+        legend entry: built the first time a session shows one (None before; a page opens
+        without them, as most logs have no temperature channel).
     comps : list of ColumnDataSource
         One per pooled component renderer (``tau_s``, ``wv``, ``label``).
     comp_renderers, comp_items : list
@@ -94,6 +100,9 @@ class WVFigures:
             name="residual",
         )
         self._shown_wv: Any = None
+        self._shown_raw: Any = None
+        self.raw: ColumnDataSource | None = None
+        self.raw_item: LegendItem | None = None
         self._unit: str | None = None
 
         p = log_figure(
@@ -307,7 +316,45 @@ class WVFigures:
                     f"{kind} of {state.channel} ({state.filename}), "
                     f"N = {wv.n:,} samples at {wv.fs:g} Hz"
                 )
+        if state.wv_raw is not self._shown_raw:
+            self._shown_raw = state.wv_raw
+            if state.wv_raw is not None or self.raw is not None:
+                raw, item = self._raw_glyphs()
+                raw.data = wv_data(state.wv_raw)
+                item.visible = state.wv_raw is not None
         self._update_model(state)
+
+    def _raw_glyphs(self) -> tuple[ColumnDataSource, LegendItem]:
+        """The raw signal's WV beside a temperature-compensated one: points and interval in
+        the report's grey (:data:`engine.reporting.figures.RAW_WV_COLOR`), under the empirical
+        WV, with their legend entry after the classical WV's; built on first use."""
+        if self.raw is not None and self.raw_item is not None:
+            return self.raw, self.raw_item
+        p = self.figure
+        src = ColumnDataSource(wv_data(None), name="raw_wv")
+        band = interval_band(p, src, color=RAW_WV_COLOR, alpha=0.12, plain=True)
+        pts = add_renderer(
+            p,
+            src,
+            Scatter(
+                x="tau_s",
+                y="variance",
+                size=6,
+                line_color=RAW_WV_COLOR,
+                fill_color=RAW_WV_COLOR,
+            ),
+        )
+        # drawn first (under the data, the model and its components)
+        new = [band, pts]
+        p.renderers = [*new, *[r for r in p.renderers if r not in new]]
+        p.y_range.renderers = [*p.y_range.renderers, band]
+        item = LegendItem(label=value(RAW_WV_LABEL), renderers=[pts, band], visible=False)
+        items = [i for i in self.legend.items if isinstance(i, LegendItem)]
+        items.insert(items.index(self.alt_item) + 1, item)
+        self.legend.items = items
+        self.emp_hover.renderers = [*self.emp_hover.renderers, pts]
+        self.raw, self.raw_item = src, item
+        return src, item
 
     @staticmethod
     def _component_renderer(p: Any, src: ColumnDataSource) -> GlyphRenderer:

@@ -229,17 +229,15 @@ def temperature_fit(
 ) -> Any:
     """The temperature compensation of channel ``name`` (``--temperature``,
     :func:`engine.inference.temperature.fit_log_temperature`), said in one line on stderr; None
-    when the log has no temperature channel (or is a summary, or is cut into segments)."""
-    from ..inference.temperature import find_temperature, fit_log_temperature
+    when the log has no temperature channel (or is a summary, or is cut into still segments
+    with ``--temperature auto``: :func:`~engine.inference.temperature.segments_note`). A
+    channel named on a log cut into segments is fitted on them, each with its own offset."""
+    from ..inference.temperature import find_temperature, fit_log_temperature, segments_note
 
     choice = getattr(args, "temperature", "none") or "none"
-    if log.segments and not log.is_summary and choice != "none":
-        tname = find_temperature(log, choice, channel=name)
-        if tname is not None:
-            say(
-                args,
-                f"{label}temperature: not fitted on a log cut into segments ('{tname}' ignored)",
-            )
+    note = segments_note(log, name, choice)
+    if note:  # a flight's still parts: fitted only on a named channel
+        say(args, f"{label}temperature: {cli_text(note)}")
         return None
     tname = None if log.is_summary else find_temperature(log, choice, channel=name)
     try:

@@ -17,6 +17,17 @@ A sensor's own temperature may lag the logged one (a board sensor, a case): with
 profiling the same regression's residual sum of squares, and keeps it only when the data
 support it: a BIC lower than the polynomial's on the differenced block means.
 
+On a log cut into still segments (a flight's still parts, ``ImuLog.segments``), the block
+means are taken within each segment and differenced within it only, so that each segment
+keeps its own offset (the bias may move while the vehicle moves), and the differences of
+every segment are pooled in one regression; the compensated signal's WV pools the segments
+as the log's own WV does. The lag is not tried there (its profile filters the whole log's
+block structure). :func:`fit_log_temperature` does this only for a temperature channel named
+by the caller: with ``"auto"`` a segmented log is not compensated (:func:`segments_note` says
+so in one line), because a flight's still parts seldom see the temperature change more than
+its noise and a slow ramp, and a sensitivity fitted from those only adds its own error, times
+the temperature's range, to the signal (a simulated ArduPilot flight: RW 3.4 times larger).
+
 The GMWM is then fitted on ``y_t - sum_p c_p (T_t - T_ref)^p``; :class:`TemperatureFit`
 keeps both wavelet variances (raw and compensated). Sensitivities are reported in datasheet
 units: deg/h per degC for gyroscopes, mg per degC for accelerometers (``engine.units``).
@@ -25,8 +36,9 @@ units: deg/h per degC for gyroscopes, mg per degC for accelerometers (``engine.u
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -45,6 +57,7 @@ __all__ = [
     "find_temperature",
     "temperature_series",
     "lagged_temperature",
+    "segments_note",
 ]
 
 BLOCKS = 256
@@ -120,6 +133,12 @@ class TemperatureFit:
     lag_bic: float = math.nan
     fs: float = math.nan
 
+    #: The sensitivity as a datasheet figure of a fleet (``engine.batch.unit_values``, the
+    #: fleet report's tables): its process, quantity and symbol.
+    PROCESS: ClassVar[str] = "temperature"
+    QUANTITY: ClassVar[str] = "bias temperature sensitivity"
+    SYMBOL: ClassVar[str] = "S_T"
+
     @property
     def interval(self) -> np.ndarray:
         """``(degree, 2)`` intervals of :attr:`coef` (normal quantile at ``level``)."""
@@ -171,6 +190,13 @@ class TemperatureFit:
             "lag_bic": self.lag_bic,
             "summary": self.line(),
         }
+
+    def compensated_log(self, log: ImuLog) -> ImuLog:
+        """The log with :attr:`channel` compensated (:meth:`compensate`, its temperature
+        channel :attr:`temperature` read from the log); everything else as it was (its
+        segments too: its WV pools them)."""
+        y = self.compensate(log[self.channel], temperature_series(log, self.temperature))
+        return replace(log, channels={**log.channels, self.channel: y})
 
     def compensate(self, y: np.ndarray, temp: np.ndarray) -> np.ndarray:
         """``y - sum_p c_p (T - T_ref)^p``, ``T`` lagged by :attr:`tau_s` when it is > 0."""
@@ -225,6 +251,18 @@ def _block_means(a: np.ndarray, k: int) -> np.ndarray:
     return a[: b * k].reshape(k, b).mean(axis=1)
 
 
+def _segment_differences(a: np.ndarray, parts: Sequence[tuple[int, int]], b: int) -> np.ndarray:
+    """First differences of the means of consecutive blocks of ``b`` samples, within each
+    part ``a[start:stop]`` (at most :data:`BLOCKS` blocks a part), pooled: no difference
+    spans two parts, so that each keeps its own offset."""
+    out = []
+    for lo, hi in parts:
+        k = min((hi - lo) // b, BLOCKS)
+        if k >= 2:
+            out.append(np.diff(a[lo : lo + k * b].reshape(k, b).mean(axis=1)))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
 def _newey_west(x: np.ndarray, e: np.ndarray, lag: int) -> np.ndarray:
     """HAC covariance of OLS coefficients (Bartlett kernel)."""
     xtx_inv = np.linalg.inv(x.T @ x)
@@ -261,6 +299,24 @@ def find_temperature(log: ImuLog, choice: str = "auto", *, channel: str = "") ->
             f"(channels: {', '.join(names) or 'none'}); use 'auto', 'none' or one of them"
         )
     return choice
+
+
+def segments_note(log: ImuLog, name: str, choice: str = "auto") -> str:
+    """Why the temperature channel beside ``name`` is not fitted on a log cut into still
+    segments with ``choice="auto"``, in one phrase (what the CLI prints after
+    ``temperature:``, the report as the channel's note); ``""`` otherwise (a log in one piece,
+    no temperature channel, or a channel named: then fitted on the segments)."""
+    if choice != "auto" or not log.segments or log.is_summary:
+        return ""
+    tname = find_temperature(log, "auto", channel=name)
+    if tname is None:
+        return ""
+    return (
+        f"'{tname}' not fitted on a log cut into still segments with temperature='auto' "
+        "(still parts seldom see the temperature change more than its noise and a slow ramp, "
+        f"and an unsure sensitivity adds error); name it, temperature='{tname}', to fit it "
+        "on the segments, each with its own offset"
+    )
 
 
 def temperature_series(log: ImuLog, name: str) -> np.ndarray:
@@ -371,9 +427,10 @@ def fit_log_temperature(
     -------
     TemperatureFit or None
         None for ``"none"``, a log without a temperature channel, a WV summary (no samples),
-        a log cut into still segments (the relation would be fitted across the gaps), and,
-        with ``"auto"``, a temperature channel the fit cannot use (constant, NaN samples, a
-        log shorter than 4096 samples).
+        and, with ``"auto"``, a log cut into still segments (:func:`segments_note`) or a
+        temperature channel the fit cannot use (constant, NaN samples, fewer than 4096
+        samples). A channel named on a log cut into still segments is fitted on the
+        segments, each with its own offset (:func:`fit_temperature`'s ``segments``).
 
     Raises
     ------
@@ -385,7 +442,7 @@ def fit_log_temperature(
     if log.is_summary or choice == "none":
         return None
     tname = find_temperature(log, choice, channel=name)
-    if tname is None or log.segments:
+    if tname is None or segments_note(log, name, choice):
         return None
     try:
         return fit_temperature(
@@ -401,6 +458,7 @@ def fit_log_temperature(
             eff=eff,
             alpha=alpha,
             weights=weights,
+            segments=log.segments,
         )
     except ValueError:
         if choice != "auto":
@@ -425,6 +483,7 @@ def fit_temperature(
     alpha: float = 0.05,
     weights: str = "ci",
     lag: bool | str = "auto",
+    segments: Sequence[tuple[int, int]] = (),
 ) -> TemperatureFit:
     """Fit the bias-temperature polynomial, then the GMWM of the compensated signal.
 
@@ -449,6 +508,12 @@ def fit_temperature(
         The first-order thermal lag: ``"auto"`` fits it and keeps it when its BIC is lower
         than the polynomial's alone (:attr:`TemperatureFit.lag_bic`), True always keeps it,
         False (or ``"none"``) does not try it.
+    segments : sequence of (start, stop), optional
+        Sample ranges to fit on (the still parts of a flight, ``ImuLog.segments``): block
+        means of ``sum(stop - start) // 256`` samples within each segment, differenced within
+        it (each segment keeps its own offset), pooled; the WVs pool the segments; ``T_ref``
+        and the temperature range are over the segments; no lag is tried. Empty: the whole
+        series.
 
     Returns
     -------
@@ -457,10 +522,12 @@ def fit_temperature(
     Raises
     ------
     ValueError
-        Lengths differ, NaN temperatures, a constant temperature, fewer than 16 x 256 samples,
-        a degree other than 1 or 2, or another ``lag``.
+        Lengths differ, NaN temperatures, a constant temperature, fewer than 16 x 256 samples
+        (in the segments), a degree other than 1 or 2, another ``lag``, or a segment outside
+        the series.
     """
     from ..wv import wavelet_variance
+    from ..wv.pooled import pooled_wavelet_variance
 
     y = np.asarray(y, dtype=float)
     temp = np.asarray(temp, dtype=float)
@@ -473,18 +540,42 @@ def fit_temperature(
             f"the temperature '{temperature}' has {temp.size} samples and {channel} "
             f"{y.size}: they must be sampled together"
         )
-    if y.size < 16 * BLOCKS:
-        raise ValueError(f"{channel}: {y.size} samples are too few for a temperature fit (4096)")
-    if not np.all(np.isfinite(temp)):
+    parts = [(int(lo), int(hi)) for lo, hi in segments] or [(0, y.size)]
+    if any(not 0 <= lo < hi <= y.size for lo, hi in parts):
+        raise ValueError(
+            f"{channel}: segments {parts} must be (start, stop) sample ranges within its "
+            f"{y.size} samples"
+        )
+    still = np.concatenate([temp[a:b] for a, b in parts]) if segments else temp
+    n_still = int(still.size)
+    if n_still < 16 * BLOCKS:
+        where = " in its segments" if segments else ""
+        raise ValueError(
+            f"{channel}: {n_still} samples{where} are too few for a temperature fit (4096)"
+        )
+    if not np.all(np.isfinite(still)):
         raise ValueError(f"the temperature '{temperature}' has NaN/Inf samples")
-    if np.ptp(temp) == 0:
+    if np.ptp(still) == 0:
         raise ValueError(f"the temperature '{temperature}' is constant: nothing to fit")
-    t_ref = float(np.mean(temp))
-    dy = np.diff(_block_means(y, BLOCKS))
+    t_ref = float(np.mean(still))
+    bl = n_still // BLOCKS  # samples per block
+    dy = _segment_differences(y, parts, bl)
+    if dy.size < 4 * (degree + 2):
+        raise ValueError(
+            f"{channel}: its segments are too short for a temperature fit ({dy.size} "
+            f"differences of block means of {bl} samples; each segment needs 2 blocks)"
+        )
 
     def design(t: np.ndarray) -> np.ndarray:
-        xb = np.column_stack([_block_means((t - t_ref) ** p, BLOCKS) for p in range(1, degree + 1)])
-        return np.column_stack([np.ones(dy.size), np.diff(xb, axis=0)])
+        powers = range(1, degree + 1)
+        if segments:
+            dx = np.column_stack(
+                [_segment_differences((t - t_ref) ** p, parts, bl) for p in powers]
+            )
+        else:  # the whole series, or the lag profile's window means of it (any length)
+            xb = np.column_stack([_block_means((t - t_ref) ** p, BLOCKS) for p in powers])
+            dx = np.diff(xb, axis=0)
+        return np.column_stack([np.ones(dy.size), dx])
 
     def rss(t: np.ndarray) -> float:
         d = design(t)
@@ -492,7 +583,7 @@ def fit_temperature(
         return float(r @ r)
 
     tau, tau_iv, dbic = 0.0, (0.0, 0.0), math.nan
-    if lag not in (False, "none"):
+    if lag not in (False, "none") and not segments:
         block_s = (y.size // BLOCKS) / fs
         tau, tau_iv, dbic = _profile_lag(temp, fs, block_s, rss, dy.size, level)
         if not (lag is True or dbic < 0):
@@ -508,7 +599,6 @@ def fit_temperature(
         jac = np.column_stack([dx, (up - down)[:, 1:] @ beta[1:] / (2 * h)])
     cov = _newey_west(jac, resid, NW_LAG)[: dx.shape[1], : dx.shape[1]]
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    b = y.size // BLOCKS
     coef, se_c = beta[1:], se[1:]
     notes: list[str] = []
     cond = np.linalg.cond(dx)
@@ -531,9 +621,9 @@ def fit_temperature(
         t_ref,
         coef,
         se_c,
-        float(beta[0]) / b,
+        float(beta[0]) / bl,
         level,
-        (float(np.min(temp)), float(np.max(temp))),
+        (float(np.min(still)), float(np.max(still))),
         sens,
         (min(lo, hi), max(lo, hi)),
         sunit,
@@ -552,8 +642,12 @@ def fit_temperature(
         "eff": eff,
         "alpha": alpha,
     }
-    wv = wavelet_variance(yc, **kw)
-    wv_raw = wavelet_variance(y, **kw)
+    if segments:  # the still parts pooled, as ImuLog.wavelet_variance does
+        wv = pooled_wavelet_variance([yc[lo:hi] for lo, hi in parts], **kw)
+        wv_raw = pooled_wavelet_variance([y[lo:hi] for lo, hi in parts], **kw)
+    else:
+        wv = wavelet_variance(yc, **kw)
+        wv_raw = wavelet_variance(y, **kw)
     fit = fit_raw = None
     if model is not None:
         fit = fit_gmwm(wv, model, weights=weights)

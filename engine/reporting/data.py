@@ -40,6 +40,7 @@ from .._version import __version__
 from ..fit import FitError, GMWMResult
 from ..formats import misfit
 from ..inference.selection import DEFAULT_SELECT
+from ..inference.temperature import segments_note
 from ..io import ImuLog, log_of
 from ..models import DR, QN, RW, WN
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
@@ -391,16 +392,18 @@ def _channel(
     level: float,
     datasheet: Any,
     temperature: Any = None,
+    temperature_note: str = "",
 ) -> ChannelReport:
     """The numbers of one fitted channel; a step that cannot be done leaves a note.
     ``temperature``: its :class:`~engine.inference.temperature.TemperatureFit` (the PSD is
-    then that of the compensated signal, as the fit is)."""
+    then that of the compensated signal, as the fit is); ``temperature_note``: why a
+    temperature channel beside it was not fitted (the channel's ``temperature`` note)."""
     from ..inference import j_test, param_intervals
     from ..inference.datasheet_check import DatasheetError, check_datasheet, read_datasheet
     from ..inference.temperature import temperature_series
 
     wv = fit.wv
-    notes: dict[str, str] = {}
+    notes: dict[str, str] = {"temperature": temperature_note} if temperature_note else {}
     intervals: list[Any] = []
     try:
         intervals = param_intervals(fit, method="asymptotic", level=level)
@@ -632,8 +635,15 @@ def gather_report(
             progress("intervals", 0, steps)
         for k, ch in enumerate(todo):
             if ch in fitted:
+                tf = temps.get(ch)
                 chans[ch] = _channel(
-                    log, ch, fitted[ch], level=level, datasheet=ds, temperature=temps.get(ch)
+                    log,
+                    ch,
+                    fitted[ch],
+                    level=level,
+                    datasheet=ds,
+                    temperature=tf,
+                    temperature_note="" if tf else segments_note(log, ch, temperature or "auto"),
                 )
             else:
                 chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=channel_errors[ch])

@@ -23,6 +23,8 @@ __all__ = [
     "fleet_adev_figure",
     "spread_figure",
     "PALETTE",
+    "RAW_WV_COLOR",
+    "RAW_WV_LABEL",
 ]
 
 #: Colours of the data, the model and the processes (Bokeh's Category10).
@@ -38,7 +40,11 @@ PALETTE = (
     "#bcbd22",
     "#17becf",
 )
-_DATA, _MODEL, _RAW = "#1f77b4", "#d62728", "#7f7f7f"
+_DATA, _MODEL = "#1f77b4", "#d62728"
+#: The raw (uncompensated) signal's WV beside the temperature-compensated one that is fitted:
+#: its colour and legend label (the report's WV figure and the app's Fit view).
+RAW_WV_COLOR = "#7f7f7f"
+RAW_WV_LABEL = "WV before temperature compensation"
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,8 +214,8 @@ def _raw_wv_layers(ch: ChannelReport) -> list[Layer]:
         return []
     raw = tf.wv_raw
     return [
-        Layer("band", raw.tau_s, raw.ci_low, "", _RAW, raw.ci_high),
-        Layer("points", raw.tau_s, raw.variance, "WV before temperature compensation", _RAW),
+        Layer("band", raw.tau_s, raw.ci_low, "", RAW_WV_COLOR, raw.ci_high),
+        Layer("points", raw.tau_s, raw.variance, RAW_WV_LABEL, RAW_WV_COLOR),
     ]
 
 

@@ -50,6 +50,7 @@ __all__ = [
     "parse_limits",
     "noise_terms",
     "ieee_terms",
+    "temperature_terms",
     "gather_fleet",
 ]
 
@@ -263,6 +264,27 @@ def ieee_terms(fit: Any) -> list[TermValue]:
             )
         )
     return out
+
+
+def temperature_terms(tf: Any) -> list[TermValue]:
+    """The bias-temperature sensitivity of a compensated channel as a noise term of process
+    ``temperature`` (symbol ``S_T``, in deg/h/degC or mg/degC with its interval: the
+    :class:`engine.inference.temperature.TemperatureFit`'s own figures); none without a
+    temperature fit (the fleet's table shows a dash for that unit)."""
+    if tf is None:
+        return []
+    lo, hi = tf.sensitivity_interval
+    return [
+        TermValue(
+            (tf.PROCESS, tf.SYMBOL, tf.sensitivity_unit),
+            tf.QUANTITY,
+            float(tf.sensitivity),
+            float(lo),
+            float(hi),
+            float(tf.coef[0]),
+            tf.SYMBOL,
+        )
+    ]
 
 
 @dataclass(frozen=True, eq=False)
@@ -632,7 +654,11 @@ def gather_fleet(
                 if c.fit is not None:
                     n = c.fit.ieee.get("N")
                     fast[-1][ch] = tuple(s for s in (n.sources if n else ()) if s != WN.code)
-                    t[ch] = noise_terms(c.rows, c.unit, ch) + ieee_terms(c.fit)
+                    t[ch] = (
+                        noise_terms(c.rows, c.unit, ch)
+                        + ieee_terms(c.fit)
+                        + temperature_terms(c.temperature)
+                    )
                     cols = columns.setdefault(ch, [])
                     cols += [v.column for v in t[ch] if v.column not in cols]
         terms.append(t)

@@ -131,7 +131,9 @@ def test_a_failed_wv_job_is_shown_and_logged(
 ) -> None:
     calls = []
 
-    def broken(lg: Any, ch: str, fs: float, robust: bool, progress: Any = None) -> Any:
+    def broken(
+        lg: Any, ch: str, fs: float, robust: bool, progress: Any = None, compensate: bool = True
+    ) -> Any:
         calls.append(ch)
         raise ValueError(f"channel {ch}: the series has 3 NaN values")
 
@@ -151,7 +153,9 @@ def test_a_failed_precompute_is_reported_once_and_logged(
 ) -> None:
     calls = []
 
-    def broken(lg: Any, ch: str, fs: float, robust: bool, progress: Any = None) -> Any:
+    def broken(
+        lg: Any, ch: str, fs: float, robust: bool, progress: Any = None, compensate: bool = True
+    ) -> Any:
         calls.append(ch)
         raise ValueError(f"channel {ch}: fewer than 8 samples")
 
@@ -230,23 +234,28 @@ def test_wv_cache_maps_and_eviction() -> None:
     wv = eg.wavelet_variance(x, fs=100.0)
     rob = eg.wavelet_variance(x, fs=100.0, robust=True)
     c = WVCache()
-    assert c.find("a", 100.0, False) is None
-    c.store("a", 100.0, True, rob)  # the robust WV carries the classical one
-    assert c.find("a", 100.0, True) is rob
-    assert c.find("a", 100.0, False) is rob.classical
-    relabelled = c.find("a", 50.0, False)  # another fs: the same WV re-labelled, kept
+    assert c.find("a", 100.0, False, False) is None
+    c.store("a", 100.0, True, False, rob)  # the robust WV carries the classical one
+    assert c.find("a", 100.0, True, False) is rob
+    assert c.find("a", 100.0, False, False) is rob.classical
+    relabelled = c.find("a", 50.0, False, False)  # another fs: the same WV re-labelled, kept
     assert relabelled is not None and relabelled.fs == 50.0
     np.testing.assert_array_equal(relabelled.variance, rob.classical.variance)
-    assert c.wvs[("a", 50.0, False)] is relabelled
-    assert c.find("b", 100.0, False) is None
-    c.store("b", 100.0, False, wv)
+    assert c.wvs[("a", 50.0, False, False)] is relabelled
+    # the compensated signal's WV is another WV: never derived from the raw one's
+    assert c.find("a", 100.0, False, True) is None
+    assert c.find("b", 100.0, False, False) is None
+    c.store("b", 100.0, False, False, wv)
     # matrices: their own map, the latest N_WV_MATRICES kept
     for k in range(N_WV_MATRICES + 2):
         c.store_matrix(("a", "b"), float(k + 1), (k, f"note {k}"))  # type: ignore[arg-type]
-    assert list(c.matrices) == [(("a", "b"), float(k + 1)) for k in range(2, N_WV_MATRICES + 2)]
+    assert list(c.matrices) == [
+        (("a", "b"), float(k + 1), False) for k in range(2, N_WV_MATRICES + 2)
+    ]
     assert c.matrix(["a", "b"], 1.0) is None and c.matrix(["a", "b"], 3.0) == (2, "note 2")
-    assert set(c.wvs) == {("a", 100.0, True), ("a", 100.0, False), ("a", 50.0, False),
-                          ("b", 100.0, False)}  # fmt: skip
+    assert c.matrix(["a", "b"], 3.0, compensate=True) is None
+    assert set(c.wvs) == {("a", 100.0, True, False), ("a", 100.0, False, False),
+                          ("a", 50.0, False, False), ("b", 100.0, False, False)}  # fmt: skip
 
 
 def test_a_state_change_reaches_the_page_as_one_held_batch(

@@ -268,3 +268,39 @@ def test_model_selection_tab_ranks_and_loads_a_row(server: str, new_tab: Callabl
     want = [names[code] for code in models[2].split("+")]
     t.wait_for(lambda: all(w in t.table_text() for w in want), "the Fit tab's parameter table")
     assert t.errors == []
+
+
+@pytest.mark.browser_tour
+def test_temperature_switch_refits_on_the_raw_wv(
+    server: str, new_tab: Callable[[], Tab], tmp_path: Path
+) -> None:
+    """An uploaded log with a temperature column shows the "Compensate temperature" box
+    ticked; unticking it in the page refits on the raw WV (the link says temperature=0), and
+    ticking it again brings the compensated fit back; no console error."""
+    import numpy as np
+
+    import engine as eg
+
+    n, fs = 20_000, 100.0
+    t_s = np.arange(n) / fs
+    temp = 25 + 10 * (1 - np.exp(-t_s / 30)) + 2 * np.sin(2 * np.pi * t_s / 60)
+    x = eg.parse_model("WN(sigma2=1e-4)+RW(gamma2=1e-10)").simulate(n, fs=fs, rng=5)
+    path = tmp_path / "thermal.csv"
+    units = {"gyro_x": "deg/s", "temperature": "degC"}
+    eg.save_log(path, {"gyro_x": x + 2e-3 * temp, "temperature": temp}, fs, units=units)
+
+    t = new_tab().open(server + "?channel=gyro_x&model=WN%2BRW")
+    t.page.locator("input[type=file]").first.set_input_files(str(path))
+    box = t.page.locator(".gmwm-compensate input").first
+    box.wait_for(timeout=TIMEOUT_MS)
+    app = _app_for(lambda a: a.state.filename == "thermal.csv")
+    assert app is not None and box.is_checked() and app.state.wv_raw is not None
+    compensated = app.state.result.params["RW.gamma2"]
+    box.click()
+    t.wait_for(lambda: not app.state.compensate, "the state to follow the box")
+    t.wait_for(lambda: "temperature=0" in t.page.url, "the link to carry the switch")
+    assert app.state.wv_raw is None and app.state.result.params["RW.gamma2"] != compensated
+    box.click()
+    t.wait_for(lambda: app.state.compensate, "the box ticked again")
+    assert app.state.result.params["RW.gamma2"] == compensated
+    assert t.errors == []

@@ -1,6 +1,8 @@
 """The app and a log with a temperature channel: the Fit view says the bias-temperature
 sensitivity in one line (AppState.temperature) and fits the compensated signal, as ``gmwm fit
---temperature auto`` does; nothing changes for a log without one."""
+--temperature auto`` does, with the raw signal's WV in grey beside it; the "Compensate
+temperature" switch (AppState.compensate) refits on the raw WV, and the Multi-channel tab's
+WV/WCCV matrix follows it; nothing changes for a log without a temperature channel."""
 
 from __future__ import annotations
 
@@ -29,7 +31,20 @@ def logs(tmp_path_factory):
     units = {"gyro_x": "deg/s", "temperature": "degC"}
     eg.save_log(d / "thermal.csv", {"gyro_x": x + C * temp, "temperature": temp}, FS, units=units)
     eg.save_log(d / "plain.csv", {"gyro_x": x + C * temp}, FS, units={"gyro_x": "deg/s"})
+    y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=22)
+    both = {"gyro_x": x + C * temp, "gyro_y": y - C * temp, "temperature": temp}
+    units2 = {**units, "gyro_y": "deg/s"}
+    eg.save_log(d / "thermal2.csv", both, FS, units=units2)
+    flat = {"gyro_x": x, "temperature": np.full(N, 25.0)}  # a constant temperature
+    eg.save_log(d / "flat.csv", flat, FS, units=units)
     return d, x, temp
+
+
+def _grey(fig) -> int:
+    """Points of the grey (raw) WV the plot draws: 0 when hidden or never built."""
+    if fig.raw is None or fig.raw_item is None or not fig.raw_item.visible:
+        return 0
+    return len(fig.raw.data["variance"])
 
 
 def _rw(s: AppState) -> float:
@@ -69,3 +84,181 @@ def test_fit_view_says_the_sensitivity_and_fits_the_compensated_signal(logs):
     assert plain.set_model("WN+RW"), plain.error
     assert _rw(plain) > 2 * _rw(s)
     assert 'class="temperature"' not in session_report(plain)
+
+
+def test_switching_compensation_off_refits_on_the_raw_wv(logs):
+    """On: the WV shown is the compensated one and the raw one is beside it (``wv_raw``, the
+    plot's grey points); off: the WV shown is the raw signal's, the fit's RW is the inflated
+    one (more than twice the compensated fit's, which is the planted 1e-10 within 30 %), no
+    grey WV, and the line says the compensation is off; on again: the same cached WV and the
+    same fit, nothing recomputed. A link keeps the switch (``temperature=0``)."""
+    d, x, temp = logs
+    raw = eg.wavelet_variance(x + C * temp, fs=FS).variance
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    assert s.compensate and s.temperature_channel == "temperature"
+    assert s.compensation_unavailable == ""
+    on_wv, on_rw = s.wv, _rw(s)
+    assert on_rw == pytest.approx(1e-10, rel=0.3)
+    np.testing.assert_allclose(s.wv_raw.variance, raw, rtol=1e-9)
+    assert "temperature" not in s.to_query()
+    computed = s.wv_computations
+
+    s.compensate = False  # what the checkbox made from the parameter does
+    assert s.error == ""
+    np.testing.assert_allclose(s.wv.variance, raw, rtol=1e-9)
+    assert s.wv_raw is None and _rw(s) > 2 * on_rw
+    assert "compensation is off" in s.temperature and LINE.search(s.temperature)
+    assert s.result.wv is s.wv  # the fit is of the raw WV
+    assert s.to_query()["temperature"] == "0"
+    link = AppState()
+    assert link.from_query({**s.to_query(), "path": str(d / "thermal.csv")}), link.error
+    assert not link.compensate and link.wv_raw is None
+    np.testing.assert_allclose(link.wv.variance, raw, rtol=1e-9)
+    assert _rw(link) == pytest.approx(_rw(s), rel=1e-9)
+
+    s.compensate = True
+    assert s.wv is on_wv and _rw(s) == pytest.approx(on_rw, rel=1e-12)
+    assert s.wv_computations == computed  # both WVs came from the session's cache
+
+
+def test_the_report_of_an_uncompensated_fit_has_no_temperature_paragraph(logs):
+    """The downloaded report says what the session fitted: with the compensation off, the
+    fit is of the raw signal, and the report has no temperature paragraph (which would say
+    the fit is of the compensated signal)."""
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    s.compensate = False
+    assert 'class="temperature"' not in session_report(s)
+
+
+def test_the_multi_channel_matrix_follows_the_switch(logs):
+    """The Multi-channel tab's WV/WCCV matrix (AppState.wv_matrix): its diagonal is each
+    channel's compensated WV while the switch is on (the Fit tab's WV of that channel), the
+    raw one when it is off; the two are cached apart."""
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal2.csv"), s.error
+    chans = ["gyro_x", "gyro_y"]
+    on, note_on = s.wv_matrix(s.log, chans, FS)
+    assert "Temperature-compensated" in note_on and "gyro_y ('temperature')" in note_on
+    s.compensate = False
+    off, note_off = s.wv_matrix(s.log, chans, FS)
+    assert note_off == ""
+    for i, ch in enumerate(chans):
+        comp = s.get_wv(ch, FS, False, True).variance
+        raw = s.get_wv(ch, FS, False, False).variance
+        np.testing.assert_allclose(on.values[:, i, i], comp, rtol=1e-9)
+        np.testing.assert_allclose(off.values[:, i, i], raw, rtol=1e-9)
+        assert np.max(raw / comp) > 2  # the premise: the temperature term shows at long scales
+    # the cross-WV of the two is that of their noise only when compensated: the opposite
+    # temperature terms make the raw one strongly negative at the long scales
+    assert off.values[-3, 0, 1] < -abs(on.values[-3, 0, 1])
+    assert s.wv_matrix(s.log, chans, FS)[0] is off
+    s.compensate = True
+    assert s.wv_matrix(s.log, chans, FS)[0] is on
+    assert s.wvm_computations == 2
+
+
+def test_the_switch_shows_with_a_temperature_channel_and_says_why_it_cannot_be_used(logs):
+    """The page's checkbox is the state's parameter (``Checkbox.from_param``): shown with a
+    temperature channel beside the channel; disabled, with the reason, for a constant
+    temperature; hidden without one. The grey WV is drawn only while compensated."""
+    from gmwm_app.app import create_app
+
+    d, _, _ = logs
+    app = create_app(load=False).gmwm_app
+    s, box, fig = app.state, app.compensate_check, app.views
+    assert s.load_path(d / "thermal.csv"), s.error
+    assert box.visible and not box.disabled and box.value
+    assert "'temperature'" in box.name
+    assert _grey(fig) == len(s.wv)
+    box.value = False  # the user unticks it
+    assert not s.compensate and s.wv_raw is None and _grey(fig) == 0
+    box.value = True
+    assert s.wv_raw is not None and _grey(fig) == len(s.wv)
+
+    assert s.load_path(d / "flat.csv"), s.error
+    assert box.visible and box.disabled and "constant" in box.name
+    assert s.temperature == "" and s.wv_raw is None and _grey(fig) == 0
+
+    assert s.load_path(d / "plain.csv"), s.error
+    assert not box.visible and s.temperature_channel == ""
+
+
+@pytest.mark.real_data
+def test_a_real_log_without_temperature_shows_no_switch_and_no_grey_wv(real_data):
+    """ADIS16405 unit 1 has no temperature channel: no switch, no grey WV, no line, nothing in
+    the link, and its WV is the raw signal's whatever the switch says."""
+    from gmwm_app.app import create_app
+
+    app = create_app(load=False).gmwm_app
+    s = app.state
+    assert s.load_path(real_data / "adis16405_imu1.h5"), s.error
+    assert s.temperature_channel == "" and s.temperature == "" and s.wv_raw is None
+    assert not app.compensate_check.visible and app.views.raw is None  # never built
+    assert "temperature" not in s.to_query()
+    want = s.log.wavelet_variance("gyro_x", fs=s.fs).variance
+    np.testing.assert_array_equal(s.wv.variance, want)
+
+
+def test_a_saved_session_keeps_the_switch(logs):
+    """A session saved with the compensation off restores with it off: the same raw WV and
+    the same fit (a session file without the key restores with it on, as before)."""
+    import json
+
+    from gmwm_app import session_view as sv
+
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    s.compensate = False
+    text = sv.session_json(s)
+    assert json.loads(text)["app"]["compensate"] is False
+    other = AppState()
+    assert sv.apply_restore(other, sv.prepare_restore(text, "s.json")), other.error
+    assert not other.compensate and other.wv_raw is None
+    np.testing.assert_allclose(other.wv.variance, s.wv.variance, rtol=1e-12)
+    assert _rw(other) == pytest.approx(_rw(s), rel=1e-9)
+    doc = json.loads(text)
+    del doc["app"]["compensate"]
+    old = AppState()
+    assert sv.apply_restore(old, sv.prepare_restore(json.dumps(doc), "s.json")), old.error
+    assert old.compensate and old.wv_raw is not None
+
+
+def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
+    """When the other WV cannot be computed, the page says why in one line, the switch goes
+    back (its widget with it) and the session keeps its WV and fit."""
+    from gmwm_app import state as state_mod
+
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    wv, res = s.wv, s.result
+    for key in [k for k in s._wv_cache.wvs if not k[3]]:  # the raw WV must be computed
+        del s._wv_cache.wvs[key]  # again, and that fails
+
+    def broken(*a, **kw):
+        raise ValueError("channel gyro_x: no memory left for its WV")
+
+    monkeypatch.setattr(state_mod, "compute_wv", broken)
+    s.compensate = False
+    why = "channel gyro_x: no memory left for its WV"
+    assert s.error == f"Could not switch the temperature compensation: {why}"
+    assert s.compensate and s.wv is wv and s.result is res
+
+
+def test_a_log_cut_into_segments_is_not_compensated_and_says_why(logs):
+    """A log loaded on its still segments is not compensated, as `--temperature auto` does not
+    (docs/qualify.md): its WV is the pooled raw one, and the switch is disabled with that
+    reason."""
+    d, x, temp = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv", segments="0:90000,110000:200000"), s.error
+    assert s.temperature_channel == "temperature" and s.wv_raw is None and s.temperature == ""
+    assert "not fitted on a log cut into still segments" in s.compensation_unavailable
+    np.testing.assert_allclose(
+        s.wv.variance, s.log.wavelet_variance("gyro_x", fs=s.fs).variance, rtol=1e-12
+    )

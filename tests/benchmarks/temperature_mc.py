@@ -14,9 +14,16 @@ discretisation), and the table gives how often the fit keeps the lag (BIC), the 
 ``tau`` and how often its profile interval covers the truth; without ``--lag`` the same
 columns give the false-lag rate.
 
+With ``--segments`` each log is a flight's still parts: three segments (samples 0-60,000,
+80,000-140,000 and 160,000-200,000), each with its own bias offset (normal, SD 0.05 deg/s),
+and motion between them (a 1 deg/s swing at 0.5 Hz and white noise of SD 0.3 deg/s); the fit
+is ``fit_temperature(..., segments=)`` (each segment keeps its own offset; no lag tried) and
+the WVs pool the segments.
+
 Usage::
 
     nice python tests/benchmarks/temperature_mc.py [--reps 200] [--seed 1] [--lag 120]
+    nice python tests/benchmarks/temperature_mc.py --segments [--reps 200]
 
 Prints a Markdown table (docs/qualify.md, section Temperature, holds its output).
 """
@@ -37,6 +44,7 @@ FS = 100.0
 N = 200_000
 TRUE = {"WN.sigma2": 1e-4, "RW.gamma2": 1e-10}
 C = 2e-3
+SEGMENTS = ((0, 60_000), (80_000, 140_000), (160_000, N))
 
 
 def band(k: int, n: int) -> str:
@@ -72,7 +80,9 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--lag", type=float, default=0.0, help="planted thermal lag tau (s)")
+    ap.add_argument("--segments", action="store_true", help="three still parts of a flight")
     a = ap.parse_args()
+    segs = SEGMENTS if a.segments else ()
     rng = np.random.default_rng(a.seed)
     t = np.arange(N) / FS
     temp = profile(t)
@@ -84,7 +94,13 @@ def main() -> None:
     t0 = time.process_time()
     for _ in range(a.reps):
         y = model.simulate(N, fs=FS, rng=rng) + C * seen
-        tf = fit_temperature(y, temp, fs=FS, model="WN+RW", unit="deg/s", channel="gyro_x")
+        for lo_s, hi_s in segs:  # each still part's own bias offset
+            y[lo_s:hi_s] += rng.normal(0.0, 0.05)
+        for (_, m0), (m1, _) in zip(segs[:-1], segs[1:], strict=True):  # the motion
+            y[m0:m1] += np.sin(np.pi * t[m0:m1]) + 0.3 * rng.standard_normal(m1 - m0)
+        tf = fit_temperature(
+            y, temp, fs=FS, model="WN+RW", unit="deg/s", channel="gyro_x", segments=segs
+        )
         if tf.tau_s > 0:
             lag_kept += 1
             taus.append(tf.tau_s)
@@ -101,7 +117,8 @@ def main() -> None:
         est["raw DR"].append(raw_dr.params["DR.omega"])
     cpu = time.process_time() - t0
     r = a.reps
-    print(f"{r} logs; planted lag {a.lag:g} s; CPU {cpu:.0f} s\n")
+    where = "; three still segments, own offsets, motion between" if segs else ""
+    print(f"{r} logs; planted lag {a.lag:g} s{where}; CPU {cpu:.0f} s\n")
     print("| quantity | truth | median estimate | 95 % interval covers truth, % [95 % band] |")
     print("|---|---|---|---|")
     print(

@@ -4,6 +4,7 @@ with --drop-warmup, and fits the temperature relation with --temperature (JSON k
 
 from __future__ import annotations
 
+import html
 import json
 
 import numpy as np
@@ -211,3 +212,31 @@ def test_fit_of_several_files_checks_each(files, capsys):
     kinds = [[f["kind"] for f in q["findings"]] for q in d["qualification"]]
     assert kinds[0] == ["shock"] and "warmup" in kinds[1]
     assert d["temperature"] == [None, None]
+
+
+def test_a_log_cut_into_segments_is_compensated_when_its_temperature_is_named(
+    files, capsys, tmp_path
+):
+    """`--segments` with `--temperature auto`: not compensated, and `gmwm fit` says so in one
+    line that names the flag to use, as the report's channel note does (in the engine's
+    words); `--temperature temperature`: fitted on the segments, each with its own offset
+    (the interval covers the planted 7.2 deg/h/degC)."""
+    csv = str(files / "thermal.csv")
+    segs = ["--segments", "0:40000,50000:100000", "--units", "deg/s"]
+    code, out, err = run(capsys, "fit", csv, "--model", "WN+RW", "--json", *segs)
+    assert code == 0 and json.loads(out)["temperature"] is None
+    (line,) = [ln for ln in err.splitlines() if "temperature:" in ln]
+    assert "'temperature' not fitted on a log cut into still segments" in line
+    assert "name it, --temperature temperature, to fit it on the segments" in line
+    code, out, err = run(
+        capsys, "fit", csv, "--model", "WN+RW", "--json", *segs, "--temperature", "temperature"
+    )
+    t = json.loads(out)["temperature"]
+    lo, hi = t["sensitivity_interval"]
+    assert code == 0 and lo < 7.2 < hi and "temperature sensitivity" in err
+    page = tmp_path / "r.html"
+    code, _, _ = run(capsys, "report", csv, "-o", str(page), "--model", "WN+RW", *segs)
+    assert code == 0
+    text = html.unescape(page.read_text())
+    assert "temperature: 'temperature' not fitted on a log cut into still segments" in text
+    assert "temperature='temperature'" in text  # the engine's words (the CLI: its flag)

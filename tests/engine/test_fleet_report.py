@@ -299,3 +299,55 @@ def test_real_fleet_numbers_equal_the_batch(real_data, tmp_path):
             for c, (_, a) in zip(cols, table[Path(lf.source).name][1:], strict=True)
         }
         assert got == pytest.approx(want, rel=1e-12, abs=0)  # worker processes vs here
+
+
+# ----------------------------------------------------------------------------- temperature
+THERMAL_C = 2e-3  # deg/s per degC = 7.2 deg/h per degC
+THERMAL_N = 2**16
+THERMAL_SPEC = "WN(sigma2=1e-4)+RW(gamma2=1e-10)"  # (deg/s)^2, as the report temperature tests
+TEMP_COL = "temperature|S_T|deg/h/degC"
+
+
+@pytest.fixture(scope="module")
+def thermal_fleet(tmp_path_factory):
+    """Three gyro units with a temperature column (the planted 7.2 deg/h/degC) and a fourth
+    without one; the fleet report of the four, its page and the compensated fits' own
+    sensitivities."""
+    d = tmp_path_factory.mktemp("thermal_fleet")
+    t = np.arange(THERMAL_N) / FS
+    temp = 25 + 5 * (1 - np.exp(-t / 120)) + 2 * np.sin(2 * np.pi * t / 90)
+    m = eg.parse_model(THERMAL_SPEC)
+    for k in range(4):
+        x = m.simulate(THERMAL_N, fs=FS, rng=500 + k) + THERMAL_C * temp
+        chans = {"gx": x, "temperature": temp} if k < 3 else {"gx": x}
+        units = {"gx": "deg/s", "temperature": "degC"}
+        save_log(d / f"unit{k}.csv", chans, FS, units={c: units[c] for c in chans})
+    fleet = gather_fleet([str(d / "unit*.csv")], model="WN+RW", channels=["gx"], workers=1)
+    return fleet, _parse(render_fleet_html(fleet))
+
+
+def test_the_fleet_table_has_each_units_temperature_sensitivity(thermal_fleet):
+    """The gx table has a column ``temperature S_T [deg/h/degC]``: for each unit with a
+    temperature channel, its fit's sensitivity and 95 % interval (which covers the planted
+    7.2 deg/h/degC on each of the three seeds: 98 % coverage over 200 logs, docs/qualify.md),
+    and a dash for the unit without one."""
+    fleet, page = thermal_fleet
+    cols = page.columns["gx"]
+    assert cols.count(TEMP_COL) == 1
+    table = page.tables[("fleet", "gx")]
+    i = cols.index(TEMP_COL) + 1
+    units = {u.name: u for u in fleet.units}
+    for k in range(3):
+        name = f"unit{k}.csv"
+        tf = units[name].report.channels["gx"].temperature
+        assert tf is not None and tf.sensitivity_unit == "deg/h/degC"
+        text, attrs = table[name][i]
+        got, lo, hi = (float(attrs[a]) for a in ("data-value", "data-low", "data-high"))
+        assert (got, (lo, hi)) == (tf.sensitivity, tf.sensitivity_interval)
+        assert lo < 7.2 < hi and hi - lo < 7.2, (name, lo, hi)
+        assert f"{got:.4g}" in text
+    assert table["unit3.csv"][i] == ("—", {"class": "n", "data-value": "nan"})
+    assert units["unit3.csv"].report.channels["gx"].temperature is None
+    # the batch's summary has the same figure (one declaration: TemperatureFit.SYMBOL)
+    rows = [r for r in fleet.batch.rows if r.symbol == "S_T"]
+    assert [(r.channel, r.unit, r.n_units) for r in rows] == [("gx", "deg/h/degC", 3)]

@@ -165,3 +165,85 @@ def test_no_lag_is_kept_without_one():
         assert tf.tau_s == 0 and tf.lag_bic > 0 and tf.tau_interval == (0.0, 0.0)
     with pytest.raises(ValueError, match="lag must be"):
         fit_temperature(y, temp, fs=FS, lag="yes")
+
+
+# ----------------------------------------------------------------------------- segments
+SEG_N = 240_000  # 40 min at 100 Hz
+SEGMENTS = ((0, 70_000), (90_000, 160_000), (180_000, SEG_N))
+OFFSETS = (0.0, 0.05, -0.03)  # deg/s: the bias of each still part after the motion
+
+
+def _segmented_log(rng: int) -> tuple[eg.ImuLog, np.ndarray]:
+    """A flight-like log: three still parts, each with its own bias offset, and motion between
+    them (a 1 deg/s swing and loud noise); the temperature (warm-up and cycle) logged
+    throughout; the planted 7.2 deg/h per degC. Returns the log (segments set) and the
+    noise alone."""
+    temp = thermal_profile(SEG_N)
+    noise = eg.parse_model(SPEC).simulate(SEG_N, fs=FS, rng=rng)
+    y = noise + C * temp
+    t = np.arange(SEG_N) / FS
+    gen = np.random.default_rng(rng + 1)
+    for (a, b), off in zip(SEGMENTS, OFFSETS, strict=True):
+        y[a:b] += off
+    for (_, a), (b, _) in zip(SEGMENTS[:-1], SEGMENTS[1:], strict=True):  # the motion
+        y[a:b] += np.sin(2 * np.pi * 0.5 * t[a:b]) + 0.3 * gen.standard_normal(b - a)
+    log = eg.ImuLog(
+        {"gyro_x": y}, FS, units={"gyro_x": "deg/s"}, aux={"temperature": temp},
+        source="flight.csv", segments=SEGMENTS,
+    )  # fmt: skip
+    return log, noise
+
+
+def test_a_log_cut_into_segments_is_compensated_on_its_segments():
+    """The relation is fitted on the still parts, each with its own offset: the planted 7.2
+    deg/h/degC is inside the 95 % interval (and the interval is narrower than the effect); the
+    compensated WV pools the segments as the log's own WV does, and at the long scales, where
+    the temperature term makes the raw WV 2 to 10 times the noise's, it is the noise's within
+    30 %; the WN+RW fit of it has the planted RW within 30 %, the raw one more than twice it.
+    This for the temperature channel named; with "auto" a segmented log is not compensated,
+    and one line says so and how to (before, it could not be compensated at all: None)."""
+    from engine.inference.temperature import fit_log_temperature, segments_note
+    from engine.wv.pooled import pooled_wavelet_variance
+
+    log, noise = _segmented_log(31)
+    assert fit_log_temperature(log, "gyro_x", "auto") is None
+    note = segments_note(log, "gyro_x")
+    assert "not fitted on a log cut into still segments" in note
+    assert "temperature='temperature'" in note
+    tf = fit_log_temperature(log, "gyro_x", "temperature", model="WN+RW")
+    assert tf is not None and tf.tau_s == 0
+    assert segments_note(log, "gyro_x", "temperature") == ""
+    lo, hi = tf.sensitivity_interval
+    assert lo < 7.2 < hi and hi - lo < 7.2, (lo, hi)
+    pieces = [slice(a, b) for a, b in SEGMENTS]
+    want = pooled_wavelet_variance([noise[p] for p in pieces], fs=FS).variance
+    raw = log.wavelet_variance("gyro_x").variance
+    np.testing.assert_allclose(tf.wv_raw.variance, raw, rtol=1e-12)
+    comp = tf.compensated_log(log).wavelet_variance("gyro_x")
+    np.testing.assert_allclose(tf.wv.variance, comp.variance, rtol=1e-12)
+    ramp = raw > 2 * want  # the premise: the temperature term dominates the long scales
+    assert ramp.sum() >= 3, raw / want
+    np.testing.assert_allclose(tf.wv.variance[ramp], want[ramp], rtol=0.3)
+    assert tf.fit.params["RW.gamma2"] == pytest.approx(1e-10, rel=0.3)
+    assert tf.fit_raw.params["RW.gamma2"] > 2e-10
+    t0, t1 = tf.temperature_range
+    temp = thermal_profile(SEG_N)
+    assert (t0, t1) == (min(temp[p].min() for p in pieces), max(temp[p].max() for p in pieces))
+
+
+def test_segments_keep_their_own_offsets():
+    """The offsets between the still parts (0.05 and -0.03 deg/s, what a flight's motion does
+    to a bias) are not taken for temperature: fitted across the whole span as one series
+    (the motion cut out and the parts joined end to end), the same data give a sensitivity
+    whose interval misses the planted 7.2 deg/h/degC."""
+    log, _ = _segmented_log(31)
+    temp = thermal_profile(SEG_N)
+    tf = fit_temperature(log["gyro_x"], temp, fs=FS, unit="deg/s", segments=SEGMENTS)
+    lo, hi = tf.sensitivity_interval
+    assert lo < 7.2 < hi
+    joined = np.concatenate([log["gyro_x"][a:b] for a, b in SEGMENTS])
+    tj = np.concatenate([temp[a:b] for a, b in SEGMENTS])
+    lo_j, hi_j = fit_temperature(joined, tj, fs=FS, unit="deg/s", lag=False).sensitivity_interval
+    assert not lo_j < 7.2 < hi_j, (lo_j, hi_j)
+    with pytest.raises(ValueError, match="within its"):
+        fit_temperature(log["gyro_x"], temp, fs=FS, segments=[(0, SEG_N + 1)])
