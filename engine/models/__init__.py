@@ -13,7 +13,9 @@ from .model import (
     TO_UNCONSTRAINED,
     Model,
     ModelError,
+    Param,
     Process,
+    param,
     parse_model,
 )
 from .processes import (
@@ -31,6 +33,8 @@ from .processes import (
 
 __all__ = [
     "Process",
+    "Param",
+    "param",
     "WN",
     "QN",
     "RW",

@@ -25,7 +25,7 @@ import numpy as np
 
 from .._limits import check_sample_count
 from .._quantity import Quantity, per_s, sqrt0, squared, times_s
-from .model import Process
+from .model import Process, coefficient_unit, param, per_sample_unit, rate_unit
 from .spectrum import FilterTerms, PsdTerms
 
 __all__ = ["WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv", "ar1_wv_pos", "TC_MIN", "TC_MAX_FACTOR"]
@@ -270,12 +270,13 @@ class WN(Process, order=3, description="white noise"):
     True
     """
 
-    sigma2: float | None = None
+    sigma2: float | None = param()
 
     display_name = "white noise"
     help = "white noise: WV falls as 1/τ (angle/velocity random walk)"
     color = "#1F77B4"
     allan_slope = -0.5
+    unique = True
     read_tau = 1.0
     shareable = True
     quantities = (
@@ -330,12 +331,13 @@ class QN(Process, order=2, description="quantization noise"):
     4.0
     """
 
-    q2: float | None = None
+    q2: float | None = param()
 
     display_name = "quantization noise"
     help = "quantization noise: WV falls as 1/τ²"
     color = "#9467BD"
     allan_slope = -1.0
+    unique = True
     read_tau = math.sqrt(3.0)
     quantities = (
         Quantity(
@@ -391,12 +393,13 @@ class RW(Process, order=4, description="random walk"):
     3 4.5 8.25
     """
 
-    gamma2: float | None = None
+    gamma2: float | None = param()
 
     display_name = "random walk"
     help = "random walk: WV rises as τ (rate random walk)"
     color = "#2CA02C"
     allan_slope = 0.5
+    unique = True
     read_tau = 3.0
     shareable = True
     quantities = (
@@ -447,12 +450,13 @@ class DR(Process, order=5, description="drift (rate ramp)"):
     2.0 4.0 6.0 8.0
     """
 
-    omega: float | None = None
+    omega: float | None = param("identity", per_sample_unit, (-math.inf, math.inf))
 
     display_name = "drift"
     help = "drift (rate ramp): WV rises as τ²"
     color = "#8C564B"
     allan_slope = 1.0
+    unique = True
     read_tau = math.sqrt(2.0)
     deterministic = True
     quantities = (
@@ -483,9 +487,6 @@ class DR(Process, order=5, description="drift (rate ramp)"):
 
     def _check_value(self, name, v):
         pass  # a drift may have either sign; its WV depends on omega^2
-
-    def bounds(self, fs=1.0):
-        return {"omega": (-math.inf, math.inf)}
 
     def basis(self, tau, fs, nl=None):
         return tau**2 / 16.0
@@ -531,13 +532,17 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
     0.3333 0.3125 0.2705
     """
 
-    phi: float | None = None
-    sigma2: float | None = None
+    phi: float | None = param("atanh", coefficient_unit, (-1.0, 1.0), "log10(1-x)")
+    sigma2: float | None = param()
 
     display_name = "AR(1)"
     help = "first-order autoregression (per sample phi, sigma2)"
     shareable = True
     phi_can_vanish = True
+    excludes = {
+        "GM": "they are the same process in two parametrisations; use only GM (continuous "
+        "time) or only AR1 (per sample)"
+    }
     quantities = _GM_QUANTITIES  # reported as the GM it samples
 
     def _check_value(self, name, v):
@@ -545,9 +550,6 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
             raise ValueError(f"AR1.phi must be in (-1, 1), got {v}")
         if name == "sigma2" and v < 0:
             raise ValueError(f"AR1.sigma2 must be >= 0, got {v}")
-
-    def bounds(self, fs=1.0):
-        return {"phi": (-1.0, 1.0), "sigma2": (0.0, math.inf)}
 
     # non-linear value: phi itself
     def basis(self, tau, fs, nl=None):
@@ -633,8 +635,8 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     0.09754 0.6126 0.276
     """
 
-    beta: float | None = None
-    sigma2_gm: float | None = None
+    beta: float | None = param("log", rate_unit)
+    sigma2_gm: float | None = param()
 
     display_name = "Gauss-Markov"
     help = "Gauss-Markov: a bump at its correlation time 1/beta (bias instability)"
