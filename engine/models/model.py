@@ -47,8 +47,16 @@ PROCESS_TYPES: dict[str, type[Process]] = {}
 
 #: Behaviour every concrete process must implement (checked when its class is created).
 BEHAVIOUR = ("basis", "simulate", "psd_terms", "filter_terms")
-#: ... and, for a process with a non-linear parameter (AR1, GM), these too.
-NONLINEAR_BEHAVIOUR = ("phi_from_nl", "nl_from_phi", "basis_scale")
+#: ... and, for a process with a non-linear parameter (AR1, GM), these too: the map between
+#: its parameter and the fitter's value, and its search coordinate in its own terms.
+NONLINEAR_BEHAVIOUR = (
+    "phi_from_nl",
+    "nl_from_phi",
+    "search_range",
+    "search_axis",
+    "search_nl",
+    "search_of_nl",
+)
 #: ... and, for a process that channels may share (multivariate models), this one.
 SHARED_BEHAVIOUR = ("simulate_shared",)
 #: Class attributes every concrete process must give (non-empty).
@@ -374,6 +382,38 @@ class Process(Spectral):
         """The non-linear parameter's value of a fitter's ``phi`` (inverse of
         :meth:`phi_from_nl`; AR1, GM only)."""
         raise NotImplementedError
+
+    # ---- the non-linear search coordinate (engine.fit._varpro asks the process) -------------
+    def search_range(self, n_max: int) -> tuple[float, float]:
+        """The interval ``[lo, hi]`` of the search coordinate ``u`` the fit explores, for a
+        series of ``n_max`` samples (AR1, GM: log correlation times from :data:`TC_MIN` to
+        ``TC_MAX_FACTOR n_max`` samples)."""
+        raise NotImplementedError
+
+    def search_axis(self, tau_max: float, k: int) -> np.ndarray:
+        """The grid of ``u`` the search starts from, for ``k`` interchangeable terms of this
+        kind and a largest scale ``tau_max`` (samples)."""
+        raise NotImplementedError
+
+    def search_nl(self, u: Any, lo: float, hi: float) -> Any:
+        """The fitter's non-linear value (:meth:`nl_value`'s space) at search coordinate
+        ``u``, clipped into ``[lo, hi]``: a float for a float, an array for an array."""
+        raise NotImplementedError
+
+    def search_of_nl(self, nl: float) -> float | None:
+        """The search coordinate of a fitter's non-linear value (inverse of
+        :meth:`search_nl`), or None when the search cannot reach it."""
+        raise NotImplementedError
+
+    def basis_many(self, tau: np.ndarray, fs: float, nls: np.ndarray) -> np.ndarray:
+        """:meth:`basis` at each non-linear value of ``nls`` (n,): an (n, J) array (the
+        search's batched path; one :meth:`basis` per value by default)."""
+        return np.array([self.basis(tau, fs, float(v)) for v in nls]).reshape(len(nls), -1)
+
+    def correlation_time(self, fs: float) -> float | None:
+        """Correlation time in samples of the fitted process (AR1, GM: ``-1 / ln phi``; 0
+        for ``phi <= 0``), None for a process without one."""
+        return None
 
     def basis_scale(self, phi: float) -> float:
         """``basis(tau, fs, phi) / ar1_wv(tau, phi, 1)`` for a process with a non-linear

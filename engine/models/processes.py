@@ -514,8 +514,51 @@ def _simulate_ar1(n: int, phi: float, sigma2: float, rng: np.random.Generator) -
     return lfilter([1.0], [1.0, -phi], e, zi=[phi * x0])[0]
 
 
+class _CorrelationTimeSearch:
+    """The search coordinate of an AR1 or a GM: ``u = log(correlation time in samples)``,
+    ``phi = exp(-1 / exp(u))``, between :data:`TC_MIN` and ``TC_MAX_FACTOR n_max`` samples;
+    an AR1 whose ``phi`` may vanish (:attr:`~engine.models.Process.phi_can_vanish`) is
+    white (``phi = 0``) below ``u = -50``."""
+
+    phi_can_vanish: bool
+
+    def search_range(self, n_max: int) -> tuple[float, float]:
+        return math.log(TC_MIN), math.log(TC_MAX_FACTOR * n_max)
+
+    def search_axis(self, tau_max: float, k: int) -> np.ndarray:
+        # 0.25 to 4x the largest scale; 60 points for one term, 36 for two, 18 for three, 10
+        # beyond (the candidates grow as C(n, k))
+        n = {1: 60, 2: 36, 3: 18}.get(k, 10)
+        return np.linspace(math.log(0.25), math.log(4.0 * tau_max), n)
+
+    def search_nl(self, u, lo, hi):
+        if isinstance(u, np.ndarray):
+            phi = np.exp(-1.0 / np.exp(np.clip(u, lo, hi)))
+            return np.where(u < -50, 0.0, phi) if self.phi_can_vanish else phi
+        if self.phi_can_vanish and u < -50:
+            return 0.0
+        return math.exp(-1.0 / math.exp(min(max(u, lo), hi)))
+
+    def search_of_nl(self, nl):
+        if not nl > 0:
+            return None
+        return math.inf if nl >= 1 else math.log(-1.0 / math.log(nl))
+
+    def correlation_time(self, fs: float) -> float | None:
+        phi = self.nl_value(fs)  # type: ignore[attr-defined]
+        if phi is None:
+            return None
+        return -1.0 / math.log(phi) if 0 < phi < 1 else (math.inf if phi >= 1 else 0.0)
+
+
 @dataclass(frozen=True, repr=False)
-class AR1(Process, order=1, description="first-order autoregression", nonlinear="phi"):
+class AR1(
+    _CorrelationTimeSearch,
+    Process,
+    order=1,
+    description="first-order autoregression",
+    nonlinear="phi",
+):
     """First-order autoregression ``X_t = phi X_{t-1} + e_t``, ``Var e = sigma2``, ``|phi| < 1``.
 
     Examples
@@ -612,7 +655,7 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
 
 
 @dataclass(frozen=True, repr=False)
-class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
+class GM(_CorrelationTimeSearch, Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     """Gauss-Markov (continuous time): ``beta`` [1/s], stationary variance ``sigma2_gm``.
 
     Sampled at ``fs`` it is an AR1 with ``phi = exp(-beta/fs)`` and innovation variance
@@ -662,6 +705,10 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
 
     def basis_scale(self, phi):
         return 1.0 - phi * phi
+
+    def basis_many(self, tau, fs, nls):
+        # every row at once (the search's hot path): the AR1 WV times 1 - phi^2
+        return ar1_wv_pos(tau, nls) * (1.0 - nls * nls)[:, None]
 
     def psd_terms(self, fs):
         phi, sigma2 = self.as_ar1(fs)._require()
