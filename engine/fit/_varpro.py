@@ -400,12 +400,13 @@ class NNLSProblem:
             return out
         uu = u[todo]
         c = np.repeat(self._c_fixed[None], todo.size, axis=0)  # (B, M, p)
-        for g in self.groups:
-            nls = np.asarray(g.proto.search_nl(uu[:, g.span], g.lo, g.hi), dtype=float)
-            cols = g.proto.basis_many(self.tau, self.fs, nls.ravel()).reshape(todo.size, g.n, -1)
-            c[:, :, g.cols] = (
+        for grp in self.groups:
+            pr = grp.proto
+            nls = np.asarray(pr.search_nl(uu[:, grp.span], grp.lo, grp.hi), dtype=float)
+            cols = pr.basis_many(self.tau, self.fs, nls.ravel()).reshape(todo.size, grp.n, -1)
+            c[:, :, grp.cols] = (
                 self._weigh(cols.transpose(2, 0, 1).reshape(self.tau.size, -1))
-                .reshape(self.tau.size, todo.size, g.n)
+                .reshape(self.tau.size, todo.size, grp.n)
                 .transpose(1, 0, 2)
             )
         norms = np.sqrt(np.einsum("bmi,bmi->bi", c, c))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -520,7 +521,7 @@ class _CorrelationTimeSearch:
     an AR1 whose ``phi`` may vanish (:attr:`~engine.models.Process.phi_can_vanish`) is
     white (``phi = 0``) below ``u = -50``."""
 
-    phi_can_vanish: bool
+    phi_can_vanish: ClassVar[bool]
 
     def search_range(self, n_max: int) -> tuple[float, float]:
         return math.log(TC_MIN), math.log(TC_MAX_FACTOR * n_max)
