@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from .ma1 import MA1
 from .model import (
     FROM_UNCONSTRAINED,
     PROCESS_TYPES,
@@ -41,6 +42,7 @@ __all__ = [
     "DR",
     "AR1",
     "GM",
+    "MA1",
     "Model",
     "ModelError",
     "parse_model",

@@ -78,6 +78,7 @@ EXAMPLES: dict[str, Process] = {
     "DR": eg.DR(omega=0.02),
     "AR1": eg.AR1(phi=0.8, sigma2=1.3),
     "GM": eg.GM(beta=2.0, sigma2_gm=4.0),
+    "MA1": eg.parse_model("MA1(theta=-0.4, sigma2=1.1)").processes[0],
 }
 
 
