@@ -204,3 +204,20 @@ def test_on_real_logs_ma1_reaches_at_most_the_qn_plus_wn_objective(real_data: Pa
             theta = eg.fit_gmwm(wv, "MA1+RW").params["MA1.theta"]
             if name.startswith("adis") and ch != "gyro_z":
                 assert 0.1 < theta < 0.3, (ch, theta)
+
+
+def test_fits_that_search_correlation_times_refuse_it_and_the_ranking_keeps_it() -> None:
+    """The GMWFM and the multivariate fit move log correlation times: they refuse an MA1
+    with a message naming the fit to use; the ranking neither folds it into WN (it has no
+    correlation time, whatever its theta) nor takes it for a random walk."""
+    model = eg.parse_model("MA1(theta=-0.3, sigma2=1e-2) + RW(gamma2=1e-8)")
+    wv = eg.wavelet_variance(model.simulate(2**14, fs=100.0, rng=4), fs=100.0)
+    with pytest.raises(eg.FitError, match="MA1 has none.*fit_gmwm"):
+        eg.fit_gmwfm(wv, "MA1+RW")
+    with pytest.raises(eg.ModelError, match="channel a: .*MA1 has none"):
+        eg.MultiModel(["a", "b"], "MA1+RW")
+    ranked = {c.model: c for c in eg.rank_models(wv, ["MA1+RW", "QN+WN+RW"]).candidates}
+    ma = ranked["RW+MA1"]
+    assert ma.sub_sample == () and ma.changes == () and not ma.error
+    # theta < 0 with RW: the same WV family as QN+WN+RW, the same minimum
+    assert ma.objective == pytest.approx(ranked["QN+WN+RW"].objective, rel=1e-6)
