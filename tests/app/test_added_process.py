@@ -10,8 +10,10 @@ import math
 import pytest
 
 import engine as eg
+from engine.models import Param
 from gmwm_app.state import PROCESS_CODES, PROCESS_NAMES, AppState
 from gmwm_app.views import component_color
+from gmwm_app.whatif import SliderSpec
 
 
 def test_the_app_adds_fits_and_slides_an_ma1(app_state: AppState) -> None:
@@ -52,3 +54,14 @@ def test_the_app_refuses_ma1_beside_white_noise_and_keeps_the_session(
     assert s.model.spec() == "WN+RW" and s.result.objective == before
     assert s.add_process("GM"), s.error  # still usable
     assert math.isfinite(s.result.objective)
+
+
+def test_linear_slider_spans_the_bounds_less_a_thousandth_each_end() -> None:
+    spec = Param("atanh", bounds=(-1.0, 1.0), slider="linear")
+    sp = SliderSpec.around("X.t", "X", "t", "1", spec, -0.25)
+    assert (sp.lo, sp.hi, sp.x) == pytest.approx((-0.998, 0.998, -0.25))
+    assert sp.value_of(0.3) == 0.3 and SliderSpec.position_of("linear", -0.7) == -0.7
+    assert SliderSpec.shows("linear", 0.0) and not SliderSpec.shows("log10", 0.0)
+    # a log slider: 3 decades either side of the value, as before
+    sp = SliderSpec.around("X.v", "X", "v", "1", Param(), 0.5)
+    assert (sp.lo, sp.hi) == pytest.approx((math.log10(0.5) - 3, math.log10(0.5) + 3))
