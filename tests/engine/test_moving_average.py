@@ -221,3 +221,16 @@ def test_fits_that_search_correlation_times_refuse_it_and_the_ranking_keeps_it()
     assert ma.sub_sample == () and ma.changes == () and not ma.error
     # theta < 0 with RW: the same WV family as QN+WN+RW, the same minimum
     assert ma.objective == pytest.approx(ranked["QN+WN+RW"].objective, rel=1e-6)
+
+
+def test_replicate_fit_starts_from_given_values_of_either_sign() -> None:
+    """Three recordings of MA1(theta = -0.3) + RW fitted together from the true values as a
+    start: the start is the process's own coordinate (atanh theta; a log correlation time of a
+    negative theta was a math domain error), and theta is recovered within 0.05."""
+    model = eg.parse_model("MA1(theta=-0.3, sigma2=1e-2) + RW(gamma2=1e-8)")
+    wvs = [
+        eg.wavelet_variance(model.simulate(2**14, fs=100.0, rng=40 + i), fs=100.0) for i in range(3)
+    ]
+    res = eg.fit_replicates(wvs, model)
+    assert res.params["MA1.theta"] == pytest.approx(-0.3, abs=0.05)
+    assert res.objective <= eg.fit_replicates(wvs, "MA1+RW").objective * (1 + 1e-9)
