@@ -184,7 +184,7 @@ def fit_replicates(
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
         # the replicates' own fits (GM/AR1 most persistent first) are candidates too
-        starts = []
+        starts: list[tuple[float, ...]] = []
         for wv, w in zip(out, ws, strict=True):
             try:
                 fr: GMWMResult = fit_gmwm(wv, m.cleared(), weights=w)
@@ -192,10 +192,10 @@ def fit_replicates(
                 continue
             st = start_coordinates(fr.model, fs0)
             if st is not None:
-                starts.append(np.array(st))
+                starts.append(st)
         st = start_coordinates(m, fs0) if m.is_set else None
         if st is not None:
-            starts.append(np.array(st))
+            starts.append(st)
         _, u, converged = search(prob, starts, keep=4)
         method, msg = "grid+nelder-mead", search_message(converged)
     fitted = fitted_model(prob, u, fs0)
