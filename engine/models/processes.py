@@ -597,6 +597,8 @@ class AR1(
 
     # non-linear value: phi itself
     def basis(self, tau, fs, nl=None):
+        if type(nl) is float and 0.0 < nl < 1.0 and isinstance(tau, np.ndarray):
+            return ar1_wv_pos(tau, nl)  # the search's hot path: ar1_wv without its checks
         return ar1_wv(tau, nl, 1.0)
 
     def phi_from_nl(self, nl, fs):
