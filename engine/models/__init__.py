@@ -1,8 +1,9 @@
-"""Latent-process models: the processes (WN, QN, RW, DR, AR1, GM) and their sums (``Model``).
+"""Latent-process models: the processes (WN, QN, RW, DR, AR1, GM, MA1) and their sums (``Model``).
 
 ``engine.models.model`` holds the :class:`Process` interface, :class:`Model` and the parser
 (the spectral side of the interface in ``engine.models.spectrum``);
-``engine.models.processes`` the concrete processes, which register themselves on import.
+``engine.models.processes`` the concrete processes and ``engine.models.ma1`` the MA(1), which
+register themselves on import (a new process: one module and one import line here).
 """
 
 from __future__ import annotations

@@ -168,6 +168,11 @@ class Process(Spectral):
     Its ``code`` is the class name and ``param_names`` its fields, in order; it registers
     itself in :data:`PROCESS_TYPES`, which is how :func:`parse_model` finds it.
 
+    Each field is declared with :func:`param`, whose :class:`Param` record gives the
+    parameter's transform to the unconstrained space, unit, bounds and slider scale; a process
+    with a non-linear parameter also states its search coordinate (:meth:`search_range`,
+    :meth:`search_axis`, :meth:`search_nl`, :meth:`search_of_nl`), which the fit reads.
+
     A process owns its behaviour, so that adding a process means adding one class: its WV
     (:meth:`basis`), simulator, spectral density (:meth:`psd_terms`, :meth:`psd`), the rule
     that projects it onto a filter's model (:meth:`filter_terms`), its datasheet quantities
