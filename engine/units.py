@@ -61,16 +61,26 @@ _DEG = math.pi / 180.0
 
 
 def param_unit(code: str, name: str, unit: str = "") -> str:
-    """Unit of a model parameter for a signal in ``unit`` (per-sample parametrisation)."""
-    u = unit or "u"
-    if name in ("sigma2", "q2", "gamma2", "sigma2_gm"):
-        return squared(u)
-    if name == "omega":
-        return f"{u} per sample"
-    if name == "beta":
-        return "1/s"
-    if name == "phi":
-        return "1 (per sample)"
+    """Unit of a model parameter for a signal in ``unit`` (per-sample parametrisation).
+
+    Read from the parameter's declaration on its process class
+    (:attr:`engine.models.model.Param.unit`); ``""`` for a name no process declares.
+
+    Parameters
+    ----------
+    code : str
+        Process code (``"WN"``, ``"GM"`` ...); another process declaring ``name`` answers
+        when the process ``code`` does not.
+    name : str
+        Parameter name (``"sigma2"``, ``"beta"`` ...).
+    unit : str
+        Signal unit (``""``: unknown, spelled ``u``).
+    """
+    cls = PROCESS_TYPES.get(code)
+    for c in ([cls] if cls is not None else []) + list(PROCESS_TYPES.values()):
+        spec = c.params().get(name)
+        if spec is not None:
+            return spec.unit(unit or "u")
     return ""
 
 

@@ -761,37 +761,21 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # what-if (the rest: gmwm_app.whatif)
     # ---------------------------------------------------------------------------------
     def slider_specs(self) -> list[SliderSpec]:
-        """One log-scaled slider per parameter, 3 decades either side of its current value."""
+        """One slider per parameter, in the scale its process declares for it
+        (:attr:`engine.models.model.Param.slider`, :meth:`SliderSpec.around`)."""
         if not len(self.model) or self.wv is None:
             return []
         vals = {**self._default_values(), **self.whatif_values}
         guesses = eg.starting_values(self.model, self.wv)
         out = []
         for lab, p in zip(self.model.labels, self.model.processes, strict=True):
-            for name in p.param_names:
+            for name, spec in p.params().items():
                 full = f"{lab}.{name}"
                 v = vals.get(full)
-                # an AR coefficient near 1 is read on 1 - phi; variances and rates on a log
-                transform = "log10(1-x)" if name == "phi" else "log10"
-                if v is None or v == 0 or (transform == "log10(1-x)" and v >= 1):
+                if v is None or not SliderSpec.shows(spec.slider, v):
                     v = guesses[full]
-                x = SliderSpec.position_of(transform, v)
-                lo, hi = x - 3.0, x + 3.0
-                if transform == "log10(1-x)":
-                    hi = min(hi, 0.0)  # phi >= 0
-                    lo = min(lo, hi - 3.0)
-                out.append(
-                    SliderSpec(
-                        full,
-                        lab,
-                        name,
-                        eg.param_unit(p.code, name, self.unit),
-                        transform,
-                        lo,
-                        hi,
-                        x,
-                    )
-                )
+                unit = eg.param_unit(p.code, name, self.unit)
+                out.append(SliderSpec.around(full, lab, name, unit, spec, v))
         return out
 
     # ---------------------------------------------------------------------------------

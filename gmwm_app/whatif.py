@@ -1,8 +1,9 @@
 """The what-if mode of a session: sliders over the model's parameters (no widgets).
 
-:class:`SliderSpec` describes one log-scaled slider; :class:`WhatIfMixin` holds the what-if
-actions of :class:`gmwm_app.state.AppState` (it has the state's parameters); a model not fitted
-yet starts from :func:`engine.fit.starting_values` (rough values read off the WV).
+:class:`SliderSpec` describes one slider, in the scale its parameter declares;
+:class:`WhatIfMixin` holds the what-if actions of :class:`gmwm_app.state.AppState` (it has
+the state's parameters); a model not fitted yet starts from
+:func:`engine.fit.starting_values` (rough values read off the WV).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import engine as eg
+from engine.models import Param
 
 __all__ = ["SliderSpec", "WhatIfMixin"]
 
@@ -26,29 +28,71 @@ else:
 class SliderSpec:
     """A "what if" slider generated from a parameter (no widget: the app builds it).
 
-    The slider moves ``x = log10(value)`` (``log10(1 - phi)`` for an AR1 ``phi``) over
-    ``[lo, hi]``, 3 decades either side of the current value.
+    The slider moves a position ``x`` over ``[lo, hi]`` in the scale the parameter declares
+    (:attr:`engine.models.model.Param.slider`): ``log10(value)`` (variances, rates) or
+    ``log10(1 - value)`` (an AR1 ``phi``), 3 decades either side of the current value, or
+    the value itself over the parameter's bounds (``linear``: a coefficient of either sign).
     """
 
     name: str  # unique parameter name, e.g. "GM_1.beta"
     label: str  # process label, e.g. "GM_1"
     param: str  # engine parameter name, e.g. "beta"
     unit: str
-    transform: str  # "log10" or "log10(1-x)"
+    transform: str  # "log10", "log10(1-x)" or "linear"
     lo: float
     hi: float
     x: float  # slider position
 
     def value_of(self, x: float) -> float:
         """Parameter value at slider position ``x``."""
+        if self.transform == "linear":
+            return x
         return 1.0 - 10.0**x if self.transform == "log10(1-x)" else 10.0**x
 
     @staticmethod
     def position_of(transform: str, value: float) -> float:
         """Slider position of a parameter value."""
+        if transform == "linear":
+            return value
         if transform == "log10(1-x)":
             return math.log10(max(1.0 - value, 1e-15))
         return math.log10(abs(value))
+
+    @staticmethod
+    def shows(transform: str, value: float | None) -> bool:
+        """Whether a slider in ``transform`` can stand at ``value`` (a log slider cannot at 0,
+        a ``log10(1-x)`` one not at 1 or above)."""
+        if value is None:
+            return False
+        if transform == "linear":
+            return True
+        return value != 0 and not (transform == "log10(1-x)" and value >= 1)
+
+    @classmethod
+    def around(
+        cls,
+        name: str,
+        label: str,
+        param: str,
+        unit: str,
+        spec: Param,
+        value: float,
+    ) -> SliderSpec:
+        """The slider of a parameter declared by ``spec`` standing at ``value``: 3 decades
+        either side of it on a log scale (``log10(1-x)``: at most ``x = 0``, ``phi >= 0``),
+        or the parameter's bounds, less a 1/1000 of their width at each end, when linear."""
+        transform = spec.slider
+        x = cls.position_of(transform, value)
+        if transform == "linear":
+            lo, hi = spec.bounds
+            pad = (hi - lo) / 1000.0
+            lo, hi = lo + pad, hi - pad
+            return cls(name, label, param, unit, transform, lo, hi, min(max(x, lo), hi))
+        lo, hi = x - 3.0, x + 3.0
+        if transform == "log10(1-x)":
+            hi = min(hi, 0.0)  # phi >= 0
+            lo = min(lo, hi - 3.0)
+        return cls(name, label, param, unit, transform, lo, hi, x)
 
 
 class WhatIfMixin(StateFields):

@@ -1,7 +1,10 @@
 """Variable projection: the one search every GMWM-type fit runs.
 
 Each latent process has non-negative linear coefficients (variances) and AR1/GM terms also one
-non-linear parameter, searched as ``u = log(correlation time in samples)``. For fixed ``u`` the
+non-linear parameter, searched in the coordinate ``u`` the process declares
+(:meth:`engine.models.Process.search_nl`: an AR1 or a GM ``u = log(correlation time in
+samples)``; terms of one kind are interchangeable, so a candidate lists each kind's
+coordinates in decreasing order). For fixed ``u`` the
 minimum over the linear part is an inner problem solved exactly (NNLS for a univariate or a
 replicate fit, a conic PSD solve for the multivariate fit); the outer search over ``u`` is a
 grid of correlation times (:func:`grid_axis`, :func:`grid_candidates`), the best candidates by
@@ -22,12 +25,12 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from .._optim import nnls
-from ..models import TC_MAX_FACTOR, TC_MIN, WN, Model, Process, ar1_wv_pos
+from ..models import GM, TC_MAX_FACTOR, TC_MIN, WN, Model, Process
 from ..units import param_unit
 from ..wv import WaveletVariance
 from .result import FitError
@@ -42,6 +45,7 @@ __all__ = [
     "search",
     "drop_one",
     "corner_anchors",
+    "start_coordinates",
     "nested_search",
     "persistent_first",
     "fitted_model",
@@ -80,9 +84,52 @@ def grid_axis(tau_max: float, k: int) -> np.ndarray:
     """Log correlation times (samples) explored per AR1/GM term: 0.25 to 4x the largest scale.
 
     60 points for one term, 36 for two, 18 for three, 10 beyond (the candidates grow as
-    ``C(n, k)``).
+    ``C(n, k)``): the axis a GM declares (:meth:`engine.models.Process.search_axis`).
     """
-    return np.linspace(math.log(0.25), math.log(4.0 * tau_max), {1: 60, 2: 36, 3: 18}.get(k, 10))
+    return np.asarray(GM().search_axis(tau_max, k))
+
+
+class SearchGroup(NamedTuple):
+    """The terms of one kind in a problem's search coordinates (interchangeable terms).
+
+    ``proto``: one of them (its class declares the coordinate); ``cols``: their columns in the
+    design (process indices); ``start``: the position of their first coordinate in ``u``;
+    ``lo``, ``hi``: the coordinate's range; ``axis``: its grid.
+    """
+
+    proto: Process
+    cols: np.ndarray
+    start: int
+    lo: float
+    hi: float
+    axis: np.ndarray
+
+    @property
+    def n(self) -> int:
+        """Number of terms of this kind."""
+        return int(self.cols.size)
+
+    @property
+    def span(self) -> slice:
+        """Their coordinates' slice of ``u``."""
+        return slice(self.start, self.start + self.n)
+
+
+def search_groups(model: Model, tau_max: float, n_max: int) -> list[SearchGroup]:
+    """The model's non-linear terms grouped by kind, in the model's order, each with the
+    coordinate range and grid its process declares (:meth:`engine.models.Process.search_range`,
+    :meth:`~engine.models.Process.search_axis`)."""
+    idx = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
+    groups: list[SearchGroup] = []
+    start = 0
+    for _, run in itertools.groupby(idx, key=lambda i: type(model.processes[i])):
+        cols = np.array(list(run), dtype=int)
+        proto = model.processes[int(cols[0])]
+        lo, hi = proto.search_range(n_max)
+        axis = np.asarray(proto.search_axis(tau_max, int(cols.size)), dtype=float)
+        groups.append(SearchGroup(proto, cols, start, lo, hi, axis))
+        start += int(cols.size)
+    return groups
 
 
 def grid_candidates(axis: np.ndarray, k: int) -> list[tuple[float, ...]]:
@@ -136,27 +183,42 @@ class NNLSProblem:
         self.nl_idx = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
         self.k = len(self.nl_idx)
         self.p = len(model.processes)
+        # the range of correlation times that at_bound reports against (AR1/GM)
         self.tc_min = TC_MIN
         self.tc_max = TC_MAX_FACTOR * n_max
-        self.lo, self.hi = math.log(self.tc_min), math.log(self.tc_max)
-        self.axis = grid_axis(float(self.tau.max() if tau_max is None else tau_max), self.k)
+        # each kind's search coordinate, as its process declares it
+        t_max = float(self.tau.max() if tau_max is None else tau_max)
+        self.groups = search_groups(model, t_max, n_max)
+        self._range_of = {int(i): (g.lo, g.hi) for g in self.groups for i in g.cols.tolist()}
+        self.lo: float | np.ndarray
+        self.hi: float | np.ndarray
+        self.spacing: float | np.ndarray
+        if len(self.groups) <= 1:  # one kind (or none): scalars, one axis
+            lo, hi = (self.groups[0].lo, self.groups[0].hi) if self.groups else (-1.0, 1.0)
+            self.lo, self.hi = lo, hi
+            self.axis = self.groups[0].axis if self.groups else np.linspace(-1.0, 1.0, 2)
+            self.spacing = float(self.axis[1] - self.axis[0])
+        else:  # one range and one grid spacing per coordinate
+            self.lo = np.concatenate([np.full(g.n, g.lo) for g in self.groups])
+            self.hi = np.concatenate([np.full(g.n, g.hi) for g in self.groups])
+            self.axis = self.groups[0].axis
+            self.spacing = np.concatenate(
+                [np.full(g.n, float(g.axis[1] - g.axis[0])) for g in self.groups]
+            )
         # constant columns of the linear processes
         self.x_fixed = np.zeros((self.tau.size, self.p))
         for i, pr in enumerate(model.processes):
             if pr.nonlinear is None:
                 self.x_fixed[:, i] = pr.basis(self.tau, self.fs)
-        # basis = basis_scale(phi) x (AR1 WV per unit innovation): 1 for AR1, 1 - phi^2 for GM
-        self.scale_of = {i: pr.basis_scale for i, pr in enumerate(model.processes) if pr.nonlinear}
         # the weighted constant columns, once (a diagonal A, the usual case, as a vector)
         diag = not np.count_nonzero(a - np.diag(np.diagonal(a)))
         self._a_diag: np.ndarray | None = np.ascontiguousarray(np.diagonal(a)) if diag else None
         self._c_fixed = self._weigh(self.x_fixed)
         self._memo: dict[bytes, float] = {}
         self.n_eval = 0
-        # the hot path of profile(): every AR1/GM column at once, unless an AR1's phi may be 0
-        self._nl = np.array(self.nl_idx, dtype=int)
+        # the hot path of profile(): each kind's columns at once (basis_many), unless an AR1's
+        # phi may be 0
         self._fast = not any(model.processes[i].phi_can_vanish for i in self.nl_idx)
-        self._scales = [self.scale_of[i] for i in self.nl_idx]
         self._c_work = self._c_fixed.copy()  # the weighted design of the point profiled
         # the positive set of the last NNLS and the other columns: the next point's, most
         # often (see _inner)
@@ -179,26 +241,59 @@ class NNLSProblem:
             float(wv.tau_samples[-1]),
         )
 
-    # the non-linear coordinate: log of the correlation time (samples); AR1 may also be < 0
+    # the non-linear coordinates: each process's own (AR1, GM: log correlation time, samples)
     def phi_of(self, i: int, u: float) -> float:
-        """phi from the search coordinate of process i."""
-        pr = self.model.processes[i]
-        if pr.phi_can_vanish and u < -50:
-            return 0.0
-        tc = math.exp(min(max(u, self.lo), self.hi))
-        return math.exp(-1.0 / tc)
+        """The fitter's non-linear value of process i (AR1, GM: phi) at its coordinate u."""
+        lo, hi = self._range_of[i]
+        return float(self.model.processes[i].search_nl(u, lo, hi))
 
     def phis_of(self, u: np.ndarray | Sequence[float]) -> tuple[float, ...]:
-        """phi of every AR1/GM term from the search coordinates."""
+        """The non-linear value of every non-linear term from the search coordinates."""
         return tuple(self.phi_of(i, float(ui)) for i, ui in zip(self.nl_idx, u, strict=True))
 
     def _column(self, i: int, phi: float) -> np.ndarray:
-        """The WV shape of AR1/GM term ``i`` at ``phi`` (unweighted, a new array)."""
-        if 0.0 < phi < 1.0:  # hot path: what basis() computes, without its checks
-            col = ar1_wv_pos(self.tau, phi)
-            scale = self.scale_of[i](phi)
-            return col if scale == 1.0 else col * scale
+        """The WV shape of non-linear term ``i`` at ``phi`` (unweighted, a new array)."""
         return np.asarray(self.model.processes[i].basis(self.tau, self.fs, phi), float)
+
+    def candidates(self) -> list[tuple[float, ...]]:
+        """The grid's candidates: per kind the combinations of its axis (interchangeable
+        terms, coordinates decreasing), and every pairing of the kinds."""
+        if len(self.groups) <= 1:
+            return grid_candidates(self.axis, self.k)
+        per = [grid_candidates(g.axis, g.n) for g in self.groups]
+        return [tuple(x for part in combo for x in part) for combo in itertools.product(*per)]
+
+    def embed(self, sub: Model, u: Sequence[float]) -> tuple[float, ...] | None:
+        """The point of this problem that a sub-model's optimum ``u`` stands for (its
+        coordinates in their groups, each group's decreasing); with one non-linear term fewer,
+        the best point of the line along the missing term's axis (:func:`corner_anchors`).
+        None when ``sub`` is not a sub-model of this problem's model."""
+        by_kind: dict[type, list[float]] = {}
+        nl = [q for q in sub.processes if q.nonlinear is not None]
+        for q, x in zip(nl, u, strict=True):
+            by_kind.setdefault(type(q), []).append(float(x))
+        parts: list[list[float]] = []
+        free = None
+        for gi, g in enumerate(self.groups):
+            xs = sorted(by_kind.pop(type(g.proto), []), reverse=True)
+            if len(xs) == g.n - 1 and free is None:
+                free = gi
+            elif len(xs) != g.n:
+                return None
+            parts.append(xs)
+        if by_kind:
+            return None
+        if free is None:
+            return tuple(x for xs in parts for x in xs)
+        line = [
+            tuple(
+                x
+                for gi, xs in enumerate(parts)
+                for x in (sorted([*xs, float(t)], reverse=True) if gi == free else xs)
+            )
+            for t in self.groups[free].axis
+        ]
+        return best_candidates(self, line, 1)[0][1]
 
     def design(self, phis: tuple[float, ...]) -> np.ndarray:
         """The (M, p) matrix of WV shapes for the AR1/GM coefficients ``phis``."""
@@ -270,15 +365,13 @@ class NNLSProblem:
         key = u.tobytes()
         f = self._memo.get(key)
         if f is None:
-            if self._fast and self.k:  # phi_of and _column of every term at once
-                phis = [
-                    math.exp(-1.0 / math.exp(min(max(v, self.lo), self.hi))) for v in u.tolist()
-                ]
-                cols = ar1_wv_pos(self.tau, np.array(phis))
-                for row, (scale, phi) in enumerate(zip(self._scales, phis, strict=True)):
-                    cols[row] *= scale(phi)
+            if self._fast and self.k:  # phi_of and _column of each kind's terms at once
+                ul = u.tolist()
                 c = self._c_work
-                c[:, self._nl] = self._weigh(cols.T)
+                for g in self.groups:
+                    pr = g.proto
+                    nls = np.array([pr.search_nl(v, g.lo, g.hi) for v in ul[g.span]])
+                    c[:, g.cols] = self._weigh(pr.basis_many(self.tau, self.fs, nls).T)
             else:
                 c = self._c_fixed.copy()
                 for i, ui in zip(self.nl_idx, u, strict=True):
@@ -306,16 +399,16 @@ class NNLSProblem:
                 out[i] = self.profile(u[i])
             return out
         uu = u[todo]
-        phis = np.exp(-1.0 / np.exp(np.clip(uu, self.lo, self.hi)))  # (B, k)
-        cols = ar1_wv_pos(self.tau, phis.ravel()).reshape(todo.size, self.k, -1)
-        for j, scale in enumerate(self._scales):
-            cols[:, j] *= np.asarray(scale(phis[:, j]), dtype=float).reshape(-1, 1)
         c = np.repeat(self._c_fixed[None], todo.size, axis=0)  # (B, M, p)
-        c[:, :, self._nl] = (
-            self._weigh(cols.transpose(2, 0, 1).reshape(self.tau.size, -1))
-            .reshape(self.tau.size, todo.size, self.k)
-            .transpose(1, 0, 2)
-        )
+        for grp in self.groups:
+            pr = grp.proto
+            nls = np.asarray(pr.search_nl(uu[:, grp.span], grp.lo, grp.hi), dtype=float)
+            cols = pr.basis_many(self.tau, self.fs, nls.ravel()).reshape(todo.size, grp.n, -1)
+            c[:, :, grp.cols] = (
+                self._weigh(cols.transpose(2, 0, 1).reshape(self.tau.size, -1))
+                .reshape(self.tau.size, todo.size, grp.n)
+                .transpose(1, 0, 2)
+            )
         norms = np.sqrt(np.einsum("bmi,bmi->bi", c, c))
         norms[norms == 0] = 1.0
         cn = c / norms[:, None, :]
@@ -354,9 +447,10 @@ class NNLSProblem:
         """
         nc = u.shape[0]
         xs = np.repeat(self.x_fixed[None, :, :], nc, axis=0)
-        phis = np.exp(-1.0 / np.exp(u))
         for col, i in enumerate(self.nl_idx):
-            xs[:, :, i] = self.model.processes[i].basis(self.tau, self.fs, phis[:, col])
+            pr = self.model.processes[i]
+            nls = pr.search_nl(u[:, col], -math.inf, math.inf)  # unclipped
+            xs[:, :, i] = pr.basis(self.tau, self.fs, nls)
         cmat = np.einsum("ij,cjk->cik", self.a, xs)
         norms = np.sqrt(np.sum(cmat * cmat, axis=1, keepdims=True))
         norms[norms == 0] = 1.0
@@ -415,9 +509,9 @@ def best_candidates(
 def local(
     fun: Callable[[np.ndarray], float],
     u0: Sequence[float] | np.ndarray,
-    step: float,
-    lo: float,
-    hi: float,
+    step: Any,
+    lo: Any,
+    hi: Any,
     *,
     maxfev: int | None = None,
 ) -> tuple[float, np.ndarray, bool]:
@@ -464,7 +558,7 @@ def local(
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.asarray(res.x, float), fn
-            step = max(step / 8, 1e-5)
+            step = max(step / 8, 1e-5) if isinstance(step, float) else np.maximum(step / 8, 1e-5)
             check = not check
         else:
             converged = bool(res.success) or fn <= f
@@ -499,13 +593,22 @@ def search(
     -------
     f, u, converged
     """
-    cands = grid_candidates(prob.axis, prob.k) + [tuple(s) for s in starts]
+    grid = prob.candidates() if hasattr(prob, "candidates") else grid_candidates(prob.axis, prob.k)
+    cands = grid + [tuple(s) for s in starts]
     best = best_candidates(prob, cands, keep) if keep else []
-    spacing = float(prob.axis[1] - prob.axis[0])
+    spacing = getattr(prob, "spacing", None)
+    if spacing is None:
+        spacing = float(prob.axis[1] - prob.axis[0])
+
+    def near(a: Any, b: Any) -> bool:  # within 1.5 grid steps in every coordinate
+        if isinstance(spacing, float):
+            return bool(np.max(np.abs(np.asarray(a) - b)) < 1.5 * spacing)
+        return bool(np.max(np.abs(np.asarray(a) - b) / spacing) < 1.5)
+
     results: list[tuple[float, np.ndarray, bool]] = []
     for _, u0 in best:
         # a start next to a local minimum already found adds nothing
-        if any(np.max(np.abs(np.asarray(u0) - r[1])) < 1.5 * spacing for r in results):
+        if any(near(u0, r[1]) for r in results):
             continue
         results.append(local(prob.profile, u0, spacing / 2, prob.lo, prob.hi))
     # the anchors (the sub-models' optima), best first: each is a result in its own right, so
@@ -519,11 +622,9 @@ def search(
     seen = [np.asarray(u0, float) for _, u0 in best] + [r[1] for r in results]
     for k, (fa, a0) in enumerate(ranked):
         results.append((fa, a0, True))
-        if k and any(np.max(np.abs(a0 - d)) < 1.5 * spacing for d in seen):
+        if k and any(near(a0, d) for d in seen):
             continue
-        if not k and any(
-            r[0] <= fa * (1 + 1e-8) and np.max(np.abs(a0 - r[1])) < 1.5 * spacing for r in minima
-        ):
+        if not k and any(r[0] <= fa * (1 + 1e-8) and near(a0, r[1]) for r in minima):
             continue
         seen.append(a0)
         results.append(local(prob.profile, a0, spacing / 2, prob.lo, prob.hi))
@@ -541,7 +642,9 @@ def drop_one(model: Model) -> list[Model]:
     return list(out.values())
 
 
-def corner_anchors(prob: Any, optima: Sequence[tuple[float, ...]]) -> list[tuple[float, ...]]:
+def corner_anchors(
+    prob: Any, optima: Sequence[tuple[float, ...]], subs: Sequence[Model] | None = None
+) -> list[tuple[float, ...]]:
     """The sub-models' optima as points of ``prob`` (the degenerate corners of its space).
 
     A sub-model with the same AR1/GM terms (a one-parameter term dropped) has the same
@@ -557,13 +660,21 @@ def corner_anchors(prob: Any, optima: Sequence[tuple[float, ...]]) -> list[tuple
     optima : sequence of tuples
         Each sub-model's optimal coordinates (``k`` or ``k - 1`` of them; AR1/GM terms are
         interchangeable, so the order does not matter).
+    subs : sequence of Model, optional
+        The sub-model of each optimum: a problem with non-linear terms of several kinds
+        places each coordinate in its kind's group (``prob.embed``).
 
     Returns
     -------
     list of (k,) tuples, correlation times decreasing.
     """
     out: list[tuple[float, ...]] = []
-    for u in optima:
+    for j, u in enumerate(optima):
+        if subs is not None and len(getattr(prob, "groups", ())) > 1:
+            point = prob.embed(subs[j], u)
+            if point is not None:
+                out.append(point)
+            continue
         if len(u) == prob.k:
             out.append(tuple(sorted(u, reverse=True)))
         elif len(u) == prob.k - 1:
@@ -622,6 +733,7 @@ def nested_search(
         nonlocal n_eval
         prob = make_prob(m)
         anchors_u = []
+        subs = []
         for sub in drop_one(m):
             key = sub.spec()
             if key not in cache:
@@ -630,12 +742,14 @@ def nested_search(
                 f_s, u_s, _, _ = run(sub, False)
                 cache[key] = (f_s, tuple(float(x) for x in u_s))
             anchors_u.append(cache[key][1])
+            subs.append(sub)
         if top and m.spec() in cache:  # found before (as another model's sub-model)
             anchors_u.append(cache[m.spec()][1])
+            subs.append(m)
         if prob.k == 0:
             f, u, conv = prob.profile(np.zeros(0)), np.zeros(0), True
         else:
-            anchors = corner_anchors(prob, anchors_u) + (list(starts) if top else [])
+            anchors = corner_anchors(prob, anchors_u, subs) + (list(starts) if top else [])
             f, u, conv = search(prob, keep=0 if top and polish else keep, anchors=anchors)
         n_eval += prob.n_eval
         return f, u, conv, prob
@@ -655,6 +769,22 @@ def _phi(q: Process, fs: float) -> float:
     if phi is None:
         raise ValueError(f"{q.code} has no value for {q.nonlinear}: the model is not fitted")
     return phi
+
+
+def start_coordinates(model: Model, fs: float) -> tuple[float, ...] | None:
+    """The search coordinates of a model whose non-linear values are all given (the user's
+    starting point), each kind's decreasing; None when one is unknown or out of the search's
+    reach (:meth:`engine.models.Process.search_of_nl`: an AR1 with ``phi <= 0``)."""
+    coords: dict[type, list[float]] = {}
+    for p in model.processes:
+        if p.nonlinear is None:
+            continue
+        nl = p.nl_value(fs)
+        u = None if nl is None else p.search_of_nl(nl)
+        if u is None or not math.isfinite(u):
+            return None
+        coords.setdefault(type(p), []).append(u)
+    return tuple(x for xs in coords.values() for x in sorted(xs, reverse=True))
 
 
 def persistent_first(procs: Sequence[Process], fs: float) -> Model:
@@ -707,12 +837,18 @@ def at_bound(fitted: Model, fs: float, tc_min: float, tc_max: float) -> list[str
     for lab, q in zip(fitted.labels, fitted.processes, strict=True):
         if q.linear_coef() == 0.0:
             out.append(f"{lab}.{q.param_names[-1] if q.nonlinear else q.param_names[0]}")
-        if q.nonlinear is not None:
-            phi = _phi(q, fs)
-            if phi > 0:
-                tc = -1.0 / math.log(phi) if phi < 1 else math.inf
-                if tc <= tc_min * 1.0001 or tc >= tc_max / 1.0001:
-                    out.append(f"{lab}.{q.nonlinear}")
+        if q.nonlinear is None:
+            continue
+        tc = q.correlation_time(fs)
+        if tc is not None:  # AR1, GM: against the explored correlation times
+            if tc > 0 and (tc <= tc_min * 1.0001 or tc >= tc_max / 1.0001):
+                out.append(f"{lab}.{q.nonlinear}")
+            continue
+        # another coordinate: at the edge of the range its process declares
+        u = q.search_of_nl(_phi(q, fs))
+        lo, hi = q.search_range(int(tc_max / TC_MAX_FACTOR))
+        if u is None or u <= lo + 1e-4 or u >= hi - 1e-4:
+            out.append(f"{lab}.{q.nonlinear}")
     return out
 
 
@@ -737,11 +873,8 @@ def sub_sample_message(label: str, q: Process, fs: float, unit: str = "") -> str
     variance ``sigma2 / (1 - phi)^2`` (a GM: ``sigma2_gm (1 + phi) / (1 - phi)``): the
     *white-noise equivalent* a datasheet's noise density should count.
     """
-    if q.nonlinear is None:
-        return None
-    phi = _phi(q, fs)
-    tc = -1.0 / math.log(phi) if 0 < phi < 1 else (math.inf if phi >= 1 else 0.0)
-    if tc >= TC_FLAG:
+    tc = q.correlation_time(fs)
+    if tc is None or tc >= TC_FLAG:
         return None
     dt = 1.0 / fs
     head = (

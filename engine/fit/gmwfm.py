@@ -272,6 +272,12 @@ def fit_gmwfm(
         raise FitError(f"{fname}(WV) is not finite at every level")
     omega, wname = _f_weights(wv, fun, weights, fname)
     a = sqrt_weight(omega)
+    for pr in m.processes:  # this search moves log correlation times (AR1, GM)
+        if pr.nonlinear is not None and type(pr).correlation_time is Process.correlation_time:
+            raise FitError(
+                f"fit_gmwfm searches correlation times and {pr.code} has none (its "
+                f"{pr.nonlinear} has its own coordinate): fit {m.spec()} with fit_gmwm"
+            )
     prob = NNLSProblem.from_wv(m, wv, np.eye(wv.n_levels))
     p, k = prob.p, prob.k
     lo_tc, hi_tc = math.log(prob.tc_min), math.log(prob.tc_max)

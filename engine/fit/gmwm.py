@@ -37,6 +37,7 @@ from ._varpro import (
     persistent_first,
     search_message,
     sqrt_weight,
+    start_coordinates,
 )
 from .asymptotic import asymptotic_bounds, wv_cov_model
 from .covariance import VOptions, inverse_cov, v_options, wv_cov
@@ -411,12 +412,8 @@ def fit_gmwm(
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
         # starting values from the user's model, if any
-        extra = []
-        given = [p.nl_value(wv.fs) for p in m.processes if p.nonlinear is not None]
-        usable = [v for v in given if v is not None and 0 < v < 1]
-        if len(usable) == len(given):
-            tcs = sorted((-1.0 / math.log(v) for v in usable), reverse=True)
-            extra.append(tuple(math.log(t) for t in tcs))
+        start = start_coordinates(m, wv.fs)
+        extra = [] if start is None else [start]
         # the search anchored at every sub-model's optimum (the degenerate corners)
         key = (wv.tau_samples.tobytes(), wv.variance.tobytes(), omega.tobytes())
         cache = optima.setdefault(key, {}) if optima is not None else {}

@@ -22,6 +22,7 @@ from ._varpro import (
     fitted_model,
     search,
     search_message,
+    start_coordinates,
     sub_sample_warnings,
 )
 from .gmwm import GMWMResult, fit_gmwm, weight_matrix
@@ -183,20 +184,18 @@ def fit_replicates(
         converged, method, msg = True, "closed-form", "closed-form non-negative least squares"
     else:
         # the replicates' own fits (GM/AR1 most persistent first) are candidates too
-        starts = []
+        starts: list[tuple[float, ...]] = []
         for wv, w in zip(out, ws, strict=True):
             try:
                 fr: GMWMResult = fit_gmwm(wv, m.cleared(), weights=w)
             except (FitError, ModelError):  # pragma: no cover - a degenerate replicate
                 continue
-            phis = [q.nl_value(fs0) for q in fr.model.processes if q.nonlinear]
-            tcs = [-1.0 / math.log(v) for v in phis if v is not None and 0 < v < 1]
-            if len(tcs) == prob.k:
-                starts.append(np.log(np.array(sorted(tcs, reverse=True))))
-        if m.is_set:
-            phis = [q.nl_value(fs0) for q in m.processes if q.nonlinear]
-            tcs = [-1.0 / math.log(v) for v in phis if v is not None]  # m is set: none is None
-            starts.append(np.log(np.array(sorted(tcs, reverse=True))))
+            st = start_coordinates(fr.model, fs0)
+            if st is not None:
+                starts.append(st)
+        st = start_coordinates(m, fs0) if m.is_set else None
+        if st is not None:
+            starts.append(st)
         _, u, converged = search(prob, starts, keep=4)
         method, msg = "grid+nelder-mead", search_message(converged)
     fitted = fitted_model(prob, u, fs0)

@@ -104,12 +104,14 @@ def submodels(max_model: Model | str) -> list[Model]:
 
 
 def _correlation_time(p: Process, fs: float) -> float:
-    """Correlation time in samples (``-1 / log(phi)``) of a fitted process with a non-linear
-    parameter (AR1, GM: :meth:`~engine.models.Process.nl_value` is its ``phi`` at ``fs``)."""
-    phi = p.nl_value(fs)
-    if phi is None:
+    """Correlation time in samples of a fitted process with a non-linear parameter
+    (:meth:`~engine.models.Process.correlation_time`: AR1, GM ``-1 / log(phi)``); NaN for one
+    without a correlation time (an MA1), which is then neither folded into WN nor taken for
+    a random walk."""
+    if p.nl_value(fs) is None:
         raise ValueError(f"{p.code} has no correlation time")
-    return -1.0 / math.log(phi) if 0.0 < phi < 1.0 else (math.inf if phi >= 1.0 else 0.0)
+    tc = p.correlation_time(fs)
+    return math.nan if tc is None else tc
 
 
 def wn_twin(fitted: Model, fs: float) -> tuple[Model, list[str]]:
@@ -751,6 +753,7 @@ def tie_choice(
             for q in res.model.processes
             if q.nonlinear is not None and q.linear_coef() > 0
         ]
+        slow = [t for t in slow if not math.isnan(t[0])]
         if slow and max(slow)[0] > slow_gm * res.wv.n:
             tc, code = max(slow)
             swaps.append(

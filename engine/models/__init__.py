@@ -1,19 +1,23 @@
-"""Latent-process models: the processes (WN, QN, RW, DR, AR1, GM) and their sums (``Model``).
+"""Latent-process models: the processes (WN, QN, RW, DR, AR1, GM, MA1) and their sums (``Model``).
 
 ``engine.models.model`` holds the :class:`Process` interface, :class:`Model` and the parser
 (the spectral side of the interface in ``engine.models.spectrum``);
-``engine.models.processes`` the concrete processes, which register themselves on import.
+``engine.models.processes`` the concrete processes and ``engine.models.ma1`` the MA(1), which
+register themselves on import (a new process: one module and one import line here).
 """
 
 from __future__ import annotations
 
+from .ma1 import MA1
 from .model import (
     FROM_UNCONSTRAINED,
     PROCESS_TYPES,
     TO_UNCONSTRAINED,
     Model,
     ModelError,
+    Param,
     Process,
+    param,
     parse_model,
 )
 from .processes import (
@@ -31,12 +35,15 @@ from .processes import (
 
 __all__ = [
     "Process",
+    "Param",
+    "param",
     "WN",
     "QN",
     "RW",
     "DR",
     "AR1",
     "GM",
+    "MA1",
     "Model",
     "ModelError",
     "parse_model",

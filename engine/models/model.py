@@ -16,17 +16,20 @@ from __future__ import annotations
 import math
 import re
 from collections import Counter
-from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any, ClassVar
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 
 from .._limits import check_sample_count
-from .._quantity import Quantity
+from .._quantity import Quantity, squared
 from ..errors import ModelError
 from .spectrum import FilterTerms, PsdTerms, Spectral
 
 __all__ = [
+    "Param",
+    "param",
     "Process",
     "PsdTerms",
     "FilterTerms",
@@ -41,12 +44,19 @@ __all__ = [
 # code -> process class, in the canonical order (GM, AR1, QN, WN, RW, DR); every concrete
 # process registers itself here when its class is created (engine.models.processes)
 PROCESS_TYPES: dict[str, type[Process]] = {}
-_UNIQUE = ("WN", "QN", "RW", "DR")
 
 #: Behaviour every concrete process must implement (checked when its class is created).
 BEHAVIOUR = ("basis", "simulate", "psd_terms", "filter_terms")
-#: ... and, for a process with a non-linear parameter (AR1, GM), these too.
-NONLINEAR_BEHAVIOUR = ("phi_from_nl", "nl_from_phi", "basis_scale")
+#: ... and, for a process with a non-linear parameter (AR1, GM), these too: the map between
+#: its parameter and the fitter's value, and its search coordinate in its own terms.
+NONLINEAR_BEHAVIOUR = (
+    "phi_from_nl",
+    "nl_from_phi",
+    "search_range",
+    "search_axis",
+    "search_nl",
+    "search_of_nl",
+)
 #: ... and, for a process that channels may share (multivariate models), this one.
 SHARED_BEHAVIOUR = ("simulate_shared",)
 #: Class attributes every concrete process must give (non-empty).
@@ -54,6 +64,94 @@ DESCRIPTIVE = ("description", "display_name", "help", "quantities")
 
 
 _MAX_REPEAT = 20  # more AR1/GM terms than this cannot be identified from any real log
+
+
+def _tanh_open(u: float) -> float:
+    """``tanh(u)`` kept strictly inside (-1, 1) (a coefficient's open range)."""
+    return min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52)
+
+
+# the transforms to the unconstrained space and back, by name
+_TRANSFORMS: dict[str, tuple[Callable[[float], float], Callable[[float], float]]] = {
+    "log": (math.log, math.exp),  # a variance or a rate, > 0
+    "atanh": (math.atanh, _tanh_open),  # a coefficient in (-1, 1)
+    "identity": (float, float),  # either sign (a drift's slope)
+}
+
+
+def variance_unit(unit: str) -> str:
+    """The unit of a variance-like parameter for a signal in ``unit`` (``(deg/s)^2``)."""
+    return squared(unit)
+
+
+def per_sample_unit(unit: str) -> str:
+    """The unit of a slope per sample for a signal in ``unit`` (``deg/s per sample``)."""
+    return f"{unit} per sample"
+
+
+def rate_unit(unit: str) -> str:
+    """The unit of a rate in 1/s, whatever the signal's unit."""
+    return "1/s"
+
+
+def coefficient_unit(unit: str) -> str:
+    """The unit of a per-sample coefficient (an AR or MA coefficient): none."""
+    return "1 (per sample)"
+
+
+@dataclass(frozen=True)
+class Param:
+    """What a process declares about one of its parameters, as the field's metadata.
+
+    Declared with :func:`param` on the process's dataclass field; :meth:`Process.params`
+    reads them. The fit's unconstrained space, the units (:func:`engine.units.param_unit`),
+    the app's what-if sliders and the parameter bounds all read this record, so a
+    parameter's facts are written once, beside the parameter.
+
+    Attributes
+    ----------
+    transform : {"log", "atanh", "identity"}
+        The map to the unconstrained space: ``log`` for a variance or a rate (> 0),
+        ``atanh`` for a coefficient in (-1, 1), ``identity`` for a value of either sign.
+    unit : callable
+        ``unit(u)``: the parameter's unit for a signal in ``u`` (``(deg/s)^2``, ``1/s`` ...).
+    bounds : (float, float)
+        Admissible range (open where the transform is).
+    slider : {"log10", "log10(1-x)", "linear"}
+        How the app's what-if slider moves the value: by decades of the value (variances,
+        rates), by decades of ``1 - x`` (a coefficient near 1: an AR1's phi), or linearly
+        over the bounds (a coefficient of either sign).
+    """
+
+    transform: Literal["log", "atanh", "identity"] = "log"
+    unit: Callable[[str], str] = variance_unit
+    bounds: tuple[float, float] = (0.0, math.inf)
+    slider: Literal["log10", "log10(1-x)", "linear"] = "log10"
+
+    def to_unconstrained(self, v: float) -> float:
+        """The value mapped to R (the transform)."""
+        return _TRANSFORMS[self.transform][0](v)
+
+    def from_unconstrained(self, u: float) -> float:
+        """The value of an unconstrained ``u`` (inverse of :meth:`to_unconstrained`)."""
+        return _TRANSFORMS[self.transform][1](u)
+
+
+def param(
+    transform: Literal["log", "atanh", "identity"] = "log",
+    unit: Callable[[str], str] = variance_unit,
+    bounds: tuple[float, float] = (0.0, math.inf),
+    slider: Literal["log10", "log10(1-x)", "linear"] = "log10",
+) -> Any:
+    """A process's parameter field (unknown by default) with its :class:`Param` record.
+
+    Examples
+    --------
+    An AR1 declares its coefficient as
+    ``phi: float | None = param("atanh", coefficient_unit, (-1.0, 1.0), "log10(1-x)")``.
+    """
+    spec = Param(transform, unit, bounds, slider)
+    return field(default=None, metadata={"param": spec})
 
 
 @dataclass(frozen=True)
@@ -69,6 +167,11 @@ class Process(Spectral):
 
     Its ``code`` is the class name and ``param_names`` its fields, in order; it registers
     itself in :data:`PROCESS_TYPES`, which is how :func:`parse_model` finds it.
+
+    Each field is declared with :func:`param`, whose :class:`Param` record gives the
+    parameter's transform to the unconstrained space, unit, bounds and slider scale; a process
+    with a non-linear parameter also states its search coordinate (:meth:`search_range`,
+    :meth:`search_axis`, :meth:`search_nl`, :meth:`search_of_nl`), which the fit reads.
 
     A process owns its behaviour, so that adding a process means adding one class: its WV
     (:meth:`basis`), simulator, spectral density (:meth:`psd_terms`, :meth:`psd`), the rule
@@ -104,6 +207,10 @@ class Process(Spectral):
     deterministic: ClassVar[bool] = False
     #: May the fitter set phi to 0 (an AR1 then is white); a GM's phi = exp(-beta/fs) may not.
     phi_can_vanish: ClassVar[bool] = False
+    #: At most one per model: two have the same WV shape, only their sum is identifiable.
+    unique: ClassVar[bool] = False
+    #: Processes a model may not hold beside this one, each with the reason (identifiability).
+    excludes: ClassVar[dict[str, str]] = {}
 
     if TYPE_CHECKING:
         # the constructor of a concrete process: the dataclass generates it from the fields,
@@ -205,16 +312,31 @@ class Process(Spectral):
         if v < 0:
             raise ValueError(f"{self.code}.{name} must be >= 0, got {v}")
 
-    # ---- bounds and the unconstrained space ------------------------------------------------
+    # ---- the parameters' declarations, bounds and the unconstrained space -------------------
+    @classmethod
+    def params(cls) -> dict[str, Param]:
+        """The :class:`Param` record of each parameter, by name (its field's metadata)."""
+        out = {}
+        for f in fields(cls):
+            spec = f.metadata.get("param")
+            if not isinstance(spec, Param):
+                raise TypeError(
+                    f"{cls.code}.{f.name} has no Param record: declare it with "
+                    "engine.models.model.param(...)"
+                )
+            out[f.name] = spec
+        return out
+
     def bounds(self, fs: float = 1.0) -> dict[str, tuple[float, float]]:
         """Admissible range of each parameter (open where the transform is)."""
-        return {n: (0.0, math.inf) for n in self.param_names}
+        return {n: spec.bounds for n, spec in self.params().items()}
 
     def to_unconstrained(self, fs: float = 1.0) -> np.ndarray:
-        """Values mapped to R^k: log of variances and rates, atanh of phi, omega as is."""
+        """Values mapped to R^k by each parameter's transform (:attr:`Param.transform`)."""
         vals = self._require()
+        specs = self.params()
         return np.array(
-            [TO_UNCONSTRAINED[n](v) for n, v in zip(self.param_names, vals, strict=True)]
+            [specs[n].to_unconstrained(v) for n, v in zip(self.param_names, vals, strict=True)]
         )
 
     def from_unconstrained(self, u: np.ndarray, fs: float = 1.0) -> Process:
@@ -225,8 +347,12 @@ class Process(Spectral):
                 f"{self.code} takes {len(self.param_names)} unconstrained values, "
                 f"got shape {u.shape}"
             )
+        specs = self.params()
         return type(self)(
-            *(FROM_UNCONSTRAINED[n](float(x)) for n, x in zip(self.param_names, u, strict=True))
+            *(
+                specs[n].from_unconstrained(float(x))
+                for n, x in zip(self.param_names, u, strict=True)
+            )
         )
 
     # ---- fitting interface ----------------------------------------------------------------
@@ -261,6 +387,38 @@ class Process(Spectral):
         """The non-linear parameter's value of a fitter's ``phi`` (inverse of
         :meth:`phi_from_nl`; AR1, GM only)."""
         raise NotImplementedError
+
+    # ---- the non-linear search coordinate (engine.fit._varpro asks the process) -------------
+    def search_range(self, n_max: int) -> tuple[float, float]:
+        """The interval ``[lo, hi]`` of the search coordinate ``u`` the fit explores, for a
+        series of ``n_max`` samples (AR1, GM: log correlation times from :data:`TC_MIN` to
+        ``TC_MAX_FACTOR n_max`` samples)."""
+        raise NotImplementedError
+
+    def search_axis(self, tau_max: float, k: int) -> np.ndarray:
+        """The grid of ``u`` the search starts from, for ``k`` interchangeable terms of this
+        kind and a largest scale ``tau_max`` (samples)."""
+        raise NotImplementedError
+
+    def search_nl(self, u: Any, lo: float, hi: float) -> Any:
+        """The fitter's non-linear value (:meth:`nl_value`'s space) at search coordinate
+        ``u``, clipped into ``[lo, hi]``: a float for a float, an array for an array."""
+        raise NotImplementedError
+
+    def search_of_nl(self, nl: float) -> float | None:
+        """The search coordinate of a fitter's non-linear value (inverse of
+        :meth:`search_nl`), or None when the search cannot reach it."""
+        raise NotImplementedError
+
+    def basis_many(self, tau: np.ndarray, fs: float, nls: np.ndarray) -> np.ndarray:
+        """:meth:`basis` at each non-linear value of ``nls`` (n,): an (n, J) array (the
+        search's batched path; one :meth:`basis` per value by default)."""
+        return np.array([self.basis(tau, fs, float(v)) for v in nls]).reshape(len(nls), -1)
+
+    def correlation_time(self, fs: float) -> float | None:
+        """Correlation time in samples of the fitted process (AR1, GM: ``-1 / ln phi``; 0
+        for ``phi <= 0``), None for a process without one."""
+        return None
 
     def basis_scale(self, phi: float) -> float:
         """``basis(tau, fs, phi) / ar1_wv(tau, phi, 1)`` for a process with a non-linear
@@ -358,26 +516,31 @@ class Process(Spectral):
         return self.spec()
 
 
-# Transforms to the unconstrained space, by parameter name: variances and rates by log, the AR1
-# coefficient by atanh (|phi| < 1), the drift slope (either sign) unchanged.
-TO_UNCONSTRAINED = {
-    "sigma2": math.log,
-    "q2": math.log,
-    "gamma2": math.log,
-    "sigma2_gm": math.log,
-    "beta": math.log,
-    "phi": math.atanh,
-    "omega": float,
-}
-FROM_UNCONSTRAINED = {
-    "sigma2": math.exp,
-    "q2": math.exp,
-    "gamma2": math.exp,
-    "sigma2_gm": math.exp,
-    "beta": math.exp,
-    "phi": lambda u: min(max(math.tanh(u), -1 + 2**-52), 1 - 2**-52),
-    "omega": float,
-}
+class _ByName(Mapping[str, Callable[[float], float]]):
+    """A parameter's transform (or its inverse) by parameter name, read from the classes'
+    :class:`Param` records (a name means the same parameter kind in every process)."""
+
+    def __init__(self, inverse: bool) -> None:
+        self._inverse = inverse
+
+    def __getitem__(self, name: str) -> Callable[[float], float]:
+        for cls in PROCESS_TYPES.values():
+            spec = cls.params().get(name)
+            if spec is not None:
+                return spec.from_unconstrained if self._inverse else spec.to_unconstrained
+        raise KeyError(name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(dict.fromkeys(n for cls in PROCESS_TYPES.values() for n in cls.params()))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+#: Transforms to the unconstrained space by parameter name (the :class:`Param` records).
+TO_UNCONSTRAINED: Mapping[str, Callable[[float], float]] = _ByName(inverse=False)
+#: Their inverses.
+FROM_UNCONSTRAINED: Mapping[str, Callable[[float], float]] = _ByName(inverse=True)
 
 
 _ECHO = 60  # characters of a user's model text quoted in a message
@@ -522,26 +685,27 @@ class Model:
     def validate(self, n_levels: int | None = None) -> Model:
         """Check identifiability; return self or raise :class:`ModelError` saying why.
 
-        Rules: at least one process; at most one WN, QN, RW and DR (two of a kind have the
-        same WV shape, only their sum is identifiable); AR1 and GM not mixed (same WV family,
-        different parametrisations); no more parameters than WV levels.
+        Rules: at least one process; at most one of each process declared
+        :attr:`Process.unique` (WN, QN, RW, DR: two of a kind have the same WV shape, only
+        their sum is identifiable); no two processes one of which :attr:`Process.excludes`
+        the other (AR1 and GM: the same WV family in two parametrisations); no more
+        parameters than WV levels.
         """
         if not self.processes:
             raise ModelError(
-                "the model is empty: add at least one process (WN, QN, RW, DR, AR1, GM)"
+                f"the model is empty: add at least one process ({', '.join(PROCESS_TYPES)})"
             )
         counts = Counter(p.code for p in self.processes)
-        for code in _UNIQUE:
-            if counts.get(code, 0) > 1:
+        for code, cls in PROCESS_TYPES.items():
+            if cls.unique and counts.get(code, 0) > 1:
                 raise ModelError(
                     f"the model has {counts[code]} {code} terms; only their sum is identifiable "
                     f"(they have the same WV shape): keep one {code}"
                 )
-        if counts.get("AR1") and counts.get("GM"):
-            raise ModelError(
-                "the model mixes AR1 and GM: they are the same process in two parametrisations; "
-                "use only GM (continuous time) or only AR1 (per sample)"
-            )
+        for code, cls in PROCESS_TYPES.items():
+            for other, reason in cls.excludes.items():
+                if counts.get(code) and counts.get(other):
+                    raise ModelError(f"the model mixes {code} and {other}: {reason}")
         if n_levels is not None and self.n_params > n_levels:
             raise ModelError(
                 f"the model has {self.n_params} parameters but the WV has only {n_levels} levels: "
@@ -646,7 +810,7 @@ def parse_model(spec: str | Model | Process) -> Model:
 
     Terms joined by ``+`` in any order, each ``CODE``, ``k*CODE`` or ``CODE*k``, optionally with
     values: ``"WN(sigma2=1)+RW(gamma2=1e-4)"``, ``"GM(0.1, 1e-4)"`` (positional in the
-    process's parameter order). Codes: WN, QN, RW, DR, AR1, GM (case-insensitive).
+    process's parameter order). Codes: those of :data:`PROCESS_TYPES` (case-insensitive).
 
     Raises
     ------

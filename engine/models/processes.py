@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from .._limits import check_sample_count
 from .._quantity import Quantity, per_s, sqrt0, squared, times_s
-from .model import Process
+from .model import Process, coefficient_unit, param, per_sample_unit, rate_unit
 from .spectrum import FilterTerms, PsdTerms
 
 __all__ = ["WN", "QN", "RW", "DR", "AR1", "GM", "ar1_wv", "ar1_wv_pos", "TC_MIN", "TC_MAX_FACTOR"]
@@ -270,12 +271,13 @@ class WN(Process, order=3, description="white noise"):
     True
     """
 
-    sigma2: float | None = None
+    sigma2: float | None = param()
 
     display_name = "white noise"
     help = "white noise: WV falls as 1/τ (angle/velocity random walk)"
     color = "#1F77B4"
     allan_slope = -0.5
+    unique = True
     read_tau = 1.0
     shareable = True
     quantities = (
@@ -330,12 +332,13 @@ class QN(Process, order=2, description="quantization noise"):
     4.0
     """
 
-    q2: float | None = None
+    q2: float | None = param()
 
     display_name = "quantization noise"
     help = "quantization noise: WV falls as 1/τ²"
     color = "#9467BD"
     allan_slope = -1.0
+    unique = True
     read_tau = math.sqrt(3.0)
     quantities = (
         Quantity(
@@ -391,12 +394,13 @@ class RW(Process, order=4, description="random walk"):
     3 4.5 8.25
     """
 
-    gamma2: float | None = None
+    gamma2: float | None = param()
 
     display_name = "random walk"
     help = "random walk: WV rises as τ (rate random walk)"
     color = "#2CA02C"
     allan_slope = 0.5
+    unique = True
     read_tau = 3.0
     shareable = True
     quantities = (
@@ -447,12 +451,13 @@ class DR(Process, order=5, description="drift (rate ramp)"):
     2.0 4.0 6.0 8.0
     """
 
-    omega: float | None = None
+    omega: float | None = param("identity", per_sample_unit, (-math.inf, math.inf))
 
     display_name = "drift"
     help = "drift (rate ramp): WV rises as τ²"
     color = "#8C564B"
     allan_slope = 1.0
+    unique = True
     read_tau = math.sqrt(2.0)
     deterministic = True
     quantities = (
@@ -484,9 +489,6 @@ class DR(Process, order=5, description="drift (rate ramp)"):
     def _check_value(self, name, v):
         pass  # a drift may have either sign; its WV depends on omega^2
 
-    def bounds(self, fs=1.0):
-        return {"omega": (-math.inf, math.inf)}
-
     def basis(self, tau, fs, nl=None):
         return tau**2 / 16.0
 
@@ -513,8 +515,51 @@ def _simulate_ar1(n: int, phi: float, sigma2: float, rng: np.random.Generator) -
     return lfilter([1.0], [1.0, -phi], e, zi=[phi * x0])[0]
 
 
+class _CorrelationTimeSearch:
+    """The search coordinate of an AR1 or a GM: ``u = log(correlation time in samples)``,
+    ``phi = exp(-1 / exp(u))``, between :data:`TC_MIN` and ``TC_MAX_FACTOR n_max`` samples;
+    an AR1 whose ``phi`` may vanish (:attr:`~engine.models.Process.phi_can_vanish`) is
+    white (``phi = 0``) below ``u = -50``."""
+
+    phi_can_vanish: ClassVar[bool]
+
+    def search_range(self, n_max: int) -> tuple[float, float]:
+        return math.log(TC_MIN), math.log(TC_MAX_FACTOR * n_max)
+
+    def search_axis(self, tau_max: float, k: int) -> np.ndarray:
+        # 0.25 to 4x the largest scale; 60 points for one term, 36 for two, 18 for three, 10
+        # beyond (the candidates grow as C(n, k))
+        n = {1: 60, 2: 36, 3: 18}.get(k, 10)
+        return np.linspace(math.log(0.25), math.log(4.0 * tau_max), n)
+
+    def search_nl(self, u, lo, hi):
+        if isinstance(u, np.ndarray):
+            phi = np.exp(-1.0 / np.exp(np.clip(u, lo, hi)))
+            return np.where(u < -50, 0.0, phi) if self.phi_can_vanish else phi
+        if self.phi_can_vanish and u < -50:
+            return 0.0
+        return math.exp(-1.0 / math.exp(min(max(u, lo), hi)))
+
+    def search_of_nl(self, nl):
+        if not nl > 0:
+            return None
+        return math.inf if nl >= 1 else math.log(-1.0 / math.log(nl))
+
+    def correlation_time(self, fs: float) -> float | None:
+        phi = self.nl_value(fs)  # type: ignore[attr-defined]
+        if phi is None:
+            return None
+        return -1.0 / math.log(phi) if 0 < phi < 1 else (math.inf if phi >= 1 else 0.0)
+
+
 @dataclass(frozen=True, repr=False)
-class AR1(Process, order=1, description="first-order autoregression", nonlinear="phi"):
+class AR1(
+    _CorrelationTimeSearch,
+    Process,
+    order=1,
+    description="first-order autoregression",
+    nonlinear="phi",
+):
     """First-order autoregression ``X_t = phi X_{t-1} + e_t``, ``Var e = sigma2``, ``|phi| < 1``.
 
     Examples
@@ -531,13 +576,17 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
     0.3333 0.3125 0.2705
     """
 
-    phi: float | None = None
-    sigma2: float | None = None
+    phi: float | None = param("atanh", coefficient_unit, (-1.0, 1.0), "log10(1-x)")
+    sigma2: float | None = param()
 
     display_name = "AR(1)"
     help = "first-order autoregression (per sample phi, sigma2)"
     shareable = True
     phi_can_vanish = True
+    excludes = {
+        "GM": "they are the same process in two parametrisations; use only GM (continuous "
+        "time) or only AR1 (per sample)"
+    }
     quantities = _GM_QUANTITIES  # reported as the GM it samples
 
     def _check_value(self, name, v):
@@ -546,11 +595,10 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
         if name == "sigma2" and v < 0:
             raise ValueError(f"AR1.sigma2 must be >= 0, got {v}")
 
-    def bounds(self, fs=1.0):
-        return {"phi": (-1.0, 1.0), "sigma2": (0.0, math.inf)}
-
     # non-linear value: phi itself
     def basis(self, tau, fs, nl=None):
+        if type(nl) is float and 0.0 < nl < 1.0 and isinstance(tau, np.ndarray):
+            return ar1_wv_pos(tau, nl)  # the search's hot path: ar1_wv without its checks
         return ar1_wv(tau, nl, 1.0)
 
     def phi_from_nl(self, nl, fs):
@@ -610,7 +658,7 @@ class AR1(Process, order=1, description="first-order autoregression", nonlinear=
 
 
 @dataclass(frozen=True, repr=False)
-class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
+class GM(_CorrelationTimeSearch, Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     """Gauss-Markov (continuous time): ``beta`` [1/s], stationary variance ``sigma2_gm``.
 
     Sampled at ``fs`` it is an AR1 with ``phi = exp(-beta/fs)`` and innovation variance
@@ -633,8 +681,8 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
     0.09754 0.6126 0.276
     """
 
-    beta: float | None = None
-    sigma2_gm: float | None = None
+    beta: float | None = param("log", rate_unit)
+    sigma2_gm: float | None = param()
 
     display_name = "Gauss-Markov"
     help = "Gauss-Markov: a bump at its correlation time 1/beta (bias instability)"
@@ -660,6 +708,10 @@ class GM(Process, order=0, description="Gauss-Markov", nonlinear="beta"):
 
     def basis_scale(self, phi):
         return 1.0 - phi * phi
+
+    def basis_many(self, tau, fs, nls):
+        # every row at once (the search's hot path): the AR1 WV times 1 - phi^2
+        return ar1_wv_pos(tau, nls) * (1.0 - nls * nls)[:, None]
 
     def psd_terms(self, fs):
         phi, sigma2 = self.as_ar1(fs)._require()

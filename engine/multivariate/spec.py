@@ -240,6 +240,12 @@ class MultiModel:
                 m.validate()
             except ModelError as e:
                 raise ModelError(f"channel {c}: {e}") from None
+            for p in m.processes:  # the multivariate search moves log correlation times
+                if p.nonlinear is not None and type(p).correlation_time is Process.correlation_time:
+                    raise ModelError(
+                        f"channel {c}: the multivariate fit searches correlation times and "
+                        f"{p.code} has none; fit {p.code} channel by channel with fit_gmwm"
+                    )
         self.models: dict[str, Model] = models
         self.shared: tuple[SharedProcess, ...] = self._shared(shared, cov or {}, nl or {})
 

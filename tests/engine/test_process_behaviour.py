@@ -78,6 +78,7 @@ EXAMPLES: dict[str, Process] = {
     "DR": eg.DR(omega=0.02),
     "AR1": eg.AR1(phi=0.8, sigma2=1.3),
     "GM": eg.GM(beta=2.0, sigma2_gm=4.0),
+    "MA1": eg.parse_model("MA1(theta=-0.4, sigma2=1.1)").processes[0],
 }
 
 
@@ -212,7 +213,11 @@ def test_filter_terms_keep_the_white_and_the_bias_apart(code):
         assert t.assignment
         assert t.fast == (t.white > 0)
         assert t.white >= 0 and t.rw_k2 >= 0
-    assert p.filter_terms(FS, FS, 100.0).fast == (code in ("WN", "QN"))
+    # white at any filter step: a stationary process without a correlation time (WN, QN)
+    white = p.correlation_time(FS) is None and not p.deterministic
+    assert p.filter_terms(FS, FS, 100.0).fast == (white and math.isfinite(p.white_equivalent(FS)))
+    if code in ("WN", "QN", "RW", "DR", "AR1", "GM"):  # the built-in six
+        assert p.filter_terms(FS, FS, 100.0).fast == (code in ("WN", "QN"))
     # GM with T_c = 0.5 s: bias at 50 Hz, white at 1 Hz (step 1 s > T_c)
     if code == "GM":
         assert p.filter_terms(FS, 1.0, 100.0).fast
