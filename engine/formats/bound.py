@@ -228,22 +228,27 @@ def least_inflation(
     if nc > 2:
         raise ValueError("least_inflation handles one or two consumer variances")
     bad = (np.full(nc, np.nan), math.inf)
-    if not (np.all(np.isfinite(a_con)) and np.all(a_con > 0) and np.all(a_obj > 0)):
+    # (min and max propagate a nan: one reduction each instead of elementwise tests)
+    if not (a_con.min() > 0 and a_con.max() < math.inf and a_obj.min() > 0):
         return bad
     ok = t_con > 0
-    if not np.any(ok):
+    if not ok.any():
         return np.zeros(nc), 0.0
-    b = a_con[ok] / t_con[ok, None]
-    s = np.max(b, axis=0)  # y = x s: the columns of b / s are at most 1
+    if not ok.all():
+        a_con, t_con = a_con[ok], t_con[ok]
+    b = a_con / t_con[:, None]
+    s = b.max(axis=0)  # y = x s: the columns of b / s are at most 1
     verts = lower_vertices(b / s) / s
     keep = t_obj > 0
-    vals = np.mean(np.log((a_obj[keep] @ verts.T) / t_obj[keep, None]), axis=0)
+    if not keep.all():
+        a_obj, t_obj = a_obj[keep], t_obj[keep]
+    vals = np.mean(np.log((a_obj @ verts.T) / t_obj[:, None]), axis=0)
     # the consumers need white noise: a vertex without it is taken only when no other exists
     vals = np.where((verts[:, 0] > 0) | ~np.any(verts[:, 0] > 0), vals, np.inf)
     k = int(np.argmin(vals))
     x = verts[k]
     # rounding: scale up so that the bound holds at every constraint scale
-    short = float(np.max(t_con[ok] / (a_con[ok] @ x)))
+    short = float(np.max(t_con / (a_con @ x)))
     return x * max(short, 1.0), float(vals[k])
 
 

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -280,13 +281,23 @@ def tail_factors(
     )
 
 
+#: The tail factors of each loaded log's channels, computed once per log and channel (a log is
+#: immutable): the export menu's preview and its downloads, and the three Gauss-Markov-bias
+#: formats of one session, share them.
+_LOG_TAILS: weakref.WeakKeyDictionary[ImuLog, dict[str, TailFactors]] = weakref.WeakKeyDictionary()
+
+
 def log_tail_factors(log: ImuLog, channels: Iterable[str]) -> dict[str, TailFactors]:
     """:func:`tail_factors` (default level and confidence) of the ``channels`` of ``log``
     that it holds: what :func:`engine.export` applies to a filter file's data bound when it is
-    given the log."""
+    given the log. Each channel's are computed once per log (kept while the log lives)."""
     names = set(log.names)
-    return {
-        ch: tail_factors(log[ch], fs=float(log.fs), channel=ch, segments=log.segments)
-        for ch in channels
-        if ch in names
-    }
+    kept = _LOG_TAILS.setdefault(log, {})
+    out = {}
+    for ch in channels:
+        if ch not in names:
+            continue
+        if ch not in kept:
+            kept[ch] = tail_factors(log[ch], fs=float(log.fs), channel=ch, segments=log.segments)
+        out[ch] = kept[ch]
+    return out
