@@ -407,6 +407,16 @@ _TIGHT = 1e-11
 #: How far (in log T_c) the searched optimum may lie from the one the search returned: its
 #: tolerance (``xatol`` 1e-4) with a margin.
 _NEAR_LT = 5e-3
+#: Rows within this relative slack are checked at every moved model's solution (a moved
+#: model's targets move by about 1e-3, its T_c by as much).
+_NEAR_SLACK = 2e-2
+#: A moved solution may miss such a row by this much (relative to its target): the kink's
+#: row is tight at the moved T_c only to second order in the step (1e-9), and the fine
+#: grid's neighbours of a tight row, nearly the same constraint, by up to 4e-6 on the
+#: ADIS16405 accelerometers, where the intervals' ends then agree with every moved model
+#: searched afresh to 1e-11 within 8e-4. A row missed by more (a row 1e-5 short of tight
+#: that the step's 1e-3 makes binding) changes the vertex within the step.
+_MISSED = 1e-5
 
 
 def nearby_solutions(
@@ -439,8 +449,10 @@ def nearby_solutions(
     list of dict or None
         Per model, ``x`` and ``T_c`` as :func:`solve` gives them; None when the solution is
         not such a vertex (an unbounded or plain solution, a variance at 0, more tight rows
-        than variances, an optimum that the conditions do not reproduce): then solve each
-        model with :func:`solve`.
+        than variances, an optimum that the conditions do not reproduce) or when a moved
+        model's solution misses a row that was near tight (the vertex changes within the
+        step: on the ADIS16405 accel_z at one fixed T_c a row 1e-5 short of tight): then
+        solve each model with :func:`solve`.
     """
     if "fine" not in sol or sol.get("x") is None:
         return None
@@ -457,12 +469,27 @@ def nearby_solutions(
     rows = np.flatnonzero(ratio <= 1.0 + _TIGHT)
     if rows.size != nc:
         return None
+    # the rows a moved model could make binding: its solution must hold there too, or the
+    # vertex changes within the derivative's step (a row short of tight by less than the
+    # step moves the targets), and each moved model is solved afresh, as before
+    near = np.flatnonzero(ratio <= 1.0 + _NEAR_SLACK)
     tms = [target_model(m, split_terms(m, fs, fs_f, tau_h), consumer) for m in models]
-    tb = np.array([target_wv(tm, fine[rows], fs, n, confidence, floor) for tm in tms])
+    tn = np.array([target_wv(tm, fine[near], fs, n, confidence, floor) for tm in tms])
+    tb = tn[:, np.searchsorted(near, rows)]
     if not sol.get("searched"):
         xs = np.linalg.solve(af[rows], tb.T).T
-        return [{"x": xi, "T_c": tc} for xi in xs] if np.all(xs > 0) else None
-    return _near_searched(sol, tms, tb, rows, fs, consumer, n, confidence, floor)
+        out = [{"x": xi, "T_c": tc} for xi in xs] if np.all(xs > 0) else None
+    else:
+        out = _near_searched(sol, tms, tb, rows, fs, consumer, n, confidence, floor)
+    if out is None:
+        return None
+    worst = 0.0
+    for s, t in zip(out, tn, strict=True):
+        a = columns(consumer, fine[near], fs, s["T_c"])
+        worst = max(worst, float(np.max(1.0 - (a @ s["x"]) / t)))
+    if worst > _MISSED:
+        return None
+    return out
 
 
 def _near_searched(

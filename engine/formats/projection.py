@@ -85,6 +85,13 @@ MISFIT_SHARE = 1.0 / 3.0
 #: The sandwich covariance of each fit's free parameters (fits are immutable).
 _COV: weakref.WeakKeyDictionary[GMWMResult, np.ndarray] = weakref.WeakKeyDictionary()
 
+#: Each fit's projections by :func:`project`'s arguments (fits, tail factors and projections are
+#: immutable): the export menu's preview and the download after it, or two formats of the same
+#: consumer, project once.
+_PROJECTIONS: weakref.WeakKeyDictionary[GMWMResult, dict[tuple[Any, ...], Projection]] = (
+    weakref.WeakKeyDictionary()
+)
+
 
 def misfit(fit: GMWMResult, channel: str = "") -> str:
     """One line when the fitted WV is outside the empirical interval at more than
@@ -627,6 +634,43 @@ def project(
     N 1.669e-04 rad/s/sqrt(Hz) (bounds GM; plain 9.998e-05)
     K 8.356e-07 rad/s/s/sqrt(Hz) (bounds GM; plain 1.310e-04)
     """
+    try:
+        key: tuple[Any, ...] | None = (
+            consumer, fs_filter, horizon_s, None if band is None else tuple(map(float, band)),
+            confidence, bound, channel, unit, ci, level, data, tc, tails,
+        )  # fmt: skip
+        hash(key)
+    except (TypeError, ValueError):
+        key = None  # arguments _project refuses with its own message
+    kept = _PROJECTIONS.get(fit) if key is not None else None
+    if kept is not None and key in kept:
+        return kept[key]
+    p = _project(
+        fit, consumer, fs_filter, horizon_s, band, confidence, bound, channel, unit, ci, level,
+        data, tc, tails,
+    )  # fmt: skip
+    if key is not None:
+        _PROJECTIONS.setdefault(fit, {})[key] = p
+    return p
+
+
+def _project(
+    fit: GMWMResult,
+    consumer: str,
+    fs_filter: float | None,
+    horizon_s: float | None,
+    band: Sequence[float] | None,
+    confidence: float | None,
+    bound: bool,
+    channel: str,
+    unit: str | None,
+    ci: str | None,
+    level: float,
+    data: str,
+    tc: float | None,
+    tails: TailFactors | None,
+) -> Projection:
+    """:func:`project` itself (it keeps what this returns per fit and arguments)."""
     st = _setup(
         fit, consumer, fs_filter, horizon_s, band, confidence, bound, channel, unit, data,
         tails, tc,
