@@ -636,7 +636,8 @@ def project(
     """
     try:
         key: tuple[Any, ...] | None = (
-            consumer, fs_filter, horizon_s, None if band is None else tuple(map(float, band)),
+            consumer_of(consumer), fs_filter, horizon_s,
+            None if band is None else tuple(map(float, band)),
             confidence, bound, channel, unit, ci, level, data, tc, tails,
         )  # fmt: skip
         hash(key)

@@ -33,7 +33,10 @@ FS = 100.0
 @pytest.fixture(scope="module")
 def demo_fits() -> dict[str, eg.GMWMResult]:
     log = eg.load_log(demo_path())
-    return {ch: eg.fit_gmwm(log.wavelet_variance(ch), "2*GM+WN+RW") for ch in ("gyro_x", "gyro_z")}
+    return {
+        ch: eg.fit_gmwm(log.wavelet_variance(ch), "2*GM+WN+RW")
+        for ch in ("gyro_x", "gyro_z", "accel_x")
+    }
 
 
 def _moved(model: Model, free: list[tuple[int, str]], k: int, h: float) -> Model:
@@ -153,3 +156,30 @@ def test_the_moved_vertex_is_used_and_fixed_tc_moves_no_tc(demo_fits) -> None:
             # the moved vertex at its T_c is the least-inflation solution there (to the
             # rounding of its scaled-hull vertices, 3e-9 here)
             np.testing.assert_allclose(s["x"], ref["x"], rtol=1e-7)
+
+
+def test_the_preview_and_the_download_project_once(demo_fits, monkeypatch) -> None:
+    """The export menu's preview projects each channel onto the format's consumer
+    (``project(fit, "gazebo", ...)``) and the download then exports (``project(fit, "WN+GM",
+    ...)`` inside): each channel is projected once, and the file's values are its values."""
+    from engine.formats import projection as projection_module
+
+    fits = {"gyro_x": demo_fits["gyro_x"], "accel_x": demo_fits["accel_x"]}
+    solved: list[str] = []
+    inner = projection_module._project
+
+    def counting(fit, consumer, *args):
+        solved.append(consumer)
+        return inner(fit, consumer, *args)
+
+    monkeypatch.setattr(projection_module, "_project", counting)
+    projection_module._PROJECTIONS.clear()
+    ps = {ch: project(f, "gazebo", channel=ch, unit=f.wv.unit) for ch, f in fits.items()}
+    assert len(solved) == 2
+    text = eg.export(None, fits, "gazebo", tails=False)
+    assert len(solved) == 2  # the download reused both projections
+    for p in ps.values():
+        assert f"T_c = {p.value('T_c'):.6g} s" in text
+    # another argument is another projection
+    project(fits["gyro_x"], "WN+GM", channel="gyro_x", unit=fits["gyro_x"].wv.unit, data="none")
+    assert len(solved) == 3
