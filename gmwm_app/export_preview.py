@@ -163,19 +163,12 @@ class ExportPreview:
         self.plot_box = pn.Column(self.plot, visible=False, margin=0)  # hides the figure
         self.projections: dict[str, Projection] = {}
         self._key: tuple[Any, ...] | None = None
-        self._tails_log: ImuLog | None = None  # the log whose channels' tail factors are kept
-        self._tails: dict[str, TailFactors] = {}  # per channel: about 1 s of CPU per 1e6 samples
 
-    def _tail_factors(
-        self, log: ImuLog | None, fits: Mapping[str, Any]
-    ) -> dict[str, TailFactors] | None:
-        """The tail factors of ``log``'s fitted channels, each computed once per log."""
-        if log is None:
-            return None
-        if log is not self._tails_log:
-            self._tails_log, self._tails = log, {}
-        self._tails.update(log_tail_factors(log, [ch for ch in fits if ch not in self._tails]))
-        return {ch: self._tails[ch] for ch in fits if ch in self._tails}
+    @staticmethod
+    def _tail_factors(log: ImuLog | None, fits: Mapping[str, Any]) -> dict[str, TailFactors] | None:
+        """The tail factors of ``log``'s fitted channels (the engine keeps them per log, so
+        the download that follows the preview does not compute them again)."""
+        return None if log is None else log_tail_factors(log, list(fits))
 
     def panel(self) -> Any:
         """The preview's layout."""

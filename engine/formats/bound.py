@@ -28,6 +28,7 @@ docs/fit-to-filter.md).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,12 +43,16 @@ __all__ = [
     "Split",
     "split_terms",
     "target_ratio",
+    "target_model",
+    "target_wv",
     "floor_at",
     "fine_scales",
     "columns",
     "lower_vertices",
     "least_inflation",
     "solve",
+    "nearby_solutions",
+    "solve_at_tcs",
 ]
 
 #: Scales of the objective per octave (the bound holds on an 8x finer grid, fine_scales).
@@ -94,6 +99,31 @@ def target_ratio(tau: np.ndarray, n: int, confidence: float | None) -> np.ndarra
         return np.ones_like(tau)
     eta = np.maximum((n - tau + 1.0) / tau, 1.0)
     return eta / chi2_isf(eta, 1.0 - (1.0 - float(confidence)) / 2.0)
+
+
+def target_model(model: Model, sp: Split, consumer: str) -> Model | None:
+    """The model whose WV the consumer bounds: the fitted model, or for the ``WN`` consumer
+    its terms that are white at the filter step (None: none is)."""
+    if consumer == "WN":
+        return Model(tuple(p for _, p in sp.fast)) if sp.fast else None
+    return model
+
+
+def target_wv(
+    tmodel: Model | None,
+    t: np.ndarray,
+    fs: float,
+    n: int,
+    confidence: float | None,
+    floor: tuple[np.ndarray, np.ndarray] | None,
+) -> np.ndarray:
+    """The bound's target at scales ``t`` (log samples): the WV of ``tmodel`` (0 for None)
+    times :func:`target_ratio`, and at least the empirical ``floor`` (:func:`floor_at`)."""
+    base = tmodel.wv(t, fs) if tmodel is not None else np.zeros_like(t)
+    base = base * target_ratio(t, n, confidence)
+    if floor is None:
+        return base
+    return np.maximum(base, floor_at(t, *floor))
 
 
 def floor_at(t: np.ndarray, tau_d: np.ndarray, wv_d: np.ndarray) -> np.ndarray:
@@ -198,22 +228,27 @@ def least_inflation(
     if nc > 2:
         raise ValueError("least_inflation handles one or two consumer variances")
     bad = (np.full(nc, np.nan), math.inf)
-    if not (np.all(np.isfinite(a_con)) and np.all(a_con > 0) and np.all(a_obj > 0)):
+    # (min and max propagate a nan: one reduction each instead of elementwise tests)
+    if not (a_con.min() > 0 and a_con.max() < math.inf and a_obj.min() > 0):
         return bad
     ok = t_con > 0
-    if not np.any(ok):
+    if not ok.any():
         return np.zeros(nc), 0.0
-    b = a_con[ok] / t_con[ok, None]
-    s = np.max(b, axis=0)  # y = x s: the columns of b / s are at most 1
+    if not ok.all():
+        a_con, t_con = a_con[ok], t_con[ok]
+    b = a_con / t_con[:, None]
+    s = b.max(axis=0)  # y = x s: the columns of b / s are at most 1
     verts = lower_vertices(b / s) / s
     keep = t_obj > 0
-    vals = np.mean(np.log((a_obj[keep] @ verts.T) / t_obj[keep, None]), axis=0)
+    if not keep.all():
+        a_obj, t_obj = a_obj[keep], t_obj[keep]
+    vals = np.mean(np.log((a_obj @ verts.T) / t_obj[:, None]), axis=0)
     # the consumers need white noise: a vertex without it is taken only when no other exists
     vals = np.where((verts[:, 0] > 0) | ~np.any(verts[:, 0] > 0), vals, np.inf)
     k = int(np.argmin(vals))
     x = verts[k]
     # rounding: scale up so that the bound holds at every constraint scale
-    short = float(np.max(t_con[ok] / (a_con[ok] @ x)))
+    short = float(np.max(t_con / (a_con @ x)))
     return x * max(short, 1.0), float(vals[k])
 
 
@@ -245,7 +280,9 @@ def solve(
     Returns a dictionary with ``split`` (:class:`Split`), ``plain`` (the plain conversion),
     ``target_at`` (the target WV as a function of scales), ``target`` (at ``tau``), ``x``
     (the exported variances per log sample), ``T_c`` (s; WN+GM only) and, when bounded, ``A``
-    (the columns at ``tau``) and ``log_excess`` (:func:`least_inflation`)."""
+    (the columns at ``tau``), ``log_excess`` (:func:`least_inflation`), ``fine`` and
+    ``fine_target`` (the scales where the bound holds and the target there) and ``searched``
+    (whether ``T_c`` was searched): what :func:`nearby_solutions` starts from."""
     sp = split_terms(model, fs, fs_f, tau_h)
     out: dict[str, Any] = {"split": sp}
     # plain conversion (per log sample)
@@ -257,17 +294,10 @@ def solve(
         plain["T_c"] = tc
         plain["sb2"] = sp.rw_k2 * tc / 2.0
     out["plain"] = plain
-    if consumer == "WN":
-        tmodel = Model(tuple(p for _, p in sp.fast)) if sp.fast else None
-    else:
-        tmodel = model
+    tmodel = target_model(model, sp, consumer)
 
     def target_at(t: np.ndarray) -> np.ndarray:
-        base = tmodel.wv(t, fs) if tmodel is not None else np.zeros_like(t)
-        base = base * target_ratio(t, n, confidence)
-        if floor is None:
-            return base
-        return np.maximum(base, floor_at(t, *floor))
+        return target_wv(tmodel, t, fs, n, confidence, floor)
 
     target = target_at(tau)
     out["target_at"] = target_at
@@ -283,6 +313,7 @@ def solve(
     fine = fine_scales(tau)
     ft = target_at(fine)
     at = np.searchsorted(fine, tau)  # tau is among the fine scales: their columns are shared
+    out["tau"], out["fine"], out["fine_target"], out["searched"] = tau, fine, ft, False
     if consumer != "WN+GM":
         af = columns(consumer, fine, fs, None)
         a = af[at]
@@ -339,4 +370,237 @@ def solve(
     a = af[at]
     x, f = least_inflation(af, ft, a, target)
     out["x"], out["T_c"], out["A"], out["log_excess"] = x, tc, a, f
+    out["searched"], out["lt_range"] = True, (lo, hi)
+    return out
+
+
+def solve_at_tcs(
+    model: Model,
+    fs: float,
+    fs_f: float,
+    tau: np.ndarray,
+    n: int,
+    confidence: float | None,
+    tau_h: float,
+    floor: tuple[np.ndarray, np.ndarray] | None,
+    tcs: Sequence[float],
+) -> list[dict[str, Any] | None]:
+    """The bounded ``WN+GM`` projection at each fixed ``T_c`` of ``tcs`` (s), as
+    ``solve(..., tc_fix=c)`` gives its ``x`` and ``log_excess``, with the target computed
+    once (None where no bias of that ``T_c`` bounds the WV)."""
+    tm = target_model(model, split_terms(model, fs, fs_f, tau_h), "WN+GM")
+    target = target_wv(tm, tau, fs, n, confidence, floor)
+    fine = fine_scales(tau)
+    ft = target_wv(tm, fine, fs, n, confidence, floor)
+    at = np.searchsorted(fine, tau)
+    out: list[dict[str, Any] | None] = []
+    for c in tcs:
+        af = columns("WN+GM", fine, fs, float(c))
+        x, f = least_inflation(af, ft, af[at], target)
+        out.append({"x": x, "log_excess": f} if math.isfinite(f) else None)
+    return out
+
+
+#: Rows of the bound within this relative slack of the target are tight (a vertex's rows are
+#: tight to rounding, about 1e-15).
+_TIGHT = 1e-11
+#: How far (in log T_c) the searched optimum may lie from the one the search returned: its
+#: tolerance (``xatol`` 1e-4) with a margin.
+_NEAR_LT = 5e-3
+#: Rows within this relative slack are checked at every moved model's solution (a moved
+#: model's targets move by about 1e-3, its T_c by as much).
+_NEAR_SLACK = 2e-2
+#: A moved solution may miss such a row by this much (relative to its target): the kink's
+#: row is tight at the moved T_c only to second order in the step (1e-9), and the fine
+#: grid's neighbours of a tight row, nearly the same constraint, by up to 4e-6 on the
+#: ADIS16405 accelerometers, where the intervals' ends then agree with every moved model
+#: searched afresh to 1e-11 within 8e-4. A row missed by more (a row 1e-5 short of tight
+#: that the step's 1e-3 makes binding) changes the vertex within the step.
+_MISSED = 1e-5
+
+
+def nearby_solutions(
+    sol: dict[str, Any],
+    models: Sequence[Model],
+    fs: float,
+    fs_f: float,
+    consumer: str,
+    n: int,
+    confidence: float | None,
+    tau_h: float,
+    floor: tuple[np.ndarray, np.ndarray] | None = None,
+) -> list[dict[str, Any]] | None:
+    """The bounded projections of models close to the one ``sol`` solved (the perturbed
+    models of the intervals' derivatives), with the solution's tight constraints kept.
+
+    A bounded solution is a vertex: ``x = B^-1 t_B`` with ``B`` the consumer's columns and
+    ``t_B`` the target at its tight rows (two rows for two variances, one for WN). A nearby
+    model moves ``t_B`` only, so its solution is one 2x2 solve, not a new least-inflation
+    problem. With a searched ``T_c`` (``lt = log T_c``) the optimum either is a stationary
+    point of the objective ``F(lt)`` along that vertex (``dF/dlt = 0``) or sits where a third
+    row becomes tight (``a_j(lt) . x(lt) = t_j``, a kink of ``F``); the nearby model's ``lt``
+    is one Newton step of that condition from the base optimum (error of second order in the
+    model's change) and its ``x`` the vertex there. The base optimum is first refined from
+    the search's (tolerance 1e-4 in ``lt``) to the condition's root; the exported values
+    stay the search's.
+
+    Returns
+    -------
+    list of dict or None
+        Per model, ``x`` and ``T_c`` as :func:`solve` gives them; None when the solution is
+        not such a vertex (an unbounded or plain solution, a variance at 0, more tight rows
+        than variances, an optimum that the conditions do not reproduce) or when a moved
+        model's solution misses a row that was near tight (the vertex changes within the
+        step: on the ADIS16405 accel_z at one fixed T_c a row 1e-5 short of tight): then
+        solve each model with :func:`solve`.
+    """
+    if "fine" not in sol or sol.get("x") is None:
+        return None
+    fine, ft = sol["fine"], sol["fine_target"]
+    x0 = np.asarray(sol["x"], float)
+    tc = sol["T_c"]
+    if not (np.all(np.isfinite(x0)) and np.all(x0 > 0)):
+        return None
+    nc = x0.size
+    ok = ft > 0
+    af = columns(consumer, fine, fs, tc)
+    ratio = np.full(fine.size, np.inf)
+    ratio[ok] = (af[ok] @ x0) / ft[ok]
+    rows = np.flatnonzero(ratio <= 1.0 + _TIGHT)
+    if rows.size != nc:
+        return None
+    # the rows a moved model could make binding: its solution must hold there too, or the
+    # vertex changes within the derivative's step (a row short of tight by less than the
+    # step moves the targets), and each moved model is solved afresh, as before
+    near = np.flatnonzero(ratio <= 1.0 + _NEAR_SLACK)
+    tms = [target_model(m, split_terms(m, fs, fs_f, tau_h), consumer) for m in models]
+    tn = np.array([target_wv(tm, fine[near], fs, n, confidence, floor) for tm in tms])
+    tb = tn[:, np.searchsorted(near, rows)]
+    if not sol.get("searched"):
+        xs = np.linalg.solve(af[rows], tb.T).T
+        out = [{"x": xi, "T_c": tc} for xi in xs] if np.all(xs > 0) else None
+    else:
+        out = _near_searched(sol, tms, tb, rows, fs, consumer, n, confidence, floor)
+    if out is None:
+        return None
+    worst = 0.0
+    for s, t in zip(out, tn, strict=True):
+        a = columns(consumer, fine[near], fs, s["T_c"])
+        worst = max(worst, float(np.max(1.0 - (a @ s["x"]) / t)))
+    if worst > _MISSED:
+        return None
+    return out
+
+
+def _near_searched(
+    sol: dict[str, Any],
+    tms: list[Model | None],
+    tb: np.ndarray,
+    rows: np.ndarray,
+    fs: float,
+    consumer: str,
+    n: int,
+    confidence: float | None,
+    floor: tuple[np.ndarray, np.ndarray] | None,
+) -> list[dict[str, Any]] | None:
+    """:func:`nearby_solutions` with a searched ``T_c`` (its docstring)."""
+    fine, ft, tau = sol["fine"], sol["fine_target"], sol["tau"]
+    keep = sol["target"] > 0
+    tau_o, t_o = tau[keep], sol["target"][keep]
+    fb = fine[rows]
+    tb0 = ft[rows][None, :]
+    ok = ft > 0
+
+    def xb(lt: float, t: np.ndarray) -> np.ndarray:  # the vertex of the tight rows, per target
+        return np.linalg.solve(columns(consumer, fb, fs, math.exp(lt)), t.T).T
+
+    def obj(lt: float, t: np.ndarray) -> np.ndarray:  # the objective along that vertex
+        a = columns(consumer, tau_o, fs, math.exp(lt))
+        return np.mean(np.log((a @ xb(lt, t).T) / t_o[:, None]), axis=0)
+
+    e = 1e-4
+
+    def grad(lt: float, t: np.ndarray) -> np.ndarray:
+        return (obj(lt + e, t) - obj(lt - e, t)) / (2 * e)
+
+    def curv(lt: float) -> float:
+        f = [float(obj(lt + d, tb0)[0]) for d in (-e, 0.0, e)]
+        return (f[0] - 2 * f[1] + f[2]) / (e * e)
+
+    def slack(lt: float) -> np.ndarray:  # each fine row's WV over its target, minus 1
+        r = np.full(fine.size, np.inf)
+        r[ok] = (columns(consumer, fine[ok], fs, math.exp(lt)) @ xb(lt, tb0)[0]) / ft[ok] - 1.0
+        return r
+
+    lt_s = math.log(sol["T_c"])
+    lo, hi = sol["lt_range"]
+    if min(lt_s - lo, hi - lt_s) < _NEAR_LT:
+        # the search's optimum at an end of its range, where the objective falls towards that
+        # end: T_c stays there (the vertex of the moved targets at the search's T_c)
+        out_dir = 1.0 if hi - lt_s < lt_s - lo else -1.0
+        if float(grad(lt_s, tb0)[0]) * out_dir > 0:
+            return None
+        xs = xb(lt_s, tb)
+        return [{"x": xi, "T_c": sol["T_c"]} for xi in xs] if np.all(xs > 0) else None
+    # the stationary point along the vertex (Newton), within the search's tolerance
+    lt, c2 = lt_s, math.nan
+    for _ in range(6):
+        c2 = curv(lt)
+        if not c2 > 0:
+            break
+        step = float(grad(lt, tb0)[0]) / c2
+        lt = min(max(lt - step, lt_s - _NEAR_LT), lt_s + _NEAR_LT)
+        if abs(step) < 1e-11:
+            break
+    r = slack(lt)
+    kink = None
+    if not (c2 > 0 and np.min(r) >= -1e-9):
+        # the vertex stops being feasible first where a third row becomes tight: the kink
+        d = lt - lt_s if lt != lt_s else -math.copysign(_NEAR_LT, float(grad(lt_s, tb0)[0]))
+        r = slack(lt_s + d)
+        r0 = slack(lt_s)
+        bad = np.flatnonzero(r < -1e-12)
+        if bad.size == 0:
+            return None
+        cross = r0[bad] / (r0[bad] - r[bad])  # linear guess of where each row turns tight
+        j = int(bad[int(np.argmin(cross))])
+
+        def h(lt_: float, t: np.ndarray, tj: np.ndarray) -> np.ndarray:
+            a = columns(consumer, fine[j : j + 1], fs, math.exp(lt_))[0]
+            return (xb(lt_, t) @ a) / tj - 1.0
+
+        tj0 = ft[j : j + 1]
+        h0, h1 = float(h(lt_s, tb0, tj0)[0]), float(h(lt_s + d, tb0, tj0)[0])
+        if abs(h0) < 1e-12:
+            lt = lt_s
+        elif h0 > 0 > h1:
+            from scipy.optimize import brentq
+
+            lt = float(brentq(lambda v: float(h(v, tb0, tj0)[0]), lt_s, lt_s + d, xtol=1e-14))
+        else:
+            return None
+        if np.min(slack(lt)) < -1e-9:
+            return None
+        kink = (j, h)
+    # the structure must give the search's optimum: the least-inflation problem at lt picks
+    # this vertex, and its objective is not above the search's
+    af = columns(consumer, fine, fs, math.exp(lt))
+    f_v = float(obj(lt, tb0)[0])
+    f_best = least_inflation(af, ft, af[np.searchsorted(fine, tau)], sol["target"])[1]
+    if not (f_v <= f_best + 1e-10 and f_v <= sol["log_excess"] + 1e-10):
+        return None
+    # each nearby model: one Newton step of the optimum's condition from lt
+    if kink is None:
+        lts = lt - grad(lt, tb) / curv(lt)
+    else:
+        j, h = kink
+        tj = np.array([target_wv(tm, fine[j : j + 1], fs, n, confidence, floor)[0] for tm in tms])
+        dh = float((h(lt + 1e-6, tb0, ft[j : j + 1]) - h(lt - 1e-6, tb0, ft[j : j + 1]))[0])
+        lts = lt - h(lt, tb, tj) / (dh / 2e-6)
+    out = []
+    for lt_m, t in zip(lts.tolist(), tb, strict=True):
+        x = xb(lt_m, t[None, :])[0]
+        if not np.all(x > 0):
+            return None
+        out.append({"x": x, "T_c": math.exp(lt_m)})
     return out

@@ -31,10 +31,10 @@ from typing import Any
 import numpy as np
 
 from ..fit import GMWMResult
-from ..units import DISPLAY, ExportError
+from ..units import DISPLAY
 from .common import text_lines, yaml_float
 from .noise import noise_for
-from .projection import project
+from .projection import log_inflation_at_tc
 
 __all__ = ["MGAL", "kfgins_yaml", "ros_imu_yaml"]
 
@@ -106,31 +106,24 @@ def _least_total_tc(
     ``T_c`` and 9 log-spaced values between the smallest and the largest."""
     cands = sorted(set(own) | set(np.geomspace(min(own), max(own), 9).tolist()))
     units = kw.get("units") or {}
+    total = np.zeros(len(cands))
+    for ch, res in fits.items():
+        total += log_inflation_at_tc(
+            res,
+            cands,
+            fs_filter=kw.get("filter_rate"),
+            horizon_s=kw.get("horizon_s"),
+            band=kw.get("band"),
+            confidence=kw.get("confidence"),
+            channel=ch,
+            unit=units.get(ch),
+            data=kw.get("data") or "low",
+            tails=(kw.get("tails") or {}).get(ch),
+        )
     best, arg = math.inf, own[-1]
-    for c in cands:
-        total = 0.0
-        for ch, res in fits.items():
-            try:
-                p = project(
-                    res,
-                    "WN+GM",
-                    fs_filter=kw.get("filter_rate"),
-                    horizon_s=kw.get("horizon_s"),
-                    band=kw.get("band"),
-                    confidence=kw.get("confidence"),
-                    channel=ch,
-                    unit=units.get(ch),
-                    ci=None,
-                    data=kw.get("data") or "low",
-                    tc=c,
-                    tails=(kw.get("tails") or {}).get(ch),
-                )
-            except ExportError:
-                total = math.inf
-                break
-            total += math.log(p.inflation["geometric_mean"])
-        if total < best:
-            best, arg = total, c
+    for c, t in zip(cands, total.tolist(), strict=True):
+        if t < best:
+            best, arg = t, c
     return float(arg)
 
 

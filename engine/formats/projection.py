@@ -32,7 +32,9 @@ from .bound import (
     columns,
     fine_scales,
     floor_at,
+    nearby_solutions,
     solve,
+    solve_at_tcs,
     split_terms,
 )
 from .tails import TailFactors
@@ -46,6 +48,7 @@ __all__ = [
     "ProjectedParam",
     "Projection",
     "project",
+    "log_inflation_at_tc",
     "consumer_of",
 ]
 
@@ -81,6 +84,13 @@ MISFIT_SHARE = 1.0 / 3.0
 
 #: The sandwich covariance of each fit's free parameters (fits are immutable).
 _COV: weakref.WeakKeyDictionary[GMWMResult, np.ndarray] = weakref.WeakKeyDictionary()
+
+#: Each fit's projections by :func:`project`'s arguments (fits, tail factors and projections are
+#: immutable): the export menu's preview and the download after it, or two formats of the same
+#: consumer, project once.
+_PROJECTIONS: weakref.WeakKeyDictionary[GMWMResult, dict[tuple[Any, ...], Projection]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def misfit(fit: GMWMResult, channel: str = "") -> str:
@@ -400,6 +410,142 @@ def _with_u(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
     return Model(tuple(procs))
 
 
+@dataclass(frozen=True)
+class _Setup:
+    """What :func:`project` derives from its arguments before it solves (checked)."""
+
+    cons: str
+    fs: float
+    fs_f: float
+    n: int
+    hz: float
+    hi_s: float
+    sensor: str | None
+    f_si: float
+    si_unit: str
+    tau: np.ndarray
+    use: str
+    floor: tuple[np.ndarray, np.ndarray] | None
+    tail: tuple[float, float, float]
+    conf: float | None
+    tau_h: float
+
+
+def _setup(
+    fit: GMWMResult,
+    consumer: str,
+    fs_filter: float | None,
+    horizon_s: float | None,
+    band: Sequence[float] | None,
+    confidence: float | None,
+    bound: bool,
+    channel: str,
+    unit: str | None,
+    data: str,
+    tails: TailFactors | None,
+    tc: float | None,
+) -> _Setup:
+    cons = consumer_of(consumer)
+    fs = float(fit.fs)
+    fs_f = fs if fs_filter is None else float(fs_filter)
+    if not (math.isfinite(fs_f) and fs_f > 0):
+        raise ExportError(f"fs_filter must be a positive rate in Hz, got {fs_filter!r}")
+    n = int(fit.wv.n)
+    hz = n / fs if horizon_s is None else float(horizon_s)
+    if not (math.isfinite(hz) and hz > 0):
+        raise ExportError(f"horizon_s must be a positive time in s, got {horizon_s!r}")
+    lo_s, hi_s = (2.0 / fs_f, hz) if band is None else (float(band[0]), float(band[1]))
+    lo_s = max(lo_s, 2.0 / fs)
+    if not (math.isfinite(lo_s) and math.isfinite(hi_s) and 0 < lo_s <= hi_s):
+        raise ExportError(
+            f"band must be two WV scales in s with {2.0 / fs:g} <= low <= high, got "
+            f"{band!r} (horizon {hz:g} s)"
+        )
+    if confidence is not None and not 0 < float(confidence) < 1:
+        raise ExportError(f"confidence must be in (0, 1), got {confidence!r}")
+    u = (unit if unit is not None else fit.wv.unit) or ""
+    try:
+        sensor, f_si = si_factor(u, channel)
+        si_unit = SI_UNIT[sensor]
+    except ExportError:
+        sensor, f_si, si_unit = None, 1.0, u or "u"
+    # scales: even numbers of log samples, POINTS_PER_OCTAVE per octave
+    t0, t1 = lo_s * fs, max(hi_s * fs, lo_s * fs)
+    k = max(int(math.ceil(POINTS_PER_OCTAVE * math.log2(t1 / t0))) + 1, 2)
+    tau = np.unique(np.maximum(2.0 * np.round(np.geomspace(t0, t1, k) / 2.0), 2.0))
+    if data not in DATA_BOUNDS:
+        raise ExportError(f"data must be one of {', '.join(DATA_BOUNDS)}, got {data!r}")
+    use = data if bound and cons != "WN" else "none"
+    floor = None
+    if use != "none":
+        td = np.asarray(fit.wv.tau_samples, float)
+        wd = np.asarray(getattr(fit.wv, DATA_BOUNDS[use]), float)
+        inb = (td >= tau[0] * (1 - 1e-9)) & (td <= tau[-1] * (1 + 1e-9))
+        floor = (td[inb], wd[inb])
+        tau = np.unique(np.concatenate([tau, td[inb]]))
+    tail = (1.0, math.nan, math.nan)
+    if tails is not None:
+        if not math.isclose(float(tails.fs), fs, rel_tol=1e-9):
+            raise ExportError(
+                f"tails were computed at {tails.fs:g} Hz, the fit at {fs:g} Hz: compute them "
+                "from the signal the fit was made from"
+            )
+        if floor is not None:
+            floor = (floor[0], floor[1] * tails.at(floor[0]))
+            tf, tt = tails.largest(float(floor[0][0] / fs), float(floor[0][-1] / fs))
+            tail = (tf, tt, float(tails.level))
+    conf = None if confidence is None else float(confidence)
+    tau_h = hz * fs
+    if tc is not None and not (math.isfinite(float(tc)) and float(tc) > 0):
+        raise ExportError(f"tc must be a positive correlation time in s, got {tc!r}")
+    if tc is not None and not (math.isfinite(float(tc)) and float(tc) > 0):
+        raise ExportError(f"tc must be a positive correlation time in s, got {tc!r}")
+    return _Setup(
+        cons, fs, fs_f, n, hz, hi_s, sensor, f_si, si_unit, tau, use, floor, tail, conf, tau_h
+    )
+
+
+def log_inflation_at_tc(
+    fit: GMWMResult,
+    tcs: Sequence[float],
+    *,
+    fs_filter: float | None = None,
+    horizon_s: float | None = None,
+    band: Sequence[float] | None = None,
+    confidence: float | None = None,
+    channel: str = "",
+    unit: str | None = None,
+    data: str = "low",
+    tails: TailFactors | None = None,
+) -> np.ndarray:
+    """``log`` of :attr:`Projection.inflation`'s geometric mean of the bounded ``WN+GM``
+    projection at each fixed correlation time of ``tcs`` (s): what ``project(fit, "WN+GM",
+    tc=c, ci=None, ...)`` gives, with the bound's target computed once for all of them
+    (KF-GINS's search of one ``T_c`` for a file). ``inf`` where no bias of that ``T_c``
+    bounds the WV, or where :func:`project` refuses the fit. Arguments as :func:`project`.
+    """
+    st = _setup(
+        fit, "WN+GM", fs_filter, horizon_s, band, confidence, True, channel, unit, data,
+        tails, None,
+    )  # fmt: skip
+    out = np.full(len(tcs), math.inf)
+    sols = solve_at_tcs(fit.model, st.fs, st.fs_f, st.tau, st.n, st.conf, st.tau_h, st.floor, tcs)
+    for i, (c, sol) in enumerate(zip(tcs, sols, strict=True)):
+        if sol is not None and np.all(sol["x"] > 0) and math.isfinite(sol["log_excess"]):
+            out[i] = sol["log_excess"]
+            continue
+        try:  # the cases where project() sets a value otherwise: its own answer
+            p = project(
+                fit, "WN+GM", fs_filter=fs_filter, horizon_s=horizon_s, band=band,
+                confidence=confidence, channel=channel, unit=unit, ci=None, data=data,
+                tc=c, tails=tails,
+            )  # fmt: skip
+        except ExportError:
+            continue
+        out[i] = math.log(p.inflation["geometric_mean"])
+    return out
+
+
 def project(
     fit: GMWMResult,
     consumer: str,
@@ -488,59 +634,58 @@ def project(
     N 1.669e-04 rad/s/sqrt(Hz) (bounds GM; plain 9.998e-05)
     K 8.356e-07 rad/s/s/sqrt(Hz) (bounds GM; plain 1.310e-04)
     """
-    cons = consumer_of(consumer)
-    fs = float(fit.fs)
-    fs_f = fs if fs_filter is None else float(fs_filter)
-    if not (math.isfinite(fs_f) and fs_f > 0):
-        raise ExportError(f"fs_filter must be a positive rate in Hz, got {fs_filter!r}")
-    n = int(fit.wv.n)
-    hz = n / fs if horizon_s is None else float(horizon_s)
-    if not (math.isfinite(hz) and hz > 0):
-        raise ExportError(f"horizon_s must be a positive time in s, got {horizon_s!r}")
-    lo_s, hi_s = (2.0 / fs_f, hz) if band is None else (float(band[0]), float(band[1]))
-    lo_s = max(lo_s, 2.0 / fs)
-    if not (math.isfinite(lo_s) and math.isfinite(hi_s) and 0 < lo_s <= hi_s):
-        raise ExportError(
-            f"band must be two WV scales in s with {2.0 / fs:g} <= low <= high, got "
-            f"{band!r} (horizon {hz:g} s)"
-        )
-    if confidence is not None and not 0 < float(confidence) < 1:
-        raise ExportError(f"confidence must be in (0, 1), got {confidence!r}")
-    u = (unit if unit is not None else fit.wv.unit) or ""
     try:
-        sensor, f_si = si_factor(u, channel)
-        si_unit = SI_UNIT[sensor]
-    except ExportError:
-        sensor, f_si, si_unit = None, 1.0, u or "u"
-    # scales: even numbers of log samples, POINTS_PER_OCTAVE per octave
-    t0, t1 = lo_s * fs, max(hi_s * fs, lo_s * fs)
-    k = max(int(math.ceil(POINTS_PER_OCTAVE * math.log2(t1 / t0))) + 1, 2)
-    tau = np.unique(np.maximum(2.0 * np.round(np.geomspace(t0, t1, k) / 2.0), 2.0))
-    if data not in DATA_BOUNDS:
-        raise ExportError(f"data must be one of {', '.join(DATA_BOUNDS)}, got {data!r}")
-    use = data if bound and cons != "WN" else "none"
-    floor = None
-    if use != "none":
-        td = np.asarray(fit.wv.tau_samples, float)
-        wd = np.asarray(getattr(fit.wv, DATA_BOUNDS[use]), float)
-        inb = (td >= tau[0] * (1 - 1e-9)) & (td <= tau[-1] * (1 + 1e-9))
-        floor = (td[inb], wd[inb])
-        tau = np.unique(np.concatenate([tau, td[inb]]))
-    tail = (1.0, math.nan, math.nan)
-    if tails is not None:
-        if not math.isclose(float(tails.fs), fs, rel_tol=1e-9):
-            raise ExportError(
-                f"tails were computed at {tails.fs:g} Hz, the fit at {fs:g} Hz: compute them "
-                "from the signal the fit was made from"
-            )
-        if floor is not None:
-            floor = (floor[0], floor[1] * tails.at(floor[0]))
-            tf, tt = tails.largest(float(floor[0][0] / fs), float(floor[0][-1] / fs))
-            tail = (tf, tt, float(tails.level))
-    conf = None if confidence is None else float(confidence)
-    tau_h = hz * fs
-    if tc is not None and not (math.isfinite(float(tc)) and float(tc) > 0):
-        raise ExportError(f"tc must be a positive correlation time in s, got {tc!r}")
+        key: tuple[Any, ...] | None = (
+            consumer_of(consumer), fs_filter, horizon_s,
+            None if band is None else tuple(map(float, band)),
+            confidence, bound, channel, unit, ci, level, data, tc, tails,
+        )  # fmt: skip
+        hash(key)
+    except (TypeError, ValueError):
+        key = None  # arguments _project refuses with its own message
+    kept = _PROJECTIONS.get(fit) if key is not None else None
+    if kept is not None and key in kept:
+        return kept[key]
+    p = _project(
+        fit, consumer, fs_filter, horizon_s, band, confidence, bound, channel, unit, ci, level,
+        data, tc, tails,
+    )  # fmt: skip
+    if key is not None:
+        _PROJECTIONS.setdefault(fit, {})[key] = p
+    return p
+
+
+def _project(
+    fit: GMWMResult,
+    consumer: str,
+    fs_filter: float | None,
+    horizon_s: float | None,
+    band: Sequence[float] | None,
+    confidence: float | None,
+    bound: bool,
+    channel: str,
+    unit: str | None,
+    ci: str | None,
+    level: float,
+    data: str,
+    tc: float | None,
+    tails: TailFactors | None,
+) -> Projection:
+    """:func:`project` itself (it keeps what this returns per fit and arguments)."""
+    st = _setup(
+        fit, consumer, fs_filter, horizon_s, band, confidence, bound, channel, unit, data,
+        tails, tc,
+    )  # fmt: skip
+    cons, fs, fs_f, n, hz, hi_s = st.cons, st.fs, st.fs_f, st.n, st.hz, st.hi_s
+    sensor, f_si, si_unit, tau, use, floor = (
+        st.sensor,
+        st.f_si,
+        st.si_unit,
+        st.tau,
+        st.use,
+        st.floor,
+    )
+    tail, conf, tau_h = st.tail, st.conf, st.tau_h
     tc_fixed = float(tc) if tc is not None and cons == "WN+GM" and bound else None
     sol = solve(fit.model, fs, fs_f, cons, tau, n, conf, tau_h, bound, floor, tc_fixed)
     sp: Split = sol["split"]
@@ -640,7 +785,21 @@ def project(
         if ci != "asymptotic":
             raise ExportError(f"ci must be 'asymptotic' or None, got {ci!r}")
         ivs = _intervals(
-            fit, cons, fs, fs_f, tau, n, conf, tau_h, bound, f_si, vals, level, floor, tc_fixed
+            fit,
+            cons,
+            fs,
+            fs_f,
+            tau,
+            n,
+            conf,
+            tau_h,
+            bound,
+            f_si,
+            vals,
+            level,
+            floor,
+            tc_fixed,
+            sol,
         )
     params: dict[str, ProjectedParam] = {}
     for name in CONSUMER_PARAMS[cons]:
@@ -748,8 +907,11 @@ def _intervals(
     level: float,
     floor: tuple[np.ndarray, np.ndarray] | None = None,
     tc: float | None = None,
+    base: dict[str, Any] | None = None,
 ) -> dict[str, tuple[float, float]]:
-    """Delta-method intervals of the log of each exported value."""
+    """Delta-method intervals of the log of each exported value (``base``: the fit's own
+    :func:`~engine.formats.bound.solve`, from which the moved models' solutions follow by
+    :func:`~engine.formats.bound.nearby_solutions`)."""
     from ..fit.asymptotic import free_params, param_cov, wv_cov_model
 
     free = free_params(fit)
@@ -762,23 +924,37 @@ def _intervals(
         [TO_UNCONSTRAINED[nm](float(getattr(fit.model.processes[i], nm))) for i, nm in free]
     )
     names = [k for k in CONSUMER_PARAMS[cons] if vals.get(k, 0) > 0]
-    grad = np.zeros((len(names), len(free)))
-    for k in range(len(free)):
-        h = 1e-4 * max(1.0, abs(u0[k]))
-        logs = []
+    steps = [1e-4 * max(1.0, abs(float(u))) for u in u0]
+    models = []
+    for k, h in enumerate(steps):
         for sgn in (1.0, -1.0):
             uu = u0.copy()
             uu[k] += sgn * h
             try:
-                m = _with_u(fit.model, free, uu)
+                models.append(_with_u(fit.model, free, uu))
             except ValueError:
                 return {}
-            sol = solve(
+    # the moved models' projections: the base solution's vertex moved with them (one small
+    # solve each), or, when the base is not such a vertex, each solved afresh
+    near = (
+        nearby_solutions(base, models, fs, fs_f, cons, n, confidence, tau_h, floor)
+        if bound and base is not None
+        else None
+    )
+    logs = []
+    for i, m in enumerate(models):
+        sol = (
+            near[i]
+            if near is not None
+            else solve(
                 m, fs, fs_f, cons, tau, n, confidence, tau_h, bound, floor, tc, vals.get("T_c")
             )
-            v = _values(sol, cons, fs, f_si)
-            logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
-        grad[:, k] = (np.array(logs[0]) - np.array(logs[1])) / (2 * h)
+        )
+        v = _values(sol, cons, fs, f_si)
+        logs.append([math.log(v[nm]) if v.get(nm, 0) > 0 else math.nan for nm in names])
+    grad = np.zeros((len(names), len(free)))
+    for k, h in enumerate(steps):
+        grad[:, k] = (np.array(logs[2 * k]) - np.array(logs[2 * k + 1])) / (2 * h)
     z = NormalDist().inv_cdf(0.5 + level / 2)
     out = {}
     for i, nm in enumerate(names):

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -88,30 +89,52 @@ def quantile_factor(
     ratio, factor : float
         ``q / (z rms)`` (1 for Gaussian data) and ``max(1, ratio^2)``.
     """
-    from scipy.stats import binom
-
     a = np.abs(np.asarray(w, float))
     if a.size < 2:
         raise ValueError(f"quantile_factor needs at least 2 values, got {a.size}")
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
+    if confidence is not None and not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1) or None, got {confidence!r}")
+    n = max(int(eta if eta is not None else a.size), 1)
+    k = None if confidence is None else int(_lower_ranks([n], level, confidence)[0])
+    return _ratio_factor(a, level, None if k is None else (k, n))
+
+
+def _lower_ranks(n: Sequence[int], level: float, confidence: float) -> np.ndarray:
+    """Per count ``n`` of independent values, the largest ``k`` with ``P(Binomial(n, level)
+    >= k) >= confidence``: the ``k``-th of ``n`` independent values is below the true
+    ``level`` quantile with that probability; never the largest (``k <= n - 1``: the maximum
+    of overlapping coefficients exceeds the maximum of the ``n`` independent ones it stands
+    for). One vectorised call for all the scales of a channel."""
+    from scipy.stats import binom
+
+    nn = np.asarray(n, dtype=np.int64)
+    return np.minimum(binom.ppf(1.0 - confidence, nn, level).astype(np.int64), nn - 1)
+
+
+def _ratio_factor(a: np.ndarray, level: float, rank: tuple[int, int] | None) -> tuple[float, float]:
+    """:func:`quantile_factor` of the absolute values ``a`` (overwritten: partitioned in
+    place), at the ``level`` quantile (``rank`` None) or the ``k / n`` one (``rank = (k,
+    n)``); the quantile as ``np.quantile``'s default (linear) method gives it."""
     rms = math.sqrt(float(np.mean(a * a)))
     if not rms > 0:
         return math.nan, 1.0
     p = level
-    if confidence is not None:
-        if not 0.0 < confidence < 1.0:
-            raise ValueError(f"confidence must be in (0, 1) or None, got {confidence!r}")
-        n = max(int(eta if eta is not None else a.size), 1)
-        # the largest k with P(Binomial(n, level) >= k) >= confidence: the k-th of n
-        # independent values is below the true quantile with that probability; never the
-        # largest (k <= n - 1): the maximum of overlapping coefficients exceeds the maximum
-        # of the n independent ones it stands for
-        k = min(int(binom.ppf(1.0 - confidence, n, level)), n - 1)
+    if rank is not None:
+        k, n = rank
         if k < 1:
             return 0.0, 1.0  # too few values to show anything at this level
         p = k / n
-    q = float(np.quantile(a, p))
+    v = p * (a.size - 1)
+    lo = int(math.floor(v))
+    hi = min(lo + 1, a.size - 1)
+    a.partition(lo)  # one order statistic (partitioning at two is 6x slower); the next one
+    # is the least of those above it
+    x0 = float(a[lo])
+    x1 = float(np.min(a[lo + 1 :])) if hi > lo else x0
+    g = v - lo
+    q = x1 - (x1 - x0) * (1.0 - g) if g >= 0.5 else x0 + (x1 - x0) * g
     ratio = q / (_gauss_quantile(level) * rms)
     return ratio, max(1.0, ratio * ratio)
 
@@ -231,13 +254,20 @@ def tail_factors(
         sampled_haar_coefficients(p, min(nl, int(math.floor(math.log2(p.size - 1)))), per_scale=8)
         for p in parts
     ]
-    taus, ratios, factors = [], [], []
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level!r}")
+    if confidence is not None and not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1) or None, got {confidence!r}")
+    taus = [float(1 << j) for j in range(1, nl + 1)]
+    etas = [max(int(max(sum(max((p.size - t + 1) / t, 0.0) for p in parts), 1.0)), 1) for t in taus]
+    ks = None if confidence is None else _lower_ranks(etas, level, confidence).tolist()
+    ratios, factors = [], []
     for j in range(1, nl + 1):
-        tau = 1 << j
-        w = np.concatenate([c[j - 1] for c in coefs if len(c) >= j])
-        eta = max(sum(max((p.size - tau + 1) / tau, 0.0) for p in parts), 1.0)
-        ratio, f = quantile_factor(w, level, confidence, eta)
-        taus.append(float(tau))
+        cs = [c[j - 1] for c in coefs if len(c) >= j]
+        a = np.abs(cs[0] if len(cs) == 1 else np.concatenate(cs))
+        if a.size < 2:
+            raise ValueError(f"quantile_factor needs at least 2 values, got {a.size}")
+        ratio, f = _ratio_factor(a, level, None if ks is None else (ks[j - 1], etas[j - 1]))
         ratios.append(ratio)
         factors.append(f)
     return TailFactors(
@@ -251,13 +281,23 @@ def tail_factors(
     )
 
 
+#: The tail factors of each loaded log's channels, computed once per log and channel (a log is
+#: immutable): the export menu's preview and its downloads, and the three Gauss-Markov-bias
+#: formats of one session, share them.
+_LOG_TAILS: weakref.WeakKeyDictionary[ImuLog, dict[str, TailFactors]] = weakref.WeakKeyDictionary()
+
+
 def log_tail_factors(log: ImuLog, channels: Iterable[str]) -> dict[str, TailFactors]:
     """:func:`tail_factors` (default level and confidence) of the ``channels`` of ``log``
     that it holds: what :func:`engine.export` applies to a filter file's data bound when it is
-    given the log."""
+    given the log. Each channel's are computed once per log (kept while the log lives)."""
     names = set(log.names)
-    return {
-        ch: tail_factors(log[ch], fs=float(log.fs), channel=ch, segments=log.segments)
-        for ch in channels
-        if ch in names
-    }
+    kept = _LOG_TAILS.setdefault(log, {})
+    out = {}
+    for ch in channels:
+        if ch not in names:
+            continue
+        if ch not in kept:
+            kept[ch] = tail_factors(log[ch], fs=float(log.fs), channel=ch, segments=log.segments)
+        out[ch] = kept[ch]
+    return out
