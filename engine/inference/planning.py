@@ -126,10 +126,12 @@ def parse_targets(text: str) -> tuple[PlanTarget, ...]:
 @dataclass(frozen=True)
 class _PlannedFit:
     """What :func:`engine.fit.ieee.ieee_table` reads of a fit, for a model at a length:
-    the true model, the WV it implies at that length and the efficient weights."""
+    the true model, the WV it implies at that length, that WV's covariance ``vmat`` and the
+    efficient weights (its inverse)."""
 
     model: Model
     wv: WaveletVariance
+    vmat: np.ndarray
     omega: np.ndarray
     at_bound: list[str] = field(default_factory=list)
 
@@ -148,7 +150,8 @@ def _planned_fit(model: Model, fs: float, n: int, unit: str, levels: int | None)
     nu = model.wv(tau, fs)
     # no data, so no empirical interval (ADEV_data is not planned): skip eta3's quantiles
     wv = WaveletVariance.from_arrays(nu, n=n, fs=fs, unit=unit, ci_low=nu, ci_high=nu)
-    return _PlannedFit(model, wv, inverse_cov(wv_cov_model(model, wv)))
+    vmat = wv_cov_model(model, wv)
+    return _PlannedFit(model, wv, vmat, inverse_cov(vmat))
 
 
 def plan_precision(
@@ -183,7 +186,8 @@ def plan_precision(
     m = _valued(model)
     if n < 16:
         raise ValueError(f"a log of {n} samples is too short to plan for (at least 16)")
-    return ieee_table(_planned_fit(m, float(fs), int(n), unit, levels), level=level)
+    pf = _planned_fit(m, float(fs), int(n), unit, levels)
+    return ieee_table(pf, level=level, vmat=pf.vmat)
 
 
 def _valued(model: Model | Process | str) -> Model:

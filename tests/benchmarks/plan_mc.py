@@ -147,6 +147,8 @@ def run(reps: int, seed: int, only: str = "") -> list[dict]:
                 "within": within / ok.sum(),
                 "within_band": (lo, hi),
                 "seconds": time.perf_counter() - t0,
+                "estimates": [float(v) for v in e],
+                "truth": truth.value,
             }
         )
         r = rows[-1]
