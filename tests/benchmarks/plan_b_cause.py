@@ -12,9 +12,14 @@ for the GM+WN+RW model of ../shared/data/adis16405_imu1.h5 gyro_x (plan_mc.py's 
    coordinates: logs of the variances and of beta) compared with the plan's; the realised
    covariance pushed through the exact map gives the B spread it implies.
 
+With ``--replay PLAN_MC.json`` (the ``--json`` of ``plan_mc.py --only "gyro_x B within"``) it
+instead replays that run's random stream and refits its ``--lowest`` lowest estimates of B,
+printing each fitted model and its Allan floor.
+
 Usage::
 
     nice python tests/benchmarks/plan_b_cause.py [--reps 60] [--draws 1000]
+    nice python tests/benchmarks/plan_b_cause.py --replay b.json [--lowest 3]
 
 docs/planning.md quotes its output.
 """
@@ -22,7 +27,9 @@ docs/planning.md quotes its output.
 from __future__ import annotations
 
 import argparse
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 from plan_mc import DATA, Z, adis_model
@@ -67,7 +74,12 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=60)
     ap.add_argument("--draws", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--replay", help="plan_mc.py's --json of the B row: refit its lowest B")
+    ap.add_argument("--lowest", type=int, default=3)
     a = ap.parse_args()
+    if a.replay:
+        replay(a.replay, a.lowest)
+        return
     log = eg.load_log(DATA / "adis16405_imu1.h5")
     m, fs, unit = adis_model(log.wavelet_variance("gyro_x")), 100.0, "deg/s"
     n = eg.plan_run(m, fs, "B within 30 %", unit=unit).required["B"]
@@ -110,6 +122,24 @@ def main() -> None:
     corr = lambda c: c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # noqa: E731
     print("planned correlations:\n", np.round(corr(cov), 2))
     print("realised correlations:\n", np.round(corr(real), 2))
+
+
+def replay(path: str, lowest: int) -> None:
+    """Refit the logs of plan_mc.py's B row with the lowest estimates (same seed, same order)."""
+    row = json.loads(Path(path).read_text())[0]
+    lr = np.log(np.asarray(row["estimates"]) / row["truth"])
+    idx = sorted(np.argsort(lr)[:lowest].tolist())
+    log = eg.load_log(DATA / "adis16405_imu1.h5")
+    m, fs, unit, n = adis_model(log.wavelet_variance("gyro_x")), 100.0, "deg/s", row["samples"]
+    print("truth:", m.spec(values=True), allan_floor(m, fs, 22))
+    rng = np.random.default_rng(1)  # plan_mc.py's default seed
+    for k in range(max(idx) + 1):
+        x = m.simulate(n, fs=fs, rng=rng)
+        if k in idx:
+            wv = eg.wavelet_variance(x, fs=fs, unit=unit)
+            res = eg.fit_gmwm(wv, "GM+WN+RW", weights="efficient")
+            fl = allan_floor(res.model, fs, wv.n_levels)
+            print(f"log {k}: log(B_hat / B) = {lr[k]:+.3f}; {res.model.spec(values=True)}; {fl}")
 
 
 if __name__ == "__main__":
