@@ -245,6 +245,25 @@ def test_no_target_is_planned_shorter_than_the_gm_lets_the_asymptotics_hold():
     assert plan_run(fast, 100.0, "N within 1 %").valid_from == 0
 
 
+def test_on_a_real_gyro_its_slow_gm_sets_the_shortest_planned_log(real_data):
+    """ADIS16405 unit 1, gyro_x fitted as 2*GM+WN+RW (efficient): one GM is slower than a
+    sample (about 2 min, the bias instability), the other faster (white noise at 100 Hz).
+    The plan's bound is 50 correlation times of the slow one (1/beta from the fit), and N
+    within 1 %, met by a few minutes asymptotically, is planned there; fitted as GM+WN+RW the
+    GM is faster than a sample and sets no bound."""
+    log = eg.load_log(real_data / "adis16405_imu1.h5")
+    wv = log.wavelet_variance("gyro_x")
+    fit = eg.fit_gmwm(wv, "2*GM+WN+RW", weights="efficient")
+    betas = sorted(p.beta for p in fit.model.processes if p.code == "GM")
+    assert betas[0] < 1.0 < 100.0 < betas[1]  # one slow (correlation time > 1 s), one fast
+    plan = plan_run(fit.model, 100.0, "N within 1 %", unit=wv.unit)
+    assert plan.valid_from == pytest.approx(50 * 100.0 / betas[0], abs=1)
+    asym = plan.asymptotic["N"]
+    assert asym is not None and asym < plan.valid_from == plan.required["N"]
+    one = eg.fit_gmwm(wv, "GM+WN+RW", weights="efficient")
+    assert plan_run(one.model, 100.0, "N within 1 %", unit=wv.unit).valid_from == 0
+
+
 @pytest.mark.slow
 def test_at_the_planned_length_a_gm_gyros_n_is_as_precise_as_planned():
     """The consumer MEMS gyro of plan_mc.py (GM 20 s + WN + RW, 100 Hz), 'N within 1 %':
