@@ -340,10 +340,16 @@ class RunPlan:
         out = []
         for t in self.targets:
             n = self.required.get(t.key)
+            a = self.asymptotic.get(t.key)
             if n is None:
                 need = f"is not reached within {_hours_text(self.lengths[-1] / self.fs)}"
             else:
                 need = f"needs {_hours_text(n / self.fs)} of log"
+                if a is not None and a < n:
+                    need += (
+                        f" ({self.valid_why}: a shorter log is too short for the plan's "
+                        "asymptotics)"
+                    )
             have = ""
             q = now.get(t.key) if now is not None else None
             if q is not None and q.has_interval and q.value > 0:
@@ -351,6 +357,8 @@ class RunPlan:
                 gives = (
                     f"+-{100 * rel:.3g} %" if rel < 9.99 else "no usable value (beyond a factor 10)"
                 )
+                if rel < 9.99 and n_log < self.valid_from:
+                    gives += " or worse (shorter than " + self.valid_why + ")"
                 have = f"; this log ({_hours_text(n_log / self.fs)}) gives {gives}"
             out.append(f"**{t}** {need}{have}.")
         return out

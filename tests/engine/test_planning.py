@@ -236,6 +236,12 @@ def test_no_target_is_planned_shorter_than_the_gm_lets_the_asymptotics_hold():
     assert "needs 16.7 min (100000 samples), +-0.442 % there" in text
     assert "holds from 50 correlation times of GM (20 s)" in text
     assert "caution" not in text
+    n_line, _ = plan.sentences()
+    assert n_line.startswith("**N within 1 %** needs 16.7 min of log (50 correlation times of GM")
+    n_line, _ = plan.sentences(6000)  # a 1-minute log: the asymptotic figure is a best case
+    assert n_line.endswith(
+        "gives +-1.82 % or worse (shorter than 50 correlation times of GM (20 s))."
+    )
     d = plan.to_dict()
     assert d["valid_from_samples"] == 100_000
     assert d["targets"][0]["asymptotic_samples"] == asym
