@@ -568,8 +568,8 @@ def _caveats(
     return [
         f"{t}: the bias instability of a model with {labs[0]} rests on the GM and the random "
         "walk, whose fitted values spread wider than the asymptotic plan says; the Monte Carlo "
-        "of docs/planning.md found B's spread 1.7x the plan's for the ADIS16405 gyro (1.14x in "
-        "the bulk, and 3.5 % of the fits 50-70 % low)"
+        "of docs/planning.md found B's spread 1.7x the plan's for the ADIS16405 gyro (1.3x "
+        "without the 2 % of fits that missed the random walk)"
         for t in targets
         if t.key in ("B", "ADEV_min") and required.get(t.key) is not None
     ]
