@@ -111,7 +111,7 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
     if not model.is_set:
         raise FitError("wv_cov_model needs a model with every value set (a fitted model)")
     poly, ar = _spectral_pieces(model, wv.fs)
-    c = closed_form_c(wv.n_levels, poly[1], poly[0], poly[-1], ar)
+    c = _closed_form_of(wv.n_levels, (poly[1], poly[0], poly[-1], tuple(ar)))
     m_j = wv.n_coef.astype(float)
     m_max = np.maximum.outer(m_j, m_j)
     mu = _coefficient_means(model, wv)
@@ -121,6 +121,28 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
     if getattr(wv, "robust", False):
         v = v + _robust_excess(wv, poly, ar, mu) / m_max
     return v
+
+
+#: The last closed-form ``C`` per spectrum, with its levels (a few entries: one per model a
+#: caller asks about in turn, e.g. a run plan's lengths).
+_C_SEEN: dict[tuple[float, float, float, tuple[tuple[float, float], ...]], np.ndarray] = {}
+
+
+def _closed_form_of(
+    levels: int, spectrum: tuple[float, float, float, tuple[tuple[float, float], ...]]
+) -> np.ndarray:
+    """:func:`engine.fit._closed_form.closed_form_c` of ``spectrum`` = ``(q2, sigma2, gamma2,
+    ar)`` at ``levels``, remembered. ``C_jk`` depends on the two levels only, not on how many
+    there are, so the ``C`` of more levels gives that of fewer as its leading block, bit for
+    bit: a run plan evaluates one model at 20-30 lengths (19-30 levels) and pays for the
+    AR1/GM pieces (10-20 ms each) once."""
+    c = _C_SEEN.get(spectrum)
+    if c is None or c.shape[0] < levels:
+        c = closed_form_c(levels, *spectrum[:3], list(spectrum[3]))
+        if len(_C_SEEN) >= 16:
+            _C_SEEN.clear()
+        _C_SEEN[spectrum] = c
+    return c[:levels, :levels].copy()
 
 
 def _coefficient_means(model: Model, wv: Any) -> np.ndarray:

@@ -255,7 +255,18 @@ def _one(cls: type[Process]) -> Callable[[Model, float], float]:
 
 
 def _floor(n_levels: int) -> Callable[[Model, float], float]:
-    return lambda m, fs: float(allan_floor(m, fs, n_levels)["adev_min"])
+    """The model's Allan-deviation minimum over ``n_levels`` levels, remembered per model: B
+    and ``ADEV_min`` are the same floor, and the delta method evaluates both at the same
+    shifted models."""
+    seen: dict[tuple[Model, float], float] = {}
+
+    def adev_min(m: Model, fs: float) -> float:
+        key = (m, fs)
+        if key not in seen:
+            seen[key] = float(allan_floor(m, fs, n_levels)["adev_min"])
+        return seen[key]
+
+    return adev_min
 
 
 def _kind_of(unit: str) -> tuple[str, float]:
@@ -265,7 +276,7 @@ def _kind_of(unit: str) -> tuple[str, float]:
         return "", math.nan
 
 
-def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
+def ieee_table(res: _Fit, *, level: float = 0.95, vmat: np.ndarray | None = None) -> IeeeTable:
     """The IEEE quantities of a one-WV fit, with intervals (see the module docstring).
 
     Parameters
@@ -274,6 +285,9 @@ def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
         A fit: its model (every value set), WV, weighting matrix and ``at_bound``.
     level : float
         Two-sided interval level in (0, 1).
+    vmat : ndarray (J, J), optional
+        Covariance of the WV for the delta method (default: the model-implied one,
+        :func:`engine.fit.asymptotic.wv_cov_model`, computed here).
 
     Returns
     -------
@@ -306,8 +320,9 @@ def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
     s2, n_src = white_share(model, fs)
     if n_src:
         specs.append(("N", _n, WN.quantities[0].unit, "N"))
-    specs.append(("B", lambda m, f: _floor(wv.n_levels)(m, f) / BI_FACTOR, lambda x: x, "B"))
-    specs.append(("ADEV_min", _floor(wv.n_levels), lambda x: x, "B"))
+    floor = _floor(wv.n_levels)
+    specs.append(("B", lambda m, f: floor(m, f) / BI_FACTOR, lambda x: x, "B"))
+    specs.append(("ADEV_min", floor, lambda x: x, "B"))
     for cls in (RW, QN, DR):
         q = cls.quantities[0]
         if any(p.code == cls.code for p in model.processes):
@@ -317,7 +332,7 @@ def ieee_table(res: _Fit, *, level: float = 0.95) -> IeeeTable:
         "K": "rate random walk" if gyro or not kind else "acceleration random walk",
         "R": "rate ramp" if gyro or not kind else "acceleration ramp",
     }
-    bounds = delta_bounds(res, [sp[1] for sp in specs], level)
+    bounds = delta_bounds(res, [sp[1] for sp in specs], level, vmat=vmat)
     out: dict[str, IeeeQuantity] = {}
     for (key, fn, spell, dsym), (lo, hi) in zip(specs, bounds, strict=True):
         value = fn(model, fs)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..fit.asymptotic import wv_cov_model
 from ..fit.covariance import inverse_cov
-from ..fit.ieee import IEEE_KEYS, IeeeTable, ieee_table
+from ..fit.ieee import IEEE_KEYS, IeeeTable, ieee_table, white_share
 from ..fit.result import FitError
 from ..models import Model, Process, parse_model
 from ..wv import WaveletVariance
@@ -50,9 +50,10 @@ _ALIASES: dict[str, str] = {
     "ramp": "R",
     "dr": "R",
 }
-#: A log shorter than this many correlation times of a GM/AR1 term is outside the plan's
-#: asymptotics: the Monte Carlo of docs/planning.md found the realised spread of N up to 1.5x
-#: the plan's at 1.5-10 correlation times, and within its sampling error beyond 100.
+#: The plan's asymptotic covariance holds from this many correlation times of the slowest
+#: GM/AR1 term (tests/benchmarks/plan_span_mc.py, docs/planning.md: below it the realised spread
+#: of the estimates exceeds the plan's, 1.45x at 10 correlation times; from 50 on it equals it).
+#: :func:`plan_run` plans no target shorter than that.
 SPAN_GM = 50.0
 
 #: The quantities planned for: the model's own (a plan has no data, so no ``ADEV_data``).
@@ -126,10 +127,12 @@ def parse_targets(text: str) -> tuple[PlanTarget, ...]:
 @dataclass(frozen=True)
 class _PlannedFit:
     """What :func:`engine.fit.ieee.ieee_table` reads of a fit, for a model at a length:
-    the true model, the WV it implies at that length and the efficient weights."""
+    the true model, the WV it implies at that length, that WV's covariance ``vmat`` and the
+    efficient weights (its inverse)."""
 
     model: Model
     wv: WaveletVariance
+    vmat: np.ndarray
     omega: np.ndarray
     at_bound: list[str] = field(default_factory=list)
 
@@ -148,7 +151,8 @@ def _planned_fit(model: Model, fs: float, n: int, unit: str, levels: int | None)
     nu = model.wv(tau, fs)
     # no data, so no empirical interval (ADEV_data is not planned): skip eta3's quantiles
     wv = WaveletVariance.from_arrays(nu, n=n, fs=fs, unit=unit, ci_low=nu, ci_high=nu)
-    return _PlannedFit(model, wv, inverse_cov(wv_cov_model(model, wv)))
+    vmat = wv_cov_model(model, wv)
+    return _PlannedFit(model, wv, vmat, inverse_cov(vmat))
 
 
 def plan_precision(
@@ -183,7 +187,8 @@ def plan_precision(
     m = _valued(model)
     if n < 16:
         raise ValueError(f"a log of {n} samples is too short to plan for (at least 16)")
-    return ieee_table(_planned_fit(m, float(fs), int(n), unit, levels), level=level)
+    pf = _planned_fit(m, float(fs), int(n), unit, levels)
+    return ieee_table(pf, level=level, vmat=pf.vmat)
 
 
 def _valued(model: Model | Process | str) -> Model:
@@ -229,14 +234,22 @@ class RunPlan:
     precision : dict of str to ndarray
         Per quantity, the relative half-width of its ``level`` interval at each length.
     required : dict of str to int or None
-        Per target key, the shortest length (samples) meeting it; None when no length up to
-        the longest evaluated does.
+        Per target key, the length to record (samples): the shortest that meets it and is at
+        least ``valid_from``; None when no length up to ``max_hours`` does.
     tables : tuple of IeeeTable
         The full expected table (values, intervals, datasheet units) at each length.
     caveats : tuple of str
-        Where the asymptotic plan is optimistic: a target met by a log shorter than
-        :data:`SPAN_GM` correlation times of a GM/AR1 term (docs/planning.md: Monte Carlo
-        spreads up to 1.5x the plan's there).
+        Targets whose planned precision the Monte Carlo of docs/planning.md did not confirm.
+    asymptotic : dict of str to int or None
+        Per target key, the shortest length meeting it by the asymptotic covariance alone
+        (shorter than ``required`` when that is below ``valid_from``).
+    achieved : dict of str to float
+        Per target key, the precision at the ``required`` length (NaN when None).
+    valid_from : int
+        The shortest length (samples) at which the asymptotic covariance holds:
+        :data:`SPAN_GM` correlation times of the slowest GM/AR1 term (0 without one).
+    valid_why : str
+        What sets ``valid_from`` (``"50 correlation times of GM (20 s)"``), or "".
     """
 
     model: Model
@@ -249,6 +262,10 @@ class RunPlan:
     required: dict[str, int | None]
     tables: tuple[IeeeTable, ...] = field(repr=False)
     caveats: tuple[str, ...] = ()
+    asymptotic: dict[str, int | None] = field(default_factory=dict)
+    achieved: dict[str, float] = field(default_factory=dict)
+    valid_from: int = 0
+    valid_why: str = ""
 
     @property
     def hours(self) -> np.ndarray:
@@ -276,15 +293,28 @@ class RunPlan:
             if n is None:
                 got = f"not reached within {_hours_text(self.lengths[-1] / self.fs)}"
             else:
-                got = f"{_hours_text(n / self.fs)} ({n} samples)"
+                p = self.achieved[t.key]
+                got = f"{_hours_text(n / self.fs)} ({n} samples), +-{100 * p:.3g} % there"
             lines.append(f"  {str(t):<22} needs {got}")
+            a = self.asymptotic.get(t.key)
+            if n is not None and a is not None and a < n:
+                lines.append(
+                    f"  {'':<22} ({_hours_text(a / self.fs)} would meet it by the asymptotic "
+                    f"covariance, which holds from {self.valid_why})"
+                )
         lines += [f"  caution: {c}" for c in self.caveats]
         keys = [k for k in self.precision if np.isfinite(self.precision[k]).any()]
         head = "  length        " + "".join(f"{k:>11}" for k in keys)
         lines += ["", "  precision (half-width of the interval, % of the value):", head]
         for i, n in enumerate(self.lengths):
             row = "".join(_pct(self.precision[k][i]) for k in keys)
-            lines.append(f"  {_hours_text(n / self.fs):<14}{row}")
+            mark = "*" if n < self.valid_from else ""
+            lines.append(f"  {_hours_text(n / self.fs) + mark:<14}{row}")
+        if self.valid_from > self.lengths[0]:
+            lines.append(
+                f"  * shorter than {_hours_text(self.valid_from / self.fs)} "
+                f"({self.valid_why}): the realised spread exceeds these figures"
+            )
         vals = [
             f"{k} = {q.datasheet_value:.4g} {q.datasheet_unit}"
             for k, q in t0.quantities.items()
@@ -310,10 +340,16 @@ class RunPlan:
         out = []
         for t in self.targets:
             n = self.required.get(t.key)
+            a = self.asymptotic.get(t.key)
             if n is None:
                 need = f"is not reached within {_hours_text(self.lengths[-1] / self.fs)}"
             else:
                 need = f"needs {_hours_text(n / self.fs)} of log"
+                if a is not None and a < n:
+                    need += (
+                        f" ({self.valid_why}: a shorter log is too short for the plan's "
+                        "asymptotics)"
+                    )
             have = ""
             q = now.get(t.key) if now is not None else None
             if q is not None and q.has_interval and q.value > 0:
@@ -321,6 +357,8 @@ class RunPlan:
                 gives = (
                     f"+-{100 * rel:.3g} %" if rel < 9.99 else "no usable value (beyond a factor 10)"
                 )
+                if rel < 9.99 and n_log < self.valid_from:
+                    gives += " or worse (shorter than " + self.valid_why + ")"
                 have = f"; this log ({_hours_text(n_log / self.fs)}) gives {gives}"
             out.append(f"**{t}** {need}{have}.")
         return out
@@ -343,11 +381,15 @@ class RunPlan:
                     "within": t.rel,
                     "samples": n,
                     "hours": None if n is None else n / self.fs / 3600.0,
+                    "precision": num(self.achieved.get(t.key, math.nan)),
+                    "asymptotic_samples": self.asymptotic.get(t.key),
                 }
                 for t, n in ((t, self.required.get(t.key)) for t in self.targets)
             ],
             "record_samples": self.record_n,
             "caveats": list(self.caveats),
+            "valid_from_samples": self.valid_from,
+            "valid_from": self.valid_why,
             "lengths": [int(n) for n in self.lengths],
             "hours": [float(h) for h in self.hours],
             "precision": {k: [num(v) for v in a] for k, a in self.precision.items()},
@@ -446,14 +488,20 @@ def plan_run(
             return math.nan
         return _rel(tb, key)
 
+    valid_from, valid_why = _valid_from(m, fs)
+    asymptotic: dict[str, int | None] = {}
     required: dict[str, int | None] = {}
+    achieved: dict[str, float] = {}
     for t in tg:
         if t.key not in keys:
             raise ValueError(
                 f"target {t}: the model {m.spec()} has no {t.key} "
                 f"({IEEE_KEYS[t.key]}); the model's quantities: {', '.join(keys)}"
             )
-        required[t.key] = _shortest(partial(_rel_at, table, rel, t.key), t.rel, n_max)
+        a = _shortest(partial(_rel_at, table, rel, t.key), t.rel, n_max)
+        n = None if a is None or valid_from > n_max else max(a, valid_from)
+        asymptotic[t.key], required[t.key] = a, n
+        achieved[t.key] = math.nan if n is None else rel(table(n), t.key)
     if lengths is None:
         longest_n = max([4 * n for n in required.values() if n is not None], default=0)
         top = min(n_max, max(longest_n, int(3600 * fs)))
@@ -466,40 +514,65 @@ def plan_run(
         raise ValueError("plan_run needs lengths of at least 16 samples")
     tables = tuple(table(int(n)) for n in grid)
     precision = {k: np.array([rel(tb, k) for tb in tables]) for k in keys}
-    caveats = tuple(_caveats(m, fs, tg, required))
-    return RunPlan(m, fs, unit, float(level), tg, grid, precision, required, tables, caveats)
+    caveats = tuple(_caveats(m, tg, required))
+    return RunPlan(
+        m,
+        fs,
+        unit,
+        float(level),
+        tg,
+        grid,
+        precision,
+        required,
+        tables,
+        caveats,
+        asymptotic,
+        achieved,
+        valid_from,
+        valid_why,
+    )
 
 
-def _caveats(
-    m: Model, fs: float, targets: tuple[PlanTarget, ...], required: dict[str, int | None]
-) -> list[str]:
-    """Targets met by a log shorter than :data:`SPAN_GM` correlation times of a GM/AR1."""
+def _valid_from(m: Model, fs: float) -> tuple[int, str]:
+    """The shortest length (samples) at which the plan's asymptotic covariance holds, and why:
+    :data:`SPAN_GM` correlation times of the slowest GM/AR1 term that is not white noise at
+    the sampling rate (a correlation time of a sample or more; a faster one is the white
+    noise it adds, :func:`engine.fit.ieee.white_share`). Every quantity's estimate shares
+    the GM's scales through the efficient fit, so the bound applies to all of them: even N,
+    read off the first scales, came out 1.45x wider than planned at 10 correlation times.
+    """
+    _, folded = white_share(m, fs)
     tcs = []
     for lab, p in zip(m.labels, m.processes, strict=True):
-        phi = p.nl_value(fs) if p.nonlinear is not None else None
+        if p.nonlinear is None or lab in folded or p.linear_coef() <= 0:
+            continue
+        phi = p.nl_value(fs)
         if phi is not None and 0.0 < phi < 1.0:
             tcs.append((-1.0 / math.log(phi) / fs, lab))
     if not tcs:
-        return []
+        return 0, ""
     tc, lab = max(tcs)
-    out = []
-    for t in targets:
-        if t.key in ("B", "ADEV_min") and required.get(t.key) is not None:
-            out.append(
-                f"{t}: the bias instability of a model with {lab} is the minimum of its Allan "
-                "deviation, which moves with the GM's estimate; the Monte Carlo of "
-                "docs/planning.md found its spread 1.7x the plan's for the ADIS16405 gyro: "
-                "plan about 3x the length for this target"
-            )
-            continue
-        n = required.get(t.key)
-        if n is not None and n / fs < SPAN_GM * tc:
-            out.append(
-                f"{t} is met by {_hours_text(n / fs)}, less than {SPAN_GM:g} correlation times "
-                f"of {lab} ({_hours_text(tc)}): the asymptotic plan is optimistic there (the "
-                f"spread can be 1.5x the plan's); record at least {_hours_text(SPAN_GM * tc)}"
-            )
-    return out
+    why = f"{SPAN_GM:g} correlation times of {lab} ({_hours_text(tc)})"
+    return int(math.ceil(SPAN_GM * tc * fs - 1e-6)), why
+
+
+def _caveats(
+    m: Model, targets: tuple[PlanTarget, ...], required: dict[str, int | None]
+) -> list[str]:
+    """Targets whose planned precision the Monte Carlo did not confirm: B of a model with a
+    GM/AR1 term (docs/planning.md, tests/benchmarks/plan_b_cause.py: not the delta method's
+    linearisation, the fits' own spread)."""
+    labs = [lab for lab, p in zip(m.labels, m.processes, strict=True) if p.nonlinear is not None]
+    if not labs:
+        return []
+    return [
+        f"{t}: the bias instability of a model with {labs[0]} rests on the GM and the random "
+        "walk, whose fitted values spread wider than the asymptotic plan says; the Monte Carlo "
+        "of docs/planning.md found B's spread 1.7x the plan's for the ADIS16405 gyro (1.3x "
+        "without the 2 % of fits that missed the random walk)"
+        for t in targets
+        if t.key in ("B", "ADEV_min") and required.get(t.key) is not None
+    ]
 
 
 def _rel_at(

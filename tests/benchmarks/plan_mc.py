@@ -115,7 +115,7 @@ def run(reps: int, seed: int, only: str = "") -> list[dict]:
         truth = plan_precision(model, fs, n, unit=unit)[target.key]
         rel_planned = max(truth.high / truth.value - 1.0, 1.0 - truth.low / truth.value)
         rng = np.random.default_rng(seed)
-        est = []
+        est, edge = [], 0
         for _ in range(reps):
             x = model.simulate(n, fs=fs, rng=rng)
             wv = eg.wavelet_variance(x, fs=fs, unit=unit)
@@ -125,6 +125,8 @@ def run(reps: int, seed: int, only: str = "") -> list[dict]:
                 est.append(math.nan)
                 continue
             est.append(estimate(res, target.key))
+            q = res.ieee.get(target.key)
+            edge += bool(q is not None and q.upper_bound)  # B, ADEV_min: no floor found
         e = np.asarray(est)
         ok = np.isfinite(e) & (e > 0)
         lr = np.log(e[ok] / truth.value)
@@ -147,6 +149,9 @@ def run(reps: int, seed: int, only: str = "") -> list[dict]:
                 "within": within / ok.sum(),
                 "within_band": (lo, hi),
                 "seconds": time.perf_counter() - t0,
+                "estimates": [float(v) for v in e],
+                "upper_bounds": edge,
+                "truth": truth.value,
             }
         )
         r = rows[-1]

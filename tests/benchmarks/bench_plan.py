@@ -1,0 +1,108 @@
+"""CPU time of `gmwm plan`, the whole command, against a reference measured in the same run.
+
+Each command runs in a fresh interpreter (``python -m engine.cli plan ...``), ``--reps`` times;
+its CPU time (user + sys of the child, ``os.wait4``) is the median over the runs. The
+reference is a fresh interpreter that imports numpy (``python -c "import numpy"``): a fixed
+cost outside the project, so the ratio is comparable between machines and loads. A second
+column splits off what the command spends after its imports: the same plan timed with
+``time.process_time`` in a child that imported ``engine.cli.main`` first.
+
+Examples (docs/planning.md): the WN+RW datasheet example of the guide, and a consumer MEMS
+gyro ``GM+WN+RW`` with three targets (N, K, B). ``--tree DIR`` adds the same commands run on
+another checkout (e.g. the main tree before a change), in the same run.
+
+Usage::
+
+    nice python tests/benchmarks/bench_plan.py [--reps 5] [--tree /path/to/old/checkout]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+EXAMPLES = {
+    "WN+RW, 2 targets": [
+        "--datasheet",
+        "arw=0.15 deg/sqrt(h), rrw=2 deg/h/sqrt(h)",
+        "--fs",
+        "100",
+        "--units",
+        "deg/s",
+        "--target",
+        "K within 10 %, arw within 1 %",
+        "--hours",
+        "0.5,1,2,10",
+    ],
+    "GM+WN+RW, 3 targets": [
+        "--model",
+        "GM(beta=0.05, sigma2_gm=4e-6)+WN(sigma2=2.5e-5)+RW(gamma2=1e-10)",
+        "--fs",
+        "100",
+        "--units",
+        "rad/s",
+        "--target",
+        "N within 1 %, K within 30 %, B within 30 %",
+    ],
+}
+
+_AFTER_IMPORTS = """
+import sys, time
+from engine.cli.main import main
+t = time.process_time()
+main(["plan", *sys.argv[1:]])
+print(f"@@{time.process_time() - t}", file=sys.stderr)
+"""
+
+
+def child_cpu(argv: list[str], tree: Path) -> tuple[float, str]:
+    """CPU seconds (user + sys) of one child process, and its stderr."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    p = subprocess.Popen(
+        argv, env=env, cwd=tree, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    err = p.stderr.read() if p.stderr else ""
+    _, status, ru = os.wait4(p.pid, 0)
+    p.returncode = os.waitstatus_to_exitcode(status)
+    if p.returncode != 0:
+        raise SystemExit(f"{argv} failed ({p.returncode}): {err.strip()[-300:]}")
+    return ru.ru_utime + ru.ru_stime, err
+
+
+def median_cpu(argv: list[str], tree: Path, reps: int) -> float:
+    return statistics.median(child_cpu(argv, tree)[0] for _ in range(reps))
+
+
+def after_imports(args: list[str], tree: Path, reps: int) -> float:
+    vals = []
+    for _ in range(reps):
+        _, err = child_cpu([sys.executable, "-c", _AFTER_IMPORTS, *args], tree)
+        vals.append(float(err.rsplit("@@", 1)[1].split()[0]))
+    return statistics.median(vals)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--tree", type=Path, help="another checkout to time the same commands on")
+    a = ap.parse_args()
+    trees = [("this tree", ROOT)] + ([("--tree", a.tree.resolve())] if a.tree else [])
+    ref = median_cpu([sys.executable, "-c", "import numpy"], ROOT, a.reps)
+    print(f"reference (python -c 'import numpy'): {ref:.3f} s of CPU, median of {a.reps}\n")
+    print("| example | tree | whole command: CPU | ratio to reference | plan after imports |")
+    print("|---|---|---|---|---|")
+    for name, args in EXAMPLES.items():
+        for label, tree in trees:
+            cpu = median_cpu([sys.executable, "-m", "engine.cli", "plan", *args], tree, a.reps)
+            inner = after_imports(args, tree, a.reps)
+            print(f"| {name} | {label} | {cpu:.2f} s | {cpu / ref:.2f} | {inner:.3f} s |")
+
+
+if __name__ == "__main__":
+    main()
