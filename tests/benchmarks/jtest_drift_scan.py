@@ -3,9 +3,9 @@ the test against the drift's share of ``Var(nu_j)``, with V at the truth and V a
 Run from the repository root (27 s of CPU at the defaults):
 
     nice -n 10 python tests/benchmarks/jtest_drift_scan.py [--omegas 1e-3,2e-3,3e-3,5e-3,1e-2,3e-2]
-        [--log2n 14] [--reps 300] [--seed 51]
+        [--log2n 14] [--gamma2 1e-4] [--reps 300] [--seed 51]
 
-For each drift ``omega``, ``--reps`` classical WVs of WN(sigma2=1)+RW(gamma2=1e-4)+DR(omega) at
+For each drift ``omega``, ``--reps`` classical WVs of WN(sigma2=1)+RW(gamma2)+DR(omega) at
 100 Hz are tested for the true structure at 5 % in three ways, on the levels of
 :func:`engine.inference.jtest.jtest_levels`:
 
@@ -34,7 +34,7 @@ from engine.fit import wv_cov_model
 from engine.inference.jtest import DRIFT_SHARE_MAX, drift_share_ratio, efficient_j, jtest_levels
 
 FS = 100.0
-SPEC = "WN(sigma2=1)+RW(gamma2=1e-4)+DR(omega={})"
+SPEC = "WN(sigma2=1)+RW(gamma2={})+DR(omega={})"
 
 
 def one_log(truth: eg.Model, n: int, rng: np.random.Generator) -> tuple[float, ...]:
@@ -77,19 +77,23 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--omegas", default="1e-3,2e-3,3e-3,5e-3,1e-2,3e-2")
     ap.add_argument("--log2n", type=int, default=14)
+    ap.add_argument("--gamma2", default="1e-4", help="the random walk's gamma2")
     ap.add_argument("--reps", type=int, default=300)
     ap.add_argument("--seed", type=int, default=51)
     args = ap.parse_args()
     cpu0 = time.process_time()
     rows = []
-    print(f"WN(1)+RW(1e-4)+DR(omega), 2^{args.log2n}, {args.reps} logs each, seed {args.seed}")
+    print(
+        f"WN(1)+RW({args.gamma2})+DR(omega), 2^{args.log2n}, {args.reps} logs each, "
+        f"seed {args.seed}"
+    )
     print(
         "| omega | share at the truth | share at the estimate, median [10 %, 90 %] "
         "| truth V, no fit | truth V, refit | V at the estimate |"
     )
     print("|---|---|---|---|---|---|")
     for om in args.omegas.split(","):
-        truth = eg.parse_model(SPEC.format(om))
+        truth = eg.parse_model(SPEC.format(args.gamma2, om))
         rng = np.random.default_rng(args.seed)
         a = np.array([one_log(truth, 2**args.log2n, rng) for _ in range(args.reps)])
         rows.append(a)
