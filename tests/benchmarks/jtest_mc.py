@@ -21,7 +21,8 @@ Each rejection rate is printed with its Wilson 95 % band and the Clopper-Pearson
 the issue's target is 3-8 %. Partial counts go to stderr every ``--every`` logs (with the CPU
 time so far), and ``--out FILE`` appends one line per log (setting, seed, log, the three
 p-values; NaN where not calibrated) so that runs split over seeds can be pooled
-(``--pool FILE...`` prints the table of such files). The ``power:`` rows test
+(``--pool FILE...`` prints the table of such files, with the share of p-values below 0.10 and
+0.01 and a Kolmogorov-Smirnov test of their uniformity). The ``power:`` rows test
 a wrong model (``TESTED``): their rejected rate is the test's power.
 The table in ``docs/jtest.md`` is this script's output.
 """
@@ -181,10 +182,18 @@ def pool(files: list[str]) -> None:
             seeds.setdefault(name, set()).add(seed)
             for k, v in zip(d, ps, strict=True):
                 d[k].append(float(v))
+    from scipy import stats
+
     print(HEADER)
     for name, d in got.items():
         for path, p in d.items():
-            print(row(name, path, p, math.nan) + f" seeds {','.join(sorted(seeds[name]))}")
+            arr = np.asarray(p, float)
+            arr = arr[np.isfinite(arr)]
+            print(
+                row(name, path, p, math.nan) + f" seeds {','.join(sorted(seeds[name]))}; "
+                f"p < 0.10: {np.mean(arr < 0.1):.3f}, p < 0.01: {np.mean(arr < 0.01):.4f}, "
+                f"uniform (Kolmogorov-Smirnov) p = {stats.kstest(arr, 'uniform').pvalue:.2f}"
+            )
 
 
 def main() -> None:

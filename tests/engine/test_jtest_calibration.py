@@ -232,7 +232,7 @@ def test_v_at_the_truth_holds_the_size_whatever_the_drift_share():
 def test_the_drift_share_rule_on_the_monte_carlo_settings():
     # the rule's number at the truth for the settings of tests/benchmarks/jtest_mc.py and
     # jtest_drift_scan.py, against what their Monte Carlo measured (docs/jtest.md): the strong
-    # drift at 2^20 (share about 106; 7.0-8.0 % of 200 logs rejected) and WN+RW+DR(3e-3) at
+    # drift at 2^20 (share about 106; 4.8-5.6 % of 800 logs rejected) and WN+RW+DR(3e-3) at
     # 2^14 (about 360; 4.7 % of 300) are calibrated; WN+RW+DR(1e-2) at 2^14 (about 4000;
     # 13.3 % of 300) is not. The share at level j is 4 mu_j^2 Var(ebar_j) with mu_j =
     # omega tau_j / 4: it scales as omega^2, which the ratios below check exactly.
