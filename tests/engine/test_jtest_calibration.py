@@ -200,7 +200,7 @@ def test_v_at_the_truth_holds_the_size_whatever_the_drift_share():
     # WN + RW + a drift whose share of Var(nu_j) is about 36,000 times the rest at the coarsest
     # level of the statistic (2^14 samples, 200 logs): with V at the TRUE parameters the
     # efficient refit rejects the true model within the binomial 99.9 % band of a 5 % test
-    # (0-21 of 200; measured 10) and mean T / df is within 4 sd of 1 (df = 8; 0.98); with V_2
+    # (2-21 of 200; measured 10) and mean T / df is within 4 sd of 1 (df = 8; 0.98); with V_2
     # alone (no drift's share) it rejects 199 of 200. With V at the ESTIMATE, as j_test
     # computes it, the same logs reject 38 (19 %): the plug-in, not V, breaks at such a share
     # (tests/benchmarks/jtest_drift_scan.py: 22.7 % of 300), and j_test declares every one of
@@ -257,7 +257,7 @@ def _wv(log2n: int) -> eg.WaveletVariance:
 def test_jtest_size_with_the_strong_drift_of_the_benchmarks():
     # WN(1) + RW(1e-6) + DR(2e-5) at 2^20 (the drift's share up to about 106 times the rest),
     # classical WV, the fit path (j_test(fit_gmwm(wv, truth))), 300 logs: rejections at 5 %
-    # within the binomial 99.9 % band of a calibrated test (5-28 of 300) and mean T / df within
+    # within the binomial 99.9 % band of a calibrated test (4-29 of 300) and mean T / df within
     # 4 sd of 1 (df = 14). Before the drift's share of V: 18.0 % (54 of 300 expected).
     # tests/benchmarks/jtest_mc.py ran 800 logs of this setting (docs/jtest.md).
     reps = 300
