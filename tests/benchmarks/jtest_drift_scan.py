@@ -69,6 +69,8 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 def rate(p: np.ndarray) -> str:
     """Rejections at 5 %: count, percent and Wilson band."""
     k, n = int(np.sum(p < 0.05)), p.size
+    if n == 0:
+        return "0/0"
     lo, hi = wilson(k, n)
     return f"{k}/{n} ({100 * k / n:.1f} %, [{100 * lo:.1f}, {100 * hi:.1f}])"
 
