@@ -518,6 +518,8 @@ class SelectionView(TabView):
                 continue
             rank, c = pick
             jp = "n/a" if not math.isfinite(c.j_p_value) else format_value(c.j_p_value, 3)
+            if s.selection is not None and s.selection.j_note and math.isfinite(c.j_stat):
+                jp = "n/c"
             fig.update(
                 c.result.wv,
                 c.result.model,

@@ -132,3 +132,29 @@ def test_jtest_badge_colours() -> None:
     assert "df = 5" in badge(0.2) and "T = 3" in badge(0.2)
     assert "n/a" in jtest_badge(Inference(None, [], None, "J - p = 0"))
     assert jtest_badge(None) == "" and "computing" in jtest_badge(None, pending=True)
+
+
+def test_a_drift_too_strong_for_a_p_value_says_n_c_everywhere(app: Any, tmp_path: Any) -> None:
+    # WN + RW + a drift whose share of Var(nu_j) is far above DRIFT_SHARE_MAX at the estimate
+    # (2^14 samples): the J-test has no calibrated p-value (docs/jtest.md); the ranking's
+    # table, the comparison's titles and the Fit badge say "n/c" / "not calibrated" with the
+    # engine's reason, never a number
+    import engine as eg
+
+    x = eg.parse_model("WN(sigma2=1)+RW(gamma2=1e-4)+DR(omega=3e-2)").simulate(
+        2**14, fs=100.0, rng=np.random.default_rng(6)
+    )
+    path = eg.save_log(tmp_path / "drift.h5", {"gyro_x": x}, fs=100.0, units={"gyro_x": "deg/s"})
+    v, s = app.selection, app.state
+    assert s.load_path(path), s.error
+    v.start_ranking("WN+RW+DR")
+    assert not v.running and s.error == ""
+    sel = s.selection
+    assert sel.j_note.startswith("not calibrated: the drift's share")
+    assert np.all(np.isnan(v.source.data["j_p_value"]))
+    assert all(sel.j_note in note for note in v.source.data["note"])
+    assert "J-test p n/c" in v.fig_a.figure.title.text
+    jt = j_test(sel.candidates[0].result)
+    assert not jt.calibrated and jt.note.startswith("not calibrated: the drift's share")
+    badge = jtest_badge(Inference(None, [], jt))
+    assert "not calibrated" in badge and "p =" not in badge
