@@ -185,8 +185,9 @@ def add_check_options(sp: argparse.ArgumentParser, *, temperature: bool = True) 
             default="auto",
             metavar="auto|none|COLUMN",
             help="temperature channel whose bias-temperature polynomial is fitted and removed "
-            "before the GMWM: auto (default: a channel named like temp/temperature, if any), "
-            "none, or its name",
+            "before the GMWM: auto (default: a channel named like temp/temperature, if any, "
+            "removed only when its sensitivity's interval excludes 0), none, or its name "
+            "(always removed)",
         )
 
 
