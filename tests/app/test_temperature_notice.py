@@ -276,7 +276,10 @@ def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path)
     temp = 30.1 + 0.5 * (1 - np.exp(-t / 900)) + np.random.default_rng(8).normal(0, 0.01, N)
     x = eg.parse_model(SPEC).simulate(N, fs=FS, rng=23)
     units = {"gyro_x": "deg/s", "temperature": "degC"}
-    eg.save_log(tmp_path / "ramp.csv", {"gyro_x": x, "temperature": temp}, FS, units=units)
+    y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=25)  # p = 0.69 (seed 24: 0.036)
+    units = {**units, "gyro_y": "deg/s"}
+    chans = {"gyro_x": x, "gyro_y": y, "temperature": temp}
+    eg.save_log(tmp_path / "ramp.csv", chans, FS, units=units)
     s = AppState()
     assert s.load_path(tmp_path / "ramp.csv") and s.set_model("WN+RW"), s.error
     assert s.temperature_channel == "temperature" and s.wv_raw is None
@@ -288,3 +291,10 @@ def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path)
     np.testing.assert_allclose(s.wv.variance, raw.variance, rtol=1e-12)
     assert _rw(s) == pytest.approx(eg.fit_gmwm(raw, "WN+RW").params["RW.gamma2"], rel=1e-9)
     assert s.data_info()["temperature_compensated"] is False
+    # the Multi-channel tab's matrix: the raw signals, and its notice claims no compensation
+    from gmwm_app.data import temperature_fit_of, wv_matrix_of
+
+    assert not any(temperature_fit_of(s.log, c).applied for c in ("gyro_x", "gyro_y"))
+    wvm, notice = wv_matrix_of(s.log, ["gyro_x", "gyro_y"], s.fs, compensate=True)
+    assert "Temperature-compensated" not in notice
+    np.testing.assert_allclose(wvm.values[:, 0, 0], raw.variance, rtol=1e-9)
