@@ -141,6 +141,7 @@ class LogFit:
                         "sensitivity": tf.sensitivity,
                         "sensitivity_interval": list(tf.sensitivity_interval),
                         "sensitivity_unit": tf.sensitivity_unit,
+                        "compensated": tf.applied,
                         "fit_raw_model": tf.fit_raw.model.spec(values=True)
                         if tf.fit_raw is not None
                         else None,
@@ -271,7 +272,9 @@ def fit_log(
             wv = tf.wv if tf is not None else log.wavelet_variance(ch, levels=levels)
             fits[ch] = _fit_channel(wv, model, select, weights)
             if tf is not None:  # the same model on the raw signal, for the page's comparison
-                raw = fit_gmwm(tf.wv_raw, parse_model(fits[ch].model.spec()), weights=weights)
+                raw = None  # (none when not compensated: the fit is of the raw signal)
+                if tf.wv_raw is not None:
+                    raw = fit_gmwm(tf.wv_raw, parse_model(fits[ch].model.spec()), weights=weights)
                 temps[ch] = replace(tf, fit=fits[ch], fit_raw=raw)
         except (FitError, ModelError, ValueError) as e:
             errors[ch] = f"{type(e).__name__}: {e}"

@@ -394,7 +394,8 @@ def is_compensated(lg: ImuLog | None, ch: str, compensate: bool) -> bool:
     """Whether the WV of ``ch`` that a session asking for ``compensate`` shows is that of a
     temperature-compensated signal: asked for, and a temperature fit of the channel exists
     (:func:`temperature_fit_of`). The fourth element of the session's WV keys."""
-    return bool(compensate and lg is not None and temperature_fit_of(lg, ch) is not None)
+    tf = temperature_fit_of(lg, ch) if compensate and lg is not None else None
+    return bool(tf is not None and tf.applied)
 
 
 def wv_matrix_of(
@@ -433,7 +434,7 @@ def wv_matrix_of(
             f"truncated to the shortest, {n:,} samples."
         )
         series = {c: a[:n] for c, a in series.items()}
-    done = [f"{c} ('{tf.temperature}')" for c, tf in fits.items() if tf is not None]
+    done = [f"{c} ('{tf.temperature}')" for c, tf in fits.items() if tf and tf.applied]
     if done:
         notes.append(
             f"Temperature-compensated, as on the Fit tab: {', '.join(done)}; the sidebar's "
@@ -480,11 +481,11 @@ def _temperature_of(lg: ImuLog, channel: str) -> tuple[TemperatureFit | None, st
             return done[channel]
     tname = None if lg.is_summary else find_temperature(lg, "auto", channel=channel)
     out: tuple[TemperatureFit | None, str] = (None, "")
-    if tname is not None and lg.segments:  # as `--temperature auto` (segments_note)
-        out = (None, f"'{tname}' is not fitted on a log cut into still segments")
-    elif tname is not None:
-        try:  # by its name: a channel the fit cannot use says why
-            out = (fit_log_temperature(lg, channel, tname), "")
+    if tname is not None:
+        try:  # by its name (a channel the fit cannot use says why), as `--temperature auto`
+            tf = fit_log_temperature(lg, channel, tname, compensate="auto")
+            why = "" if tf is None or tf.applied else "its effect is not distinguishable from 0"
+            out = (tf, why)
         except ValueError as e:  # constant temperature, too short, NaN
             out = (None, message_of(e))
     with _CHECKS_LOCK:
@@ -495,16 +496,18 @@ def _temperature_of(lg: ImuLog, channel: str) -> tuple[TemperatureFit | None, st
 def temperature_fit_of(lg: ImuLog, channel: str) -> TemperatureFit | None:
     """The bias-temperature fit of one channel of a log
     (:func:`engine.inference.temperature.fit_log_temperature`, temperature channel found
-    automatically), or None: no temperature channel, a WV summary, a log cut into still
-    segments (as ``gmwm fit --temperature auto``), or a relation that cannot be fitted (a
-    constant temperature, too few samples; :func:`temperature_unusable` says why). Cached per
-    log and channel."""
+    automatically, compensated only when the data show an effect, as ``gmwm fit
+    --temperature auto``; a log cut into still segments on its segments), or None: no
+    temperature channel, a WV summary, or a relation that cannot be fitted (a constant
+    temperature, too few samples; :func:`temperature_unusable` says why). Cached per log and
+    channel."""
     return _temperature_of(lg, channel)[0]
 
 
 def temperature_unusable(lg: ImuLog, channel: str) -> str:
-    """Why a channel with a temperature channel beside it cannot be compensated, in one
-    phrase (``""``: it can, or it has no temperature channel)."""
+    """Why a channel with a temperature channel beside it is not compensated, in one phrase
+    (the fit cannot use it, or its effect is not distinguishable from 0; ``""``: it is, or it
+    has no temperature channel)."""
     return _temperature_of(lg, channel)[1]
 
 
@@ -515,6 +518,8 @@ def temperature_line(lg: ImuLog, channel: str, compensate: bool = True) -> str:
     tf = temperature_fit_of(lg, channel)
     if tf is None:
         return ""
+    if not tf.applied:  # the line says so: the sensitivity is information only
+        return f"{tf.line()}; the WV and the fit are of the raw signal"
     if not compensate:
         return f"{tf.line()}; compensation is off: the WV and the fit are of the raw signal"
     return (

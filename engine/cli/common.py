@@ -185,8 +185,9 @@ def add_check_options(sp: argparse.ArgumentParser, *, temperature: bool = True) 
             default="auto",
             metavar="auto|none|COLUMN",
             help="temperature channel whose bias-temperature polynomial is fitted and removed "
-            "before the GMWM: auto (default: a channel named like temp/temperature, if any), "
-            "none, or its name",
+            "before the GMWM: auto (default: a channel named like temp/temperature, if any, "
+            "removed only when its sensitivity's interval excludes 0), none, or its name "
+            "(always removed)",
         )
 
 
@@ -229,22 +230,20 @@ def temperature_fit(
 ) -> Any:
     """The temperature compensation of channel ``name`` (``--temperature``,
     :func:`engine.inference.temperature.fit_log_temperature`), said in one line on stderr; None
-    when the log has no temperature channel (or is a summary, or is cut into still segments
-    with ``--temperature auto``: :func:`~engine.inference.temperature.segments_note`). A
-    channel named on a log cut into segments is fitted on them, each with its own offset."""
-    from ..inference.temperature import find_temperature, fit_log_temperature, segments_note
+    when the log has no temperature channel (or is a summary). With ``--temperature auto`` the
+    signal is compensated only when the data show an effect (the line says when it is not); a
+    channel named is always compensated. A log cut into segments is fitted on them, each with
+    its own offset."""
+    from ..inference.temperature import find_temperature, fit_log_temperature
 
     choice = getattr(args, "temperature", "none") or "none"
-    note = segments_note(log, name, choice)
-    if note:  # a flight's still parts: fitted only on a named channel
-        say(args, f"{label}temperature: {cli_text(note)}")
-        return None
     tname = None if log.is_summary else find_temperature(log, choice, channel=name)
     try:
         tf = fit_log_temperature(
             log,
             name,
             tname or "none",
+            compensate="auto" if choice == "auto" else True,
             model=model,
             levels=args.levels,
             robust=getattr(args, "robust", False),
@@ -258,7 +257,7 @@ def temperature_fit(
         say(args, f"{label}temperature: '{tname}' not used ({e})")  # too short, constant ...
         return None
     if tf is not None:
-        say(args, label + tf.line())
+        say(args, label + cli_text(tf.line()))
     return tf
 
 

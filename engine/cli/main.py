@@ -240,7 +240,9 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     wv, name = load_wv(args, check=True)  # the log check and --temperature first
     res = fit_gmwm(wv, model, weights=args.weights)
     tf = getattr(args, "temperature_fit", None)
-    raw = fit_gmwm(tf.wv_raw, model, weights=args.weights) if tf is not None else None
+    raw = None  # the raw signal's fit beside a compensated one (none when not compensated)
+    if tf is not None and tf.wv_raw is not None:
+        raw = fit_gmwm(tf.wv_raw, model, weights=args.weights)
     q = getattr(args, "qualification", None)
     intervals = None
     if args.ci:
@@ -256,8 +258,8 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         d = res.to_dict()
         d["channel"] = name
         d["qualification"] = q.to_dict() if q is not None else None
-        if tf is not None and raw is not None:  # the uncompensated fit beside it
-            d["temperature"] = {**tf.to_dict(), "fit_raw": raw.to_dict()}
+        if tf is not None:  # with the uncompensated fit beside a compensated one
+            d["temperature"] = {**tf.to_dict(), "fit_raw": raw.to_dict() if raw else None}
         else:
             d["temperature"] = None
         if intervals is not None:
@@ -281,6 +283,8 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             f"\n\n  {tf.line()}\n  the fit above is of the compensated signal; without "
             f"compensation: {raw.model.spec(values=True)}"
         )
+    elif tf is not None:
+        text += f"\n\n  {cli_text(tf.line())}"
     if intervals is not None:
         text += f"\n\n  {100 * args.confidence:g}% intervals ({args.ci}):\n"
         text += "\n".join(

@@ -22,15 +22,22 @@ means are taken within each segment and differenced within it only, so that each
 keeps its own offset (the bias may move while the vehicle moves), and the differences of
 every segment are pooled in one regression; the compensated signal's WV pools the segments
 as the log's own WV does. The lag is not tried there (its profile filters the whole log's
-block structure). :func:`fit_log_temperature` does this only for a temperature channel named
-by the caller: with ``"auto"`` a segmented log is not compensated (:func:`segments_note` says
-so in one line), because a flight's still parts seldom see the temperature change more than
-its noise and a slow ramp, and a sensitivity fitted from those only adds its own error, times
-the temperature's range, to the signal (a simulated ArduPilot flight: RW 3.4 times larger).
+block structure).
+
+Compensate only what the data show: with ``compensate="auto"`` (what ``temperature="auto"``
+asks of :func:`fit_log_temperature`) the relation is taken out only when the joint Wald test
+that every coefficient is 0 rejects at the fit's level (the Newey-West covariance above; for
+degree 1, the sensitivity's interval excludes 0). A log whose temperature barely moves beyond
+a slow ramp, a flight's still parts, give a sensitivity the data cannot tell from 0, and taking
+it out only adds its own error, times the temperature's range, to the signal (the ArduPilot
+flight of ``docs/drone-logs.md``: RW.gamma2 1.99e-10 compensated against 5.80e-11 raw). The
+fit then says so (:attr:`TemperatureFit.applied`, its :meth:`~TemperatureFit.line`) and its
+WV is the raw one. A temperature channel named by the caller is always compensated.
 
 The GMWM is then fitted on ``y_t - sum_p c_p (T_t - T_ref)^p``; :class:`TemperatureFit`
-keeps both wavelet variances (raw and compensated). Sensitivities are reported in datasheet
-units: deg/h per degC for gyroscopes, mg per degC for accelerometers (``engine.units``).
+keeps both wavelet variances (raw and compensated) and says which one to fit (``wv``).
+Sensitivities are reported in datasheet units: deg/h per degC for gyroscopes, mg per degC
+for accelerometers (``engine.units``).
 """
 
 from __future__ import annotations
@@ -57,7 +64,6 @@ __all__ = [
     "find_temperature",
     "temperature_series",
     "lagged_temperature",
-    "segments_note",
 ]
 
 BLOCKS = 256
@@ -91,9 +97,18 @@ class TemperatureFit:
         ``c_1`` in datasheet units (deg/h per degC, mg per degC), its interval; the signal
         unit per degC when the unit is not a known one.
     fit, fit_raw : GMWMResult
-        The GMWM of the compensated signal, and of the raw one (same model).
+        The GMWM the caller takes away (of the compensated signal when :attr:`applied`, of
+        the raw one otherwise), and the raw signal's beside a compensated one (same model;
+        None when not applied: there is nothing to compare).
     wv, wv_raw : WaveletVariance
-        Their wavelet variances.
+        Their wavelet variances: :attr:`wv` is the one to fit, whatever :attr:`applied`.
+    applied : bool
+        Whether the relation is taken out of the signal: always for a temperature channel
+        named by the caller; with ``compensate="auto"`` only when the data show an effect
+        (the joint Wald test that every coefficient is 0, Newey-West covariance, rejects at
+        ``level``; for degree 1: the sensitivity's interval excludes 0).
+    p_value : float
+        That test's p-value (chi-squared with ``degree`` degrees of freedom).
     notes : tuple of str
         What the fit could not tell (a temperature rising at a constant rate, like a drift).
     tau_s : float
@@ -132,6 +147,8 @@ class TemperatureFit:
     tau_interval: tuple[float, float] = (0.0, 0.0)
     lag_bic: float = math.nan
     fs: float = math.nan
+    applied: bool = True
+    p_value: float = math.nan
 
     #: The sensitivity as a datasheet figure of a fleet (``engine.batch.unit_values``, the
     #: fleet report's tables): its process, quantity and symbol.
@@ -148,17 +165,24 @@ class TemperatureFit:
         return np.column_stack([self.coef - z * self.se, self.coef + z * self.se])
 
     def line(self) -> str:
-        """One line: the sensitivity with its interval and the temperature range."""
+        """One line: the sensitivity with its interval and the temperature range, and, when
+        not :attr:`applied`, that it is not compensated and how to compensate anyway."""
         lo, hi = self.sensitivity_interval
         t0, t1 = self.temperature_range
         lag = ""
         if self.tau_s > 0:
             a, b = self.tau_interval
             lag = f", lagging it by tau = {self.tau_s:.3g} s [{a:.3g}, {b:.3g}]"
-        return (
+        out = (
             f"{self.channel}: temperature sensitivity {self.sensitivity:.4g} "
             f"[{lo:.4g}, {hi:.4g}] {self.sensitivity_unit} ({100 * self.level:g} %, "
             f"'{self.temperature}' from {t0:.3g} to {t1:.3g} degC{lag})"
+        )
+        if self.applied:
+            return out
+        return (
+            f"{out}: not distinguishable from 0 (p = {self.p_value:.2g}), not compensated "
+            f"(name it, temperature='{self.temperature}', to compensate anyway)"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -188,13 +212,18 @@ class TemperatureFit:
             "lag_tau_s": self.tau_s,
             "lag_tau_interval_s": list(self.tau_interval),
             "lag_bic": self.lag_bic,
+            "compensated": self.applied,
+            "p_value": self.p_value,
             "summary": self.line(),
         }
 
     def compensated_log(self, log: ImuLog) -> ImuLog:
-        """The log with :attr:`channel` compensated (:meth:`compensate`, its temperature
-        channel :attr:`temperature` read from the log); everything else as it was (its
-        segments too: its WV pools them)."""
+        """The log as :attr:`wv` sees it: :attr:`channel` compensated (:meth:`compensate`, its
+        temperature channel :attr:`temperature` read from the log) when :attr:`applied`, the
+        log itself otherwise; everything else as it was (its segments too: its WV pools
+        them)."""
+        if not self.applied:
+            return log
         y = self.compensate(log[self.channel], temperature_series(log, self.temperature))
         return replace(log, channels={**log.channels, self.channel: y})
 
@@ -301,24 +330,6 @@ def find_temperature(log: ImuLog, choice: str = "auto", *, channel: str = "") ->
     return choice
 
 
-def segments_note(log: ImuLog, name: str, choice: str = "auto") -> str:
-    """Why the temperature channel beside ``name`` is not fitted on a log cut into still
-    segments with ``choice="auto"``, in one phrase (what the CLI prints after
-    ``temperature:``, the report as the channel's note); ``""`` otherwise (a log in one piece,
-    no temperature channel, or a channel named: then fitted on the segments)."""
-    if choice != "auto" or not log.segments or log.is_summary:
-        return ""
-    tname = find_temperature(log, "auto", channel=name)
-    if tname is None:
-        return ""
-    return (
-        f"'{tname}' not fitted on a log cut into still segments with temperature='auto' "
-        "(still parts seldom see the temperature change more than its noise and a slow ramp, "
-        f"and an unsure sensitivity adds error); name it, temperature='{tname}', to fit it "
-        "on the segments, each with its own offset"
-    )
-
-
 def temperature_series(log: ImuLog, name: str) -> np.ndarray:
     """The samples of the temperature channel ``name`` of a log (an auxiliary channel, or a
     signal channel named like a temperature)."""
@@ -407,6 +418,7 @@ def fit_log_temperature(
     eff: float = 0.6,
     alpha: float = 0.05,
     weights: str = "ci",
+    compensate: bool | str | None = None,
 ) -> TemperatureFit | None:
     """The temperature compensation of channel ``name`` of a log (:func:`fit_temperature` on
     the log's temperature channel, its fs, unit and names), or None when there is none to fit.
@@ -422,15 +434,18 @@ def fit_log_temperature(
         channel name.
     model, levels, robust, eff, alpha, weights
         As :func:`fit_temperature`.
+    compensate : {None, True, "auto"}
+        As :func:`fit_temperature`; None: ``"auto"`` for ``choice="auto"`` (compensated only
+        when the data show an effect), True for a channel named (always compensated).
 
     Returns
     -------
     TemperatureFit or None
         None for ``"none"``, a log without a temperature channel, a WV summary (no samples),
-        and, with ``"auto"``, a log cut into still segments (:func:`segments_note`) or a
-        temperature channel the fit cannot use (constant, NaN samples, fewer than 4096
-        samples). A channel named on a log cut into still segments is fitted on the
-        segments, each with its own offset (:func:`fit_temperature`'s ``segments``).
+        and, with ``"auto"``, a temperature channel the fit cannot use (constant, NaN
+        samples, fewer than 4096 samples). On a log cut into still segments the fit is on
+        the segments, each with its own offset (:func:`fit_temperature`'s ``segments``),
+        under the same rule.
 
     Raises
     ------
@@ -442,8 +457,10 @@ def fit_log_temperature(
     if log.is_summary or choice == "none":
         return None
     tname = find_temperature(log, choice, channel=name)
-    if tname is None or segments_note(log, name, choice):
+    if tname is None:
         return None
+    if compensate is None:
+        compensate = "auto" if choice == "auto" else True
     try:
         return fit_temperature(
             log[name],
@@ -459,6 +476,7 @@ def fit_log_temperature(
             alpha=alpha,
             weights=weights,
             segments=log.segments,
+            compensate=compensate,
         )
     except ValueError:
         if choice != "auto":
@@ -484,8 +502,10 @@ def fit_temperature(
     weights: str = "ci",
     lag: bool | str = "auto",
     segments: Sequence[tuple[int, int]] = (),
+    compensate: bool | str = True,
 ) -> TemperatureFit:
-    """Fit the bias-temperature polynomial, then the GMWM of the compensated signal.
+    """Fit the bias-temperature polynomial, then the GMWM of the compensated signal (or, with
+    ``compensate="auto"`` and no effect the data can tell from 0, of the raw one).
 
     Parameters
     ----------
@@ -514,6 +534,14 @@ def fit_temperature(
         it (each segment keeps its own offset), pooled; the WVs pool the segments; ``T_ref``
         and the temperature range are over the segments; no lag is tried. Empty: the whole
         series.
+    compensate : {True, "auto"}
+        True: take the relation out of the signal whatever its size (a temperature channel
+        the user named). ``"auto"``: only when the joint Wald test that all the coefficients
+        are 0 (their Newey-West covariance, chi-squared with ``degree`` degrees of freedom)
+        rejects at ``level``; for degree 1, when the sensitivity's interval excludes 0.
+        Otherwise :attr:`TemperatureFit.applied` is False and :attr:`TemperatureFit.wv` is
+        the raw signal's: a sensitivity the data cannot tell from 0 would only add its own
+        error, times the temperature's range, to the signal.
 
     Returns
     -------
@@ -535,6 +563,8 @@ def fit_temperature(
         raise ValueError(f"degree must be 1 or 2, got {degree}")
     if lag not in ("auto", "none", True, False):
         raise ValueError(f"lag must be 'auto', True or False, got {lag!r}")
+    if compensate not in (True, "auto"):
+        raise ValueError(f"compensate must be True or 'auto', got {compensate!r}")
     if y.shape != temp.shape or y.ndim != 1:
         raise ValueError(
             f"the temperature '{temperature}' has {temp.size} samples and {channel} "
@@ -600,6 +630,12 @@ def fit_temperature(
     cov = _newey_west(jac, resid, NW_LAG)[: dx.shape[1], : dx.shape[1]]
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     coef, se_c = beta[1:], se[1:]
+    from scipy import stats
+
+    # the joint Wald test that every temperature coefficient is 0 (degree 1: (c / se)^2)
+    wald = float(coef @ np.linalg.lstsq(cov[1:, 1:], coef, rcond=None)[0])
+    p_value = float(stats.chi2.sf(wald, degree))
+    applied = compensate is True or p_value < 1 - level
     notes: list[str] = []
     cond = np.linalg.cond(dx)
     if cond > 1e6:
@@ -607,8 +643,6 @@ def fit_temperature(
             "the temperature changes at a constant rate over the log: its effect cannot be told "
             "from a drift (DR)"
         )
-    from scipy import stats
-
     z = float(stats.norm.ppf(0.5 + level / 2))
     sens, sunit = temperature_sensitivity(float(coef[0]), unit, channel)
     lo, _ = temperature_sensitivity(float(coef[0] - z * se_c[0]), unit, channel)
@@ -632,8 +666,9 @@ def fit_temperature(
         tau_interval=tau_iv,
         lag_bic=dbic,
         fs=float(fs),
+        applied=applied,
+        p_value=p_value,
     )
-    yc = tf.compensate(y, temp)
     kw: dict[str, Any] = {
         "fs": fs,
         "levels": levels,
@@ -642,16 +677,20 @@ def fit_temperature(
         "eff": eff,
         "alpha": alpha,
     }
-    if segments:  # the still parts pooled, as ImuLog.wavelet_variance does
-        wv = pooled_wavelet_variance([yc[lo:hi] for lo, hi in parts], **kw)
-        wv_raw = pooled_wavelet_variance([y[lo:hi] for lo, hi in parts], **kw)
-    else:
-        wv = wavelet_variance(yc, **kw)
-        wv_raw = wavelet_variance(y, **kw)
+
+    def wv_of(x: np.ndarray) -> WaveletVariance:
+        if segments:  # the still parts pooled, as ImuLog.wavelet_variance does
+            return pooled_wavelet_variance([x[lo:hi] for lo, hi in parts], **kw)
+        return wavelet_variance(x, **kw)
+
+    # not applied: the raw WV is the one to fit, and none is drawn beside it
+    raw = wv_of(y)
+    wv = wv_of(tf.compensate(y, temp)) if applied else raw
+    wv_raw = raw if applied else None
     fit = fit_raw = None
     if model is not None:
         fit = fit_gmwm(wv, model, weights=weights)
-        fit_raw = fit_gmwm(wv_raw, model, weights=weights)
+        fit_raw = fit_gmwm(wv_raw, model, weights=weights) if wv_raw is not None else None
     return TemperatureFit(
         **{**tf.__dict__, "fit": fit, "fit_raw": fit_raw, "wv": wv, "wv_raw": wv_raw}
     )

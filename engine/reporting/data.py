@@ -40,7 +40,6 @@ from .._version import __version__
 from ..fit import FitError, GMWMResult
 from ..formats import misfit
 from ..inference.selection import DEFAULT_SELECT
-from ..inference.temperature import segments_note
 from ..io import ImuLog, log_of
 from ..models import DR, QN, RW, WN
 from ..units import BI_FACTOR, DatasheetRow, ExportError, allan_floor, datasheet_rows, si_factor
@@ -157,7 +156,8 @@ class ChannelReport:
     #: export, whatever the export's format.
     misfit: str = ""
     #: The bias-temperature fit (:class:`engine.inference.temperature.TemperatureFit`) when
-    #: the log has a temperature channel: :attr:`fit` is then that of the compensated signal.
+    #: the log has a temperature channel: :attr:`fit` is then that of the compensated signal
+    #: when the compensation was applied (``temperature.applied``), of the raw one otherwise.
     temperature: Any = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -392,18 +392,15 @@ def _channel(
     level: float,
     datasheet: Any,
     temperature: Any = None,
-    temperature_note: str = "",
 ) -> ChannelReport:
     """The numbers of one fitted channel; a step that cannot be done leaves a note.
     ``temperature``: its :class:`~engine.inference.temperature.TemperatureFit` (the PSD is
-    then that of the compensated signal, as the fit is); ``temperature_note``: why a
-    temperature channel beside it was not fitted (the channel's ``temperature`` note)."""
+    then that of the signal the fit is of: compensated when the fit was applied)."""
     from ..inference import j_test, param_intervals
     from ..inference.datasheet_check import DatasheetError, check_datasheet, read_datasheet
-    from ..inference.temperature import temperature_series
 
     wv = fit.wv
-    notes: dict[str, str] = {"temperature": temperature_note} if temperature_note else {}
+    notes: dict[str, str] = {}
     intervals: list[Any] = []
     try:
         intervals = param_intervals(fit, method="asymptotic", level=level)
@@ -427,9 +424,7 @@ def _channel(
     if log.is_summary:
         notes["psd"] = "a WV summary file holds no samples: no PSD"
     else:
-        x = log[name]
-        if temperature is not None:
-            x = temperature.compensate(x, temperature_series(log, temperature.temperature))
+        x = (log if temperature is None else temperature.compensated_log(log))[name]
         if log.segments:  # a flight: the PSD of its longest still segment, not of the motion
             a, b = max(log.segments, key=lambda ab: ab[1] - ab[0])
             notes["psd"] = f"the PSD is that of the longest still segment, samples {a} to {b}"
@@ -643,7 +638,6 @@ def gather_report(
                     level=level,
                     datasheet=ds,
                     temperature=tf,
-                    temperature_note="" if tf else segments_note(log, ch, temperature or "auto"),
                 )
             else:
                 chans[ch] = ChannelReport(ch, log.units.get(ch, ""), error=channel_errors[ch])

@@ -250,15 +250,51 @@ def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
     assert s.compensate and s.wv is wv and s.result is res
 
 
-def test_a_log_cut_into_segments_is_not_compensated_and_says_why(logs):
-    """A log loaded on its still segments is not compensated, as `--temperature auto` does not
-    (docs/qualify.md): its WV is the pooled raw one, and the switch is disabled with that
-    reason."""
+def test_a_log_cut_into_segments_is_compensated_under_the_rule_of_any_log(logs):
+    """A log loaded on its still segments is fitted on them, each with its own offset, and
+    judged as any log is (`--temperature auto`, docs/qualify.md): the planted 7.2 deg/h/degC
+    is clear in 180,000 still samples, so the WV is the compensated one, the pooled raw WV
+    beside it, and the switch is enabled."""
     d, x, temp = logs
     s = AppState()
     assert s.load_path(d / "thermal.csv", segments="0:90000,110000:200000"), s.error
-    assert s.temperature_channel == "temperature" and s.wv_raw is None and s.temperature == ""
-    assert "not fitted on a log cut into still segments" in s.compensation_unavailable
+    assert s.temperature_channel == "temperature" and s.compensation_unavailable == ""
+    lo, hi = (float(v) for v in LINE.search(s.temperature).groups()[1:])
+    assert lo < 7.2 < hi and lo > 0
     np.testing.assert_allclose(
-        s.wv.variance, s.log.wavelet_variance("gyro_x", fs=s.fs).variance, rtol=1e-12
+        s.wv_raw.variance, s.log.wavelet_variance("gyro_x", fs=s.fs).variance, rtol=1e-12
     )
+    assert s.data_info()["temperature_compensated"] is True
+
+
+def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path):
+    """No true sensitivity, a temperature that barely moves (30.1 to 30.6 degC): the line
+    says the sensitivity with its interval and that it is not compensated; the WV and the fit
+    are the raw signal's (no grey WV beside them), and the switch is disabled with the
+    reason, as `gmwm fit --temperature auto` does not compensate either."""
+    t = np.arange(N) / FS
+    temp = 30.1 + 0.5 * (1 - np.exp(-t / 900)) + np.random.default_rng(8).normal(0, 0.01, N)
+    x = eg.parse_model(SPEC).simulate(N, fs=FS, rng=23)
+    units = {"gyro_x": "deg/s", "temperature": "degC"}
+    y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=25)  # p = 0.69 (seed 24: 0.036)
+    units = {**units, "gyro_y": "deg/s"}
+    chans = {"gyro_x": x, "gyro_y": y, "temperature": temp}
+    eg.save_log(tmp_path / "ramp.csv", chans, FS, units=units)
+    s = AppState()
+    assert s.load_path(tmp_path / "ramp.csv") and s.set_model("WN+RW"), s.error
+    assert s.temperature_channel == "temperature" and s.wv_raw is None
+    lo, hi = (float(v) for v in LINE.search(s.temperature).groups()[1:])
+    assert lo < 0 < hi
+    assert "not distinguishable from 0" in s.temperature and "raw signal" in s.temperature
+    assert "not distinguishable from 0" in s.compensation_unavailable
+    raw = s.log.wavelet_variance("gyro_x", fs=s.fs)
+    np.testing.assert_allclose(s.wv.variance, raw.variance, rtol=1e-12)
+    assert _rw(s) == pytest.approx(eg.fit_gmwm(raw, "WN+RW").params["RW.gamma2"], rel=1e-9)
+    assert s.data_info()["temperature_compensated"] is False
+    # the Multi-channel tab's matrix: the raw signals, and its notice claims no compensation
+    from gmwm_app.data import temperature_fit_of, wv_matrix_of
+
+    assert not any(temperature_fit_of(s.log, c).applied for c in ("gyro_x", "gyro_y"))
+    wvm, notice = wv_matrix_of(s.log, ["gyro_x", "gyro_y"], s.fs, compensate=True)
+    assert "Temperature-compensated" not in notice
+    np.testing.assert_allclose(wvm.values[:, 0, 0], raw.variance, rtol=1e-9)

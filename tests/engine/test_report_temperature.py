@@ -147,3 +147,34 @@ def test_a_real_log_without_temperature_is_reported_as_before(real_data):
     np.testing.assert_array_equal(c.fit.wv.variance, log.wavelet_variance("gyro_x").variance)
     page = render_html(rep)
     assert 'class="temperature"' not in page and "temperature compensation" not in page
+
+
+def test_a_sensitivity_not_distinguishable_from_0_is_reported_not_applied():
+    """A gyro with no true sensitivity and a temperature that barely moves (30.1 to 30.6
+    degC): the report (through the batch's fit_log) shows the sensitivity as information
+    only: the paragraph says "not compensated", the fit and the WV figure are the raw
+    signal's, with no grey WV beside them, the JSON says ``compensated`` false; the batch's
+    status says so too."""
+    from engine.batch import fit_log
+
+    t = np.arange(N) / FS
+    temp = 30.1 + 0.5 * (1 - np.exp(-t / 900)) + np.random.default_rng(9).normal(0, 0.01, N)
+    x = eg.parse_model(GYRO).simulate(N, fs=FS, rng=13)
+    log = eg.ImuLog(
+        {"gyro_x": x}, FS, units={"gyro_x": "deg/s"}, aux={"imu_temp": temp}, source="r.h5"
+    )
+    rep = gather_report(log, model="WN+RW", export_format=None, temperature="auto")
+    c = rep.channels["gyro_x"]
+    lo, hi = c.temperature.sensitivity_interval
+    assert lo < 0 < hi and not c.temperature.applied  # the premise, and the decision
+    raw = eg.wavelet_variance(x, fs=FS)
+    np.testing.assert_array_equal(c.fit.wv.variance, raw.variance)
+    labels = [lay.label for lay in figure_specs(rep)["gyro_x-wv"].layers]
+    assert "WV before temperature compensation" not in labels
+    page = html.unescape(render_html(rep))
+    assert "not compensated" in page and "--temperature imu_temp" in page
+    assert "WV before temperature compensation" not in page
+    d = rep.to_dict()["channels"]["gyro_x"]["temperature"]
+    assert d["compensated"] is False and d["fit_raw"] is None and d["wv_raw"] is None
+    status = fit_log(log, model="WN+RW").status()["temperature"]["gyro_x"]
+    assert status["compensated"] is False and status["fit_raw_model"] is None
