@@ -254,13 +254,16 @@ def main() -> None:
     )
     variants: dict = {}
     checks: list[str] = []
-    for name in args.settings:
+    for name in list(args.settings):
         truth, n = SETTINGS[name]
         family = args.max_model or FAMILY[name]
         t0 = time.perf_counter()
         seed = args.seed + list(SETTINGS).index(name)
         rankings = ranked_logs(name, args.logs, family, seed, args.cache, args.cached_only)
         logs = len(rankings)
+        if not logs:  # --cached-only with none of this setting's logs in the cache
+            args.settings = [nm for nm in args.settings if nm != name]
+            continue
         dt = time.perf_counter() - t0
         for choice in ("WVIC first row", "actionable first row", "selection"):
             chosen = [choices(sel)[choice] for sel in rankings]
