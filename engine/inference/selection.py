@@ -54,6 +54,7 @@ __all__ = [
     "DEFAULT_SELECT",
     "TIE_Z",
     "SLOW_GM",
+    "GM_RW",
 ]
 
 #: The maximal model whose WVIC-best sub-model is fitted when no model is given (``gmwm
@@ -73,6 +74,12 @@ TIE_Z = 1.0
 #: walk at the scales of the log (:func:`tie_choice`): 1, a correlation time beyond the log
 #: (docs/selection.md: a smaller fraction swaps real GMs for random walks on simulated logs).
 SLOW_GM = 1.0
+
+#: A tie that adds a RW beside the selection's slowest AR1/GM is chosen when that term's
+#: correlation time exceeds this fraction of the log (:func:`tie_choice`): inf, never
+#: (docs/selection.md: on simulated logs a finite fraction finds more hidden random walks but
+#: takes the selection's WV out of the true band where the random walk is too small to see).
+GM_RW = math.inf
 
 #: What the J column of a ranking is (the table's last line; the app and docs/inference.md agree).
 JTEST_NOTE = (
@@ -685,6 +692,7 @@ def tie_choice(
     *,
     z: float = TIE_Z,
     slow_gm: float = SLOW_GM,
+    gm_rw: float = GM_RW,
 ) -> Candidate:
     """The selection among the candidates that the WVIC does not tell apart from the first row.
 
@@ -697,8 +705,10 @@ def tie_choice(
 
     1. **a random walk bounds the long scales** (the filter's horizon): when ``selected`` has
        no RW and a tie is ``selected`` with its drift DR, or its slowest AR1/GM if that one's
-       correlation time exceeds ``slow_gm`` times the log's length, replaced by a RW, that
-       tie is chosen (fewest parameters, then smallest WVIC);
+       correlation time exceeds ``slow_gm`` times the log's length, replaced by a RW, or
+       ``selected`` with a RW added beside that AR1/GM if its correlation time exceeds
+       ``gm_rw`` times the log's length, that tie is chosen (fewest parameters, then
+       smallest WVIC);
     2. **the fewer parameters among over-fitted ties**: a tie whose terms are a strict part
        of the choice's (keeping its RW) replaces it (fewest parameters, then smallest WVIC).
 
@@ -715,6 +725,9 @@ def tie_choice(
     slow_gm : float
         Fraction of the log's length beyond which a correlation time mimics a random walk
         (:data:`SLOW_GM`).
+    gm_rw : float
+        Fraction of the log's length beyond which a correlation time may hide a random walk
+        beside it (:data:`GM_RW`: inf, off by default).
 
     Returns
     -------
@@ -747,23 +760,25 @@ def tie_choice(
     if not have["RW"]:
         swaps: list[tuple[Counter[str], str]] = []
         if have["DR"]:
-            swaps.append((have - Counter(["DR"]) + Counter(["RW"]), "its drift DR"))
+            swaps.append((have - Counter(["DR"]) + Counter(["RW"]), "a RW for its drift DR"))
         slow = [
             (_correlation_time(q, res.wv.fs), q.code)
             for q in res.model.processes
             if q.nonlinear is not None and q.linear_coef() > 0
         ]
         slow = [t for t in slow if not math.isnan(t[0])]
-        if slow and max(slow)[0] > slow_gm * res.wv.n:
-            tc, code = max(slow)
-            swaps.append(
-                (have - Counter([code]) + Counter(["RW"]), f"its {code} of {tc:.3g} samples")
-            )
+        tc, code = max(slow) if slow else (0.0, "")
+        if slow and tc > slow_gm * res.wv.n:
+            what = f"a RW for its {code} of {tc:.3g} samples"
+            swaps.append((have - Counter([code]) + Counter(["RW"]), what))
+        if slow and tc > gm_rw * res.wv.n:
+            what = f"a RW beside its {code} of {tc:.3g} samples ({tc / res.wv.n:.2g} of the log)"
+            swaps.append((have + Counter(["RW"]), what))
         for target, what in swaps:
             options = [t for t in ties if t[1] == target]
             if options:
                 c, how = pick(options)
-                why.append(f"{c.model} for {cur.model}: a RW for {what}, tied ({how})")
+                why.append(f"{c.model} for {cur.model}: {what}, tied ({how})")
                 cur, have = c, target
                 break
     parts = [

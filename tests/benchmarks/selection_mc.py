@@ -47,7 +47,7 @@ from scipy import stats
 
 import engine as eg
 from engine.inference import SelectionResult, rank_models
-from engine.inference.selection import SLOW_GM, TIE_Z, tie_choice, wvic_se
+from engine.inference.selection import GM_RW, SLOW_GM, TIE_Z, tie_choice, wvic_se
 
 FS = 100.0
 
@@ -92,6 +92,11 @@ SE_PAIRS = {
 
 #: the tie rules' settings scored by ``--variants`` (z, slow-GM fraction); inf: no GM swap
 VARIANTS = [(z, g) for z in (0.5, 1.0, 2.0) for g in (1.0, 1 / 16, 1 / 32, 1 / 64, math.inf)]
+
+#: the fractions of the log beyond which a tie that adds a RW beside the selection's slowest
+#: AR1/GM is chosen (``gm_rw`` of :func:`tie_choice`), scored by ``--variants`` with the
+#: default band and slow-GM swap; inf: never
+GM_RW_VARIANTS = [math.inf, 1 / 16, 1 / 32, 1 / 64, 1 / 128, 0.0]
 
 
 def quantities(model: eg.Model, fs: float, tau: np.ndarray) -> tuple[float, float, float]:
@@ -184,6 +189,13 @@ def choices(sel: SelectionResult) -> dict[str, eg.Candidate]:
     }
 
 
+def true_fit(sel: SelectionResult, truth_spec: str) -> eg.Candidate | None:
+    """The candidate with the true structure (a reference, not a choice: its fit on the log,
+    actionable or not; None when it is not a candidate)."""
+    spec = eg.parse_model(truth_spec).cleared().spec()
+    return next((c for c in sel.candidates if c.model == spec and c.result is not None), None)
+
+
 def se_check(name: str, rankings: list[SelectionResult]) -> list[str]:
     """Rows: the sd over the logs of a pair's WVIC difference against the formula's SE."""
     out = []
@@ -233,7 +245,8 @@ def main() -> None:
         f"Selection on simulated logs: {'the cached' if args.cached_only else args.logs} logs per "
         f"setting at {FS:g} Hz, every "
         f"sub-model of the family ranked (ci weights, asymptotic optimism); tie rules: band "
-        f"{TIE_Z:g} SE, slow GM > {SLOW_GM:.3g} of the log"
+        f"{TIE_Z:g} SE, slow GM > {SLOW_GM:.3g} of the log, a RW beside a GM > {GM_RW:.3g} of "
+        "the log"
     )
     print(
         "| setting | N | choice | true | in band | N err | K err | B err | K missed | RW->DR "
@@ -241,17 +254,24 @@ def main() -> None:
     )
     variants: dict = {}
     checks: list[str] = []
-    for name in args.settings:
+    for name in list(args.settings):
         truth, n = SETTINGS[name]
         family = args.max_model or FAMILY[name]
         t0 = time.perf_counter()
         seed = args.seed + list(SETTINGS).index(name)
         rankings = ranked_logs(name, args.logs, family, seed, args.cache, args.cached_only)
         logs = len(rankings)
+        if not logs:  # --cached-only with none of this setting's logs in the cache
+            args.settings = [nm for nm in args.settings if nm != name]
+            continue
         dt = time.perf_counter() - t0
         for choice in ("WVIC first row", "actionable first row", "selection"):
             chosen = [choices(sel)[choice] for sel in rankings]
             print(row(name, n, choice, score(truth, n, chosen, rankings), logs, dt), flush=True)
+        ref = [(c, s) for s in rankings if (c := true_fit(s, truth)) is not None]
+        if ref:
+            o = score(truth, n, [c for c, _ in ref], [s for _, s in ref])
+            print(row(name, n, "true structure's fit", o, len(ref), dt), flush=True)
         if args.se_check:
             checks += se_check(name, rankings)
         if args.variants:
@@ -263,6 +283,13 @@ def main() -> None:
                     for sel in rankings
                 ]
                 variants[(name, z, g)] = score(truth, n, chosen, rankings)
+            for g in GM_RW_VARIANTS:
+                first = [choices(sel)["actionable first row"] for sel in rankings]
+                chosen = [
+                    tie_choice(sel.candidates, c, sel.v, gm_rw=g)
+                    for sel, c in zip(rankings, first, strict=True)
+                ]
+                variants[(name, "gm_rw", g)] = score(truth, n, chosen, rankings)
     if args.variants:
         print("\nTie rules' variants (in band / true / K missed / over, per setting):")
         print(f"| z | slow GM | {' | '.join(args.settings)} | in band | K missed | over |")
@@ -272,6 +299,22 @@ def main() -> None:
             txt = " | ".join(f"{o['band']}/{o['true']}/{o['Kmiss']}/{o['over']}" for o in cells)
             tot = [sum(o[k] for o in cells) for k in ("band", "Kmiss", "over")]
             print(f"| {z:g} | {g:.3g} | {txt} | {' | '.join(map(str, tot))} |")
+        print(
+            "\nA RW kept beside a slow GM (gm_rw: a tie that adds a RW to a selection whose "
+            "slowest AR1/GM is slower than this fraction of the log; band 1 SE; in band / true / "
+            "K missed / over, median K error, per setting):"
+        )
+        print(f"| gm_rw | {' | '.join(args.settings)} | in band | K missed | over |")
+        print("|---" * (len(args.settings) + 4) + "|")
+        for g in GM_RW_VARIANTS:
+            cells = [variants[(nm, "gm_rw", g)] for nm in args.settings]
+            txt = " | ".join(
+                f"{o['band']}/{o['true']}/{o['Kmiss']}/{o['over']}"
+                + (f", K {100 * np.median(o['K']):.0f} %" if o["K"] else "")
+                for o in cells
+            )
+            tot = [sum(o[k] for o in cells) for k in ("band", "Kmiss", "over")]
+            print(f"| {g:.3g} | {txt} | {' | '.join(map(str, tot))} |")
 
     if args.se_check:
         print("\nThe WVIC difference of a pair over the logs against wvic_se (the tie band's SE):")
