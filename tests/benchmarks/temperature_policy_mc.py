@@ -32,21 +32,10 @@ import argparse
 import time
 
 import numpy as np
-from scipy import stats
+from temperature_mc import FS, SEGMENTS, C, N, band  # the thermal logs of temperature_mc.py
 
 import engine as eg
 from engine.inference.temperature import fit_temperature
-
-FS = 100.0
-N = 200_000
-C = 2e-3
-SEGMENTS = ((0, 60_000), (80_000, 140_000), (160_000, N))
-
-
-def band(k: int, n: int) -> str:
-    lo = stats.beta.ppf(0.025, k, n - k + 1) if k > 0 else 0.0
-    hi = stats.beta.ppf(0.975, k + 1, n - k) if k < n else 1.0
-    return f"{100 * k / n:.1f} [{100 * lo:.1f}, {100 * hi:.1f}]"
 
 
 def main() -> None:
