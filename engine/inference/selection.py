@@ -252,7 +252,7 @@ class Candidate:
         parts = []
         if self.twin:
             head = f"{', '.join(self.sub_sample)} < 1 sample"
-            tp = f"{self.twin_p:.2g}" if math.isfinite(self.twin_p) else "n/a"
+            tp = f"{self.twin_p:.2g}" if math.isfinite(self.twin_p) else "n/c"
             if self.as_twin:
                 parts.append(f"{head}: WN in effect (p = {tp}), ranked as {self.twin}")
             else:
@@ -612,8 +612,8 @@ def rank_models(
         t = by_spec.get(c.twin) if c.twin else None
         if t is None or t.result is None:
             continue
-        tp = math.nan
-        if math.isfinite(c.j_stat) and math.isfinite(t.j_stat):
+        tp = math.nan  # no calibrated test (j_note): folded, as a disguised term is by default
+        if math.isfinite(c.j_stat) and math.isfinite(t.j_stat) and not j_note:
             tp = float(stats.chi2.sf(t.j_stat - c.j_stat, max(t.j_df - c.j_df, 1)))
         cands[k] = dataclasses.replace(c, twin_p=tp, as_twin=not tp < DISGUISE_LEVEL)
     eff = _rank_criteria(cands)

@@ -172,6 +172,13 @@ def test_no_p_value_where_the_test_is_not_calibrated():
     ranking = eg.rank_models(wv, ["WN+RW+DR"])
     assert ranking.j_note and math.isnan(ranking.best.j_p_value)
     assert "n/c" in ranking.table() and ranking.to_dict()["j_note"] == ranking.j_note
+    # the fold test of a term in disguise is a J difference: no p-value there either (it
+    # printed p = 1 beside an n/c J column); the GM below one sample is folded into WN
+    ranking = eg.rank_models(wv, ["GM+RW+DR", "WN+RW+DR"])
+    gm = next(c for c in ranking.candidates if c.model == "GM+RW+DR")
+    assert gm.twin == "WN+RW+DR" and math.isfinite(gm.j_stat)
+    assert math.isnan(gm.twin_p) and gm.as_twin and "p = n/c" in gm.note
+    assert gm.to_dict()["twin_p"] is None
 
 
 @pytest.mark.slow
