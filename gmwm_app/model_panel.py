@@ -23,11 +23,14 @@ import engine as eg
 from gmwm_app.state import PROCESS_CODES, PROCESS_NAMES, AppState, state_param
 from gmwm_app.views import component_color, redraws
 from gmwm_app.whatif import SliderSpec
+from gmwm_app.wv_figures import N_INITIAL_COMPONENTS
 
 __all__ = ["ModelPanel", "N_POOL"]
 
-#: Process rows created up front (more are added if a model grows beyond).
-N_POOL = 8
+#: Process rows created up front, as many as the component curves the page starts with
+#: (more are added if a model grows beyond: 4 Bokeh models each, a page opens faster with
+#: fewer).
+N_POOL = N_INITIAL_COMPONENTS
 
 
 #: The weights choice of the fit (label, value of ``AppState.weights``).

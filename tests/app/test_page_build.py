@@ -25,9 +25,11 @@ import pytest
 from bokeh.document import Document
 from bokeh.document.models import DocumentModelManager
 
+import engine as eg
 from gmwm_app import _panel_compat as compat
 from gmwm_app import data, server
 from gmwm_app.app import live_apps
+from gmwm_app.model_panel import N_POOL
 from gmwm_app.state import AppState
 from gmwm_app.wv_figures import N_COMPONENTS, N_INITIAL_COMPONENTS
 
@@ -81,6 +83,24 @@ def test_page_built_with_one_walk_and_bounded(app_demo: Path, counted: dict) -> 
     app.open_view("Slope method")
     assert set(app.lazy_views) == {"Slope method"}
     assert len(list(doc.models)) > sizes[1]
+
+
+def test_process_rows_grow_past_the_initial_pool(app_demo: Path, counted: dict) -> None:
+    # the sidebar's process rows start at N_POOL (built with every page) and grow when a
+    # model has more processes: each process gets its row, label and remove button
+    _, app = _build_page()
+    panel = app.model_panel
+    spec = "4*GM+WN+QN+RW+DR"  # 8 processes
+    assert len(eg.parse_model(spec).processes) > N_POOL
+    panel.spec_input.value_input = spec
+    panel.spec_input.param.trigger("enter_pressed")
+    assert app.state.error == "" and len(app.state.model.processes) == 8
+    rows = [r for r in panel.process_list.objects[1:] if r.visible]
+    assert len(rows) == 8
+    labels = [r.objects[0].object for r in rows]
+    assert sum("GM" in x for x in labels) == 4 and all(x for x in labels)
+    rows[-1].objects[1].clicks += 1  # the grown row's remove button works
+    assert len(app.state.model.processes) == 7
 
 
 def test_page_build_failure_leaves_an_empty_document(counted: dict) -> None:
