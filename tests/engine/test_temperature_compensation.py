@@ -324,7 +324,7 @@ def test_auto_compensates_a_planted_sensitivity():
 @pytest.mark.slow  # Monte Carlo, about 30 s of CPU
 def test_false_compensation_rate_and_detection_rate():
     """200 logs with no true sensitivity on the slow ramp: the test compensates at most at its
-    level, 5 %: at most 19 of 200 (the binomial 99.75 % quantile at 5 %; the Newey-West test is
+    level, 5 %: at most 20 of 200 (the binomial 99.75 % quantile at 5 %; the Newey-West test is
     conservative, 2.4 % [1.2, 4.2] over 500 logs in tests/benchmarks/temperature_policy_mc.py,
     so no lower bound is asserted); 100 logs with the planted 7.2 deg/h/degC on the warm-up
     profile: compensated in all (docs/qualify.md has the table)."""
@@ -335,7 +335,7 @@ def test_false_compensation_rate_and_detection_rate():
         fit(model.simulate(N, fs=FS, rng=s), slow_ramp(rng=s), fs=FS, compensate="auto").applied
         for s in range(1000, 1200)
     )
-    assert stats.binom.ppf(0.9975, 200, 0.05) == 19 and false <= 19, false
+    assert false <= stats.binom.ppf(0.9975, 200, 0.05), false  # 20
     temp = thermal_profile()
     found = sum(
         fit(model.simulate(N, fs=FS, rng=s) + C * temp, temp, fs=FS, compensate="auto").applied
