@@ -30,6 +30,26 @@ BEFORE = {
 }
 
 
+class _WhiteNoiseShape:
+    """What the test processes below need beyond their fields: a white noise's WV, spectrum
+    and filter terms, and no samples."""
+
+    help = "a test process"
+    quantities = PROCESS_TYPES["WN"].quantities
+
+    def basis(self, tau, fs, nl=None):
+        return 1.0 / tau
+
+    def simulate(self, n, rng=None, fs=1.0):
+        return np.zeros(n)
+
+    def psd_terms(self, fs):
+        return eg.PROCESS_TYPES["WN"](1.0).psd_terms(fs)
+
+    def filter_terms(self, fs, fs_filter, horizon):
+        return eg.PROCESS_TYPES["WN"](1.0).filter_terms(fs, fs_filter, horizon)
+
+
 @pytest.mark.parametrize("code", sorted(PROCESS_TYPES))
 def test_every_parameter_declares_its_param_record(code: str) -> None:
     cls = PROCESS_TYPES[code]
@@ -65,25 +85,11 @@ def test_a_new_process_needs_no_table_beside_its_class() -> None:
     units, the unconstrained space, bounds and its slider follow from its fields alone."""
 
     @dataclass(frozen=True, repr=False)
-    class Probe(Process, order=98, description="a test process"):
+    class Probe(_WhiteNoiseShape, Process, order=98, description="a test process"):
         kappa: float | None = param("log", rate_unit)
         s2_probe: float | None = param()
 
         display_name = "probe"
-        help = "a test process"
-        quantities = PROCESS_TYPES["WN"].quantities
-
-        def basis(self, tau, fs, nl=None):
-            return 1.0 / tau
-
-        def simulate(self, n, rng=None, fs=1.0):
-            return np.zeros(n)
-
-        def psd_terms(self, fs):
-            return eg.PROCESS_TYPES["WN"](1.0).psd_terms(fs)
-
-        def filter_terms(self, fs, fs_filter, horizon):
-            return eg.PROCESS_TYPES["WN"](1.0).filter_terms(fs, fs_filter, horizon)
 
     try:
         assert eg.param_unit("Probe", "kappa", "g") == "1/s"
@@ -100,24 +106,10 @@ def test_a_new_process_needs_no_table_beside_its_class() -> None:
 
 def test_a_field_without_its_record_is_refused() -> None:
     @dataclass(frozen=True, repr=False)
-    class Bare(Process, order=97, description="a test process"):
+    class Bare(_WhiteNoiseShape, Process, order=97, description="a test process"):
         x: float | None = None
 
         display_name = "bare"
-        help = "a test process"
-        quantities = PROCESS_TYPES["WN"].quantities
-
-        def basis(self, tau, fs, nl=None):
-            return 1.0 / tau
-
-        def simulate(self, n, rng=None, fs=1.0):
-            return np.zeros(n)
-
-        def psd_terms(self, fs):
-            return eg.PROCESS_TYPES["WN"](1.0).psd_terms(fs)
-
-        def filter_terms(self, fs, fs_filter, horizon):
-            return eg.PROCESS_TYPES["WN"](1.0).filter_terms(fs, fs_filter, horizon)
 
     try:
         with pytest.raises(TypeError, match=r"Bare.x has no Param record"):
