@@ -293,12 +293,16 @@ def precompute(
     A WV that cannot be computed (e.g. a channel of NaN) is not raised here: its message is
     kept in ``loaded.wv_errors`` (and logged), and the install that follows reports it on the
     page (the data cannot be shown without it). Anything else is raised.
+
+    The log check of that channel (:func:`log_check_line`, a tenth of a second on a long log)
+    is run here too, so the install on the server loop finds it cached.
     """
     lg = loaded.log
     names = channel_names(lg)
     if not names:
         return
     ch = channel if channel in names else names[0]
+    log_check_line(lg, ch)
     f = float(fs) if fs else float(lg.fs)
     comp = is_compensated(lg, ch, compensate)
     for c in (comp, False) if comp else (False,):

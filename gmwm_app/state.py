@@ -348,7 +348,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         that of the compensated signal when :attr:`compensate` is on and the channel has a
         temperature channel beside it, and then the raw one too (:func:`gmwm_app.data.precompute`).
 
-        :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached.
+        :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached,
+        and the channel's log check (:func:`gmwm_app.data.log_check_line`) done.
         ``progress(j, J)`` is called as each level is done (a robust WV of a long log takes
         seconds).
 
@@ -365,6 +366,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         ch = channel or self.channel
         f = float(fs or self.fs or lg.fs)
         rob = self.robust if robust is None else bool(robust)
+        log_check_line(lg, ch)  # cached: the switch on the loop finds it done
         comp = is_compensated(lg, ch, self.compensate)
         for c in (comp, False) if comp else (False,):
             with self._lock:

@@ -25,3 +25,43 @@ def test_log_check_line_follows_the_channel(tmp_path):
         "shock (gy)" in s.log_check and "first at samples 40,0" in s.log_check
     )  # 40,000-40,029 planted
     assert s.select_channel("gx") and s.log_check == ""
+
+
+def test_log_check_runs_in_the_worker_not_on_the_loop(tmp_path, monkeypatch):
+    """The check takes a tenth of a second on a long log: the page's read (``prepare_query``)
+    and a channel's warm-up (``warm``) run it in the worker, so the install and the channel
+    switch that follow on the server loop find it done (a second run would raise here)."""
+    import gmwm_app.data as data
+
+    rng = np.random.default_rng(5)
+    n, fs = 50_000, 100.0
+    x = eg.parse_model("WN(sigma2=1e-2)").simulate(n, fs=fs, rng=rng)
+    y = x.copy()
+    y[20_000:20_030] += rng.normal(size=30)
+    path = tmp_path / "two.h5"
+    eg.save_log(path, {"gx": x, "gy": y}, fs, units={"gx": "deg/s", "gy": "deg/s"})
+    calls: list[list[str]] = []
+    real = data.qualify_log
+
+    def counted(lg, channels, *a, **k):
+        calls.append(list(channels))
+        return real(lg, channels, *a, **k)
+
+    monkeypatch.setattr(data, "qualify_log", counted)
+    s = AppState()
+    q = {"source": "path", "path": str(path), "channel": "gx"}
+    prepared = s.prepare_query(q, "demo", "")  # the worker's part
+    assert calls == [["gx"]]
+
+    def refused(*a, **k):
+        raise AssertionError("the log check ran on the loop")
+
+    monkeypatch.setattr(data, "qualify_log", refused)
+    assert s.from_query(q, prepared=prepared), s.error  # the loop's part
+    assert s.channel == "gx" and s.log_check == ""
+    monkeypatch.setattr(data, "qualify_log", counted)
+    s.warm("gy")  # the worker's part of a channel switch
+    assert calls == [["gx"], ["gy"]]
+    monkeypatch.setattr(data, "qualify_log", refused)
+    assert s.select_channel("gy"), s.error  # the loop's part
+    assert "shock (gy)" in s.log_check
