@@ -3,20 +3,29 @@ nothing for a clean channel."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 import engine as eg
+import gmwm_app.data as data
 from gmwm_app.state import AppState
 
 
-def test_log_check_line_follows_the_channel(tmp_path):
-    rng = np.random.default_rng(4)
-    n, fs = 100_000, 100.0
-    clean = eg.parse_model("WN(sigma2=1e-2)+RW(gamma2=1e-10)").simulate(n, fs=fs, rng=rng)
+def _knocked_log(path: Path, n: int, knock_at: int, seed: int) -> Path:
+    """A log of two channels at 100 Hz: gx clean, gy the same with a shock of 30 samples
+    planted at ``knock_at``."""
+    rng = np.random.default_rng(seed)
+    clean = eg.parse_model("WN(sigma2=1e-2)+RW(gamma2=1e-10)").simulate(n, fs=100.0, rng=rng)
     knocked = clean.copy()
-    knocked[40_000:40_030] += rng.normal(size=30)
-    path = tmp_path / "two.h5"
-    eg.save_log(path, {"gx": clean, "gy": knocked}, fs, units={"gx": "deg/s", "gy": "deg/s"})
+    knocked[knock_at : knock_at + 30] += rng.normal(size=30)
+    units = {"gx": "deg/s", "gy": "deg/s"}
+    eg.save_log(path, {"gx": clean, "gy": knocked}, 100.0, units=units)
+    return path
+
+
+def test_log_check_line_follows_the_channel(tmp_path):
+    path = _knocked_log(tmp_path / "two.h5", 100_000, 40_000, seed=4)
     s = AppState()
     assert s.load_path(path), s.error
     assert s.channel == "gx" and s.log_check == ""
@@ -31,15 +40,7 @@ def test_log_check_runs_in_the_worker_not_on_the_loop(tmp_path, monkeypatch):
     """The check takes a tenth of a second on a long log: the page's read (``prepare_query``)
     and a channel's warm-up (``warm``) run it in the worker, so the install and the channel
     switch that follow on the server loop find it done (a second run would raise here)."""
-    import gmwm_app.data as data
-
-    rng = np.random.default_rng(5)
-    n, fs = 50_000, 100.0
-    x = eg.parse_model("WN(sigma2=1e-2)").simulate(n, fs=fs, rng=rng)
-    y = x.copy()
-    y[20_000:20_030] += rng.normal(size=30)
-    path = tmp_path / "two.h5"
-    eg.save_log(path, {"gx": x, "gy": y}, fs, units={"gx": "deg/s", "gy": "deg/s"})
+    path = _knocked_log(tmp_path / "two.h5", 50_000, 20_000, seed=5)
     calls: list[list[str]] = []
     real = data.qualify_log
 
