@@ -279,8 +279,9 @@ class GMWMApp(pn.viewable.Viewer):
             css_classes=["gmwm-robust"],
         )
         self.robust_check.param.watch(self._on_robust, "value")
-        # the state's own parameter: switching it refits on the compensated or the raw WV
-        self.compensate_check = pn.widgets.Checkbox.from_param(
+        # the state's own parameter (auto / always / off): a change refits on the
+        # compensated or the raw WV
+        self.compensate_check = pn.widgets.Select.from_param(
             s.param.compensate, css_classes=["gmwm-compensate"], visible=False
         )
         self.data_info.object = self._data_info_text
@@ -574,7 +575,7 @@ class GMWMApp(pn.viewable.Viewer):
     def _sync_compensation(self) -> None:
         s = self.state
         why = s.compensation_unavailable
-        label = f"Compensate temperature ('{s.temperature_channel}')"
+        label = f"Temperature compensation ('{s.temperature_channel}')"
         self.compensate_check.param.update(
             visible=bool(s.temperature_channel),
             disabled=bool(why),
