@@ -281,7 +281,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.robust_check.param.watch(self._on_robust, "value")
         # the state's own parameter (auto / always / off): a change refits on the
         # compensated or the raw WV
-        self.compensate_check = pn.widgets.Select.from_param(
+        self.compensate_choice = pn.widgets.Select.from_param(
             s.param.compensate, css_classes=["gmwm-compensate"], visible=False
         )
         self.data_info.object = self._data_info_text
@@ -367,7 +367,7 @@ class GMWMApp(pn.viewable.Viewer):
             self.fs_input,
             self.data_info,
             self.robust_check,
-            self.compensate_check,
+            self.compensate_choice,
             pn.layout.Divider(),
             *self.model_panel.sidebar(),
             h("### Export", margin=(0, 10)),
@@ -576,7 +576,7 @@ class GMWMApp(pn.viewable.Viewer):
         s = self.state
         why = s.compensation_unavailable
         label = f"Temperature compensation ('{s.temperature_channel}')"
-        self.compensate_check.param.update(
+        self.compensate_choice.param.update(
             visible=bool(s.temperature_channel),
             disabled=bool(why),
             name=f"{label}: not available, {why}" if why else label,

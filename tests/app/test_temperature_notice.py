@@ -172,7 +172,7 @@ def test_the_switch_shows_with_a_temperature_channel_and_says_why_it_cannot_be_u
 
     d, _, _ = logs
     app = create_app(load=False).gmwm_app
-    s, box, fig = app.state, app.compensate_check, app.views
+    s, box, fig = app.state, app.compensate_choice, app.views
     assert s.load_path(d / "thermal.csv"), s.error
     assert box.visible and not box.disabled and box.value == "auto"
     assert list(box.options) == ["auto", "always", "off"]
@@ -201,7 +201,7 @@ def test_a_real_log_without_temperature_shows_no_switch_and_no_grey_wv(real_data
     s = app.state
     assert s.load_path(real_data / "adis16405_imu1.h5"), s.error
     assert s.temperature_channel == "" and s.temperature == "" and s.wv_raw is None
-    assert not app.compensate_check.visible and app.views.raw is None  # never built
+    assert not app.compensate_choice.visible and app.views.raw is None  # never built
     assert "temperature" not in s.to_query()
     want = s.log.wavelet_variance("gyro_x", fs=s.fs).variance
     np.testing.assert_array_equal(s.wv.variance, want)
