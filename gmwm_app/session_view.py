@@ -149,7 +149,10 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
     robust = bool(app.get("robust", False))
     # the choice (sessions saved with the switch of before: True is auto, False off; without
     # the key: auto, as then)
-    compensate = compensation_mode(app.get("compensate", "auto"))
+    try:
+        compensate = compensation_mode(app.get("compensate", "auto"))
+    except ValueError as e:  # a session file edited by hand: which file, what to do
+        raise ValueError(f"{name}: {e}; edit 'compensate' in the file or remove it") from None
     segment = sess.load.get("segment")
     segment = segment if isinstance(segment, str) else None
     plan = RestorePlan(sess, None)

@@ -236,6 +236,13 @@ def test_a_saved_session_keeps_the_switch(logs):
         was = AppState()
         assert sv.apply_restore(was, sv.prepare_restore(json.dumps(doc), "s.json")), was.error
         assert was.compensate == mode and (was.wv_raw is None) == (mode == "off")
+    doc["app"]["compensate"] = "sometimes"  # edited by hand: one line naming the file
+    with pytest.raises(ValueError) as e:
+        sv.prepare_restore(json.dumps(doc), "s.json")
+    assert str(e.value) == (
+        "s.json: temperature compensation 'sometimes' is not one of auto, always, off (or 0 "
+        "for off, 1 for auto); edit 'compensate' in the file or remove it"
+    )
 
 
 def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
