@@ -92,7 +92,12 @@ class LogFit:
     temperature : dict of str to TemperatureFit
         Per channel with a temperature channel beside it (``temperature=`` of
         :func:`fit_log`), its bias-temperature fit; the channel's fit in :attr:`fits` is then
-        that of the compensated signal (:mod:`engine.inference.temperature`).
+        that of the compensated signal when the fit says so
+        (:attr:`~engine.inference.temperature.TemperatureFit.applied`,
+        :mod:`engine.inference.temperature`).
+    temperature_recorded : dict of str to dict
+        A resumed log's :meth:`temperature_status`, as recorded when it was fitted (empty
+        otherwise: :attr:`temperature` holds the fits).
     """
 
     source: str
@@ -107,6 +112,7 @@ class LogFit:
     values: tuple[tuple[tuple[str, ...], float], ...] = ()
     qualification: dict[str, Any] = field(default_factory=dict)
     temperature: dict[str, Any] = field(default_factory=dict)
+    temperature_recorded: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -134,21 +140,32 @@ class LogFit:
                 "elapsed_s": self.elapsed_s,
                 "resumed": self.resumed,
                 "qualification": self.qualification or None,
-                "temperature": {
-                    ch: {
-                        "line": tf.line(),
-                        "temperature": tf.temperature,
-                        "sensitivity": tf.sensitivity,
-                        "sensitivity_interval": list(tf.sensitivity_interval),
-                        "sensitivity_unit": tf.sensitivity_unit,
-                        "compensated": tf.applied,
-                        "fit_raw_model": tf.fit_raw.model.spec(values=True)
-                        if tf.fit_raw is not None
-                        else None,
-                    }
-                    for ch, tf in self.temperature.items()
+                "temperature": self.temperature_status() or None,
+            }
+        )
+
+    def temperature_status(self) -> dict[str, dict[str, Any]]:
+        """Per channel with a temperature fit: its line, temperature channel, sensitivity
+        with its interval and unit, whether it was compensated and the test's p-value, and
+        the raw signal's fit beside a compensated one (JSON-ready); a resumed log's as
+        recorded when it was fitted (:attr:`temperature_recorded`)."""
+        if self.resumed:
+            return dict(self.temperature_recorded)
+        return json_ready(
+            {
+                ch: {
+                    "line": tf.line(),
+                    "temperature": tf.temperature,
+                    "sensitivity": tf.sensitivity,
+                    "sensitivity_interval": list(tf.sensitivity_interval),
+                    "sensitivity_unit": tf.sensitivity_unit,
+                    "compensated": tf.applied,
+                    "p_value": tf.p_value,
+                    "fit_raw_model": tf.fit_raw.model.spec(values=True)
+                    if tf.fit_raw is not None
+                    else None,
                 }
-                or None,
+                for ch, tf in self.temperature.items()
             }
         )
 
@@ -458,7 +475,9 @@ def fit_batch(
 def unit_values(lf: LogFit) -> list[tuple[tuple[str, ...], float]]:
     """The summary quantities of one fitted log: ``((channel, kind, process, quantity,
     symbol, unit), value)`` for every parameter and datasheet quantity, and the bias-temperature
-    sensitivity of a compensated channel (process ``temperature``; see :func:`fleet_summary`)."""
+    sensitivity of a channel with a temperature fit (process ``temperature``; quantity
+    :attr:`~engine.inference.temperature.TemperatureFit.quantity`, which says when it was not
+    compensated, so that such units are pooled apart; see :func:`fleet_summary`)."""
     out: list[tuple[tuple[str, ...], float]] = []
     for ch, res in lf.fits.items():
         for r in res.param_records:
@@ -469,7 +488,7 @@ def unit_values(lf: LogFit) -> list[tuple[tuple[str, ...], float]]:
             out.append(((ch, "datasheet", d.process, d.quantity, d.symbol, d.unit), float(d.value)))
         tf = lf.temperature.get(ch)
         if tf is not None:  # the bias-temperature sensitivity, a datasheet figure too
-            key = (ch, "datasheet", tf.PROCESS, tf.QUANTITY, tf.SYMBOL, tf.sensitivity_unit)
+            key = (ch, "datasheet", tf.PROCESS, tf.quantity, tf.SYMBOL, tf.sensitivity_unit)
             out.append((key, float(tf.sensitivity)))
     return out
 
@@ -744,6 +763,9 @@ class BatchFolder:
         fp = self.fingerprint(source)
         if unit is None or fp is None or unit.get("fingerprint") != fp:
             return None
+        if not isinstance(unit.get("temperature"), dict):  # recorded before it was kept:
+            return None  # fitted again, so that its status says what temperature did
+
         p = self.path / str(unit["report"])
         if _file_sha256(p) != self._record["files"].get(str(unit["report"])):
             return None
@@ -755,6 +777,7 @@ class BatchFolder:
             n=int(unit.get("n", 0)),
             resumed=True,
             values=values,
+            temperature_recorded=dict(unit["temperature"]),
         )
 
     def record(self, lf: LogFit) -> None:
@@ -768,6 +791,7 @@ class BatchFolder:
             "fs": lf.fs,
             "n": lf.n,
             "values": [[list(k), v] for k, v in unit_values(lf)],
+            "temperature": lf.temperature_status(),
         }
         self.write(name, lf.report)
 

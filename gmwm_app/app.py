@@ -279,8 +279,9 @@ class GMWMApp(pn.viewable.Viewer):
             css_classes=["gmwm-robust"],
         )
         self.robust_check.param.watch(self._on_robust, "value")
-        # the state's own parameter: switching it refits on the compensated or the raw WV
-        self.compensate_check = pn.widgets.Checkbox.from_param(
+        # the state's own parameter (auto / always / off): a change refits on the
+        # compensated or the raw WV
+        self.compensate_choice = pn.widgets.Select.from_param(
             s.param.compensate, css_classes=["gmwm-compensate"], visible=False
         )
         self.data_info.object = self._data_info_text
@@ -366,7 +367,7 @@ class GMWMApp(pn.viewable.Viewer):
             self.fs_input,
             self.data_info,
             self.robust_check,
-            self.compensate_check,
+            self.compensate_choice,
             pn.layout.Divider(),
             *self.model_panel.sidebar(),
             h("### Export", margin=(0, 10)),
@@ -574,8 +575,8 @@ class GMWMApp(pn.viewable.Viewer):
     def _sync_compensation(self) -> None:
         s = self.state
         why = s.compensation_unavailable
-        label = f"Compensate temperature ('{s.temperature_channel}')"
-        self.compensate_check.param.update(
+        label = f"Temperature compensation ('{s.temperature_channel}')"
+        self.compensate_choice.param.update(
             visible=bool(s.temperature_channel),
             disabled=bool(why),
             name=f"{label}: not available, {why}" if why else label,

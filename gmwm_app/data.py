@@ -57,7 +57,41 @@ __all__ = [
     "compensated_series",
     "is_compensated",
     "temperature_unusable",
+    "COMPENSATION",
+    "compensation_mode",
 ]
+
+#: The temperature compensation choices of a session (``AppState.compensate``): ``auto``
+#: (as ``gmwm fit --temperature auto``: compensated when the joint Wald test of the
+#: temperature terms rejects at 5 %), ``always`` (as ``--temperature COLUMN``: whatever the
+#: test says), ``off`` (as ``--temperature none``: the raw signal).
+COMPENSATION: tuple[str, ...] = ("auto", "always", "off")
+
+
+def compensation_mode(value: Any) -> str:
+    """A compensation choice of :data:`COMPENSATION` from what a link or a saved session
+    holds: the choice itself, or the switch of before (True or on: ``auto``; False or off:
+    ``off``).
+
+    Raises
+    ------
+    ValueError
+        Anything else, naming the value and the choices.
+    """
+    if isinstance(value, bool):
+        return "auto" if value else "off"
+    text = str(value).strip().lower()
+    if text in COMPENSATION:
+        return text
+    if text in ("1", "true", "yes", "on"):
+        return "auto"
+    if text in ("0", "false", "no", "none"):
+        return "off"
+    raise ValueError(
+        f"temperature compensation {value!r} is not one of {', '.join(COMPENSATION)} "
+        "(or 0 for off, 1 for auto)"
+    )
+
 
 log = logging.getLogger(__name__)
 
@@ -283,12 +317,12 @@ def precompute(
     channel: str | None = None,
     fs: float | None = None,
     robust: bool = False,
-    compensate: bool = True,
+    compensate: str = "auto",
 ) -> None:
     """Compute the WV of one channel of ``loaded`` into its cache (worker-thread safe): that of
-    the temperature-compensated signal with ``compensate`` when the channel has a temperature
-    channel beside it (:func:`is_compensated`), and then the raw signal's too (the Fit view
-    draws it in grey beside it).
+    the temperature-compensated signal when the choice ``compensate`` (:data:`COMPENSATION`)
+    compensates the channel (:func:`is_compensated`), and then the raw signal's too (the Fit
+    view draws it in grey beside it).
 
     A WV that cannot be computed (e.g. a channel of NaN) is not raised here: its message is
     kept in ``loaded.wv_errors`` (and logged), and the install that follows reports it on the
@@ -370,8 +404,9 @@ def compute_wv(
     compensate: bool = True,
 ) -> eg.WaveletVariance:
     """WV of one channel of a log (a summary file's stored WV, re-labelled to ``fs``); with
-    ``compensate`` and a temperature channel beside it (:func:`temperature_fit_of`), the WV of
-    its compensated signal.
+    ``compensate`` and a temperature channel beside it that the fit can use
+    (:func:`temperature_fit_of`), the WV of its compensated signal (the relation taken out
+    whatever its test says: :func:`is_compensated` decides whether a session asks for it).
 
     ``progress(j, J)`` is called as each level of a computed WV is done (see
     :func:`engine.wavelet_variance`); not for a summary file's stored WV.
@@ -379,8 +414,8 @@ def compute_wv(
     if lg is None:
         raise ValueError("load a log first")
     try:
-        tf = temperature_fit_of(lg, ch) if compensate else None
-        if tf is not None:  # the compensated signal, as `gmwm fit --temperature auto` fits it
+        tf = temperature_fit_of(lg, ch, "always") if compensate else None
+        if tf is not None:  # the compensated signal, as `gmwm fit --temperature T` fits it
             lg = tf.compensated_log(lg)  # (a log cut into segments: still pooled)
         return lg.wavelet_variance(ch, robust=robust, fs=fs, progress=progress)
     except (ValueError, TypeError) as e:
@@ -394,23 +429,26 @@ def compensated_series(lg: ImuLog, ch: str, tf: TemperatureFit | None) -> np.nda
     return np.asarray((lg if tf is None else tf.compensated_log(lg)).channels[ch])
 
 
-def is_compensated(lg: ImuLog | None, ch: str, compensate: bool) -> bool:
-    """Whether the WV of ``ch`` that a session asking for ``compensate`` shows is that of a
-    temperature-compensated signal: asked for, and a temperature fit of the channel exists
-    (:func:`temperature_fit_of`). The fourth element of the session's WV keys."""
-    tf = temperature_fit_of(lg, ch) if compensate and lg is not None else None
+def is_compensated(lg: ImuLog | None, ch: str, compensate: str) -> bool:
+    """Whether the WV of ``ch`` that a session with the choice ``compensate``
+    (:data:`COMPENSATION`) shows is that of a temperature-compensated signal: not ``off``,
+    and a temperature fit of the channel that this choice applies
+    (:func:`temperature_fit_of`; with ``auto``, only when its test rejects). The fourth
+    element of the session's WV keys."""
+    mode = compensation_mode(compensate)
+    tf = temperature_fit_of(lg, ch, mode) if mode != "off" and lg is not None else None
     return bool(tf is not None and tf.applied)
 
 
 def wv_matrix_of(
-    lg: ImuLog, channels: Sequence[str], fs: float, compensate: bool = False
+    lg: ImuLog, channels: Sequence[str], fs: float, compensate: str = "off"
 ) -> tuple[eg.WVMatrix, str]:
     """The WV/WCCV matrix of some channels of a log, and a notice (truncation, compensation).
 
-    Channels of different lengths are truncated to the shortest (the notice says so). With
-    ``compensate``, each channel with a temperature fit (:func:`temperature_fit_of`) is
-    taken with its bias-temperature relation taken out, as the Fit tab's WV is (the notice
-    names them).
+    Channels of different lengths are truncated to the shortest (the notice says so). Each
+    channel that the choice ``compensate`` (:data:`COMPENSATION`) compensates
+    (:func:`is_compensated`) is taken with its bias-temperature relation taken out, as the
+    Fit tab's WV is (the notice names them).
 
     Raises
     ------
@@ -426,7 +464,8 @@ def wv_matrix_of(
             "the raw channels of a log (CSV, NPY/NPZ or HDF5)"
         )
     chans = tuple(channels)
-    fits = {c: temperature_fit_of(lg, c) if compensate else None for c in chans}
+    mode = compensation_mode(compensate)
+    fits = {c: temperature_fit_of(lg, c, mode) if mode != "off" else None for c in chans}
     series = {c: compensated_series(lg, c, fits[c]) for c in chans}
     sizes = {c: int(a.size) for c, a in series.items()}
     n = min(sizes.values())
@@ -441,8 +480,8 @@ def wv_matrix_of(
     done = [f"{c} ('{tf.temperature}')" for c, tf in fits.items() if tf and tf.applied]
     if done:
         notes.append(
-            f"Temperature-compensated, as on the Fit tab: {', '.join(done)}; the sidebar's "
-            "'Compensate temperature' box turns it off."
+            f"Temperature-compensated ({mode}), as on the Fit tab: {', '.join(done)}; the "
+            "sidebar's 'Temperature compensation' choice turns it off."
         )
     units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
     wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
@@ -470,63 +509,90 @@ def log_check_line(lg: ImuLog, channel: str) -> str:
     return line
 
 
-#: The temperature fit per log and channel, or why there is none (once per loaded log).
-_TEMPS: weakref.WeakKeyDictionary[ImuLog, dict[str, tuple[TemperatureFit | None, str]]] = (
-    weakref.WeakKeyDictionary()
-)
+#: The temperature fit per log, channel and whether it is forced (``always``), or why there
+#: is none (once per loaded log).
+_TEMPS: weakref.WeakKeyDictionary[
+    ImuLog, dict[tuple[str, bool], tuple[TemperatureFit | None, str]]
+] = weakref.WeakKeyDictionary()
 
 
-def _temperature_of(lg: ImuLog, channel: str) -> tuple[TemperatureFit | None, str]:
+def _temperature_of(
+    lg: ImuLog, channel: str, force: bool = False
+) -> tuple[TemperatureFit | None, str]:
     """The temperature fit of a channel and ``""``, or None and why there is none (``""``:
-    no temperature channel beside it). Cached per log and channel."""
+    no temperature channel beside it). ``force``: the relation taken out whatever its test
+    says (the ``auto`` fit itself when it already is). Cached per log, channel and ``force``."""
     with _CHECKS_LOCK:
         done = _TEMPS.setdefault(lg, {})
-        if channel in done:
-            return done[channel]
-    tname = None if lg.is_summary else find_temperature(lg, "auto", channel=channel)
+        if (channel, force) in done:
+            return done[(channel, force)]
     out: tuple[TemperatureFit | None, str] = (None, "")
-    if tname is not None:
-        try:  # by its name (a channel the fit cannot use says why), as `--temperature auto`
-            tf = fit_log_temperature(lg, channel, tname, compensate="auto")
-            why = "" if tf is None or tf.applied else "its effect is not distinguishable from 0"
-            out = (tf, why)
-        except ValueError as e:  # constant temperature, too short, NaN
-            out = (None, message_of(e))
+    if force:
+        auto, why = _temperature_of(lg, channel)
+        if auto is None or auto.applied:
+            out = (auto, why)
+        else:  # the same relation, taken out: as `gmwm fit --temperature COLUMN`
+            out = (fit_log_temperature(lg, channel, auto.temperature, compensate=True), "")
+    else:
+        tname = None if lg.is_summary else find_temperature(lg, "auto", channel=channel)
+        if tname is not None:
+            try:  # by its name (a channel the fit cannot use says why), as `--temperature auto`
+                out = (fit_log_temperature(lg, channel, tname, compensate="auto"), "")
+            except ValueError as e:  # constant temperature, too short, NaN
+                out = (None, message_of(e))
     with _CHECKS_LOCK:
-        done[channel] = out
+        done[(channel, force)] = out
     return out
 
 
-def temperature_fit_of(lg: ImuLog, channel: str) -> TemperatureFit | None:
-    """The bias-temperature fit of one channel of a log
-    (:func:`engine.inference.temperature.fit_log_temperature`, temperature channel found
-    automatically, compensated only when the data show an effect, as ``gmwm fit
-    --temperature auto``; a log cut into still segments on its segments), or None: no
+def temperature_fit_of(lg: ImuLog, channel: str, compensate: str = "auto") -> TemperatureFit | None:
+    """The bias-temperature fit of one channel of a log under the choice ``compensate``
+    (:data:`COMPENSATION`; :func:`engine.inference.temperature.fit_log_temperature`,
+    temperature channel found automatically; a log cut into still segments on its segments):
+    with ``auto`` and ``off``, compensated only when the data show an effect, as ``gmwm fit
+    --temperature auto`` (``off`` shows it, :func:`is_compensated` leaves it out); with
+    ``always``, compensated whatever the test says, as ``--temperature COLUMN``. None: no
     temperature channel, a WV summary, or a relation that cannot be fitted (a constant
-    temperature, too few samples; :func:`temperature_unusable` says why). Cached per log and
-    channel."""
-    return _temperature_of(lg, channel)[0]
+    temperature, too few samples; :func:`temperature_unusable` says why). Cached per log,
+    channel and choice."""
+    return _temperature_of(lg, channel, compensation_mode(compensate) == "always")[0]
 
 
 def temperature_unusable(lg: ImuLog, channel: str) -> str:
-    """Why a channel with a temperature channel beside it is not compensated, in one phrase
-    (the fit cannot use it, or its effect is not distinguishable from 0; ``""``: it is, or it
-    has no temperature channel)."""
+    """Why the temperature channel beside a channel cannot compensate it, in one phrase (the
+    fit cannot use it: a constant temperature, too few samples, NaN); ``""`` when it can (a
+    sensitivity the test cannot tell from 0 included: ``always`` takes it out), or when it
+    has no temperature channel."""
     return _temperature_of(lg, channel)[1]
 
 
-def temperature_line(lg: ImuLog, channel: str, compensate: bool = True) -> str:
+#: What the info line says of the choice in force (:func:`temperature_line`).
+_COMPENSATED = (
+    "the WV and the fit are of the temperature-compensated signal (the raw signal's WV in grey)"
+)
+_RAW = "the WV and the fit are of the raw signal"
+
+
+def temperature_line(lg: ImuLog, channel: str, compensate: str = "auto") -> str:
     """The one line the Fit view says of a channel with a temperature channel beside it: the
-    sensitivity with its interval in datasheet units, and whether the WV and the fit are of
-    the compensated signal (``compensate``) or of the raw one; ``""`` without one."""
-    tf = temperature_fit_of(lg, channel)
+    sensitivity with its interval in datasheet units, the choice in force
+    (:data:`COMPENSATION`; for ``auto`` with its test's p-value), and whether the WV and the
+    fit are of the compensated signal or of the raw one; ``""`` without one."""
+    mode = compensation_mode(compensate)
+    tf = temperature_fit_of(lg, channel, mode)
     if tf is None:
         return ""
-    if not tf.applied:  # the line says so: the sensitivity is information only
-        return f"{tf.line()}; the WV and the fit are of the raw signal"
-    if not compensate:
-        return f"{tf.line()}; compensation is off: the WV and the fit are of the raw signal"
-    return (
-        f"{tf.line()}; the WV and the fit are of the temperature-compensated signal "
-        "(the raw signal's WV in grey)"
-    )
+    p = f"p = {tf.p_value:.2g}"
+    if mode == "off":
+        return f"{tf.line(anyway=_ANYWAY)}; compensation off: {_RAW}"
+    if mode == "always":
+        return (
+            f"{tf.line()}; compensation always ({p}, taken out whatever the test): {_COMPENSATED}"
+        )
+    if not tf.applied:  # the line says so and gives p: the sensitivity is information only
+        return f"{tf.line(anyway=_ANYWAY)}; compensation auto: {_RAW}"
+    return f"{tf.line()}; compensation auto ({p} < {1 - tf.level:.2g}): {_COMPENSATED}"
+
+
+#: How a session compensates anyway what ``auto`` leaves in.
+_ANYWAY = "choose 'always' to compensate anyway"

@@ -9,7 +9,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from gmwm_app.data import PreparedQuery, check_fs, message_of
+from gmwm_app.data import (
+    COMPENSATION,
+    PreparedQuery,
+    check_fs,
+    compensation_mode,
+    message_of,
+)
 
 __all__ = ["QueryMixin"]
 
@@ -29,7 +35,8 @@ class QueryMixin(StateFields):
 
         E.g. ``{"source": "demo", "channel": "gyro_x", "fs": "100", "robust": "0",
         "model": "2*GM+WN+RW"}``; ``path`` is added for a server file, ``temperature=0`` when
-        the temperature compensation is off (on is the default: no parameter).
+        the temperature compensation is off (as links made before the choice had it) and
+        ``temperature=always`` when it is forced (``auto``, the default: no parameter).
         """
         q = {"source": self.source}
         if self.source == "path" and self.path:
@@ -41,8 +48,8 @@ class QueryMixin(StateFields):
         if self.fs:
             q["fs"] = f"{self.fs:.12g}"
         q["robust"] = "1" if self.robust else "0"
-        if not self.compensate:
-            q["temperature"] = "0"
+        if self.compensate != "auto":
+            q["temperature"] = "0" if self.compensate == "off" else str(self.compensate)
         if self.weights != "ci":
             q["weights"] = self.weights
         if len(self.model):
@@ -91,15 +98,12 @@ class QueryMixin(StateFields):
             else:
                 out["problems"].append(f"robust={q['robust']!r} in the link is not 0 or 1")
         if "temperature" in q:
-            r = q["temperature"].strip().lower()
-            if r in ("1", "true", "yes", "on", "auto"):
-                out["compensate"] = True
-            elif r in ("0", "false", "no", "off", "none"):
-                out["compensate"] = False
-            else:
+            try:  # the choice, or the switch of older links (1: on, that is auto; 0: off)
+                out["compensate"] = compensation_mode(q["temperature"])
+            except ValueError:
                 out["problems"].append(
-                    f"temperature={q['temperature']!r} in the link is not 0 (compensation off) "
-                    "or 1 (on)"
+                    f"temperature={q['temperature']!r} in the link is not one of "
+                    f"{', '.join(COMPENSATION)} (or 0 for off)"
                 )
         if "weights" in q:
             w = q["weights"].strip().lower()
@@ -141,7 +145,7 @@ class QueryMixin(StateFields):
                 s.get("channel"),
                 s.get("fs"),
                 bool(s.get("robust", False)),
-                bool(s.get("compensate", True)),
+                s.get("compensate", "auto"),
             )
         return PreparedQuery(s, loaded, problems)
 
@@ -179,7 +183,7 @@ class QueryMixin(StateFields):
                 channel=s.get("channel"),
                 fs=s.get("fs"),
                 robust=s.get("robust"),
-                compensate=s.get("compensate", True),
+                compensate=s.get("compensate", "auto"),
             )
             if self.error:
                 problems.append(self.error)
@@ -215,5 +219,6 @@ class QueryMixin(StateFields):
             "unit": self.unit,
             "robust_wv": self.robust,
             "temperature_compensated": bool(self.wv_raw is not None),
+            "temperature_compensation": self.compensate,
             "wv_summary_file": self.is_summary,
         }

@@ -37,8 +37,10 @@ def session_report(state: AppState) -> str:
         raise ValueError("load a log first: the report is of the session's log and fit")
     if res is None or not state.channel:
         raise ValueError("fit a model first (add a process): the report shows the session's fit")
-    # with the compensation on, the fit is of the compensated signal: the report says so
-    tf = temperature_fit_of(lg, state.channel) if state.compensate else None
+    # unless the compensation is off, the temperature fit in force: the report says whether
+    # the fit is of the compensated signal
+    off = state.compensate == "off"
+    tf = None if off else temperature_fit_of(lg, state.channel, state.compensate)
     rep = gather_report(
         lg,
         fits={state.channel: res},

@@ -29,7 +29,7 @@ import param
 from engine.formats import FORMATS, export, misfit
 from engine.io import ImuLog
 from engine.session import Session, session_from_json, session_to_json
-from gmwm_app.data import LoadedData
+from gmwm_app.data import LoadedData, compensation_mode
 from gmwm_app.export_bound import BoundOptions
 from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size, public_path
@@ -88,7 +88,7 @@ def session_json(state: AppState, load: dict[str, Any] | None = None) -> str:
         "fs": state.fs,
         "fs_source": state.fs_source,
         "robust": bool(state.robust),
-        "compensate": bool(state.compensate),
+        "compensate": state.compensate,
         "model": state.model.spec(),
         "query": state.to_query(),
     }
@@ -147,7 +147,12 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
     channel = app.get("channel") or next(iter(sess.models), None)
     fs = app.get("fs")
     robust = bool(app.get("robust", False))
-    compensate = bool(app.get("compensate", True))  # (sessions saved before: on, as then)
+    # the choice (sessions saved with the switch of before: True is auto, False off; without
+    # the key: auto, as then)
+    try:
+        compensate = compensation_mode(app.get("compensate", "auto"))
+    except ValueError as e:  # a session file edited by hand: which file, what to do
+        raise ValueError(f"{name}: {e}; edit 'compensate' in the file or remove it") from None
     segment = sess.load.get("segment")
     segment = segment if isinstance(segment, str) else None
     plan = RestorePlan(sess, None)
@@ -231,7 +236,7 @@ def apply_restore(state: AppState, plan: RestorePlan) -> bool:
             channel=app.get("channel") or None,
             fs=user_fs,
             robust=bool(app.get("robust", False)),
-            compensate=bool(app.get("compensate", True)),
+            compensate=compensation_mode(app.get("compensate", "auto")),
         )
         if state.error:
             problems.append(state.error)

@@ -40,9 +40,11 @@ import engine as eg
 from engine.inference.temperature import find_temperature
 from engine.io import ImuLog
 from gmwm_app.data import (
+    COMPENSATION,
     LoadedData,
     channel_names,
     check_fs,
+    compensation_mode,
     compute_wv,
     fs_source,
     is_compensated,
@@ -185,15 +187,20 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     temperature = param.String(
         default="",
         doc="With a temperature channel beside the channel shown: its bias-temperature "
-        "sensitivity with its interval, one line (the WV and the fit are then of the "
-        "compensated signal, unless compensate is off); empty otherwise.",
+        "sensitivity with its interval, the compensation choice in force (for auto with "
+        "its test's p-value) and whether the WV and the fit are of the compensated or the "
+        "raw signal, one line; empty otherwise.",
     )
-    compensate = param.Boolean(
-        default=True,
-        label="Compensate temperature",
-        doc="Fit the WV of the temperature-compensated signal when the channel shown has a "
-        "temperature channel beside it (its bias-temperature relation taken out, "
-        "engine.inference.temperature); off: the raw signal's. No effect without one.",
+    compensate: param.Selector[str] = param.Selector(
+        default="auto",
+        objects=list(COMPENSATION),
+        label="Temperature compensation",
+        doc="When the channel shown has a temperature channel beside it, whether the WV "
+        "fitted is that of its temperature-compensated signal (its bias-temperature relation "
+        "taken out, engine.inference.temperature): auto, when the test of the relation "
+        "rejects at 5 % (gmwm fit --temperature auto); always, whatever the test says "
+        "(--temperature COLUMN); off, the raw signal's (--temperature none). No effect "
+        "without one.",
     )
     temperature_channel = param.String(
         default="",
@@ -209,8 +216,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         class_=eg.WaveletVariance,
         default=None,
         allow_None=True,
-        doc="With the compensation on: the WV of the raw (uncompensated) signal, drawn "
-        "beside the fitted one; None otherwise.",
+        doc="While the channel shown is compensated: the WV of the raw (uncompensated) "
+        "signal, drawn beside the fitted one; None otherwise.",
     )
 
     def __init__(self, **params: Any) -> None:
@@ -226,16 +233,17 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
         self._reverting = False  # a failed compensation switch is being put back
+        self.param.watch(self._compensate_changed, "compensate")
 
     # ---------------------------------------------------------------------------------
     # helpers
     # ---------------------------------------------------------------------------------
     def wv_matrix(self, lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
-        """:func:`gmwm_app.data.wv_matrix_of` (of the temperature-compensated signals when
-        :attr:`compensate` is on), cached in the session's WV cache while ``lg`` is the
-        session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
+        """:func:`gmwm_app.data.wv_matrix_of` (of the temperature-compensated signals that
+        the choice :attr:`compensate` compensates), cached in the session's WV cache while
+        ``lg`` is the session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
         """
-        comp = bool(self.compensate)
+        comp = str(self.compensate)
         with self._lock:
             cache = self._wv_cache if self._log is lg else None
             hit = cache.matrix(channels, fs, comp) if cache is not None else None
@@ -345,8 +353,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         progress: Callable[[int, int], object] | None = None,
     ) -> None:
         """Compute a WV of the current log into the cache (worker-thread safe, no state change):
-        that of the compensated signal when :attr:`compensate` is on and the channel has a
-        temperature channel beside it, and then the raw one too (:func:`gmwm_app.data.precompute`).
+        that of the compensated signal when the choice :attr:`compensate` compensates the
+        channel, and then the raw one too (:func:`gmwm_app.data.precompute`).
 
         :meth:`select_channel`, :meth:`set_fs` and :meth:`set_robust` then find it cached,
         and the channel's log check (:func:`gmwm_app.data.log_check_line`) done.
@@ -381,11 +389,12 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # WV cache
     # ---------------------------------------------------------------------------------
     def get_wv(
-        self, channel: str, fs: float, robust: bool, compensate: bool | None = None
+        self, channel: str, fs: float, robust: bool, compensate: str | bool | None = None
     ) -> eg.WaveletVariance:
         """The WV of a channel: from the cache, or computed once and cached; that of its
-        temperature-compensated signal when ``compensate`` (:attr:`compensate` by default) and
-        the channel has a temperature channel beside it (:func:`gmwm_app.data.is_compensated`).
+        temperature-compensated signal when the choice ``compensate`` (:attr:`compensate` by
+        default; True: ``auto``, False: ``off``) compensates the channel
+        (:func:`gmwm_app.data.is_compensated`).
 
         Raises
         ------
@@ -394,7 +403,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             summary file.
         """
         lg = self._loaded_log()
-        comp = is_compensated(lg, channel, self.compensate if compensate is None else compensate)
+        want = self.compensate if compensate is None else compensation_mode(compensate)
+        comp = is_compensated(lg, channel, want)
         with self._lock:
             wv = self._wv_cache.find(channel, fs, robust, comp)
         if wv is not None:
@@ -439,11 +449,12 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         channel: str | None = None,
         fs: float | None = None,
         robust: bool | None = None,
-        compensate: bool | None = None,
+        compensate: str | bool | None = None,
     ) -> bool:
         """Make a read log the session's data; select a channel, compute (or reuse) its WV
-        (with ``compensate``, :attr:`compensate` by default: of the temperature-compensated
-        signal when the channel has a temperature channel beside it, and the raw one beside).
+        (with the choice ``compensate``, :attr:`compensate` by default: of the
+        temperature-compensated signal when it compensates the channel, and the raw one
+        beside).
 
         The channel is ``channel`` if given, else the current one if the new log has it, else
         the first. The model is kept and refitted (an empty model becomes the form of a teaching
@@ -474,7 +485,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                     "the robust WV needs the raw log"
                 )
                 rob = False
-            want = self.compensate if compensate is None else bool(compensate)
+            want = self.compensate if compensate is None else compensation_mode(compensate)
             comp = is_compensated(lg, ch, want)
             cache = WVCache(loaded.wv_cache)
             computed = 0
@@ -535,7 +546,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         lg: ImuLog,
         ch: str,
         wv: eg.WaveletVariance,
-        compensate: bool,
+        compensate: str,
         wv_raw: eg.WaveletVariance | None,
     ) -> dict[str, Any]:
         n = int(wv.n if lg.is_summary else np.size(lg.channels[ch]))
@@ -626,17 +637,19 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         )
         return not msgs
 
-    @param.depends("compensate", watch=True)
-    def _compensate_changed(self) -> None:
-        """The compensation switched (by its widget, a URL, a restored session): show the WV
-        of the compensated or of the raw signal and refit on it (nothing to do when the WV
-        shown is already that one, e.g. an install that set both)."""
+    def _compensate_changed(self, event: Any) -> None:
+        """The compensation choice changed (by its widget, a URL, a restored session): show
+        the WV of the compensated or of the raw signal and refit on it, and say the choice in
+        the info line (nothing else to do when the WV shown is already that one, e.g. an
+        install that set both, or ``auto`` and ``always`` on a channel whose test rejects)."""
         if self._log is None or self.wv is None or not self.channel or self._reverting:
             return
 
         def run() -> bool:
             wv = self.get_wv(self.channel, self._data_fs(), self.robust)
-            if wv is self.wv:
+            if wv is self.wv:  # the same WV: the line still says which choice is in force
+                lg = self._loaded_log()
+                self._publish(temperature=temperature_line(lg, self.channel, self.compensate))
                 return True
             return self._switch_wv(wv)
 
@@ -645,7 +658,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             if self.wv is before:  # nothing switched: the switch (and its widget) go back
                 self._reverting = True
                 try:
-                    self.compensate = not self.compensate
+                    self.compensate = event.old
                 finally:
                     self._reverting = False
 

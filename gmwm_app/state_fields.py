@@ -36,7 +36,7 @@ class StateFields(Protocol):
     unit: str
     is_summary: bool
     robust: bool
-    compensate: bool
+    compensate: str
     wv: eg.WaveletVariance | None
     wv_raw: eg.WaveletVariance | None
     model: eg.Model
@@ -62,7 +62,7 @@ class StateFields(Protocol):
         channel: str | None = None,
         fs: float | None = None,
         robust: bool | None = None,
-        compensate: bool | None = None,
+        compensate: str | bool | None = None,
     ) -> bool: ...
     def set_model(self, model: eg.Model | str) -> bool: ...
     def display_objective(self) -> float | None: ...

@@ -31,8 +31,9 @@ N_WV_MATRICES = 4
 
 #: Key of a WV: ``(channel, fs in Hz, robust, compensated)``.
 WVKey = tuple[str, float, bool, bool]
-#: Key of a WV/WCCV matrix: ``(channels, fs in Hz, temperature compensation asked for)``.
-MatrixKey = tuple[tuple[str, ...], float, bool]
+#: Key of a WV/WCCV matrix: ``(channels, fs in Hz, temperature compensation choice)`` (the
+#: choice, not whether each channel is compensated: a matrix mixes channels).
+MatrixKey = tuple[tuple[str, ...], float, str]
 
 
 def wv_from_cache(
@@ -123,20 +124,20 @@ class WVCache:
         store_wv(self.wvs, channel, fs, robust, compensated, wv)
 
     def matrix(
-        self, channels: Sequence[str], fs: float, compensate: bool = False
+        self, channels: Sequence[str], fs: float, compensate: str = "off"
     ) -> tuple[eg.WVMatrix, str] | None:
-        """The cached WV/WCCV matrix of ``channels`` at ``fs`` (of the compensated signals
-        with ``compensate``) and its notice, or None."""
-        return self.matrices.get((tuple(channels), float(fs), bool(compensate)))
+        """The cached WV/WCCV matrix of ``channels`` at ``fs`` (of the signals the
+        temperature compensation choice ``compensate`` compensates) and its notice, or None."""
+        return self.matrices.get((tuple(channels), float(fs), str(compensate)))
 
     def store_matrix(
         self,
         channels: Sequence[str],
         fs: float,
         out: tuple[eg.WVMatrix, str],
-        compensate: bool = False,
+        compensate: str = "off",
     ) -> None:
         """Keep a WV/WCCV matrix and its notice; the oldest beyond :attr:`n_matrices` go."""
-        self.matrices[(tuple(channels), float(fs), bool(compensate))] = out
+        self.matrices[(tuple(channels), float(fs), str(compensate))] = out
         for key in list(self.matrices)[: -self.n_matrices]:
             del self.matrices[key]

@@ -268,8 +268,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             print(
                 terminal_text(f"gmwm batch: {lf.source}: {cli_text(q['summary'])}"), file=sys.stderr
             )
-        for tf in lf.temperature.values():  # each channel with a temperature fit, one line
-            print(terminal_text(f"gmwm batch: {lf.source}: {cli_text(tf.line())}"), file=sys.stderr)
+        for t in lf.temperature_status().values():  # each channel with a temperature fit
+            print(terminal_text(f"gmwm batch: {lf.source}: {cli_text(t['line'])}"), file=sys.stderr)
     for w in res.warnings:  # the fits' own (e.g. a GM faster than one sample)
         queue_warning(args, w)
     if not res.fitted:

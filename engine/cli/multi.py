@@ -13,10 +13,19 @@ from typing import Any
 from .._jsonutil import json_ready
 from ..fit import FitError
 from ..fit.replicates import fit_replicates
+from ..inference.temperature import TemperatureFit
 from ..io import load_log
 from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
-from .common import bootstrap_kwargs, load_wv, log_kwargs, queue_warning, warn_fs_unknown
+from .common import (
+    bootstrap_kwargs,
+    cli_text,
+    load_wv,
+    log_kwargs,
+    queue_warning,
+    temperature_fit,
+    warn_fs_unknown,
+)
 from .progress import Bar
 
 __all__ = ["cli_fit"]
@@ -104,18 +113,38 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             f"are {', '.join(log.channels)}"
         )
     model = MultiModel(names, args.model, shared=shared or ())
+    # --temperature as the single-channel fit: each channel's relation fitted, said in one
+    # stderr line, and taken out when the fit says so (TemperatureFit.applied: always for a
+    # channel named, with auto only when its test rejects); the WVs and WCCVs are then those
+    # of the compensated signals
+    fits: dict[str, TemperatureFit] = {}
+    for c in names:
+        tf = temperature_fit(args, log, c)
+        if tf is not None:
+            fits[c] = tf
+            log = tf.compensated_log(log)
     wvm = wv_matrix(log, channels=names, levels=args.levels)
     mres = fit_mgmwm(wvm, model, weights=args.weights)
     test = None
     if getattr(args, "dependence_test", False):
         test = dependence_test(wvm, model, **bootstrap_kwargs(args))
+    done = [c for c, tf in fits.items() if tf.applied]
     if args.json:
         d = mres.to_dict()
         d["input"] = args.input
+        # per channel its temperature fit (None: no temperature channel beside it); None
+        # when no channel has one
+        d["temperature"] = {c: fits[c].to_dict() if c in fits else None for c in names}
+        if not fits:
+            d["temperature"] = None
         if test is not None:
             d["dependence_test"] = test.to_dict()
         return json_ready(d)
     text = f"{args.input} [{', '.join(names)}]\n{mres.summary()}"
+    for tf in fits.values():
+        text += f"\n\n  {cli_text(tf.line())}"
+    if done:
+        text += f"\n  the fit above is of the temperature-compensated {', '.join(done)}"
     if test is not None:
         text += f"\n\n  {test.summary()}"
     return text

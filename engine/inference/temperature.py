@@ -155,6 +155,20 @@ class TemperatureFit:
     PROCESS: ClassVar[str] = "temperature"
     QUANTITY: ClassVar[str] = "bias temperature sensitivity"
     SYMBOL: ClassVar[str] = "S_T"
+    #: The quantity of a sensitivity that was not taken out of the signal (information only:
+    #: a fleet pools it apart from the compensated units').
+    QUANTITY_NOT_APPLIED: ClassVar[str] = "bias temperature sensitivity, not compensated"
+
+    @property
+    def quantity(self) -> str:
+        """:attr:`QUANTITY` when :attr:`applied`, :attr:`QUANTITY_NOT_APPLIED` otherwise."""
+        return self.QUANTITY if self.applied else self.QUANTITY_NOT_APPLIED
+
+    @property
+    def marker(self) -> str:
+        """``""`` when :attr:`applied`; otherwise ``"not compensated (p = 0.41)"``, the mark
+        beside a sensitivity shown as information only (the fleet's tables)."""
+        return "" if self.applied else f"not compensated (p = {self.p_value:.2g})"
 
     @property
     def interval(self) -> np.ndarray:
@@ -164,9 +178,10 @@ class TemperatureFit:
         z = float(stats.norm.ppf(0.5 + self.level / 2))
         return np.column_stack([self.coef - z * self.se, self.coef + z * self.se])
 
-    def line(self) -> str:
+    def line(self, anyway: str | None = None) -> str:
         """One line: the sensitivity with its interval and the temperature range, and, when
-        not :attr:`applied`, that it is not compensated and how to compensate anyway."""
+        not :attr:`applied`, that it is not compensated and how to compensate anyway
+        (``anyway``: how, in the caller's words; by default the argument to name)."""
         lo, hi = self.sensitivity_interval
         t0, t1 = self.temperature_range
         lag = ""
@@ -180,9 +195,11 @@ class TemperatureFit:
         )
         if self.applied:
             return out
+        if anyway is None:
+            anyway = f"name it, temperature='{self.temperature}', to compensate anyway"
         return (
             f"{out}: not distinguishable from 0 (p = {self.p_value:.2g}), not compensated "
-            f"(name it, temperature='{self.temperature}', to compensate anyway)"
+            f"({anyway})"
         )
 
     def to_dict(self) -> dict[str, Any]:

@@ -168,7 +168,9 @@ class TermValue:
 
     ``column`` is ``(process, symbol, unit)`` (``("WN", "ARW", "deg/sqrt(h)")``); ``native``
     the same value in the channel's own unit (for the limits); ``z`` the robust z-score
-    across the units (NaN: fewer than :data:`MIN_UNITS_Z` units have it).
+    across the units (NaN: fewer than :data:`MIN_UNITS_Z` units have it); ``note`` a mark
+    shown beside the value (``"not compensated (p = 0.41)"``: a temperature sensitivity given
+    as information only), ``""`` for none.
     """
 
     column: tuple[str, str, str]
@@ -180,6 +182,7 @@ class TermValue:
     native_symbol: str
     z: float = math.nan
     rel: float = math.nan
+    note: str = ""
 
     @property
     def outlier(self) -> bool:
@@ -267,22 +270,24 @@ def ieee_terms(fit: Any) -> list[TermValue]:
 
 
 def temperature_terms(tf: Any) -> list[TermValue]:
-    """The bias-temperature sensitivity of a compensated channel as a noise term of process
-    ``temperature`` (symbol ``S_T``, in deg/h/degC or mg/degC with its interval: the
-    :class:`engine.inference.temperature.TemperatureFit`'s own figures); none without a
-    temperature fit (the fleet's table shows a dash for that unit)."""
+    """The bias-temperature sensitivity of a channel with a temperature fit as a noise term of
+    process ``temperature`` (symbol ``S_T``, in deg/h/degC or mg/degC with its interval: the
+    :class:`engine.inference.temperature.TemperatureFit`'s own figures), marked when the
+    channel was not compensated (its :attr:`~TermValue.note`, the fit's ``marker``); none
+    without a temperature fit (the fleet's table shows a dash for that unit)."""
     if tf is None:
         return []
     lo, hi = tf.sensitivity_interval
     return [
         TermValue(
             (tf.PROCESS, tf.SYMBOL, tf.sensitivity_unit),
-            tf.QUANTITY,
+            tf.quantity,
             float(tf.sensitivity),
             float(lo),
             float(hi),
             float(tf.coef[0]),
             tf.SYMBOL,
+            note=tf.marker,
         )
     ]
 
@@ -358,6 +363,7 @@ class FleetUnit:
                             "z": t.z,
                             "rel": t.rel,
                             "outlier": t.outlier,
+                            "note": t.note,
                         }
                         for t in ts
                     ]

@@ -250,10 +250,10 @@ def test_wv_cache_maps_and_eviction() -> None:
     for k in range(N_WV_MATRICES + 2):
         c.store_matrix(("a", "b"), float(k + 1), (k, f"note {k}"))  # type: ignore[arg-type]
     assert list(c.matrices) == [
-        (("a", "b"), float(k + 1), False) for k in range(2, N_WV_MATRICES + 2)
+        (("a", "b"), float(k + 1), "off") for k in range(2, N_WV_MATRICES + 2)
     ]
     assert c.matrix(["a", "b"], 1.0) is None and c.matrix(["a", "b"], 3.0) == (2, "note 2")
-    assert c.matrix(["a", "b"], 3.0, compensate=True) is None
+    assert c.matrix(["a", "b"], 3.0, compensate="auto") is None
     assert set(c.wvs) == {("a", 100.0, True, False), ("a", 100.0, False, False),
                           ("a", 50.0, False, False), ("b", 100.0, False, False)}  # fmt: skip
 

@@ -274,9 +274,10 @@ def test_model_selection_tab_ranks_and_loads_a_row(server: str, new_tab: Callabl
 def test_temperature_switch_refits_on_the_raw_wv(
     server: str, new_tab: Callable[[], Tab], tmp_path: Path
 ) -> None:
-    """An uploaded log with a temperature column shows the "Compensate temperature" box
-    ticked; unticking it in the page refits on the raw WV (the link says temperature=0), and
-    ticking it again brings the compensated fit back; no console error."""
+    """An uploaded log with a temperature column shows the "Temperature compensation" choice
+    at auto (compensated: the planted sensitivity is clear); choosing off in the page refits on
+    the raw WV (the link says temperature=0), choosing always brings the compensated fit back
+    (the link says temperature=always), and auto again keeps it; no console error."""
     import numpy as np
 
     import engine as eg
@@ -291,24 +292,35 @@ def test_temperature_switch_refits_on_the_raw_wv(
 
     t = new_tab().open(server + "?channel=gyro_x&model=WN%2BRW")
     t.page.locator("input[type=file]").first.set_input_files(str(path))
-    box = t.page.locator(".gmwm-compensate input").first
-    box.wait_for(timeout=TIMEOUT_MS)
-    app = _app_for(lambda a: a.state.filename == "thermal.csv")
-    assert app is not None and box.is_checked() and app.state.wv_raw is not None
-    compensated = app.state.result.params["RW.gamma2"]
-    box.click()
-    t.wait_for(lambda: not app.state.compensate, "the state to follow the box")
-    t.wait_for(lambda: "temperature=0" in t.page.url, "the link to carry the switch")
-    assert app.state.wv_raw is None and app.state.result.params["RW.gamma2"] != compensated
-    box.click()
-    # the state's switch flips before its watcher (on the server's thread) has refitted: wait
-    # for the refit's published result, not for the switch alone
-    t.wait_for(lambda: "temperature=0" not in t.page.url, "the link to drop the switch")
+    # the upload is read and its WVs computed in a job: wait for the server's state first
     t.wait_for(
-        lambda: (
-            app.state.wv_raw is not None and app.state.result.params["RW.gamma2"] == compensated
-        ),
-        "the compensated fit to come back",
+        lambda: _app_for(lambda a: a.state.temperature_channel == "temperature") is not None,
+        "the uploaded log on the server",
+        timeout_s=3 * TIMEOUT_MS / 1000,
     )
-    assert app.state.compensate and box.is_checked()
+    app = _app_for(lambda a: a.state.filename == "thermal.csv")
+    choice = t.page.locator(".gmwm-compensate select").first
+    choice.wait_for(timeout=TIMEOUT_MS)
+    assert app is not None and choice.input_value() == "auto" and app.state.wv_raw is not None
+    compensated = app.state.result.params["RW.gamma2"]
+
+    # the state's choice changes before its watcher (on the server's thread) has refitted:
+    # wait for the link and for the refit's published result, not for the choice alone
+    def refitted(raw: bool) -> bool:
+        s = app.state
+        same = s.result is not None and s.result.params["RW.gamma2"] == compensated
+        return (s.wv_raw is None and not same) if raw else (s.wv_raw is not None and same)
+
+    choice.select_option("off")
+    t.wait_for(lambda: "temperature=0" in t.page.url, "the link to carry the choice")
+    t.wait_for(lambda: refitted(raw=True), "the fit of the raw WV")
+    assert app.state.compensate == "off"
+    choice.select_option("always")
+    t.wait_for(lambda: "temperature=always" in t.page.url, "the link to carry always")
+    t.wait_for(lambda: refitted(raw=False), "the compensated fit to come back")
+    assert app.state.compensate == "always" and "compensation always" in app.state.temperature
+    choice.select_option("auto")
+    t.wait_for(lambda: "temperature=" not in t.page.url, "the link to drop the choice")
+    t.wait_for(lambda: "compensation auto" in app.state.temperature, "the line to say auto")
+    assert refitted(raw=False) and choice.input_value() == "auto"
     assert t.errors == []

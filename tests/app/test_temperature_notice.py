@@ -1,8 +1,9 @@
 """The app and a log with a temperature channel: the Fit view says the bias-temperature
 sensitivity in one line (AppState.temperature) and fits the compensated signal, as ``gmwm fit
---temperature auto`` does, with the raw signal's WV in grey beside it; the "Compensate
-temperature" switch (AppState.compensate) refits on the raw WV, and the Multi-channel tab's
-WV/WCCV matrix follows it; nothing changes for a log without a temperature channel."""
+--temperature auto`` does, with the raw signal's WV in grey beside it; the "Temperature
+compensation" choice (AppState.compensate: auto, always, off) refits on the raw WV or on the
+compensated one whatever the test says, and the Multi-channel tab's WV/WCCV matrix follows it;
+nothing changes for a log without a temperature channel."""
 
 from __future__ import annotations
 
@@ -96,7 +97,7 @@ def test_switching_compensation_off_refits_on_the_raw_wv(logs):
     raw = eg.wavelet_variance(x + C * temp, fs=FS).variance
     s = AppState()
     assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
-    assert s.compensate and s.temperature_channel == "temperature"
+    assert s.compensate == "auto" and s.temperature_channel == "temperature"
     assert s.compensation_unavailable == ""
     on_wv, on_rw = s.wv, _rw(s)
     assert on_rw == pytest.approx(1e-10, rel=0.3)
@@ -104,20 +105,21 @@ def test_switching_compensation_off_refits_on_the_raw_wv(logs):
     assert "temperature" not in s.to_query()
     computed = s.wv_computations
 
-    s.compensate = False  # what the checkbox made from the parameter does
+    s.compensate = "off"  # what the widget made from the parameter does
     assert s.error == ""
     np.testing.assert_allclose(s.wv.variance, raw, rtol=1e-9)
     assert s.wv_raw is None and _rw(s) > 2 * on_rw
-    assert "compensation is off" in s.temperature and LINE.search(s.temperature)
+    assert "compensation off: the WV and the fit are of the raw signal" in s.temperature
+    assert LINE.search(s.temperature)
     assert s.result.wv is s.wv  # the fit is of the raw WV
     assert s.to_query()["temperature"] == "0"
     link = AppState()
     assert link.from_query({**s.to_query(), "path": str(d / "thermal.csv")}), link.error
-    assert not link.compensate and link.wv_raw is None
+    assert link.compensate == "off" and link.wv_raw is None
     np.testing.assert_allclose(link.wv.variance, raw, rtol=1e-9)
     assert _rw(link) == pytest.approx(_rw(s), rel=1e-9)
 
-    s.compensate = True
+    s.compensate = "auto"
     assert s.wv is on_wv and _rw(s) == pytest.approx(on_rw, rel=1e-12)
     assert s.wv_computations == computed  # both WVs came from the session's cache
 
@@ -129,7 +131,7 @@ def test_the_report_of_an_uncompensated_fit_has_no_temperature_paragraph(logs):
     d, _, _ = logs
     s = AppState()
     assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
-    s.compensate = False
+    s.compensate = "off"
     assert 'class="temperature"' not in session_report(s)
 
 
@@ -143,7 +145,7 @@ def test_the_multi_channel_matrix_follows_the_switch(logs):
     chans = ["gyro_x", "gyro_y"]
     on, note_on = s.wv_matrix(s.log, chans, FS)
     assert "Temperature-compensated" in note_on and "gyro_y ('temperature')" in note_on
-    s.compensate = False
+    s.compensate = "off"
     off, note_off = s.wv_matrix(s.log, chans, FS)
     assert note_off == ""
     for i, ch in enumerate(chans):
@@ -156,27 +158,29 @@ def test_the_multi_channel_matrix_follows_the_switch(logs):
     # temperature terms make the raw one strongly negative at the long scales
     assert off.values[-3, 0, 1] < -abs(on.values[-3, 0, 1])
     assert s.wv_matrix(s.log, chans, FS)[0] is off
-    s.compensate = True
+    s.compensate = "auto"
     assert s.wv_matrix(s.log, chans, FS)[0] is on
     assert s.wvm_computations == 2
 
 
 def test_the_switch_shows_with_a_temperature_channel_and_says_why_it_cannot_be_used(logs):
-    """The page's checkbox is the state's parameter (``Checkbox.from_param``): shown with a
-    temperature channel beside the channel; disabled, with the reason, for a constant
-    temperature; hidden without one. The grey WV is drawn only while compensated."""
+    """The page's choice is the state's parameter (``Select.from_param``: auto, always,
+    off): shown with a temperature channel beside the channel; disabled, with the reason, for
+    a constant temperature; hidden without one. The grey WV is drawn only while
+    compensated."""
     from gmwm_app.app import create_app
 
     d, _, _ = logs
     app = create_app(load=False).gmwm_app
-    s, box, fig = app.state, app.compensate_check, app.views
+    s, box, fig = app.state, app.compensate_choice, app.views
     assert s.load_path(d / "thermal.csv"), s.error
-    assert box.visible and not box.disabled and box.value
+    assert box.visible and not box.disabled and box.value == "auto"
+    assert list(box.options) == ["auto", "always", "off"]
     assert "'temperature'" in box.name
     assert _grey(fig) == len(s.wv)
-    box.value = False  # the user unticks it
-    assert not s.compensate and s.wv_raw is None and _grey(fig) == 0
-    box.value = True
+    box.value = "off"  # the user chooses off
+    assert s.compensate == "off" and s.wv_raw is None and _grey(fig) == 0
+    box.value = "auto"
     assert s.wv_raw is not None and _grey(fig) == len(s.wv)
 
     assert s.load_path(d / "flat.csv"), s.error
@@ -197,7 +201,7 @@ def test_a_real_log_without_temperature_shows_no_switch_and_no_grey_wv(real_data
     s = app.state
     assert s.load_path(real_data / "adis16405_imu1.h5"), s.error
     assert s.temperature_channel == "" and s.temperature == "" and s.wv_raw is None
-    assert not app.compensate_check.visible and app.views.raw is None  # never built
+    assert not app.compensate_choice.visible and app.views.raw is None  # never built
     assert "temperature" not in s.to_query()
     want = s.log.wavelet_variance("gyro_x", fs=s.fs).variance
     np.testing.assert_array_equal(s.wv.variance, want)
@@ -205,7 +209,8 @@ def test_a_real_log_without_temperature_shows_no_switch_and_no_grey_wv(real_data
 
 def test_a_saved_session_keeps_the_switch(logs):
     """A session saved with the compensation off restores with it off: the same raw WV and
-    the same fit (a session file without the key restores with it on, as before)."""
+    the same fit (a session file without the key restores with auto, as before; one saved
+    with the switch of before, True or False, with auto or off)."""
     import json
 
     from gmwm_app import session_view as sv
@@ -213,19 +218,31 @@ def test_a_saved_session_keeps_the_switch(logs):
     d, _, _ = logs
     s = AppState()
     assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
-    s.compensate = False
+    s.compensate = "off"
     text = sv.session_json(s)
-    assert json.loads(text)["app"]["compensate"] is False
+    assert json.loads(text)["app"]["compensate"] == "off"
     other = AppState()
     assert sv.apply_restore(other, sv.prepare_restore(text, "s.json")), other.error
-    assert not other.compensate and other.wv_raw is None
+    assert other.compensate == "off" and other.wv_raw is None
     np.testing.assert_allclose(other.wv.variance, s.wv.variance, rtol=1e-12)
     assert _rw(other) == pytest.approx(_rw(s), rel=1e-9)
     doc = json.loads(text)
     del doc["app"]["compensate"]
     old = AppState()
     assert sv.apply_restore(old, sv.prepare_restore(json.dumps(doc), "s.json")), old.error
-    assert old.compensate and old.wv_raw is not None
+    assert old.compensate == "auto" and old.wv_raw is not None
+    for before, mode in ((False, "off"), (True, "auto")):  # the switch of before
+        doc["app"]["compensate"] = before
+        was = AppState()
+        assert sv.apply_restore(was, sv.prepare_restore(json.dumps(doc), "s.json")), was.error
+        assert was.compensate == mode and (was.wv_raw is None) == (mode == "off")
+    doc["app"]["compensate"] = "sometimes"  # edited by hand: one line naming the file
+    with pytest.raises(ValueError) as e:
+        sv.prepare_restore(json.dumps(doc), "s.json")
+    assert str(e.value) == (
+        "s.json: temperature compensation 'sometimes' is not one of auto, always, off (or 0 "
+        "for off, 1 for auto); edit 'compensate' in the file or remove it"
+    )
 
 
 def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
@@ -244,10 +261,10 @@ def test_a_failed_switch_goes_back_and_says_why(logs, monkeypatch):
         raise ValueError("channel gyro_x: no memory left for its WV")
 
     monkeypatch.setattr(state_mod, "compute_wv", broken)
-    s.compensate = False
+    s.compensate = "off"
     why = "channel gyro_x: no memory left for its WV"
     assert s.error == f"Could not switch the temperature compensation: {why}"
-    assert s.compensate and s.wv is wv and s.result is res
+    assert s.compensate == "auto" and s.wv is wv and s.result is res
 
 
 def test_a_log_cut_into_segments_is_compensated_under_the_rule_of_any_log(logs):
@@ -269,9 +286,10 @@ def test_a_log_cut_into_segments_is_compensated_under_the_rule_of_any_log(logs):
 
 def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path):
     """No true sensitivity, a temperature that barely moves (30.1 to 30.6 degC): the line
-    says the sensitivity with its interval and that it is not compensated; the WV and the fit
-    are the raw signal's (no grey WV beside them), and the switch is disabled with the
-    reason, as `gmwm fit --temperature auto` does not compensate either."""
+    says the sensitivity with its interval, that it is not compensated (``auto``, with the
+    test's p-value) and how to compensate anyway; the WV and the fit are the raw signal's (no
+    grey WV beside them), as `gmwm fit --temperature auto` does not compensate either. The
+    choice stays enabled: ``always`` takes it out (the test below)."""
     t = np.arange(N) / FS
     temp = 30.1 + 0.5 * (1 - np.exp(-t / 900)) + np.random.default_rng(8).normal(0, 0.01, N)
     x = eg.parse_model(SPEC).simulate(N, fs=FS, rng=23)
@@ -286,7 +304,9 @@ def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path)
     lo, hi = (float(v) for v in LINE.search(s.temperature).groups()[1:])
     assert lo < 0 < hi
     assert "not distinguishable from 0" in s.temperature and "raw signal" in s.temperature
-    assert "not distinguishable from 0" in s.compensation_unavailable
+    assert "compensation auto: the WV and the fit are of the raw signal" in s.temperature
+    assert "(choose 'always' to compensate anyway)" in s.temperature
+    assert s.compensation_unavailable == ""  # (before: disabled; the choice can force it)
     raw = s.log.wavelet_variance("gyro_x", fs=s.fs)
     np.testing.assert_allclose(s.wv.variance, raw.variance, rtol=1e-12)
     assert _rw(s) == pytest.approx(eg.fit_gmwm(raw, "WN+RW").params["RW.gamma2"], rel=1e-9)
@@ -295,6 +315,89 @@ def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path)
     from gmwm_app.data import temperature_fit_of, wv_matrix_of
 
     assert not any(temperature_fit_of(s.log, c).applied for c in ("gyro_x", "gyro_y"))
-    wvm, notice = wv_matrix_of(s.log, ["gyro_x", "gyro_y"], s.fs, compensate=True)
+    wvm, notice = wv_matrix_of(s.log, ["gyro_x", "gyro_y"], s.fs, compensate="auto")
     assert "Temperature-compensated" not in notice
     np.testing.assert_allclose(wvm.values[:, 0, 0], raw.variance, rtol=1e-9)
+
+
+def _ramp(path):
+    """gyro_x with no true sensitivity under a temperature that barely moves (30.1 to 30.6
+    degC): ``auto`` leaves it raw (p = 0.74 on this seed)."""
+    t = np.arange(N) / FS
+    temp = 30.1 + 0.5 * (1 - np.exp(-t / 900)) + np.random.default_rng(8).normal(0, 0.01, N)
+    x = eg.parse_model(SPEC).simulate(N, fs=FS, rng=23)
+    units = {"gyro_x": "deg/s", "temperature": "degC"}
+    eg.save_log(path, {"gyro_x": x, "temperature": temp}, FS, units=units)
+    return path
+
+
+def test_always_compensates_what_auto_declines(tmp_path):
+    """``always`` takes out the relation ``auto`` leaves in, as `gmwm fit --temperature
+    COLUMN` does: the WV fitted is that of the engine's named-channel fit (its
+    TemperatureFit.wv, bit for bit up to 1e-12), the raw WV is drawn beside it, the line says
+    "compensation always" with the p-value; the link carries ``temperature=always`` and
+    brings it back; ``off`` and ``auto`` fit the raw WV again, from the session's cache.
+    Before, the app could not force it (its switch was disabled)."""
+    from engine.inference.temperature import fit_log_temperature
+
+    path = _ramp(tmp_path / "ramp.csv")
+    s = AppState()
+    assert s.load_path(path) and s.set_model("WN+RW"), s.error
+    raw_wv = s.wv
+    named = fit_log_temperature(s.log, "gyro_x", "temperature")  # --temperature temperature
+    assert named.applied and named.p_value > 0.05  # the premise: auto declines
+    assert f"p = {named.p_value:.2g}" in s.temperature  # auto says its test's p-value
+    s.compensate = "always"
+    assert s.error == "" and s.wv is not raw_wv
+    np.testing.assert_allclose(s.wv.variance, named.wv.variance, rtol=1e-12)
+    np.testing.assert_allclose(s.wv_raw.variance, raw_wv.variance, rtol=1e-12)
+    assert s.result.wv is s.wv
+    want = eg.fit_gmwm(named.wv, "WN+RW").params["RW.gamma2"]
+    assert _rw(s) == pytest.approx(want, rel=1e-9)
+    assert f"compensation always (p = {named.p_value:.2g}" in s.temperature
+    assert "temperature-compensated signal" in s.temperature
+    assert "not compensated" not in s.temperature
+    assert s.data_info()["temperature_compensated"] is True
+    assert s.data_info()["temperature_compensation"] == "always"
+    q = s.to_query()
+    assert q["temperature"] == "always"
+    link = AppState()
+    assert link.from_query({**q, "path": str(path)}), link.error
+    assert link.compensate == "always" and link.wv_raw is not None
+    np.testing.assert_allclose(link.wv.variance, s.wv.variance, rtol=1e-12)
+    computed = s.wv_computations
+    for mode in ("off", "auto"):
+        s.compensate = mode
+        assert s.wv is raw_wv and s.wv_raw is None, mode
+        assert f"compensation {mode}" in s.temperature
+    assert s.wv_computations == computed  # both WVs from the session's cache
+
+
+def test_auto_and_always_agree_where_the_test_rejects(logs):
+    """On the planted 7.2 deg/h/degC the test rejects: ``auto`` compensates and its line says
+    so with the p-value; ``always`` is the same WV (the same relation, nothing recomputed),
+    its line says "always"."""
+    d, _, _ = logs
+    s = AppState()
+    assert s.load_path(d / "thermal.csv") and s.set_model("WN+RW"), s.error
+    m = re.search(r"compensation auto \(p = (\S+) < 0.05\)", s.temperature)
+    assert m is not None and float(m[1]) < 1e-6, s.temperature
+    wv, computed = s.wv, s.wv_computations
+    s.compensate = "always"
+    assert s.wv is wv and s.wv_computations == computed and s.wv_raw is not None
+    assert "compensation always (p = " in s.temperature
+
+
+def test_links_of_before_and_bad_links(logs):
+    """Links made before the choice: ``temperature=0`` is off, ``temperature=1`` auto; a
+    link with another value names it and the choices in one line, and the rest applies."""
+    d, _, _ = logs
+    p = str(d / "thermal.csv")
+    for value, mode in (("0", "off"), ("1", "auto"), ("always", "always"), ("auto", "auto")):
+        assert AppState().parse_query({"temperature": value})["compensate"] == mode
+    s = AppState()
+    assert not s.from_query({"source": "path", "path": p, "temperature": "sometimes"})
+    assert s.error == (
+        "temperature='sometimes' in the link is not one of auto, always, off (or 0 for off)"
+    )
+    assert s.compensate == "auto" and s.wv_raw is not None

@@ -351,3 +351,61 @@ def test_the_fleet_table_has_each_units_temperature_sensitivity(thermal_fleet):
     # the batch's summary has the same figure (one declaration: TemperatureFit.SYMBOL)
     rows = [r for r in fleet.batch.rows if r.symbol == "S_T"]
     assert [(r.channel, r.unit, r.n_units) for r in rows] == [("gx", "deg/h/degC", 3)]
+
+
+@pytest.fixture(scope="module")
+def marked_fleet(tmp_path_factory):
+    """Two gyro units with a temperature column under the same profile: one with the planted
+    7.2 deg/h/degC (compensated), one with none (seed 503: p = 0.45, so ``auto`` leaves its
+    signal raw and its sensitivity, 0.30 [-0.48, 1.07] deg/h/degC, is information only)."""
+    d = tmp_path_factory.mktemp("marked_fleet")
+    t = np.arange(THERMAL_N) / FS
+    temp = 25 + 5 * (1 - np.exp(-t / 120)) + 2 * np.sin(2 * np.pi * t / 90)
+    m = eg.parse_model(THERMAL_SPEC)
+    for k, c in ((500, THERMAL_C), (503, 0.0)):
+        x = m.simulate(THERMAL_N, fs=FS, rng=k) + c * temp
+        units = {"gx": "deg/s", "temperature": "degC"}
+        save_log(d / f"unit{k}.csv", {"gx": x, "temperature": temp}, FS, units=units)
+    fleet = gather_fleet([str(d / "unit*.csv")], model="WN+RW", channels=["gx"], workers=1)
+    return fleet, _parse(render_fleet_html(fleet))
+
+
+def test_a_sensitivity_not_compensated_is_marked(marked_fleet):
+    """The ``temperature S_T`` column marks the unit whose channel was not compensated, with
+    the test's p-value ("not compensated (p = 0.45)"), in the page's cell, in the fleet's JSON
+    (the term's ``note``) and in the batch's summary (CSV and JSON: its own quantity, ``bias
+    temperature sensitivity, not compensated``, pooled apart from the compensated units');
+    the compensated unit is not marked. Before, both showed a bare number."""
+    from engine.inference.temperature import TemperatureFit
+
+    fleet, page = marked_fleet
+    units = {u.name: u for u in fleet.units}
+    comp = units["unit500.csv"].report.channels["gx"].temperature
+    raw = units["unit503.csv"].report.channels["gx"].temperature
+    assert comp.applied and not raw.applied and raw.p_value == pytest.approx(0.45, abs=0.005)
+    lo, hi = raw.sensitivity_interval
+    assert lo < 0 < hi
+    cols = page.columns["gx"]
+    i = cols.index(TEMP_COL) + 1
+    table = page.tables[("fleet", "gx")]
+    text, attrs = table["unit503.csv"][i]
+    assert attrs["data-note"] == "not compensated (p = 0.45)"
+    assert text.endswith("not compensated (p = 0.45)") and float(attrs["data-value"]) == (
+        raw.sensitivity
+    )
+    text, attrs = table["unit500.csv"][i]
+    assert "data-note" not in attrs and "not compensated" not in text
+    d = fleet.to_dict()
+    notes = {
+        u["name"]: [t["note"] for t in u["terms"]["gx"] if t["symbol"] == "S_T"] for u in d["units"]
+    }
+    assert notes == {"unit500.csv": [""], "unit503.csv": ["not compensated (p = 0.45)"]}
+    rows = {r.quantity: r for r in fleet.batch.rows if r.symbol == "S_T"}
+    assert set(rows) == {TemperatureFit.QUANTITY, TemperatureFit.QUANTITY_NOT_APPLIED}
+    assert rows[TemperatureFit.QUANTITY].mean == comp.sensitivity
+    assert rows[TemperatureFit.QUANTITY_NOT_APPLIED].mean == raw.sensitivity
+    csv = fleet.batch.summary_csv()
+    assert "bias temperature sensitivity, not compensated" in csv
+    status = {Path(s["source"]).name: s for s in fleet.batch.to_dict()["logs"]}
+    t = status["unit503.csv"]["temperature"]["gx"]
+    assert t["compensated"] is False and t["p_value"] == raw.p_value
