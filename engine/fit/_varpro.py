@@ -220,6 +220,18 @@ class NNLSProblem:
         # phi may be 0
         self._fast = not any(model.processes[i].phi_can_vanish for i in self.nl_idx)
         self._c_work = self._c_fixed.copy()  # the weighted design of the point profiled
+        # per kind: its span of u, its columns of the design (a slice when they are adjacent)
+        # and its process's column kernel (the scale terms prepared once)
+        self._kernels = [
+            (
+                g.span,
+                slice(int(g.cols[0]), int(g.cols[-1]) + 1)
+                if np.array_equal(g.cols, np.arange(g.cols[0], g.cols[-1] + 1))
+                else g.cols,
+                g.proto.search_kernel(self.tau, self.fs, g.lo, g.hi),
+            )
+            for g in self.groups
+        ]
         # the positive set of the last NNLS and the other columns: the next point's, most
         # often (see _inner)
         self._active: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -340,12 +352,12 @@ class NNLSProblem:
         h = np.zeros(self.p)
         if s.size:
             _, hs, info = self._dposv(gram[s_col, s], cb[s])  # 3 us, np.linalg.solve 15
-            if info or hs.min() <= 0:
+            if info or min(hs.tolist()) <= 0:  # (a list's min: a few entries)
                 return None
             h[s] = hs
         if rest.size:
             grad = (cb - gram @ h)[rest]
-            if grad.max() > 0 and np.any(grad > self._tol * np.sqrt(gram[rest, rest])):
+            if max(grad.tolist()) > 0 and np.any(grad > self._tol * np.sqrt(gram[rest, rest])):
                 return None
         return h
 
@@ -368,10 +380,10 @@ class NNLSProblem:
             if self._fast and self.k:  # phi_of and _column of each kind's terms at once
                 ul = u.tolist()
                 c = self._c_work
-                for g in self.groups:
-                    pr = g.proto
-                    nls = np.array([pr.search_nl(v, g.lo, g.hi) for v in ul[g.span]])
-                    c[:, g.cols] = self._weigh(pr.basis_many(self.tau, self.fs, nls).T)
+                a_diag = self._a_diag
+                for span, cols, kernel in self._kernels:
+                    x = kernel(ul[span])  # (n, M)
+                    c[:, cols] = (x * a_diag).T if a_diag is not None else self.a @ x.T
             else:
                 c = self._c_fixed.copy()
                 for i, ui in zip(self.nl_idx, u, strict=True):
