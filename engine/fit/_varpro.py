@@ -63,6 +63,9 @@ TC_FLAG = 1.0
 # (log correlation times) and objective (relative).
 CHECK_XATOL = 1e-4
 CHECK_FATOL = 1e-8
+# A local search whose best point comes this close to a minimum already found (in grid steps,
+# every coordinate) without being below it stops there (:func:`local`, :func:`search`).
+MERGE = 0.25
 # Candidates whose exact profile branch and bound computes at once (``profile_many``).
 _CHUNK = 32
 
@@ -220,6 +223,18 @@ class NNLSProblem:
         # phi may be 0
         self._fast = not any(model.processes[i].phi_can_vanish for i in self.nl_idx)
         self._c_work = self._c_fixed.copy()  # the weighted design of the point profiled
+        # per kind: its span of u, its columns of the design (a slice when they are adjacent)
+        # and its process's column kernel (the scale terms prepared once)
+        self._kernels = [
+            (
+                g.span,
+                slice(int(g.cols[0]), int(g.cols[-1]) + 1)
+                if np.array_equal(g.cols, np.arange(g.cols[0], g.cols[-1] + 1))
+                else g.cols,
+                g.proto.search_kernel(self.tau, self.fs, g.lo, g.hi),
+            )
+            for g in self.groups
+        ]
         # the positive set of the last NNLS and the other columns: the next point's, most
         # often (see _inner)
         self._active: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -340,12 +355,12 @@ class NNLSProblem:
         h = np.zeros(self.p)
         if s.size:
             _, hs, info = self._dposv(gram[s_col, s], cb[s])  # 3 us, np.linalg.solve 15
-            if info or hs.min() <= 0:
+            if info or min(hs.tolist()) <= 0:  # (a list's min: a few entries)
                 return None
             h[s] = hs
         if rest.size:
             grad = (cb - gram @ h)[rest]
-            if grad.max() > 0 and np.any(grad > self._tol * np.sqrt(gram[rest, rest])):
+            if max(grad.tolist()) > 0 and np.any(grad > self._tol * np.sqrt(gram[rest, rest])):
                 return None
         return h
 
@@ -368,10 +383,10 @@ class NNLSProblem:
             if self._fast and self.k:  # phi_of and _column of each kind's terms at once
                 ul = u.tolist()
                 c = self._c_work
-                for g in self.groups:
-                    pr = g.proto
-                    nls = np.array([pr.search_nl(v, g.lo, g.hi) for v in ul[g.span]])
-                    c[:, g.cols] = self._weigh(pr.basis_many(self.tau, self.fs, nls).T)
+                a_diag = self._a_diag
+                for span, cols, kernel in self._kernels:
+                    x = kernel(ul[span])  # (n, M)
+                    c[:, cols] = (x * a_diag).T if a_diag is not None else self.a @ x.T
             else:
                 c = self._c_fixed.copy()
                 for i, ui in zip(self.nl_idx, u, strict=True):
@@ -514,6 +529,8 @@ def local(
     hi: Any,
     *,
     maxfev: int | None = None,
+    known: Sequence[tuple[float, np.ndarray]] = (),
+    merge: Any = 0.0,
 ) -> tuple[float, np.ndarray, bool]:
     """Local minimum of ``fun`` from ``u0`` (clipped into ``[lo, hi]``).
 
@@ -529,6 +546,11 @@ def local(
     from there at the full tolerance. On the imu1 gyro_x ranking no check ever found a lower
     point, and checks cost half of all evaluations at the full tolerance.
 
+    ``known`` lists local minima ``(f, u)`` already found by other runs on the same function
+    (:func:`search`): when the best point of a run comes within ``merge`` of one of them in
+    every coordinate and is not below it, the run is heading for that minimum and stops there
+    (it returns that minimum: a run that finds it again adds nothing to the search's lowest).
+
     Returns
     -------
     f, u, converged
@@ -542,12 +564,22 @@ def local(
     f = fun(x)
     converged = False
     check = False  # the previous run lowered the objective: this one checks its minimum
+    hit: list[tuple[float, np.ndarray]] = []
+
+    def merged(intermediate_result: Any) -> None:  # (SciPy passes the best point by this name)
+        r = intermediate_result  # the run's best point: in a known minimum's basin?
+        for fk, uk in known:
+            if r.fun >= fk and np.all(np.abs(r.x - uk) <= merge):
+                hit.append((fk, uk))
+                raise StopIteration
+
     for _ in range(8):
         simplex = np.vstack([x] + [x + step * e for e in np.eye(k)])
         res = optimize.minimize(
             fun,
             x,
             method="Nelder-Mead",
+            callback=merged if known else None,
             options={
                 "initial_simplex": simplex,
                 "xatol": CHECK_XATOL if check else 1e-6,
@@ -555,6 +587,8 @@ def local(
                 "maxfev": maxfev,
             },
         )
+        if hit:
+            return hit[0][0], np.array(hit[0][1], float), True
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.asarray(res.x, float), fn
@@ -606,11 +640,20 @@ def search(
         return bool(np.max(np.abs(np.asarray(a) - b) / spacing) < 1.5)
 
     results: list[tuple[float, np.ndarray, bool]] = []
+    found: list[tuple[float, np.ndarray]] = []  # the converged local minima, for local()
+    merge = MERGE * spacing
+
+    def run(u0: Any) -> tuple[float, np.ndarray, bool]:
+        r = local(prob.profile, u0, spacing / 2, prob.lo, prob.hi, known=found, merge=merge)
+        if r[2]:
+            found.append((r[0], r[1]))
+        return r
+
     for _, u0 in best:
         # a start next to a local minimum already found adds nothing
         if any(near(u0, r[1]) for r in results):
             continue
-        results.append(local(prob.profile, u0, spacing / 2, prob.lo, prob.hi))
+        results.append(run(u0))
     # the anchors (the sub-models' optima), best first: each is a result in its own right, so
     # the fit is at or below every one of them; a local search starts from the best one,
     # unless a local minimum already found is next to it and not above it (the same basin:
@@ -627,7 +670,7 @@ def search(
         if not k and any(r[0] <= fa * (1 + 1e-8) and near(a0, r[1]) for r in minima):
             continue
         seen.append(a0)
-        results.append(local(prob.profile, a0, spacing / 2, prob.lo, prob.hi))
+        results.append(run(a0))
     return min(results, key=lambda r: r[0])
 
 

@@ -415,6 +415,20 @@ class Process(Spectral):
         search's batched path; one :meth:`basis` per value by default)."""
         return np.array([self.basis(tau, fs, float(v)) for v in nls]).reshape(len(nls), -1)
 
+    def search_kernel(
+        self, tau: np.ndarray, fs: float, lo: float, hi: float
+    ) -> Callable[[list[float]], np.ndarray]:
+        """The search's hot path: a function of a list of ``n`` search coordinates that
+        returns :meth:`basis_many` at their :meth:`search_nl` values (clipped into
+        ``[lo, hi]``), an (n, J) array, the same numbers. Built once per fit problem, so a
+        process may prepare what depends on the scales only (by default nothing)."""
+
+        def columns(us: list[float]) -> np.ndarray:
+            nls = np.array([self.search_nl(v, lo, hi) for v in us])
+            return self.basis_many(tau, fs, nls)
+
+        return columns
+
     def correlation_time(self, fs: float) -> float | None:
         """Correlation time in samples of the fitted process (AR1, GM: ``-1 / ln phi``; 0
         for ``phi <= 0``), None for a process without one."""

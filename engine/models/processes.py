@@ -61,16 +61,42 @@ _SERIES_CACHE: dict[bytes, np.ndarray] = {}
 
 
 def _scale_terms(t: np.ndarray) -> np.ndarray:
-    """``-t / 2``, ``1 / t`` and ``1 / t^2`` as a (3, J) array, cached like
-    :func:`_series_coefficients`."""
+    """``-t / 2``, ``1 / t``, ``1 / t^2`` and (every entry) ``min(t)`` as a (4, J) array,
+    cached like :func:`_series_coefficients`."""
     key = b"scale" + t.tobytes()
     terms = _SERIES_CACHE.get(key)
     if terms is None:
-        terms = np.array([-0.5 * t, 1.0 / t, 1.0 / (t * t)])
+        terms = np.array([-0.5 * t, 1.0 / t, 1.0 / (t * t), np.full(t.shape, t.min())])
         if len(_SERIES_CACHE) > 256:
             _SERIES_CACHE.clear()
         _SERIES_CACHE[key] = terms
     return terms
+
+
+def _ar1_rows(ps: list[float], terms: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """:func:`ar1_wv_pos` of each ``phi`` of ``ps``, one row each, with ``terms`` the
+    :func:`_scale_terms` of ``t`` (a fit's search prepares them once: :meth:`GM.search_kernel`).
+
+    ``phi^t - 4 phi^(t/2) + 3 = B (B - 2)`` with ``B = phi^(t/2) - 1`` (t even): one expm1;
+    the row's constants divided by ``e_1^3 (phi + 1)`` once, as Python floats; the series
+    where ``x t < 2e-3`` (``x = -ln phi``), in the rows that reach it.
+    """
+    xs = [-math.log(p) for p in ps]
+    co = []
+    for x, p in zip(xs, ps, strict=True):
+        d = 1.0 / (math.expm1(-x) ** 3 * (p + 1))
+        co.append((math.expm1(-2 * x) * d, 2 * p * d))
+    coef = np.array(co)
+    neg_half_t, inv_t, inv_t2, t_min = terms
+    hx = np.multiply.outer(xs, neg_half_t)  # -x t / 2
+    half = np.expm1(hx)
+    out = coef[:, :1] * inv_t + coef[:, 1:] * (half * (half - 2)) * inv_t2
+    if min(xs) * t_min[0] < 2e-3:  # the series where x t < 2e-3, in some row
+        c = _series_coefficients(t)
+        xc = np.array(xs)[:, None]
+        series = ((c[3] * xc + c[2]) * xc + c[1]) * xc + c[0]
+        out = np.where(hx > -1e-3, series, out)
+    return out
 
 
 def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
@@ -89,25 +115,7 @@ def ar1_wv_pos(t: np.ndarray, phi: float | np.ndarray) -> np.ndarray:
         The WV per unit innovation variance (a new array).
     """
     if isinstance(phi, np.ndarray):  # several at once, one row each (the search's hot path)
-        # phi^t - 4 phi^(t/2) + 3 = B (B - 2) with B = phi^(t/2) - 1 (t even): one expm1;
-        # the row's constants divided by e_1^3 (phi + 1) once, as Python floats
-        ps = phi.tolist()
-        xs = [-math.log(p) for p in ps]
-        co = []
-        for x, p in zip(xs, ps, strict=True):
-            d = 1.0 / (math.expm1(-x) ** 3 * (p + 1))
-            co.append((math.expm1(-2 * x) * d, 2 * p * d))
-        coef = np.array(co)
-        neg_half_t, inv_t, inv_t2 = _scale_terms(t)
-        hx = np.multiply.outer(xs, neg_half_t)  # -x t / 2
-        half = np.expm1(hx)
-        out = coef[:, :1] * inv_t + coef[:, 1:] * (half * (half - 2)) * inv_t2
-        if min(xs) * t.min() < 2e-3:  # the series where x t < 2e-3, in some row
-            c = _series_coefficients(t)
-            xc = np.array(xs)[:, None]
-            series = ((c[3] * xc + c[2]) * xc + c[1]) * xc + c[0]
-            out = np.where(hx > -1e-3, series, out)
-        return out
+        return _ar1_rows(phi.tolist(), _scale_terms(t), t)
     x = -math.log(phi)
     e_2 = math.expm1(-2 * x)
     e_1 = math.expm1(-x)
@@ -712,6 +720,17 @@ class GM(_CorrelationTimeSearch, Process, order=0, description="Gauss-Markov", n
     def basis_many(self, tau, fs, nls):
         # every row at once (the search's hot path): the AR1 WV times 1 - phi^2
         return ar1_wv_pos(tau, nls) * (1.0 - nls * nls)[:, None]
+
+    def search_kernel(self, tau, fs, lo, hi):
+        # basis_many at search_nl's phi, with the scale terms taken once per problem
+        t = np.asarray(tau, dtype=float)
+        terms = _scale_terms(t).copy()
+
+        def columns(us):
+            ps = [math.exp(-1.0 / math.exp(min(max(u, lo), hi))) for u in us]
+            return _ar1_rows(ps, terms, t) * np.array([[1.0 - p * p] for p in ps])
+
+        return columns
 
     def psd_terms(self, fs):
         phi, sigma2 = self.as_ar1(fs)._require()

@@ -13,7 +13,7 @@ import pytest
 import scipy.optimize
 
 import engine as eg
-from engine.fit._varpro import NNLSProblem, sqrt_weight
+from engine.fit._varpro import NNLSProblem, local, sqrt_weight
 from engine.fit.gmwm import weight_matrix
 from engine.models.processes import ar1_wv, ar1_wv_pos
 
@@ -184,3 +184,46 @@ def test_profile_of_many_points_is_the_nnls_of_each(weights: str, model: str) ->
         _, rnorm = scipy.optimize.nnls(c / norms, prob.b)
         assert value == pytest.approx(rnorm**2, rel=1e-10)
     assert np.array_equal(prob.profile_many(u), many)  # memoised
+
+
+@pytest.mark.parametrize("code", ["GM", "AR1", "MA1"])
+def test_search_kernel_is_the_basis_at_the_search_values(code: str) -> None:
+    # the column kernel a fit problem prepares once (Process.search_kernel) gives the same
+    # numbers as the process's basis at its search values, bit for bit, at coordinates below,
+    # inside and above the search range (clipped) and where the AR1 series branch applies
+    tau = 2.0 ** np.arange(1, 20)
+    proc = eg.parse_model(code).processes[0]
+    lo, hi = proc.search_range(10**6)
+    kernel = proc.search_kernel(tau, 100.0, lo, hi)
+    for us in ([lo - 3.0], [0.5], [math.log(30.0), math.log(2.5)], [hi + 1.0, math.log(1e9)]):
+        got = kernel(us)
+        nls = np.array([proc.search_nl(u, lo, hi) for u in us])
+        np.testing.assert_array_equal(got, proc.basis_many(tau, 100.0, nls))
+        if code == "GM":  # and the AR1 WV formula of docs/conventions.md, independently
+            ref = ar1_wv(tau, nls, 1.0 - nls * nls)
+            np.testing.assert_allclose(got, ref, rtol=1e-12, atol=0)
+
+
+def test_local_search_stops_in_a_known_minimums_basin() -> None:
+    # a run whose best point comes within `merge` of a minimum found before, not below it,
+    # returns that minimum (with fewer evaluations); a known point above the run's path is
+    # not taken
+    calls = [0]
+
+    def f(u: np.ndarray) -> float:
+        calls[0] += 1
+        return float((u[0] - 1.0) ** 2 + 2.0 * (u[1] + 0.5) ** 2 + 1.0)
+
+    f1, u1, ok = local(f, [0.0, 0.0], 0.2, -5.0, 5.0)
+    assert ok and f1 == pytest.approx(1.0, abs=1e-10)
+    np.testing.assert_allclose(u1, [1.0, -0.5], atol=1e-5)
+    calls[0] = 0
+    plain = local(f, [0.4, 0.2], 0.2, -5.0, 5.0)
+    n_plain = calls[0]
+    calls[0] = 0
+    merged = local(f, [0.4, 0.2], 0.2, -5.0, 5.0, known=[(f1, u1)], merge=0.05)
+    assert merged[0] == f1 and np.array_equal(merged[1], u1) and merged[2]
+    assert calls[0] < n_plain / 2
+    assert plain[0] == pytest.approx(f1, rel=1e-9)
+    high = local(f, [0.4, 0.2], 0.2, -5.0, 5.0, known=[(f1 + 1e-6, u1)], merge=1e-4)
+    assert high[0] < f1 + 1e-9 and not np.array_equal(high[1], u1)
