@@ -460,9 +460,9 @@ def fleet_noise(units: Sequence[tuple[str, ImuNoise]], fmt: str = "") -> ImuNois
     header = [
         nz0.header[0] + f"; a fleet file of {len(units)} units",
         f"fleet file: per axis the largest N and K of the {len(units)} units' own exports "
-        f"({', '.join(names)}), so its WV is at least every unit's bound (fitted WV and data): "
-        "no unit is overconfident, a quieter unit is cautious (docs/filters.md, One file for "
-        "a fleet)",
+        f"({', '.join(names)}), so its WV is at least each unit's own file's and bounds what "
+        "each of them bounds: no unit is overconfident, a quieter unit is cautious "
+        "(docs/filters.md, One file for a fleet)",
         *lines,
         f"the lines below are the first unit's export ({src0}); each unit's is in its own file",
         *nz0.header[1:],
