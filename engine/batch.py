@@ -55,6 +55,7 @@ __all__ = [
     "fleet_summary",
     "unit_values",
     "options_fingerprint",
+    "export_fleet",
 ]
 
 #: The record an output folder of :func:`fit_batch` keeps of what it wrote (see
@@ -815,3 +816,70 @@ class BatchFolder:
             "summary_csv": str(self.path / "summary.csv"),
             "summary_json": str(self.path / "summary.json"),
         }
+
+
+def export_fleet(
+    path: str | os.PathLike[str] | None,
+    logs: Sequence[LogFit],
+    fmt: str,
+    *,
+    fs: float | None = None,
+    load_options: Mapping[str, Any] | None = None,
+    tails: bool = True,
+    **options: Any,
+) -> str:
+    """One filter file for every fitted unit of a batch: the **fleet file**
+    (``engine.export(..., fleet=)``: per axis the largest N and K of the units' own bounded
+    exports, so that no unit is exported overconfident; docs/filters.md, "One file for a
+    fleet"). Writes ``path`` (unless None) and returns the text.
+
+    Parameters
+    ----------
+    path : path or None
+    logs : sequence of LogFit
+        The batch's logs (:attr:`BatchResult.logs`); the failed ones are left out (the caller
+        says so), a resumed one (no fits kept) is refused.
+    fmt : str
+        A WN+RW or white-noise filter format of :data:`engine.formats.FORMATS`.
+    fs, load_options
+        How each log is loaded again for its tail factors (as :func:`fit_batch` loaded it).
+    tails : bool
+        Each unit's tail factors from its own log (default True).
+    **options
+        More :func:`engine.export` keywords (``filter_rate``, ``horizon_s``, ``data`` ...).
+
+    Raises
+    ------
+    engine.units.ExportError
+        No fitted log, a resumed log, or what :func:`engine.export` refuses.
+    """
+    from .formats import export
+    from .io import log_of
+    from .units import ExportError
+
+    fitted = [lf for lf in logs if lf.ok]
+    if not fitted:
+        raise ExportError("no fitted log to export a fleet file from")
+    for lf in fitted:
+        if lf.resumed:
+            raise ExportError(
+                f"{lf.source}: read back from an earlier run's report, whose fits are not "
+                "kept: a fleet file needs every unit's fits (write into a new folder)"
+            )
+
+    def log_for(lf: LogFit) -> ImuLog | None:
+        if not tails:
+            return None
+        return log_of(lf.source, fs=fs, load_options=load_options, caller="export_fleet")
+
+    first, rest = fitted[0], fitted[1:]
+    return export(
+        path,
+        first.fits,
+        fmt,
+        log=log_for(first),
+        source=first.source,
+        tails=tails,
+        fleet=[(lf.source, lf.fits, log_for(lf)) for lf in rest],
+        **options,
+    )

@@ -6,6 +6,7 @@
                [--datasheet VALUES | --datasheet-file FILE] [--spec 'KEY<=VALUE UNIT' ...]
                [--segment ...] [--scale ...] [--units ...] [--topic T]
                [--drop-warmup] [--temperature auto|none|COLUMN]
+               [--export FORMAT [--filter-rate HZ] [--horizon S]]
 
 Every channel of every log is fitted (:func:`engine.batch.fit_batch`); DIR receives one JSON
 report per log and ``summary.csv``/``summary.json`` (the spread of every parameter and
@@ -17,6 +18,9 @@ datasheet quantity across the units). ``--select`` is the deprecated spelling of
 a row per unit, verdicts against ``--spec`` limits and/or ``--datasheet``, outliers, every
 unit's own section); the logs are fitted once for both outputs (:func:`add_report_options`,
 :func:`run_fleet`).
+
+``--export FORMAT`` (with ``-o DIR``) writes ``DIR/fleet.<suffix>``, one filter file that no
+unit is overconfident under (:func:`engine.batch.export_fleet`).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import sys
 from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from .._files import write_atomic
@@ -138,7 +143,66 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     bt.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     add_log_options(bt, stream=False)
     add_report_options(bt)
+    add_fleet_export_options(bt)
     return bt
+
+
+def add_fleet_export_options(bt: argparse.ArgumentParser) -> None:
+    """``--export FORMAT`` (one filter file for the whole fleet) and its rate and horizon."""
+    g = bt.add_argument_group("fleet filter file")
+    g.add_argument(
+        "--export",
+        metavar="FORMAT",
+        help="with -o DIR: write DIR/fleet.<suffix>, one filter file for every fitted unit: "
+        "per axis the largest N and K of the units' own default exports, so that no unit is "
+        "overconfident (WN+RW formats such as kalibr, openvins, px4, and ros-imu; "
+        "docs/filters.md, One file for a fleet)",
+    )
+    g.add_argument(
+        "--filter-rate",
+        type=positive(float, "--filter-rate"),
+        help="with --export: the filter's step; px4/ardupilot: the rate (Hz) the EKF predicts "
+        "at (required by those formats)",
+    )
+    g.add_argument(
+        "--horizon",
+        type=positive(float, "--horizon"),
+        help="with --export: the longest time (s) the filter runs without aiding: the longest "
+        "WV scale the bound covers (default: each log's length)",
+    )
+
+
+def _fleet_format(name: str) -> Any:
+    """The :class:`engine.formats.Format` of ``--export`` (a filter format), else a usage
+    error naming the choices."""
+    from ..formats import FORMATS
+    from ..formats.noise import FLEET_CONSUMERS
+
+    ok = {n: f for n, f in FORMATS.items() if f.consumer in FLEET_CONSUMERS}
+    if name not in ok:
+        raise usage_error(
+            f"--export takes a filter format whose bias is a random walk or that has none "
+            f"({', '.join(ok)}; a Gauss-Markov bias's T_c differs per unit), got {name!r}"
+        )
+    return ok[name]
+
+
+def _write_fleet_file(args: argparse.Namespace, res: Any) -> str:
+    """``--export``: the fleet file in ``-o DIR``; returns its path."""
+    from ..batch import export_fleet
+
+    fmt = _fleet_format(args.export)
+    path = str(Path(args.output) / f"fleet{fmt.suffix}")
+    export_fleet(
+        path,
+        res.logs,
+        args.export,
+        fs=args.fs,
+        load_options=log_kwargs(args),
+        filter_rate=args.filter_rate,
+        horizon_s=args.horizon,
+    )
+    return path
 
 
 def add_report_options(bt: argparse.ArgumentParser) -> None:
@@ -239,6 +303,10 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         raise usage_error("give -o DIR (JSON reports and summaries), --report FILE.html, or both")
     if args.report is None and (args.spec or args.datasheet or args.datasheet_file):
         raise usage_error("--spec, --datasheet and --datasheet-file apply to --report FILE.html")
+    if getattr(args, "export", None) and args.output is None:
+        raise usage_error("--export FORMAT writes the fleet file into -o DIR: give -o DIR")
+    if getattr(args, "export", None):  # before any fit
+        _fleet_format(args.export)
     if args.output is not None:  # before the (slow) imports and any fit
         check_output(args.output, "-o", kind="dir")
     if args.report is not None:
@@ -258,6 +326,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
                 args.inputs, **_fit_kwargs(args, channels, ex, bar), output=args.output
             )
     files = res.save(args.output) if args.output is not None else {}
+    if getattr(args, "export", None) and res.fitted:
+        files = {**files, "fleet_file": _write_fleet_file(args, res)}
     for lf in res.logs:
         if lf.error:
             print(terminal_text(f"gmwm: batch: {lf.source}: {cli_text(lf.error)}"), file=sys.stderr)
@@ -280,6 +350,11 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         d["files"] = {**files, **({"report": args.report} if args.report else {})}
         return d
     wrote = [f"the fleet report {args.report}"] if args.report else []
+    if "fleet_file" in files:
+        wrote.append(
+            f"the fleet {args.export} file {files['fleet_file']} (every axis at the largest N "
+            f"and K of the {len(res.fitted)} fitted unit(s))"
+        )
     if files:
         again = sum(lf.resumed for lf in res.logs)
         wrote.append(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import warnings as _warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,7 +31,17 @@ from .kalibr import kalibr_imu
 from .projection import Projection, consumer_of, project
 from .tails import TailFactors
 
-__all__ = ["ImuNoise", "imu_noise", "noise_for", "check_inflate", "SENSORS", "PROJECTIONS"]
+__all__ = [
+    "ImuNoise",
+    "imu_noise",
+    "noise_for",
+    "check_inflate",
+    "SENSORS",
+    "PROJECTIONS",
+    "FleetUnit",
+    "fleet_noise",
+    "FLEET_CONSUMERS",
+]
 
 #: The values of ``projection``.
 PROJECTIONS = ("bound", "plain", "fit")
@@ -334,22 +344,128 @@ def noise_for(
     ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``, ``data``, ``tc``,
     ``tails``;
     ``filter_rate`` unless
-    ``fs_filter`` is given)."""
-    return imu_noise(
-        fits,
-        units=options.get("units"),
-        inflate=options.get("inflate", 1.0),
-        source=options.get("source", ""),
-        fmt=fmt,
-        allow_partial=allow_partial,
-        projection=options.get("projection") or "bound",
-        consumer=consumer,
-        fs_filter=fs_filter if fs_filter is not None else options.get("filter_rate"),
-        horizon_s=options.get("horizon_s"),
-        band=options.get("band"),
-        confidence=options.get("confidence"),
-        ci=options.get("ci", "asymptotic"),
-        data=options.get("data") or "low",
-        tc=options.get("tc"),
-        tails=options.get("tails"),
-    )
+    ``fs_filter`` is given); with ``fleet`` (a sequence of :class:`FleetUnit`, the units
+    beside ``fits``), the fleet's :func:`fleet_noise`."""
+
+    def one(unit_fits: Mapping[str, GMWMResult], source: str, tails: Any) -> ImuNoise:
+        return imu_noise(
+            unit_fits,
+            units=options.get("units"),
+            inflate=options.get("inflate", 1.0),
+            source=source,
+            fmt=fmt,
+            allow_partial=allow_partial,
+            projection=options.get("projection") or "bound",
+            consumer=consumer,
+            fs_filter=fs_filter if fs_filter is not None else options.get("filter_rate"),
+            horizon_s=options.get("horizon_s"),
+            band=options.get("band"),
+            confidence=options.get("confidence"),
+            ci=options.get("ci", "asymptotic"),
+            data=options.get("data") or "low",
+            tc=options.get("tc"),
+            tails=tails,
+        )
+
+    nz = one(fits, options.get("source", ""), options.get("tails"))
+    fleet = options.get("fleet") or ()
+    if not fleet:
+        return nz
+    units = [(options.get("source", "") or "unit 1", nz)]
+    units += [(u.source, one(u.fits, u.source, u.tails)) for u in fleet]
+    return fleet_noise(units, fmt)
+
+
+@dataclass(frozen=True, eq=False)
+class FleetUnit:
+    """One more unit of a fleet file (``engine.export(..., fleet=)``): its fits, with the
+    same channels as the first unit's, and their tail factors.
+
+    Attributes
+    ----------
+    source : str
+        The unit's log (for the file's header and messages).
+    fits : mapping of str to GMWMResult
+        Channel to fit.
+    tails : mapping of str to TailFactors, optional
+        Per channel (:func:`~engine.formats.tails.log_tail_factors` of the unit's log); None:
+        no tail factors.
+    """
+
+    source: str
+    fits: Mapping[str, GMWMResult]
+    tails: Mapping[str, TailFactors] | None = None
+
+
+#: The consumer models (:attr:`engine.formats.Format.consumer`) a fleet file can be written
+#: for: their WV grows with each of N and K, so the largest over the units bounds every unit.
+FLEET_CONSUMERS = ("WN+RW", "WN")
+
+
+def fleet_noise(units: Sequence[tuple[str, ImuNoise]], fmt: str = "") -> ImuNoise:
+    """The fleet file's numbers: per sensor and axis the largest N and K (and per-sample
+    ``sigma2``, Allan floor ``B``) over the units' own bounded numbers.
+
+    A WN+RW (or white-noise) file's WV grows with each of N and K, so the fleet file's WV is
+    at least every unit's file's, hence at least every unit's fitted WV and empirical lower
+    limit (times its tail factors) over the band: no unit is exported overconfident. A unit
+    quieter than the largest gets a cautious file (docs/filters.md, "One file for a fleet").
+
+    Parameters
+    ----------
+    units : sequence of (source, ImuNoise)
+        Each unit's :func:`imu_noise` (same consumer, channels and options).
+    fmt : str
+        The format's name for messages.
+
+    Raises
+    ------
+    ExportError
+        A Gauss-Markov consumer (its T_c differs per unit: the largest sigma_b at another
+        unit's T_c does not bound), or a unit without an axis of the first.
+    """
+    (src0, nz0), rest = units[0], units[1:]
+    if any("T_c" in q for _, nz in units for q in nz.values.values()):
+        raise ExportError(
+            f"{fmt or 'this format'}: a fleet file takes, per axis, the largest white noise "
+            "and random walk of the units (the WN+RW formats and sensor_msgs/Imu); its "
+            "Gauss-Markov bias has a correlation time per unit, which one value cannot bound: "
+            "export each unit's own file (gmwm export LOG)"
+        )
+    vals: dict[str, dict[str, dict[str, float]]] = {}
+    lines: list[str] = []
+    for kind, qs in nz0.values.items():
+        for q, axes in qs.items():
+            for ax, v0 in axes.items():
+                got = [(v0, src0)]
+                for src, nz in rest:
+                    v = nz.values.get(kind, {}).get(q, {}).get(ax)
+                    if v is None:
+                        raise ExportError(
+                            f"fleet unit {src}: no {kind} axis {ax} (the first unit, {src0}, "
+                            "has it): give every unit the same channels"
+                        )
+                    got.append((v, src))
+                top, who = max(got)
+                vals.setdefault(kind, {}).setdefault(q, {})[ax] = top
+                if q in ("N", "K") and math.isfinite(top):
+                    low = min(v for v, _ in got)
+                    lines.append(
+                        f"fleet {kind} {q} {ax}: {top:.4g} from {who} (units {low:.4g} .. "
+                        f"{top:.4g}, x{top / low:.2f})"
+                        if low > 0
+                        else f"fleet {kind} {q} {ax}: {top:.4g} from {who}"
+                    )
+    names = [src for src, _ in units]
+    header = [
+        nz0.header[0] + f"; a fleet file of {len(units)} units",
+        f"fleet file: per axis the largest N and K of the {len(units)} units' own exports "
+        f"({', '.join(names)}), so its WV is at least each unit's own file's and bounds what "
+        "each of them bounds: no unit is overconfident, a quieter unit is cautious "
+        "(docs/filters.md, One file for a fleet)",
+        *lines,
+        f"the lines below are the first unit's export ({src0}); each unit's is in its own file",
+        *nz0.header[1:],
+    ]
+    warnings = list(nz0.warnings) + [f"{src}: {w}" for src, nz in rest for w in nz.warnings]
+    return ImuNoise(vals, nz0.fs, nz0.inflate, header, warnings, nz0.projections, nz0.fs_filter)

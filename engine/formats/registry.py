@@ -23,7 +23,7 @@ from . import autopilot, ins, sim, vio
 from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu
-from .noise import check_inflate, noise_for
+from .noise import FleetUnit, check_inflate, noise_for
 from .projection import CONSUMER_PARAMS, FORMAT_CONSUMERS
 from .report import curves_csv, fit_report
 from .tails import log_tail_factors
@@ -50,7 +50,8 @@ class Format:
     The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
     ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
     ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``,
-    ``consumers``, ``data``.
+    ``consumers``, ``data``; ``fleet`` (:class:`~engine.formats.noise.FleetUnit` list) only
+    for a fleet file.
 
     The capabilities of a filter format are declared here once and read by the writers'
     callers, the CLI and the app:
@@ -372,6 +373,7 @@ def export(
     consumers: Sequence[str] | None = None,
     data: str = "low",
     tails: bool = True,
+    fleet: Sequence[tuple[str, Mapping[str, GMWMResult], ImuLog | None]] = (),
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -430,6 +432,13 @@ def export(
         makes the file's Gaussian 99.9 % quantile cover the data's Haar coefficients'), so
         that a sensor with heavier-than-Gaussian errors is not exported overconfident
         (docs/filters.md, "Tails"). Default True; False: the data bound alone.
+    fleet : sequence of (source, fits, log or None)
+        WN+RW and white-noise filter formats: more units of the same sensor model, with the
+        same channels as ``fits`` (the first unit, from ``log`` and ``source``). The file is
+        the **fleet file**: per axis the largest N and K of every unit's own export (each with
+        its tail factors from its log), so that no unit is exported overconfident
+        (:func:`engine.formats.noise.fleet_noise`; docs/filters.md, "One file for a fleet").
+        Refused by the reports and the Gauss-Markov formats, and with ``projection="fit"``.
 
     Examples
     --------
@@ -453,16 +462,25 @@ def export(
     f = FORMATS.get(fmt)
     if f is None:
         raise ExportError(f"unknown export format {fmt!r}: use one of {', '.join(FORMATS)}")
-    tail_map = (
-        log_tail_factors(log, fits)
-        if tails
-        and log is not None
-        and projection == "bound"
-        and data != "none"
-        # the formats whose projection has a data bound (not the white part of sensor_msgs/Imu)
-        and (f.consumer not in (None, "WN") or fmt == "json")
-        else None
-    )
+
+    def tail_map(log: ImuLog | None, fits: Mapping[str, GMWMResult]) -> Any:
+        return (
+            log_tail_factors(log, fits)
+            if tails
+            and log is not None
+            and projection == "bound"
+            and data != "none"
+            # the formats whose projection has a data bound (not sensor_msgs/Imu's white part)
+            and (f.consumer not in (None, "WN") or fmt == "json")
+            else None
+        )
+
+    if fleet and (not f.is_filter or projection == "fit"):
+        raise ExportError(
+            f"a fleet file is a filter format's bounded numbers: {fmt!r} with projection "
+            f"{projection!r} takes one unit's fits (export each unit on its own)"
+        )
+    units_more = [FleetUnit(str(src), fs_, tail_map(lg, fs_)) for src, fs_, lg in fleet]
     text = f.writer(
         fits,
         intervals=intervals,
@@ -482,7 +500,8 @@ def export(
         scale_factor_std_ppm=scale_factor_std_ppm,
         consumers=consumers,
         data=data,
-        tails=tail_map,
+        tails=tail_map(log, fits),
+        **({"fleet": units_more} if units_more else {}),
     )
     if path is not None:
         write_atomic(path, text)  # the one write of every format (engine._files)

@@ -42,6 +42,7 @@ MEANINGS: dict[str, tuple[str, str]] = {
     "--eff": ("eff", r"^efficiency of the robust WV, in \(0, 0\.99\)"),
     "--filter-rate": ("filter_rate", r"the rate \(Hz\) the EKF predicts at"),
     "--fit": ("fit", r"^a fitted model: the output of 'gmwm fit --json'"),
+    "--export": ("export", r"^with -o DIR: write DIR/fleet\.<suffix>, one filter file"),
     "--format": ("format", r"^export format"),
     "--hours": ("hours", r"^log lengths to tabulate, in hours"),
     "--horizon": ("horizon", r"the longest WV scale the bound covers"),

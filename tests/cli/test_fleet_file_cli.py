@@ -1,0 +1,75 @@
+"""``gmwm batch ... -o DIR --export FORMAT``: one filter file for the whole fleet.
+
+The file is ``DIR/fleet.<suffix>``: per axis the largest N and K of the units' own default
+exports (``engine.batch.export_fleet``; tests/engine/test_fleet_file.py checks its bound), and
+``gmwm check`` reads it back. A format it cannot write for a fleet (a Gauss-Markov bias, a
+report) and ``--export`` without ``-o`` are refused in one line before any fit.
+"""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+import engine as eg
+from engine.cli import main
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.real_data
+def test_batch_writes_the_fleet_file_and_check_reads_it(real_data, tmp_path, capsys):
+    logs = [str(real_data / f"adis16405_imu{i}.h5") for i in (1, 4)]
+    out = tmp_path / "fleet"
+    code, text, err = run(
+        capsys, "batch", *logs, "--model", "WN+RW", "--channels", "gyro_x,accel_x",
+        "-o", str(out), "--export", "kalibr", "--quiet",
+    )  # fmt: skip
+    assert code == 0, err
+    assert f"the fleet kalibr file {out / 'fleet.yaml'}" in text
+    fleet = yaml.safe_load((out / "fleet.yaml").read_text())
+    own = []
+    for path in logs:
+        log = eg.load_log(path)
+        fits = {ch: eg.fit_gmwm(log.wavelet_variance(ch), "WN+RW") for ch in ("gyro_x", "accel_x")}
+        own.append(yaml.safe_load(eg.export(None, fits, "kalibr", log=log)))
+    for key in (
+        "gyroscope_noise_density",
+        "gyroscope_random_walk",
+        "accelerometer_noise_density",
+        "accelerometer_random_walk",
+    ):
+        assert fleet[key] == pytest.approx(max(o[key] for o in own), rel=1e-9), key
+    # unit 4 sets the accelerometer random walk (x1.9 unit 1's)
+    assert fleet["accelerometer_random_walk"] == pytest.approx(
+        own[1]["accelerometer_random_walk"], rel=1e-9
+    )
+    code, text, err = run(
+        capsys, "check", logs[0], "--channel", "accel_x",
+        "--datasheet-file", str(out / "fleet.yaml"),
+    )  # fmt: skip
+    assert code == 0, err
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--export", "kalibr"], "--export FORMAT writes the fleet file into -o DIR"),
+        (["-o", "DIR", "--export", "kf-gins"], "--export takes a filter format whose bias"),
+        (["-o", "DIR", "--export", "json"], "--export takes a filter format whose bias"),
+    ],
+)
+def test_batch_export_refuses_before_any_fit(tmp_path, capsys, extra, message):
+    extra = [str(tmp_path / "out") if a == "DIR" else a for a in extra]
+    code, _, err = run(
+        capsys, "batch", str(tmp_path / "missing.h5"), "--model", "WN+RW",
+        "--report" if "-o" not in extra else "--quiet",
+        *([str(tmp_path / "r.html")] if "-o" not in extra else []), *extra,
+    )  # fmt: skip
+    assert code == 2
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "out" / "summary.json").exists()
