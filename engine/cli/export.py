@@ -60,12 +60,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
     from ..formats.registry import FORMATS
 
-    ex = sub.add_parser(
-        "export",
-        help="fit channels and export Kalibr imu.yaml, a JSON report, WV curves (CSV), a "
-        "datasheet table, or a filter/simulator format (OpenVINS, Basalt, ORB-SLAM3, VINS, "
-        "PX4, ArduPilot, MATLAB, Gazebo, KF-GINS, sensor_msgs/Imu)",
-    )
+    ex = sub.add_parser("export")
     ex.add_argument("input", help=INPUT_HELP)
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
     ex.add_argument(

@@ -26,11 +26,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``plan`` sub-command to the ``gmwm`` sub-parsers."""
-    pp = sub.add_parser(
-        "plan",
-        help="how long to record: the precision of the IEEE quantities against the log "
-        "length, and the length that meets each target",
-    )
+    pp = sub.add_parser("plan")
     pp.add_argument(
         "pilot",
         nargs="?",

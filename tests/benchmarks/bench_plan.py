@@ -5,7 +5,7 @@ its CPU time (user + sys of the child, ``os.wait4``) is the median over the runs
 reference is a fresh interpreter that imports numpy (``python -c "import numpy"``): a fixed
 cost outside the project, so the ratio is comparable between machines and loads. A second
 column splits off what the command spends after its imports: the same plan timed with
-``time.process_time`` in a child that imported ``engine.cli.main`` first.
+``time.process_time`` in a child that ran it once first (so every import is done).
 
 Examples (docs/planning.md): the WN+RW datasheet example of the guide, and a consumer MEMS
 gyro ``GM+WN+RW`` with three targets (N, K, B). ``--tree DIR`` adds the same commands run on
@@ -53,8 +53,10 @@ EXAMPLES = {
 }
 
 _AFTER_IMPORTS = """
-import sys, time
-from engine.cli.main import main
+import contextlib, io, sys, time
+from engine.cli import main
+with contextlib.redirect_stdout(io.StringIO()):
+    main(["plan", *sys.argv[1:]])  # the imports, run by the command itself
 t = time.process_time()
 main(["plan", *sys.argv[1:]])
 print(f"@@{time.process_time() - t}", file=sys.stderr)
