@@ -58,7 +58,7 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..formats.registry import FORMATS
+    from ..formats.catalog import FORMATS
 
     ex = sub.add_parser("export")
     ex.add_argument("input", help=INPUT_HELP)
@@ -102,7 +102,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument(
         "--filter-rate",
         type=positive(float, "--filter-rate"),
-        help="px4/ardupilot: the rate (Hz) the EKF predicts at (required by those formats)",
+        help="/".join(f.name for f in FORMATS.values() if f.needs_filter_rate)
+        + ": the rate (Hz) the EKF predicts at (required by those formats)",
     )
     ex.add_argument(
         "--projection",

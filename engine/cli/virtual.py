@@ -57,7 +57,7 @@ def _band(text: str) -> tuple[float, float]:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``virtual`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..formats.registry import FORMATS
+    from ..formats.catalog import FORMATS
 
     vp = sub.add_parser("virtual")
     vp.add_argument(

@@ -115,3 +115,22 @@ def test_an_unknown_sub_command_is_a_one_line_error(capsys):
     assert main(["plot", "x.csv"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "invalid choice: 'plot'" in err and "plan" in err
+
+
+def test_plan_loads_neither_the_formats_nor_the_reports_nor_the_app():
+    mods = _modules_after(
+        [
+            "plan",
+            "--model",
+            "GM(beta=0.05, sigma2_gm=4e-6)+WN(sigma2=2.5e-5)+RW(gamma2=1e-10)",
+            "--fs",
+            "100",
+            "--target",
+            "N within 1 %, K within 30 %",
+        ]
+    )
+    assert "engine.inference.planning" in mods
+    # engine.formats.common (text helpers) is all of the formats the shared CLI code uses
+    heavy = {m for m in mods if m.startswith(("engine.formats.", "engine.reporting", "gmwm_app"))}
+    assert heavy <= {"engine.formats.common"}, sorted(heavy)
+    assert not {"engine.multivariate", "engine.teaching", "engine.batch"} & mods
