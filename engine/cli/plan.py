@@ -88,7 +88,6 @@ def _from_fit_json(path: str) -> tuple[str, float | None, str]:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm plan``."""
     from ..fit import fit_gmwm
-    from ..inference import parse_datasheet
     from ..inference.planning import parse_targets, plan_run
     from .common import load_wv
 
@@ -118,6 +117,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         fs = fs if fs is not None else fs_json
         unit = unit if unit is not None else unit_json
     elif args.datasheet:
+        from ..inference.datasheet_check import parse_datasheet  # this input only (engine.io)
+
         if fs is None or not unit:
             raise CliError("--datasheet needs --fs and --units (e.g. --fs 100 --units deg/s)")
         spec = parse_datasheet(args.datasheet)

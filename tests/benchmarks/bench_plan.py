@@ -1,11 +1,12 @@
 """CPU time of `gmwm plan`, the whole command, against a reference measured in the same run.
 
 Each command runs in a fresh interpreter (``python -m engine.cli plan ...``), ``--reps`` times;
-its CPU time (user + sys of the child, ``os.wait4``) is the median over the runs. The
+its CPU time (user + sys of the child, ``os.wait4``) is the best (least) of the runs, the
+one least disturbed by the machine's load. The
 reference is a fresh interpreter that imports numpy (``python -c "import numpy"``): a fixed
 cost outside the project, so the ratio is comparable between machines and loads. A second
 column splits off what the command spends after its imports: the same plan timed with
-``time.process_time`` in a child that ran it once first (so every import is done).
+``time.process_time`` in a child that imported what the command imports first.
 
 Examples (docs/planning.md): the WN+RW datasheet example of the guide, and a consumer MEMS
 gyro ``GM+WN+RW`` with three targets (N, K, B). ``--tree DIR`` adds the same commands run on
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -53,10 +53,9 @@ EXAMPLES = {
 }
 
 _AFTER_IMPORTS = """
-import contextlib, io, sys, time
+import sys, time
 from engine.cli import main
-with contextlib.redirect_stdout(io.StringIO()):
-    main(["plan", *sys.argv[1:]])  # the imports, run by the command itself
+import engine.cli.common, engine.cli.plan, engine.fit, engine.inference, engine.inference.planning
 t = time.process_time()
 main(["plan", *sys.argv[1:]])
 print(f"@@{time.process_time() - t}", file=sys.stderr)
@@ -77,8 +76,8 @@ def child_cpu(argv: list[str], tree: Path) -> tuple[float, str]:
     return ru.ru_utime + ru.ru_stime, err
 
 
-def median_cpu(argv: list[str], tree: Path, reps: int) -> float:
-    return statistics.median(child_cpu(argv, tree)[0] for _ in range(reps))
+def best_cpu(argv: list[str], tree: Path, reps: int) -> float:
+    return min(child_cpu(argv, tree)[0] for _ in range(reps))
 
 
 def after_imports(args: list[str], tree: Path, reps: int) -> float:
@@ -86,7 +85,7 @@ def after_imports(args: list[str], tree: Path, reps: int) -> float:
     for _ in range(reps):
         _, err = child_cpu([sys.executable, "-c", _AFTER_IMPORTS, *args], tree)
         vals.append(float(err.rsplit("@@", 1)[1].split()[0]))
-    return statistics.median(vals)
+    return min(vals)
 
 
 def main() -> None:
@@ -95,13 +94,13 @@ def main() -> None:
     ap.add_argument("--tree", type=Path, help="another checkout to time the same commands on")
     a = ap.parse_args()
     trees = [("this tree", ROOT)] + ([("--tree", a.tree.resolve())] if a.tree else [])
-    ref = median_cpu([sys.executable, "-c", "import numpy"], ROOT, a.reps)
-    print(f"reference (python -c 'import numpy'): {ref:.3f} s of CPU, median of {a.reps}\n")
+    ref = best_cpu([sys.executable, "-c", "import numpy"], ROOT, a.reps)
+    print(f"reference (python -c 'import numpy'): {ref:.3f} s of CPU, best of {a.reps}\n")
     print("| example | tree | whole command: CPU | ratio to reference | plan after imports |")
     print("|---|---|---|---|---|")
     for name, args in EXAMPLES.items():
         for label, tree in trees:
-            cpu = median_cpu([sys.executable, "-m", "engine.cli", "plan", *args], tree, a.reps)
+            cpu = best_cpu([sys.executable, "-m", "engine.cli", "plan", *args], tree, a.reps)
             inner = after_imports(args, tree, a.reps)
             print(f"| {name} | {label} | {cpu:.2f} s | {cpu / ref:.2f} | {inner:.3f} s |")
 
