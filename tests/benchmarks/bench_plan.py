@@ -2,7 +2,7 @@
 
 Each command runs in a fresh interpreter (``python -m engine.cli plan ...``), ``--reps`` times;
 its CPU time (user + sys of the child, ``os.wait4``) is the best (least) of the runs, the
-one least disturbed by the machine's load. The
+one least disturbed by the machine's load; the commands run in turn, one run of each per round. The
 reference is a fresh interpreter that imports numpy (``python -c "import numpy"``): a fixed
 cost outside the project, so the ratio is comparable between machines and loads. A second
 column splits off what the command spends after its imports: the same plan timed with
@@ -76,10 +76,6 @@ def child_cpu(argv: list[str], tree: Path) -> tuple[float, str]:
     return ru.ru_utime + ru.ru_stime, err
 
 
-def best_cpu(argv: list[str], tree: Path, reps: int) -> float:
-    return min(child_cpu(argv, tree)[0] for _ in range(reps))
-
-
 def after_imports(args: list[str], tree: Path, reps: int) -> float:
     vals = []
     for _ in range(reps):
@@ -94,15 +90,31 @@ def main() -> None:
     ap.add_argument("--tree", type=Path, help="another checkout to time the same commands on")
     a = ap.parse_args()
     trees = [("this tree", ROOT)] + ([("--tree", a.tree.resolve())] if a.tree else [])
-    ref = best_cpu([sys.executable, "-c", "import numpy"], ROOT, a.reps)
-    print(f"reference (python -c 'import numpy'): {ref:.3f} s of CPU, best of {a.reps}\n")
-    print("| example | tree | whole command: CPU | ratio to reference | plan after imports |")
-    print("|---|---|---|---|---|")
+    # every command once per round, in turn, so that a change of the machine's load reaches
+    # all of them alike; the best of the rounds is kept
+    cmds: dict[tuple[str, str], tuple[list[str], Path]] = {
+        ("reference", ""): ([sys.executable, "-c", "import numpy"], ROOT),
+        ("gmwm --help", "this tree"): ([sys.executable, "-m", "engine.cli", "--help"], ROOT),
+    }
+    for label, tree in trees[1:]:
+        cmds["gmwm --help", label] = ([sys.executable, "-m", "engine.cli", "--help"], tree)
     for name, args in EXAMPLES.items():
         for label, tree in trees:
-            cpu = best_cpu([sys.executable, "-m", "engine.cli", "plan", *args], tree, a.reps)
-            inner = after_imports(args, tree, a.reps)
-            print(f"| {name} | {label} | {cpu:.2f} s | {cpu / ref:.2f} | {inner:.3f} s |")
+            cmds[name, label] = ([sys.executable, "-m", "engine.cli", "plan", *args], tree)
+    best = dict.fromkeys(cmds, float("inf"))
+    for _ in range(a.reps):
+        for key, (argv, tree) in cmds.items():
+            best[key] = min(best[key], child_cpu(argv, tree)[0])
+    ref = best["reference", ""]
+    print(f"reference (python -c 'import numpy'): {ref:.3f} s of CPU, best of {a.reps}\n")
+    print("| command | tree | whole command: CPU | ratio to reference | plan after imports |")
+    print("|---|---|---|---|---|")
+    for (name, label), cpu in best.items():
+        if name == "reference":
+            continue
+        args = EXAMPLES.get(name)
+        inner = f"{after_imports(args, cmds[name, label][1], a.reps):.3f} s" if args else "-"
+        print(f"| {name} | {label} | {cpu:.2f} s | {cpu / ref:.2f} | {inner} |")
 
 
 if __name__ == "__main__":
