@@ -1,5 +1,5 @@
 """``python -m engine.cli``: the ``gmwm`` command."""
 
-from .main import main
+from .commands import main
 
 raise SystemExit(main())

@@ -100,12 +100,7 @@ def scheduler_executor(args: argparse.Namespace) -> Iterator[Executor | None]:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``batch`` sub-command to the ``gmwm`` sub-parsers."""
-    bt = sub.add_parser(
-        "batch",
-        help="fit every channel of many logs (a fleet of IMUs): one report per log and the "
-        "spread of every parameter across the units",
-        epilog=_EXIT,
-    )
+    bt = sub.add_parser("batch", epilog=_EXIT)
     bt.add_argument(
         "inputs",
         nargs="+",

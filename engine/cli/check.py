@@ -31,11 +31,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``check`` sub-command to the ``gmwm`` sub-parsers."""
-    ck = sub.add_parser(
-        "check",
-        help="datasheet check: the manufacturer's noise model (ARW/VRW, bias instability, "
-        "rate random walk) against the empirical WV and its interval, per scale",
-    )
+    ck = sub.add_parser("check")
     ck.add_argument("input", help=INPUT_HELP)
     ck.add_argument("--channel", help="channel name or index (default: the first)")
     add_wv_options(ck)

@@ -58,14 +58,9 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..formats.registry import FORMATS
+    from ..formats.catalog import FORMATS
 
-    ex = sub.add_parser(
-        "export",
-        help="fit channels and export Kalibr imu.yaml, a JSON report, WV curves (CSV), a "
-        "datasheet table, or a filter/simulator format (OpenVINS, Basalt, ORB-SLAM3, VINS, "
-        "PX4, ArduPilot, MATLAB, Gazebo, KF-GINS, sensor_msgs/Imu)",
-    )
+    ex = sub.add_parser("export")
     ex.add_argument("input", help=INPUT_HELP)
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
     ex.add_argument(
@@ -107,7 +102,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument(
         "--filter-rate",
         type=positive(float, "--filter-rate"),
-        help="px4/ardupilot: the rate (Hz) the EKF predicts at (required by those formats)",
+        help="/".join(f.name for f in FORMATS.values() if f.needs_filter_rate)
+        + ": the rate (Hz) the EKF predicts at (required by those formats)",
     )
     ex.add_argument(
         "--projection",

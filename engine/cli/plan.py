@@ -26,11 +26,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``plan`` sub-command to the ``gmwm`` sub-parsers."""
-    pp = sub.add_parser(
-        "plan",
-        help="how long to record: the precision of the IEEE quantities against the log "
-        "length, and the length that meets each target",
-    )
+    pp = sub.add_parser("plan")
     pp.add_argument(
         "pilot",
         nargs="?",
@@ -92,7 +88,6 @@ def _from_fit_json(path: str) -> tuple[str, float | None, str]:
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm plan``."""
     from ..fit import fit_gmwm
-    from ..inference import parse_datasheet
     from ..inference.planning import parse_targets, plan_run
     from .common import load_wv
 
@@ -122,6 +117,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         fs = fs if fs is not None else fs_json
         unit = unit if unit is not None else unit_json
     elif args.datasheet:
+        from ..inference.datasheet_check import parse_datasheet  # this input only (engine.io)
+
         if fs is None or not unit:
             raise CliError("--datasheet needs --fs and --units (e.g. --fs 100 --units deg/s)")
         spec = parse_datasheet(args.datasheet)

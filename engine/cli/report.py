@@ -41,11 +41,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``report`` sub-command to the ``gmwm`` sub-parsers."""
     from ..inference.selection import DEFAULT_SELECT
 
-    rp = sub.add_parser(
-        "report",
-        help="calibration report of one log: one self-contained HTML file (plots, "
-        "parameters with intervals, datasheet check, export numbers)",
-    )
+    rp = sub.add_parser("report")
     rp.add_argument("input", help=INPUT_HELP)
     rp.add_argument("-o", "--output", required=True, help="output file: the HTML report (.html)")
     what = rp.add_mutually_exclusive_group()

@@ -22,7 +22,7 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``segments`` sub-command to the ``gmwm`` sub-parsers."""
-    sp = sub.add_parser("segments", help="list the still segments of a flight log")
+    sp = sub.add_parser("segments")
     sp.add_argument("input", help="log file (.ulg, .bin, CSV, HDF5, ...)")
     sp.add_argument(
         "--fs", type=positive(float, "--fs"), help="sampling frequency in Hz (default: the file's)"

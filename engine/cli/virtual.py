@@ -57,13 +57,9 @@ def _band(text: str) -> tuple[float, float]:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``virtual`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..formats.registry import FORMATS
+    from ..formats.catalog import FORMATS
 
-    vp = sub.add_parser(
-        "virtual",
-        help="optimal virtual sensor: the weighted mean of k redundant sensors (same axis) "
-        "with the smallest WV, from a multivariate GMWM fit",
-    )
+    vp = sub.add_parser("virtual")
     vp.add_argument(
         "inputs",
         nargs="+",

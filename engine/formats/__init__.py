@@ -16,28 +16,61 @@ the formats it writes.
   intervals), used by every filter format;
 * :mod:`.tails`: :func:`~.tails.tail_factors` (per scale, the factor on the data bound's
   variance that makes the file's Gaussian quantile cover the data's);
-* :mod:`.registry`: the formats by name (:data:`FORMATS`) and :func:`export`.
+* :mod:`.catalog`: the formats by name (:data:`FORMATS`), records of their consumer model and
+  capabilities that import no writer; :mod:`.registry`: :func:`export`.
+
+The names are imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`), so that a
+module that needs one helper (``engine.formats.common``) does not load every writer.
 """
 
 from __future__ import annotations
 
-from ..io.kalibr import read_kalibr
-from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor
-from .datasheet import datasheet_csv, datasheet_table, datasheet_text
-from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr
-from .noise import ImuNoise, imu_noise
-from .projection import (
-    DATA_BOUNDS,
-    FORMAT_CONSUMERS,
-    MISFIT_SHARE,
-    ProjectedParam,
-    Projection,
-    misfit,
-    project,
-)
-from .registry import FORMATS, Format, export, register
-from .report import curves_csv, fit_report, write_report
-from .tails import TailFactors, log_tail_factors, tail_factors
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_attributes
+
+#: Each module (relative to this package; ``.units`` is ``engine.units``) and the public names
+#: it defines.
+_LAZY: dict[str, tuple[str, ...]] = {
+    ".units": ("ExportError", "DatasheetRow", "si_factor", "BI_FACTOR"),
+    "datasheet": ("datasheet_table", "datasheet_text", "datasheet_csv"),
+    "kalibr": ("KalibrImu", "kalibr_imu", "write_kalibr", "kalibr_models"),
+    ".io.kalibr": ("read_kalibr",),
+    "report": ("fit_report", "write_report", "curves_csv"),
+    "catalog": ("FORMATS", "Format", "register", "FORMAT_CONSUMERS"),
+    "registry": ("export",),
+    "noise": ("ImuNoise", "imu_noise"),
+    "projection": (
+        "project",
+        "Projection",
+        "ProjectedParam",
+        "DATA_BOUNDS",
+        "MISFIT_SHARE",
+        "misfit",
+    ),
+    "tails": ("TailFactors", "tail_factors", "log_tail_factors"),
+}
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of _LAZY)
+    from ..io.kalibr import read_kalibr  # noqa: F401
+    from ..units import BI_FACTOR, DatasheetRow, ExportError, si_factor  # noqa: F401
+    from .catalog import FORMAT_CONSUMERS, FORMATS, Format, register  # noqa: F401
+    from .datasheet import datasheet_csv, datasheet_table, datasheet_text  # noqa: F401
+    from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr  # noqa: F401
+    from .noise import ImuNoise, imu_noise  # noqa: F401
+    from .projection import (  # noqa: F401
+        DATA_BOUNDS,
+        MISFIT_SHARE,
+        ProjectedParam,
+        Projection,
+        misfit,
+        project,
+    )
+    from .registry import export  # noqa: F401
+    from .report import curves_csv, fit_report, write_report  # noqa: F401
+    from .tails import TailFactors, log_tail_factors, tail_factors  # noqa: F401
+
+__getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "ExportError",

@@ -37,6 +37,7 @@ from .bound import (
     solve_at_tcs,
     split_terms,
 )
+from .catalog import CONSUMER_PARAMS, FORMAT_CONSUMERS
 from .tails import TailFactors
 
 __all__ = [
@@ -51,18 +52,6 @@ __all__ = [
     "log_inflation_at_tc",
     "consumer_of",
 ]
-
-#: Consumer noise models and the parameters they take.
-CONSUMER_PARAMS: dict[str, tuple[str, ...]] = {
-    "WN+RW": ("N", "K"),
-    "WN+GM": ("N", "sigma_b", "T_c"),
-    "WN": ("N",),
-}
-
-#: The consumer model of each filter format: an index that
-#: :func:`engine.formats.registry.register` fills from each :class:`~engine.formats.Format`'s
-#: ``consumer`` (declared there, once).
-FORMAT_CONSUMERS: dict[str, str] = {}
 
 #: What of the empirical WV the bound covers besides the fitted model (``data=``): its interval's
 #: lower limit (the default: the data give no evidence that the sensor is quieter than the

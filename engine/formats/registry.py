@@ -1,8 +1,10 @@
-"""The export formats by name: one :class:`Format` per format, and :func:`export`.
+"""Writing the export formats: :func:`export`, and the writers of the reports and the Kalibr file.
 
-A new filter format (OpenVINS, Basalt, VINS ...) is one module with a writer
-``writer(fits, **options) -> str`` (and a reader where one exists) that takes its numbers from
-the one datasheet table (:mod:`engine.units`), plus one :func:`register` call below.
+The formats themselves (name, consumer model, capabilities, where the writer is) are records
+in :mod:`engine.formats.catalog`, which imports no writer. A new filter format (OpenVINS,
+Basalt, VINS ...) is one module with a writer ``writer(fits, **options) -> str`` (and a reader
+where one exists) that takes its numbers from the one datasheet table (:mod:`engine.units`),
+plus one :func:`~engine.formats.catalog.register` call in the catalog.
 """
 
 from __future__ import annotations
@@ -10,21 +12,18 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from .._files import write_atomic
 from ..fit import GMWMResult
-from ..io.kalibr import read_kalibr
 from ..io.log import channel_axis
 from ..units import ExportError
-from . import autopilot, ins, sim, vio
+from .catalog import FORMATS, VALUE_KINDS, Format, register
 from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu
 from .noise import FleetUnit, check_inflate, noise_for
-from .projection import CONSUMER_PARAMS, FORMAT_CONSUMERS
 from .report import curves_csv, fit_report
 from .tails import log_tail_factors
 
@@ -32,80 +31,21 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..inference import ParamInterval
     from ..io import ImuLog
 
-__all__ = ["Format", "FORMATS", "VALUE_KINDS", "register", "export"]
+__all__ = [
+    "Format",
+    "FORMATS",
+    "VALUE_KINDS",
+    "register",
+    "export",
+    "kalibr_text",
+    "json_text",
+    "curves_text",
+    "datasheet_table_text",
+    "datasheet_csv_text",
+]
 
 
-#: The values of :attr:`Format.values`: how a filter format's numbers relate to a rate.
-VALUE_KINDS = {
-    "density": "continuous-time densities (rate-free); the consumer's rate is written",
-    "per-sample": "per-sample standard deviations or variances at the consumer's IMU rate",
-    "per-step": "standard deviations per filter step at the filter's prediction rate",
-}
-
-
-@dataclass(frozen=True)
-class Format:
-    """An export format: ``writer(fits, **options) -> text``; ``reader(path or text)``.
-
-    The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
-    ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
-    ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``,
-    ``consumers``, ``data``; ``fleet`` (:class:`~engine.formats.noise.FleetUnit` list) only
-    for a fleet file.
-
-    The capabilities of a filter format are declared here once and read by the writers'
-    callers, the CLI and the app:
-
-    Attributes
-    ----------
-    consumer : str or None
-        The consumer's noise model (``"WN+RW"``, ``"WN+GM"``, ``"WN"``;
-        :data:`~engine.formats.projection.CONSUMER_PARAMS`); None for the reports.
-    values : str or None
-        A key of :data:`VALUE_KINDS` (None for the reports).
-    needs_filter_rate : bool
-        The file is wrong without the filter's rate (``filter_rate`` required).
-    bias : str
-        The consumer's bias model in words (``"random walk"``, ``"Gauss-Markov, one T_c per
-        file"`` ...); ``""`` for none.
-    """
-
-    name: str
-    description: str
-    writer: Callable[..., str]
-    reader: Callable[[Any], Any] | None = None
-    suffix: str = ".txt"
-    consumer: str | None = None
-    values: str | None = None
-    needs_filter_rate: bool = False
-    bias: str = ""
-
-    @property
-    def is_filter(self) -> bool:
-        """A filter or simulator format (it has a consumer noise model)."""
-        return self.consumer is not None
-
-
-#: Registered formats by name, in registration order.
-FORMATS: dict[str, Format] = {}
-
-
-def register(fmt: Format) -> Format:
-    """Add (or replace) a format; returns it. A filter format's consumer model is indexed in
-    :data:`~engine.formats.projection.FORMAT_CONSUMERS` (what ``consumer_of`` reads)."""
-    if fmt.consumer is not None and fmt.consumer not in CONSUMER_PARAMS:
-        raise ValueError(f"format {fmt.name!r}: unknown consumer model {fmt.consumer!r}")
-    if fmt.values is not None and fmt.values not in VALUE_KINDS:
-        raise ValueError(f"format {fmt.name!r}: values must be one of {', '.join(VALUE_KINDS)}")
-    FORMATS[fmt.name] = fmt
-    if fmt.consumer is not None:
-        FORMAT_CONSUMERS[fmt.name] = fmt.consumer
-    else:
-        FORMAT_CONSUMERS.pop(fmt.name, None)
-    return fmt
-
-
-def _kalibr(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def kalibr_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     f = check_inflate(kw.get("inflate", 1.0))
     if (kw.get("projection") or "bound") == "fit":
         kal = kalibr_imu(
@@ -164,7 +104,7 @@ def _no_inflate(kw: Mapping[str, Any], name: str) -> None:
         )
 
 
-def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def json_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     _no_inflate(kw, "JSON report")
     rep = fit_report(
         fits,
@@ -185,7 +125,7 @@ def _json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return json.dumps(rep, indent=1, allow_nan=False) + "\n"
 
 
-def _datasheet(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def datasheet_table_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     _no_inflate(kw, "datasheet")
     return (
         datasheet_text(datasheet_table(fits, intervals=kw.get("intervals"), units=kw.get("units")))
@@ -193,161 +133,16 @@ def _datasheet(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     )
 
 
-def _datasheet_csv(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def datasheet_csv_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     _no_inflate(kw, "datasheet")
     return datasheet_csv(
         datasheet_table(fits, intervals=kw.get("intervals"), units=kw.get("units"))
     )
 
 
-_RW, _GM = "random walk (one K per axis or per sensor)", "Gauss-Markov (T_c, sigma_b)"
-register(
-    Format("kalibr", "Kalibr imu.yaml", _kalibr, read_kalibr, ".yaml", "WN+RW", "density", bias=_RW)
-)
-register(Format("json", "JSON report", _json, None, ".json"))
-
-
-def _curves(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def curves_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     _no_inflate(kw, "curves CSV")
     return curves_csv(fits)
-
-
-register(Format("csv", "CSV of the WV and implied curves", _curves, None, ".csv"))
-register(Format("datasheet", "readable datasheet table", _datasheet, None, ".txt"))
-register(Format("datasheet-csv", "datasheet CSV", _datasheet_csv, None, ".csv"))
-register(
-    Format(
-        "openvins",
-        "OpenVINS kalibr_imu_chain.yaml",
-        vio.openvins_yaml,
-        None,
-        ".yaml",
-        "WN+RW",
-        "density",
-        bias=_RW,
-    )
-)
-register(
-    Format(
-        "basalt",
-        "Basalt calibration JSON (IMU noise)",
-        vio.basalt_json,
-        None,
-        ".json",
-        "WN+RW",
-        "density",
-        bias=_RW,
-    )
-)
-register(
-    Format(
-        "orbslam3",
-        "ORB-SLAM3 settings IMU.* keys",
-        vio.orbslam3_yaml,
-        None,
-        ".yaml",
-        "WN+RW",
-        "density",
-        bias=_RW,
-    )
-)
-register(
-    Format(
-        "px4",
-        "PX4 EKF2 noise parameters (.params)",
-        autopilot.px4_params,
-        None,
-        ".params",
-        "WN+RW",
-        "per-step",
-        needs_filter_rate=True,
-        bias=_RW,
-    )
-)
-register(
-    Format(
-        "ardupilot",
-        "ArduPilot EKF3 noise parameters (.param)",
-        autopilot.ardupilot_params,
-        None,
-        ".param",
-        "WN+RW",
-        "per-step",
-        needs_filter_rate=True,
-        bias=_RW,
-    )
-)
-register(
-    Format(
-        "matlab",
-        "MATLAB gyroparams/accelparams .m",
-        sim.matlab_m,
-        None,
-        ".m",
-        "WN+RW",
-        "density",
-        bias=_RW,
-    )
-)
-register(
-    Format(
-        "gazebo",
-        "Gazebo classic PX4/RotorS IMU plugin (GM bias)",
-        sim.gazebo_xml,
-        None,
-        ".xml",
-        "WN+GM",
-        "density",
-        bias=f"{_GM}, one per sensor triad",
-    )
-)
-register(
-    Format(
-        "gz-sim",
-        "gz-sim SDF <imu> <noise> (GM bias)",
-        sim.gz_sim_sdf,
-        None,
-        ".sdf",
-        "WN+GM",
-        "per-sample",
-        bias=f"{_GM} per axis",
-    )
-)
-register(
-    Format(
-        "kf-gins",
-        "KF-GINS imunoise (GM bias)",
-        ins.kfgins_yaml,
-        None,
-        ".yaml",
-        "WN+GM",
-        "density",
-        bias=f"{_GM}, one T_c for the whole file",
-    )
-)
-register(
-    Format(
-        "ros-imu",
-        "sensor_msgs/Imu covariances",
-        ins.ros_imu_yaml,
-        None,
-        ".yaml",
-        "WN",
-        "per-sample",
-    )
-)
-register(
-    Format(
-        "vins",
-        "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w",
-        vio.vins_yaml,
-        None,
-        ".yaml",
-        "WN+RW",
-        "per-sample",
-        bias=_RW,
-    )
-)
 
 
 def export(

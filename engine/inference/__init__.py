@@ -26,23 +26,51 @@
 * Model selection (:func:`rank_models`, WVIC) in :mod:`engine.inference.selection`.
 * Datasheet check (:func:`check_datasheet`, :func:`read_datasheet`): a manufacturer's noise
   model against the empirical WV, scale by scale (:mod:`engine.inference.datasheet_check`).
+* Planning a log's length (:func:`plan_run`) in :mod:`engine.inference.planning`.
+
+The names are imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`): ``gmwm
+plan`` loads the planning module, not the selection or the datasheet check.
 """
 
 from __future__ import annotations
 
-from .datasheet_check import (
-    DATASHEET_KEYS,
-    DatasheetCheck,
-    DatasheetError,
-    DatasheetSpec,
-    check_datasheet,
-    parse_datasheet,
-    read_datasheet,
-)
-from .intervals import ParamInterval, param_intervals
-from .jtest import JTest, j_test
-from .planning import PlanTarget, RunPlan, parse_targets, plan_precision, plan_run
-from .selection import Candidate, SelectionResult, rank_models, submodels
+from typing import TYPE_CHECKING
+
+from .._lazy import lazy_attributes
+
+#: Each module of the package and the public names it defines.
+_LAZY: dict[str, tuple[str, ...]] = {
+    "intervals": ("param_intervals", "ParamInterval"),
+    "jtest": ("j_test", "JTest"),
+    "selection": ("rank_models", "submodels", "SelectionResult", "Candidate"),
+    "datasheet_check": (
+        "check_datasheet",
+        "read_datasheet",
+        "parse_datasheet",
+        "DatasheetSpec",
+        "DatasheetCheck",
+        "DatasheetError",
+        "DATASHEET_KEYS",
+    ),
+    "planning": ("plan_run", "plan_precision", "parse_targets", "PlanTarget", "RunPlan"),
+}
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of _LAZY)
+    from .datasheet_check import (  # noqa: F401
+        DATASHEET_KEYS,
+        DatasheetCheck,
+        DatasheetError,
+        DatasheetSpec,
+        check_datasheet,
+        parse_datasheet,
+        read_datasheet,
+    )
+    from .intervals import ParamInterval, param_intervals  # noqa: F401
+    from .jtest import JTest, j_test  # noqa: F401
+    from .planning import PlanTarget, RunPlan, parse_targets, plan_precision, plan_run  # noqa: F401
+    from .selection import Candidate, SelectionResult, rank_models, submodels  # noqa: F401
+
+__getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "param_intervals",

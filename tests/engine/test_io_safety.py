@@ -27,7 +27,7 @@ import pytest
 
 import engine._files as files
 import engine._limits as _limits
-from engine.cli.main import main as gmwm
+from engine.cli import main as gmwm
 from engine.inference.datasheet_check import read_datasheet
 from engine.io import LoadError, load_log
 from engine.io.text import text_memory_need
@@ -145,7 +145,7 @@ _DEV_ZERO = textwrap.dedent(
     import json, sys
     from engine.io import load_log
     from engine.wv import open_series
-    from engine.cli.main import main
+    from engine.cli import main
     out = {}
     for name, fn in (("load_log", load_log), ("open_series", open_series)):
         try:

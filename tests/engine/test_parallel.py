@@ -110,7 +110,7 @@ def test_dask_is_imported_only_when_a_cluster_is_asked_for():
     from pathlib import Path
 
     code = (
-        "import sys, engine as eg, engine.cli.batch, engine.cli.main; eg.fit_batch; "
+        "import sys, engine as eg, engine.cli.batch, engine.cli.core; eg.fit_batch; "
         "eg.param_intervals; eg.run_slope_study; eg.dependence_test; "
         "print('dask' in sys.modules, 'distributed' in sys.modules)"
     )

@@ -1,4 +1,6 @@
-"""The ``gmwm`` command: wavelet variance, GMWM fit and simulation from the shell.
+"""The first sub-commands of ``gmwm``: wavelet variance, GMWM fit, model selection, simulation
+and the slope-method study (the table of every sub-command and the dispatch:
+:mod:`engine.cli.commands`).
 
 ::
 
@@ -12,31 +14,19 @@
     gmwm select INPUT --max-model SPEC | --models SPEC1,SPEC2 [--optimism asymptotic|bootstrap]
              [--weights ci|identity|efficient]
 
-Without ``--json`` a readable table with units is printed; with ``--json`` exactly one JSON
-object. Bad input exits with status 2 and a one-line message on stderr, never a traceback.
-Warnings (queued by the subcommands, or issued by the engine as Python warnings) are printed
-after the result as ``gmwm COMMAND: warning: ...``, one line each. An option name has one
-meaning in every subcommand (tests/cli/test_cli_options.py holds the table); old spellings
-(``--alpha``, ``--level``, ``--out``, ``--select``, ``gmwm virtual --scale``) still work and
-print a deprecation warning naming the new option.
+The output, the errors and the warnings are the dispatcher's (:mod:`engine.cli.commands`).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib
-import json
 import math
-import os
-import sys
-import warnings
-from collections.abc import Sequence
-from typing import Any, NoReturn
+from collections.abc import Callable
+from typing import Any
 
 from .._jsonutil import json_ready
 from .._limits import check_sample_count
-from ..errors import GmwmError
 from ..fit import fit_gmwm
 from ..models import parse_model
 from .common import (
@@ -54,44 +44,44 @@ from .common import (
     cli_text,
     load_wv,
     positive,
-    queue_warning,
     sample_count,
-    terminal_text,
 )
 
-__all__ = ["main", "build_parser"]
+__all__ = [
+    "add_wv_parser",
+    "add_fit_parser",
+    "add_select_parser",
+    "add_simulate_parser",
+    "add_study_parser",
+    "RUNNERS",
+    "run",
+]
 
-# Subcommands that live in their own module engine/cli/<name>.py, each with
-# ``add_parser(subparsers)`` and ``run(args) -> dict | str``.
-_MODULE_COMMANDS = ("export", "check", "virtual", "batch", "report", "segments", "plan")
+
+def _data_args(sp: argparse.ArgumentParser) -> None:
+    sp.add_argument(
+        "input",
+        help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, PX4 .ulg, ArduPilot .bin "
+        "or a WV summary HDF5",
+    )
+    sp.add_argument("--channel", help="channel name or index (default: the first)")
+    add_wv_options(sp, robust=True)
+    sp.add_argument("--json", action="store_true", help="print one JSON object")
+    add_log_options(sp)  # --segment --scale --units --topic --stream
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:  # one line, exit 2 (argparse's own convention)
-        raise CliError(f"{self.prog}: {message}")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="gmwm", description="GMWM stochastic calibration of inertial sensors.")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
-    def data_args(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument(
-            "input",
-            help="log file: CSV/TSV/text, NPY/NPZ, HDF5, ROS bag, PX4 .ulg, ArduPilot .bin "
-            "or a WV summary HDF5",
-        )
-        sp.add_argument("--channel", help="channel name or index (default: the first)")
-        add_wv_options(sp, robust=True)
-        sp.add_argument("--json", action="store_true", help="print one JSON object")
-        add_log_options(sp)  # --segment --scale --units --topic --stream
-
-    wv = sub.add_parser("wv", help="empirical Haar wavelet variance with intervals")
-    data_args(wv)
+def add_wv_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``wv`` sub-command to the ``gmwm`` sub-parsers."""
+    wv: argparse.ArgumentParser = sub.add_parser("wv")
+    _data_args(wv)
     add_confidence_option(wv, "the WV intervals", "--alpha")
+    return wv
 
-    fit = sub.add_parser("fit", help="fit a latent model by GMWM")
-    data_args(fit)
+
+def add_fit_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``fit`` sub-command to the ``gmwm`` sub-parsers."""
+    fit: argparse.ArgumentParser = sub.add_parser("fit")
+    _data_args(fit)
     fit.add_argument("--model", required=True, help="model, e.g. '2*GM+WN+RW'")
     fit.add_argument(
         "more_inputs",
@@ -123,9 +113,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_confidence_option(fit, "the --ci parameter intervals", "--level")
     add_bootstrap_options(fit, replicates="bootstrap replicates")
     add_check_options(fit)  # --drop-warmup --temperature
+    return fit
 
-    sel = sub.add_parser("select", help="rank candidate models by WVIC")
-    data_args(sel)
+
+def add_select_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``select`` sub-command to the ``gmwm`` sub-parsers."""
+    sel: argparse.ArgumentParser = sub.add_parser("select")
+    _data_args(sel)
     sel.add_argument(
         "--max-model", help="rank every sub-model of this model, e.g. '3*GM+WN+QN+RW+DR'"
     )
@@ -152,8 +146,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--top", type=positive(int, "--top"), help="show only the best N (all are ranked)"
     )
     add_check_options(sel)  # --drop-warmup --temperature
+    return sel
 
-    sim = sub.add_parser("simulate", help="simulate a model with given values")
+
+def add_simulate_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``simulate`` sub-command to the ``gmwm`` sub-parsers."""
+    sim: argparse.ArgumentParser = sub.add_parser("simulate")
     sim.add_argument(
         "--model", required=True, help="model with values, e.g. 'WN(sigma2=1e-4)+RW(gamma2=1e-9)'"
     )
@@ -177,10 +175,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="output file (.h5, .npy or .csv); fs, channel name and unit are kept: in the "
         "file (.h5, .csv) or in the sidecar OUT.npy.json (.npy)",
     )
-    st = sub.add_parser(
-        "study",
-        help="Monte Carlo studies: slope = AVSM vs ARMAV vs GMWM (the GMWM paper, Fig. 1-2)",
-    )
+    return sim
+
+
+def add_study_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add the ``study`` sub-command to the ``gmwm`` sub-parsers."""
+    st: argparse.ArgumentParser = sub.add_parser("study")
     st.add_argument("name", choices=["slope"], help="the study to run")
     st.add_argument(
         "--reps",
@@ -215,9 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_deprecated_alias(st, "--out", out)
     st.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
-    for name in _MODULE_COMMANDS:  # each in its own module: add_parser(sub) and run(args)
-        importlib.import_module(f".{name}", __package__).add_parser(sub)
-    return p
+    return st
 
 
 def _cmd_wv(args: argparse.Namespace) -> dict[str, Any] | str:
@@ -360,11 +358,6 @@ def _cmd_simulate(args: argparse.Namespace) -> dict[str, Any] | str:
     return f"wrote {args.n} samples of {model.spec(values=True)} at {args.fs:g} Hz to {out}{also}"
 
 
-def _one_line(e: BaseException | Warning | str) -> str:
-    """An engine error or warning as one line, in the command's words (:func:`cli_text`)."""
-    return cli_text(" ".join(str(e).split()))
-
-
 def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
     check_output(args.output, "-o", kind="dir")  # before the (slow) imports and any work
     try:
@@ -399,45 +392,16 @@ def _cmd_study(args: argparse.Namespace) -> dict[str, Any] | str:
     return res.table() + ("\n\nwrote " + ", ".join(paths.values()) if paths else "")
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``gmwm`` console script; returns the exit status."""
-    from .._blas import set_blas_threads
+#: The sub-commands of this module and their bodies (:func:`run`).
+RUNNERS: dict[str, Callable[[argparse.Namespace], dict[str, Any] | str]] = {
+    "wv": _cmd_wv,
+    "fit": _cmd_fit,
+    "select": _cmd_select,
+    "simulate": _cmd_simulate,
+    "study": _cmd_study,
+}
 
-    if argv is None:  # the command itself (not a call from Python): see engine._blas
-        set_blas_threads(1)
-    try:
-        args = build_parser().parse_args(argv)
-        args.argv = list(sys.argv[1:] if argv is None else argv)  # as given (gmwm report)
-        handler = {
-            "wv": _cmd_wv,
-            "fit": _cmd_fit,
-            "simulate": _cmd_simulate,
-            "select": _cmd_select,
-            "study": _cmd_study,
-        }.get(args.command)
-        if handler is None:  # a subcommand in its own module (_MODULE_COMMANDS)
-            handler = importlib.import_module(f".{args.command}", __package__).run
-        with warnings.catch_warnings(record=True) as caught:  # the engine's, e.g. PX4 range
-            out = handler(args)
-        for w in caught:
-            queue_warning(args, _one_line(w.message))
-    except GmwmError as e:  # every engine error (engine.errors): one line, exit status 2
-        print(terminal_text(f"gmwm: error: {_one_line(e)}"), file=sys.stderr)
-        return 2
-    except (ValueError, OSError, TypeError) as e:  # data-dependent errors from numpy/h5py
-        print(terminal_text(f"gmwm: error: {_one_line(e)}"), file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:  # pragma: no cover
-        print("gmwm: interrupted", file=sys.stderr)
-        return 130
-    for warning in getattr(args, "warnings", ()):  # e.g. fs unknown, deprecated option
-        print(terminal_text(f"gmwm {args.command}: warning: {warning}"), file=sys.stderr)
-    text = json.dumps(out, allow_nan=False) if isinstance(out, dict) else out
-    try:
-        print(terminal_text(text))
-        sys.stdout.flush()  # here, not at exit, so that a closed pipe is caught
-    except BrokenPipeError:  # `gmwm wv ... | head -3`: the reader left; no traceback
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())  # the exit-time flush writes nowhere
-        return 141  # 128 + SIGPIPE, what a shell tool killed by the closed pipe reports
-    return 0
+
+def run(args: argparse.Namespace) -> dict[str, Any] | str:
+    """Run the sub-command ``args.command`` (one of :data:`RUNNERS`)."""
+    return RUNNERS[args.command](args)

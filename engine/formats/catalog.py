@@ -1,0 +1,264 @@
+"""The export formats as records (:class:`Format`, :data:`FORMATS`): what each writes, for
+which consumer noise model, with which capabilities, and where its writer is.
+
+A record names its writer (``"vio:openvins_yaml"``, a function of a module of this package)
+instead of holding it, so that reading the formats (the ``gmwm export`` options and help, the
+app's format menus, the consumer of a format name in the projection) imports no writer; the
+writer's module is imported when a file is written (:func:`engine.formats.registry.export`).
+A new format is one writer ``writer(fits, **options) -> str`` in a module of this package and
+one :func:`register` call below.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "Format",
+    "FORMATS",
+    "FORMAT_CONSUMERS",
+    "CONSUMER_PARAMS",
+    "VALUE_KINDS",
+    "register",
+]
+
+#: Consumer noise models and the parameters they take.
+CONSUMER_PARAMS: dict[str, tuple[str, ...]] = {
+    "WN+RW": ("N", "K"),
+    "WN+GM": ("N", "sigma_b", "T_c"),
+    "WN": ("N",),
+}
+
+#: The values of :attr:`Format.values`: how a filter format's numbers relate to a rate.
+VALUE_KINDS = {
+    "density": "continuous-time densities (rate-free); the consumer's rate is written",
+    "per-sample": "per-sample standard deviations or variances at the consumer's IMU rate",
+    "per-step": "standard deviations per filter step at the filter's prediction rate",
+}
+
+
+def _resolve(ref: Callable[..., Any] | str) -> Callable[..., Any]:
+    if not isinstance(ref, str):
+        return ref
+    module, _, name = ref.partition(":")
+    func: Callable[..., Any] = getattr(importlib.import_module(f".{module}", __package__), name)
+    return func
+
+
+@dataclass(frozen=True)
+class Format:
+    """An export format: ``writer(fits, **options) -> text``; ``reader(path or text)``.
+
+    The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
+    ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
+    ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``,
+    ``consumers``, ``data``; ``fleet`` (:class:`~engine.formats.noise.FleetUnit` list) only
+    for a fleet file.
+
+    The capabilities of a filter format are declared here once and read by the writers'
+    callers, the CLI and the app:
+
+    Attributes
+    ----------
+    name : str
+        What the user names (``gmwm export --format NAME``, ``eg.export(..., fmt=NAME)``).
+    description : str
+        One line: the consumer and the file.
+    write, read : callable or str
+        The writer and the reader (None: no reader), or where they are: ``"MODULE:FUNCTION"``
+        in this package, imported on first use (:attr:`writer`, :attr:`reader`).
+    suffix : str
+        The file's suffix (``".yaml"``).
+    consumer : str or None
+        The consumer's noise model (``"WN+RW"``, ``"WN+GM"``, ``"WN"``;
+        :data:`CONSUMER_PARAMS`); None for the reports.
+    values : str or None
+        A key of :data:`VALUE_KINDS` (None for the reports).
+    needs_filter_rate : bool
+        The file is wrong without the filter's rate (``filter_rate`` required).
+    bias : str
+        The consumer's bias model in words (``"random walk"``, ``"Gauss-Markov, one T_c per
+        file"`` ...); ``""`` for none.
+    """
+
+    name: str
+    description: str
+    write: Callable[..., str] | str
+    read: Callable[[Any], Any] | str | None = None
+    suffix: str = ".txt"
+    consumer: str | None = None
+    values: str | None = None
+    needs_filter_rate: bool = False
+    bias: str = ""
+
+    @property
+    def writer(self) -> Callable[..., str]:
+        """The writer ``writer(fits, **options) -> str`` (its module imported on first use)."""
+        return _resolve(self.write)
+
+    @property
+    def reader(self) -> Callable[[Any], Any] | None:
+        """The reader of the format's files, or None (its module imported on first use)."""
+        return None if self.read is None else _resolve(self.read)
+
+    @property
+    def is_filter(self) -> bool:
+        """A filter or simulator format (it has a consumer noise model)."""
+        return self.consumer is not None
+
+
+#: Registered formats by name, in registration order.
+FORMATS: dict[str, Format] = {}
+
+#: The consumer model of each filter format: an index that :func:`register` fills from each
+#: :class:`Format`'s ``consumer`` (declared there, once).
+FORMAT_CONSUMERS: dict[str, str] = {}
+
+
+def register(fmt: Format) -> Format:
+    """Add (or replace) a format; returns it. A filter format's consumer model is indexed in
+    :data:`FORMAT_CONSUMERS` (what the projection's ``consumer_of`` reads)."""
+    if fmt.consumer is not None and fmt.consumer not in CONSUMER_PARAMS:
+        raise ValueError(f"format {fmt.name!r}: unknown consumer model {fmt.consumer!r}")
+    if fmt.values is not None and fmt.values not in VALUE_KINDS:
+        raise ValueError(f"format {fmt.name!r}: values must be one of {', '.join(VALUE_KINDS)}")
+    FORMATS[fmt.name] = fmt
+    if fmt.consumer is not None:
+        FORMAT_CONSUMERS[fmt.name] = fmt.consumer
+    else:
+        FORMAT_CONSUMERS.pop(fmt.name, None)
+    return fmt
+
+
+_RW, _GM = "random walk (one K per axis or per sensor)", "Gauss-Markov (T_c, sigma_b)"
+for _fmt in (
+    Format(
+        "kalibr",
+        "Kalibr imu.yaml",
+        "registry:kalibr_text",
+        ".io.kalibr:read_kalibr",
+        ".yaml",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    ),
+    Format("json", "JSON report", "registry:json_text", None, ".json"),
+    Format("csv", "CSV of the WV and implied curves", "registry:curves_text", None, ".csv"),
+    Format("datasheet", "readable datasheet table", "registry:datasheet_table_text", None),
+    Format("datasheet-csv", "datasheet CSV", "registry:datasheet_csv_text", None, ".csv"),
+    Format(
+        "openvins",
+        "OpenVINS kalibr_imu_chain.yaml",
+        "vio:openvins_yaml",
+        None,
+        ".yaml",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    ),
+    Format(
+        "basalt",
+        "Basalt calibration JSON (IMU noise)",
+        "vio:basalt_json",
+        None,
+        ".json",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    ),
+    Format(
+        "orbslam3",
+        "ORB-SLAM3 settings IMU.* keys",
+        "vio:orbslam3_yaml",
+        None,
+        ".yaml",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    ),
+    Format(
+        "px4",
+        "PX4 EKF2 noise parameters (.params)",
+        "autopilot:px4_params",
+        None,
+        ".params",
+        "WN+RW",
+        "per-step",
+        needs_filter_rate=True,
+        bias=_RW,
+    ),
+    Format(
+        "ardupilot",
+        "ArduPilot EKF3 noise parameters (.param)",
+        "autopilot:ardupilot_params",
+        None,
+        ".param",
+        "WN+RW",
+        "per-step",
+        needs_filter_rate=True,
+        bias=_RW,
+    ),
+    Format(
+        "matlab",
+        "MATLAB gyroparams/accelparams .m",
+        "sim:matlab_m",
+        None,
+        ".m",
+        "WN+RW",
+        "density",
+        bias=_RW,
+    ),
+    Format(
+        "gazebo",
+        "Gazebo classic PX4/RotorS IMU plugin (GM bias)",
+        "sim:gazebo_xml",
+        None,
+        ".xml",
+        "WN+GM",
+        "density",
+        bias=f"{_GM}, one per sensor triad",
+    ),
+    Format(
+        "gz-sim",
+        "gz-sim SDF <imu> <noise> (GM bias)",
+        "sim:gz_sim_sdf",
+        None,
+        ".sdf",
+        "WN+GM",
+        "per-sample",
+        bias=f"{_GM} per axis",
+    ),
+    Format(
+        "kf-gins",
+        "KF-GINS imunoise (GM bias)",
+        "ins:kfgins_yaml",
+        None,
+        ".yaml",
+        "WN+GM",
+        "density",
+        bias=f"{_GM}, one T_c for the whole file",
+    ),
+    Format(
+        "ros-imu",
+        "sensor_msgs/Imu covariances",
+        "ins:ros_imu_yaml",
+        None,
+        ".yaml",
+        "WN",
+        "per-sample",
+    ),
+    Format(
+        "vins",
+        "VINS-Mono/Fusion acc_n/gyr_n/acc_w/gyr_w",
+        "vio:vins_yaml",
+        None,
+        ".yaml",
+        "WN+RW",
+        "per-sample",
+        bias=_RW,
+    ),
+):
+    register(_fmt)
