@@ -517,7 +517,9 @@ def plan_run(
         return _rel(tb, key)
 
     valid_from, valid_why = _valid_from(m, fs)
-    floor_from, floor_why = _floor_from(floor_tau.get("B", floor_tau.get("ADEV_min")), fs)
+    # the model's own floor (none when even the longest log's minimum is at the scales' edge)
+    at_floor = [k for k in floor_tau if "edge" not in longest[k].note]
+    floor_from, floor_why = _floor_from(floor_tau[at_floor[0]] if at_floor else None, fs)
     asymptotic: dict[str, int | None] = {}
     required: dict[str, int | None] = {}
     achieved: dict[str, float] = {}

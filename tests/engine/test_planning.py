@@ -376,6 +376,9 @@ def test_the_bias_instability_is_planned_from_40_times_its_averaging_time():
     assert tact.required["B"] == tact.floor_from > tact.asymptotic["B"]  # 7 h, not 3.35 h
     # K is not bounded by the floor: 11.8 h by the asymptotics, as the Monte Carlo confirmed
     assert tact.required["K"] == tact.asymptotic["K"]
+    # white noise alone has no floor (its Allan deviation falls to the last scale): no bound
+    wn = plan_run(eg.parse_model("WN(sigma2=1)"), 100.0, "N within 1 %")
+    assert wn.floor_from == 0 and wn.floor_why == "" and wn.valid_for("B") == (0, "")
 
 
 @pytest.mark.slow
