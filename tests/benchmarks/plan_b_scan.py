@@ -1,8 +1,10 @@
 """Does the realised spread of B converge to the plan's with the log length, and for which fit?
 
-For a GM+WN+RW model (default: the ADIS16405 gyro_x model of plan_mc.py) at multiples of the
-length the plan gives for ``B within 30 %``, ``--reps`` logs are simulated and each log's WV is
-fitted three ways:
+For a GM+WN+RW model (default: the ADIS16405 gyro_x model of plan_mc.py; ``--model`` another,
+``--fit WN+RW`` for a model without a GM) at multiples of the length the asymptotic covariance
+alone gives for ``B within 30 %`` (``RunPlan.asymptotic``, about 19 averaging times of the Allan
+floor), ``--reps`` logs are simulated (``--rate 10``: at 10 Hz, the same continuous-time noise,
+plan_mc.py's ``at_rate``) and each log's WV is fitted up to three ways (``--fits``):
 
 * ``efficient``: the two-step efficient GMWM that users run (``weights="efficient"``: a fit with
   the ``ci`` weights, then ``Omega = V^-1`` with V at the first fit's model);
@@ -14,9 +16,13 @@ It prints, per length and fit, the realised sd of ``log B_hat`` (with the 95 % b
 standard deviation's sampling error) against the plan's, the ratio, and the fits whose Allan
 floor is at the edge of the scales (no B: an upper bound). ``--json`` keeps every estimate.
 
+It chose ``engine.inference.planning.SPAN_B`` (40 averaging times of the floor); the table
+and the commands are in docs/planning.md.
+
 Usage::
 
     nice -n 10 python tests/benchmarks/plan_b_scan.py --mults 1,2,4 [--reps 200] [--seed 11]
+    nice -n 10 python tests/benchmarks/plan_b_scan.py --rate 10 --fits efficient --mults 1
 """
 
 from __future__ import annotations

@@ -9,13 +9,16 @@ realised precision is compared with the plan:
 * ``within``: the share of estimates within the target (``|q_hat / q - 1| <= rel``), against
   the interval level (95 %), with its Wilson 95 % band.
 
-Models: a tactical-grade gyro (WN+RW at 200 Hz), the ADIS16405 gyro and accelerometer
-(GM+WN+RW fitted to ../shared/data/adis16405_imu1.h5, gyro_x and accel_x, at 100 Hz), a
-consumer MEMS gyro with a Gauss-Markov term (GM+WN+RW at 100 Hz).
+Models: a tactical-grade gyro (WN+RW at 20 Hz), the ADIS16405 gyro and accelerometer
+(GM+WN+RW fitted to ../shared/data/adis16405_imu1.h5, gyro_x and accel_x, at 100 Hz; the
+gyro's B row at 10 Hz, :func:`at_rate`), a consumer MEMS gyro with a Gauss-Markov term
+(GM+WN+RW at 100 Hz), and the XSens MTi-G gyro (../shared/data/mtig_cont_imu1.h5, B only, at
+10 Hz: a model the B bound ``SPAN_B`` was not tuned on).
 
 Usage::
 
     nice python tests/benchmarks/plan_mc.py [--reps 200] [--seed 1] [--json out.json]
+    nice python tests/benchmarks/plan_mc.py --only "B within"    # the B rows
 
 Prints a Markdown table (docs/planning.md holds its output).
 """
