@@ -56,6 +56,16 @@ _ALIASES: dict[str, str] = {
 #: :func:`plan_run` plans no target shorter than that.
 SPAN_GM = 50.0
 
+#: The bias instability's asymptotic interval holds from a log this many times the averaging
+#: time of the model's Allan floor (tests/benchmarks/plan_b_scan.py, docs/planning.md: at the 19
+#: times that the asymptotics alone give for "B within 30 %", the few-degree-of-freedom WV
+#: levels at and above the floor make the fitted GM and random walk spread 1.22-1.70x the plan's
+#: sd of log B; at 40 times, 0.99-1.08x on four models, one not tuned on).
+#: :func:`plan_run` plans no B or ADEV_min target shorter.
+SPAN_B = 40.0
+#: The quantities read off the Allan floor, to which :data:`SPAN_B` applies.
+_FLOOR_KEYS = ("B", "ADEV_min")
+
 #: The quantities planned for: the model's own (a plan has no data, so no ``ADEV_data``).
 _PLANNED = ("N", "B", "ADEV_min", "K", "Q", "R")
 
@@ -238,8 +248,6 @@ class RunPlan:
         least ``valid_from``; None when no length up to ``max_hours`` does.
     tables : tuple of IeeeTable
         The full expected table (values, intervals, datasheet units) at each length.
-    caveats : tuple of str
-        Targets whose planned precision the Monte Carlo of docs/planning.md did not confirm.
     asymptotic : dict of str to int or None
         Per target key, the shortest length meeting it by the asymptotic covariance alone
         (shorter than ``required`` when that is below ``valid_from``).
@@ -250,6 +258,12 @@ class RunPlan:
         :data:`SPAN_GM` correlation times of the slowest GM/AR1 term (0 without one).
     valid_why : str
         What sets ``valid_from`` (``"50 correlation times of GM (20 s)"``), or "".
+    floor_from : int
+        The shortest length (samples) at which the asymptotic interval of B and ADEV_min
+        holds: :data:`SPAN_B` times the averaging time of the model's Allan floor (0 when the
+        model has no floor within ``max_hours``).
+    floor_why : str
+        What sets ``floor_from`` (``"40 times B's averaging time (52 min)"``), or "".
     """
 
     model: Model
@@ -261,11 +275,21 @@ class RunPlan:
     precision: dict[str, np.ndarray]
     required: dict[str, int | None]
     tables: tuple[IeeeTable, ...] = field(repr=False)
-    caveats: tuple[str, ...] = ()
     asymptotic: dict[str, int | None] = field(default_factory=dict)
     achieved: dict[str, float] = field(default_factory=dict)
     valid_from: int = 0
     valid_why: str = ""
+    floor_from: int = 0
+    floor_why: str = ""
+
+    def valid_for(self, key: str) -> tuple[int, str]:
+        """The shortest length (samples) at which the asymptotic precision of ``key`` holds,
+        and what sets it: the larger of ``valid_from`` and, for B and ADEV_min,
+        ``floor_from`` ((0, "") when nothing bounds it)."""
+        bounds = [(self.valid_from, self.valid_why)]
+        if key in _FLOOR_KEYS:
+            bounds.append((self.floor_from, self.floor_why))
+        return max(bounds)
 
     @property
     def hours(self) -> np.ndarray:
@@ -300,9 +324,8 @@ class RunPlan:
             if n is not None and a is not None and a < n:
                 lines.append(
                     f"  {'':<22} ({_hours_text(a / self.fs)} would meet it by the asymptotic "
-                    f"covariance, which holds from {self.valid_why})"
+                    f"covariance, which holds from {self.valid_for(t.key)[1]})"
                 )
-        lines += [f"  caution: {c}" for c in self.caveats]
         keys = [k for k in self.precision if np.isfinite(self.precision[k]).any()]
         head = "  length        " + "".join(f"{k:>11}" for k in keys)
         lines += ["", "  precision (half-width of the interval, % of the value):", head]
@@ -314,6 +337,12 @@ class RunPlan:
             lines.append(
                 f"  * shorter than {_hours_text(self.valid_from / self.fs)} "
                 f"({self.valid_why}): the realised spread exceeds these figures"
+            )
+        floor = [k for k in keys if k in _FLOOR_KEYS]
+        if floor and self.floor_from > max(self.lengths[0], self.valid_from):
+            lines.append(
+                f"  {' and '.join(floor)} shorter than {_hours_text(self.floor_from / self.fs)} "
+                f"({self.floor_why}): the realised spread exceeds these figures"
             )
         vals = [
             f"{k} = {q.datasheet_value:.4g} {q.datasheet_unit}"
@@ -341,15 +370,13 @@ class RunPlan:
         for t in self.targets:
             n = self.required.get(t.key)
             a = self.asymptotic.get(t.key)
+            valid, why = self.valid_for(t.key)
             if n is None:
                 need = f"is not reached within {_hours_text(self.lengths[-1] / self.fs)}"
             else:
                 need = f"needs {_hours_text(n / self.fs)} of log"
                 if a is not None and a < n:
-                    need += (
-                        f" ({self.valid_why}: a shorter log is too short for the plan's "
-                        "asymptotics)"
-                    )
+                    need += f" ({why}: a shorter log is too short for the plan's asymptotics)"
             have = ""
             q = now.get(t.key) if now is not None else None
             if q is not None and q.has_interval and q.value > 0:
@@ -357,8 +384,8 @@ class RunPlan:
                 gives = (
                     f"+-{100 * rel:.3g} %" if rel < 9.99 else "no usable value (beyond a factor 10)"
                 )
-                if rel < 9.99 and n_log < self.valid_from:
-                    gives += " or worse (shorter than " + self.valid_why + ")"
+                if rel < 9.99 and n_log < valid:
+                    gives += " or worse (shorter than " + why + ")"
                 have = f"; this log ({_hours_text(n_log / self.fs)}) gives {gives}"
             out.append(f"**{t}** {need}{have}.")
         return out
@@ -383,13 +410,16 @@ class RunPlan:
                     "hours": None if n is None else n / self.fs / 3600.0,
                     "precision": num(self.achieved.get(t.key, math.nan)),
                     "asymptotic_samples": self.asymptotic.get(t.key),
+                    "valid_from_samples": self.valid_for(t.key)[0],
+                    "valid_from": self.valid_for(t.key)[1],
                 }
                 for t, n in ((t, self.required.get(t.key)) for t in self.targets)
             ],
             "record_samples": self.record_n,
-            "caveats": list(self.caveats),
             "valid_from_samples": self.valid_from,
             "valid_from": self.valid_why,
+            "floor_from_samples": self.floor_from,
+            "floor_from": self.floor_why,
             "lengths": [int(n) for n in self.lengths],
             "hours": [float(h) for h in self.hours],
             "precision": {k: [num(v) for v in a] for k, a in self.precision.items()},
@@ -489,6 +519,9 @@ def plan_run(
         return _rel(tb, key)
 
     valid_from, valid_why = _valid_from(m, fs)
+    # the model's own floor (none when even the longest log's minimum is at the scales' edge)
+    at_floor = [k for k in floor_tau if "edge" not in longest[k].note]
+    floor_from, floor_why = _floor_from(floor_tau[at_floor[0]] if at_floor else None, fs)
     asymptotic: dict[str, int | None] = {}
     required: dict[str, int | None] = {}
     achieved: dict[str, float] = {}
@@ -499,7 +532,8 @@ def plan_run(
                 f"({IEEE_KEYS[t.key]}); the model's quantities: {', '.join(keys)}"
             )
         a = _shortest(partial(_rel_at, table, rel, t.key), t.rel, n_max)
-        n = None if a is None or valid_from > n_max else max(a, valid_from)
+        lowest = max(valid_from, floor_from if t.key in _FLOOR_KEYS else 0)
+        n = None if a is None or lowest > n_max else max(a, lowest)
         asymptotic[t.key], required[t.key] = a, n
         achieved[t.key] = math.nan if n is None else rel(table(n), t.key)
     if lengths is None:
@@ -514,7 +548,6 @@ def plan_run(
         raise ValueError("plan_run needs lengths of at least 16 samples")
     tables = tuple(table(int(n)) for n in grid)
     precision = {k: np.array([rel(tb, k) for tb in tables]) for k in keys}
-    caveats = tuple(_caveats(m, tg, required))
     return RunPlan(
         m,
         fs,
@@ -525,11 +558,12 @@ def plan_run(
         precision,
         required,
         tables,
-        caveats,
         asymptotic,
         achieved,
         valid_from,
         valid_why,
+        floor_from,
+        floor_why,
     )
 
 
@@ -556,23 +590,17 @@ def _valid_from(m: Model, fs: float) -> tuple[int, str]:
     return int(math.ceil(SPAN_GM * tc * fs - 1e-6)), why
 
 
-def _caveats(
-    m: Model, targets: tuple[PlanTarget, ...], required: dict[str, int | None]
-) -> list[str]:
-    """Targets whose planned precision the Monte Carlo did not confirm: B of a model with a
-    GM/AR1 term (docs/planning.md, tests/benchmarks/plan_b_cause.py: not the delta method's
-    linearisation, the fits' own spread)."""
-    labs = [lab for lab, p in zip(m.labels, m.processes, strict=True) if p.nonlinear is not None]
-    if not labs:
-        return []
-    return [
-        f"{t}: the bias instability of a model with {labs[0]} rests on the GM and the random "
-        "walk, whose fitted values spread wider than the asymptotic plan says; the Monte Carlo "
-        "of docs/planning.md found B's spread 1.7x the plan's for the ADIS16405 gyro (1.3x "
-        "without the 2 % of fits that missed the random walk)"
-        for t in targets
-        if t.key in ("B", "ADEV_min") and required.get(t.key) is not None
-    ]
+def _floor_from(tau_s: float | None, fs: float) -> tuple[int, str]:
+    """The shortest length (samples) at which the plan's interval of the bias instability
+    holds, and why: :data:`SPAN_B` times the averaging time ``tau_s`` (s) of the model's Allan
+    floor. B is read off the WV levels at and above the floor; a log of ``L`` such times holds
+    about ``L / 2`` effective degrees of freedom at the floor's level, too few below
+    :data:`SPAN_B` for the fitted GM and random walk to spread as the asymptotics say
+    (tests/benchmarks/plan_b_scan.py, docs/planning.md)."""
+    if tau_s is None or not (math.isfinite(tau_s) and tau_s > 0):
+        return 0, ""
+    why = f"{SPAN_B:g} times B's averaging time ({_hours_text(tau_s)})"
+    return int(math.ceil(SPAN_B * tau_s * fs - 1e-6)), why
 
 
 def _rel_at(
