@@ -245,58 +245,69 @@ async def _attack(port: int, frags: list[str | bytes], timeout_s: float = 60.0) 
     return None
 
 
-def test_protocol_attacks_close_the_session_not_the_server(tmp_path: Path) -> None:
-    with _gmwm_app("--prebuild", "0", cwd=tmp_path) as srv:
-        port, pid = srv["port"], _server_pid(srv)
-        assert _request(port, "GET", "/").status == 200
-        time.sleep(1.0)
-        base = _peak_mb(pid)
-        # 1. a compressed value inflating to BOMB_MB MB in a PATCH-DOC event
-        bomb = base64.b64encode(_gzip_zeros(BOMB_MB * 1_000_000)).decode()
-        event = {"kind": "MessageSent", "msg_type": "x", "msg_data": {"type": "bytes"}}
-        event["msg_data"]["data"] = bomb
-        code = asyncio.run(_attack(port, _fragments({"events": [event]})))
-        assert code == 10001, code  # Bokeh's protocol-error close
-        rise_bomb = _peak_mb(pid) - base
-        # 2. a message declaring 1000 buffers, sent as 4 MB buffers, never finished
-        chunk = bytes(4_000_000)
-        flood = _fragments({"events": []}, [chunk] * (FLOOD_MB // 4), declared=1000)
-        code = asyncio.run(_attack(port, flood))
-        assert code == 10001, code
-        rise_flood = _peak_mb(pid) - base
-        out = "".join(srv["lines"])
-        assert "compressed value over 16 MB" in out and "message over 16 MB" in out, out[-3000:]
-        print(
-            f"server peak memory {base:.0f} MB; +{rise_bomb:.0f} MB after the bomb, "
-            f"+{rise_flood:.0f} MB after the flood"
-        )
-        assert rise_bomb < MAX_RISE_MB and rise_flood < MAX_RISE_MB, (rise_bomb, rise_flood)
-        # the server still serves pages and sessions
-        assert srv["proc"].poll() is None
-        assert _request(port, "GET", "/").status == 200
+@pytest.fixture(scope="module")
+def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    """One ``gmwm-app --prebuild 0`` for the attacks and the DNS-rebinding checks (a start
+    costs about 7 s of CPU). Each test reads only what it causes: the peak memory against its
+    own baseline, the log lines printed since it began."""
+    with _gmwm_app("--prebuild", "0", cwd=tmp_path_factory.mktemp("served")) as srv:
+        yield srv
 
 
-def test_dns_rebinding_is_refused(tmp_path: Path) -> None:
-    with _gmwm_app("--prebuild", "0", cwd=tmp_path) as srv:
-        port = srv["port"]
-        evil = f"rebind.evil.example:{port}"
-        for headers in ({"Host": evil}, {"Host": evil, "Origin": f"http://{evil}"}):
-            r = _request(port, "GET", "/", headers=headers)
-            assert r.status == 403, r.status
-            assert b"--allow-websocket-origin" in r.body  # type: ignore[attr-defined]
-            assert b"token" not in r.body  # type: ignore[attr-defined]
-        for host in (f"localhost:{port}", f"127.0.0.1:{port}"):
-            assert _request(port, "GET", "/", headers={"Host": host}).status == 200
-        # a token obtained by a good page does not open a websocket from the foreign name
-        token = _token(_request(port, "GET", "/").body)  # type: ignore[attr-defined]
+def test_protocol_attacks_close_the_session_not_the_server(served: dict) -> None:
+    srv = served
+    begin = len(srv["lines"])
+    port, pid = srv["port"], _server_pid(srv)
+    assert _request(port, "GET", "/").status == 200
+    time.sleep(1.0)
+    base = _peak_mb(pid)
+    # 1. a compressed value inflating to BOMB_MB MB in a PATCH-DOC event
+    bomb = base64.b64encode(_gzip_zeros(BOMB_MB * 1_000_000)).decode()
+    event = {"kind": "MessageSent", "msg_type": "x", "msg_data": {"type": "bytes"}}
+    event["msg_data"]["data"] = bomb
+    code = asyncio.run(_attack(port, _fragments({"events": [event]})))
+    assert code == 10001, code  # Bokeh's protocol-error close
+    rise_bomb = _peak_mb(pid) - base
+    # 2. a message declaring 1000 buffers, sent as 4 MB buffers, never finished
+    chunk = bytes(4_000_000)
+    flood = _fragments({"events": []}, [chunk] * (FLOOD_MB // 4), declared=1000)
+    code = asyncio.run(_attack(port, flood))
+    assert code == 10001, code
+    rise_flood = _peak_mb(pid) - base
+    out = "".join(srv["lines"][begin:])
+    assert "compressed value over 16 MB" in out and "message over 16 MB" in out, out[-3000:]
+    print(
+        f"server peak memory {base:.0f} MB; +{rise_bomb:.0f} MB after the bomb, "
+        f"+{rise_flood:.0f} MB after the flood"
+    )
+    assert rise_bomb < MAX_RISE_MB and rise_flood < MAX_RISE_MB, (rise_bomb, rise_flood)
+    # the server still serves pages and sessions
+    assert srv["proc"].poll() is None
+    assert _request(port, "GET", "/").status == 200
 
-        async def ws_from(host: str) -> Any:
-            ws = await _open_ws(port, token, host=host)
-            ws.close()
 
-        with pytest.raises(Exception, match="403"):
-            asyncio.run(ws_from("rebind.evil.example"))
-        assert "refused GET /" in "".join(srv["lines"])
+def test_dns_rebinding_is_refused(served: dict) -> None:
+    srv = served
+    begin = len(srv["lines"])
+    port = srv["port"]
+    evil = f"rebind.evil.example:{port}"
+    for headers in ({"Host": evil}, {"Host": evil, "Origin": f"http://{evil}"}):
+        r = _request(port, "GET", "/", headers=headers)
+        assert r.status == 403, r.status
+        assert b"--allow-websocket-origin" in r.body  # type: ignore[attr-defined]
+        assert b"token" not in r.body  # type: ignore[attr-defined]
+    for host in (f"localhost:{port}", f"127.0.0.1:{port}"):
+        assert _request(port, "GET", "/", headers={"Host": host}).status == 200
+    # a token obtained by a good page does not open a websocket from the foreign name
+    token = _token(_request(port, "GET", "/").body)  # type: ignore[attr-defined]
+
+    async def ws_from(host: str) -> Any:
+        ws = await _open_ws(port, token, host=host)
+        ws.close()
+
+    with pytest.raises(Exception, match="403"):
+        asyncio.run(ws_from("rebind.evil.example"))
+    assert "refused GET /" in "".join(srv["lines"][begin:])
 
 
 def test_login_cookie_not_in_token_and_logins_throttled(tmp_path: Path) -> None:

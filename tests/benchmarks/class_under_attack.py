@@ -2,7 +2,7 @@
 keeps working (a bounded load run, not collected by the test suite: run it alone, in a process
 of its own, with
 
-    python -m pytest tests/benchmarks/class_under_attack.py -m load -s -p no:cacheprovider
+    python -m pytest tests/benchmarks/class_under_attack.py -m load -s -n 0 -p no:cacheprovider
 
 In one process with other tests it left Bokeh's patched current document and its sessions'
 threads behind when it failed, which broke the tests after it).
