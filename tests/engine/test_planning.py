@@ -409,3 +409,40 @@ def test_at_the_planned_length_a_gm_gyros_bias_instability_is_as_precise_as_plan
     sd = float(np.std(lr, ddof=1))
     band = Z999 * sd_plan / math.sqrt(2 * (reps - 1))
     assert abs(sd - sd_plan) <= band, (sd, sd_plan, band)
+
+
+def test_at_the_planned_length_a_drifting_sensors_n_is_as_precise_as_planned():
+    """WN + DR at 100 Hz, 'N within 1 %' (the plan's longest log, 1000 h, was out of memory
+    before the drift's share of V had its closed form): 400 logs at the planned 19,416 samples,
+    each fitted WN+DR by the efficient GMWM (about 6 s of CPU). The spread of log N_hat equals
+    the plan's within the 99.9 % band of a standard deviation's sampling error
+    (sd / sqrt(2 (R - 1)), +-12 % of it at R = 400), and the share within 1 % is 95 % within
+    its Wilson-like 99.9 % band (+-3.6 points). Measured: sd 0.0050 against 0.0051 planned,
+    95.5 % within."""
+    m = eg.parse_model("WN(sigma2=1)+DR(omega=1e-6)")
+    fs, reps = 100.0, 400
+    plan = plan_run(m, fs, "N within 1 %")
+    n = plan.required["N"]
+    assert n is not None and 19_000 < n < 20_000
+    q = plan_precision(m, fs, n)["N"]
+    sd_plan = math.log1p(plan.achieved["N"]) / Z95
+    rng = np.random.default_rng(20261128)
+    est = np.array(
+        [
+            eg.fit_gmwm(
+                eg.wavelet_variance(m.simulate(n, fs=fs, rng=rng), fs=fs),
+                "WN+DR",
+                weights="efficient",
+            )
+            .ieee["N"]
+            .value
+            for _ in range(reps)
+        ]
+    )
+    lr = np.log(est / q.value)
+    sd = float(np.std(lr, ddof=1))
+    band = Z999 * sd_plan / math.sqrt(2 * (reps - 1))
+    assert abs(sd - sd_plan) <= band, (sd, sd_plan, band)
+    share = float(np.mean(np.abs(est / q.value - 1.0) <= _rel(q)))
+    half = Z999 * math.sqrt(0.95 * 0.05 / reps) + 1.0 / reps
+    assert abs(share - 0.95) <= half, share
