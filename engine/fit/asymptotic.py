@@ -497,14 +497,25 @@ def _u0(model: Model, free: list[tuple[int, str]]) -> np.ndarray:
     return np.array([TO_UNCONSTRAINED[n](float(getattr(model.processes[i], n))) for i, n in free])
 
 
+def _steps(free: list[tuple[int, str]], u0: np.ndarray) -> list[float]:
+    """Central-difference steps in the unconstrained coordinates: ``1e-5 max(1, |u|)`` for the
+    log and atanh coordinates; ``1e-5 |omega|`` for a drift's omega, which is taken as is at
+    any scale (``1e-9`` per sample for a gyro) and whose reported size ``|omega|`` has a kink
+    at 0: a step of ``1e-5`` across it made the rate ramp's gradient ``|omega| / 1e-5`` times
+    too small, and its interval as much too narrow."""
+    return [
+        1e-5 * (abs(u) if name == "omega" and u != 0 else max(1.0, abs(u)))
+        for (_, name), u in zip(free, u0, strict=True)
+    ]
+
+
 def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     """d nu / d u (J x p) at the estimate, u the unconstrained coordinates of free parameters."""
     free = free_params(res) if free is None else free
     u0 = _u0(res.model, free)
     tau = res.wv.tau_samples
     jac = np.empty((tau.size, len(free)))
-    for k in range(len(free)):
-        h = 1e-5 * max(1.0, abs(u0[k]))
+    for k, h in enumerate(_steps(free, u0)):
         up, dn = u0.copy(), u0.copy()
         up[k] += h
         dn[k] -= h
@@ -629,7 +640,7 @@ def delta_bounds(
         return [(math.nan, math.nan)] * len(fns)
     z = NormalDist().inv_cdf(0.5 + level / 2)
     u0 = _u0(res.model, free)
-    steps = [1e-5 * max(1.0, abs(u)) for u in u0]
+    steps = _steps(free, u0)
     shifted = []
     for k, h in enumerate(steps):
         up, dn = u0.copy(), u0.copy()
