@@ -222,52 +222,31 @@ def _increment_sums(n: int, n_coef: tuple[int, ...]) -> tuple[np.ndarray, np.nda
     random walk's and the white noise's factors, which depend on the log's length only: cached,
     a ranking asks for them twice).
 
-    Each level's weights are a ramp up of ``K = 2^j - 1`` increments, a plateau and a ramp down;
-    a sum over a pair is over the finer level's ramps only (the plateau in closed form), so the
-    cost is ``O(2^J)`` for all pairs, not ``O(J 2^J)`` (2.8 s of CPU for 10^6 samples before).
+    Each level's weights are piecewise polynomials of degree 2 or less in the index (the ramp up
+    ``H_j``, the plateau, the ramp down; :func:`_weight4`), so on each stretch between the
+    breakpoints of a pair the product is a polynomial of degree 4 or less, summed exactly from
+    its first five values (Newton's forward differences, in Python integers). The cost is
+    ``O(J^2)`` time and memory whatever ``n`` (it built arrays of ``2^J`` and ``n`` values
+    before: 512 MiB each for 3.6e8 samples).
     """
     n_lev = len(n_coef)
     inc = n - 1  # increments
-    ramps, tris = [], []
-    for j in range(1, n_lev + 1):
-        m = 1 << (j - 1)
-        tri = np.concatenate([np.arange(1, m + 1), np.arange(m - 1, 0, -1)]) / float(2 * m)
-        tris.append(tri)
-        ramps.append(np.cumsum(tri))  # H_j(r), r = 0 .. 2^j - 2; then the plateau tau_j / 4
     rw = np.empty((n_lev, n_lev))
     wn = np.empty((n_lev, n_lev))
+    halves = [1 << j for j in range(n_lev)]  # m = 2^(j-1), j = 1..J
     for b in range(n_lev):
-        hb, kb = ramps[b], ramps[b].size
-        if 2 * kb <= inc:  # ramps at both ends, then a plateau: by symmetry
-            tail = np.concatenate([np.cumsum(hb[::-1])[::-1], [0.0]])  # tail[i] = sum hb[i:]
-            for a in range(b + 1):
-                ha, ka = ramps[a], ramps[a].size
-                dot = _dot(ha, hb[:ka]) + ha[-1] * tail[ka]
-                rw[a, b] = 2.0 * dot + (inc - 2 * kb) * ha[-1] * hb[-1]
-                wn[a, b] = 2.0 * _dot(tris[a], tris[b][:ka])
-        else:  # the coarsest levels of a short log: the ramps meet; build the weights
-            wb = _increment_weights(hb, inc)
-            db = np.diff(wb, prepend=0.0, append=0.0)
-            wb_sum = float(wb.sum())
-            for a in range(b + 1):
-                ha, ka = ramps[a], ramps[a].size
-                if 2 * ka + 2 <= inc:  # a finer level: its plateau, then its two ends
-                    u = np.arange(1, ka + 2)  # u = 1 .. K + 1 and inc - K .. inc
-                    head = _increment_weights(ha, inc, u)
-                    end = _increment_weights(ha, inc, inc + 1 - u[::-1])
-                    top = ha[-1]
-                    rw[a, b] = (
-                        top * wb_sum
-                        + _dot(head[:ka] - top, wb[:ka])
-                        + _dot(end[1:] - top, wb[inc - ka :])
-                    )
-                    d_head = np.diff(head, prepend=0.0)  # da at 0 .. K
-                    d_end = np.diff(end, append=0.0)  # da at inc - K .. inc
-                    wn[a, b] = _dot(d_head, db[: ka + 1]) + _dot(d_end, db[inc - ka :])
-                else:
-                    wa = _increment_weights(ha, inc)
-                    rw[a, b] = _dot(wa, wb)
-                    wn[a, b] = _dot(np.diff(wa, prepend=0.0, append=0.0), db)
+        mb = halves[b]
+        short = 2 * (2 * mb - 1)  # both ramps of the coarser level, K = 2m - 1 increments each
+        for a in range(b + 1):
+            ma = halves[a]
+            if short <= inc:  # a plateau between the ramps: its length adds P_a P_b per increment
+                rw4, wn4 = _pair_sums4(ma, mb, short)
+                rw4 += (inc - short) * (2 * ma * ma) * (2 * mb * mb)
+            else:  # the coarsest levels of a short log: the ramps meet
+                rw4, wn4 = _pair_sums4(ma, mb, inc)
+            scale = 16.0 * ma * mb
+            rw[a, b] = rw4 / scale
+            wn[a, b] = wn4 / scale
     iu = np.triu_indices(n_lev, 1)
     rw[iu[::-1]] = rw[iu]
     wn[iu[::-1]] = wn[iu]
@@ -276,21 +255,87 @@ def _increment_sums(n: int, n_coef: tuple[int, ...]) -> tuple[np.ndarray, np.nda
     return rw, wn
 
 
-def _dot(x: np.ndarray, y: np.ndarray) -> float:
-    """``x @ y`` in the calling thread: OpenBLAS splits a dot product of more than 10,000
-    elements over its threads, 20x slower here on a busy machine (:mod:`engine._blas`)."""
-    return float(np.einsum("i,i->", x, y))
+@functools.lru_cache(maxsize=2048)
+def _pair_sums4(ma: int, mb: int, inc: int) -> tuple[int, int]:
+    """``16 ma mb`` times ``sum_u W_a(u) W_b(u)`` and ``sum_s w_a(s) w_b(s)`` over a log of
+    ``inc`` increments, exact (cached: for long logs they are asked at ``inc = 2 (2 mb - 1)``
+    only, whatever the length)."""
+    big = functools.partial(_product4, _weight4, ma, mb, inc)
+    small = functools.partial(_product4, _sample_weight4, ma, mb, inc)
+    rw4 = _piecewise_sum(big, _weight_breaks(ma, inc) | _weight_breaks(mb, inc), 1, inc + 1)
+    wn4 = _piecewise_sum(
+        small, _sample_weight_breaks(ma, inc) | _sample_weight_breaks(mb, inc), 0, inc + 1
+    )
+    return rw4, wn4
 
 
-def _increment_weights(ramp: np.ndarray, inc: int, u: np.ndarray | None = None) -> np.ndarray:
-    """Weights of the ``inc`` increments ``u = 1..inc`` (or of the given ``u`` only) in the sum
-    of one level's coefficients, ``H(min(K - 1, inc - u)) - H(K - 1 - u)`` (``H`` the ramp,
-    ``K`` its length, ``H`` of a negative index 0): the ramp up, the plateau, the ramp down,
-    for any log length."""
-    u = np.arange(1, inc + 1) if u is None else u
-    k = ramp.size
-    hx = np.concatenate([[0.0], ramp])  # hx[i + 1] = H(i), hx[0] = H(-1) = 0
-    return hx[np.minimum(k - 1, inc - u) + 1] - hx[np.maximum(k - 1 - u, -1) + 1]
+def _ramp4(r: int, m: int) -> int:
+    """``4 m H(r)``, an integer: the ramp ``H(r) = sum_{d <= r} G(d)`` of a level with
+    ``m = 2^(j-1)`` (``G`` its triangle ``1..m..1 / 2m``), 0 below ``r = 0`` and ``m / 2``
+    (``tau_j / 4``) from ``r = 2m - 2`` on. Quadratic pieces: ``(r + 1)(r + 2) / 4m`` for
+    ``r < m``, then ``(m + 1) / 4 + (t (m - 1) - t (t - 1) / 2) / 2m`` with ``t = r - m + 1``."""
+    if r < 0:
+        return 0
+    if r < m:
+        return (r + 1) * (r + 2)
+    if r < 2 * m - 1:
+        t = r - m + 1
+        return m * (m + 1) + 2 * t * (m - 1) - t * (t - 1)
+    return 2 * m * m
+
+
+def _weight4(m: int, inc: int, u: int) -> int:
+    """``4 m W(u)``: the weight of increment ``u`` (``1..inc``, 0 elsewhere) in the sum of one
+    level's coefficients, ``H(min(K - 1, inc - u)) - H(K - 1 - u)``, ``K = 2m - 1``."""
+    if u < 1 or u > inc:
+        return 0
+    return _ramp4(inc - u, m) - _ramp4(2 * m - 2 - u, m)
+
+
+def _sample_weight4(m: int, inc: int, s: int) -> int:
+    """``4 m w(s)``: the weight of sample ``s`` (``0..inc``), the increments' weights
+    differenced."""
+    return _weight4(m, inc, s + 1) - _weight4(m, inc, s)
+
+
+def _weight_breaks(m: int, inc: int) -> set[int]:
+    """The first indices of the stretches on which :func:`_weight4` is one polynomial: the
+    breaks of ``H(c - u)`` (``u = c + 1, c - m + 1, c - 2m + 2``) for ``c = inc`` and
+    ``c = 2m - 2``, and the ends of the range."""
+    breaks = {1, inc + 1}
+    for c in (inc, 2 * m - 2):
+        breaks.update((c + 1, c - m + 1, c - 2 * m + 2))
+    return breaks
+
+
+def _sample_weight_breaks(m: int, inc: int) -> set[int]:
+    """The breaks of :func:`_sample_weight4`: those of both shifted weights, and its range."""
+    w = _weight_breaks(m, inc)
+    return w | {u - 1 for u in w} | {0, inc + 1}
+
+
+def _product4(weight: Callable[[int, int, int], int], ma: int, mb: int, inc: int, u: int) -> int:
+    """The product of two levels' (scaled, integer) weights at ``u``."""
+    return weight(ma, inc, u) * weight(mb, inc, u)
+
+
+def _piecewise_sum(f: Callable[[int], int], breaks: set[int], start: int, stop: int) -> int:
+    """Exact ``sum_{start <= u < stop} f(u)`` for an ``f`` that is a polynomial of degree 4 or
+    less on each stretch between consecutive breaks (``start`` and ``stop`` among them): each
+    stretch of ``L`` terms is ``sum_k Delta^k f(lo) C(L, k + 1)`` (Newton's forward
+    differences), in Python integers."""
+    points = sorted(u for u in breaks if start <= u <= stop)
+    total = 0
+    for lo, hi in zip(points[:-1], points[1:], strict=True):
+        length = hi - lo
+        if length <= 5:
+            total += sum(f(u) for u in range(lo, hi))
+            continue
+        diffs = [f(lo + i) for i in range(5)]
+        for k in range(5):
+            total += diffs[0] * math.comb(length, k + 1)
+            diffs = [y - x for x, y in zip(diffs[:-1], diffs[1:], strict=True)]
+    return total
 
 
 def _spectral_pieces(model: Model, fs: float) -> tuple[dict[int, float], list[tuple[float, float]]]:
@@ -452,14 +497,25 @@ def _u0(model: Model, free: list[tuple[int, str]]) -> np.ndarray:
     return np.array([TO_UNCONSTRAINED[n](float(getattr(model.processes[i], n))) for i, n in free])
 
 
+def _steps(free: list[tuple[int, str]], u0: np.ndarray) -> list[float]:
+    """Central-difference steps in the unconstrained coordinates: ``1e-5 max(1, |u|)`` for the
+    log and atanh coordinates; ``1e-5 |omega|`` for a drift's omega, which is taken as is at
+    any scale (``1e-9`` per sample for a gyro) and whose reported size ``|omega|`` has a kink
+    at 0: a step of ``1e-5`` across it made the rate ramp's gradient ``|omega| / 1e-5`` times
+    too small, and its interval as much too narrow."""
+    return [
+        1e-5 * (abs(u) if name == "omega" and u != 0 else max(1.0, abs(u)))
+        for (_, name), u in zip(free, u0, strict=True)
+    ]
+
+
 def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     """d nu / d u (J x p) at the estimate, u the unconstrained coordinates of free parameters."""
     free = free_params(res) if free is None else free
     u0 = _u0(res.model, free)
     tau = res.wv.tau_samples
     jac = np.empty((tau.size, len(free)))
-    for k in range(len(free)):
-        h = 1e-5 * max(1.0, abs(u0[k]))
+    for k, h in enumerate(_steps(free, u0)):
         up, dn = u0.copy(), u0.copy()
         up[k] += h
         dn[k] -= h
@@ -584,7 +640,7 @@ def delta_bounds(
         return [(math.nan, math.nan)] * len(fns)
     z = NormalDist().inv_cdf(0.5 + level / 2)
     u0 = _u0(res.model, free)
-    steps = [1e-5 * max(1.0, abs(u)) for u in u0]
+    steps = _steps(free, u0)
     shifted = []
     for k, h in enumerate(steps):
         up, dn = u0.copy(), u0.copy()

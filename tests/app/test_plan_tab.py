@@ -61,3 +61,28 @@ def test_a_twenty_minute_log_gives_no_rate_random_walk_sentence() -> None:
     k = plan_precision(m, 100.0, 20 * 60 * 100, unit="deg/s")["K"]
     assert _rel(k) > 9.99 and "no usable value" in line
     assert math.isfinite(k.value)
+
+
+def test_a_fit_with_a_drift_is_planned_not_a_memory_error(app: Any, tmp_path: Any) -> None:
+    """Was: the plan of a model with a drift built arrays of up to 3.6e8 values for the
+    plan's 1000 h (the class server's memory, or a MemoryError shown as 'Could not plan').
+    Now the drift's share of V is in closed form; the tab answers with finite numbers."""
+    s = app.state
+    x = eg.parse_model("WN(sigma2=1)+DR(omega=1e-3)").simulate(
+        50_000, fs=100.0, rng=np.random.default_rng(3)
+    )
+    np.save(tmp_path / "drift.npy", x)
+    assert s.load_path(tmp_path / "drift.npy"), s.error
+    assert s.set_fs(100.0), s.error
+    assert s.set_model("WN+DR"), s.error
+    assert s.result is not None
+    (drift,) = [p for p in s.result.model.processes if p.code == "DR"]
+    assert drift.omega > 0  # the drift is fitted
+    view = PlanView(s, app.jobs, active=True)
+    view.targets.value = "N within 1 %, R within 20 %"
+    assert not view.message.visible, view.message.object
+    plan = view.plan
+    assert plan is not None and plan.required["N"] is not None and plan.required["R"] is not None
+    assert plan.achieved["N"] <= 0.01 and plan.achieved["R"] <= 0.20
+    assert np.isfinite(view.source.data["N"]).all()
+    assert view.status.object.count("needs") == 2
