@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -99,6 +100,27 @@ def real_data() -> Path:
 
 APP_DEMO_CHANNELS = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
 APP_DEMO_MODEL = "GM(beta=0.5, sigma2_gm=1e-4)+WN(sigma2=1e-3)+RW(gamma2=1e-9)"
+
+
+def run_capped(code: str, address_space: int, timeout: float) -> subprocess.CompletedProcess:
+    """Run ``python -c code`` in a child whose address space is capped at ``address_space``
+    bytes (one BLAS thread), so that a regression that allocates without bound ends in a
+    MemoryError there, not in the kernel killing processes on this machine."""
+
+    def cap() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (address_space, address_space))
+
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        preexec_fn=cap,
+        env=env,
+    )
 
 
 def write_small_demo(path: Path, n: int = 20_000, fs: float = 100.0) -> Path:

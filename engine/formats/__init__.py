@@ -72,36 +72,4 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
 
 __getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
-__all__ = [
-    "ExportError",
-    "DatasheetRow",
-    "si_factor",
-    "datasheet_table",
-    "datasheet_text",
-    "datasheet_csv",
-    "KalibrImu",
-    "kalibr_imu",
-    "write_kalibr",
-    "read_kalibr",
-    "kalibr_models",
-    "fit_report",
-    "write_report",
-    "curves_csv",
-    "export",
-    "FORMATS",
-    "Format",
-    "register",
-    "BI_FACTOR",
-    "ImuNoise",
-    "imu_noise",
-    "project",
-    "Projection",
-    "ProjectedParam",
-    "FORMAT_CONSUMERS",
-    "DATA_BOUNDS",
-    "MISFIT_SHARE",
-    "misfit",
-    "TailFactors",
-    "tail_factors",
-    "log_tail_factors",
-]
+__all__ = list(_lazy_names)  # the names of _LAZY, in its order

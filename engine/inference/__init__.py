@@ -72,25 +72,4 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
 
 __getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
-__all__ = [
-    "param_intervals",
-    "ParamInterval",
-    "j_test",
-    "JTest",
-    "rank_models",
-    "submodels",
-    "SelectionResult",
-    "Candidate",
-    "check_datasheet",
-    "read_datasheet",
-    "parse_datasheet",
-    "DatasheetSpec",
-    "DatasheetCheck",
-    "DatasheetError",
-    "DATASHEET_KEYS",
-    "plan_run",
-    "plan_precision",
-    "parse_targets",
-    "PlanTarget",
-    "RunPlan",
-]
+__all__ = list(_lazy_names)  # the names of _LAZY, in its order

@@ -85,32 +85,4 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
 
 __getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
 
-__all__ = [
-    "available_memory",  # what the loaders' size checks compare a log with
-    "ImuLog",
-    "LoadError",
-    "load_log",
-    "log_of",
-    "save_log",
-    "pick_channel",
-    "npy_sidecar_path",
-    "read_npy_sidecar",
-    "write_npy_sidecar",
-    "ImuBag",
-    "IMU_CHANNELS",
-    "read_imu_bag",
-    "imu_topics",
-    "write_imu_bag",
-    "mcap_profile",
-    "TimeEvent",
-    "TimeReport",
-    "check_time",
-    "segment_fs",
-    "as_seconds",
-    "GAP_FACTOR",
-    "Finding",
-    "Qualification",
-    "qualify_log",
-    "qualify_signal",
-    "drop_warmup",
-]
+__all__ = list(_lazy_names)  # the names of _LAZY, in its order

@@ -24,6 +24,7 @@ from typing import Any
 import h5py
 import numpy as np
 import pytest
+from conftest import run_capped
 
 import engine._files as files
 import engine._limits as _limits
@@ -167,20 +168,7 @@ def test_dev_zero_is_refused_without_reading_it() -> None:
     a regression ends in a MemoryError there (and a failed test) instead of filling this
     machine."""
 
-    def cap() -> None:
-        import resource
-
-        resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
-
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    r = subprocess.run(
-        [sys.executable, "-c", _DEV_ZERO],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        preexec_fn=cap,
-        env=env,
-    )
+    r = run_capped(_DEV_ZERO, 4 << 30, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     refusal = (

@@ -16,7 +16,7 @@ import pytest
 from scipy import stats
 
 import engine as eg
-from engine.fit.asymptotic import mean_coefficient_cov, wv_cov_model
+from engine.fit.asymptotic import wv_cov_model
 from engine.inference import j_test
 from engine.inference.jtest import (
     DRIFT_SHARE_MAX,
@@ -25,7 +25,6 @@ from engine.inference.jtest import (
     efficient_j,
     jtest_levels,
 )
-from engine.wv import haar_coefficients
 from engine.wv.robust import robust_wv_hermite
 
 FS = 100.0
@@ -48,23 +47,6 @@ def test_robust_hermite_weights_sum_to_the_efficiency(eff):
     assert even.sum() == pytest.approx(2.0 / eff, rel=1e-9)
     assert np.all(even[1::2] == 0) and np.all(odd[0::2] == 0)
     assert np.all(np.diff(even[2:12:2]) < 0)  # the weights decay with the degree (2-10)
-
-
-@pytest.mark.parametrize("n", [64, 100, 777])
-def test_mean_coefficient_cov_equals_the_weights_on_the_samples(n):
-    # brute force: the sum of the level-j coefficients is linear in the samples; its weights
-    # on unit vectors give the covariance under RW + WN (X_0 = 0, increments iid)
-    levels = int(math.floor(math.log2(n - 1)))
-    m_j = n - 2 ** np.arange(1, levels + 1) + 1
-    eye = np.eye(n)
-    w = np.array(
-        [[haar_coefficients(eye[i], j).sum() for i in range(n)] for j in range(1, levels + 1)]
-    )
-    idx = np.arange(n)
-    cov_x = 0.3 * np.minimum.outer(idx, idx) + 0.7 * np.eye(n)
-    direct = w @ cov_x @ w.T / np.outer(m_j, m_j)
-    mine = mean_coefficient_cov({1: 0.0, 0: 0.7, -1: 0.3}, [], n, m_j)
-    np.testing.assert_allclose(mine, direct, rtol=1e-11)
 
 
 def _mc_variance(spec: str, n: int, reps: int, robust: bool, levels: int | None, seed: int):

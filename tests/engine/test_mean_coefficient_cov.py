@@ -11,13 +11,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
 import pytest
+from conftest import run_capped
 
 from engine.fit.asymptotic import mean_coefficient_cov
 from engine.wv import haar_coefficients
@@ -93,7 +91,7 @@ def test_the_closed_form_equals_the_array_code_at_every_level(n):
         np.testing.assert_allclose(m, r, rtol=1e-9, atol=1e-12 * float(np.abs(r).max()))
 
 
-@pytest.mark.parametrize("n", [4, 5, 7, 8, 13, 16, 31, 33])
+@pytest.mark.parametrize("n", [4, 5, 7, 8, 13, 16, 31, 33, 64, 100, 777])
 def test_the_closed_form_equals_the_haar_coefficients_weights_on_the_samples(n):
     # independent of both: the sum of the level-j coefficients is linear in the samples; its
     # weights on unit vectors give the covariance under RW + WN (X_0 = 0, increments iid)
@@ -157,20 +155,7 @@ def test_a_plan_with_a_drift_answers_in_bounded_memory_and_cpu():
     space; the plan takes 0.6-0.65 s of CPU in a fresh process here, 0.45 s of it the drift share's
     closed form (542 pairs of levels, each cached), and 41 MB."""
 
-    def cap() -> None:
-        import resource
-
-        resource.setrlimit(resource.RLIMIT_AS, (1536 << 20, 1536 << 20))
-
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    r = subprocess.run(
-        [sys.executable, "-c", _PLAN_DRIFT],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        preexec_fn=cap,
-        env=env,
-    )
+    r = run_capped(_PLAN_DRIFT, 1536 << 20, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     lines = r.stdout.strip().splitlines()
     out = json.loads(lines[-1])

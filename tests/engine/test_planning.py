@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -381,6 +382,19 @@ def test_the_bias_instability_is_planned_from_40_times_its_averaging_time():
     assert wn.floor_from == 0 and wn.floor_why == "" and wn.valid_for("B") == (0, "")
 
 
+def _efficient_wn_dr(
+    m: Any, fs: float, n: int, reps: int, rng: np.random.Generator, key: str
+) -> np.ndarray:
+    """The IEEE quantity ``key`` of efficient WN+DR fits of ``reps`` logs of ``m``."""
+    fits = (
+        eg.fit_gmwm(
+            eg.wavelet_variance(m.simulate(n, fs=fs, rng=rng), fs=fs), "WN+DR", weights="efficient"
+        )
+        for _ in range(reps)
+    )
+    return np.array([f.ieee[key].value for f in fits])
+
+
 @pytest.mark.slow
 def test_at_the_planned_length_a_gm_gyros_bias_instability_is_as_precise_as_planned():
     """The ADIS16405 gyro_x model of plan_mc.py, 'B within 30 %', simulated at 10 Hz (the same
@@ -427,18 +441,7 @@ def test_at_the_planned_length_a_drifting_sensors_n_is_as_precise_as_planned():
     q = plan_precision(m, fs, n)["N"]
     sd_plan = math.log1p(plan.achieved["N"]) / Z95
     rng = np.random.default_rng(20261128)
-    est = np.array(
-        [
-            eg.fit_gmwm(
-                eg.wavelet_variance(m.simulate(n, fs=fs, rng=rng), fs=fs),
-                "WN+DR",
-                weights="efficient",
-            )
-            .ieee["N"]
-            .value
-            for _ in range(reps)
-        ]
-    )
+    est = _efficient_wn_dr(m, fs, n, reps, rng, "N")
     lr = np.log(est / q.value)
     sd = float(np.std(lr, ddof=1))
     band = Z999 * sd_plan / math.sqrt(2 * (reps - 1))
@@ -476,18 +479,7 @@ def test_at_400k_samples_a_drifts_rate_ramp_is_as_precise_as_planned():
     q = plan_precision(m, fs, n)["R"]
     s_plan = math.log(q.high / q.value) / Z95
     rng = np.random.default_rng(7)
-    est = np.array(
-        [
-            eg.fit_gmwm(
-                eg.wavelet_variance(m.simulate(n, fs=fs, rng=rng), fs=fs),
-                "WN+DR",
-                weights="efficient",
-            )
-            .ieee["R"]
-            .value
-            for _ in range(reps)
-        ]
-    )
+    est = _efficient_wn_dr(m, fs, n, reps, rng, "R")
     lr = np.log(est / q.value)
     sd = float(np.std(lr, ddof=1))
     band = Z999 * s_plan / math.sqrt(2 * (reps - 1))
