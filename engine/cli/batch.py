@@ -51,6 +51,7 @@ from .common import (
     terminal_text,
     usage_error,
 )
+from .export import add_filter_rate_option, add_horizon_option
 
 __all__ = [
     "add_parser",
@@ -153,18 +154,8 @@ def add_fleet_export_options(bt: argparse.ArgumentParser) -> None:
         "overconfident (WN+RW formats such as kalibr, openvins, px4, and ros-imu; "
         "docs/filters.md, One file for a fleet)",
     )
-    g.add_argument(
-        "--filter-rate",
-        type=positive(float, "--filter-rate"),
-        help="with --export: the filter's step; px4/ardupilot: the rate (Hz) the EKF predicts "
-        "at (required by those formats)",
-    )
-    g.add_argument(
-        "--horizon",
-        type=positive(float, "--horizon"),
-        help="with --export: the longest time (s) the filter runs without aiding: the longest "
-        "WV scale the bound covers (default: each log's length)",
-    )
+    add_filter_rate_option(g, "with --export: ")
+    add_horizon_option(g, "with --export: ", default="each log's length")
 
 
 def _fleet_format(name: str) -> Any:

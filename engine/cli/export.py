@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..formats.catalog import FORMATS
 from .common import (
     CHANNELS_HELP,
     INPUT_HELP,
@@ -58,8 +59,6 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
-    from ..formats.catalog import FORMATS
-
     ex = sub.add_parser("export")
     ex.add_argument("input", help=INPUT_HELP)
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
@@ -99,12 +98,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="filter formats: multiply every noise value by this factor (variances by its "
         "square), written in the file's header (default 1: the fitted values)",
     )
-    ex.add_argument(
-        "--filter-rate",
-        type=positive(float, "--filter-rate"),
-        help="/".join(f.name for f in FORMATS.values() if f.needs_filter_rate)
-        + ": the rate (Hz) the EKF predicts at (required by those formats)",
-    )
+    add_filter_rate_option(ex)
     ex.add_argument(
         "--projection",
         choices=["bound", "plain", "fit"],
@@ -122,12 +116,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "or filter format's (kalibr, kf-gins ...), with each value's interval and factor; "
         "repeat for several (default: WN+RW)",
     )
-    ex.add_argument(
-        "--horizon",
-        type=positive(float, "--horizon"),
-        help="the longest time (s) your filter runs without aiding (a GNSS outage, a visual "
-        "dropout): the longest WV scale the bound covers (default: the log length)",
-    )
+    add_horizon_option(ex)
     ex.add_argument(
         "--bound-data",
         choices=["low", "estimate", "high", "none"],
@@ -291,4 +280,27 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             f"wrote {args.format} export of {len(fits)} channel(s) ({', '.join(fits)}) to {out}",
             *(f"  warning: {line}" for line in disagree),
         ]
+    )
+
+
+def add_filter_rate_option(group: Any, when: str = "") -> None:
+    """``--filter-rate HZ``: the rate the consumer's filter predicts at (the formats that need
+    it are read from their records); ``when`` prefixes the help (``"with --export: "``)."""
+    group.add_argument(
+        "--filter-rate",
+        type=positive(float, "--filter-rate"),
+        help=when
+        + "/".join(f.name for f in FORMATS.values() if f.needs_filter_rate)
+        + ": the rate (Hz) the EKF predicts at (required by those formats)",
+    )
+
+
+def add_horizon_option(group: Any, when: str = "", default: str = "the log length") -> None:
+    """``--horizon S``: the longest time the filter runs without aiding, the longest WV scale
+    the export's bound covers; ``when`` prefixes the help, ``default`` names the default."""
+    group.add_argument(
+        "--horizon",
+        type=positive(float, "--horizon"),
+        help=f"{when}the longest time (s) your filter runs without aiding (a GNSS outage, a "
+        f"visual dropout): the longest WV scale the bound covers (default: {default})",
     )
