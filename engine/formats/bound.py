@@ -252,6 +252,31 @@ def least_inflation(
     return x * max(short, 1.0), float(vals[k])
 
 
+#: Tolerance of the ``T_c`` search in ``log T_c``.
+_XATOL = 1e-4
+#: Golden-section step (the shorter part of a golden cut of 1).
+_GOLD = (3.0 - math.sqrt(5.0)) / 2.0
+
+
+def _bracketed_min(f: Any, a: float, b: float, c: float, fb: float, xatol: float) -> float:
+    """A local minimum of ``f`` in ``[a, c]`` to ``xatol``, from a bracket ``a < b < c`` with
+    ``f(b) = fb`` not above ``f(a)`` and ``f(c)``: golden-section search, which keeps the
+    best point inside the bracket, so it ends at a local minimum whose value is at most
+    ``fb`` (scipy's bounded search starts from its own golden points and can settle in
+    another basin of the interval, above ``fb``)."""
+    while c - a > xatol:
+        x = b + _GOLD * (c - b) if c - b > b - a else b - _GOLD * (b - a)
+        fx = float(f(x))
+        if fx < fb:
+            a, c = (b, c) if x > b else (a, b)
+            b, fb = x, fx
+        elif x > b:
+            c = x
+        else:
+            a = x
+    return b
+
+
 def solve(
     model: Model,
     fs: float,
@@ -352,7 +377,7 @@ def solve(
     lt = math.nan
     if tc_near is not None and lo < math.log(tc_near) < hi:
         a_, b_ = max(math.log(tc_near) - 0.05, lo), min(math.log(tc_near) + 0.05, hi)
-        r = minimize_scalar(obj, bounds=(a_, b_), method="bounded", options={"xatol": 1e-4})
+        r = minimize_scalar(obj, bounds=(a_, b_), method="bounded", options={"xatol": _XATOL})
         x_ = float(r.x)
         inside = (a_ == lo or x_ > a_ + 1e-3) and (b_ == hi or x_ < b_ - 1e-3)
         if inside and math.isfinite(float(r.fun)):
@@ -363,8 +388,16 @@ def solve(
         if not math.isfinite(vals[k]):
             raise ExportError("no Gauss-Markov bias bounds the fitted WV over the band")
         a_, b_ = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        r = minimize_scalar(obj, bounds=(a_, b_), method="bounded", options={"xatol": 1e-4})
-        lt = float(r.x) if r.fun <= vals[k] else float(grid[k])
+        r = minimize_scalar(obj, bounds=(a_, b_), method="bounded", options={"xatol": _XATOL})
+        if r.fun <= vals[k]:
+            lt = float(r.x)
+        elif 0 < k < grid.size - 1:
+            # the bounded search went into another basin (two minima between the grid's
+            # neighbours, e.g. ADIS16405 accel_x) and ended above the grid point, where the
+            # objective may still be falling: the bracketed search keeps its best point
+            lt = _bracketed_min(obj, float(a_), float(grid[k]), float(b_), float(vals[k]), _XATOL)
+        else:
+            lt = float(grid[k])
     tc = math.exp(lt)
     af = columns(consumer, fine, fs, tc)
     a = af[at]
@@ -405,7 +438,7 @@ def solve_at_tcs(
 #: tight to rounding, about 1e-15).
 _TIGHT = 1e-11
 #: How far (in log T_c) the searched optimum may lie from the one the search returned: its
-#: tolerance (``xatol`` 1e-4) with a margin.
+#: tolerance (:data:`_XATOL`) with a margin.
 _NEAR_LT = 5e-3
 #: Rows within this relative slack are checked at every moved model's solution (a moved
 #: model's targets move by about 1e-3, its T_c by as much).
