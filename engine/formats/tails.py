@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..wv import as_series, sampled_haar_coefficients
+from ..wv import as_series, iter_sampled_haar_coefficients
 
 if TYPE_CHECKING:
     from ..io import ImuLog
@@ -113,11 +113,14 @@ def _lower_ranks(n: Sequence[int], level: float, confidence: float) -> np.ndarra
     return np.minimum(binom.ppf(1.0 - confidence, nn, level).astype(np.int64), nn - 1)
 
 
-def _ratio_factor(a: np.ndarray, level: float, rank: tuple[int, int] | None) -> tuple[float, float]:
+def _ratio_factor(
+    a: np.ndarray, level: float, rank: tuple[int, int] | None, sq: np.ndarray | None = None
+) -> tuple[float, float]:
     """:func:`quantile_factor` of the absolute values ``a`` (overwritten: partitioned in
     place), at the ``level`` quantile (``rank`` None) or the ``k / n`` one (``rank = (k,
-    n)``); the quantile as ``np.quantile``'s default (linear) method gives it."""
-    rms = math.sqrt(float(np.mean(a * a)))
+    n)``); the quantile as ``np.quantile``'s default (linear) method gives it. ``sq``: a
+    scratch array of at least ``a.size`` values for the squares (none allocated)."""
+    rms = math.sqrt(float(np.mean(np.multiply(a, a, out=None if sq is None else sq[: a.size]))))
     if not rms > 0:
         return math.nan, 1.0
     p = level
@@ -250,24 +253,30 @@ def tail_factors(
     nl = big if levels is None else int(levels)
     if not 1 <= nl <= big:
         raise ValueError(f"levels must be in 1..{big} for {n} samples, got {levels!r}")
-    coefs = [
-        sampled_haar_coefficients(p, min(nl, int(math.floor(math.log2(p.size - 1)))), per_scale=8)
-        for p in parts
-    ]
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
     if confidence is not None and not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1) or None, got {confidence!r}")
+    # one level at a time, each part's coefficients in a buffer of its own that the next
+    # level overwrites (their absolute values are partitioned in place), the squares in one
+    # scratch array: no allocation of N values per level
+    tops = [min(nl, int(math.floor(math.log2(p.size - 1)))) for p in parts]
+    coefs = [
+        iter_sampled_haar_coefficients(p, top, per_scale=8, reuse=True)
+        for p, top in zip(parts, tops, strict=True)
+    ]
+    sq = np.empty(sum(p.size for p in parts))
     taus = [float(1 << j) for j in range(1, nl + 1)]
     etas = [max(int(max(sum(max((p.size - t + 1) / t, 0.0) for p in parts), 1.0)), 1) for t in taus]
     ks = None if confidence is None else _lower_ranks(etas, level, confidence).tolist()
     ratios, factors = [], []
     for j in range(1, nl + 1):
-        cs = [c[j - 1] for c in coefs if len(c) >= j]
-        a = np.abs(cs[0] if len(cs) == 1 else np.concatenate(cs))
+        cs = [next(c) for c, top in zip(coefs, tops, strict=True) if top >= j]
+        a = cs[0] if len(cs) == 1 else np.concatenate(cs)
+        np.abs(a, out=a)
         if a.size < 2:
             raise ValueError(f"quantile_factor needs at least 2 values, got {a.size}")
-        ratio, f = _ratio_factor(a, level, None if ks is None else (ks[j - 1], etas[j - 1]))
+        ratio, f = _ratio_factor(a, level, None if ks is None else (ks[j - 1], etas[j - 1]), sq)
         ratios.append(ratio)
         factors.append(f)
     return TailFactors(

@@ -30,6 +30,8 @@ __all__ = [
 # regions S[a-2^k : b-2^k], k = 0..J, which are shared between consecutive levels, so a block
 # of this size keeps all of them in the CPU cache.
 _BLOCK = 1 << 15
+# Values of one level per block of haar_from_cumsum (its output and the three reads in cache).
+_HAAR_BLOCK = 1 << 16
 
 
 def as_series(x: Any) -> np.ndarray:
@@ -82,16 +84,37 @@ def check_fs_alpha(fs: float, alpha: float) -> None:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
 
 
-def haar_from_cumsum(s: np.ndarray, m: int, at: np.ndarray | None = None) -> np.ndarray:
+def haar_from_cumsum(
+    s: np.ndarray,
+    m: int,
+    at: np.ndarray | None = None,
+    *,
+    step: int = 1,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
     """Haar MODWT coefficients of the level with half-width ``m = 2^(j-1)`` from the cumulative
     sum ``s`` (length ``N + 1``) of the de-meaned series: ``W_{j,t} = (S_{t+2m} - 2 S_{t+m} +
-    S_t) / 2^j``, for every ``t`` (``N - 2m + 1`` values) or only at the offsets ``at``.
+    S_t) / 2^j``, for every ``step``-th ``t`` from 0 (``(N - 2m) // step + 1`` values) or only
+    at the offsets ``at``.
 
-    The one Haar-coefficient formula of the package (classical and robust WV, V from data).
+    The one Haar-coefficient formula of the package (classical and robust WV, V from data,
+    the export's tail factors). Without ``at`` the values are written into ``out`` when given
+    (a float64 array of that length: no allocation), each operation in the order of the
+    formula, so they are the same to the last bit as an evaluation with temporaries.
     """
     if at is not None:
         return (s[at + 2 * m] - 2.0 * s[at + m] + s[at]) / (2.0 * m)
-    return (s[2 * m :] - 2.0 * s[m:-m] + s[: s.size - 2 * m]) / (2.0 * m)
+    cnt = (s.size - 1 - 2 * m) // step + 1
+    w = np.empty(cnt) if out is None else out
+    # in blocks of _HAAR_BLOCK values, so that the four passes over a block stay in cache
+    for i in range(0, cnt, _HAAR_BLOCK):
+        e = min(i + _HAAR_BLOCK, cnt)
+        b, lo, hi = w[i:e], i * step, (e - 1) * step + 1
+        np.multiply(s[m + lo : m + hi : step], 2.0, out=b)
+        np.subtract(s[2 * m + lo : 2 * m + hi : step], b, out=b)
+        np.add(b, s[lo:hi:step], out=b)
+        np.divide(b, 2.0 * m, out=b)
+    return w
 
 
 def cumsum_demeaned(x: np.ndarray) -> np.ndarray:

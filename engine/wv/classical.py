@@ -17,7 +17,7 @@ Guerrier et al. (2020), the GMWM paper, section II.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any, TypedDict, overload
 
@@ -43,6 +43,7 @@ __all__ = [
     "max_levels",
     "haar_coefficients",
     "sampled_haar_coefficients",
+    "iter_sampled_haar_coefficients",
     "eta3_interval",
     "LevelScales",
     "SeriesSettings",
@@ -341,19 +342,29 @@ def sampled_haar_coefficients(x: Any, levels: int, per_scale: int = 8) -> list[n
     per such span keep the information of the whole level at ``O(N / 2^j)`` cost: what a
     statistic of a level's distribution (a quantile) needs, in ``O(N)`` for all levels.
     """
+    return list(iter_sampled_haar_coefficients(x, levels, per_scale))
+
+
+def iter_sampled_haar_coefficients(
+    x: Any, levels: int, per_scale: int = 8, *, reuse: bool = False
+) -> Iterator[np.ndarray]:
+    """:func:`sampled_haar_coefficients` one level at a time (level 1 first).
+
+    With ``reuse=True`` every level is written into one buffer of ``N - 1`` values, which
+    the next level overwrites: use (or copy) each level before asking for the next one. The
+    caller may overwrite it (sort it in place). For a long channel this saves an allocation
+    of ``N`` values per level, and the page faults of touching it.
+    """
     a = as_series(x)
     if levels < 1 or 1 << levels > a.size:
         raise ValueError(f"levels must be in 1..log2(N) = {int(np.log2(a.size))}, got {levels}")
     s = cumsum_demeaned(a)
-    out = []
+    buf = np.empty(a.size - 1) if reuse else None
     for j in range(1, levels + 1):
         m = 1 << (j - 1)
         step = max(1, (2 * m) // per_scale)
-        if step < 8:  # slices are cheaper than gathering this many offsets
-            out.append(haar_from_cumsum(s, m)[::step])
-        else:
-            out.append(haar_from_cumsum(s, m, np.arange(0, a.size - 2 * m + 1, step)))
-    return out
+        cnt = (a.size - 2 * m) // step + 1
+        yield haar_from_cumsum(s, m, step=step, out=None if buf is None else buf[:cnt])
 
 
 def axis_columns(x: Any) -> np.ndarray | None:

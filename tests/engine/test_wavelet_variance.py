@@ -171,6 +171,26 @@ def test_haar_coefficients_level_one():
     np.testing.assert_allclose(w, np.diff(x) / 2)
 
 
+@pytest.mark.parametrize("n", [5, 64, 1000, 70_001])
+def test_sampled_coefficients_are_every_step_th_of_the_direct_convolution(n):
+    """Every ``max(1, 2^j // 8)``-th coefficient of level j (the tail factors' sample), from the
+    level-j filter convolved with the series; the one-level-at-a-time form with a reused
+    buffer gives the same arrays to the last bit."""
+    x = np.random.default_rng(n).standard_normal(n) + 50.0
+    levels = int(np.floor(np.log2(n - 1)))
+    listed = eg.wv.sampled_haar_coefficients(x, levels)
+    d = x - x.mean()
+    for j, (w, w_it) in enumerate(
+        zip(listed, eg.wv.iter_sampled_haar_coefficients(x, levels, reuse=True), strict=True), 1
+    ):
+        m, step = 2 ** (j - 1), max(1, 2**j // 8)
+        h = np.concatenate([np.full(m, 1.0), np.full(m, -1.0)]) / 2**j
+        full = np.convolve(d, h, mode="valid")
+        assert w.size == (n - 2 * m) // step + 1
+        np.testing.assert_allclose(w, full[::step], rtol=1e-9, atol=1e-12)
+        assert np.array_equal(w, w_it)
+
+
 @pytest.mark.parametrize(
     ("x", "kwargs", "match"),
     [
