@@ -311,11 +311,12 @@ class MultiModel:
                     )
                 procs.append(m.processes[i])
             code = procs[0].code
-            if code not in SHAREABLE:
+            if not procs[0].shareable:  # the class says (a process registered later too)
+                shareable = [c for c, cls in PROCESS_TYPES.items() if cls.shareable]
                 raise ModelError(
                     f"{lab} cannot be shared: {code} is per channel only (the "
                     "multivariate paper, section II); shareable: "
-                    f"{', '.join(SHAREABLE)}"
+                    f"{', '.join(shareable)}"
                 )
             c_given = cov.get(lab, sp.cov)
             c_arr = None if c_given is None else _check_cov(lab, group, c_given)
