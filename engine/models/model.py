@@ -435,6 +435,12 @@ class Process(Spectral):
 
         return columns
 
+    def start_nl(self, tau: np.ndarray, nu: np.ndarray, fs: float) -> float | None:
+        """A rough value of the non-linear parameter read off an empirical WV ``nu`` at scales
+        ``tau`` (samples), for :func:`engine.fit.starting_values`; None (AR1, GM) when the
+        start spreads correlation times over the scales with the model's other such terms."""
+        return None
+
     def correlation_time(self, fs: float) -> float | None:
         """Correlation time in samples of the fitted process (AR1, GM: ``-1 / ln phi``; 0
         for ``phi <= 0``), None for a process without one."""
