@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..fit.result import FitError
-from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, Process
+from ..models import Model, Param, Process
 from ..wv import WaveletVariance
 from ..wv.robust import robust_wv_hermite
 from ._closed_form import closed_form_c
@@ -484,28 +484,40 @@ def free_params(res: Any) -> list[tuple[int, str]]:
     return out
 
 
+def _spec(model: Model, i: int, name: str) -> Param:
+    """The declaration of parameter ``name`` of process ``i`` (its transform, its sign)."""
+    return model.processes[i].params()[name]
+
+
 def _set(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
     """The model with the free parameters set from unconstrained coordinates ``u``."""
     procs = list(model.processes)
     for (i, name), ui in zip(free, u, strict=True):
-        procs[i] = procs[i].with_values(**{name: FROM_UNCONSTRAINED[name](float(ui))})
+        value = _spec(model, i, name).from_unconstrained(float(ui))
+        procs[i] = procs[i].with_values(**{name: value})
     return Model(tuple(procs))
 
 
 def _u0(model: Model, free: list[tuple[int, str]]) -> np.ndarray:
-    """Unconstrained coordinates of the free parameters."""
-    return np.array([TO_UNCONSTRAINED[n](float(getattr(model.processes[i], n))) for i, n in free])
+    """Unconstrained coordinates of the free parameters (each by its class's transform)."""
+    return np.array(
+        [
+            _spec(model, i, n).to_unconstrained(float(getattr(model.processes[i], n)))
+            for i, n in free
+        ]
+    )
 
 
-def _steps(free: list[tuple[int, str]], u0: np.ndarray) -> list[float]:
+def _steps(model: Model, free: list[tuple[int, str]], u0: np.ndarray) -> list[float]:
     """Central-difference steps in the unconstrained coordinates: ``1e-5 max(1, |u|)`` for the
-    log and atanh coordinates; ``1e-5 |omega|`` for a drift's omega, which is taken as is at
-    any scale (``1e-9`` per sample for a gyro) and whose reported size ``|omega|`` has a kink
-    at 0: a step of ``1e-5`` across it made the rate ramp's gradient ``|omega| / 1e-5`` times
-    too small, and its interval as much too narrow."""
+    log and atanh coordinates; ``1e-5 |omega|`` for a parameter whose size alone is identified
+    (:attr:`engine.models.Param.magnitude`: a drift's omega), which is taken as is at any
+    scale (``1e-9`` per sample for a gyro) and whose reported size ``|omega|`` has a kink at 0:
+    a step of ``1e-5`` across it made the rate ramp's gradient ``|omega| / 1e-5`` times too
+    small, and its interval as much too narrow."""
     return [
-        1e-5 * (abs(u) if name == "omega" and u != 0 else max(1.0, abs(u)))
-        for (_, name), u in zip(free, u0, strict=True)
+        1e-5 * (abs(u) if _spec(model, i, name).magnitude and u != 0 else max(1.0, abs(u)))
+        for (i, name), u in zip(free, u0, strict=True)
     ]
 
 
@@ -515,7 +527,7 @@ def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     u0 = _u0(res.model, free)
     tau = res.wv.tau_samples
     jac = np.empty((tau.size, len(free)))
-    for k, h in enumerate(_steps(free, u0)):
+    for k, h in enumerate(_steps(res.model, free, u0)):
         up, dn = u0.copy(), u0.copy()
         up[k] += h
         dn[k] -= h
@@ -587,14 +599,18 @@ def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[fl
     z = NormalDist().inv_cdf(0.5 + level / 2)
     u0 = _u0(res.model, free)
     bounds = {}
+    magnitude = set()
     for k, (i, name) in enumerate(free):
-        lo = FROM_UNCONSTRAINED[name](u0[k] - z * se[k])
-        hi = FROM_UNCONSTRAINED[name](u0[k] + z * se[k])
+        spec = _spec(res.model, i, name)
+        lo = spec.from_unconstrained(u0[k] - z * se[k])
+        hi = spec.from_unconstrained(u0[k] + z * se[k])
         bounds[(res.model.labels[i], name)] = (min(lo, hi), max(lo, hi))
+        if spec.magnitude:
+            magnitude.add((res.model.labels[i], name))
     out = []
     for r in res.param_records:
         lo, hi = bounds.get((r.label, r.name), (math.nan, math.nan))
-        if r.name == "omega":  # the sign of a drift is not identified: report |omega|
+        if (r.label, r.name) in magnitude:  # its sign is not identified: report |value|
             lo, hi = (max(lo, 0.0), hi) if r.value >= 0 else (lo, hi)
         out.append((float(lo), float(hi)))
     return out
@@ -640,7 +656,7 @@ def delta_bounds(
         return [(math.nan, math.nan)] * len(fns)
     z = NormalDist().inv_cdf(0.5 + level / 2)
     u0 = _u0(res.model, free)
-    steps = _steps(free, u0)
+    steps = _steps(res.model, free, u0)
     shifted = []
     for k, h in enumerate(steps):
         up, dn = u0.copy(), u0.copy()

@@ -21,7 +21,6 @@ from ..wv import WaveletVariance
 from ._varpro import (
     NNLSProblem,
     fitted_fields,
-    grid_candidates,
     persistent_first,
     sqrt_weight,
 )
@@ -40,6 +39,7 @@ _F: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "sqrt": np.sqrt,
 }
 _U_LO, _U_HI = -70.0, 8.0  # bounds of the log linear coefficients (relative to their scale)
+_EDGE = math.log(1.01)  # how far inside its range a start's non-linear coordinate is put
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -150,7 +150,7 @@ def _grid_starts(
     start: Callable[[np.ndarray, np.ndarray], np.ndarray],
     keep: int = 8,
 ) -> list[np.ndarray]:
-    """Starts from the core's grid of correlation times: for each candidate the variances of
+    """Starts from the core's grid of search coordinates: for each candidate the variances of
     the linearised problem (NNLS with the weights ``A diag(f'(nu_hat))``, the first-order
     expansion of ``f`` at the data), scored by the exact f-space objective."""
     nu = wv.variance
@@ -162,7 +162,7 @@ def _grid_starts(
         return []
     lin = NNLSProblem.from_wv(m, wv, a * fp[None, :])
     scored = []
-    for u in grid_candidates(prob.axis, prob.k):
+    for u in prob.candidates():
         _, h, x = lin.solve(lin.phis_of(u))
         with np.errstate(all="ignore"):
             r = a @ (fy - np.asarray(fun(np.maximum(x @ h, 1e-300)), float))
@@ -170,7 +170,7 @@ def _grid_starts(
         if np.isfinite(cost):
             scored.append((cost, u, h))
     scored.sort(key=lambda t: t[0])
-    return [start(h, np.exp(np.asarray(u))) for _, u, h in scored[:keep]]
+    return [start(h, np.asarray(u, float)) for _, u, h in scored[:keep]]
 
 
 def fit_gmwfm(
@@ -194,7 +194,7 @@ def fit_gmwfm(
         The empirical WV (classical: the identity ``AVAR = 2 nu2`` makes a fit on the octave
         AVAR the same fit, ``log10`` only adding the constant ``log10 2`` to both sides).
     model : Model, Process or str
-        Any engine model (QN, WN, RW, DR, AR1, GM).
+        Any engine model (QN, WN, RW, DR, AR1, GM, MA1).
     f : {"log10", "log", "sqrt", "identity"} or callable
         The function of the WV to match; a callable must be vectorised, continuous and
         strictly increasing on the positive reals.
@@ -221,14 +221,17 @@ def fit_gmwfm(
 
     Notes
     -----
-    Each process contributes a non-negative coefficient ``h`` times its WV shape (and AR1/GM a
-    correlation time). The search space is ``log h`` (scaled per process; a coefficient whose
-    curve stays below 1e-9 of the fitted WV at every level is reported as exactly 0, the
-    objective being flat there) and the log correlation time in
-    samples; the fit runs bounded least squares (:func:`engine._optim.least_squares`, a
-    projected Levenberg-Marquardt) from the GMWM estimate and from an equal-share start (and,
-    with AR1/GM, from correlation times 4x shorter and longer) and keeps the lowest objective.
-    AR1 coefficients are searched in (0, 1), as correlation times.
+    Each process contributes a non-negative coefficient ``h`` times its WV shape (and AR1, GM
+    and MA1 a non-linear parameter). The search space is ``log h`` (scaled per process; a
+    coefficient whose curve stays below 1e-9 of the fitted WV at every level is reported as
+    exactly 0, the objective being flat there) and each non-linear term's search coordinate as
+    its class declares it (:meth:`engine.models.Process.search_nl`: AR1, GM the log
+    correlation time in samples, so an AR1 coefficient is searched in (0, 1); MA1 atanh theta),
+    within its declared range; the fit runs bounded least squares
+    (:func:`engine._optim.least_squares`, a projected Levenberg-Marquardt) from the GMWM
+    estimate and from an equal-share start (and, with non-linear terms, from coordinates
+    shifted by ``log 4``: correlation times 4x shorter and longer, and from the best points of
+    the fit's grid) and keeps the lowest objective.
     """
     t0 = time.perf_counter()
     fname, fun = _resolve_f(f)
@@ -272,15 +275,12 @@ def fit_gmwfm(
         raise FitError(f"{fname}(WV) is not finite at every level")
     omega, wname = _f_weights(wv, fun, weights, fname)
     a = sqrt_weight(omega)
-    for pr in m.processes:  # this search moves log correlation times (AR1, GM)
-        if pr.nonlinear is not None and type(pr).correlation_time is Process.correlation_time:
-            raise FitError(
-                f"fit_gmwfm searches correlation times and {pr.code} has none (its "
-                f"{pr.nonlinear} has its own coordinate): fit {m.spec()} with fit_gmwm"
-            )
+    # the non-linear terms move in the coordinates their classes declare (AR1, GM: log
+    # correlation time in samples; MA1: atanh theta), within their declared ranges
     prob = NNLSProblem.from_wv(m, wv, np.eye(wv.n_levels))
     p, k = prob.p, prob.k
-    lo_tc, hi_tc = math.log(prob.tc_min), math.log(prob.tc_max)
+    lo_u = np.broadcast_to(np.asarray(prob.lo, float), (k,))
+    hi_u = np.broadcast_to(np.asarray(prob.hi, float), (k,))
 
     # starting point: the GMWM estimate (weights "ci") in the problem's process order
     try:
@@ -289,12 +289,14 @@ def fit_gmwfm(
     except FitError:
         gm_model = None
 
-    def nl_of(pr: Process) -> float:
+    def coord_of(pr: Process) -> float:
+        """A fitted term's search coordinate (0 when its value is out of the search's reach)."""
         v = pr.nl_value(wv.fs)
-        return -1.0 / math.log(v) if v is not None and 0 < v < 1 else 1.0
+        u = None if v is None else pr.search_of_nl(v)
+        return u if u is not None and math.isfinite(u) else 0.0
 
     h0 = np.zeros(p)
-    tc0 = np.ones(k)
+    u0 = np.zeros(k)
     if gm_model is not None:
         # match processes by kind (AR1/GM most persistent first in both)
         pool = {
@@ -309,20 +311,17 @@ def fit_gmwfm(
             taken[c] = j + 1
             h0[i] = q.linear_coef()
             if q.nonlinear is not None:
-                tc0[prob.nl_idx.index(i)] = nl_of(q)
-    if k:
-        tc0 = np.clip(tc0, prob.tc_min * 1.01, prob.tc_max / 1.01)
-    phis0 = tuple(math.exp(-1.0 / t) for t in tc0)
-    x0 = prob.design(phis0)
+                u0[prob.nl_idx.index(i)] = coord_of(q)
+    if k:  # a hundredth of a log correlation time inside its range (log 1.01)
+        u0 = np.clip(u0, lo_u + _EDGE, hi_u - _EDGE)
+    x0 = prob.design(prob.phis_of(u0))
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(x0 > 0, wv.variance[:, None] / np.where(x0 > 0, x0, 1.0), np.inf)
     scale = np.min(ratio, axis=0)  # the largest coefficient whose curve stays below the data
     scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
 
     def unpack(z: np.ndarray) -> tuple[np.ndarray, tuple[float, ...]]:
-        h = scale * np.exp(z[:p])
-        phis = tuple(math.exp(-math.exp(-float(v))) for v in z[p:])
-        return h, phis
+        return scale * np.exp(z[:p]), prob.phis_of(z[p:])
 
     def resid(z: np.ndarray) -> np.ndarray:
         h, phis = unpack(z)
@@ -331,21 +330,21 @@ def fit_gmwfm(
             r = fy - np.asarray(fun(np.maximum(nu, 1e-300)), float)
         return a @ np.where(np.isfinite(r), r, 1e3)
 
-    def start(h: np.ndarray, tcs: np.ndarray) -> np.ndarray:
-        u = np.log(np.maximum(h, 1e-30 * scale) / scale)
+    def start(h: np.ndarray, u: np.ndarray) -> np.ndarray:
+        v = np.log(np.maximum(h, 1e-30 * scale) / scale)
         return np.concatenate(
-            [np.clip(u, _U_LO + 1, _U_HI - 1), np.clip(np.log(tcs), lo_tc + 1e-6, hi_tc - 1e-6)]
+            [np.clip(v, _U_LO + 1, _U_HI - 1), np.clip(u, lo_u + 1e-6, hi_u - 1e-6)]
         )
 
-    starts = [start(np.full(p, 1.0 / p) * scale, tc0)]
+    starts = [start(np.full(p, 1.0 / p) * scale, u0)]
     if gm_model is not None:
-        starts.insert(0, start(h0, tc0))
-        if k:
-            starts += [start(h0, tc0 * 4.0), start(h0, tc0 / 4.0)]
+        starts.insert(0, start(h0, u0))
+        if k:  # correlation times 4x longer and shorter (a shift of log 4 in any coordinate)
+            starts += [start(h0, u0 + math.log(4.0)), start(h0, u0 - math.log(4.0))]
     if k:
         starts += _grid_starts(prob, m, wv, a, fy, fun, start)
-    lb = np.concatenate([np.full(p, _U_LO), np.full(k, lo_tc)])
-    ub = np.concatenate([np.full(p, _U_HI), np.full(k, hi_tc)])
+    lb = np.concatenate([np.full(p, _U_LO), lo_u])
+    ub = np.concatenate([np.full(p, _U_HI), hi_u])
     best = None
     n_eval = 0
     for z0 in starts:

@@ -1,8 +1,10 @@
 """Rough starting values of a model's parameters, read off an empirical WV.
 
-Used before a fit (the app's what-if sliders start from them); the fit itself searches from
-its own grid. AR1/GM correlation times are spread geometrically over the scales; each
-variance-like parameter is half the largest value whose WV curve stays below the empirical WV.
+Used before a fit (the app's what-if sliders start from them; a model with values is an extra
+start of the fit, which otherwise searches from its own grid). AR1/GM correlation times are
+spread geometrically over the scales, a process with another non-linear parameter reads its own
+off the WV (:meth:`engine.models.Process.start_nl`: MA1); each variance-like parameter is half
+the largest value whose WV curve stays below the empirical WV.
 """
 
 from __future__ import annotations
@@ -22,9 +24,12 @@ def starting_values(model: Model, wv: WaveletVariance) -> dict[str, float]:
 
     The correlation times of the nonlinear processes (AR1, GM) are spread geometrically from
     a quarter of the largest scale down to the smallest (at least 2 samples), the slowest
-    first. Each process's variance-like parameter (sigma2, q2, ...) is then half the largest
-    value whose WV curve alone stays below the empirical WV at every scale where both are
-    positive, so that the guessed model's WV does not exceed the empirical one by much.
+    first; another non-linear parameter is the process's own guess
+    (:meth:`engine.models.Process.start_nl`: an MA1's theta is the one whose WV falls from
+    the first scale to the second as the empirical WV does). Each process's variance-like
+    parameter (sigma2, q2, ...) is then half the largest value whose WV curve alone stays
+    below the empirical WV at every scale where both are positive, so that the guessed
+    model's WV does not exceed the empirical one by much.
 
     Parameters
     ----------
@@ -40,9 +45,17 @@ def starting_values(model: Model, wv: WaveletVariance) -> dict[str, float]:
         the square root of its guessed squared slope; a GM's ``beta`` is in 1/s).
     """
     tau = wv.tau_samples.astype(float)
-    nl = [i for i, p in enumerate(model.processes) if p.nonlinear is not None]
-    tcs = np.geomspace(tau[-1] / 4, max(tau[0], 2.0), len(nl)) if nl else np.zeros(0)
     out: dict[str, float] = {}
+    nl = []  # the terms whose start is a correlation time (AR1, GM)
+    for i, p in enumerate(model.processes):
+        if p.nonlinear is None:
+            continue
+        own = p.start_nl(tau, wv.variance, wv.fs)
+        if own is None:
+            nl.append(i)
+        else:
+            out[f"{model.labels[i]}.{p.nonlinear}"] = p.nl_from_phi(own, wv.fs)
+    tcs = np.geomspace(tau[-1] / 4, max(tau[0], 2.0), len(nl)) if nl else np.zeros(0)
     for k, i in enumerate(nl):
         lab, p = model.labels[i], model.processes[i]
         phi = math.exp(-1.0 / float(tcs[k]))

@@ -32,6 +32,7 @@ __all__ = ["MA1", "ma1_wv"]
 # the search coordinate u = atanh(theta): its range (|theta| <= 1 - 1e-8) and grid
 _U_MAX = math.atanh(1.0 - 1e-8)
 _AXIS = np.linspace(-4.0, 4.0, 33)  # theta from -0.9993 to 0.9993
+_START = np.linspace(-0.95, 0.95, 191)  # the thetas a starting value is chosen from
 
 
 def ma1_wv(tau: np.ndarray, theta: float | np.ndarray, sigma2: float = 1.0) -> np.ndarray:
@@ -78,6 +79,7 @@ class MA1(Process, order=6, description="first-order moving average", nonlinear=
     help = "first-order moving average: WV (1+θ)²σ²/τ − 6θσ²/τ² (a filtered white noise)"
     color = "#E377C2"
     unique = True
+    shareable = True  # channels may share one (one theta, correlated innovations)
     excludes = {
         code: "an MA1's WV spans the same two shapes (1/tau, 1/tau^2) as WN and QN, so "
         f"their sum is not identifiable; use MA1 without {code}"
@@ -142,6 +144,16 @@ class MA1(Process, order=6, description="first-order moving average", nonlinear=
     def search_of_nl(self, nl):
         return math.atanh(nl) if -1.0 < nl < 1.0 else None
 
+    def start_nl(self, tau, nu, fs):
+        # the theta whose WV falls from the first to the second scale as the data's does: an
+        # MA1 shows there before a random walk or a drift does (0, white, without two levels)
+        t, v = np.asarray(tau, dtype=float)[:2], np.asarray(nu, dtype=float)[:2]
+        if t.size < 2 or not np.all(v > 0):
+            return 0.0
+        shape = ma1_wv(t, _START)  # (n, 2), positive for |theta| < 1
+        miss = np.abs(np.log(shape[:, 1] / shape[:, 0]) - math.log(v[1] / v[0]))
+        return float(_START[int(np.argmin(miss))])
+
     # ---- spectrum, filters, datasheet ---------------------------------------------------
     def psd_terms(self, fs):
         # sigma2 |1 + theta e^(-iw)|^2 = sigma2 (1 + theta)^2 - sigma2 theta x
@@ -168,6 +180,12 @@ class MA1(Process, order=6, description="first-order moving average", nonlinear=
         g = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         e = g.normal(0.0, math.sqrt(s2), n + 1)
         return e[1:] + theta * e[:-1]  # stationary from the first sample
+
+    def simulate_shared(self, z, root, phi, rng):
+        # z: the group's innovations e_1..e_n (rows ~ N(0, C)); e_0 from the same law, so the
+        # series is stationary from its first sample; phi is the fitter's value, theta
+        e0 = rng.standard_normal(z.shape[1]) @ root.T
+        return z + phi * np.vstack([e0[None, :], z[:-1]])
 
     def autocovariance(self, lags, fs=1.0):
         theta, s2 = self._require()

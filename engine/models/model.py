@@ -121,12 +121,16 @@ class Param:
         How the app's what-if slider moves the value: by decades of the value (variances,
         rates), by decades of ``1 - x`` (a coefficient near 1: an AR1's phi), or linearly
         over the bounds (a coefficient of either sign).
+    magnitude : bool
+        The WV depends on the value's magnitude only (a drift's slope ``omega``: its sign is
+        not identified), so an interval is one of ``|value|``: it stops at 0.
     """
 
     transform: Literal["log", "atanh", "identity"] = "log"
     unit: Callable[[str], str] = variance_unit
     bounds: tuple[float, float] = (0.0, math.inf)
     slider: Literal["log10", "log10(1-x)", "linear"] = "log10"
+    magnitude: bool = False
 
     def to_unconstrained(self, v: float) -> float:
         """The value mapped to R (the transform)."""
@@ -142,6 +146,8 @@ def param(
     unit: Callable[[str], str] = variance_unit,
     bounds: tuple[float, float] = (0.0, math.inf),
     slider: Literal["log10", "log10(1-x)", "linear"] = "log10",
+    *,
+    magnitude: bool = False,
 ) -> Any:
     """A process's parameter field (unknown by default) with its :class:`Param` record.
 
@@ -150,7 +156,7 @@ def param(
     An AR1 declares its coefficient as
     ``phi: float | None = param("atanh", coefficient_unit, (-1.0, 1.0), "log10(1-x)")``.
     """
-    spec = Param(transform, unit, bounds, slider)
+    spec = Param(transform, unit, bounds, slider, magnitude)
     return field(default=None, metadata={"param": spec})
 
 
@@ -428,6 +434,12 @@ class Process(Spectral):
             return self.basis_many(tau, fs, nls)
 
         return columns
+
+    def start_nl(self, tau: np.ndarray, nu: np.ndarray, fs: float) -> float | None:
+        """A rough value of the non-linear parameter read off an empirical WV ``nu`` at scales
+        ``tau`` (samples), for :func:`engine.fit.starting_values`; None (AR1, GM) when the
+        start spreads correlation times over the scales with the model's other such terms."""
+        return None
 
     def correlation_time(self, fs: float) -> float | None:
         """Correlation time in samples of the fitted process (AR1, GM: ``-1 / ln phi``; 0

@@ -459,7 +459,9 @@ class DR(Process, order=5, description="drift (rate ramp)"):
     2.0 4.0 6.0 8.0
     """
 
-    omega: float | None = param("identity", per_sample_unit, (-math.inf, math.inf))
+    omega: float | None = param(
+        "identity", per_sample_unit, (-math.inf, math.inf), "log10", magnitude=True
+    )
 
     display_name = "drift"
     help = "drift (rate ramp): WV rises as τ²"

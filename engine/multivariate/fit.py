@@ -9,7 +9,8 @@ two-step efficient ``Omega = V^-1`` of :func:`moment_covariance`.
 
 The minimum is reached by variable projection: the inner problem (variances and covariance
 matrices, a convex least squares over non-negative orthants and PSD cones) is solved exactly
-(:mod:`engine.multivariate._cone`), the AR1/GM parameters by :func:`.problem.search`.
+(:mod:`engine.multivariate._cone`), the non-linear parameters (AR1, GM, MA1) by
+:func:`.problem.search`.
 """
 
 from __future__ import annotations
@@ -228,12 +229,11 @@ def _fit(
     wvm: WVMatrix, model: MultiModel, w: np.ndarray, omega: np.ndarray | None, wname: str, t0: float
 ) -> MGMWMResult:
     prob = MProblem(model, wvm, w, omega)
-    lo, hi = math.log(prob.tc_min), math.log(prob.tc_max)
     if not prob.slots:
         u = np.zeros(0)
         converged, method, msg = True, "closed-form", "exact (convex inner problem)"
     else:
-        u, converged = search(prob, model, wvm, w, lo, hi)
+        u, converged = search(prob, model, wvm, w)
         method = "profiled nelder-mead"
         msg = (
             "converged"

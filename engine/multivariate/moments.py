@@ -14,7 +14,7 @@ import numpy as np
 
 from ..fit import FitError
 from ..fit.result import ParamTable
-from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, Process
+from ..models import Model, Param, Process
 from ..wv import WVMatrix
 from .spec import MultiModel, phi_of_nl
 
@@ -119,8 +119,10 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
     ``omega``, ``V`` the model-implied covariance of the stacked moments
     (:func:`moment_covariance`) and ``A`` the derivative of the stacked implied moments by
     central differences, in unconstrained coordinates mapped back (as the univariate
-    :func:`engine.inference.param_intervals`): log of variances (a covariance's diagonal)
-    and of beta, atanh of phi, covariances between channels and drifts as they are. A
+    :func:`engine.inference.param_intervals`): each process parameter by the transform its
+    class declares (:attr:`engine.models.Param.transform`: log of variances and of beta,
+    atanh of phi and theta, a drift as it is), a covariance's diagonal by log and the
+    covariances between channels as they are. A
     parameter on a boundary (a variance at 0, an entry of a singular or diagonal-restricted
     covariance, a correlation time at the edge, the phi/beta of a process with no variance)
     gets ``nan`` bounds: the normal approximation does not hold there.
@@ -179,13 +181,18 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
                     coords.append((ti, i))
                     names.append(f"{c}.{t.label}.{name}")
 
+    def nl_param(ti: int) -> Param:
+        """The declaration of a shared term's non-linear parameter (its transform)."""
+        proto = terms[ti].proto
+        return proto.params()[str(proto.nonlinear)]
+
     def forward(ti: int, co: Any) -> float:
         t, st = terms[ti], state[ti]
         if not t.shared:
             return float(st.to_unconstrained(fs)[co])
         cov, nl = st
         if co == "nl":
-            return TO_UNCONSTRAINED[str(t.proto.nonlinear)](nl)
+            return nl_param(ti).to_unconstrained(nl)
         a, b = co
         return math.log(cov[a, a]) if a == b else float(cov[a, b])
 
@@ -201,7 +208,7 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
                 continue
             cov, nl = st[ti]
             if co == "nl":
-                nl = FROM_UNCONSTRAINED[str(t.proto.nonlinear)](ui)
+                nl = nl_param(ti).from_unconstrained(ui)
             else:
                 a, b = co
                 cov = cov.copy()
@@ -236,6 +243,7 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
     bounds: dict[str, tuple[float, float]] = {}
     for j, ((ti, co), name) in enumerate(zip(coords, names, strict=True)):
         t = terms[ti]
+        magnitude = False  # the parameter's WV depends on its size only (a drift's omega)
         if not t.shared:
             p = state[ti]
             ends = []
@@ -243,15 +251,16 @@ def conf_int(res: Any, alpha: float = 0.05) -> ParamTable:
                 v = p.to_unconstrained(fs)
                 v[co] = u0[j] + sgn * z * se[j]
                 ends.append(float(p.from_unconstrained(v, fs).values[co]))
+            magnitude = p.params()[p.param_names[co]].magnitude
         elif co == "nl":
-            back = FROM_UNCONSTRAINED[str(t.proto.nonlinear)]
-            ends = [back(u0[j] - z * se[j]), back(u0[j] + z * se[j])]
+            spec = nl_param(ti)
+            ends = [spec.from_unconstrained(u0[j] + sgn * z * se[j]) for sgn in (-1.0, 1.0)]
         else:
             a, b = co
             back = math.exp if a == b else float
             ends = [back(u0[j] - z * se[j]), back(u0[j] + z * se[j])]
         lo, hi = min(ends), max(ends)
-        if name.endswith(".omega") and lo < 0 <= u0[j]:  # the sign of a drift is not identified
+        if magnitude and lo < 0 <= u0[j]:  # its sign is not identified: an interval of |value|
             lo = 0.0
         bounds[name] = (lo, hi)
     recs = res.param_records

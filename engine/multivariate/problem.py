@@ -1,6 +1,7 @@
 """The MGMWM problem: stacked moments, the profiled objective and its non-linear search.
 
-For fixed AR1/GM parameters (log correlation times ``u``, as in the univariate fit) the
+For fixed non-linear parameters (each in the search coordinate ``u`` its class declares, as in
+the univariate fit: AR1, GM a log correlation time, MA1 atanh theta) the
 implied WV/WCCV moments are linear in the coefficients (independent variances, shared
 covariance matrices): :class:`MProblem` builds that design and solves the inner problem
 exactly with :class:`engine.multivariate._cone.ConeLSQ`. :func:`search` minimises the profiled
@@ -28,7 +29,7 @@ import numpy as np
 
 from ..fit import FitError, fit_gmwm
 from ..fit._varpro import local
-from ..models import TC_MAX_FACTOR, TC_MIN, Model, ModelError
+from ..models import Model, ModelError, Process
 from ..wv import WVMatrix
 from ._cone import ConeLSQ
 from .spec import MultiModel, SharedProcess, find_label, nl_of_phi, phi_of_nl
@@ -94,8 +95,13 @@ class MProblem:
             for t in self.terms
         ]
         self.slots = [ti for ti, t in enumerate(self.terms) if t.nonlinear]
-        self.tc_min = TC_MIN
-        self.tc_max = TC_MAX_FACTOR * max(wvm.n, 2 ** (wvm.n_levels + 1))
+        # each non-linear term's search coordinate: its range and scan, as its class declares
+        n_max = max(wvm.n, 2 ** (wvm.n_levels + 1))
+        self.ranges = {ti: self.terms[ti].proto.search_range(n_max) for ti in self.slots}
+        self.lo = np.array([self.ranges[ti][0] for ti in self.slots])
+        self.hi = np.array([self.ranges[ti][1] for ti in self.slots])
+        self.scans = {ti: _scan(self.terms[ti].proto, float(self.tau[-1])) for ti in self.slots}
+        self.step = np.array([self.scans[ti][1] - self.scans[ti][0] for ti in self.slots])
         self.full = [ti for ti, t in enumerate(self.terms) if t.shared and not t.diagonal]
         self.n_eval = 0
         groups = (
@@ -114,16 +120,26 @@ class MProblem:
             groups,
         )
 
-    # -- non-linear coordinates: log correlation time in samples (as the univariate fit) --
+    # -- non-linear coordinates: each term's own (AR1, GM: log correlation time in samples) --
     def phi_of(self, ti: int, u: float) -> float:
-        if self.terms[ti].proto.phi_can_vanish and u < -50:
-            return 0.0
-        tc = math.exp(min(max(u, math.log(self.tc_min)), math.log(self.tc_max)))
-        return math.exp(-1.0 / tc)
+        """The fitter's non-linear value (AR1, GM: phi; MA1: theta) of term ``ti`` at ``u``."""
+        lo, hi = self.ranges[ti]
+        return float(self.terms[ti].proto.search_nl(u, lo, hi))
 
-    def u_of_phi(self, phi: float) -> float:
-        phi = min(max(phi, 1e-300), 1 - 1e-16)
-        return math.log(-1.0 / math.log(phi))
+    def u_of(self, ti: int, phi: float | None, default: float) -> float:
+        """The coordinate of term ``ti`` at the fitter's value ``phi``, clipped into its range;
+        ``default`` when there is no value or the search cannot reach it."""
+        u = None if phi is None else self.terms[ti].proto.search_of_nl(phi)
+        if u is None or not math.isfinite(u):
+            return default
+        lo, hi = self.ranges[ti]
+        return min(max(u, lo), hi)
+
+    def at_edge(self, ti: int, u: float) -> bool:
+        """Is term ``ti``'s coordinate at an edge of its range (AR1, GM: a correlation time
+        within 0.01 % of the shortest or the longest searched)?"""
+        lo, hi = self.ranges[ti]
+        return u <= lo + _EDGE or u >= hi - _EDGE
 
     def bases(self, u: np.ndarray) -> list[np.ndarray]:
         """The WV basis of every term: fixed, or at the coordinates ``u`` of the AR1/GM slots."""
@@ -181,11 +197,16 @@ class MProblem:
         return self.cone.n_inner
 
 
-def _grid_axis(tau_max: float, npts: int) -> np.ndarray:
-    """The scan of a shared phi/beta: ``npts`` log correlation times (samples) from 0.25 to 4x
-    the largest scale (the range of :func:`engine.fit._varpro.grid_axis`, with its own
-    number of points)."""
-    return np.linspace(math.log(0.25), math.log(4.0 * tau_max), npts)
+_EDGE = math.log(1.0001)  # a coordinate this close to the end of its range is at a bound
+_SCAN = 40  # points of the scan of a shared term's coordinate
+
+
+def _scan(proto: Process, tau_max: float) -> np.ndarray:
+    """The scan of a shared term's coordinate: :data:`_SCAN` points over the span of the grid
+    its class declares (:meth:`engine.models.Process.search_axis`; AR1, GM: log correlation
+    times from 0.25 to 4x the largest scale)."""
+    axis = np.asarray(proto.search_axis(tau_max, 1), dtype=float)
+    return np.linspace(axis[0], axis[-1], _SCAN)
 
 
 def _maxfev(u: Any) -> int:
@@ -253,8 +274,7 @@ def boundary_estimates(fitted: MultiModel, prob: MProblem, u: np.ndarray) -> lis
             name = p.param_names[-1] if p.nonlinear else p.param_names[0]
             out.append(f"{fitted.channels[t.chans[0]]}.{t.label}.{name}")
     for ti, ui in zip(prob.slots, u, strict=True):
-        tc = math.exp(float(ui))
-        if tc <= prob.tc_min * 1.0001 or tc >= prob.tc_max / 1.0001:
+        if prob.at_edge(ti, float(ui)):
             t = prob.terms[ti]
             key = t.label if t.shared else f"{fitted.channels[t.chans[0]]}.{t.label}"
             out.append(f"{key}.{t.proto.nonlinear}")
@@ -262,10 +282,12 @@ def boundary_estimates(fitted: MultiModel, prob: MProblem, u: np.ndarray) -> lis
 
 
 def search(
-    prob: MProblem, model: MultiModel, wvm: WVMatrix, w: np.ndarray, lo: float, hi: float
+    prob: MProblem, model: MultiModel, wvm: WVMatrix, w: np.ndarray
 ) -> tuple[np.ndarray, bool]:
     """Non-linear search: univariate starts, scans of shared phi/beta, Nelder-Mead, polish."""
     fs = wvm.fs
+    lo, hi = prob.lo, prob.hi
+    fallback = math.log(float(prob.tau[0]))  # a term without a usable value starts here
     # univariate fits of every channel give per-channel starting values
     uni: dict[str, Model] = {}
     for p, c in enumerate(model.channels):
@@ -277,18 +299,11 @@ def search(
         except (FitError, ModelError) as e:
             raise FitError(f"channel {c}: {e}") from None
 
-    def uni_u(c: str, label: str) -> float:
+    def uni_u(ti: int, c: str, label: str) -> float:
         """Start from channel c's univariate fit (AR1/GM most persistent first)."""
         i = find_label(uni[c], label)
         phi = None if i is None else uni[c].processes[i].nl_value(fs)
-        if phi is None or not 0 < phi < 1:
-            return math.log(float(prob.tau[0]))
-        return min(max(prob.u_of_phi(phi), lo), hi)
-
-    def u_from(phi: float | None) -> float:
-        if phi is None or not 0 < phi < 1:
-            return math.log(float(prob.tau[0]))
-        return min(max(prob.u_of_phi(phi), lo), hi)
+        return prob.u_of(ti, phi, fallback)
 
     u0 = np.empty(len(prob.slots))
     shared_slots = []
@@ -296,9 +311,9 @@ def search(
         t = prob.terms[ti]
         if t.shared:
             shared_slots.append(si)
-            u0[si] = np.median([uni_u(model.channels[p], t.label) for p in t.chans])
+            u0[si] = np.median([uni_u(ti, model.channels[p], t.label) for p in t.chans])
         else:
-            u0[si] = uni_u(model.channels[t.chans[0]], t.label)
+            u0[si] = uni_u(ti, model.channels[t.chans[0]], t.label)
     starts = [u0]
     # user values as another start
     user = []
@@ -309,14 +324,15 @@ def search(
         else:
             phi = t.proto.nl_value(fs)  # None when the value is unknown
         user.append(phi)
-    if all(v is not None and 0 < v < 1 for v in user):
-        starts.append(np.array([u_from(v) for v in user]))
+    given = [prob.u_of(ti, v, math.nan) for ti, v in zip(prob.slots, user, strict=True)]
+    if not any(math.isnan(v) for v in given):
+        starts.append(np.array(given))
     # each shared phi/beta: the channels' univariate values and a scan, others held
-    grid = _grid_axis(float(prob.tau[-1]), 40)
     best_u = min(starts, key=prob.profile).copy()
     for si in shared_slots:
-        t = prob.terms[prob.slots[si]]
-        cands = [uni_u(model.channels[p], t.label) for p in t.chans] + list(grid)
+        ti = prob.slots[si]
+        t = prob.terms[ti]
+        cands = [uni_u(ti, model.channels[p], t.label) for p in t.chans] + list(prob.scans[ti])
         vals = []
         for cval in cands:
             uu = best_u.copy()
@@ -324,7 +340,7 @@ def search(
             vals.append((prob.profile(uu), cval))
         best_u[si] = min(vals)[1]
     starts.append(best_u)
-    step = float(grid[1] - grid[0])
+    step = prob.step
     results: list[tuple[float, np.ndarray, bool]] = []
     for st in starts:
         if any(np.max(np.abs(st - r[1])) < 1e-9 for r in results):
@@ -346,7 +362,7 @@ def search(
                     uu[idx] = v
                     return prob.profile(uu)
 
-                fb, vb, _ = local(sub, u[idx], step / 4, lo, hi, maxfev=_maxfev(idx))
+                fb, vb, _ = local(sub, u[idx], step[idx] / 4, lo[idx], hi[idx], maxfev=_maxfev(idx))
                 if fb < f * (1 - 1e-10):
                     u = u.copy()
                     u[idx] = vb

@@ -1,10 +1,11 @@
 """Multivariate latent models: one univariate model per channel plus shared processes.
 
 Multivariate latent model (the multivariate paper, section II): each of k channels is a sum
-of latent processes; a WN, RW, AR1 or GM process may be *shared* by a group of channels, i.e.
-be one multivariate process whose components are correlated with a covariance matrix
-``Sigma`` (g x g, positive semi-definite); QN and DR are per channel only. A shared AR1/GM has
-one phi (beta) for the whole group, so that every element of the group has the same WV shape.
+of latent processes; a WN, RW, AR1, GM or MA1 process (a class with ``shareable = True``) may
+be *shared* by a group of channels, i.e. be one multivariate process whose components are
+correlated with a covariance matrix ``Sigma`` (g x g, positive semi-definite); QN and DR are
+per channel only. A shared AR1/GM/MA1 has one phi (beta, theta) for the whole group, so that
+every element of the group has the same WV shape.
 Processes are independent of each other (the paper's Condition 1).
 
 Implied moments. For a shared process with covariance ``Sigma`` and WV shape ``b_j`` (the
@@ -114,10 +115,11 @@ class SharedProcess:
         The group (at least 2 channels).
     cov : ndarray (g, g) or None
         Covariance of the group's components in the process's linear parametrisation
-        (WN: sigma2, RW: gamma2, AR1: innovation variance, GM: stationary variance), per
+        (WN: sigma2, RW: gamma2, AR1, MA1: innovation variance, GM: stationary variance), per
         sample; None when unknown.
     nl : float or None
-        The group's common non-linear value: AR1 phi, GM beta [1/s]; None otherwise.
+        The group's common non-linear value: AR1 phi, GM beta [1/s], MA1 theta; None
+        otherwise.
     diagonal : bool
         Covariance restricted to be diagonal (independent components with a common
         phi/beta): the null model of :func:`dependence_test`.
@@ -180,7 +182,8 @@ class MultiModel:
     shared : str, sequence or mapping, optional
         The shared processes, by label in the channel models: ``"WN,RW"`` or ``["WN", "RW"]``
         (shared by all channels), ``{"RW": ["gyro_x", "gyro_y"]}`` (by a group), or
-        :class:`SharedProcess` objects. Only WN, RW, AR1 and GM can be shared.
+        :class:`SharedProcess` objects. Only the processes whose class is
+        :attr:`~engine.models.Process.shareable` (WN, RW, AR1, GM, MA1) can be shared.
     cov : mapping of str to array, optional
         Covariance of a shared process's group (g x g, positive definite), by label.
     nl : mapping of str to float, optional
@@ -240,12 +243,6 @@ class MultiModel:
                 m.validate()
             except ModelError as e:
                 raise ModelError(f"channel {c}: {e}") from None
-            for p in m.processes:  # the multivariate search moves log correlation times
-                if p.nonlinear is not None and type(p).correlation_time is Process.correlation_time:
-                    raise ModelError(
-                        f"channel {c}: the multivariate fit searches correlation times and "
-                        f"{p.code} has none; fit {p.code} channel by channel with fit_gmwm"
-                    )
         self.models: dict[str, Model] = models
         self.shared: tuple[SharedProcess, ...] = self._shared(shared, cov or {}, nl or {})
 
@@ -311,11 +308,12 @@ class MultiModel:
                     )
                 procs.append(m.processes[i])
             code = procs[0].code
-            if code not in SHAREABLE:
+            if not procs[0].shareable:  # the class says (a process registered later too)
+                shareable = [c for c, cls in PROCESS_TYPES.items() if cls.shareable]
                 raise ModelError(
                     f"{lab} cannot be shared: {code} is per channel only (the "
                     "multivariate paper, section II); shareable: "
-                    f"{', '.join(SHAREABLE)}"
+                    f"{', '.join(shareable)}"
                 )
             c_given = cov.get(lab, sp.cov)
             c_arr = None if c_given is None else _check_cov(lab, group, c_given)

@@ -288,7 +288,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
     for beta in np.geomspace(0.01, 20, 60):
         fixed = MultiModel(["a", "b"], "GM+WN+RW", shared=["GM"], nl={"GM": float(beta)})
         prob = MProblem(fixed.cleared(), wvm, res.moment_weights)
-        u = np.array([prob.u_of_phi(np.exp(-beta / 5.0))])
+        u = np.array([prob.u_of(prob.slots[0], float(np.exp(-beta / 5.0)), np.nan)])
         assert prob.profile(u) >= res.objective * (1 - 1e-9)
 
 
@@ -472,7 +472,8 @@ def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
     wvm, mm = boundary_case("3 channels RW")
     res = eg.fit_mgmwm(wvm, mm)
     prob = MProblem(mm.cleared(), wvm, res.moment_weights)
-    u = np.array([prob.u_of_phi(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs)) for c in mm.channels])
+    phis = [float(np.exp(-res.params[f"{c}.GM.beta"] / wvm.fs)) for c in mm.channels]
+    u = np.array([prob.u_of(ti, phi, np.nan) for ti, phi in zip(prob.slots, phis, strict=True)])
     f, _, s, coupled = prob.solve(u)
     assert coupled and f == pytest.approx(res.objective, rel=1e-12)
     monkeypatch.setattr(ConeLSQ, "_uncertified", lambda self, *a, **k: {-1})

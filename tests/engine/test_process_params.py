@@ -116,3 +116,42 @@ def test_a_field_without_its_record_is_refused() -> None:
             Bare.params()
     finally:
         del PROCESS_TYPES["Bare"]
+
+
+def test_intervals_read_each_transform_from_the_parameters_own_class() -> None:
+    """A process whose ``phi`` moves on the identity (an AR1 with another declaration) beside
+    the AR1's atanh ``phi``: the univariate and the multivariate (shared term) Wald intervals
+    use the class's own transform, so they are symmetric about the estimate. A lookup by the
+    parameter's name finds the AR1's atanh first (PROCESS_TYPES order) and makes them
+    asymmetric (by about 10 % of their width here)."""
+    from engine.models import AR1
+    from engine.models.model import coefficient_unit
+
+    @dataclass(frozen=True, repr=False)
+    class AR1Linear(AR1, order=90, description="a test process", nonlinear="phi"):
+        phi: float | None = param("identity", coefficient_unit, (-1.0, 1.0), "linear")
+        sigma2: float | None = param()
+
+        def from_fit(self, h, nl, fs):
+            return type(self)(float(nl), float(h))
+
+    try:
+        assert AR1Linear.params()["phi"].transform == "identity"
+        assert AR1.params()["phi"].transform == "atanh"
+        truth = AR1Linear(phi=0.95, sigma2=1.0) + eg.WN(sigma2=4.0)
+        x = {c: truth.simulate(2**12, rng=seed) for c, seed in (("a", 1), ("b", 2))}
+        res = eg.fit_gmwm(eg.wavelet_variance(x["a"]), AR1Linear() + eg.WN())
+        ci = res.conf_int()
+        k = ci.names.index("AR1Linear.phi")
+        est, lo, hi = ci.estimate[k], ci.lower[k], ci.upper[k]
+        assert lo < est < hi
+        assert 0.5 * (lo + hi) == pytest.approx(est, abs=1e-9 * (hi - lo))
+        mm = eg.MultiModel(["a", "b"], AR1Linear() + eg.WN(), shared=["AR1Linear"])
+        mres = eg.fit_mgmwm(x, mm)
+        mci = mres.conf_int()
+        k = mci.names.index("AR1Linear.phi")
+        est, lo, hi = mci.estimate[k], mci.lower[k], mci.upper[k]
+        assert lo < est < hi
+        assert 0.5 * (lo + hi) == pytest.approx(est, abs=1e-9 * (hi - lo))
+    finally:
+        del PROCESS_TYPES["AR1Linear"]

@@ -44,7 +44,7 @@ def test_correlation_times_spread_geometrically(wv: eg.WaveletVariance) -> None:
     assert one["AR1.phi"] == pytest.approx(math.exp(-1.0 / t_slow), rel=1e-12)
 
 
-@pytest.mark.parametrize("spec", ["WN+RW", "QN+WN+AR1+GM+DR", "2*GM+WN"])
+@pytest.mark.parametrize("spec", ["WN+RW", "QN+WN+AR1+GM+DR", "2*GM+WN", "MA1+RW", "GM+MA1+DR"])
 def test_each_guessed_curve_touches_half_the_empirical_wv(
     wv: eg.WaveletVariance, spec: str
 ) -> None:
@@ -67,6 +67,37 @@ def test_each_guessed_curve_touches_half_the_empirical_wv(
         total += curve
     r = total / wv.variance
     assert r.max() >= 0.5 - 1e-9 and r.max() <= 0.5 * len(model) + 1e-9
+
+
+@pytest.mark.parametrize("theta", [-0.6, 0.5])
+def test_ma1_theta_is_read_off_the_two_smallest_scales(theta: float) -> None:
+    """An MA1's start is its own (``MA1.start_nl``): the theta whose WV ratio
+    ``nu(4) / nu(2) = (2 + theta + 2 theta^2) / (4 (1 - theta + theta^2))`` is the data's,
+    within 0.05 of the truth on a 2^14-sample MA1 + RW log (the ratio's sampling error moves it
+    by about 0.01 here); the old start, a correlation time of a quarter of the largest scale,
+    gave theta = 0.9998 whatever the data. A fit from the started model reaches the plain
+    fit's objective (GMWM and ARMAV), and a GM beside it keeps the correlation-time start."""
+    truth = eg.parse_model(f"MA1(theta={theta}, sigma2=1e-2) + RW(gamma2=1e-9)")
+    wv = eg.wavelet_variance(truth.simulate(2**14, fs=100.0, rng=21), fs=100.0)
+    got = eg.starting_values(eg.parse_model("MA1+RW"), wv)
+    assert got["MA1.theta"] == pytest.approx(theta, abs=0.05)
+    r = wv.variance[1] / wv.variance[0]
+    t = got["MA1.theta"]  # on a grid of step 0.01: the ratio within a step's change of it
+    assert (2 + t + 2 * t * t) / (4 * (1 - t + t * t)) == pytest.approx(r, rel=0.02)
+    started = eg.parse_model("MA1+RW").processes
+    model = eg.Model(
+        tuple(
+            p.with_values(**{n: got[f"{lab}.{n}"] for n in p.param_names})
+            for lab, p in zip(eg.parse_model("MA1+RW").labels, started, strict=True)
+        )
+    )
+    for fit in (eg.fit_gmwm, eg.fit_armav):
+        plain, from_start = fit(wv, "MA1+RW"), fit(wv, model)
+        assert from_start.objective <= plain.objective * (1 + 1e-9)
+        assert from_start.params["MA1.theta"] == pytest.approx(theta, abs=0.05)
+    both = eg.starting_values(eg.parse_model("GM+MA1+RW"), wv)
+    assert both["MA1.theta"] == got["MA1.theta"]
+    assert both["GM.beta"] == pytest.approx(wv.fs / (wv.tau_samples[-1] / 4.0), rel=1e-12)
 
 
 def test_gmwm_objective_is_the_fits_objective_and_a_weighted_sum(wv: eg.WaveletVariance) -> None:
