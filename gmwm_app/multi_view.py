@@ -25,6 +25,8 @@ import param
 from bokeh.models.widgets import NumberFormatter, ScientificFormatter
 
 import engine as eg
+from engine.models import PROCESS_TYPES
+from engine.multivariate import SHAREABLE
 
 from .data import message_of
 from .multi_controls import DEFAULT_SHARED, DEFAULT_SPEC, MultiControls
@@ -41,6 +43,9 @@ from .multi_fit import MAX_CHANNELS, MIN_CHANNELS, build_model, fit_text
 from .tab_view import TabView
 from .views import TOTAL_COLOR, component_color, hidden_alert, redraw_table
 from .virtual_view import VirtualView
+
+#: the processes a channel keeps to itself (the classes say which may be shared)
+PER_CHANNEL = tuple(code for code in PROCESS_TYPES if code not in SHAREABLE)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .jobs import Jobs
@@ -190,8 +195,9 @@ class MultiView(TabView):
             c.override_input,
             h(
                 "**Shared processes**: pick the channels that share each process (a shared "
-                "WN, RW, AR1 or GM has a covariance matrix over its channels; QN and DR are "
-                "per channel only; fewer than 2 channels = independent).",
+                f"{', '.join(SHAREABLE[:-1])} or {SHAREABLE[-1]} has a covariance matrix over "
+                f"its channels; {', '.join(PER_CHANNEL)} are per channel only; fewer than 2 "
+                "channels = independent).",
                 margin=(0, 10),
                 styles=small,
             ),
