@@ -126,6 +126,7 @@ def gz_sim_sdf(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     sqrt(q) and ``dynamic_bias_correlation_time`` = T_c of the projected Gauss-Markov bias
     (module docstring). The sensor's ``<update_rate>`` must be the log's rate ``fs``."""
     nz = noise_for(fits, "gz-sim IMU <noise>", kw, consumer="gz-sim")
+    nz.need("T_c", "the gz-sim export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
     r = math.sqrt(nz.rate)
     lines = ["<!--", *(f"  {c.replace('--', '-')}" for c in nz.header)]
     lines += [f"  warning: {w.replace('--', '-')}" for w in nz.warnings]
