@@ -348,15 +348,13 @@ def export_fits(
         raise ValueError("no fit yet: add processes to the model first")
     log = state.log
     units = fit_units(state, fits)
-    topic = (log.meta.get("topic") if log is not None else None) or None
-    return export(
+    return export(  # the rostopic: the bag's IMU topic when the log is a bag (engine.export)
         None,
         dict(fits),
         fmt,
         units=units or None,
         source=state.filename,
-        rostopic=topic,
-        allow_partial=fmt == "kalibr",
+        allow_partial=FORMATS[fmt].takes("allow_partial"),  # Kalibr: the axes fitted
         inflate=inflate,
         filter_rate=filter_rate,
         projection=projection,

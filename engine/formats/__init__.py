@@ -39,12 +39,12 @@ _LAZY: dict[str, tuple[str, ...]] = {
     "report": ("fit_report", "write_report", "curves_csv"),
     "catalog": ("FORMATS", "Format", "register", "FORMAT_CONSUMERS"),
     "registry": ("export",),
+    "options": ("ExportOptions", "DATA_BOUNDS"),
     "noise": ("ImuNoise", "imu_noise"),
     "projection": (
         "project",
         "Projection",
         "ProjectedParam",
-        "DATA_BOUNDS",
         "MISFIT_SHARE",
         "misfit",
     ),
@@ -58,8 +58,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
     from .datasheet import datasheet_csv, datasheet_table, datasheet_text  # noqa: F401
     from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr  # noqa: F401
     from .noise import ImuNoise, imu_noise  # noqa: F401
+    from .options import DATA_BOUNDS, ExportOptions  # noqa: F401
     from .projection import (  # noqa: F401
-        DATA_BOUNDS,
         MISFIT_SHARE,
         ProjectedParam,
         Projection,
