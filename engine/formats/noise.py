@@ -28,7 +28,7 @@ from ..io.log import channel_axis
 from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
 from .kalibr import kalibr_imu
-from .options import PROJECTIONS, ExportOptions, check_inflate
+from .options import PROJECTIONS, ExportOptions, FleetUnit, check_inflate
 from .projection import Projection, consumer_of, project
 from .tails import TailFactors
 
@@ -362,27 +362,6 @@ def noise_for(
     units = [(o.source or "unit 1", nz)]
     units += [(u.source, one(u.fits, u.source, u.tails)) for u in o.fleet]
     return fleet_noise(units, fmt)
-
-
-@dataclass(frozen=True, eq=False)
-class FleetUnit:
-    """One more unit of a fleet file (``engine.export(..., fleet=)``): its fits, with the
-    same channels as the first unit's, and their tail factors.
-
-    Attributes
-    ----------
-    source : str
-        The unit's log (for the file's header and messages).
-    fits : mapping of str to GMWMResult
-        Channel to fit.
-    tails : mapping of str to TailFactors, optional
-        Per channel (:func:`~engine.formats.tails.log_tail_factors` of the unit's log); None:
-        no tail factors.
-    """
-
-    source: str
-    fits: Mapping[str, GMWMResult]
-    tails: Mapping[str, TailFactors] | None = None
 
 
 #: The consumer models (:attr:`engine.formats.Format.consumer`) a fleet file can be written

@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING, Any
 from ..errors import ExportError
 
 if TYPE_CHECKING:  # pragma: no cover
+    from ..fit import GMWMResult
     from ..inference import ParamInterval
     from ..io import ImuLog
-    from .noise import FleetUnit
     from .tails import TailFactors
 
-__all__ = ["ExportOptions", "PROJECTIONS", "DATA_BOUNDS", "CONTEXT", "check_inflate"]
+__all__ = ["ExportOptions", "FleetUnit", "PROJECTIONS", "DATA_BOUNDS", "CONTEXT", "check_inflate"]
 
 #: The values of :attr:`ExportOptions.projection`.
 PROJECTIONS = ("bound", "plain", "fit")
@@ -57,6 +57,27 @@ def check_inflate(inflate: float) -> float:
     if isinstance(inflate, bool) or not (math.isfinite(f) and f > 0):
         raise ExportError(f"inflate must be a positive number, got {inflate!r}")
     return f
+
+
+@dataclass(frozen=True, eq=False)
+class FleetUnit:
+    """One more unit of a fleet file (``engine.export(..., fleet=)``): its fits, with the
+    same channels as the first unit's, and their tail factors.
+
+    Attributes
+    ----------
+    source : str
+        The unit's log (for the file's header and messages).
+    fits : mapping of str to GMWMResult
+        Channel to fit.
+    tails : mapping of str to TailFactors, optional
+        Per channel (:func:`~engine.formats.tails.log_tail_factors` of the unit's log); None:
+        no tail factors.
+    """
+
+    source: str
+    fits: Mapping[str, GMWMResult]
+    tails: Mapping[str, TailFactors] | None = None
 
 
 @dataclass(frozen=True)
