@@ -168,12 +168,20 @@ class ExportOptions:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "inflate", check_inflate(self.inflate))
-        if self.band is not None:
-            object.__setattr__(self, "band", tuple(self.band))
-        c: Any = self.consumers  # a str is one name, not its letters
-        if c is not None:
-            object.__setattr__(self, "consumers", (c,) if isinstance(c, str) else tuple(c))
-        object.__setattr__(self, "fleet", tuple(self.fleet))
+        for name, must in (
+            ("band", "two WV scales (low, high) in s with 0 < low <= high, or None"),
+            ("consumers", "names of consumer models or filter formats"),
+            ("fleet", "a sequence of FleetUnit"),
+        ):
+            v: Any = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, str) and name == "consumers":  # one name, not its letters
+                v = (v,)
+            try:
+                object.__setattr__(self, name, tuple(v))
+            except TypeError:
+                raise ExportError(f"{name} must be {must}, got {v!r}") from None
         self._check()
 
     def _check(self) -> None:

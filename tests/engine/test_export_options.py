@@ -76,6 +76,7 @@ BAD = [
     ("horizon_s", -5.0, "a positive number (s)"),
     ("scale_factor_std_ppm", float("nan"), "a positive number (ppm)"),
     ("band", (5.0, 1.0), "two WV scales"),
+    ("band", 5.0, "two WV scales"),
     ("confidence", 1.5, "a level in (0, 1)"),
     ("ci", "bootstrap", "'asymptotic' or None"),
     ("vehicle_id", 0, "a MAVLink system id 1..255"),
