@@ -16,8 +16,10 @@ the formats it writes.
   intervals), used by every filter format;
 * :mod:`.tails`: :func:`~.tails.tail_factors` (per scale, the factor on the data bound's
   variance that makes the file's Gaussian quantile cover the data's);
-* :mod:`.catalog`: the formats by name (:data:`FORMATS`), records of their consumer model and
-  capabilities that import no writer; :mod:`.registry`: :func:`export`.
+* :mod:`.catalog`: the formats by name (:data:`FORMATS`), records of their consumer model,
+  capabilities and the options their writer reads, importing no writer; :mod:`.options`:
+  :class:`ExportOptions`, the typed options every writer takes; :mod:`.registry`:
+  :func:`export`.
 
 The names are imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`), so that a
 module that needs one helper (``engine.formats.common``) does not load every writer.
