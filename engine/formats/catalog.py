@@ -13,7 +13,7 @@ A new format is one writer ``writer(fits, options) -> str`` (``options`` an
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,6 +58,10 @@ FILTER_OPTIONS = (
     "tails",
     "fleet",
 )
+
+
+#: A writer: the fits (channel to :class:`~engine.fit.GMWMResult`) and the options -> the text.
+Writer = Callable[[Mapping[str, Any], ExportOptions], str]
 
 
 def _resolve(ref: Callable[..., Any] | str) -> Callable[..., Any]:
@@ -108,7 +112,7 @@ class Format:
 
     name: str
     description: str
-    write: Callable[..., str] | str
+    write: Writer | str
     read: Callable[[Any], Any] | str | None = None
     suffix: str = ".txt"
     consumer: str | None = None
@@ -118,8 +122,8 @@ class Format:
     options: tuple[str, ...] = ()
 
     @property
-    def writer(self) -> Callable[..., str]:
-        """The writer ``writer(fits, **options) -> str`` (its module imported on first use)."""
+    def writer(self) -> Writer:
+        """The writer ``writer(fits, options) -> str`` (its module imported on first use)."""
         return _resolve(self.write)
 
     @property
