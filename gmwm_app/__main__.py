@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from engine.errors import UsageError  # the gmwm command's: one line, what to change
 from gmwm_app.limits import MAX_MESSAGE_BYTES
 from gmwm_app.server_guard import is_loopback
 
@@ -44,10 +45,6 @@ DEFAULT_ADDRESS = "localhost"
 
 #: Request headers never copied into a session's token (cookies are never copied either).
 TOKEN_EXCLUDED_HEADERS = ("Cookie", "Authorization", "Proxy-Authorization")
-
-
-class UsageError(ValueError):
-    """A command line that cannot be served; the message says what to change."""
 
 
 def build_parser() -> argparse.ArgumentParser:

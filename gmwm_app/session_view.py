@@ -348,15 +348,13 @@ def export_fits(
         raise ValueError("no fit yet: add processes to the model first")
     log = state.log
     units = fit_units(state, fits)
-    topic = (log.meta.get("topic") if log is not None else None) or None
-    return export(
+    return export(  # the rostopic: the bag's IMU topic when the log is a bag (engine.export)
         None,
         dict(fits),
         fmt,
         units=units or None,
         source=state.filename,
-        rostopic=topic,
-        allow_partial=fmt == "kalibr",
+        allow_partial=FORMATS[fmt].takes("allow_partial"),  # Kalibr: the axes fitted
         inflate=inflate,
         filter_rate=filter_rate,
         projection=projection,
@@ -582,7 +580,10 @@ class SessionPanel(pn.viewable.Viewer):
     def _on_format(self, _event: Any = None) -> None:
         key = self.format_select.value
         f = FORMATS[key]
-        self.rate_input.visible = f.is_filter  # every filter format honours the filter rate
+        # only the options the format's record says its writer reads (Format.options)
+        self.inflate_input.visible = f.takes("inflate")
+        self.rate_input.visible = f.takes("filter_rate")
+        self.projection_select.visible = f.takes("projection")
         self.rate_input.placeholder = "required" if f.needs_filter_rate else "the log's rate"
         stem = Path(self.state.filename or "data").stem
         self.format_download.filename = f"{key}_{stem}{f.suffix}"
@@ -640,7 +641,9 @@ class SessionPanel(pn.viewable.Viewer):
                     s,
                     self._fits,
                     key,
-                    inflate=float(self.inflate_input.value or 1.0),
+                    inflate=float(self.inflate_input.value or 1.0)
+                    if self.inflate_input.visible
+                    else 1.0,
                     filter_rate=rate,
                     projection=self.projection_select.value,
                     **opts,

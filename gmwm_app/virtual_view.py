@@ -269,7 +269,7 @@ class VirtualView:
             self.format_select.value,
             units={name: vs.unit} if vs.unit else None,
             source=f"virtual sensor of {', '.join(vs.channels)}",
-            allow_partial=True,
+            allow_partial=FORMATS[self.format_select.value].takes("allow_partial"),
         )
 
     def export_file(self) -> io.StringIO:

@@ -74,7 +74,8 @@ def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
 
 
 def on_page_content(html: str, page: Any, **kwargs: Any) -> str:
-    """Drop the Sphinx role names that the API page's docstrings show as text."""
-    if page.file.src_uri != "api.md":
+    """Drop the Sphinx role names that the docstrings show as text (the API page, and a guide
+    that renders one docstring, e.g. fit-to-filter.md's ExportOptions)."""
+    if page.file.src_uri != "api.md" and 'class="doc doc-' not in html:
         return html
     return ROLE_TEXT.sub(r"\1", ROLE.sub(r"\1", html))

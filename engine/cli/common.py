@@ -83,6 +83,18 @@ ARGUMENT_FLAGS: dict[str, str] = {
     "segments": "--segments",
     "drop_warmup": "--drop-warmup",
     "temperature": "--temperature",
+    # gmwm export's options (engine.formats.ExportOptions); "--no-" flags take no value
+    "rostopic": "--rostopic",
+    "projection": "--projection",
+    "horizon_s": "--horizon",
+    "band": "--bound-band",
+    "confidence": "--bound-confidence",
+    "ci": "--no-intervals",
+    "data": "--bound-data",
+    "tails": "--no-tails",
+    "vehicle_id": "--vehicle-id",
+    "scale_factor_std_ppm": "--scale-factor-std",
+    "consumers": "--consumer",
 }
 
 _ARGUMENT = re.compile(
@@ -93,7 +105,7 @@ _ARGUMENT = re.compile(
 
 def _flag(m: re.Match[str]) -> str:
     flag, value = ARGUMENT_FLAGS[m.group(1)], m.group(2)
-    if value in ("", "...", "True"):
+    if value in ("", "...", "True") or flag.startswith("--no-"):  # tails=False: --no-tails
         return flag
     if value.startswith("("):  # a Python tuple (segment=(start, stop)): no CLI form
         return m.group(0)

@@ -18,10 +18,12 @@ engine's ValueError subclasses), which ``gmwm`` prints as one line with exit sta
 from __future__ import annotations
 
 import argparse
+import textwrap
 from typing import Any
 
 from ..formats.catalog import FORMATS
 from .common import (
+    ARGUMENT_FLAGS,
     CHANNELS_HELP,
     INPUT_HELP,
     add_bootstrap_options,
@@ -40,7 +42,7 @@ from .common import (
     warn_fs_unknown,
 )
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "format_options_help"]
 
 
 def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
@@ -59,7 +61,9 @@ def _small_multipliers(spec: str, opt: str, limit: int = 100) -> str:
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``export`` sub-command to the ``gmwm`` sub-parsers."""
-    ex = sub.add_parser("export")
+    ex = sub.add_parser(
+        "export", epilog=format_options_help(), formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ex.add_argument("input", help=INPUT_HELP)
     ex.add_argument("--model", required=True, help="model for every channel, e.g. 'GM+WN+RW'")
     ex.add_argument(
@@ -249,7 +253,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         log=log,
         units=units,
         source=str(args.input),
-        rostopic=args.rostopic or (log.meta.get("topic") if log is not None else None) or "/imu0",
+        rostopic=args.rostopic,  # default: the bag's IMU topic, else /imu0 (engine.export)
         allow_partial=args.partial,
         inflate=args.inflate,
         filter_rate=args.filter_rate,
@@ -281,6 +285,41 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             *(f"  warning: {line}" for line in disagree),
         ]
     )
+
+
+def format_options_help() -> str:
+    """The epilog of ``gmwm export --help``: the options each format reads, from the format
+    records (:attr:`engine.formats.Format.options`), in the command's flags."""
+    filt = [f for f in FORMATS.values() if f.is_filter]
+    common = [o for o in filt[0].options if all(o in f.options for f in filt)]
+
+    def flags(options: Any) -> str:  # fleet is gmwm batch --export's
+        return " ".join(ARGUMENT_FLAGS[o] for o in options if o != "fleet")
+
+    lines = [
+        "options by format (besides the log, model and fit options):",
+        *textwrap.wrap(
+            f"the filter formats: {flags(common)}",
+            88,
+            initial_indent="  ",
+            subsequent_indent="    ",
+        ),
+    ]
+    for f in FORMATS.values():
+        own = [o for o in f.options if not (f.is_filter and o in common)]
+        said = ("the filter options" + (" and " if own else "")) if f.is_filter else ""
+        said += flags(own) if own else ("" if f.is_filter else "none")
+        if f.needs_filter_rate:
+            said += "; --filter-rate required"
+        lines += textwrap.wrap(
+            f"{f.name}: {said}",
+            88,
+            initial_indent="  ",
+            subsequent_indent="    ",
+            break_on_hyphens=False,
+        )
+    lines.append("an option given that the format does not read is ignored, with a warning")
+    return "\n".join(lines)
 
 
 def add_filter_rate_option(group: Any, when: str = "") -> None:

@@ -207,7 +207,7 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         queue_warning(args, w)
     exported = None
     if args.format:
-        from ..formats import export
+        from ..formats import FORMATS, export
 
         name = args.name or base
         out = None if args.output == "-" else args.output
@@ -217,7 +217,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
             args.format,
             units={name: unit} if unit else None,
             source=", ".join(str(f) for f in args.inputs),
-            allow_partial=True,  # one axis: a Kalibr file with only its sensor's keys
+            # one axis: a Kalibr file with only its sensor's keys
+            allow_partial=FORMATS[args.format].takes("allow_partial"),
         )
         if out is None:
             return text.rstrip("\n")

@@ -16,8 +16,10 @@ the formats it writes.
   intervals), used by every filter format;
 * :mod:`.tails`: :func:`~.tails.tail_factors` (per scale, the factor on the data bound's
   variance that makes the file's Gaussian quantile cover the data's);
-* :mod:`.catalog`: the formats by name (:data:`FORMATS`), records of their consumer model and
-  capabilities that import no writer; :mod:`.registry`: :func:`export`.
+* :mod:`.catalog`: the formats by name (:data:`FORMATS`), records of their consumer model,
+  capabilities and the options their writer reads, importing no writer; :mod:`.options`:
+  :class:`ExportOptions`, the typed options every writer takes; :mod:`.registry`:
+  :func:`export`.
 
 The names are imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`), so that a
 module that needs one helper (``engine.formats.common``) does not load every writer.
@@ -39,12 +41,12 @@ _LAZY: dict[str, tuple[str, ...]] = {
     "report": ("fit_report", "write_report", "curves_csv"),
     "catalog": ("FORMATS", "Format", "register", "FORMAT_CONSUMERS"),
     "registry": ("export",),
+    "options": ("ExportOptions", "DATA_BOUNDS"),
     "noise": ("ImuNoise", "imu_noise"),
     "projection": (
         "project",
         "Projection",
         "ProjectedParam",
-        "DATA_BOUNDS",
         "MISFIT_SHARE",
         "misfit",
     ),
@@ -58,8 +60,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
     from .datasheet import datasheet_csv, datasheet_table, datasheet_text  # noqa: F401
     from .kalibr import KalibrImu, kalibr_imu, kalibr_models, write_kalibr  # noqa: F401
     from .noise import ImuNoise, imu_noise  # noqa: F401
+    from .options import DATA_BOUNDS, ExportOptions  # noqa: F401
     from .projection import (  # noqa: F401
-        DATA_BOUNDS,
         MISFIT_SHARE,
         ProjectedParam,
         Projection,

@@ -31,12 +31,12 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping
-from typing import Any
 
 from ..fit import GMWMResult
 from ..units import ExportError
 from .common import text_lines
 from .noise import noise_for
+from .options import ExportOptions
 
 __all__ = ["RANGES", "autopilot_params", "px4_params", "ardupilot_params"]
 
@@ -56,7 +56,7 @@ RANGES: dict[str, tuple[str, str, str, float, float]] = {
 
 
 def autopilot_params(
-    fits: Mapping[str, GMWMResult], prefix: str, **kw: Any
+    fits: Mapping[str, GMWMResult], prefix: str, o: ExportOptions
 ) -> tuple[dict[str, float], list[str], list[str]]:
     """The parameters of one autopilot (``prefix`` ``"EKF2_"`` or ``"EK3_"``).
 
@@ -71,15 +71,11 @@ def autopilot_params(
     ExportError
         No ``filter_rate``, or the errors of :func:`~engine.formats.noise.imu_noise`.
     """
-    fr = kw.get("filter_rate")
-    if fr is None or not (math.isfinite(float(fr)) and float(fr) > 0):
-        raise ExportError(
-            f"the {prefix.rstrip('_')} export needs the EKF's filter rate in Hz "
-            "(filter_rate=...): its noise parameters are per filter step"
-        )
-    fr = float(fr)
+    if o.filter_rate is None:  # engine.export refuses it first (the record's needs_filter_rate)
+        raise ExportError(f"the {prefix.rstrip('_')} export needs the EKF's filter rate in Hz")
+    fr = float(o.filter_rate)
     label = f"{'PX4 EKF2' if prefix == 'EKF2_' else 'ArduPilot EKF3'} parameters"
-    nz = noise_for(fits, label, kw, consumer="px4" if prefix == "EKF2_" else "ardupilot")
+    nz = noise_for(fits, label, o, consumer="px4" if prefix == "EKF2_" else "ardupilot")
     header = [
         *nz.header,
         f"filter rate {fr!r} Hz: value = density x sqrt(filter rate) (N in rad/s/sqrt(Hz) "
@@ -114,15 +110,12 @@ def autopilot_params(
     return values, header, warn
 
 
-def px4_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def px4_params(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """PX4 EKF2 noise parameters as a QGroundControl ``.params`` file (``#`` comments, then
     ``vehicle-id<TAB>component-id<TAB>name<TAB>value<TAB>type`` with type 9 = float); the
-    vehicle id is ``kw["vehicle_id"]`` (default 1)."""
-    vid = kw.get("vehicle_id")
-    vid = 1 if vid is None else vid
-    if isinstance(vid, bool) or not isinstance(vid, int) or not 1 <= vid <= 255:
-        raise ExportError(f"vehicle_id must be a MAVLink system id 1..255, got {vid!r}")
-    values, header, warn = autopilot_params(fits, "EKF2_", **kw)
+    vehicle id is :attr:`~engine.formats.ExportOptions.vehicle_id`."""
+    vid = o.vehicle_id
+    values, header, warn = autopilot_params(fits, "EKF2_", o)
     lines = [f"# {c}" for c in header] + [f"# warning: {w}" for w in warn]
     lines.append("#")
     lines.append("# Vehicle-Id Component-Id Name Value Type")
@@ -133,10 +126,10 @@ def px4_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines) + "\n".join(rows) + "\n"
 
 
-def ardupilot_params(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def ardupilot_params(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """ArduPilot EKF3 noise parameters as a ``.param`` file (``NAME,VALUE`` lines, ``#``
     comments)."""
-    values, header, warn = autopilot_params(fits, "EK3_", **kw)
+    values, header, warn = autopilot_params(fits, "EK3_", o)
     lines = [f"# {c}" for c in header] + [f"# warning: {w}" for w in warn]
     for name, v in values.items():
         lines.append(f"# {name} [{RANGES[name][2]}]")

@@ -5,16 +5,19 @@ A record names its writer (``"vio:openvins_yaml"``, a function of a module of th
 instead of holding it, so that reading the formats (the ``gmwm export`` options and help, the
 app's format menus, the consumer of a format name in the projection) imports no writer; the
 writer's module is imported when a file is written (:func:`engine.formats.registry.export`).
-A new format is one writer ``writer(fits, **options) -> str`` in a module of this package and
-one :func:`register` call below.
+A new format is one writer ``writer(fits, options) -> str`` (``options`` an
+:class:`~engine.formats.options.ExportOptions`) in a module of this package and one
+:func:`register` call below, which names the options the writer reads.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from .options import CONTEXT, ExportOptions
 
 __all__ = [
     "Format",
@@ -22,6 +25,7 @@ __all__ = [
     "FORMAT_CONSUMERS",
     "CONSUMER_PARAMS",
     "VALUE_KINDS",
+    "FILTER_OPTIONS",
     "register",
 ]
 
@@ -40,6 +44,26 @@ VALUE_KINDS = {
 }
 
 
+#: The options every filter format reads (its projection, bound and file values):
+#: :class:`~engine.formats.options.ExportOptions` fields.
+FILTER_OPTIONS = (
+    "inflate",
+    "filter_rate",
+    "projection",
+    "horizon_s",
+    "band",
+    "confidence",
+    "ci",
+    "data",
+    "tails",
+    "fleet",
+)
+
+
+#: A writer: the fits (channel to :class:`~engine.fit.GMWMResult`) and the options -> the text.
+Writer = Callable[[Mapping[str, Any], ExportOptions], str]
+
+
 def _resolve(ref: Callable[..., Any] | str) -> Callable[..., Any]:
     if not isinstance(ref, str):
         return ref
@@ -50,13 +74,11 @@ def _resolve(ref: Callable[..., Any] | str) -> Callable[..., Any]:
 
 @dataclass(frozen=True)
 class Format:
-    """An export format: ``writer(fits, **options) -> text``; ``reader(path or text)``.
+    """An export format: ``writer(fits, options) -> text``; ``reader(path or text)``.
 
-    The options every writer receives (and may ignore): ``intervals``, ``log``, ``units``,
-    ``source``, ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate``, ``projection``,
-    ``horizon_s``, ``band``, ``confidence``, ``ci``, ``vehicle_id``, ``scale_factor_std_ppm``,
-    ``consumers``, ``data``; ``fleet`` (:class:`~engine.formats.noise.FleetUnit` list) only
-    for a fleet file.
+    The writer takes the fits (channel to :class:`~engine.fit.GMWMResult`) and one
+    :class:`~engine.formats.options.ExportOptions`, and reads only the fields its record names
+    in :attr:`options` (and the context: intervals, log, units, source).
 
     The capabilities of a filter format are declared here once and read by the writers'
     callers, the CLI and the app:
@@ -82,27 +104,37 @@ class Format:
     bias : str
         The consumer's bias model in words (``"random walk"``, ``"Gauss-Markov, one T_c per
         file"`` ...); ``""`` for none.
+    options : tuple of str
+        The :class:`~engine.formats.options.ExportOptions` fields the writer reads besides the
+        context (``intervals``, ``log``, ``units``, ``source``): what ``gmwm export --help``
+        lists for the format; an option given that is not here is named in one warning.
     """
 
     name: str
     description: str
-    write: Callable[..., str] | str
+    write: Writer | str
     read: Callable[[Any], Any] | str | None = None
     suffix: str = ".txt"
     consumer: str | None = None
     values: str | None = None
     needs_filter_rate: bool = False
     bias: str = ""
+    options: tuple[str, ...] = ()
 
     @property
-    def writer(self) -> Callable[..., str]:
-        """The writer ``writer(fits, **options) -> str`` (its module imported on first use)."""
+    def writer(self) -> Writer:
+        """The writer ``writer(fits, options) -> str`` (its module imported on first use)."""
         return _resolve(self.write)
 
     @property
     def reader(self) -> Callable[[Any], Any] | None:
         """The reader of the format's files, or None (its module imported on first use)."""
         return None if self.read is None else _resolve(self.read)
+
+    def takes(self, option: str) -> bool:
+        """The writer reads ``option`` (an :class:`~engine.formats.options.ExportOptions`
+        field): one of :attr:`options` or of the context every format accepts."""
+        return option in self.options or option in CONTEXT
 
     @property
     def is_filter(self) -> bool:
@@ -125,6 +157,9 @@ def register(fmt: Format) -> Format:
         raise ValueError(f"format {fmt.name!r}: unknown consumer model {fmt.consumer!r}")
     if fmt.values is not None and fmt.values not in VALUE_KINDS:
         raise ValueError(f"format {fmt.name!r}: values must be one of {', '.join(VALUE_KINDS)}")
+    unknown = [o for o in fmt.options if o not in ExportOptions.names() or o in CONTEXT]
+    if unknown:
+        raise ValueError(f"format {fmt.name!r}: unknown options {unknown} (ExportOptions fields)")
     FORMATS[fmt.name] = fmt
     if fmt.consumer is not None:
         FORMAT_CONSUMERS[fmt.name] = fmt.consumer
@@ -144,8 +179,16 @@ for _fmt in (
         "WN+RW",
         "density",
         bias=_RW,
+        options=(*FILTER_OPTIONS, "rostopic", "allow_partial"),
     ),
-    Format("json", "JSON report", "registry:json_text", None, ".json"),
+    Format(
+        "json",
+        "JSON report",
+        "registry:json_text",
+        None,
+        ".json",
+        options=(*(o for o in FILTER_OPTIONS if o not in ("inflate", "fleet")), "consumers"),
+    ),
     Format("csv", "CSV of the WV and implied curves", "registry:curves_text", None, ".csv"),
     Format("datasheet", "readable datasheet table", "registry:datasheet_table_text", None),
     Format("datasheet-csv", "datasheet CSV", "registry:datasheet_csv_text", None, ".csv"),
@@ -158,6 +201,7 @@ for _fmt in (
         "WN+RW",
         "density",
         bias=_RW,
+        options=(*FILTER_OPTIONS, "rostopic"),
     ),
     Format(
         "basalt",
@@ -168,6 +212,7 @@ for _fmt in (
         "WN+RW",
         "density",
         bias=_RW,
+        options=FILTER_OPTIONS,
     ),
     Format(
         "orbslam3",
@@ -178,6 +223,7 @@ for _fmt in (
         "WN+RW",
         "density",
         bias=_RW,
+        options=FILTER_OPTIONS,
     ),
     Format(
         "px4",
@@ -189,6 +235,7 @@ for _fmt in (
         "per-step",
         needs_filter_rate=True,
         bias=_RW,
+        options=(*FILTER_OPTIONS, "vehicle_id"),
     ),
     Format(
         "ardupilot",
@@ -200,6 +247,7 @@ for _fmt in (
         "per-step",
         needs_filter_rate=True,
         bias=_RW,
+        options=FILTER_OPTIONS,
     ),
     Format(
         "matlab",
@@ -210,6 +258,7 @@ for _fmt in (
         "WN+RW",
         "density",
         bias=_RW,
+        options=FILTER_OPTIONS,
     ),
     Format(
         "gazebo",
@@ -220,6 +269,7 @@ for _fmt in (
         "WN+GM",
         "density",
         bias=f"{_GM}, one per sensor triad",
+        options=FILTER_OPTIONS,
     ),
     Format(
         "gz-sim",
@@ -230,6 +280,7 @@ for _fmt in (
         "WN+GM",
         "per-sample",
         bias=f"{_GM} per axis",
+        options=FILTER_OPTIONS,
     ),
     Format(
         "kf-gins",
@@ -240,6 +291,7 @@ for _fmt in (
         "WN+GM",
         "density",
         bias=f"{_GM}, one T_c for the whole file",
+        options=(*FILTER_OPTIONS, "scale_factor_std_ppm"),
     ),
     Format(
         "ros-imu",
@@ -249,6 +301,7 @@ for _fmt in (
         ".yaml",
         "WN",
         "per-sample",
+        options=FILTER_OPTIONS,
     ),
     Format(
         "vins",
@@ -259,6 +312,7 @@ for _fmt in (
         "WN+RW",
         "per-sample",
         bias=_RW,
+        options=FILTER_OPTIONS,
     ),
 ):
     register(_fmt)

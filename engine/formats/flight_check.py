@@ -32,6 +32,7 @@ from typing import Any
 from ..fit import GMWMResult
 from ..units import ExportError
 from .autopilot import RANGES, autopilot_params
+from .options import ExportOptions
 
 __all__ = [
     "TOO_LARGE",
@@ -177,7 +178,7 @@ def check_flight_params(
         notes.append(f"filter rate {filter_rate:g} Hz (pass filter_rate= if it differs)")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        measured, _, warn = autopilot_params(fits, prefix, filter_rate=filter_rate)
+        measured, _, warn = autopilot_params(fits, prefix, ExportOptions(filter_rate=filter_rate))
     notes += [str(w.message) for w in caught if str(w.message) not in warn] + list(warn)
     rows = []
     for name, value in measured.items():

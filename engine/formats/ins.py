@@ -24,9 +24,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from ..fit import GMWMResult
 from ..units import DISPLAY
 from .common import text_lines, yaml_float
 from .noise import noise_for
+from .options import ExportOptions
 from .projection import log_inflation_at_tc
 
 __all__ = ["MGAL", "kfgins_yaml", "ros_imu_yaml"]
@@ -46,22 +47,25 @@ def _flow(vals: list[float]) -> str:
     return "[" + ", ".join(yaml_float(v) for v in vals) + "]"
 
 
-def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def kfgins_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
     one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
-    bounded = (kw.get("projection") or "bound") == "bound"
+    bounded = o.projection == "bound"
     # with the bound, a first pass without intervals gives each channel's own T_c
     nz = noise_for(
-        fits, "KF-GINS imunoise", dict(kw, ci=None) if bounded else kw, consumer="kf-gins"
+        fits,
+        "KF-GINS imunoise",
+        dataclasses.replace(o, ci=None) if bounded else o,
+        consumer="kf-gins",
     )
     nz.need("T_c", "the KF-GINS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
-    ss = float(kw.get("scale_factor_std_ppm") or 1000.0)
+    ss = float(o.scale_factor_std_ppm or 1000.0)
 
     g, a = "gyroscope", "accelerometer"
     own = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
     if bounded:
-        tc = _least_total_tc(fits, kw, sorted(set(own.values())))
-        nz = noise_for(fits, "KF-GINS imunoise", dict(kw, tc=tc), consumer="kf-gins")
+        tc = _least_total_tc(fits, o, sorted(set(own.values())))
+        nz = noise_for(fits, "KF-GINS imunoise", o, consumer="kf-gins", tc=tc)
         how = (
             f"one T_c = {tc:.6g} s for every bias (KF-GINS's one corrtime): the least total "
             "inflation over the channels; each gbstd/abstd bounds its channel at that T_c"
@@ -98,27 +102,25 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines)
 
 
-def _least_total_tc(
-    fits: Mapping[str, GMWMResult], kw: Mapping[str, Any], own: list[float]
-) -> float:
+def _least_total_tc(fits: Mapping[str, GMWMResult], o: ExportOptions, own: list[float]) -> float:
     """The one ``T_c`` (s) of least total inflation over the channels: the sum of each
     channel's log geometric-mean ratio (:attr:`Projection.inflation`), over the channels' own
     ``T_c`` and 9 log-spaced values between the smallest and the largest."""
     cands = sorted(set(own) | set(np.geomspace(min(own), max(own), 9).tolist()))
-    units = kw.get("units") or {}
+    units = o.units or {}
     total = np.zeros(len(cands))
     for ch, res in fits.items():
         total += log_inflation_at_tc(
             res,
             cands,
-            fs_filter=kw.get("filter_rate"),
-            horizon_s=kw.get("horizon_s"),
-            band=kw.get("band"),
-            confidence=kw.get("confidence"),
+            fs_filter=o.filter_rate,
+            horizon_s=o.horizon_s,
+            band=o.band,
+            confidence=o.confidence,
             channel=ch,
             unit=units.get(ch),
-            data=kw.get("data") or "low",
-            tails=(kw.get("tails") or {}).get(ch),
+            data=o.data,
+            tails=(o.tail_factors or {}).get(ch),
         )
     best, arg = math.inf, own[-1]
     for c, t in zip(cands, total.tolist(), strict=True):
@@ -127,10 +129,10 @@ def _least_total_tc(
     return float(arg)
 
 
-def ros_imu_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def ros_imu_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """``sensor_msgs/Imu`` covariance fields (YAML): diagonal per-sample WN variances in SI
     (``inflate**2`` applied), ``orientation_covariance[0] = -1``."""
-    nz = noise_for(fits, "sensor_msgs/Imu covariances", kw, allow_partial=True, consumer="ros-imu")
+    nz = noise_for(fits, "sensor_msgs/Imu covariances", o, allow_partial=True, consumer="ros-imu")
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines.append(
         f"# per-sample variance of the white noise at {nz.rate:g} Hz (the consumer's IMU rate), "

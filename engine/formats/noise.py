@@ -28,6 +28,7 @@ from ..io.log import channel_axis
 from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
 from .kalibr import kalibr_imu
+from .options import PROJECTIONS, ExportOptions, FleetUnit, check_inflate
 from .projection import Projection, consumer_of, project
 from .tails import TailFactors
 
@@ -43,19 +44,8 @@ __all__ = [
     "FLEET_CONSUMERS",
 ]
 
-#: The values of ``projection``.
-PROJECTIONS = ("bound", "plain", "fit")
-
 #: Sensor kinds in file order, with their SI signal unit.
 SENSORS = {"gyroscope": "rad/s", "accelerometer": "m/s^2"}
-
-
-def check_inflate(inflate: float) -> float:
-    """The ``inflate`` factor as a float; refuses a non-finite or non-positive one."""
-    f = float(inflate)
-    if not (math.isfinite(f) and f > 0):
-        raise ExportError(f"inflate must be a positive number, got {inflate!r}")
-    return f
 
 
 @dataclass(frozen=True, eq=False)
@@ -335,66 +325,43 @@ def _fit_noise(
 def noise_for(
     fits: Mapping[str, GMWMResult],
     fmt: str,
-    options: Mapping[str, Any],
+    options: ExportOptions,
     allow_partial: bool = False,
     consumer: str = "WN+RW",
-    fs_filter: float | None = None,
+    *,
+    tc: float | None = None,
 ) -> ImuNoise:
-    """:func:`imu_noise` with a writer's options (``units``, ``inflate``, ``source``,
-    ``projection``, ``horizon_s``, ``band``, ``confidence``, ``ci``, ``data``, ``tc``,
-    ``tails``;
-    ``filter_rate`` unless
-    ``fs_filter`` is given); with ``fleet`` (a sequence of :class:`FleetUnit`, the units
-    beside ``fits``), the fleet's :func:`fleet_noise`."""
+    """:func:`imu_noise` of a writer's options (its projection, bound, rate, inflate, units,
+    source and tail factors); with :attr:`~ExportOptions.fleet` (the units beside ``fits``),
+    the fleet's :func:`fleet_noise`. ``tc`` fixes the Gauss-Markov bias's correlation time (s)."""
+    o = options
 
     def one(unit_fits: Mapping[str, GMWMResult], source: str, tails: Any) -> ImuNoise:
         return imu_noise(
             unit_fits,
-            units=options.get("units"),
-            inflate=options.get("inflate", 1.0),
+            units=o.units,
+            inflate=o.inflate,
             source=source,
             fmt=fmt,
             allow_partial=allow_partial,
-            projection=options.get("projection") or "bound",
+            projection=o.projection,
             consumer=consumer,
-            fs_filter=fs_filter if fs_filter is not None else options.get("filter_rate"),
-            horizon_s=options.get("horizon_s"),
-            band=options.get("band"),
-            confidence=options.get("confidence"),
-            ci=options.get("ci", "asymptotic"),
-            data=options.get("data") or "low",
-            tc=options.get("tc"),
+            fs_filter=o.filter_rate,
+            horizon_s=o.horizon_s,
+            band=o.band,
+            confidence=o.confidence,
+            ci=o.ci,
+            data=o.data,
+            tc=tc,
             tails=tails,
         )
 
-    nz = one(fits, options.get("source", ""), options.get("tails"))
-    fleet = options.get("fleet") or ()
-    if not fleet:
+    nz = one(fits, o.source, o.tail_factors)
+    if not o.fleet:
         return nz
-    units = [(options.get("source", "") or "unit 1", nz)]
-    units += [(u.source, one(u.fits, u.source, u.tails)) for u in fleet]
+    units = [(o.source or "unit 1", nz)]
+    units += [(u.source, one(u.fits, u.source, u.tails)) for u in o.fleet]
     return fleet_noise(units, fmt)
-
-
-@dataclass(frozen=True, eq=False)
-class FleetUnit:
-    """One more unit of a fleet file (``engine.export(..., fleet=)``): its fits, with the
-    same channels as the first unit's, and their tail factors.
-
-    Attributes
-    ----------
-    source : str
-        The unit's log (for the file's header and messages).
-    fits : mapping of str to GMWMResult
-        Channel to fit.
-    tails : mapping of str to TailFactors, optional
-        Per channel (:func:`~engine.formats.tails.log_tail_factors` of the unit's log); None:
-        no tail factors.
-    """
-
-    source: str
-    fits: Mapping[str, GMWMResult]
-    tails: Mapping[str, TailFactors] | None = None
 
 
 #: The consumer models (:attr:`engine.formats.Format.consumer`) a fleet file can be written

@@ -38,6 +38,7 @@ from .bound import (
     split_terms,
 )
 from .catalog import CONSUMER_PARAMS, FORMAT_CONSUMERS
+from .options import DATA_BOUNDS
 from .tails import TailFactors
 
 __all__ = [
@@ -52,16 +53,6 @@ __all__ = [
     "log_inflation_at_tc",
     "consumer_of",
 ]
-
-#: What of the empirical WV the bound covers besides the fitted model (``data=``): its interval's
-#: lower limit (the default: the data give no evidence that the sensor is quieter than the
-#: file there), its estimate, its upper limit, or nothing (the fitted model alone).
-DATA_BOUNDS: dict[str, str] = {
-    "low": "ci_low",
-    "estimate": "variance",
-    "high": "ci_high",
-    "none": "",
-}
 
 #: A fit disagrees with its data when its WV is outside the empirical interval at more than
 #: this share of the scales. If the fit were the truth, each scale would be outside with

@@ -2,9 +2,10 @@
 
 The formats themselves (name, consumer model, capabilities, where the writer is) are records
 in :mod:`engine.formats.catalog`, which imports no writer. A new filter format (OpenVINS,
-Basalt, VINS ...) is one module with a writer ``writer(fits, **options) -> str`` (and a reader
-where one exists) that takes its numbers from the one datasheet table (:mod:`engine.units`),
-plus one :func:`~engine.formats.catalog.register` call in the catalog.
+Basalt, VINS ...) is one module with a writer ``writer(fits, options) -> str`` (``options``
+an :class:`~engine.formats.options.ExportOptions`), and a reader where one exists, that takes
+its numbers from the one datasheet table (:mod:`engine.units`), plus one
+:func:`~engine.formats.catalog.register` call in the catalog that names the options it reads.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -23,12 +25,12 @@ from .catalog import FORMATS, VALUE_KINDS, Format, register
 from .common import source_text
 from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu
-from .noise import FleetUnit, check_inflate, noise_for
+from .noise import FleetUnit, noise_for
+from .options import ExportOptions
 from .report import curves_csv, fit_report
 from .tails import log_tail_factors
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..inference import ParamInterval
     from ..io import ImuLog
 
 __all__ = [
@@ -45,15 +47,18 @@ __all__ = [
 ]
 
 
-def kalibr_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    f = check_inflate(kw.get("inflate", 1.0))
-    if (kw.get("projection") or "bound") == "fit":
+def kalibr_text(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
+    """Kalibr ``imu.yaml``: the bounded WN+RW projection (max over axes), or with
+    ``projection="fit"`` the fit's own terms (:func:`~engine.formats.kalibr.kalibr_imu`)."""
+    rostopic = o.rostopic or "/imu0"
+    if o.projection == "fit":
+        f = o.inflate
         kal = kalibr_imu(
             fits,
-            units=kw.get("units"),
-            rostopic=kw.get("rostopic") or "/imu0",
-            source=kw.get("source", ""),
-            allow_partial=kw.get("allow_partial", False),
+            units=o.units,
+            rostopic=rostopic,
+            source=o.source,
+            allow_partial=o.allow_partial,
         )
         kal = dataclasses.replace(
             kal,
@@ -66,9 +71,7 @@ def kalibr_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
             ],
         )
         return kal.to_yaml()
-    nz = noise_for(
-        fits, "Kalibr imu.yaml", kw, allow_partial=kw.get("allow_partial", False), consumer="kalibr"
-    )
+    nz = noise_for(fits, "Kalibr imu.yaml", o, allow_partial=o.allow_partial, consumer="kalibr")
     per_axis: dict[str, dict[str, float]] = {}
     chosen: dict[str, str] = {}
     values: dict[str, float] = {}
@@ -90,58 +93,46 @@ def kalibr_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         per_axis=per_axis,
         sources={},
         update_rate=nz.rate,
-        rostopic=kw.get("rostopic") or "/imu0",
+        rostopic=rostopic,
         comments=nz.header,
         warnings=nz.warnings,
     )
     return kal.to_yaml()
 
 
-def _no_inflate(kw: Mapping[str, Any], name: str) -> None:
-    if check_inflate(kw.get("inflate", 1.0)) != 1.0:
-        raise ExportError(
-            f"inflate= is for filter formats; the {name} reports the fit itself (inflate 1)"
-        )
-
-
-def json_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    _no_inflate(kw, "JSON report")
+def json_text(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
+    """The JSON report (:func:`~engine.formats.report.fit_report`) of the options."""
     rep = fit_report(
         fits,
-        intervals=kw.get("intervals"),
-        log=kw.get("log"),
-        units=kw.get("units"),
-        source=kw.get("source", ""),
-        consumers=kw.get("consumers"),
-        projection=kw.get("projection") or "bound",
-        filter_rate=kw.get("filter_rate"),
-        horizon_s=kw.get("horizon_s"),
-        band=kw.get("band"),
-        confidence=kw.get("confidence"),
-        ci=kw.get("ci", "asymptotic"),
-        data=kw.get("data") or "low",
-        tails=kw.get("tails"),
+        intervals=o.intervals,
+        log=o.log,
+        units=o.units,
+        source=o.source,
+        consumers=o.consumers,
+        projection=o.projection,
+        filter_rate=o.filter_rate,
+        horizon_s=o.horizon_s,
+        band=o.band,
+        confidence=o.confidence,
+        ci=o.ci,
+        data=o.data,
+        tails=o.tail_factors,
     )
     return json.dumps(rep, indent=1, allow_nan=False) + "\n"
 
 
-def datasheet_table_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    _no_inflate(kw, "datasheet")
-    return (
-        datasheet_text(datasheet_table(fits, intervals=kw.get("intervals"), units=kw.get("units")))
-        + "\n"
-    )
+def datasheet_table_text(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
+    """The readable datasheet table (:func:`~engine.formats.datasheet.datasheet_text`)."""
+    return datasheet_text(datasheet_table(fits, intervals=o.intervals, units=o.units)) + "\n"
 
 
-def datasheet_csv_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    _no_inflate(kw, "datasheet")
-    return datasheet_csv(
-        datasheet_table(fits, intervals=kw.get("intervals"), units=kw.get("units"))
-    )
+def datasheet_csv_text(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
+    """The datasheet CSV (:func:`~engine.formats.datasheet.datasheet_csv`)."""
+    return datasheet_csv(datasheet_table(fits, intervals=o.intervals, units=o.units))
 
 
-def curves_text(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
-    _no_inflate(kw, "curves CSV")
+def curves_text(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
+    """The CSV of the WV and implied curves (:func:`~engine.formats.report.curves_csv`)."""
     return curves_csv(fits)
 
 
@@ -150,25 +141,8 @@ def export(
     fits: Mapping[str, GMWMResult],
     fmt: str,
     *,
-    intervals: Mapping[str, Sequence[ParamInterval]] | None = None,
-    log: ImuLog | None = None,
-    units: Mapping[str, str] | None = None,
-    source: str | os.PathLike[str] = "",
-    rostopic: str | None = None,
-    allow_partial: bool = False,
-    inflate: float = 1.0,
-    filter_rate: float | None = None,
-    projection: str = "bound",
-    horizon_s: float | None = None,
-    band: Sequence[float] | None = None,
-    confidence: float | None = None,
-    ci: str | None = "asymptotic",
-    vehicle_id: int = 1,
-    scale_factor_std_ppm: float | None = None,
-    consumers: Sequence[str] | None = None,
-    data: str = "low",
-    tails: bool = True,
     fleet: Sequence[tuple[str, Mapping[str, GMWMResult], ImuLog | None]] = (),
+    **options: Any,
 ) -> str:
     """Export fits in one format; writes ``path`` (unless None) and returns the text.
 
@@ -183,50 +157,6 @@ def export(
         table), ``"datasheet-csv"``, and the filter formats ``"openvins"``, ``"basalt"``,
         ``"orbslam3"``, ``"vins"``, ``"px4"``, ``"ardupilot"``, ``"matlab"``, ``"gazebo"``,
         ``"kf-gins"``, ``"ros-imu"`` (docs/fit-to-filter.md, "Export formats").
-    intervals, log, units, source, rostopic, allow_partial
-        Passed to the format's writer (parameter intervals per channel, the log for the JSON
-        report, signal unit per channel, source name (a str or a path), Kalibr topic, partial
-        Kalibr file). Every user-given string is written with its control characters escaped
-        (:func:`engine.formats.common.clean_text`): a newline in a file name cannot add a line
-        (a parameter, a key) to the file.
-    inflate : float
-        Filter formats: every noise value (density, random walk, bias std) is the fitted value
-        times ``inflate`` (variances times ``inflate**2``), written in the file's header;
-        the reports (json, csv, datasheet) refuse a factor other than 1. Default 1.
-    rostopic : str, optional
-        Kalibr/OpenVINS ``rostopic``; default: the bag's IMU topic when ``log`` came from a
-        bag, else ``/imu0``.
-    filter_rate : float, optional
-        PX4/ArduPilot: the rate (Hz) the EKF predicts at (required by those formats); the
-        other filter formats: the filter's step for the projection (default the log's rate).
-    projection : {"bound", "plain", "fit"}
-        Filter formats: ``"bound"`` (default) projects each fit onto the consumer's noise model
-        and over-bounds it (:func:`engine.formats.projection.project`); ``"plain"`` the rule
-        without the bound; ``"fit"`` the fit's own terms converted one by one (no projection).
-    horizon_s, band, confidence, ci
-        The bound's horizon (s, default the log length), its WV scales (s), the confidence of
-        the fitted WV's upper limit to bound (default: the WV itself), the intervals
-        (``"asymptotic"`` or None); :func:`engine.formats.projection.project`.
-    vehicle_id : int
-        PX4: the MAVLink system id of the ``.params`` lines (default 1).
-    scale_factor_std_ppm : float, optional
-        KF-GINS: ``gsstd``/``asstd`` (not identified by GMWM; default 1000 ppm).
-    consumers : sequence of str, optional
-        JSON report: the consumer models or filter formats each fit is projected onto, with
-        each value's interval and factor (default ``("WN+RW",)``; ``projection="fit"``:
-        none); the filter formats use their own consumer.
-    data : {"low", "estimate", "high", "none"}
-        Filter formats and the JSON report's projections: the bound also covers the
-        empirical WV's lower interval limit (default), its estimate or its upper limit at the
-        dyadic scales of the band, or only the fitted model (``"none"``);
-        :func:`engine.formats.projection.project`.
-    tails : bool
-        Filter formats and the JSON report's projections, with a data bound and ``log``
-        given: the data bound's variance at each dyadic scale times the channel's tail factor
-        (:func:`engine.formats.tails.tail_factors` of ``log``'s channel: the least factor that
-        makes the file's Gaussian 99.9 % quantile cover the data's Haar coefficients'), so
-        that a sensor with heavier-than-Gaussian errors is not exported overconfident
-        (docs/filters.md, "Tails"). Default True; False: the data bound alone.
     fleet : sequence of (source, fits, log or None)
         WN+RW and white-noise filter formats: more units of the same sensor model, with the
         same channels as ``fits`` (the first unit, from ``log`` and ``source``). The file is
@@ -234,6 +164,19 @@ def export(
         its tail factors from its log), so that no unit is exported overconfident
         (:func:`engine.formats.noise.fleet_noise`; docs/filters.md, "One file for a fleet").
         Refused by the reports and the Gauss-Markov formats, and with ``projection="fit"``.
+    **options
+        The fields of :class:`engine.formats.ExportOptions`, each documented there with its
+        unit and default: ``intervals``, ``log``, ``units``, ``source`` (what the fits are),
+        ``rostopic``, ``allow_partial``, ``inflate``, ``filter_rate`` [Hz], ``projection``,
+        ``horizon_s`` [s], ``band`` [s], ``confidence``, ``ci``, ``vehicle_id``,
+        ``scale_factor_std_ppm``, ``consumers``, ``data``, ``tails``. They are checked once
+        (a bad value, or an unknown name: one :class:`~engine.errors.ExportError` naming
+        it); the format's record says which it uses (:attr:`Format.options`, listed by
+        ``gmwm export --help``): one given that the format does not use is named in a
+        :class:`UserWarning`, except ``inflate``, which the reports refuse. Every user-given
+        string is written with its control characters escaped
+        (:func:`engine.formats.common.clean_text`): a newline in a file name cannot add a line
+        (a parameter, a key) to the file.
 
     Examples
     --------
@@ -257,47 +200,54 @@ def export(
     f = FORMATS.get(fmt)
     if f is None:
         raise ExportError(f"unknown export format {fmt!r}: use one of {', '.join(FORMATS)}")
+    unknown = [k for k in options if k not in ExportOptions.names() or k == "fleet"]
+    if unknown:
+        raise ExportError(
+            f"unknown export option(s) {', '.join(unknown)}: the options are "
+            f"{', '.join(n for n in ExportOptions.names() if n != 'fleet')} and fleet"
+        )
+    if "source" in options:
+        options["source"] = source_text(options["source"])
+    o = ExportOptions(**options)
+    if o.inflate != 1.0 and "inflate" not in f.options:
+        raise ExportError(
+            f"inflate= is for filter formats; the {f.description} reports the fit itself "
+            "(inflate 1)"
+        )
+    if fleet and ("fleet" not in f.options or o.projection == "fit"):
+        raise ExportError(
+            f"a fleet file is a filter format's bounded numbers: {fmt!r} with projection "
+            f"{o.projection!r} takes one unit's fits (export each unit on its own)"
+        )
+    if f.needs_filter_rate and o.filter_rate is None:
+        raise ExportError(
+            f"the {fmt} export needs the filter rate in Hz its EKF predicts at (filter_rate=...):"
+            " its noise parameters are per filter step"
+        )
+    ignored = o.ignored_by(fmt, f.options)
+    if ignored:
+        warnings.warn(ignored, UserWarning, stacklevel=2)
 
-    def tail_map(log: ImuLog | None, fits: Mapping[str, GMWMResult]) -> Any:
+    def tail_map(log: ImuLog | None, unit_fits: Mapping[str, GMWMResult]) -> Any:
         return (
-            log_tail_factors(log, fits)
-            if tails
+            log_tail_factors(log, unit_fits)
+            if o.tails
             and log is not None
-            and projection == "bound"
-            and data != "none"
+            and o.projection == "bound"
+            and o.data != "none"
             # the formats whose projection has a data bound (not sensor_msgs/Imu's white part)
             and (f.consumer not in (None, "WN") or fmt == "json")
             else None
         )
 
-    if fleet and (not f.is_filter or projection == "fit"):
-        raise ExportError(
-            f"a fleet file is a filter format's bounded numbers: {fmt!r} with projection "
-            f"{projection!r} takes one unit's fits (export each unit on its own)"
-        )
-    units_more = [FleetUnit(str(src), fs_, tail_map(lg, fs_)) for src, fs_, lg in fleet]
-    text = f.writer(
-        fits,
-        intervals=intervals,
-        log=log,
-        units=units,
-        source=source_text(source),
-        rostopic=rostopic or (log.meta.get("topic") if log is not None else None) or "/imu0",
-        allow_partial=allow_partial,
-        inflate=inflate,
-        filter_rate=filter_rate,
-        projection=projection,
-        horizon_s=horizon_s,
-        band=band,
-        confidence=confidence,
-        ci=ci,
-        vehicle_id=vehicle_id,
-        scale_factor_std_ppm=scale_factor_std_ppm,
-        consumers=consumers,
-        data=data,
-        tails=tail_map(log, fits),
-        **({"fleet": units_more} if units_more else {}),
+    topic = o.log.meta.get("topic") if o.log is not None else None
+    o = dataclasses.replace(
+        o,
+        rostopic=o.rostopic or topic or "/imu0",
+        tail_factors=tail_map(o.log, fits),
+        fleet=tuple(FleetUnit(str(src), fs_, tail_map(lg, fs_)) for src, fs_, lg in fleet),
     )
+    text = f.writer(fits, o)
     if path is not None:
         write_atomic(path, text)  # the one write of every format (engine._files)
     return text

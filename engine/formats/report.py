@@ -78,7 +78,7 @@ def fit_report(
     filter_rate, horizon_s, band, confidence, ci, data
         The projection's filter rate (Hz, default the log's), horizon (s), band (s),
         confidence of the bounded WV limit, intervals (``"asymptotic"`` or None) and what of
-        the empirical WV the bound covers (:data:`~engine.formats.projection.DATA_BOUNDS`).
+        the empirical WV the bound covers (:data:`~engine.formats.options.DATA_BOUNDS`).
     tails : mapping of channel name to TailFactors, optional
         The projections' tail factors (:mod:`engine.formats.tails`; none by default).
 

@@ -30,11 +30,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 from ..fit import GMWMResult
 from .common import text_lines
 from .noise import noise_for
+from .options import ExportOptions
 
 __all__ = ["matlab_m", "gazebo_xml", "gz_sim_sdf", "GAZEBO_KEYS"]
 
@@ -47,11 +47,11 @@ GAZEBO_KEYS = {
 }
 
 
-def matlab_m(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def matlab_m(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """A runnable MATLAB script: ``gyroparams``/``accelparams`` with per-axis (x, y, z)
     ``NoiseDensity`` = N, ``RandomWalk`` = K, ``BiasInstability`` = B (SI), and an
     ``imuSensor`` at the log's rate (an axis not fitted gets the max over fitted ones)."""
-    nz = noise_for(fits, "MATLAB gyroparams/accelparams", kw, allow_partial=True, consumer="matlab")
+    nz = noise_for(fits, "MATLAB gyroparams/accelparams", o, allow_partial=True, consumer="matlab")
     lines = [f"% {c}" for c in nz.header] + [f"% warning: {w}" for w in nz.warnings]
     lines.append(f"fs = {nz.rate!r};  % Hz, the IMU rate (the log's unless --filter-rate)")
     ctor = {
@@ -80,12 +80,12 @@ def matlab_m(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines)
 
 
-def gazebo_xml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def gazebo_xml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """RotorS ``gazebo_imu_plugin`` noise parameters (an SDF ``<plugin>`` element): per sensor
     ``*NoiseDensity`` = N, ``*RandomWalk`` = sqrt(q), ``*BiasCorrelationTime`` = T_c of the
     most persistent GM term, ``*TurnOnBiasSigma`` = 0 (not identified); max over axes. Needs a
     GM (or AR1) term in every channel's model."""
-    nz = noise_for(fits, "Gazebo/RotorS IMU plugin", kw, consumer="gazebo")
+    nz = noise_for(fits, "Gazebo/RotorS IMU plugin", o, consumer="gazebo")
     nz.need("T_c", "the Gazebo/RotorS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
     lines = ["<!--", *(f"  {c.replace('--', '-')}" for c in nz.header)]
     lines += [f"  warning: {w.replace('--', '-')}" for w in nz.warnings]
@@ -119,13 +119,14 @@ def gazebo_xml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines)
 
 
-def gz_sim_sdf(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def gz_sim_sdf(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """gz-sim IMU sensor noise: an SDF ``<imu>`` element with ``<angular_velocity>`` and
     ``<linear_acceleration>``, per axis x, y, z a ``<noise type="gaussian">`` with ``mean`` 0,
     ``stddev`` = N sqrt(fs), ``bias_mean``/``bias_stddev`` 0, ``dynamic_bias_stddev`` =
     sqrt(q) and ``dynamic_bias_correlation_time`` = T_c of the projected Gauss-Markov bias
     (module docstring). The sensor's ``<update_rate>`` must be the log's rate ``fs``."""
-    nz = noise_for(fits, "gz-sim IMU <noise>", kw, consumer="gz-sim")
+    nz = noise_for(fits, "gz-sim IMU <noise>", o, consumer="gz-sim")
+    nz.need("T_c", "the gz-sim export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
     r = math.sqrt(nz.rate)
     lines = ["<!--", *(f"  {c.replace('--', '-')}" for c in nz.header)]
     lines += [f"  warning: {w.replace('--', '-')}" for w in nz.warnings]

@@ -20,6 +20,7 @@ from typing import Any
 from ..fit import GMWMResult
 from .common import text_lines, yaml_float, yaml_str
 from .noise import noise_for
+from .options import ExportOptions
 
 __all__ = ["openvins_yaml", "basalt_json", "orbslam3_yaml", "vins_yaml"]
 
@@ -34,13 +35,13 @@ def _eye(n: int, indent: str, zero: bool = False) -> list[str]:
     ]
 
 
-def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def openvins_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """OpenVINS ``kalibr_imu_chain.yaml`` (OpenCV ``%YAML:1.0``): the ``imu0`` block with
     identity ``T_i_b``/``Tw``/``R_IMUtoGYRO``/``Ta``/``R_IMUtoACC``, zero ``Tg``, the four Kalibr
-    densities (max over axes, SI), ``rostopic`` (``kw["rostopic"]``), ``time_offset: 0.0``,
-    ``update_rate`` (the consumer's rate: ``filter_rate``, default the log's) and
-    ``model: "kalibr"``."""
-    nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", kw, consumer="openvins")
+    densities (max over axes, SI), ``rostopic``
+    (:attr:`~engine.formats.ExportOptions.rostopic`), ``time_offset: 0.0``, ``update_rate``
+    (the consumer's rate: ``filter_rate``, default the log's) and ``model: "kalibr"``."""
+    nz = noise_for(fits, "OpenVINS kalibr_imu_chain.yaml", o, consumer="openvins")
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     lines += ["", "imu0:", "  T_i_b:  # IMU to body: identity (not estimated by GMWM)"]
@@ -50,7 +51,7 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
         lines.append(f"  {kind}_noise_density: {yaml_float(n)}  # [{_ND[kind]}] N, max over axes")
         lines.append(f"  {kind}_random_walk: {yaml_float(k)}  # [{_RW[kind]}] K, max over axes")
     lines += [
-        f"  rostopic: {yaml_str(kw.get('rostopic') or '/imu0')}",
+        f"  rostopic: {yaml_str(o.rostopic or '/imu0')}",
         "  time_offset: 0.0  # [s] (not estimated by GMWM)",
         f"  update_rate: {yaml_float(nz.rate)}  # [Hz] the consumer's IMU rate (densities "
         "do not depend on it)",
@@ -63,13 +64,13 @@ def openvins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines)
 
 
-def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def basalt_json(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """Basalt calibration JSON fragment: ``value0`` with ``imu_update_rate`` [Hz] and per-axis
     (x, y, z) ``gyro_noise_std`` = N, ``accel_noise_std`` = N, ``gyro_bias_std`` = K,
     ``accel_bias_std`` = K in SI; an axis that was not fitted gets the max over the fitted
     axes. JSON has no comments: ``gmwm_export`` (a sibling of ``value0``, which Basalt does
     not read) holds the header and units. Merge ``value0``'s keys into the calib file."""
-    nz = noise_for(fits, "Basalt calibration JSON", kw, consumer="basalt")
+    nz = noise_for(fits, "Basalt calibration JSON", o, consumer="basalt")
     v0: dict[str, Any] = {"imu_update_rate": nz.rate}
     units: dict[str, str] = {"imu_update_rate": "Hz"}
     for kind, short in (("accelerometer", "accel"), ("gyroscope", "gyro")):
@@ -87,12 +88,12 @@ def basalt_json(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return json.dumps(out, indent=1, allow_nan=False) + "\n"
 
 
-def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def orbslam3_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """ORB-SLAM3 settings lines (``%YAML:1.0``): ``IMU.NoiseGyro``/``IMU.NoiseAcc`` = N,
     ``IMU.GyroWalk``/``IMU.AccWalk`` = K (max over axes, SI), ``IMU.Frequency`` [Hz] as an
     integer (the legacy settings parser reads it with ``(int)``; a non-integer rate is rounded
     with a warning)."""
-    nz = noise_for(fits, "ORB-SLAM3 IMU settings", kw, consumer="orbslam3")
+    nz = noise_for(fits, "ORB-SLAM3 IMU settings", o, consumer="orbslam3")
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]
     freq = round(nz.rate)
@@ -112,12 +113,12 @@ def orbslam3_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
     return text_lines(lines)
 
 
-def vins_yaml(fits: Mapping[str, GMWMResult], **kw: Any) -> str:
+def vins_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """VINS-Mono/Fusion IMU keys (``%YAML:1.0``): per-sample (discrete) standard deviations at
     the consumer's IMU rate ``fs`` (``filter_rate``, default the log's), ``acc_n``/``gyr_n`` =
     ``N sqrt(fs)`` and ``acc_w``/``gyr_w`` = ``K sqrt(fs)`` (max over axes, SI; module
     docstring), stated in the file."""
-    nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", kw, consumer="vins")
+    nz = noise_for(fits, "VINS-Mono/Fusion IMU parameters", o, consumer="vins")
     r = math.sqrt(nz.rate)
     lines = ["%YAML:1.0", *(f"# {c}" for c in nz.header)]
     lines += [f"# warning: {w}" for w in nz.warnings]

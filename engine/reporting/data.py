@@ -38,7 +38,7 @@ import numpy as np
 from .._jsonutil import json_ready
 from .._version import __version__
 from ..fit import FitError, GMWMResult
-from ..formats import misfit
+from ..formats import FORMATS, misfit
 from ..inference.selection import DEFAULT_SELECT
 from ..io import ImuLog, log_of
 from ..models import DR, QN, RW, WN
@@ -655,7 +655,9 @@ def gather_report(
     if export_format:
         exp["format"] = export_format
         try:
-            exp["text"] = export(None, fitted, export_format, log=log, allow_partial=True)
+            f = FORMATS.get(export_format)
+            one_sensor = f is not None and f.takes("allow_partial")  # Kalibr: the keys fitted
+            exp["text"] = export(None, fitted, export_format, log=log, allow_partial=one_sensor)
         except (ExportError, ValueError) as e:
             exp["error"] = str(e)
         if progress is not None:

@@ -164,3 +164,41 @@ def test_the_app_file_covers_heavy_tails_as_gmwm_export_does(app_demo: Path) -> 
     assert b.options == {"data": "low", "tails": False}
     assert yaml.safe_load(sp.format_download.callback().getvalue()) == without
     assert sp.preview.projections["gyro_x"].value("N") == without[key]
+
+
+def test_the_menu_asks_only_the_options_of_the_format(app_demo: Path) -> None:
+    # read from the format records (engine.formats.Format.options): a report has no inflate
+    # factor, the datasheet no filter rate or projection, every filter format all three
+    from gmwm_app.app import create_app
+
+    sp = create_app().gmwm_app.session_panel
+    shown = {}
+    for fmt in ("datasheet", "json", "openvins", "px4"):
+        sp.format_select.value = fmt
+        shown[fmt] = (
+            sp.inflate_input.visible,
+            sp.rate_input.visible,
+            sp.projection_select.visible,
+            sp.rate_input.placeholder if sp.rate_input.visible else "",
+        )
+    assert shown == {
+        "datasheet": (False, False, False, ""),
+        "json": (False, True, True, "the log's rate"),
+        "openvins": (True, True, True, "the log's rate"),
+        "px4": (True, True, True, "required"),
+    }
+
+
+def test_a_report_downloads_with_the_inflate_of_a_filter_format_left(app_demo: Path) -> None:
+    # the inflate factor typed for a filter format is not sent to a report (which refuses it)
+    from gmwm_app.app import create_app
+
+    app = create_app().gmwm_app
+    sp = app.session_panel
+    _fit_two(app)
+    sp.format_select.value = "openvins"
+    sp.inflate_input.value = 2.0
+    sp.format_select.value = "datasheet"
+    text = sp.format_download.callback().getvalue()
+    assert not text.startswith("# could not export") and "gyro_x" in text
+    assert not app.state.error

@@ -104,3 +104,34 @@ def test_export_help_reads_the_records():
     rate = next(a for a in ex._actions if a.dest == "filter_rate")
     needs = [k for k, f in FORMATS.items() if f.needs_filter_rate]
     assert rate.help.startswith("/".join(needs) + ":") and needs == ["px4", "ardupilot"]
+
+
+def test_export_help_lists_the_options_each_record_names():
+    # gmwm export --help's epilog: per format, the flags of the options its writer reads
+    import re
+
+    from engine.cli.common import ARGUMENT_FLAGS
+    from engine.formats.catalog import FILTER_OPTIONS
+
+    sub = next(a for a in build_parser(["export"])._actions if a.dest == "command")
+    assert isinstance(sub.choices, dict)
+    text = " ".join(sub.choices["export"].format_help().split())
+    text = text[text.index("options by format") :]
+    flags = {k: ARGUMENT_FLAGS[k] for k in FILTER_OPTIONS if k != "fleet"}
+    assert f"the filter formats: {' '.join(flags.values())}" in text
+    for f in FORMATS.values():
+        m = re.search(rf"(?<![\w-]){re.escape(f.name)}: ([^:]*?)(?= [\w-]+: | an option)", text)
+        assert m, f.name
+        said = m.group(1)
+        own = [ARGUMENT_FLAGS[o] for o in f.options if o not in FILTER_OPTIONS]
+        if f.is_filter:
+            assert set(f.options) >= set(FILTER_OPTIONS), f.name
+            assert said.startswith("the filter options"), (f.name, said)
+        else:
+            own = [ARGUMENT_FLAGS[o] for o in f.options]
+        assert re.findall(r"--[\w-]+", said.split(";")[0].replace("the filter options", "")) == (
+            own
+        ), (f.name, said)
+        assert ("--filter-rate required" in said) == f.needs_filter_rate, f.name
+    assert "px4: the filter options and --vehicle-id; --filter-rate required" in text
+    assert "csv: none" in text

@@ -73,6 +73,20 @@ def test_no_error_class_is_defined_outside_engine_errors():
     assert found == []
 
 
+def test_the_app_raises_the_engines_errors():
+    # the app's command line refuses with the gmwm command's UsageError, not a second class
+    # of the same name outside the common base
+    import gmwm_app.__main__ as app_main
+
+    assert app_main.UsageError is errors.UsageError
+    found = []
+    for path in sorted((ROOT / "gmwm_app").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef) and node.name.lstrip("_").endswith("Error"):
+                found.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
+    assert found == []
+
+
 def test_the_cli_prints_an_engine_error_as_one_line_with_status_2(capsys):
     with pytest.raises(errors.GmwmError) as caught:
         eg.parse_model("WN+BOGUS")
