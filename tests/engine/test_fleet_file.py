@@ -362,3 +362,57 @@ def test_gyro_fleet_file_at_100_s_is_consistent_on_every_unit(real_data):
         assert 0.5 <= m <= 1.3 and above <= 0.05, (u + 1, m, above)
     own1 = {ch: ex[(0, ch)] for ch in chans}
     assert run(1, own1)[0] > 1.3 and run(3, own1)[0] > 1.3
+
+
+@pytest.mark.slow
+@pytest.mark.real_data
+def test_own_gyro_files_at_100_s_miss_the_band_only_in_the_first_1000_s(real_data):
+    """docs/filters.md, "Each unit's own gyro file at 100 s": units 2-6's own default WN+RW
+    gyro files on their own recorded signal, the 15 axes pooled, fixes every 100 s. Over the
+    whole log 8.2 % of the epochs are above the 95 % band (the criterion is 5 %); with the
+    filter started at 1000 s and the same files, 3.6 % and a mean NEES of 1.00. The gyros'
+    bias wanders more in the first 1000 s after turn-on: the variance of the differences of
+    consecutive 100 s means is x2.2 the rest's (F test p ~ 1e-12), so what misses is that
+    warm-up, not the files (deterministic: the recorded signal and seeded fix noise)."""
+    import sys
+    from pathlib import Path
+
+    from scipy.stats import f as f_dist
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_filter import CHANNELS, KINDS, bias_prior
+    from filter_fleet_spread import unit_exports
+    from filtersim import block_fraction, nees_band, run_recorded
+
+    logs = [eg.load_log(real_data / f"adis16405_imu{i}.h5") for i in range(1, 7)]
+    chans, fix_sigma = KINDS["gyro"], CHANNELS["gyro_x"][0]
+    n = min(log.n for log in logs)
+    raw = {(u, ch): np.asarray(log[ch], float)[:n] for u, log in enumerate(logs) for ch in chans}
+    pb0 = bias_prior([(x - x.mean())[None, :] for x in raw.values()], int(1200 * FS), FS)
+    files = unit_exports(logs, chans, "WN+RW")
+    others = [(u, ch) for u in range(1, 6) for ch in chans]
+    hi = nees_band(1, len(others))[1]
+
+    def pooled(start: int) -> tuple[float, float]:
+        v = np.mean(
+            [
+                run_recorded(
+                    (raw[k][start:] - raw[k][start:].mean())[None, :], files[k], fs=FS, hold=1,
+                    t_fix_s=100.0, fix_sigma=fix_sigma, pb0=pb0, seed=1 + k[0],
+                ).nees
+                for k in others
+            ],
+            axis=0,
+        )  # fmt: skip
+        return float(v.mean()), block_fraction(v > hi, int(100 * FS))[0]
+
+    mean, above = pooled(0)
+    assert above == pytest.approx(0.082, abs=0.002) and mean == pytest.approx(1.093, abs=0.002)
+    mean, above = pooled(int(1000 * FS))
+    assert above <= 0.05 and 0.5 <= mean <= 1.3, (mean, above)  # 3.6 %, 1.003
+    b = int(100 * FS)
+    d = [np.diff(raw[k][: n // b * b].reshape(-1, b).mean(axis=1)) for k in others]
+    first = np.concatenate([x[:9] for x in d])  # the 9 differences within the first 1000 s
+    rest = np.concatenate([x[9:] for x in d])
+    ratio = float(np.mean(first**2) / np.mean(rest**2))
+    assert ratio > 1.8 and f_dist.sf(ratio, first.size, rest.size) < 1e-9, ratio
