@@ -172,6 +172,7 @@ class LogFit:
             A resumed log (its temperature fits are not kept), or a log whose length is not
             the one fitted (the file changed since).
         """
+        from .inference.temperature import compensate_channels
         from .io import drop_warmup
         from .units import ExportError
 
@@ -186,9 +187,7 @@ class LogFit:
                 f"{self.source}: {log.n:,} samples now, {self.n + self.warmup_dropped:,} when "
                 "it was fitted: the file changed since; fit it again"
             )
-        for tf in self.temperature.values():
-            out = tf.compensated_log(out)
-        return out
+        return compensate_channels(out, self.temperature.values())
 
     def temperature_status(self) -> dict[str, dict[str, Any]]:
         """Per channel with a temperature fit: its line, temperature channel, sensitivity

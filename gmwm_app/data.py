@@ -25,6 +25,7 @@ import numpy as np
 import engine as eg
 from engine.inference.temperature import (
     TemperatureFit,
+    compensate_channels,
     find_temperature,
     fit_log_temperature,
 )
@@ -447,11 +448,8 @@ def fitted_log(lg: ImuLog, channels: Iterable[str], compensate: str) -> ImuLog:
         hit = _FITTED_LOGS.get(lg, {}).get(key)
     if hit is not None:
         return hit
-    out = lg
-    for c in comp:
-        tf = temperature_fit_of(lg, c, "always")  # what compute_wv takes out
-        if tf is not None:
-            out = tf.compensated_log(out)
+    # what compute_wv takes out of each
+    out = compensate_channels(lg, [temperature_fit_of(lg, c, "always") for c in comp])
     with _FITTED_LOCK:
         _FITTED_LOGS.setdefault(lg, {})[key] = out
     return out

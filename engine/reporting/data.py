@@ -555,6 +555,7 @@ def gather_report(
     from ..batch import fit_log
     from ..formats import export
     from ..inference.datasheet_check import DatasheetSpec, parse_datasheet
+    from ..inference.temperature import compensate_channels
     from ..io import drop_warmup as cut_warmup
     from ..io import qualify_log
 
@@ -655,7 +656,10 @@ def gather_report(
     if export_format:
         exp["format"] = export_format
         try:
-            exp["text"] = export(None, fitted, export_format, log=log, allow_partial=True)
+            exp["text"] = export(  # the tail factors of the signal the fits were made on
+                None, fitted, export_format, log=compensate_channels(log, temps.values()),
+                allow_partial=True,
+            )  # fmt: skip
         except (ExportError, ValueError) as e:
             exp["error"] = str(e)
         if progress is not None:
