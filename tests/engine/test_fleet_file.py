@@ -133,6 +133,15 @@ def _write_units(tmp_path, make) -> list[str]:
     return paths
 
 
+def _fleet_text(units: list) -> str:
+    """``eg.export`` of a Kalibr fleet file (gyro only) from ``(source, fits, log)`` units: the
+    first unit's fits and log, the others as ``fleet=``; the logs' tail factors."""
+    (src, fits, log), rest = units[0], units[1:]
+    return eg.export(
+        None, fits, "kalibr", allow_partial=True, ci=None, log=log, source=src, fleet=rest
+    )
+
+
 def test_fleet_file_reads_the_log_without_the_warmup_the_fit_dropped(tmp_path):
     """A warm-up transient of 10 white-noise SDs (1e-2 rad/s, time constant 60 s) in both
     units: ``fit_batch(drop_warmup=True)`` fits the log after it, and the fleet file's tail
@@ -154,15 +163,11 @@ def test_fleet_file_reads_the_log_without_the_warmup_the_fit_dropped(tmp_path):
         cut.append((lf.source, lf.fits, drop_warmup(log, starts[-1])))
         raw.append((lf.source, lf.fits, log))
     assert starts == [26_112, 28_160]  # 4.4 and 4.7 time constants
-    (src, fits, log), rest = cut[0], cut[1:]
-    want = eg.export(None, fits, "kalibr", allow_partial=True, ci=None, log=log, source=src,
-                     fleet=rest)  # fmt: skip
-    assert text == want
+    assert text == _fleet_text(cut)
     assert _gyro_density(text) == pytest.approx(N_TRUE, rel=0.03)
-    (src, fits, log), rest = raw[0], raw[1:]
-    old = eg.export(None, fits, "kalibr", allow_partial=True, ci=None, log=log, source=src,
-                    fleet=rest)  # fmt: skip
-    assert _gyro_density(old) > 1.2 * N_TRUE  # the premise: the raw log's tails inflate it
+    assert (
+        _gyro_density(_fleet_text(raw)) > 1.2 * N_TRUE
+    )  # the premise: the raw log's tails inflate it
     assert [lf.warmup_dropped for lf in lfs] == starts  # what LogFit.prepared cuts
 
 
@@ -188,15 +193,11 @@ def test_fleet_file_reads_the_temperature_compensated_signal(tmp_path):
         log = eg.load_log(lf.source)
         comp.append((lf.source, lf.fits, lf.temperature["gyro_x"].compensated_log(log)))
         raw.append((lf.source, lf.fits, log))
-    (src, fits, log), rest = comp[0], comp[1:]
-    want = eg.export(None, fits, "kalibr", allow_partial=True, ci=None, log=log, source=src,
-                     fleet=rest)  # fmt: skip
-    assert text == want
+    assert text == _fleet_text(comp)
     assert _gyro_density(text) == pytest.approx(N_TRUE, rel=0.03)
-    (src, fits, log), rest = raw[0], raw[1:]
-    old = eg.export(None, fits, "kalibr", allow_partial=True, ci=None, log=log, source=src,
-                    fleet=rest)  # fmt: skip
-    assert _gyro_density(old) > 1.3 * N_TRUE  # the premise: the raw signal's tails inflate it
+    assert (
+        _gyro_density(_fleet_text(raw)) > 1.3 * N_TRUE
+    )  # the premise: the raw signal's tails inflate it
     # the log's own JSON report: its WN+RW projection reads the compensated signal too
     for lf in lfs:
         proj = json.loads(lf.report)["channels"]["gyro_x"]["projections"]["WN+RW"]
