@@ -608,7 +608,9 @@ class SessionPanel(pn.viewable.Viewer):
             units=fit_units(self.state, self._fits),
             filter_rate=self.rate_input.value if self.rate_input.visible else None,
             projection=self.projection_select.value,
-            log=self.state.log,
+            log=None
+            if (lg := self.state.log) is None
+            else fitted_log(lg, self._fits, self.state.compensate),
             **opts,
         )
 
