@@ -99,6 +99,10 @@ class LogFit:
     temperature_recorded : dict of str to dict
         A resumed log's :meth:`temperature_status`, as recorded when it was fitted (empty
         otherwise: :attr:`temperature` holds the fits).
+    warmup_dropped : int
+        Samples cut from the start of the log as its warm-up before the fit (``drop_warmup=True``
+        of :func:`fit_log`; 0: none). With :attr:`temperature`, what :meth:`prepared` needs to
+        give the signal the fits were made on.
     """
 
     source: str
@@ -114,6 +118,7 @@ class LogFit:
     qualification: dict[str, Any] = field(default_factory=dict)
     temperature: dict[str, Any] = field(default_factory=dict)
     temperature_recorded: dict[str, dict[str, Any]] = field(default_factory=dict)
+    warmup_dropped: int = 0
 
     @property
     def ok(self) -> bool:
@@ -144,6 +149,45 @@ class LogFit:
                 "temperature": self.temperature_status() or None,
             }
         )
+
+    def prepared(self, log: ImuLog) -> ImuLog:
+        """The log as the fits saw it: without the :attr:`warmup_dropped` first samples, and
+        each channel of :attr:`temperature` compensated where its fit says so
+        (:meth:`~engine.inference.temperature.TemperatureFit.compensated_log`).
+
+        Parameters
+        ----------
+        log : ImuLog
+            This log as loaded (:attr:`source`, with the batch's load options).
+
+        Returns
+        -------
+        ImuLog
+            The signal of every fit in :attr:`fits`: what a filter file's tail factors and any
+            other figure computed from the samples must read (:func:`export_fleet`).
+
+        Raises
+        ------
+        engine.units.ExportError
+            A resumed log (its temperature fits are not kept), or a log whose length is not
+            the one fitted (the file changed since).
+        """
+        from .inference.temperature import compensate_channels
+        from .io import drop_warmup
+        from .units import ExportError
+
+        if self.resumed:
+            raise ExportError(
+                f"{self.source}: read back from an earlier run's report, whose fits are not "
+                "kept: fit the log again (write into a new folder)"
+            )
+        out = drop_warmup(log, self.warmup_dropped)
+        if out.n != self.n:
+            raise ExportError(
+                f"{self.source}: {log.n:,} samples now, {self.n + self.warmup_dropped:,} when "
+                "it was fitted: the file changed since; fit it again"
+            )
+        return compensate_channels(out, self.temperature.values())
 
     def temperature_status(self) -> dict[str, dict[str, Any]]:
         """Per channel with a temperature fit: its line, temperature channel, sensitivity
@@ -276,8 +320,10 @@ def fit_log(
     if temperature not in (None, "auto", "none"):  # a name the log lacks: the log's error
         find_temperature(log, temperature)
     check = qualify_log(log, names)
+    loaded, cut = log, 0
     if drop_warmup and check.suggested_start:
-        log = cut_warmup(log, check.suggested_start)
+        cut = int(check.suggested_start)
+        log = cut_warmup(log, cut)
         check = qualify_log(log, names)
     fits: dict[str, GMWMResult] = {}
     errors: dict[str, str] = {}
@@ -302,20 +348,22 @@ def fit_log(
         raise FitError(
             "no channel could be fitted: " + "; ".join(f"{c}: {e}" for c, e in errors.items())
         )
-    report = export(None, fits, "json", log=log, source=src) if json_report else ""
-    elapsed = time.perf_counter() - t0
-    return LogFit(
+    out = LogFit(
         src,
         fits,
-        report,
+        "",
         "",
         errors,
         float(log.fs),
         log.n,
-        elapsed,
         qualification=check.to_dict(),
         temperature=temps,
+        warmup_dropped=cut,
     )
+    if json_report:  # its projections' tail factors read the signal the fits were made on
+        report = export(None, fits, "json", log=out.prepared(loaded), source=src)
+        out = replace(out, report=report)
+    return replace(out, elapsed_s=time.perf_counter() - t0)
 
 
 _FIT_LOG_OPTIONS = frozenset(
@@ -844,7 +892,9 @@ def export_fleet(
     fs, load_options
         How each log is loaded again for its tail factors (as :func:`fit_batch` loaded it).
     tails : bool
-        Each unit's tail factors from its own log (default True).
+        Each unit's tail factors (default True), from the signal its fits were made on
+        (:meth:`LogFit.prepared`: its warm-up cut and its temperature compensation, as
+        :func:`fit_log` made them), as ``gmwm export`` reads them from its log.
     **options
         More :func:`engine.export` keywords (``filter_rate``, ``horizon_s``, ``data`` ...).
 
@@ -870,7 +920,8 @@ def export_fleet(
     def log_for(lf: LogFit) -> ImuLog | None:
         if not tails:
             return None
-        return log_of(lf.source, fs=fs, load_options=load_options, caller="export_fleet")
+        loaded = log_of(lf.source, fs=fs, load_options=load_options, caller="export_fleet")
+        return lf.prepared(loaded)
 
     first, rest = fitted[0], fitted[1:]
     return export(

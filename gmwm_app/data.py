@@ -15,7 +15,7 @@ import os
 import threading
 import time
 import weakref
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +25,7 @@ import numpy as np
 import engine as eg
 from engine.inference.temperature import (
     TemperatureFit,
+    compensate_channels,
     find_temperature,
     fit_log_temperature,
 )
@@ -56,6 +57,7 @@ __all__ = [
     "temperature_line",
     "compensated_series",
     "is_compensated",
+    "fitted_log",
     "temperature_unusable",
     "COMPENSATION",
     "compensation_mode",
@@ -420,6 +422,37 @@ def compute_wv(
         return lg.wavelet_variance(ch, robust=robust, fs=fs, progress=progress)
     except (ValueError, TypeError) as e:
         raise ValueError(f"channel {ch}: {message_of(e)}") from None
+
+
+#: Per loaded log, the log as a session's fits see it (:func:`fitted_log`), per choice and
+#: channels: one object, so that the export's tail factors (cached per log object,
+#: :func:`engine.formats.tails.log_tail_factors`) are computed once.
+_FITTED_LOGS: weakref.WeakKeyDictionary[ImuLog, dict[tuple[str, tuple[str, ...]], ImuLog]] = (
+    weakref.WeakKeyDictionary()
+)
+_FITTED_LOCK = threading.Lock()
+
+
+def fitted_log(lg: ImuLog, channels: Iterable[str], compensate: str) -> ImuLog:
+    """The log as a session's fits of ``channels`` see it: each channel that the choice
+    ``compensate`` (:data:`COMPENSATION`) compensates (:func:`is_compensated`) with its
+    bias-temperature relation taken out, as its WV was computed (:func:`compute_wv`); the log
+    itself when none is. What a filter file's tail factors must read (``engine.export``'s
+    ``log``), as ``gmwm batch --export`` reads each unit's prepared log. Cached per log."""
+    chans = tuple(c for c in channels if c in set(channel_names(lg)))
+    comp = tuple(c for c in chans if is_compensated(lg, c, compensate))
+    if not comp:
+        return lg
+    key = (compensation_mode(compensate), comp)
+    with _FITTED_LOCK:
+        hit = _FITTED_LOGS.get(lg, {}).get(key)
+    if hit is not None:
+        return hit
+    # what compute_wv takes out of each
+    out = compensate_channels(lg, [temperature_fit_of(lg, c, "always") for c in comp])
+    with _FITTED_LOCK:
+        _FITTED_LOGS.setdefault(lg, {})[key] = out
+    return out
 
 
 def compensated_series(lg: ImuLog, ch: str, tf: TemperatureFit | None) -> np.ndarray:

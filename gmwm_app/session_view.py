@@ -29,7 +29,7 @@ import param
 from engine.formats import FORMATS, export, misfit
 from engine.io import ImuLog
 from engine.session import Session, session_from_json, session_to_json
-from gmwm_app.data import LoadedData, compensation_mode
+from gmwm_app.data import LoadedData, compensation_mode, fitted_log
 from gmwm_app.export_bound import BoundOptions
 from gmwm_app.export_preview import ExportPreview
 from gmwm_app.limits import check_path, check_upload_size, public_path
@@ -267,7 +267,9 @@ def export_text(
     how a filter format maps the fit onto its noise model (``engine.export``: ``"bound"``, the
     default, ``"plain"`` or ``"fit"``, the fit's own terms); ``data``, ``horizon_s`` and
     ``tails``: what of the empirical WV the bound covers, up to which scale, and whether the
-    loaded log's tail factors raise it (``engine.export``, as ``gmwm export`` does).
+    loaded log's tail factors raise it (``engine.export``, as ``gmwm export`` does), read from
+    the signal the fit was made on (:func:`gmwm_app.data.fitted_log`: temperature-compensated
+    when the session compensates the channel).
 
     Raises
     ------
@@ -290,7 +292,7 @@ def export_text(
             projection=projection,
             data=data,
             horizon_s=horizon_s,
-            log=state.log,
+            log=None if state.log is None else fitted_log(state.log, fits, state.compensate),
             tails=tails,
         )
     return export(None, fits, fmt, units=units, source=src)
@@ -360,7 +362,7 @@ def export_fits(
         projection=projection,
         data=data,
         horizon_s=horizon_s,
-        log=log,
+        log=None if log is None else fitted_log(log, fits, state.compensate),
         tails=tails,
     )
 
@@ -607,7 +609,9 @@ class SessionPanel(pn.viewable.Viewer):
             units=fit_units(self.state, self._fits),
             filter_rate=self.rate_input.value if self.rate_input.visible else None,
             projection=self.projection_select.value,
-            log=self.state.log,
+            log=None
+            if (lg := self.state.log) is None
+            else fitted_log(lg, self._fits, self.state.compensate),
             **opts,
         )
 

@@ -43,7 +43,7 @@ for accelerometers (``engine.units``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -64,6 +64,7 @@ __all__ = [
     "find_temperature",
     "temperature_series",
     "lagged_temperature",
+    "compensate_channels",
 ]
 
 BLOCKS = 256
@@ -254,6 +255,18 @@ class TemperatureFit:
         for p, c in enumerate(self.coef, start=1):
             out -= c * dt**p
         return out
+
+
+def compensate_channels(log: ImuLog, fits: Iterable[TemperatureFit | None]) -> ImuLog:
+    """The log with the channel of each of ``fits`` compensated where that fit says so
+    (:meth:`TemperatureFit.compensated_log`, one after the other; None entries skipped): the
+    signal the fits' GMWMs were made on, which any figure of the samples (a filter file's tail
+    factors, a PSD) must read. ``log`` itself when none is compensated."""
+    out = log
+    for tf in fits:
+        if tf is not None:
+            out = tf.compensated_log(out)
+    return out
 
 
 def temperature_sensitivity(value: float, unit: str, channel: str = "") -> tuple[float, str]:

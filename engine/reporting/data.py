@@ -555,6 +555,7 @@ def gather_report(
     from ..batch import fit_log
     from ..formats import export
     from ..inference.datasheet_check import DatasheetSpec, parse_datasheet
+    from ..inference.temperature import compensate_channels
     from ..io import drop_warmup as cut_warmup
     from ..io import qualify_log
 
@@ -657,7 +658,13 @@ def gather_report(
         try:
             f = FORMATS.get(export_format)
             one_sensor = f is not None and f.takes("allow_partial")  # Kalibr: the keys fitted
-            exp["text"] = export(None, fitted, export_format, log=log, allow_partial=one_sensor)
+            exp["text"] = export(  # the tail factors of the signal the fits were made on
+                None,
+                fitted,
+                export_format,
+                log=compensate_channels(log, temps.values()),
+                allow_partial=one_sensor,
+            )
         except (ExportError, ValueError) as e:
             exp["error"] = str(e)
         if progress is not None:

@@ -401,3 +401,62 @@ def test_links_of_before_and_bad_links(logs):
         "temperature='sometimes' in the link is not one of auto, always, off (or 0 for off)"
     )
     assert s.compensate == "auto" and s.wv_raw is not None
+
+
+def _heater_log(path) -> None:
+    """gyro_x (rad/s): white noise N = 1e-4 rad/s/sqrt(Hz) and a random walk, its bias
+    2e-4 rad/s per degC of a temperature that warms up by 10 degC and steps by 4 degC every
+    5 min (a heater cycling); 2^17 samples at 100 Hz."""
+    n = 2**17
+    t = np.arange(n) / FS
+    temp = 25 + 10 * (1 - np.exp(-t / 300)) + 2 * np.sign(np.sin(2 * np.pi * t / 600))
+    x = eg.parse_model("WN(1e-6)+RW(1e-12)").simulate(n, rng=np.random.default_rng(1))
+    units = {"gyro_x": "rad/s", "temperature": "degC"}
+    eg.save_log(path, {"gyro_x": x + 2e-4 * (temp - 25), "temperature": temp}, FS, units=units)
+
+
+def test_filter_export_of_a_compensated_fit_reads_the_compensated_signal(tmp_path):
+    """A gyro_x of white noise N = 1e-4 rad/s/sqrt(Hz) (and a random walk) whose bias follows
+    a temperature that warms up by 10 degC and steps by 4 degC every 5 min (2e-4 rad/s per
+    degC): the session fits the compensated signal, and the Kalibr export's tail factors must
+    read that signal too (``gmwm_app.data.fitted_log``), not the raw one, whose steps give
+    tail factors of 1.8-3.0 at 5-20 s (a density of 1.65e-4 before). Compensated: the
+    planted density within 3 %, from the download and from the several-channel export alike;
+    with compensation off, the raw signal's fit and tails (more than 1.3x it)."""
+    import yaml
+
+    from gmwm_app.session_view import export_fits, export_text
+
+    path = tmp_path / "heater.csv"
+    _heater_log(path)
+    s = AppState()
+    assert s.load_path(path), s.error
+    assert "compensated signal" in s.temperature
+    assert s.set_model("WN+RW"), s.error
+
+    def density(text: str) -> float:
+        return float(yaml.safe_load(text)["gyroscope_noise_density"])
+
+    assert density(export_text(s, "kalibr")) == pytest.approx(1e-4, rel=0.03)
+    both = export_fits(s, {"gyro_x": s.result}, "kalibr")
+    assert density(both) == pytest.approx(1e-4, rel=0.03)
+    s.compensate = "off"
+    assert s.set_model("WN+RW"), s.error
+    assert density(export_text(s, "kalibr")) > 1.3e-4
+
+
+def test_the_export_preview_of_a_compensated_fit_reads_the_compensated_signal(tmp_path, app_demo):
+    """The export menu's preview ("Show what the filter will assume") of the same fit: its N
+    is the download's, the planted 1e-4 within 3 % (the raw signal's tails made it 1.65e-4)."""
+    from gmwm_app.app import create_app
+
+    path = tmp_path / "heater.csv"
+    _heater_log(path)
+    app = create_app().gmwm_app
+    sp, s = app.session_panel, app.state
+    assert s.load_path(path), s.error
+    assert s.set_model("WN+RW"), s.error
+    sp.format_select.value = "kalibr"
+    sp.preview.toggle.value = True
+    got = sp.preview.projections["gyro_x"].value("N")
+    assert got == pytest.approx(1e-4, rel=0.03)

@@ -4,7 +4,7 @@
     python tests/benchmarks/bench_filter.py --recorded [--minutes 20] [--fix 1 10 100]
         [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW] [--kinds gyro accel]
         [--min-fixes 100] [--control-runs 100] [--no-tails] [--data low|estimate|high|none]
-        [--fleet | --own] [--control-runs 0]
+        [--fleet | --own] [--control-runs 0] [--horizon-fixes 4]
 
 ``--recorded`` (issue 28): the error fed to the filter is the *recorded* ADIS16405 signal, not
 a simulation: the six units' logs (all channels), each channel minus its mean over the whole
@@ -54,6 +54,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
@@ -116,6 +117,13 @@ def main() -> None:
         "--fleet",
         action="store_true",
         help="--recorded: a fleet file, per axis the largest N and K of the six units' exports",
+    )
+    ap.add_argument(
+        "--horizon-fixes",
+        type=float,
+        default=None,
+        help="--recorded: the exports' horizon (gmwm export --horizon) this many fix intervals "
+        "(default: the log length, the export's default)",
     )
     ap.add_argument(
         "--tails",
@@ -190,6 +198,54 @@ def bias_prior(errors: list[np.ndarray], seg: int, fs: float) -> float:
     return float(np.mean(first**2))
 
 
+def horizon_of(args: argparse.Namespace, t_fix: float) -> float | None:
+    """The exports' horizon (s) for fixes every ``t_fix`` s: ``--horizon-fixes`` intervals, or
+    None (the export's default, the log length)."""
+    return None if args.horizon_fixes is None else args.horizon_fixes * t_fix
+
+
+def exports(
+    args: argparse.Namespace,
+    fits: dict,
+    tails: dict,
+    src: Any,
+    chans: tuple[str, ...],
+    n_units: int,
+    label: str,
+    rate: float,
+    horizon_s: float | None,
+) -> dict[tuple[int, str], FilterNoise]:
+    """Per (unit, axis), the filter's N and K: the default exports of the units ``src`` (the
+    largest over them, or with ``--own`` each unit's own), at filter ``rate`` and horizon."""
+    proj = {
+        (u, ch): eg.project(
+            fits[(u, ch)],
+            "WN+RW",
+            fs_filter=rate,
+            unit="",
+            ci=None,
+            data=args.data,
+            tails=tails[(u, ch)],
+            horizon_s=horizon_s,
+        )
+        for u in src
+        for ch in chans
+    }
+    noise = {}
+    for ch in chans:
+        fleet = FilterNoise(
+            max(proj[(u, ch)].value("N") for u in src),
+            max(proj[(u, ch)].value("K") for u in src),
+            label,
+        )
+        for u in range(n_units):
+            own = proj[(u, ch)] if args.own else None
+            noise[(u, ch)] = (
+                fleet if own is None else FilterNoise(own.value("N"), own.value("K"), label)
+            )
+    return noise
+
+
 def recorded(args: argparse.Namespace) -> None:
     """The ``--recorded`` table (module docstring)."""
     data = args.log.parent
@@ -206,7 +262,8 @@ def recorded(args: argparse.Namespace) -> None:
         f"recorded ADIS16405 errors: 6 units at {fs:g} Hz, segments of {args.minutes:g} min or "
         f"{args.min_fixes} fix intervals (the longer, at most the log); noise numbers exported "
         f"from unit 1's fits (default export: bound on the fit and the data's lower 95 % "
-        f"limit; data={args.data}, tails: {args.tails}, fleet file: {args.fleet}, "
+        f"limit; data={args.data}, tails: {args.tails}, fleet file: {args.fleet}, horizon: "
+        f"{'the log' if args.horizon_fixes is None else f'{args.horizon_fixes:g} fix intervals'}, "
         f"each unit's own file: {args.own})"
     )
     rows = []
@@ -236,36 +293,14 @@ def recorded(args: argparse.Namespace) -> None:
                 for u in src
                 for ch in chans
             }
+
             for rate in args.rates:
                 hold = int(round(rate / fs))
-                proj = {
-                    (u, ch): eg.project(
-                        fits[(u, ch)],
-                        "WN+RW",
-                        fs_filter=rate,
-                        unit="",
-                        ci=None,
-                        data=args.data,
-                        tails=tails[(u, ch)],
-                    )
-                    for u in src
-                    for ch in chans
-                }
-                noise = {}
-                for ch in chans:
-                    fleet = FilterNoise(
-                        max(proj[(u, ch)].value("N") for u in src),
-                        max(proj[(u, ch)].value("K") for u in src),
-                        f"{model} @ {rate:g} Hz",
-                    )
-                    for u in range(len(logs)):
-                        own = proj[(u, ch)] if args.own else None
-                        noise[(u, ch)] = (
-                            fleet
-                            if own is None
-                            else FilterNoise(own.value("N"), own.value("K"), fleet.label)
-                        )
                 for t_fix in args.fix:
+                    noise = exports(
+                        args, fits, tails, src, chans, len(logs), f"{model} @ {rate:g} Hz", rate,
+                        horizon_of(args, t_fix),
+                    )  # fmt: skip
                     seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
                     for group, us in (
                         ("unit 1" if args.fleet or args.own else "unit 1 (calibrated)", [0]),
@@ -304,9 +339,19 @@ def recorded(args: argparse.Namespace) -> None:
             # the recorded segments of the cell
             if args.control_runs <= 0:
                 continue
-            nz = noise[(0, chans[0])]
-            own = eg.Model((eg.WN(sigma2=nz.N**2 * fs), eg.RW(gamma2=nz.K**2 / fs)))
             for t_fix in args.fix:
+                nz = exports(
+                    args,
+                    fits,
+                    tails,
+                    src,
+                    chans,
+                    len(logs),
+                    model,
+                    args.rates[0],
+                    horizon_of(args, t_fix),
+                )[(0, chans[0])]
+                own = eg.Model((eg.WN(sigma2=nz.N**2 * fs), eg.RW(gamma2=nz.K**2 / fs)))
                 seg = min(max(seg20, int(round(args.min_fixes * t_fix * fs))), n_log)
                 r = run_monte_carlo(
                     own,

@@ -178,3 +178,26 @@ def test_a_sensitivity_not_distinguishable_from_0_is_reported_not_applied():
     assert d["compensated"] is False and d["fit_raw"] is None and d["wv_raw"] is None
     status = fit_log(log, model="WN+RW").status()["temperature"]["gyro_x"]
     assert status["compensated"] is False and status["fit_raw_model"] is None
+
+
+def test_the_reports_filter_file_reads_the_compensated_signal():
+    """A gyro_x of white noise N = 1e-4 rad/s/sqrt(Hz) (and a random walk) whose bias steps
+    with a heater (2e-4 rad/s per degC, 4 degC steps every 5 min after a 10 degC warm-up): the
+    report fits the compensated signal, and the Kalibr file it carries must take its tail
+    factors from that signal too (``engine.inference.temperature.compensate_channels``): the
+    planted density within 3 %; the raw signal's steps (tail factors 1.8-3.0 at 5-20 s) made
+    it 1.65e-4."""
+    import yaml
+
+    n = 2**17
+    t = np.arange(n) / FS
+    temp = 25 + 10 * (1 - np.exp(-t / 300)) + 2 * np.sign(np.sin(2 * np.pi * t / 600))
+    x = eg.parse_model("WN(1e-6)+RW(1e-12)").simulate(n, rng=np.random.default_rng(1))
+    log = eg.ImuLog(
+        {"gyro_x": x + 2e-4 * (temp - 25)}, FS, units={"gyro_x": "rad/s"},
+        aux={"imu_temp": temp}, source="heater.h5",
+    )  # fmt: skip
+    rep = gather_report(log, model="WN+RW", export_format="kalibr", temperature="auto")
+    assert rep.channels["gyro_x"].temperature.applied
+    text = rep.export["text"]
+    assert float(yaml.safe_load(text)["gyroscope_noise_density"]) == pytest.approx(1e-4, rel=0.03)
