@@ -165,3 +165,30 @@ def test_channels_fit_of_a_real_log_without_temperature_is_unchanged(capsys, rea
     log = eg.load_log(path)
     want = fit_mgmwm(wv_matrix(log, channels=chans), MultiModel(chans, "WN+RW"), weights="ci")
     assert [p["value"] for p in d["params"]] == [float(v) for v in want.params.values()]
+
+
+def test_channels_fit_gives_the_uncompensated_fit_beside_the_compensated_one(thermal, capsys):
+    """As the single-channel fit does: when a channel is compensated, the multivariate fit of
+    the raw signals comes beside it, in the JSON (``fit_raw``: the same numbers as
+    `--temperature none`) and in the text ("without compensation: ..."), with the random walk
+    the ramp inflates (more than 2x the compensated fit's on both gyros). No channel
+    compensated: ``fit_raw`` is null. Before, only the compensated fit was given."""
+    chans = "gyro_x,gyro_y"
+    code, out, err = run(capsys, "fit", thermal, "--model", "WN+RW", "--channels", chans, "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    code, out, _ = run(
+        capsys, "fit", thermal, "--model", "WN+RW", "--channels", chans, "--json",
+        "--temperature", "none",
+    )  # fmt: skip
+    none = json.loads(out)
+    assert code == 0 and none["fit_raw"] is None
+    raw = d["fit_raw"]
+    assert [p["value"] for p in raw["params"]] == [p["value"] for p in none["params"]]
+    for ch in PLANTED:
+        assert _rw(raw, ch) > 2 * _rw(d, ch), (ch, _rw(raw, ch), _rw(d, ch))
+    code, out, _ = run(capsys, "fit", thermal, "--model", "WN+RW", "--channels", chans)
+    assert code == 0
+    line = next(ln for ln in out.splitlines() if "without compensation" in ln)
+    assert "the fit above is of the temperature-compensated gyro_x, gyro_y" in line
+    assert f"gyro_x: WN(sigma2={none['params'][0]['value']!r}" in line
