@@ -260,7 +260,8 @@ class RunPlan:
         The full expected table (values, intervals, datasheet units) at each length.
     asymptotic : dict of str to int or None
         Per target key, the shortest length meeting it by the asymptotic covariance alone
-        (shorter than ``required`` when that is below ``valid_from``).
+        (shorter than ``required`` when that is below ``valid_from``): to the sample where it
+        is the length to record, to 0.5 % where a bound sets that.
     achieved : dict of str to float
         Per target key, the precision at the ``required`` length (NaN when None).
     valid_from : int
@@ -588,12 +589,17 @@ def plan_run(
                 f"target {t}: the model {m.spec()} has no {t.key} "
                 f"({IEEE_KEYS[t.key]}); the model's quantities: {', '.join(keys)}"
             )
-        a = _shortest(partial(_rel_at, table, rel, t.key), t.rel, n_max)
         lowest = max(
             valid_from,
             floor_from if t.key in _FLOOR_KEYS else 0,
             drift_from if t.key == "R" else 0,
         )
+        # to the sample where it sets the length; to 0.5 % where a bound does (said only)
+        bound_meets = 64 < lowest <= n_max and _rel_at(table, rel, t.key, lowest) <= t.rel
+        prec_of = partial(_rel_at, table, rel, t.key)
+        a = _shortest(prec_of, t.rel, n_max, rtol=5e-3 if bound_meets else 0.0)
+        if bound_meets and a is not None:
+            a = min(a, lowest)
         n = None if a is None or lowest > n_max else max(a, lowest)
         asymptotic[t.key], required[t.key] = a, n
         achieved[t.key] = math.nan if n is None else rel(table(n), t.key)
@@ -765,8 +771,11 @@ def _rel_at(
     return rel(table(n), key)
 
 
-def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | None:
-    """The shortest length (samples) with ``prec(n) <= rel``, to the sample.
+def _shortest(
+    prec: Callable[[int], float], rel: float, n_max: int, rtol: float = 0.0
+) -> int | None:
+    """The shortest length (samples) with ``prec(n) <= rel``, to the sample (``rtol`` 0) or
+    to ``rtol`` of it.
 
     The lengths with one number of WV levels form runs ``2^(k-1) < n <= 2^k``. Within a run
     the precision falls with the length; where the log gains a level (``n = 2^k + 1``, a last
@@ -774,7 +783,8 @@ def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | Non
     0.149 at ``2^24 + 1``), then falls below the previous run's. So the shortest length lies
     in the first run whose end meets the target: a x4 search from 64 samples (ends of runs)
     brackets it, the run ends inside the bracket find the run, and a safeguarded regula
-    falsi (Illinois) on ``log prec`` against ``log n`` closes it to one sample. (Interpolating
+    falsi (Illinois) on ``log prec`` against ``log n``, from the failing end of the run
+    before, closes it to one sample. (Interpolating
     across the bracket and stepping up by 2 % overshot the shortest length by up to 9 %, and
     by 45 % where the target fell just before a run's end.)
     """
@@ -797,19 +807,19 @@ def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | Non
                 hi = 2**k
                 break
             lo = 2**k
-    start = max(lo + 1, 2 ** (hi - 1).bit_length() // 2 + 1)
-    if ok(start):
-        return start
-    lo = start
-    # lo fails and hi meets it, with one number of levels in between: regula falsi
+    lo = max(lo, 2 ** (hi - 1).bit_length() // 2)
+    # lo fails and hi meets it, with one number of levels in (lo, hi]: regula falsi
     f_lo, f_hi = _log_gap(prec(lo), rel), _log_gap(prec(hi), rel)
-    side = 0
-    while hi - lo > 1:
+    side, check = 0, False
+    while hi - lo > max(1.0, rtol * hi):
         n = (lo + hi) // 2
-        if math.isfinite(f_lo) and math.isfinite(f_hi) and f_lo > f_hi:
+        if check:  # to a tolerance: is the length rtol shorter than a new hi too short?
+            n = max(hi - max(1, int(rtol * hi)), lo + 1)
+        elif math.isfinite(f_lo) and math.isfinite(f_hi) and f_lo > f_hi:
             x = math.log(lo) + f_lo / (f_lo - f_hi) * (math.log(hi) - math.log(lo))
             n = min(max(int(math.ceil(math.exp(x))), lo + 1), hi - 1)
         f = _log_gap(prec(n), rel)
+        check = rtol > 0 and f <= 0 and not check
         if f <= 0:
             hi, f_hi = n, f
             f_lo = f_lo / 2 if side == 1 else f_lo
