@@ -602,6 +602,20 @@ def test_a_short_drift_log_is_marked_and_its_share_at_zero_said():
     assert plan.required["R"] == plan.asymptotic["R"] > plan.drift_from  # 20 % needs more
 
 
+def _assert_no_floor_count(
+    m: Any, spec: str, fs: float, n: int, unit: str, reps: int, p: float, rng: Any
+) -> None:
+    """``reps`` logs of ``m``, each fitted ``spec`` by the efficient GMWM: the count whose B
+    is an upper bound at the edge of the scales lies within the 99.9 % binomial band of the
+    share ``p`` (plus one log for the discreteness)."""
+    k = 0
+    for _ in range(reps):
+        wv = eg.wavelet_variance(m.simulate(n, fs=fs, rng=rng), fs=fs, unit=unit)
+        k += bool(eg.fit_gmwm(wv, spec, weights="efficient").ieee["B"].upper_bound)
+    half = Z999 * math.sqrt(p * (1 - p) / reps) + 1.0 / reps
+    assert abs(k / reps - p) <= half, (k, p)
+
+
 def test_the_share_of_fits_without_a_floor_agrees_with_monte_carlo():
     """The tactical gyro (WN+RW at 20 Hz, T_B = 10.5 min) at 80,000 samples (6.3 T_B): the plan
     says 21.9 % of the efficient fits have no Allan minimum inside the scales (the normal of
@@ -614,13 +628,7 @@ def test_the_share_of_fits_without_a_floor_agrees_with_monte_carlo():
     fs, n, reps = 20.0, 80_000, 300
     p = no_floor_share(tact, fs, n)
     assert 0.19 < p < 0.25
-    rng = np.random.default_rng(3)
-    k = 0
-    for _ in range(reps):
-        wv = eg.wavelet_variance(tact.simulate(n, fs=fs, rng=rng), fs=fs, unit="deg/s")
-        k += bool(eg.fit_gmwm(wv, "WN+RW", weights="efficient").ieee["B"].upper_bound)
-    half = Z999 * math.sqrt(p * (1 - p) / reps) + 1.0 / reps
-    assert abs(k / reps - p) <= half, (k, p)
+    _assert_no_floor_count(tact, "WN+RW", fs, n, "deg/s", reps, p, np.random.default_rng(3))
 
 
 def test_the_plan_says_how_often_a_fit_of_its_length_reports_no_floor():
@@ -654,12 +662,7 @@ def test_the_consumer_gyros_share_of_fits_without_a_floor_agrees_with_monte_carl
     n, p = plan.required["B"], plan.boundary["B"]
     assert n == 100_000
     rng = np.random.default_rng(20261128)
-    k = 0
-    for _ in range(reps):
-        wv = eg.wavelet_variance(cons.simulate(n, fs=fs, rng=rng), fs=fs, unit="rad/s")
-        k += bool(eg.fit_gmwm(wv, "GM+WN+RW", weights="efficient").ieee["B"].upper_bound)
-    half = Z999 * math.sqrt(p * (1 - p) / reps) + 1.0 / reps
-    assert abs(k / reps - p) <= half, (k, p)
+    _assert_no_floor_count(cons, "GM+WN+RW", fs, n, "rad/s", reps, p, rng)
 
 
 def test_on_the_real_gyros_the_share_of_16_minute_fits_without_a_floor_is_planned(real_data):
