@@ -34,6 +34,7 @@ __all__ = [
     "say",
     "checked_log",
     "temperature_fit",
+    "without_compensation",
     "cli_text",
     "CliError",
     "UsageError",
@@ -271,6 +272,13 @@ def temperature_fit(
     if tf is not None:
         say(args, label + cli_text(tf.line()))
     return tf
+
+
+def without_compensation(what: str, raw: Any) -> str:
+    """The line under a fit of temperature-compensated signals (``what``: "the compensated
+    signal", "the temperature-compensated gyro_x, gyro_y") that gives the fit of the raw
+    signals beside it (``raw``: a fit of the same model to them)."""
+    return f"the fit above is of {what}; without compensation: {raw.model.spec(values=True)}"
 
 
 def usage_error(msg: str) -> Exception:

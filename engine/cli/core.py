@@ -45,6 +45,7 @@ from .common import (
     load_wv,
     positive,
     sample_count,
+    without_compensation,
 )
 
 __all__ = [
@@ -277,10 +278,7 @@ def _cmd_fit(args: argparse.Namespace) -> dict[str, Any] | str:
         return json_ready(d)
     text = f"{args.input} [{name}]\n{res.summary()}"
     if tf is not None and raw is not None:
-        text += (
-            f"\n\n  {tf.line()}\n  the fit above is of the compensated signal; without "
-            f"compensation: {raw.model.spec(values=True)}"
-        )
+        text += f"\n\n  {tf.line()}\n  {without_compensation('the compensated signal', raw)}"
     elif tf is not None:
         text += f"\n\n  {cli_text(tf.line())}"
     if intervals is not None:

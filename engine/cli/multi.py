@@ -19,12 +19,14 @@ from ..multivariate import MultiModel, dependence_test, fit_mgmwm
 from ..wv import wv_matrix
 from .common import (
     bootstrap_kwargs,
+    checked_log,
     cli_text,
     load_wv,
     log_kwargs,
     queue_warning,
     temperature_fit,
     warn_fs_unknown,
+    without_compensation,
 )
 from .progress import Bar
 
@@ -113,6 +115,9 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
             f"are {', '.join(log.channels)}"
         )
     model = MultiModel(names, args.model, shared=shared or ())
+    # the log check of `gmwm fit` (one stderr line; --drop-warmup), on the channels fitted
+    log, q = checked_log(args, log, names)
+    raw_log = log
     # --temperature as the single-channel fit: each channel's relation fitted, said in one
     # stderr line, and taken out when the fit says so (TemperatureFit.applied: always for a
     # channel named, with auto only when its test rejects); the WVs and WCCVs are then those
@@ -129,9 +134,15 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     if getattr(args, "dependence_test", False):
         test = dependence_test(wvm, model, **bootstrap_kwargs(args))
     done = [c for c, tf in fits.items() if tf.applied]
+    raw = None  # the raw signals' fit beside a compensated one, as the single-channel fit's
+    if done:
+        raw_wvm = wv_matrix(raw_log, channels=names, levels=args.levels)
+        raw = fit_mgmwm(raw_wvm, model, weights=args.weights)
     if args.json:
         d = mres.to_dict()
         d["input"] = args.input
+        d["qualification"] = q.to_dict()
+        d["fit_raw"] = raw.to_dict() if raw is not None else None
         # per channel its temperature fit (None: no temperature channel beside it); None
         # when no channel has one
         d["temperature"] = {c: fits[c].to_dict() if c in fits else None for c in names}
@@ -143,8 +154,9 @@ def cli_fit(args: argparse.Namespace) -> dict[str, Any] | str:
     text = f"{args.input} [{', '.join(names)}]\n{mres.summary()}"
     for tf in fits.values():
         text += f"\n\n  {cli_text(tf.line())}"
-    if done:
-        text += f"\n  the fit above is of the temperature-compensated {', '.join(done)}"
+    if raw is not None:
+        what = f"the temperature-compensated {', '.join(done)}"
+        text += f"\n  {without_compensation(what, raw)}"
     if test is not None:
         text += f"\n\n  {test.summary()}"
     return text

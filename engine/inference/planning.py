@@ -17,19 +17,21 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
 
-from ..fit.asymptotic import wv_cov_model
+from ..fit.asymptotic import free_params, param_cov, wv_cov_model
 from ..fit.covariance import inverse_cov
 from ..fit.ieee import IEEE_KEYS, IeeeTable, ieee_table, white_share
 from ..fit.result import FitError
-from ..models import Model, Process, parse_model
+from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, Process, parse_model
+from ..units import allan_floor
 from ..wv import WaveletVariance
 from ..wv.classical import default_levels
 
-__all__ = ["PlanTarget", "RunPlan", "parse_targets", "plan_run", "plan_precision"]
+__all__ = ["PlanTarget", "RunPlan", "drift_at_zero", "parse_targets", "plan_run", "plan_precision"]
 
 #: Quantities a target may name, with the words a user may write for them.
 _ALIASES: dict[str, str] = {
@@ -65,6 +67,14 @@ SPAN_GM = 50.0
 SPAN_B = 40.0
 #: The quantities read off the Allan floor, to which :data:`SPAN_B` applies.
 _FLOOR_KEYS = ("B", "ADEV_min")
+
+#: The rate ramp's asymptotic interval holds once a fit of the log puts the drift at 0 (its
+#: WV coefficient ``omega^2``, about normal with sd ``2 s omega^2`` for the plan's sd ``s`` of
+#: ``log R_hat``, on its boundary) in at most this share of logs: ``Phi(-1 / (2 s))`` at most 1 %,
+#: so ``s <= 0.215`` (R within 52 % at 95 %). Shorter, the share at 0 and the spread are not the
+#: plan's (tests/benchmarks/plan_drift_scan.py, docs/planning.md: 11.5 % of WN+DR fits at 0 where
+#: the plan said R within [0.34, 2.97] R). :func:`plan_run` plans no R target shorter.
+DRIFT_AT_ZERO = 0.01
 
 #: The quantities planned for: the model's own (a plan has no data, so no ``ADEV_data``).
 _PLANNED = ("N", "B", "ADEV_min", "K", "Q", "R")
@@ -250,7 +260,8 @@ class RunPlan:
         The full expected table (values, intervals, datasheet units) at each length.
     asymptotic : dict of str to int or None
         Per target key, the shortest length meeting it by the asymptotic covariance alone
-        (shorter than ``required`` when that is below ``valid_from``).
+        (shorter than ``required`` when that is below ``valid_from``): to the sample where it
+        is the length to record, to 0.5 % where a bound sets that.
     achieved : dict of str to float
         Per target key, the precision at the ``required`` length (NaN when None).
     valid_from : int
@@ -264,6 +275,17 @@ class RunPlan:
         model has no floor within ``max_hours``).
     floor_why : str
         What sets ``floor_from`` (``"40 times B's averaging time (52 min)"``), or "".
+    drift_from : int
+        The shortest length (samples) at which the asymptotic interval of R holds: where at
+        most :data:`DRIFT_AT_ZERO` of the fits put the drift at 0 (:func:`drift_at_zero`; 0
+        without a drift).
+    drift_why : str
+        What sets ``drift_from`` (``"where 1 % of fits put the drift at 0 (R within 52.4 %)"``),
+        or "".
+    boundary : dict of str to float
+        Per B, ADEV_min or R target, the share of efficient fits of the ``required`` length
+        expected to report no value there: no floor inside the scales (B, ADEV_min:
+        :func:`no_floor_share`) or the drift at 0 (R: :func:`drift_at_zero`).
     """
 
     model: Model
@@ -281,14 +303,19 @@ class RunPlan:
     valid_why: str = ""
     floor_from: int = 0
     floor_why: str = ""
+    drift_from: int = 0
+    drift_why: str = ""
+    boundary: dict[str, float] = field(default_factory=dict)
 
     def valid_for(self, key: str) -> tuple[int, str]:
         """The shortest length (samples) at which the asymptotic precision of ``key`` holds,
         and what sets it: the larger of ``valid_from`` and, for B and ADEV_min,
-        ``floor_from`` ((0, "") when nothing bounds it)."""
+        ``floor_from``, for R ``drift_from`` ((0, "") when nothing bounds it)."""
         bounds = [(self.valid_from, self.valid_why)]
         if key in _FLOOR_KEYS:
             bounds.append((self.floor_from, self.floor_why))
+        if key == "R":
+            bounds.append((self.drift_from, self.drift_why))
         return max(bounds)
 
     @property
@@ -326,6 +353,8 @@ class RunPlan:
                     f"  {'':<22} ({_hours_text(a / self.fs)} would meet it by the asymptotic "
                     f"covariance, which holds from {self.valid_for(t.key)[1]})"
                 )
+            if n is not None and math.isfinite(self.boundary.get(t.key, math.nan)):
+                lines.append(f"  {'':<22} ({self._boundary_text(t.key)})")
         keys = [k for k in self.precision if np.isfinite(self.precision[k]).any()]
         head = "  length        " + "".join(f"{k:>11}" for k in keys)
         lines += ["", "  precision (half-width of the interval, % of the value):", head]
@@ -338,12 +367,13 @@ class RunPlan:
                 f"  * shorter than {_hours_text(self.valid_from / self.fs)} "
                 f"({self.valid_why}): the realised spread exceeds these figures"
             )
-        floor = [k for k in keys if k in _FLOOR_KEYS]
-        if floor and self.floor_from > max(self.lengths[0], self.valid_from):
-            lines.append(
-                f"  {' and '.join(floor)} shorter than {_hours_text(self.floor_from / self.fs)} "
-                f"({self.floor_why}): the realised spread exceeds these figures"
-            )
+        for own in ([k for k in keys if k in _FLOOR_KEYS], [k for k in keys if k == "R"]):
+            bound, why = self.valid_for(own[0]) if own else (0, "")
+            if own and bound > max(self.lengths[0], self.valid_from):
+                lines.append(
+                    f"  {' and '.join(own)} shorter than {_hours_text(bound / self.fs)} "
+                    f"({why}): the realised spread exceeds these figures"
+                )
         vals = [
             f"{k} = {q.datasheet_value:.4g} {q.datasheet_unit}"
             for k, q in t0.quantities.items()
@@ -351,6 +381,17 @@ class RunPlan:
         ]
         lines += ["", "  values: " + ", ".join(vals)]
         return "\n".join(lines)
+
+    def _boundary_text(self, key: str) -> str:
+        """How many fits of the length to record report no value of ``key``."""
+        what = (
+            "put the drift at 0"
+            if key == "R"
+            else "report no floor inside the scales (B at their edge)"
+        )
+        share = self.boundary[key]
+        pct = "under 0.1" if share < 0.001 else f"{100 * share:.2g}"
+        return f"{pct} % of the fits of that length {what}"
 
     def sentences(self, n_log: int = 0) -> list[str]:
         """One sentence per target: the length it needs and, for a log of ``n_log`` samples
@@ -377,6 +418,8 @@ class RunPlan:
                 need = f"needs {_hours_text(n / self.fs)} of log"
                 if a is not None and a < n:
                     need += f" ({why}: a shorter log is too short for the plan's asymptotics)"
+                if math.isfinite(self.boundary.get(t.key, math.nan)):
+                    need += f"; {self._boundary_text(t.key)}"
             have = ""
             q = now.get(t.key) if now is not None else None
             if q is not None and q.has_interval and q.value > 0:
@@ -412,6 +455,7 @@ class RunPlan:
                     "asymptotic_samples": self.asymptotic.get(t.key),
                     "valid_from_samples": self.valid_for(t.key)[0],
                     "valid_from": self.valid_for(t.key)[1],
+                    "boundary_share": num(self.boundary.get(t.key, math.nan)),
                 }
                 for t, n in ((t, self.required.get(t.key)) for t in self.targets)
             ],
@@ -420,6 +464,8 @@ class RunPlan:
             "valid_from": self.valid_why,
             "floor_from_samples": self.floor_from,
             "floor_from": self.floor_why,
+            "drift_from_samples": self.drift_from,
+            "drift_from": self.drift_why,
             "lengths": [int(n) for n in self.lengths],
             "hours": [float(h) for h in self.hours],
             "precision": {k: [num(v) for v in a] for k, a in self.precision.items()},
@@ -522,20 +568,45 @@ def plan_run(
     # the model's own floor (none when even the longest log's minimum is at the scales' edge)
     at_floor = [k for k in floor_tau if "edge" not in longest[k].note]
     floor_from, floor_why = _floor_from(floor_tau[at_floor[0]] if at_floor else None, fs)
+    drift_from, drift_why = 0, ""
+    if "R" in keys:  # where the plan's R says at most DRIFT_AT_ZERO of the fits are at 0
+        s_max = 1.0 / (2.0 * -NormalDist().inv_cdf(DRIFT_AT_ZERO))
+        rel_max = math.expm1(NormalDist().inv_cdf(0.5 + level / 2) * s_max)
+        found = _shortest(partial(_rel_at, table, rel, "R"), rel_max, n_max)
+        if found is not None:
+            drift_from = found
+            drift_why = (
+                f"the length at which at most {100 * DRIFT_AT_ZERO:g} % of fits put the drift at 0 "
+                f"(R within {100 * rel_max:.3g} %)"
+            )
     asymptotic: dict[str, int | None] = {}
     required: dict[str, int | None] = {}
     achieved: dict[str, float] = {}
+    boundary: dict[str, float] = {}
     for t in tg:
         if t.key not in keys:
             raise ValueError(
                 f"target {t}: the model {m.spec()} has no {t.key} "
                 f"({IEEE_KEYS[t.key]}); the model's quantities: {', '.join(keys)}"
             )
-        a = _shortest(partial(_rel_at, table, rel, t.key), t.rel, n_max)
-        lowest = max(valid_from, floor_from if t.key in _FLOOR_KEYS else 0)
+        lowest = max(
+            valid_from,
+            floor_from if t.key in _FLOOR_KEYS else 0,
+            drift_from if t.key == "R" else 0,
+        )
+        # to the sample where it sets the length; to 0.5 % where a bound does (said only)
+        bound_meets = 64 < lowest <= n_max and _rel_at(table, rel, t.key, lowest) <= t.rel
+        prec_of = partial(_rel_at, table, rel, t.key)
+        a = _shortest(prec_of, t.rel, n_max, rtol=5e-3 if bound_meets else 0.0)
+        if bound_meets and a is not None:
+            a = min(a, lowest)
         n = None if a is None or lowest > n_max else max(a, lowest)
         asymptotic[t.key], required[t.key] = a, n
         achieved[t.key] = math.nan if n is None else rel(table(n), t.key)
+        if n is not None and t.key in _FLOOR_KEYS:
+            boundary[t.key] = no_floor_share(m, fs, n)
+        elif n is not None and t.key == "R":
+            boundary[t.key] = drift_at_zero(table(n))
     if lengths is None:
         longest_n = max([4 * n for n in required.values() if n is not None], default=0)
         top = min(n_max, max(longest_n, int(3600 * fs)))
@@ -564,6 +635,9 @@ def plan_run(
         valid_why,
         floor_from,
         floor_why,
+        drift_from,
+        drift_why,
+        boundary,
     )
 
 
@@ -603,6 +677,90 @@ def _floor_from(tau_s: float | None, fs: float) -> tuple[int, str]:
     return int(math.ceil(SPAN_B * tau_s * fs - 1e-6)), why
 
 
+def drift_at_zero(table: IeeeTable) -> float:
+    """The share of efficient fits expected to put the drift at 0, from the plan's interval of
+    the rate ramp R: ``Phi(-1 / (2 s))`` with ``s`` the sd of ``log R_hat``. The fit is linear
+    in ``omega^2`` (the drift's WV is ``omega^2 tau^2 / 16``), whose estimate is about normal
+    with sd ``2 s omega^2`` and is held at its boundary 0 when it would be negative
+    (tests/benchmarks/plan_drift_scan.py checks it against Monte Carlo). NaN without R."""
+    q = table.get("R")
+    if q is None or not (q.has_interval and q.value > 0 and q.high > q.value):
+        return math.nan
+    s = math.log(q.high / q.value) / NormalDist().inv_cdf(0.5 + table.level / 2)
+    return NormalDist().cdf(-1.0 / (2.0 * s))
+
+
+#: Points per octave of the Allan times on which :func:`no_floor_share` looks for each draw's
+#: minimum (4: a quarter of :func:`engine.units.allan_floor`'s CPU, the same shares to 0.1 %).
+_PER_OCTAVE = 4
+
+
+def no_floor_share(model: Model | str, fs: float, n: int, *, draws: int = 2000) -> float:
+    """The share of efficient fits of an ``n``-sample log whose Allan deviation has no minimum
+    inside the scales (the fit reports their B as an upper bound at the edge).
+
+    From the fit's asymptotic normal (``(A' V^-1 A)^-1``, :func:`engine.fit.asymptotic.
+    param_cov`), drawn ``draws`` times (a fixed seed: the same plan twice gives the same
+    share) in the coordinates where the GMWM is linear: each process's linear coefficient
+    (a variance; ``omega^2`` for a drift), held at 0 where the draw is negative as the
+    constrained fit holds it, and the non-linear parameters (a GM's beta) in their own
+    unconstrained coordinates. Each draw's Allan deviation is evaluated on
+    :func:`engine.units.allan_floor`'s grid and counted when its minimum is at an end. (The
+    normal in the log coordinates the intervals use gives almost no such fits, and the delta
+    method of a linearised edge condition 3-5 times too many: tests/benchmarks/plan_mc.py's
+    counts, docs/planning.md.)
+
+    Parameters
+    ----------
+    model : Model or str
+        Every value set.
+    fs : float
+        Sampling frequency (Hz).
+    n : int
+        Log length (samples).
+    draws : int
+        Draws from the asymptotic normal (2,000: a share of 5 % to +-0.5 %).
+
+    Returns
+    -------
+    float
+        In [0, 1]; NaN when the model itself has no floor inside the scales of ``n`` samples.
+    """
+    m = _valued(model)
+    pf = _planned_fit(m, float(fs), int(n), "", None)
+    j = pf.wv.n_levels
+    if allan_floor(m, pf.fs, j)["at_edge"]:
+        return math.nan
+    free = free_params(pf)
+    cov = param_cov(pf, pf.vmat, free)
+    u0 = np.array([TO_UNCONSTRAINED[nm](float(getattr(m.processes[i], nm))) for i, nm in free])
+    u = np.random.default_rng(0).multivariate_normal(u0, cov, size=draws, method="eigh")
+    col = {key: k for k, key in enumerate(free)}
+    # the Allan times of allan_floor's grid, as WV scales (tau = 2 m samples)
+    tau = 2.0 * 2.0 ** np.linspace(0.0, max(j - 1, 0), max(j - 1, 0) * _PER_OCTAVE + 1)
+    wv = np.zeros((draws, tau.size))
+    for i, p in enumerate(m.processes):
+        h0 = p.linear_coef()
+        lin = "omega" if p.code == "DR" else p.param_names[-1]
+        h = np.full(draws, h0)
+        if (i, lin) in col:  # linear in the coefficient: its first-order change, clipped
+            k = col[(i, lin)]
+            e = 1e-6 * max(1.0, abs(u0[k]))
+            up = p.with_values(**{lin: FROM_UNCONSTRAINED[lin](u0[k] + e)}).linear_coef()
+            h = np.maximum(h0 + (up - h0) / e * (u[:, k] - u0[k]), 0.0)
+        if p.nonlinear is None:
+            wv += h[:, None] * p.basis(tau, pf.fs)[None, :]
+            continue
+        nl = np.full(draws, float(getattr(p, p.nonlinear)))
+        if (i, p.nonlinear) in col:
+            nl = np.array([FROM_UNCONSTRAINED[p.nonlinear](v) for v in u[:, col[(i, p.nonlinear)]]])
+        phis = np.array([p.phi_from_nl(v, pf.fs) for v in nl])
+        wv += h[:, None] * p.basis_many(tau, pf.fs, phis)
+    wv = np.where(np.isfinite(wv) & (wv > 0), wv, np.inf)
+    at = np.argmin(wv, axis=1)
+    return float(np.mean((at == 0) | (at == tau.size - 1)))
+
+
 def _rel_at(
     table: Callable[[int], IeeeTable],
     rel: Callable[[IeeeTable, str], float],
@@ -613,10 +771,23 @@ def _rel_at(
     return rel(table(n), key)
 
 
-def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | None:
-    """The shortest length (samples) with ``prec(n) <= rel``, to about 2 %: a x4 search from
-    64 samples, a power-law interpolation between the two lengths that bracket the target,
-    then steps of 2 % up until it holds (precision falls with the length)."""
+def _shortest(
+    prec: Callable[[int], float], rel: float, n_max: int, rtol: float = 0.0
+) -> int | None:
+    """The shortest length (samples) with ``prec(n) <= rel``, to the sample (``rtol`` 0) or
+    to ``rtol`` of it.
+
+    The lengths with one number of WV levels form runs ``2^(k-1) < n <= 2^k``. Within a run
+    the precision falls with the length; where the log gains a level (``n = 2^k + 1``, a last
+    level of two coefficients) it jumps up (K of a WN+RW gyro: 0.118 at ``2^24`` samples,
+    0.149 at ``2^24 + 1``), then falls below the previous run's. So the shortest length lies
+    in the first run whose end meets the target: a x4 search from 64 samples (ends of runs)
+    brackets it, the run ends inside the bracket find the run, and a safeguarded regula
+    falsi (Illinois) on ``log prec`` against ``log n``, from the failing end of the run
+    before, closes it to one sample. (Interpolating
+    across the bracket and stepping up by 2 % overshot the shortest length by up to 9 %, and
+    by 45 % where the target fell just before a run's end.)
+    """
 
     def ok(n: int) -> bool:
         p = prec(n)
@@ -629,13 +800,40 @@ def _shortest(prec: Callable[[int], float], rel: float, n_max: int) -> int | Non
         lo, hi = hi, min(4 * hi, n_max)
     if lo == 0:
         return hi
-    p_lo, p_hi = prec(lo), prec(hi)
-    n = hi
-    if math.isfinite(p_lo) and p_lo > rel and p_hi > 0:
-        slope = math.log(p_hi / p_lo) / math.log(hi / lo)
-        if slope < 0:
-            n = int(math.ceil(lo * (rel / p_lo) ** (1.0 / slope)))
-            n = min(max(n, lo + 1), hi)
-    while n < hi and not ok(n):
-        n = min(hi, int(math.ceil(n * 1.02)))
-    return n
+    # the first run whose end meets the target: (lo, hi] from here on
+    for k in range(lo.bit_length(), (hi - 1).bit_length()):
+        if lo < 2**k < hi:
+            if ok(2**k):
+                hi = 2**k
+                break
+            lo = 2**k
+    lo = max(lo, 2 ** (hi - 1).bit_length() // 2)
+    # lo fails and hi meets it, with one number of levels in (lo, hi]: regula falsi
+    f_lo, f_hi = _log_gap(prec(lo), rel), _log_gap(prec(hi), rel)
+    side, check = 0, False
+    while hi - lo > max(1.0, rtol * hi):
+        n = (lo + hi) // 2
+        if check:  # to a tolerance: is the length rtol shorter than a new hi too short?
+            n = max(hi - max(1, int(rtol * hi)), lo + 1)
+        elif math.isfinite(f_lo) and math.isfinite(f_hi) and f_lo > f_hi:
+            x = math.log(lo) + f_lo / (f_lo - f_hi) * (math.log(hi) - math.log(lo))
+            n = min(max(int(math.ceil(math.exp(x))), lo + 1), hi - 1)
+        f = _log_gap(prec(n), rel)
+        check = rtol > 0 and f <= 0 and not check
+        if f <= 0:
+            hi, f_hi = n, f
+            f_lo = f_lo / 2 if side == 1 else f_lo
+            side = 1
+        else:
+            lo, f_lo = n, f
+            f_hi = f_hi / 2 if side == -1 else f_hi
+            side = -1
+    return hi
+
+
+def _log_gap(p: float, rel: float) -> float:
+    """``log(p / rel)``: negative where the precision ``p`` meets the target ``rel``, +inf
+    where it has none."""
+    if not math.isfinite(p):
+        return math.inf
+    return math.log(p / rel) if p > 0 else -math.inf

@@ -668,14 +668,17 @@ def gather_fleet(
                     cols = columns.setdefault(ch, [])
                     cols += [v.column for v in t[ch] if v.column not in cols]
         terms.append(t)
-    # robust z-scores per channel and column, across the units that have the term
-    for ch, cols in columns.items():
-        for col in cols:
+    # robust z-scores per channel, column and quantity, across the units that have the term:
+    # a quantity tells comparable units apart (a temperature sensitivity that was not
+    # compensated is its own quantity, scored only among the units that share it)
+    for ch in columns:
+        groups = dict.fromkeys((v.column, v.quantity) for t in terms for v in t.get(ch, []))
+        for col, qty in groups:
             where = [
                 (i, j)
                 for i, t in enumerate(terms)
                 for j, v in enumerate(t.get(ch, []))
-                if v.column == col
+                if (v.column, v.quantity) == (col, qty)
             ]
             # a term of an AR1/GM faster than one sample has no z: its T_c means nothing
             where = [(i, j) for i, j in where if col[0] not in fast[i].get(ch, ())]

@@ -270,3 +270,76 @@ def test_the_ardupilot_flight_is_not_compensated_with_auto(capsys, tmp_path):
     code, _, _ = run(capsys, "report", path, "-o", str(page), *argv)
     text = html.unescape(page.read_text())
     assert code == 0 and "not compensated" in text and "--temperature imu0_temperature" in text
+
+
+def test_channels_fit_runs_the_log_check_and_drops_the_warmup(files, tmp_path, capsys):
+    """`gmwm fit --channels` runs the log check that `gmwm fit` runs, on the channels it fits:
+    one stderr line naming the shock in gyro_y, the JSON key ``qualification``; with
+    --drop-warmup the multivariate fit is that of the log without the warm-up the check
+    found (the same numbers as wv_matrix + fit_mgmwm of the cut log). Before, the check was
+    skipped: no line, no key, and the warm-up stayed in the fit."""
+    from engine.io import drop_warmup, qualify_log
+    from engine.multivariate import MultiModel, fit_mgmwm
+    from engine.wv import wv_matrix
+
+    log = eg.load_log(files / "warm.h5")
+    x = eg.parse_model("WN(sigma2=1e-2)+RW(gamma2=1e-10)").simulate(
+        N, fs=FS, rng=np.random.default_rng(9)
+    )
+    y = x.copy()
+    y[30_000:30_030] += np.random.default_rng(10).normal(size=30)
+    path = tmp_path / "two.h5"
+    eg.save_log(
+        path,
+        {"gyro_x": log["gyro_x"], "gyro_y": y},
+        FS,
+        units={"gyro_x": "deg/s", "gyro_y": "deg/s"},
+    )
+    argv = ["fit", str(path), "--model", "WN+RW", "--channels", "gyro_x,gyro_y", "--json"]
+    code, out, err = run(capsys, *argv)
+    assert code == 0, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("gmwm fit: log check")]
+    assert len(lines) == 1 and "shock (gyro_y)" in lines[0] and "--drop-warmup" in lines[0]
+    q = json.loads(out)["qualification"]
+    assert [f["channel"] for f in q["findings"] if f["kind"] == "shock"] == ["gyro_y"]
+    start = q["suggested_start"]
+    assert start > 0 and q["dropped"] == 0
+    code, out, err = run(capsys, *argv, "--drop-warmup")
+    d = json.loads(out)
+    assert code == 0 and d["qualification"]["dropped"] == start
+    both = eg.load_log(path)
+    want_q = qualify_log(both, ["gyro_x", "gyro_y"])
+    assert want_q.suggested_start == start
+    cut = drop_warmup(both, start)
+    chans = ["gyro_x", "gyro_y"]
+    want = fit_mgmwm(wv_matrix(cut, channels=chans), MultiModel(chans, "WN+RW"), weights="ci")
+    assert [p["value"] for p in d["params"]] == [float(v) for v in want.params.values()]
+
+
+@pytest.mark.real_data
+def test_channels_fit_of_adis_unit4_reports_its_bursts(real_data, capsys):
+    """ADIS16405 unit 4, its three accelerometers fitted together: the log check's line and
+    JSON give what the single-channel check finds on each of them, the documented bursts at
+    samples 11,710-11,900 (accel_y), 404,530-404,640 and 514,580-514,690 (accel_z) among them
+    (tests/engine/test_log_qualification.py)."""
+    from engine.io import qualify_log
+
+    path = real_data / "adis16405_imu4.h5"
+    chans = ["accel_x", "accel_y", "accel_z"]
+    argv = ["fit", str(path), "--model", "WN+RW", "--channels", ",".join(chans), "--json"]
+    code, out, err = run(capsys, *argv)
+    assert code == 0, err
+    assert sum(ln.startswith("gmwm fit: log check") for ln in err.splitlines()) == 1
+    q = json.loads(out)["qualification"]
+    shocks = [
+        (f["channel"], [tuple(r) for r in f["ranges"]])
+        for f in q["findings"]
+        if f["kind"] == "shock"
+    ]
+    one = [
+        (f.channel, list(f.ranges)) for f in qualify_log(eg.load_log(path), chans).of_kind("shock")
+    ]
+    assert shocks == one
+    ranges = [r for _, rs in shocks for r in rs]
+    for a, b in ((11_710, 11_900), (404_530, 404_640), (514_580, 514_690)):
+        assert any(lo < b and a < hi for lo, hi in ranges), (a, b, shocks)

@@ -61,8 +61,11 @@ def test_channels_fit_is_of_the_compensated_signals(thermal, capsys):
     truth in 97.5 % of 200 logs, docs/qualify.md), said in one stderr line each; the WVs of the
     multivariate fit are those of the compensated signals (the single-channel fit's
     TemperatureFit.wv), and the RW, inflated 2.9x (gyro_y) and 7.3x (gyro_x) without
-    compensation on this log, comes back within a factor 2 of the true 1e-10 (deg/s)^2.
-    Before, the raw signals were fitted and the JSON had no key ``temperature``."""
+    compensation on this log, comes back within a factor 2 of the true 1e-10 (deg/s)^2. As the
+    single-channel fit does, the fit of the raw signals comes beside it (JSON ``fit_raw``, the
+    numbers of `--temperature none`, where it is null; the text's "without compensation: ...").
+    Before, the raw signals were fitted and the JSON had no key ``temperature``; then no raw
+    fit was given beside the compensated one."""
     chans = "gyro_x,gyro_y"
     code, out, err = run(capsys, "fit", thermal, "--model", "WN+RW", "--channels", chans, "--json")
     assert code == 0, err
@@ -84,14 +87,18 @@ def test_channels_fit_is_of_the_compensated_signals(thermal, capsys):
         "--temperature", "none",
     )  # fmt: skip
     raw = json.loads(out)
-    assert code == 0 and raw["temperature"] is None
+    assert code == 0 and raw["temperature"] is None and raw["fit_raw"] is None
     for ch in PLANTED:
         assert 0.5e-10 < _rw(d, ch) < 2e-10, (ch, _rw(d, ch))
         assert _rw(raw, ch) > 2 * _rw(d, ch), (ch, _rw(raw, ch), _rw(d, ch))
+    # as the single-channel fit: the raw signals' fit beside the compensated one
+    assert [p["value"] for p in d["fit_raw"]["params"]] == [p["value"] for p in raw["params"]]
     # the readable text says the same, and names the compensated channels
     code, out, _ = run(capsys, "fit", thermal, "--model", "WN+RW", "--channels", chans)
     assert code == 0 and out.count("temperature sensitivity") == 2
-    assert "the fit above is of the temperature-compensated gyro_x, gyro_y" in out
+    line = next(ln for ln in out.splitlines() if "without compensation" in ln)
+    assert "the fit above is of the temperature-compensated gyro_x, gyro_y" in line
+    assert f"gyro_x: WN(sigma2={raw['params'][0]['value']!r}" in line
 
 
 def test_channels_fit_follows_auto_and_a_named_channel(thermal, capsys, tmp_path):

@@ -409,3 +409,46 @@ def test_a_sensitivity_not_compensated_is_marked(marked_fleet):
     status = {Path(s["source"]).name: s for s in fleet.batch.to_dict()["logs"]}
     t = status["unit503.csv"]["temperature"]["gx"]
     assert t["compensated"] is False and t["p_value"] == raw.p_value
+
+
+@pytest.fixture(scope="module")
+def mixed_fleet(tmp_path_factory):
+    """Five gyro units with the planted 7.2 deg/h/degC (compensated) and the unit of seed 503
+    with none (p = 0.45: left raw, its sensitivity 0.30 deg/h/degC information only), under
+    the same temperature profile."""
+    d = tmp_path_factory.mktemp("mixed_fleet")
+    t = np.arange(THERMAL_N) / FS
+    temp = 25 + 5 * (1 - np.exp(-t / 120)) + 2 * np.sin(2 * np.pi * t / 90)
+    m = eg.parse_model(THERMAL_SPEC)
+    for k, c in ((500, THERMAL_C), (501, THERMAL_C), (502, THERMAL_C), (504, THERMAL_C),
+                 (505, THERMAL_C), (503, 0.0)):  # fmt: skip
+        x = m.simulate(THERMAL_N, fs=FS, rng=k) + c * temp
+        units = {"gx": "deg/s", "temperature": "degC"}
+        save_log(d / f"unit{k}.csv", {"gx": x, "temperature": temp}, FS, units=units)
+    return gather_fleet([str(d / "unit*.csv")], model="WN+RW", channels=["gx"], workers=1)
+
+
+def test_outlier_scores_compare_a_sensitivity_only_with_comparable_units(mixed_fleet):
+    """A sensitivity not compensated is its own quantity: its robust z-score is computed among
+    the units that share it (here none besides itself: fewer than MIN_UNITS_Z, so no score
+    and no outlier), and the five compensated units are scored among themselves (the robust z
+    of their five sensitivities). Before, the six were pooled and the unit left raw (0.30
+    against a median of 7.2 deg/h/degC) was reported as an outlier."""
+    from engine.reporting.fleet import robust_z
+
+    units = {u.name: u for u in mixed_fleet.units}
+
+    def s_t(name):
+        (v,) = [v for v in units[name].terms["gx"] if v.column[1] == "S_T"]
+        return v
+
+    raw = s_t("unit503.csv")
+    assert raw.note.startswith("not compensated") and math.isnan(raw.z) and not raw.outlier
+    assert not any("S_T" in r for r in units["unit503.csv"].reasons)
+    comp = ["unit500.csv", "unit501.csv", "unit502.csv", "unit504.csv", "unit505.csv"]
+    vals = [s_t(n) for n in comp]
+    assert all(v.note == "" for v in vals)
+    want = robust_z([v.value for v in vals])
+    np.testing.assert_allclose([v.z for v in vals], want, rtol=1e-12)
+    med = float(np.median([v.value for v in vals]))
+    np.testing.assert_allclose([v.rel for v in vals], [(v.value - med) / med for v in vals])
