@@ -474,9 +474,14 @@ class NNLSProblem:
         xs = np.repeat(self.x_fixed[None, :, :], nc, axis=0)
         for col, i in enumerate(self.nl_idx):
             pr = self.model.processes[i]
-            nls = pr.search_nl(u[:, col], -math.inf, math.inf)  # unclipped
-            xs[:, :, i] = pr.basis(self.tau, self.fs, nls)
-        cmat = np.einsum("ij,cjk->cik", self.a, xs)
+            # the grid's candidates share a few axis values: each column formed once
+            vals, where = np.unique(u[:, col], return_inverse=True)
+            nls = pr.search_nl(vals, -math.inf, math.inf)  # unclipped
+            xs[:, :, i] = np.asarray(pr.basis(self.tau, self.fs, nls)).reshape(vals.size, -1)[where]
+        if self._a_diag is None:
+            cmat = np.einsum("ij,cjk->cik", self.a, xs)
+        else:  # a diagonal A (the usual case) as a vector
+            cmat = xs * self._a_diag[None, :, None]
         norms = np.sqrt(np.sum(cmat * cmat, axis=1, keepdims=True))
         norms[norms == 0] = 1.0
         cn = cmat / norms

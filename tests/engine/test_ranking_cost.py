@@ -302,3 +302,25 @@ def test_ranking_profile_evaluations(real_data, monkeypatch) -> None:
     ranking = eg.rank_models(wv, max_model="2*GM+WN+QN+RW+DR")
     assert len(ranking.candidates) == 47
     assert n[0] <= 5_500
+
+
+@pytest.mark.parametrize("weights", ["ci", "full"])
+@pytest.mark.parametrize("model", ["2*GM+WN+QN+RW+DR", "GM+WN", "2*GM"])
+def test_grid_lower_bounds_are_the_unconstrained_least_squares(weights: str, model: str) -> None:
+    # branch and bound's lower bound of each grid candidate (its columns formed once per axis
+    # value, a diagonal A as a vector) against the unconstrained weighted least squares of that
+    # candidate's design formed here (numpy's lstsq), and its feasibility flag against the
+    # signs of that solution, at every candidate of the grid
+    prob = _problem(model, weights)
+    u = np.asarray(prob.candidates(), dtype=float)
+    lower, feasible = prob.lower_bounds(u)
+    assert len(u) > 30
+    for row, lo, ok in zip(u, lower, feasible, strict=True):
+        c = prob.a @ prob.design(tuple(np.exp(-1.0 / np.exp(row))))
+        norms = np.linalg.norm(c, axis=0)
+        coef, *_ = np.linalg.lstsq(c / norms, prob.b, rcond=None)
+        r = prob.b - (c / norms) @ coef
+        assert lo == pytest.approx(max(float(r @ r), 0.0), rel=1e-6, abs=1e-12 * prob.bb)
+        assert lo <= prob.profile(row) * (1 + 1e-9)
+        if ok:
+            assert np.all(coef >= -1e-9 * np.max(np.abs(coef)))
