@@ -218,6 +218,7 @@ class NNLSProblem:
         self._a_diag: np.ndarray | None = np.ascontiguousarray(np.diagonal(a)) if diag else None
         self._c_fixed = self._weigh(self.x_fixed)
         self._memo: dict[bytes, float] = {}
+        self._nl_dead: dict[bytes, bool] = {}
         self.n_eval = 0
         # the hot path of profile(): each kind's columns at once (basis_many), unless an AR1's
         # phi may be 0
@@ -391,8 +392,17 @@ class NNLSProblem:
                 c = self._c_fixed.copy()
                 for i, ui in zip(self.nl_idx, u, strict=True):
                     c[:, i] = self._weigh(self._column(i, self.phi_of(i, float(ui))))
-            f = self._memo[key] = self._inner(c)[0]
+            f, h = self._inner(c)
+            self._memo[key] = f
+            if self.k:  # an AR1/GM term at zero variance: the point is on a sub-model's surface
+                self._nl_dead[key] = min(h[self.nl_idx].tolist()) <= 0.0
         return f
+
+    def nl_term_dead(self, u: np.ndarray) -> bool:
+        """Whether an AR1/GM term has zero variance at ``u``, a point :meth:`profile` solved
+        (False for a point it did not): there the objective is a sub-model's, whose optimum an
+        anchor of :func:`nested_search` stands for."""
+        return self._nl_dead.get(np.asarray(u, dtype=float).tobytes(), False)
 
     def profile_many(self, u: np.ndarray) -> np.ndarray:
         """:meth:`profile` at each row of ``u`` (C, k), the exact NNLS of all rows at once.
@@ -464,9 +474,14 @@ class NNLSProblem:
         xs = np.repeat(self.x_fixed[None, :, :], nc, axis=0)
         for col, i in enumerate(self.nl_idx):
             pr = self.model.processes[i]
-            nls = pr.search_nl(u[:, col], -math.inf, math.inf)  # unclipped
-            xs[:, :, i] = pr.basis(self.tau, self.fs, nls)
-        cmat = np.einsum("ij,cjk->cik", self.a, xs)
+            # the grid's candidates share a few axis values: each column formed once
+            vals, where = np.unique(u[:, col], return_inverse=True)
+            nls = pr.search_nl(vals, -math.inf, math.inf)  # unclipped
+            xs[:, :, i] = np.asarray(pr.basis(self.tau, self.fs, nls)).reshape(vals.size, -1)[where]
+        if self._a_diag is None:
+            cmat = np.einsum("ij,cjk->cik", self.a, xs)
+        else:  # a diagonal A (the usual case) as a vector
+            cmat = xs * self._a_diag[None, :, None]
         norms = np.sqrt(np.sum(cmat * cmat, axis=1, keepdims=True))
         norms[norms == 0] = 1.0
         cn = cmat / norms
@@ -531,6 +546,7 @@ def local(
     maxfev: int | None = None,
     known: Sequence[tuple[float, np.ndarray]] = (),
     merge: Any = 0.0,
+    stop: Callable[[np.ndarray, float], bool] | None = None,
 ) -> tuple[float, np.ndarray, bool]:
     """Local minimum of ``fun`` from ``u0`` (clipped into ``[lo, hi]``).
 
@@ -550,6 +566,8 @@ def local(
     (:func:`search`): when the best point of a run comes within ``merge`` of one of them in
     every coordinate and is not below it, the run is heading for that minimum and stops there
     (it returns that minimum: a run that finds it again adds nothing to the search's lowest).
+    ``stop(u, f)``, when given, is asked of each iteration's best point: True stops the run
+    there (it returns that point, not converged; :func:`search` then drops the run).
 
     Returns
     -------
@@ -566,12 +584,17 @@ def local(
     check = False  # the previous run lowered the objective: this one checks its minimum
     hit: list[tuple[float, np.ndarray]] = []
 
+    stopped: list[tuple[float, np.ndarray]] = []
+
     def merged(intermediate_result: Any) -> None:  # (SciPy passes the best point by this name)
         r = intermediate_result  # the run's best point: in a known minimum's basin?
         for fk, uk in known:
             if r.fun >= fk and np.all(np.abs(r.x - uk) <= merge):
                 hit.append((fk, uk))
                 raise StopIteration
+        if stop is not None and stop(r.x, float(r.fun)):
+            stopped.append((float(r.fun), np.array(r.x, float)))
+            raise StopIteration
 
     for _ in range(8):
         simplex = np.vstack([x] + [x + step * e for e in np.eye(k)])
@@ -579,7 +602,7 @@ def local(
             fun,
             x,
             method="Nelder-Mead",
-            callback=merged if known else None,
+            callback=merged if known or stop is not None else None,
             options={
                 "initial_simplex": simplex,
                 "xatol": CHECK_XATOL if check else 1e-6,
@@ -589,6 +612,8 @@ def local(
         )
         if hit:
             return hit[0][0], np.array(hit[0][1], float), True
+        if stopped:
+            return stopped[0][0], stopped[0][1], False
         fn = float(res.fun)
         if fn < f * (1 - 1e-10):
             x, f = np.asarray(res.x, float), fn
@@ -606,6 +631,7 @@ def search(
     *,
     keep: int = 3,
     anchors: Sequence[Sequence[float]] = (),
+    anchor_minima: Sequence[float | None] = (),
 ) -> tuple[float, np.ndarray, bool]:
     """The variable-projection search over the non-linear coordinates (see the module notes).
 
@@ -622,6 +648,18 @@ def search(
     anchors : sequence of (k,) coordinates
         Points every one of which starts a local search of its own, whatever its grid rank
         (:func:`nested_search`: the sub-models' optima), so the result is at or below each.
+    anchor_minima : sequence of float or None
+        Per anchor, the objective of the sub-model optimum it is (same coordinates, a
+        one-parameter term fewer), or None. An anchor whose objective here equals it (the
+        extra term stays at zero variance) is a local minimum already: it starts no local
+        search, and a run that comes near it merges into it.
+
+    Notes
+    -----
+    With anchors, a local search whose best point has an AR1/GM term at zero variance and is
+    not below the lowest anchor stops (``prob.nl_term_dead``): it is on a sub-model's
+    surface, where the objective is at least that sub-model's optimum, which an anchor
+    already stands for.
 
     Returns
     -------
@@ -642,35 +680,74 @@ def search(
     results: list[tuple[float, np.ndarray, bool]] = []
     found: list[tuple[float, np.ndarray]] = []  # the converged local minima, for local()
     merge = MERGE * spacing
+    # the anchors (the sub-models' optima) profiled first: a sub-model optimum whose extra
+    # term stays at zero variance here is a local minimum of this model already
+    pts = [np.clip(np.asarray(a, float), prob.lo, prob.hi) for a in anchors]
+    vals = [prob.profile(a) for a in pts]
+    mins = list(anchor_minima) + [None] * (len(pts) - len(anchor_minima))
+    settled = [fs is not None and fa >= fs * (1 - 1e-12) for fa, fs in zip(vals, mins, strict=True)]
+    found += [(fa, a) for fa, a, ok in zip(vals, pts, settled, strict=True) if ok]
+    floor = min(vals, default=math.inf)
+    dead = getattr(prob, "nl_term_dead", None)
+    on_sub: Callable[[np.ndarray, float], bool] | None = None
+    if dead is not None and pts:
 
-    def run(u0: Any) -> tuple[float, np.ndarray, bool]:
-        r = local(prob.profile, u0, spacing / 2, prob.lo, prob.hi, known=found, merge=merge)
+        def on_sub(u: np.ndarray, f: float) -> bool:
+            return f >= floor and dead(u)
+
+    def run(u0: Any) -> tuple[float, np.ndarray, bool] | None:
+        hits: list[bool] = []
+
+        def stop(u: np.ndarray, f: float) -> bool:
+            hits.append(on_sub is not None and on_sub(u, f))
+            return hits[-1]
+
+        r = local(
+            prob.profile,
+            u0,
+            spacing / 2,
+            prob.lo,
+            prob.hi,
+            known=found,
+            merge=merge,
+            stop=stop if on_sub is not None else None,
+        )
+        if hits and hits[-1]:  # on a sub-model's surface, above an anchor: nothing new
+            passed.append(r[1])
+            return None
         if r[2]:
             found.append((r[0], r[1]))
         return r
 
+    passed: list[np.ndarray] = []  # where the runs dropped for being on a sub-model's stopped
     for _, u0 in best:
         # a start next to a local minimum already found adds nothing
-        if any(near(u0, r[1]) for r in results):
+        if any(near(u0, r[1]) for r in results) or any(near(u0, d) for d in passed):
             continue
-        results.append(run(u0))
-    # the anchors (the sub-models' optima), best first: each is a result in its own right, so
-    # the fit is at or below every one of them; a local search starts from the best one,
-    # unless a local minimum already found is next to it and not above it (the same basin:
-    # a sub-model's optimum with the larger model's extra term at 0 is often the larger
-    # model's too), and from every other that is not next to a start or a minimum searched
-    pts = [np.clip(np.asarray(a, float), prob.lo, prob.hi) for a in anchors]
-    ranked = sorted(((prob.profile(a), a) for a in pts), key=lambda t: t[0])
+        r = run(u0)
+        if r is not None:
+            results.append(r)
+    # the anchors, best first: each is a result in its own right, so the fit is at or below
+    # every one of them; a local search starts from the best one, unless it is a minimum
+    # already (settled) or a local minimum already found is next to it and not above it (the
+    # same basin: a sub-model's optimum with the larger model's extra term at 0 is often the
+    # larger model's too), and from every other that is neither settled nor next to a start
+    # or a minimum searched
+    ranked = sorted(zip(vals, pts, settled, strict=True), key=lambda t: t[0])
     minima = list(results)
-    seen = [np.asarray(u0, float) for _, u0 in best] + [r[1] for r in results]
-    for k, (fa, a0) in enumerate(ranked):
+    seen = [np.asarray(u0, float) for _, u0 in best] + [r[1] for r in results] + passed
+    for k, (fa, a0, ok) in enumerate(ranked):
         results.append((fa, a0, True))
+        if ok:
+            continue
         if k and any(near(a0, d) for d in seen):
             continue
         if not k and any(r[0] <= fa * (1 + 1e-8) and near(a0, r[1]) for r in minima):
             continue
         seen.append(a0)
-        results.append(run(a0))
+        r = run(a0)
+        if r is not None:
+            results.append(r)
     return min(results, key=lambda r: r[0])
 
 
@@ -792,8 +869,19 @@ def nested_search(
         if prob.k == 0:
             f, u, conv = prob.profile(np.zeros(0)), np.zeros(0), True
         else:
-            anchors = corner_anchors(prob, anchors_u, subs) + (list(starts) if top else [])
-            f, u, conv = search(prob, keep=0 if top and polish else keep, anchors=anchors)
+            anchors: list[Sequence[float]] = []
+            minima: list[float | None] = []  # a sub-model optimum at the same coordinates
+            for opt, sub in zip(anchors_u, subs, strict=True):
+                for a in corner_anchors(prob, [opt], [sub]):
+                    anchors.append(a)
+                    minima.append(cache[sub.spec()][0] if len(opt) == prob.k else None)
+            anchors += list(starts) if top else []
+            f, u, conv = search(
+                prob,
+                keep=0 if top and polish else keep,
+                anchors=anchors,
+                anchor_minima=minima,
+            )
         n_eval += prob.n_eval
         return f, u, conv, prob
 

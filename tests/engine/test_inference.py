@@ -11,7 +11,7 @@ import pytest
 import engine as eg
 from engine.cli import main
 from engine.fit import fit_efficient
-from engine.fit.asymptotic import wv_cov_model
+from engine.fit.asymptotic import free_params, jacobian, wv_cov_model
 from engine.fit.covariance import wv_cov_bootstrap, wv_cov_data
 from engine.inference import j_test, param_intervals
 
@@ -253,3 +253,20 @@ def test_cli_fit_with_intervals(capsys, tmp_path):
     assert wn["low"] < 4.0 < wn["high"] and wn["level"] == 0.95
     assert main(["fit", str(path), "--model", "WN+RW", "--weights", "efficient"]) == 0
     assert "efficient" in capsys.readouterr().out
+
+
+def test_jacobian_of_a_term_far_below_the_others() -> None:
+    # d nu / d log(theta) of a variance is the process's own WV (nu is linear in it), even for a
+    # random walk 1e-14 of the white noise at the finest scales: the difference is taken of the
+    # moved process's term, not of the whole model's WV, where that term was below rounding
+    # (a central difference of the sum put it 20 % off there, measured); the bound is the
+    # central difference's own error in log(gamma2) = -27.6, step h = 1e-5 * 27.6: h^2 / 6 =
+    # 1.3e-8
+    tau = 2.0 ** np.arange(1, 20)
+    wv = eg.wavelet_variance(np.random.default_rng(0).standard_normal(2**20), fs=100.0)
+    model = eg.parse_model("WN(sigma2=1.0) + RW(gamma2=1e-12)")
+    res = eg.fit_gmwm(wv, model, fixed=True)
+    jac = jacobian(res)
+    assert free_params(res) == [(0, "sigma2"), (1, "gamma2")]
+    np.testing.assert_allclose(jac[:, 0], 1.0 / tau, rtol=1e-7)
+    np.testing.assert_allclose(jac[:, 1], 1e-12 * (tau**2 + 2.0) / (12.0 * tau), rtol=1e-7)

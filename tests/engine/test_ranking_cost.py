@@ -13,7 +13,7 @@ import pytest
 import scipy.optimize
 
 import engine as eg
-from engine.fit._varpro import NNLSProblem, local, sqrt_weight
+from engine.fit._varpro import NNLSProblem, corner_anchors, local, search, sqrt_weight
 from engine.fit.gmwm import weight_matrix
 from engine.models.processes import ar1_wv, ar1_wv_pos
 
@@ -227,3 +227,100 @@ def test_local_search_stops_in_a_known_minimums_basin() -> None:
     assert plain[0] == pytest.approx(f1, rel=1e-9)
     high = local(f, [0.4, 0.2], 0.2, -5.0, 5.0, known=[(f1 + 1e-6, u1)], merge=1e-4)
     assert high[0] < f1 + 1e-9 and not np.array_equal(high[1], u1)
+
+
+class _WithoutSurfaceStop:
+    """A problem that hides ``nl_term_dead``: :func:`search` then runs every local search to
+    its end, as it did before runs on a sub-model's surface were stopped."""
+
+    def __init__(self, prob: NNLSProblem) -> None:
+        self._prob = prob
+
+    def __getattr__(self, name: str) -> object:
+        if name == "nl_term_dead":
+            raise AttributeError(name)
+        return getattr(self._prob, name)
+
+
+def test_an_anchor_that_is_a_sub_models_minimum_starts_no_search() -> None:
+    # GM+WN+RW's optimum on a series without drift is a point of GM+WN+RW+DR where DR's
+    # variance stays 0 (the same objective, to rounding): a local minimum of the larger model
+    # already, so its search profiles the anchor once and runs no Nelder-Mead; without the
+    # sub-model's objective the same search runs from the anchor and finds the same minimum
+    prob_s = _problem("GM+WN+RW")
+    f_s, u_s, ok = search(prob_s)
+    assert ok
+    prob = _problem("GM+WN+RW+DR")
+    f, h, _ = prob.solve(prob.phis_of(u_s))
+    assert h[-1] == 0.0 and f == pytest.approx(f_s, rel=1e-12)
+    n = prob.n_eval
+    got = search(prob, keep=0, anchors=[tuple(u_s)], anchor_minima=[f_s])
+    assert prob.n_eval == n + 1 and got[0] == pytest.approx(f, rel=1e-12)
+    assert np.array_equal(got[1], u_s) and got[2]
+    plain = _problem("GM+WN+RW+DR")
+    ref = search(plain, keep=0, anchors=[tuple(u_s)])
+    assert plain.n_eval > 20  # (measured: a Nelder-Mead run that does not move)
+    assert got[0] == pytest.approx(ref[0], rel=1e-10)
+
+
+def test_a_run_on_a_sub_models_surface_stops() -> None:
+    # 2*GM+WN+RW on a series with one GM: the grid's starts lead Nelder-Mead to where the
+    # second GM's variance is 0 (GM+WN+RW's objective, flat in that GM's correlation time);
+    # those runs stop once there, not below the anchor that GM+WN+RW's optimum gives, and the
+    # search ends at the same minimum as when every run goes to its end, with a third of the
+    # profile evaluations (measured 247 against 843)
+    f_s, u_s, _ = search(_problem("GM+WN+RW"))
+    fast = _problem("2*GM+WN+RW")
+    got = search(fast, anchors=corner_anchors(fast, [tuple(u_s)]))
+    full = _problem("2*GM+WN+RW")
+    ref = search(_WithoutSurfaceStop(full), anchors=corner_anchors(full, [tuple(u_s)]))
+    assert got[0] == pytest.approx(ref[0], rel=1e-10) and got[0] <= f_s
+    assert fast.n_eval < full.n_eval / 2
+
+
+@pytest.mark.real_data
+def test_ranking_profile_evaluations(real_data, monkeypatch) -> None:
+    # the 47 sub-models of the default ranked on imu1 accel_x (the candidates' fits and their
+    # J-test refits): a deterministic count of the profiled objective's evaluations, memo hits
+    # and the grid's batches included, as tests/benchmarks/bench_ranking.py counts them
+    # (8,281 before the anchors that are minima already and the runs stopped on a
+    # sub-model's surface, 4,647 after); the numbers themselves: test_ranking_table.py
+    n = [0]
+    one, many = NNLSProblem.profile, NNLSProblem.profile_many
+
+    def counted(self, u):  # type: ignore[no-untyped-def]
+        n[0] += 1
+        return one(self, u)
+
+    def counted_many(self, u):  # type: ignore[no-untyped-def]
+        n[0] += len(u)
+        return many(self, u)
+
+    monkeypatch.setattr(NNLSProblem, "profile", counted)
+    monkeypatch.setattr(NNLSProblem, "profile_many", counted_many)
+    wv = eg.load_log(real_data / "adis16405_imu1.h5").wavelet_variance("accel_x")
+    ranking = eg.rank_models(wv, max_model="2*GM+WN+QN+RW+DR")
+    assert len(ranking.candidates) == 47
+    assert n[0] <= 5_500
+
+
+@pytest.mark.parametrize("weights", ["ci", "full"])
+@pytest.mark.parametrize("model", ["2*GM+WN+QN+RW+DR", "GM+WN", "2*GM"])
+def test_grid_lower_bounds_are_the_unconstrained_least_squares(weights: str, model: str) -> None:
+    # branch and bound's lower bound of each grid candidate (its columns formed once per axis
+    # value, a diagonal A as a vector) against the unconstrained weighted least squares of that
+    # candidate's design formed here (numpy's lstsq), and its feasibility flag against the
+    # signs of that solution, at every candidate of the grid
+    prob = _problem(model, weights)
+    u = np.asarray(prob.candidates(), dtype=float)
+    lower, feasible = prob.lower_bounds(u)
+    assert len(u) > 30
+    for row, lo, ok in zip(u, lower, feasible, strict=True):
+        c = prob.a @ prob.design(tuple(np.exp(-1.0 / np.exp(row))))
+        norms = np.linalg.norm(c, axis=0)
+        coef, *_ = np.linalg.lstsq(c / norms, prob.b, rcond=None)
+        r = prob.b - (c / norms) @ coef
+        assert lo == pytest.approx(max(float(r @ r), 0.0), rel=1e-6, abs=1e-12 * prob.bb)
+        assert lo <= prob.profile(row) * (1 + 1e-9)
+        if ok:
+            assert np.all(coef >= -1e-9 * np.max(np.abs(coef)))
