@@ -150,7 +150,7 @@ class Cancelled(Exception):
 
 
 def run_dependence_test(
-    wvm: eg.WVMatrix,
+    wvm: eg.wv.WVMatrix,
     model: MultiModel,
     *,
     B: int = 100,
@@ -177,7 +177,7 @@ def run_dependence_test(
         )
     if progress is not None:
         progress(0, B)  # the two observed fits come first
-    return eg.dependence_test(
+    return eg.multivariate.dependence_test(
         wvm, model, B=B, seed=seed, workers=1, weights="ci", progress=progress
     )
 

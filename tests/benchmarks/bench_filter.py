@@ -239,7 +239,7 @@ def recorded(args: argparse.Namespace) -> None:
             for rate in args.rates:
                 hold = int(round(rate / fs))
                 proj = {
-                    (u, ch): eg.project(
+                    (u, ch): eg.formats.project(
                         fits[(u, ch)],
                         "WN+RW",
                         fs_filter=rate,

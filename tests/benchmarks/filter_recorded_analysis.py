@@ -94,7 +94,9 @@ def cells(kind: str, fixes: list[float]) -> None:
         out = {}
         for ch in chans:
             tails = None if level is None else tail_factors(logs[0][ch], fs=FS, level=level)
-            p = eg.project(fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None, tails=tails, **kw)
+            p = eg.formats.project(
+                fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None, tails=tails, **kw
+            )
             out[ch] = FilterNoise(p.value("N"), p.value("K"), ch)
         return out
 
@@ -157,8 +159,8 @@ def quantiles_table() -> None:
         for ch in CHANNELS:
             cells = []
             for j in range(1, 16):
-                ratio95 = quantile_factor(eg.haar_coefficients(log[ch], j), 0.95, None)[0]
-                ratio99 = quantile_factor(eg.haar_coefficients(log[ch], j), 0.99, None)[0]
+                ratio95 = quantile_factor(eg.wv.haar_coefficients(log[ch], j), 0.95, None)[0]
+                ratio99 = quantile_factor(eg.wv.haar_coefficients(log[ch], j), 0.99, None)[0]
                 cells.append(f"{j}: {ratio95:.2f} / {ratio99:.2f}")
             print(f"| {i} | {ch} | " + ", ".join(cells) + " |")
 

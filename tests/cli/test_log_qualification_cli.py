@@ -26,8 +26,8 @@ def files(tmp_path_factory):
     warm = x + 0.5 * np.exp(-t / 30.0)
     shock = x.copy()
     shock[60_000:60_030] += rng.normal(size=30)
-    eg.save_log(d / "warm.h5", {"gyro_x": warm}, FS, units={"gyro_x": "deg/s"})
-    eg.save_log(d / "shock.h5", {"gyro_x": shock}, FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(d / "warm.h5", {"gyro_x": warm}, FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(d / "shock.h5", {"gyro_x": shock}, FS, units={"gyro_x": "deg/s"})
     temp = 25 + 10 * (1 - np.exp(-t / 200)) + 2 * np.sin(2 * np.pi * t / 300)
     y = x + 2e-3 * temp  # 7.2 deg/h per degC
     csv = d / "thermal.csv"

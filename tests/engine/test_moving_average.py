@@ -139,8 +139,8 @@ def test_model_string_round_trip_and_identifiability() -> None:
 
 
 def test_units_transform_and_slider_come_from_its_declaration() -> None:
-    assert eg.param_unit("MA1", "theta", "deg/s") == "1 (per sample)"
-    assert eg.param_unit("MA1", "sigma2", "deg/s") == "(deg/s)^2"
+    assert eg.units.param_unit("MA1", "theta", "deg/s") == "1 (per sample)"
+    assert eg.units.param_unit("MA1", "sigma2", "deg/s") == "(deg/s)^2"
     ma = MA1(theta=-0.3, sigma2=2e-3)
     u = ma.to_unconstrained()
     np.testing.assert_allclose(u, [math.atanh(-0.3), math.log(2e-3)])
@@ -160,7 +160,7 @@ def test_datasheet_rows_and_back() -> None:
     assert vals["N"] == pytest.approx(math.sqrt(1e-2 * 1.2**2 / fs), rel=1e-12)
     back = process_from_values("MA1", vals, fs)
     assert back.theta == pytest.approx(0.2) and back.sigma2 == pytest.approx(1e-2, rel=1e-12)
-    rows = eg.datasheet(ma + eg.RW(1e-9), fs, "deg/s")
+    rows = eg.units.datasheet(ma + eg.RW(1e-9), fs, "deg/s")
     by_symbol = {(r["label"], r["symbol"], r["unit"]): r["value"] for r in rows}
     # the white noise it adds at long scales reads as an angle random walk: 60 N deg/sqrt(h)
     assert by_symbol[("MA1", "ARW", "deg/sqrt(h)")] == pytest.approx(60 * vals["N"], rel=1e-12)
@@ -213,7 +213,7 @@ def test_fits_that_search_correlation_times_refuse_it_and_the_ranking_keeps_it()
     model = eg.parse_model("MA1(theta=-0.3, sigma2=1e-2) + RW(gamma2=1e-8)")
     wv = eg.wavelet_variance(model.simulate(2**14, fs=100.0, rng=4), fs=100.0)
     with pytest.raises(eg.FitError, match="MA1 has none.*fit_gmwm"):
-        eg.fit_gmwfm(wv, "MA1+RW")
+        eg.fit.fit_gmwfm(wv, "MA1+RW")
     with pytest.raises(eg.ModelError, match="channel a: .*MA1 has none"):
         eg.MultiModel(["a", "b"], "MA1+RW")
     ranked = {c.model: c for c in eg.rank_models(wv, ["MA1+RW", "QN+WN+RW"]).candidates}
@@ -231,6 +231,6 @@ def test_replicate_fit_starts_from_given_values_of_either_sign() -> None:
     wvs = [
         eg.wavelet_variance(model.simulate(2**14, fs=100.0, rng=40 + i), fs=100.0) for i in range(3)
     ]
-    res = eg.fit_replicates(wvs, model)
+    res = eg.fit.fit_replicates(wvs, model)
     assert res.params["MA1.theta"] == pytest.approx(-0.3, abs=0.05)
-    assert res.objective <= eg.fit_replicates(wvs, "MA1+RW").objective * (1 + 1e-9)
+    assert res.objective <= eg.fit.fit_replicates(wvs, "MA1+RW").objective * (1 + 1e-9)
