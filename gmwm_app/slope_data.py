@@ -245,7 +245,7 @@ def comparison_values(
     -------
     list of dict
         ``{"process", "quantity", "unit", <column>: float or None ...}``, one row per
-        datasheet quantity (``engine.datasheet``: N, Q, K, R, GM correlation time ...;
+        datasheet quantity (``engine.units.datasheet``: N, Q, K, R, GM correlation time ...;
         the slope method's bias instability B), in the order QN, WN, BI, GM, RW, DR.
     """
     rows: dict[tuple[str, str, str], dict[str, Any]] = {}

@@ -34,7 +34,7 @@ REQUIRED = [
     ("engine.formats.projection", "project"),
     ("engine.reporting", "report"),
     ("engine.batch", "fit_batch"),
-    # every latent process, in the module that defines it (engine.PROCESS_TYPES)
+    # every latent process, in the module that defines it (engine.models.PROCESS_TYPES)
     *[(cls.__module__, code) for code, cls in eg.models.PROCESS_TYPES.items()],
 ]
 
