@@ -157,7 +157,8 @@ def run_dependence_test(
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
 ) -> DependenceTest:
-    """:func:`engine.multivariate.dependence_test` of every shared process (``weights="ci"``, one worker).
+    """:func:`engine.multivariate.dependence_test` of every shared process (``weights="ci"``,
+    one worker).
 
     ``progress(done, B)`` is called first with ``done = 0`` and then after every replicate;
     it may raise to stop the test.
