@@ -119,7 +119,7 @@ class CheckView(TabView):
         self.result: Any = None
         self.kind = ""
         self.texts = [""] * 4
-        self.file_spec: eg.DatasheetSpec | None = None
+        self.file_spec: eg.inference.DatasheetSpec | None = None
         self._key: Any = None
         for build in (self._build_widgets, self._build_figures, self._build_table):
             build()
@@ -293,7 +293,7 @@ class CheckView(TabView):
     # state -> computation -> views
     # ------------------------------------------------------------------------------------
     @staticmethod
-    def _file_texts(spec: eg.DatasheetSpec) -> list[str]:
+    def _file_texts(spec: eg.inference.DatasheetSpec) -> list[str]:
         """A datasheet's values as the fields show them (datasheet units, 4 digits)."""
         out = []
         for _key, sym, _unit in FIELDS[spec.kind]:
@@ -331,7 +331,7 @@ class CheckView(TabView):
             for w in self.inputs:
                 w.disabled = True
 
-    def spec(self) -> eg.DatasheetSpec:
+    def spec(self) -> eg.inference.DatasheetSpec:
         """The datasheet of the fields (raises DatasheetError with a readable message)."""
         items: dict[str, tuple[float, str]] = {}
         for text, (key, _s, unit) in zip(self.texts, FIELDS[self.kind], strict=True):
@@ -341,8 +341,8 @@ class CheckView(TabView):
             try:
                 items[key] = (float(text), unit)
             except ValueError:
-                raise eg.DatasheetError(f"{key.upper()}: {text!r} is not a number") from None
-        return eg.DatasheetSpec.from_values(items, source="app")
+                raise eg.errors.DatasheetError(f"{key.upper()}: {text!r} is not a number") from None
+        return eg.inference.DatasheetSpec.from_values(items, source="app")
 
     def _draw(self, force: bool) -> None:
         """Recompute when the data, the fit or the values changed."""
@@ -366,7 +366,7 @@ class CheckView(TabView):
             return
         try:
             spec = self.file_spec or self.spec()
-        except eg.DatasheetError as e:
+        except eg.errors.DatasheetError as e:
             self._clear([str(e)])
             return
         fit = s.result if s.result is not None and s.result.wv is s.wv else None

@@ -475,7 +475,7 @@ def is_compensated(lg: ImuLog | None, ch: str, compensate: str) -> bool:
 
 def wv_matrix_of(
     lg: ImuLog, channels: Sequence[str], fs: float, compensate: str = "off"
-) -> tuple[eg.WVMatrix, str]:
+) -> tuple[eg.wv.WVMatrix, str]:
     """The WV/WCCV matrix of some channels of a log, and a notice (truncation, compensation).
 
     Channels of different lengths are truncated to the shortest (the notice says so). Each
@@ -517,7 +517,7 @@ def wv_matrix_of(
             "sidebar's 'Temperature compensation' choice turns it off."
         )
     units = {c: str((getattr(lg, "units", None) or {}).get(c, "")) for c in chans}
-    wvm = eg.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
+    wvm = eg.wv.wv_matrix(series, channels=list(chans), fs=float(fs), units=units)
     return wvm, " ".join(notes)
 
 

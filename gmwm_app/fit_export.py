@@ -41,7 +41,7 @@ class ExportMixin(StateFields):
         }
         if self.result is not None and self.fs is not None:  # a fit implies data and fs
             out["fit"] = self.result.to_dict()
-            out["datasheet"] = eg.datasheet(
+            out["datasheet"] = eg.units.datasheet(
                 self.result.model, float(self.fs), self.unit, n_levels=self.result.wv.n_levels
             )
             out["warnings"] = self.warnings()

@@ -65,7 +65,7 @@ class ModelPanel(pn.viewable.Viewer):
                 label=f"+ {code}",
                 color="primary",
                 variant="outline",
-                description=f"Add {eg.PROCESS_TYPES[code].help}",
+                description=f"Add {eg.models.PROCESS_TYPES[code].help}",
                 width=82,
                 margin=(3, 3),
             )

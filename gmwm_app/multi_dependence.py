@@ -1,4 +1,4 @@
-"""The test of dependence of the "Multi-channel" tab (``engine.dependence_test``, the
+"""The test of dependence of the "Multi-channel" tab (``engine.multivariate.dependence_test``, the
 multivariate paper, section IV), on request.
 
 The parametric bootstrap refits 2 B simulated logs (B = 100 on the demo log with a linear

@@ -77,7 +77,7 @@ def _nan_unless(mask: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.where(mask, a, np.nan)
 
 
-def _empirical(wvm: eg.WVMatrix, p: int, q: int) -> dict[str, Any]:
+def _empirical(wvm: eg.wv.WVMatrix, p: int, q: int) -> dict[str, Any]:
     v = np.asarray(wvm.values[:, p, q], float)
     lo = np.asarray(wvm.ci_low[:, p, q], float)
     hi = np.asarray(wvm.ci_high[:, p, q], float)
@@ -137,7 +137,7 @@ def color_label(key: str) -> str:
 
 
 def grid_data(
-    wvm: eg.WVMatrix, result: Any = None, per_octave: int = PER_OCTAVE
+    wvm: eg.wv.WVMatrix, result: Any = None, per_octave: int = PER_OCTAVE
 ) -> dict[tuple[int, int], dict[str, Any]]:
     """The data of every cell of the grid (row p, column q, q <= p).
 
@@ -206,7 +206,7 @@ COV_COLUMNS = ("process", "channel_a", "channel_b", "covariance", "unit", "corre
 PARAM_COLUMNS = ("channel", "process", "parameter", "value", "unit")
 
 
-def _channel_unit(wvm: eg.WVMatrix, channel: str) -> str:
+def _channel_unit(wvm: eg.wv.WVMatrix, channel: str) -> str:
     i = wvm.channels.index(channel)
     return wvm.units[i] if i < len(wvm.units) else ""
 
@@ -400,7 +400,7 @@ class GridFigure:
         self.layout = gridplot(rows, toolbar_location="right", merge_tools=True)
         self.pane = pn.pane.Bokeh(self.layout, margin=(5, 10))
 
-    def update(self, wvm: eg.WVMatrix | None, data: dict[tuple[int, int], Any] | None) -> None:
+    def update(self, wvm: eg.wv.WVMatrix | None, data: dict[tuple[int, int], Any] | None) -> None:
         for (p, q), cell in self.cells.items():
             if wvm is None or data is None:
                 cell.update(None, "", "")

@@ -150,14 +150,15 @@ class Cancelled(Exception):
 
 
 def run_dependence_test(
-    wvm: eg.WVMatrix,
+    wvm: eg.wv.WVMatrix,
     model: MultiModel,
     *,
     B: int = 100,
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
 ) -> DependenceTest:
-    """:func:`engine.dependence_test` of every shared process (``weights="ci"``, one worker).
+    """:func:`engine.multivariate.dependence_test` of every shared process (``weights="ci"``,
+    one worker).
 
     ``progress(done, B)`` is called first with ``done = 0`` and then after every replicate;
     it may raise to stop the test.
@@ -177,7 +178,7 @@ def run_dependence_test(
         )
     if progress is not None:
         progress(0, B)  # the two observed fits come first
-    return eg.dependence_test(
+    return eg.multivariate.dependence_test(
         wvm, model, B=B, seed=seed, workers=1, weights="ci", progress=progress
     )
 

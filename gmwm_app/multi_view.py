@@ -89,7 +89,7 @@ class MultiView(TabView):
 
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
         super().__init__(state, jobs, **params)
-        self.wvm: eg.WVMatrix | None = None
+        self.wvm: eg.wv.WVMatrix | None = None
         self.result: Any = None
         self.error = ""
         self.n_fits = 0
@@ -396,7 +396,7 @@ class MultiView(TabView):
             self.grid_box.objects = [g.pane]
         return g
 
-    def _show(self, wvm: eg.WVMatrix | None, result: Any, error: str, note: str) -> None:
+    def _show(self, wvm: eg.wv.WVMatrix | None, result: Any, error: str, note: str) -> None:
         """Draw a matrix and a fit (either may be None) with a message."""
         self.wvm, self.result = wvm, result
         rob = (

@@ -62,7 +62,7 @@ class PlanView(TabView):
 
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
         super().__init__(state, jobs, **params)
-        self.plan: eg.RunPlan | None = None
+        self.plan: eg.inference.RunPlan | None = None
         self.targets = pn.widgets.TextInput(
             label="Targets (95 % intervals)",
             value=DEFAULT_TARGETS,
@@ -137,13 +137,13 @@ class PlanView(TabView):
         model, fs, unit, n_log = res.model, res.fs, res.wv.unit, int(self.state.n or res.wv.n)
         self.status.object = "Planning ..."
 
-        def work() -> tuple[eg.RunPlan, list[str]]:
+        def work() -> tuple[eg.inference.RunPlan, list[str]]:
             plan = eg.plan_run(model, fs, targets, unit=unit)
             return plan, plan.sentences(n_log)
 
         self._compute(work, lambda out: self._apply(out, n_log), key="plan")
 
-    def _apply(self, out: tuple[eg.RunPlan, list[str]], n_log: int) -> None:
+    def _apply(self, out: tuple[eg.inference.RunPlan, list[str]], n_log: int) -> None:
         plan, sentences = out
         self.plan = plan
         data: dict[str, Any] = {"hours": list(plan.hours)}

@@ -44,11 +44,11 @@ __all__ = [
 #: Rows of the comparison table by Allan-deviation slope: QN, WN, the bias-like terms (the
 #: floor BI, then GM and AR1, which have no single slope), RW, DR.
 CODE_ORDER = tuple(
-    sorted(["BI", *eg.PROCESS_TYPES], key=lambda c: SLOPES.get(c, 0.0))  # stable: BI first
+    sorted(["BI", *eg.models.PROCESS_TYPES], key=lambda c: SLOPES.get(c, 0.0))  # stable: BI first
 )
 #: Colour of each slope-method term's region (and of its slope line): the process's own colour,
 #: orange for the bias-instability floor.
-REGION_COLORS = {c: eg.PROCESS_TYPES[c].color if c != "BI" else "#FF7F0E" for c in SLOPES}
+REGION_COLORS = {c: eg.models.PROCESS_TYPES[c].color if c != "BI" else "#FF7F0E" for c in SLOPES}
 
 #: Methods in the table and on the plot: column name -> (MethodEstimate.method, colour, dash).
 METHODS: dict[str, tuple[str, str, str]] = {
@@ -245,7 +245,7 @@ def comparison_values(
     -------
     list of dict
         ``{"process", "quantity", "unit", <column>: float or None ...}``, one row per
-        datasheet quantity (``engine.datasheet``: N, Q, K, R, GM correlation time ...;
+        datasheet quantity (``engine.units.datasheet``: N, Q, K, R, GM correlation time ...;
         the slope method's bias instability B), in the order QN, WN, BI, GM, RW, DR.
     """
     rows: dict[tuple[str, str, str], dict[str, Any]] = {}
@@ -255,7 +255,7 @@ def comparison_values(
         if e is not None:
             sources.append((col, e.datasheet()))
     if truth is not None and len(truth) and truth.is_set:
-        sources.append(("truth", eg.datasheet(truth, fs, unit)))
+        sources.append(("truth", eg.units.datasheet(truth, fs, unit)))
     for col, ds in sources:
         for r in ds:
             key = (r["label"], r["quantity"], r["unit"])  # native and display rows share names

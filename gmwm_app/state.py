@@ -76,10 +76,10 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Process codes in the order of the add buttons: the engine's processes, in its order.
-PROCESS_CODES: tuple[str, ...] = tuple(eg.PROCESS_TYPES)
+PROCESS_CODES: tuple[str, ...] = tuple(eg.models.PROCESS_TYPES)
 
 #: Readable names of the processes (for the process list): each process's own.
-PROCESS_NAMES: dict[str, str] = {c: cls.display_name for c, cls in eg.PROCESS_TYPES.items()}
+PROCESS_NAMES: dict[str, str] = {c: cls.display_name for c, cls in eg.models.PROCESS_TYPES.items()}
 
 #: Sources a session can load from.
 SOURCES: tuple[str, ...] = ("demo", "upload", "path", "scenario")
@@ -238,7 +238,9 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     # ---------------------------------------------------------------------------------
     # helpers
     # ---------------------------------------------------------------------------------
-    def wv_matrix(self, lg: ImuLog, channels: Sequence[str], fs: float) -> tuple[eg.WVMatrix, str]:
+    def wv_matrix(
+        self, lg: ImuLog, channels: Sequence[str], fs: float
+    ) -> tuple[eg.wv.WVMatrix, str]:
         """:func:`gmwm_app.data.wv_matrix_of` (of the temperature-compensated signals that
         the choice :attr:`compensate` compensates), cached in the session's WV cache while
         ``lg`` is the session's log (worker-thread safe; the last :data:`N_WV_MATRICES` kept).
@@ -781,7 +783,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         if not len(self.model) or self.wv is None:
             return []
         vals = {**self._default_values(), **self.whatif_values}
-        guesses = eg.starting_values(self.model, self.wv)
+        guesses = eg.fit.starting_values(self.model, self.wv)
         out = []
         for lab, p in zip(self.model.labels, self.model.processes, strict=True):
             for name, spec in p.params().items():
@@ -789,7 +791,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                 v = vals.get(full)
                 if v is None or not SliderSpec.shows(spec.slider, v):
                     v = guesses[full]
-                unit = eg.param_unit(p.code, name, self.unit)
+                unit = eg.units.param_unit(p.code, name, self.unit)
                 out.append(SliderSpec.around(full, lab, name, unit, spec, v))
         return out
 
@@ -818,7 +820,9 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             return float(self.result.objective)
         eff = self.weights == "efficient"  # the fit's V^-1 (ci weights without a fit)
         w = self.result.omega if eff and self.result is not None else None
-        return eg.gmwm_objective(self.wv, m, ("ci" if eff else self.weights) if w is None else w)
+        return eg.fit.gmwm_objective(
+            self.wv, m, ("ci" if eff else self.weights) if w is None else w
+        )
 
     def warnings(self) -> list[str]:
         """Warnings about the fit: parameters at a bound, the fit's own warnings (an AR1/GM

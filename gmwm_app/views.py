@@ -104,13 +104,13 @@ _CORRELATED_COLORS = (
 def component_color(label: str) -> str:
     """Colour of a process curve, stable per label (``WN`` blue, ``GM_1`` orange, ...)."""
     code, _, idx = label.partition("_")
-    cls = eg.PROCESS_TYPES.get(code)
+    cls = eg.models.PROCESS_TYPES.get(code)
     if cls is not None and cls.color:
         return cls.color  # a kind that appears once has its own colour
     k = int(idx) - 1 if idx.isdigit() else 0
     # a kind that repeats (GM, AR1) takes the palette, each kind from its own offset (AR1 and
     # GM never mix, but keep their colours apart anyway)
-    repeating = [c for c, t in eg.PROCESS_TYPES.items() if not t.color]
+    repeating = [c for c, t in eg.models.PROCESS_TYPES.items() if not t.color]
     if code in repeating:
         k += 4 * repeating.index(code)
     return _CORRELATED_COLORS[k % len(_CORRELATED_COLORS)]
@@ -500,7 +500,7 @@ def parameter_rows(state: AppState) -> list[dict[str, str]]:
                     "value": format_value(float(v)) if v is not None else "",
                     "low": format_value(i.low) if i else "",
                     "high": format_value(i.high) if i else "",
-                    "unit": _pretty(eg.param_unit(p.code, name, state.unit)),
+                    "unit": _pretty(eg.units.param_unit(p.code, name, state.unit)),
                 }
             )
     res = state.result
@@ -535,7 +535,7 @@ def datasheet_rows(state: AppState) -> list[dict[str, str]]:
             "unit": _pretty(r["unit"]),
         }
         # the rows of the datasheet download (engine.units), bias-instability floor included
-        for r in eg.datasheet(
+        for r in eg.units.datasheet(
             m,
             float(state.fs),
             state.unit,

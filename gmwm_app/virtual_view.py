@@ -103,7 +103,7 @@ class VirtualView:
         self.jobs = jobs
         self._safely = safely
         self.result: Any = None
-        self.sensor: eg.VirtualSensor | None = None
+        self.sensor: eg.multivariate.VirtualSensor | None = None
         self.error = ""
         self._auto_name = "virtual"
         self.target_input = pn.widgets.TextInput(
@@ -228,11 +228,11 @@ class VirtualView:
             return
         relative = bool(self.relative.value)
 
-        def work() -> eg.VirtualSensor:
+        def work() -> eg.multivariate.VirtualSensor:
             # the sampling band only: the delta-method interval costs as much as the fit
             return eg.virtual_sensor(res, relative=relative, confidence=False, **kw)
 
-        def apply(vs: eg.VirtualSensor) -> None:
+        def apply(vs: eg.multivariate.VirtualSensor) -> None:
             if res is self.result:
                 self._show(vs, "")
 
@@ -284,7 +284,7 @@ class VirtualView:
         self.error = text
         self.alert.param.update(object=html.escape(text), visible=bool(text))
 
-    def _show(self, vs: eg.VirtualSensor | None, error: str) -> None:
+    def _show(self, vs: eg.multivariate.VirtualSensor | None, error: str) -> None:
         self.sensor = vs
         with pn.io.hold():
             self._message(error)
@@ -319,7 +319,7 @@ class VirtualView:
             self.info.object = self.info_text(vs)
 
     @staticmethod
-    def weight_rows(vs: eg.VirtualSensor) -> dict[str, list[Any]]:
+    def weight_rows(vs: eg.multivariate.VirtualSensor) -> dict[str, list[Any]]:
         """Table rows: each channel, the plain average and the virtual sensor, with their
         weights (used, and the fitted model's optimum before shrinkage) and their Allan
         deviation ``sqrt(2 WV)`` at the criterion's first level."""
@@ -337,7 +337,7 @@ class VirtualView:
         }
 
     @staticmethod
-    def info_text(vs: eg.VirtualSensor) -> str:
+    def info_text(vs: eg.multivariate.VirtualSensor) -> str:
         """The criterion, the gains out of sample, the shrinkage or the fallback to the plain
         average (and why), and the virtual model's warnings, in words."""
         rel = " (each scale relative to the average's WV)" if vs.relative else ""

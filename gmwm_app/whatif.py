@@ -149,7 +149,7 @@ class WhatIfMixin(StateFields):
         vals = {k: v for k, v in self.model.values().items() if v is not None}
         if self.wv is None:
             return vals
-        for name, v in eg.starting_values(self.model, self.wv).items():
+        for name, v in eg.fit.starting_values(self.model, self.wv).items():
             vals.setdefault(name, v)
         return vals
 

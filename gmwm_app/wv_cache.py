@@ -104,7 +104,7 @@ class WVCache:
         n_matrices: int = N_WV_MATRICES,
     ) -> None:
         self.wvs: dict[WVKey, eg.WaveletVariance] = dict(wvs or {})
-        self.matrices: dict[MatrixKey, tuple[eg.WVMatrix, str]] = {}
+        self.matrices: dict[MatrixKey, tuple[eg.wv.WVMatrix, str]] = {}
         self.n_matrices = int(n_matrices)
 
     def find(
@@ -125,7 +125,7 @@ class WVCache:
 
     def matrix(
         self, channels: Sequence[str], fs: float, compensate: str = "off"
-    ) -> tuple[eg.WVMatrix, str] | None:
+    ) -> tuple[eg.wv.WVMatrix, str] | None:
         """The cached WV/WCCV matrix of ``channels`` at ``fs`` (of the signals the
         temperature compensation choice ``compensate`` compensates) and its notice, or None."""
         return self.matrices.get((tuple(channels), float(fs), str(compensate)))
@@ -134,7 +134,7 @@ class WVCache:
         self,
         channels: Sequence[str],
         fs: float,
-        out: tuple[eg.WVMatrix, str],
+        out: tuple[eg.wv.WVMatrix, str],
         compensate: str = "off",
     ) -> None:
         """Keep a WV/WCCV matrix and its notice; the oldest beyond :attr:`n_matrices` go."""

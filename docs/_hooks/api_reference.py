@@ -1,5 +1,6 @@
-"""MkDocs hook: the API reference page is generated from ``engine.__all__``, the one list of
-public names (``engine/__init__.py``). No name is written by hand anywhere in docs/.
+"""MkDocs hook: the API reference page is generated from ``engine.__all__`` (the top level) and
+``engine.MOVED`` (the names of the subpackages a user reaches as ``eg.<subpackage>.<name>``),
+declared once in ``engine/__init__.py``. No name is written by hand anywhere in docs/.
 
 The page ``api.md`` holds the marker ``<!-- engine-api -->``; this hook replaces it with one
 mkdocstrings block (``::: path``) per public name, grouped by the subpackage that defines it,
@@ -28,16 +29,16 @@ def _summary(module: str) -> str:
     return ROLE_TEXT.sub(r"`\1`", para)
 
 
-def _defining_path(engine: Any, name: str) -> str:
-    """Dotted path at which mkdocstrings finds ``engine.<name>``."""
-    obj = getattr(engine, name)
+def _defining_path(engine: Any, name: str, home: str = "") -> str:
+    """Dotted path at which mkdocstrings finds ``engine.<name>`` (``engine.<home>.<name>``)."""
+    obj = getattr(importlib.import_module(f"engine.{home}") if home else engine, name)
     module = getattr(obj, "__module__", None)
     qualname = getattr(obj, "__qualname__", None)
     if isinstance(module, str) and module.startswith("engine.") and qualname == name:
         return f"{module}.{name}"
     # a constant (dict, tuple, float, str): the module that engine's table of names gives, else
     # the shortest engine module that holds this very object
-    known = getattr(engine, "API", {}).get(name)
+    known = getattr(engine, "API", {}).get(name) or (f"engine.{home}" if home else None)
     if known is None:
         holders = [
             m
@@ -48,21 +49,31 @@ def _defining_path(engine: Any, name: str) -> str:
     return f"{known}.{name}"
 
 
-def api_markdown() -> str:
-    """The Markdown of the API reference, one ``:::`` block per name of ``engine.__all__``."""
-    engine = importlib.import_module("engine")
+def _groups(engine: Any, names: dict[str, str]) -> list[str]:
+    """One section per subpackage: its summary, then one ``:::`` block per name."""
     groups: dict[str, list[tuple[str, str]]] = {}
-    for name in engine.__all__:
+    for name, home in names.items():
         if name.startswith("__"):
             continue  # __version__: a string, stated in the page's text
-        path = _defining_path(engine, name)
-        sub = ".".join(path.split(".")[:2])
+        path = _defining_path(engine, name, home)
+        sub = f"engine.{home}" if home else ".".join(path.split(".")[:2])
         groups.setdefault(sub, []).append((name, path))
     out: list[str] = []
     for sub in sorted(groups):
-        out.append(f"## `{sub}`\n\n{_summary(sub)}\n")
+        out.append(f"### `{sub}`\n\n{_summary(sub)}\n")
         for _name, path in sorted(groups[sub], key=lambda t: t[0].lower()):
-            out.append(f"::: {path}\n    options:\n      heading_level: 3\n")
+            out.append(f"::: {path}\n    options:\n      heading_level: 4\n")
+    return out
+
+
+def api_markdown() -> str:
+    """The Markdown of the API reference: the top level (``engine.__all__``), then the names
+    of the subpackages that ``engine.MOVED`` lists (the old top level), each where it lives."""
+    engine = importlib.import_module("engine")
+    out = ["## The top level: `import engine as eg`\n"]
+    out += _groups(engine, dict.fromkeys(engine.__all__, ""))
+    out.append("## In the subpackages: `eg.fit`, `eg.wv`, `eg.formats` ...\n")
+    out += _groups(engine, dict(engine.MOVED))
     return "\n".join(out)
 
 

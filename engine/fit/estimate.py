@@ -95,7 +95,7 @@ class MethodEstimate:
         return out
 
     def datasheet(self) -> list[dict[str, Any]]:
-        """Datasheet rows (see :func:`engine.datasheet`), plus the bias instability if any."""
+        """Datasheet rows (see :func:`engine.units.datasheet`), plus the bias instability if any."""
         return datasheet(self.model, self.fs, self.unit, extras=self.extras)
 
     def summary(self) -> str:

@@ -300,7 +300,7 @@ def ieee_table(res: _Fit, *, level: float = 0.95, vmat: np.ndarray | None = None
 
     >>> import numpy as np
     >>> import engine as eg
-    >>> spec = eg.parse_datasheet("arw=0.3 deg/sqrt(h), rrw=3 deg/h/sqrt(h)")
+    >>> spec = eg.inference.parse_datasheet("arw=0.3 deg/sqrt(h), rrw=3 deg/h/sqrt(h)")
     >>> x = spec.model(100.0, "deg/s").simulate(2**17, rng=np.random.default_rng(2), fs=100.0)
     >>> t = eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0, unit="deg/s"), "WN+RW").ieee
     >>> n = t["N"]

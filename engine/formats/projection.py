@@ -606,7 +606,7 @@ def project(
     >>> m = eg.parse_model("WN(1e-6) + GM(beta=0.5, sigma2_gm=1e-8)")
     >>> x = m.simulate(2**15, rng=np.random.default_rng(3), fs=100.0)
     >>> fit = eg.fit_gmwm(eg.wavelet_variance(x, fs=100.0, unit="rad/s"), "WN + GM")
-    >>> p = eg.project(fit, "WN+RW")
+    >>> p = eg.formats.project(fit, "WN+RW")
     >>> p.assignment
     {'GM': 'bias (T_c 1.052 s >= filter step)', 'WN': 'WN'}
     >>> for name, q in p.params.items():

@@ -751,7 +751,7 @@ def check_datasheet(
 
     >>> import numpy as np
     >>> import engine as eg
-    >>> spec = eg.parse_datasheet("arw=0.3 deg/sqrt(h), rrw=3 deg/h/sqrt(h)")
+    >>> spec = eg.inference.parse_datasheet("arw=0.3 deg/sqrt(h), rrw=3 deg/h/sqrt(h)")
     >>> x = spec.model(100.0, "rad/s").simulate(2**15, rng=np.random.default_rng(1), fs=100.0)
     >>> wv = eg.wavelet_variance(x, fs=100.0, unit="rad/s")
     >>> s = eg.check_datasheet(wv, spec).summary()

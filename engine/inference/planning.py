@@ -535,7 +535,8 @@ def plan_run(
     A tactical-grade gyro (ARW 0.01 deg/sqrt(h), RRW 0.1 deg/h/sqrt(h)) at 200 Hz:
 
     >>> import engine as eg
-    >>> m = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(200.0, "deg/s")
+    >>> spec = eg.inference.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)")
+    >>> m = spec.model(200.0, "deg/s")
     >>> p = plan_run(m, 200.0, "K within 10 %, N within 1 %", unit="deg/s")
     >>> print(f"{p.required['K'] / 200 / 3600:.2g} h; {p.required['N'] / 200 / 60:.2g} min")
     """

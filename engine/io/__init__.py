@@ -43,6 +43,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
         "write_imu_bag",
     ),
     "save": ("save_log",),
+    "segments": ("still_segments", "with_segments"),
     "timecheck": (
         "GAP_FACTOR",
         "TimeEvent",
@@ -74,6 +75,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
         write_imu_bag,
     )
     from .save import save_log  # noqa: F401
+    from .segments import still_segments, with_segments  # noqa: F401
     from .timecheck import (  # noqa: F401
         GAP_FACTOR,
         TimeEvent,

@@ -146,7 +146,7 @@ def fit_mgmwm(
     Parameters
     ----------
     data : WVMatrix, ndarray (N, k), mapping of name to series, or ImuLog
-        The empirical WV/WCCV matrix (from :func:`engine.wv_matrix`), or the raw channels
+        The empirical WV/WCCV matrix (from :func:`engine.wv.wv_matrix`), or the raw channels
         (the matrix is computed for the model's channels, in the model's order).
     model : MultiModel
         Structure (values, if any, are extra starting points).

@@ -7,6 +7,7 @@
   variance.
 * :mod:`engine.wv.stream`: the WV of logs larger than memory, read in blocks.
 * :mod:`engine.wv.wccv`: the WCCV of two channels and the k x k WV/WCCV matrix.
+* :mod:`engine.wv.pooled`: the WV of several segments of one log, pooled.
 
 The streamed WV and the WCCV are imported on first use (PEP 562): the WCCV needs
 ``scipy.special`` (about 0.1 s), which ``import engine`` does not pay for.
@@ -37,10 +38,12 @@ _LAZY: dict[str, tuple[str, ...]] = {
     "stream": ("SeriesSource", "open_series", "wavelet_variance_stream"),
     "wccv": ("WaveletCrossCovariance", "WVMatrix", "wavelet_cross_covariance", "wv_matrix"),
     "allan": ("AllanVariance", "allan_variance"),
+    "pooled": ("pooled_wavelet_variance",),
 }
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of _LAZY)
     from .allan import AllanVariance, allan_variance  # noqa: F401
+    from .pooled import pooled_wavelet_variance  # noqa: F401
     from .stream import SeriesSource, open_series, wavelet_variance_stream  # noqa: F401
     from .wccv import WaveletCrossCovariance, WVMatrix, wavelet_cross_covariance, wv_matrix  # noqa: F401
 

@@ -40,7 +40,7 @@ def test_the_app_adds_fits_and_slides_an_ma1(app_state: AppState) -> None:
     assert s.set_whatif_value("MA1.theta", -0.5), s.error
     assert s.display_model().values()["MA1.theta"] == -0.5
     assert not s.set_whatif_value("MA1.theta", 1.5) and "theta" in s.error
-    assert component_color("MA1") == eg.PROCESS_TYPES["MA1"].color
+    assert component_color("MA1") == eg.models.PROCESS_TYPES["MA1"].color
 
 
 def test_the_app_refuses_ma1_beside_white_noise_and_keeps_the_session(

@@ -288,7 +288,7 @@ def test_temperature_switch_refits_on_the_raw_wv(
     x = eg.parse_model("WN(sigma2=1e-4)+RW(gamma2=1e-10)").simulate(n, fs=fs, rng=5)
     path = tmp_path / "thermal.csv"
     units = {"gyro_x": "deg/s", "temperature": "degC"}
-    eg.save_log(path, {"gyro_x": x + 2e-3 * temp, "temperature": temp}, fs, units=units)
+    eg.io.save_log(path, {"gyro_x": x + 2e-3 * temp, "temperature": temp}, fs, units=units)
 
     t = new_tab().open(server + "?channel=gyro_x&model=WN%2BRW")
     t.page.locator("input[type=file]").first.set_input_files(str(path))

@@ -20,7 +20,7 @@ def _knocked_log(path: Path, n: int, knock_at: int, seed: int) -> Path:
     knocked = clean.copy()
     knocked[knock_at : knock_at + 30] += rng.normal(size=30)
     units = {"gx": "deg/s", "gy": "deg/s"}
-    eg.save_log(path, {"gx": clean, "gy": knocked}, 100.0, units=units)
+    eg.io.save_log(path, {"gx": clean, "gy": knocked}, 100.0, units=units)
     return path
 
 

@@ -39,8 +39,8 @@ def open_view(app: Any, show: bool = True) -> MultiView:
     return v
 
 
-def direct_fit(lg: Any, chans: list[str], spec: str, shared: dict) -> eg.MGMWMResult:
-    wvm = eg.wv_matrix(lg, channels=chans)
+def direct_fit(lg: Any, chans: list[str], spec: str, shared: dict) -> eg.multivariate.MGMWMResult:
+    wvm = eg.wv.wv_matrix(lg, channels=chans)
     return eg.fit_mgmwm(wvm, MultiModel(chans, spec, shared=shared))
 
 
@@ -308,7 +308,7 @@ def test_too_short_and_uneven_logs_are_messages(app: Any) -> None:
     lg = ImuLog(channels={"a": rng.standard_normal(5000), "b": rng.standard_normal(3000)}, fs=10.0)
     assert app.state.install(LoadedData(lg, "path", "uneven.h5"))
     assert v.notice.visible and "truncated to the shortest, 3,000 samples" in v.notice.object
-    ref = eg.wv_matrix({"a": lg.channels["a"][:3000], "b": lg.channels["b"]}, fs=10.0)
+    ref = eg.wv.wv_matrix({"a": lg.channels["a"][:3000], "b": lg.channels["b"]}, fs=10.0)
     np.testing.assert_allclose(v.wvm.values, ref.values, rtol=1e-12)
 
 
@@ -331,7 +331,7 @@ def test_pure_helpers() -> None:
     assert covariance_rows(None)["covariance"] == []
     # grid_data without a fit: the empirical part only; an interval straddling 0
     rng = np.random.default_rng(3)
-    wvm = eg.wv_matrix(rng.standard_normal((4096, 2)))
+    wvm = eg.wv.wv_matrix(rng.standard_normal((4096, 2)))
     d = grid_data(wvm)
     assert sorted(d) == [(0, 0), (1, 0), (1, 1)] and d[(1, 0)]["components"] == []
     off = d[(1, 0)]["emp"]
@@ -379,7 +379,9 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
     v = open_view(app)
     v.controls.spec_input.value = "WN+RW"  # RW shared by the three gyros (the default marks)
     mm = MultiModel(GYROS, "WN+RW", shared=["RW"])
-    ref = eg.dependence_test(eg.wv_matrix(app.state.log, channels=GYROS), mm, B=4, seed=0)
+    ref = eg.multivariate.dependence_test(
+        eg.wv.wv_matrix(app.state.log, channels=GYROS), mm, B=4, seed=0
+    )
     seen: list[int] = []
     assert v.dep.start(4, observer=lambda d, t: seen.append(d))
     assert seen == [0, 1, 2, 3, 4] and not v.dep.running
@@ -390,7 +392,7 @@ def test_dependence_test_equals_the_engine_and_can_be_cancelled(app: Any) -> Non
     np.testing.assert_allclose(t.bootstrap, ref.bootstrap, rtol=1e-9)
     # independently of dependence_test: the statistic is the drop of the objective that the
     # shared covariance brings, and the p-value counts the bootstrap differences above it
-    wvm = eg.wv_matrix(app.state.log, channels=GYROS)
+    wvm = eg.wv.wv_matrix(app.state.log, channels=GYROS)
     q1 = eg.fit_mgmwm(wvm, mm.cleared(), weights="ci").objective
     q0 = eg.fit_mgmwm(wvm, mm.without_dependence().cleared(), weights="ci").objective
     assert t.statistic == pytest.approx(q0 - q1, rel=1e-9, abs=1e-12)

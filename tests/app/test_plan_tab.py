@@ -54,7 +54,9 @@ def test_a_bad_target_or_no_fit_is_a_message_not_an_error(app: Any) -> None:
 
 
 def test_a_twenty_minute_log_gives_no_rate_random_walk_sentence() -> None:
-    m = eg.parse_datasheet("arw=0.15 deg/sqrt(h), rrw=2 deg/h/sqrt(h)").model(100.0, "deg/s")
+    m = eg.inference.parse_datasheet("arw=0.15 deg/sqrt(h), rrw=2 deg/h/sqrt(h)").model(
+        100.0, "deg/s"
+    )
     plan = eg.plan_run(m, 100.0, "K within 10 %", unit="deg/s")
     (line,) = plan.sentences(20 * 60 * 100)
     assert "needs 63.8 h of log" in line and "this log (20 min)" in line

@@ -144,7 +144,7 @@ def test_a_drift_too_strong_for_a_p_value_says_n_c_everywhere(app: Any, tmp_path
     x = eg.parse_model("WN(sigma2=1)+RW(gamma2=1e-4)+DR(omega=3e-2)").simulate(
         2**14, fs=100.0, rng=np.random.default_rng(6)
     )
-    path = eg.save_log(tmp_path / "drift.h5", {"gyro_x": x}, fs=100.0, units={"gyro_x": "deg/s"})
+    path = eg.io.save_log(tmp_path / "drift.h5", {"gyro_x": x}, fs=100.0, units={"gyro_x": "deg/s"})
     v, s = app.selection, app.state
     assert s.load_path(path), s.error
     v.start_ranking("WN+RW+DR")

@@ -318,7 +318,7 @@ def test_page_export_menu_every_format_from_the_fitted_channels(app_demo: Path) 
     # need it (K may then go down: the least inflation trades; the engine's bound is tested
     # against formulas elsewhere)
     for r, kind, f in ((gyro, "gyroscope", rad), (accel, "accelerometer", 1.0)):
-        p = eg.project(r, "openvins", ci=None)
+        p = eg.formats.project(r, "openvins", ci=None)
         assert d[f"{kind}_noise_density"] == pytest.approx(2 * p.value("N"), rel=1e-9)
         assert d[f"{kind}_random_walk"] == pytest.approx(2 * p.value("K"), rel=1e-9)
         assert d[f"{kind}_noise_density"] >= 2 * f * math.sqrt(wn[r].sigma2 / fs) * (1 - 1e-9)
@@ -332,7 +332,7 @@ def test_page_export_menu_every_format_from_the_fitted_channels(app_demo: Path) 
     px4 = sp.format_download.callback().getvalue()
     line = next(ln for ln in px4.splitlines() if "EKF2_GYR_NOISE" in ln and not ln.startswith("#"))
     value = float(line.split("\t")[3])  # QGC format: vehicle, component, name, value, type
-    n250 = eg.project(gyro, "px4", fs_filter=250.0, ci=None).value("N")
+    n250 = eg.formats.project(gyro, "px4", fs_filter=250.0, ci=None).value("N")
     assert value == pytest.approx(n250 * math.sqrt(250.0), 1e-9)  # per step at 250 Hz
     # new data forget the fits of the old: only the channel refitted on the new log is left
     s.load_demo()

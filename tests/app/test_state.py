@@ -508,7 +508,7 @@ def test_page_without_server(app_demo: Path) -> None:
     assert list(app.channel_select.options) == CHANNELS
     # one button per registered process (the built-in six and any added class)
     assert {"WN", "QN", "RW", "DR", "AR1", "GM"} <= set(app.model_panel.add_buttons)
-    assert set(app.model_panel.add_buttons) == set(eg.PROCESS_TYPES)
+    assert set(app.model_panel.add_buttons) == set(eg.models.PROCESS_TYPES)
     assert all(f"+ {code}" == b.label for code, b in app.model_panel.add_buttons.items())
     app.model_panel.add_buttons["GM"].clicks += 1
     app.model_panel.add_buttons["WN"].clicks += 1

@@ -30,14 +30,16 @@ def logs(tmp_path_factory):
     temp = 25 + 10 * (1 - np.exp(-t / 300)) + 2 * np.sin(2 * np.pi * t / 600)
     x = eg.parse_model(SPEC).simulate(N, fs=FS, rng=21)
     units = {"gyro_x": "deg/s", "temperature": "degC"}
-    eg.save_log(d / "thermal.csv", {"gyro_x": x + C * temp, "temperature": temp}, FS, units=units)
-    eg.save_log(d / "plain.csv", {"gyro_x": x + C * temp}, FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(
+        d / "thermal.csv", {"gyro_x": x + C * temp, "temperature": temp}, FS, units=units
+    )
+    eg.io.save_log(d / "plain.csv", {"gyro_x": x + C * temp}, FS, units={"gyro_x": "deg/s"})
     y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=22)
     both = {"gyro_x": x + C * temp, "gyro_y": y - C * temp, "temperature": temp}
     units2 = {**units, "gyro_y": "deg/s"}
-    eg.save_log(d / "thermal2.csv", both, FS, units=units2)
+    eg.io.save_log(d / "thermal2.csv", both, FS, units=units2)
     flat = {"gyro_x": x, "temperature": np.full(N, 25.0)}  # a constant temperature
-    eg.save_log(d / "flat.csv", flat, FS, units=units)
+    eg.io.save_log(d / "flat.csv", flat, FS, units=units)
     return d, x, temp
 
 
@@ -297,7 +299,7 @@ def test_a_sensitivity_not_distinguishable_from_0_is_shown_not_applied(tmp_path)
     y = eg.parse_model(SPEC).simulate(N, fs=FS, rng=25)  # p = 0.69 (seed 24: 0.036)
     units = {**units, "gyro_y": "deg/s"}
     chans = {"gyro_x": x, "gyro_y": y, "temperature": temp}
-    eg.save_log(tmp_path / "ramp.csv", chans, FS, units=units)
+    eg.io.save_log(tmp_path / "ramp.csv", chans, FS, units=units)
     s = AppState()
     assert s.load_path(tmp_path / "ramp.csv") and s.set_model("WN+RW"), s.error
     assert s.temperature_channel == "temperature" and s.wv_raw is None
@@ -327,7 +329,7 @@ def _ramp(path):
     temp = 30.1 + 0.5 * (1 - np.exp(-t / 900)) + np.random.default_rng(8).normal(0, 0.01, N)
     x = eg.parse_model(SPEC).simulate(N, fs=FS, rng=23)
     units = {"gyro_x": "deg/s", "temperature": "degC"}
-    eg.save_log(path, {"gyro_x": x, "temperature": temp}, FS, units=units)
+    eg.io.save_log(path, {"gyro_x": x, "temperature": temp}, FS, units=units)
     return path
 
 
@@ -412,7 +414,7 @@ def _heater_log(path) -> None:
     temp = 25 + 10 * (1 - np.exp(-t / 300)) + 2 * np.sign(np.sin(2 * np.pi * t / 600))
     x = eg.parse_model("WN(1e-6)+RW(1e-12)").simulate(n, rng=np.random.default_rng(1))
     units = {"gyro_x": "rad/s", "temperature": "degC"}
-    eg.save_log(path, {"gyro_x": x + 2e-4 * (temp - 25), "temperature": temp}, FS, units=units)
+    eg.io.save_log(path, {"gyro_x": x + 2e-4 * (temp - 25), "temperature": temp}, FS, units=units)
 
 
 def test_filter_export_of_a_compensated_fit_reads_the_compensated_signal(tmp_path):

@@ -46,7 +46,7 @@ def array_log(tmp_path: Path) -> Path:
     )
     x = truth.simulate(1 << 14, fs=FS, rng=3)
     p = tmp_path / "array.h5"
-    eg.save_log(
+    eg.io.save_log(
         p, {"imu_a": x[:, 0], "imu_b": x[:, 1]}, fs=FS, units={"imu_a": "deg/s", "imu_b": "deg/s"}
     )
     return p
@@ -204,7 +204,7 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
                     rows[cells[0]] = cells[1:]
                 return rows
 
-            def shows(vs: eg.VirtualSensor) -> bool:
+            def shows(vs: eg.multivariate.VirtualSensor) -> bool:
                 """The table shows the weights of ``vs`` as the view formats them (0.0000): the
                 weights used, the fitted model's optimum, the data's own."""
                 rows = table()

@@ -259,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
                     )
 
                 # (c) a 1e6-sample channel from a server path, until its WV is drawn
-                n_levels = eg.default_levels(1_000_000)
+                n_levels = eg.wv.default_levels(1_000_000)
                 loads = []
                 for _ in range(3):
                     pg.page.get_by_placeholder("/path/to/log.h5 (press Enter)").fill(str(big))

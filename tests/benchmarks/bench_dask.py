@@ -132,7 +132,7 @@ def main() -> None:
         for u in range(args.logs):
             rng = np.random.default_rng(u)
             data = {c: truth.simulate(n, fs=100.0, rng=rng) for c in chans}
-            eg.save_log(
+            eg.io.save_log(
                 Path(d) / f"unit{u:02d}.h5", data, 100.0, units=dict.fromkeys(chans, "deg/s")
             )
         paths = [str(Path(d) / "unit*.h5")]

@@ -218,7 +218,7 @@ def exports(
     """Per (unit, axis), the filter's N and K: the default exports of the units ``src`` (the
     largest over them, or with ``--own`` each unit's own), at filter ``rate`` and horizon."""
     proj = {
-        (u, ch): eg.project(
+        (u, ch): eg.formats.project(
             fits[(u, ch)],
             "WN+RW",
             fs_filter=rate,

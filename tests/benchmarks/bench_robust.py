@@ -51,7 +51,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     n = args.n
     x = rng.standard_normal(n) + 1e-3 * rng.standard_normal(n).cumsum() + 1e-6 * np.arange(n)
-    levels = eg.default_levels(n)
+    levels = eg.wv.default_levels(n)
     eg.wavelet_variance(x[:100_000], robust=True)  # warm caches (SciPy import, constants)
     t_cl, t_rb = [], []
     for _ in range(args.repeat):  # interleaved, so both see the same machine load

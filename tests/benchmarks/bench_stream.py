@@ -2,7 +2,7 @@
 
 Writes a log of ``--n`` samples (default 1e8: 800 MB as float64) to a ``.npy`` or HDF5 file in
 the temporary directory, in chunks (the generator itself holds a few MB), then computes the
-classical Haar WV of every level with :func:`engine.wavelet_variance_stream` in a fresh
+classical Haar WV of every level with :func:`engine.wv.wavelet_variance_stream` in a fresh
 subprocess and reports its wall time and peak resident memory (``resource.getrusage``
 ``ru_maxrss`` of that subprocess, which includes the interpreter and the imports, and on
 Linux also whatever the parent held when it forked, so it is an upper bound; the value right

@@ -51,7 +51,7 @@ def run_array() -> dict[str, Any]:
         (MGMWMResult without shared process), ``best`` (label of the lowest objective).
     """
     log = eg.load_log(ADIS)
-    wvm = eg.wv_matrix(log, channels=CHANNELS)
+    wvm = eg.wv.wv_matrix(log, channels=CHANNELS)
     fits = {}
     for lab in ("AR1_1", "AR1_2"):
         fits[lab] = mv.fit_mgmwm(wvm, mv.MultiModel(CHANNELS, MODEL, shared=[lab]))

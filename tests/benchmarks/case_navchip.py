@@ -43,7 +43,7 @@ MODEL = "QN+WN+2*GM+RW+DR"  # the paper's model (sec. V)
 #: NavChip datasheet (the paper's ref. [19]), gyroscope
 DATASHEET_ARW_DEG_S_RTHZ = 0.003  # (deg/s)/sqrt(Hz)  (= 0.18 deg/sqrt(h))
 DATASHEET_BI_DEG_H = 10.0  # deg/h, in-run bias instability
-DATASHEET = eg.DatasheetSpec.from_values(
+DATASHEET = eg.inference.DatasheetSpec.from_values(
     {"arw": (DATASHEET_ARW_DEG_S_RTHZ, "deg/s/sqrt(Hz)"), "bi": (DATASHEET_BI_DEG_H, "deg/h")},
     source="NavChip product brief",
 )

@@ -43,7 +43,7 @@ def run() -> dict[str, Any]:
     for k in range(1, 7):
         log = eg.load_log(DATA / f"adis16405_imu{k}.h5", channel="gyro_x")
         data[f"IMU {k}"] = log["gyro_x"]
-    wvm = eg.wv_matrix(data, fs=log.fs, units=["deg/s"] * 6)
+    wvm = eg.wv.wv_matrix(data, fs=log.fs, units=["deg/s"] * 6)
     res = eg.fit_mgmwm(wvm, eg.MultiModel(list(data), MODEL, shared=SHARED))
     return {
         "data": data,

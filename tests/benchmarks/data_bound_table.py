@@ -44,7 +44,7 @@ def main() -> None:
             fit = eg.fit_gmwm(wv, "WN+RW")
             tau = np.asarray(wv.tau_samples, float)
             for data in ("none", "low"):
-                p = eg.project(fit, "WN+RW", unit="", ci=None, data=data)
+                p = eg.formats.project(fit, "WN+RW", unit="", ci=None, data=data)
                 fw = p.value("N") ** 2 * log.fs / tau + p.value("K") ** 2 / log.fs * (
                     tau**2 + 2
                 ) / (12 * tau)
@@ -66,8 +66,8 @@ def tails() -> None:
         for ch in log.names:
             tf = tail_factors(log[ch], fs=log.fs, channel=ch)
             fit = eg.fit_gmwm(log.wavelet_variance(ch), "WN+RW")
-            a = eg.project(fit, "WN+RW", unit="", ci=None)
-            b = eg.project(fit, "WN+RW", unit="", ci=None, tails=tf)
+            a = eg.formats.project(fit, "WN+RW", unit="", ci=None)
+            b = eg.formats.project(fit, "WN+RW", unit="", ci=None, tails=tf)
             f, t = tf.largest()
             mid = " / ".join(f"{v:.2f}" for v in tf.at(np.array([1024.0, 2048.0, 4096.0])))
             print(

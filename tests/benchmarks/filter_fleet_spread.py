@@ -61,7 +61,7 @@ def unit_exports(
         for ch in chans:
             fit = eg.fit_gmwm(log.wavelet_variance(ch), model)
             tf = tail_factors(log[ch], fs=log.fs, channel=ch)
-            p = eg.project(fit, "WN+RW", unit="", ci=None, tails=tf)
+            p = eg.formats.project(fit, "WN+RW", unit="", ci=None, tails=tf)
             out[(u, ch)] = FilterNoise(p.value("N"), p.value("K"), f"unit {u + 1}")
     return out
 

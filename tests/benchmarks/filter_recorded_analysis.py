@@ -113,7 +113,9 @@ def cells(kind: str, fixes: list[float]) -> None:
         out = {}
         for ch in chans:
             tails = None if level is None else tail_factors(logs[0][ch], fs=FS, level=level)
-            p = eg.project(fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None, tails=tails, **kw)
+            p = eg.formats.project(
+                fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None, tails=tails, **kw
+            )
             out[ch] = FilterNoise(p.value("N"), p.value("K"), ch)
         return out
 
@@ -176,8 +178,8 @@ def quantiles_table() -> None:
         for ch in CHANNELS:
             cells = []
             for j in range(1, 16):
-                ratio95 = quantile_factor(eg.haar_coefficients(log[ch], j), 0.95, None)[0]
-                ratio99 = quantile_factor(eg.haar_coefficients(log[ch], j), 0.99, None)[0]
+                ratio95 = quantile_factor(eg.wv.haar_coefficients(log[ch], j), 0.95, None)[0]
+                ratio99 = quantile_factor(eg.wv.haar_coefficients(log[ch], j), 0.99, None)[0]
                 cells.append(f"{j}: {ratio95:.2f} / {ratio99:.2f}")
             print(f"| {i} | {ch} | " + ", ".join(cells) + " |")
 
@@ -280,7 +282,7 @@ def own(kind: str, t_fix: float, skip_s: float = 1000.0) -> None:
         for u, log in enumerate(logs):
             for ch in chans:
                 fit = eg.fit_gmwm(log.wavelet_variance(ch), model)
-                p = eg.project(fit, "WN+RW", unit="", ci=None, horizon_s=t_fix,
+                p = eg.formats.project(fit, "WN+RW", unit="", ci=None, horizon_s=t_fix,
                                tails=tail_factors(log[ch], fs=FS, channel=ch))  # fmt: skip
                 hz[(u, ch)] = run(errs[(u, ch)], FilterNoise(p.value("N"), p.value("K"), ""), u)
         print(cell(f"horizon {t_fix:g} s (default: the log)", "units 2-6", hz, others))
@@ -351,7 +353,7 @@ def horizon(kind: str, t_fix: float, model: str) -> None:
         for tl in (True, False):
             nz = {}
             for ch in chans:
-                p = eg.project(fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None,
+                p = eg.formats.project(fits[ch], "WN+RW", fs_filter=FS, unit="", ci=None,
                                tails=tails[ch] if tl else None, horizon_s=h)  # fmt: skip
                 nz[ch] = FilterNoise(p.value("N"), p.value("K"), ch)
             cells = []

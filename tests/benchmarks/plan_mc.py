@@ -55,7 +55,7 @@ def settings() -> list[tuple[str, eg.Model, float, str, PlanTarget, str]]:
     out = []
     # the RW's precision depends on the duration, not on fs: the tactical gyro is planned at
     # 20 Hz so that 200 logs of the hours its K needs stay affordable here
-    tactical = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(
+    tactical = eg.inference.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(
         20.0, "deg/s"
     )
     out.append(("tactical gyro", tactical, 20.0, "deg/s", PlanTarget("N", 0.005), "WN+RW"))
@@ -248,7 +248,7 @@ def rules_table() -> str:
     def rel(q) -> float:
         return max(q.high / q.value - 1.0, 1.0 - q.low / q.value)
 
-    tact = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)")
+    tact = eg.inference.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)")
     models = [("tactical gyro (WN+RW)", tact.model(200.0, "deg/s"), 200.0, "deg/s")]
     if (DATA / "adis16405_imu1.h5").exists():
         log = eg.load_log(DATA / "adis16405_imu1.h5")

@@ -153,7 +153,7 @@ def ranked_logs(
     return out
 
 
-def score(truth_spec: str, n: int, chosen: list[eg.Candidate], rankings: list) -> dict:
+def score(truth_spec: str, n: int, chosen: list[eg.inference.Candidate], rankings: list) -> dict:
     """The columns of the table for one choice per log."""
     truth = eg.parse_model(truth_spec)
     have = structure(truth)
@@ -179,7 +179,7 @@ def score(truth_spec: str, n: int, chosen: list[eg.Candidate], rankings: list) -
     return o
 
 
-def choices(sel: SelectionResult) -> dict[str, eg.Candidate]:
+def choices(sel: SelectionResult) -> dict[str, eg.inference.Candidate]:
     """The three choices scored for one ranking."""
     first = sel.candidates[0]
     return {
@@ -189,7 +189,7 @@ def choices(sel: SelectionResult) -> dict[str, eg.Candidate]:
     }
 
 
-def true_fit(sel: SelectionResult, truth_spec: str) -> eg.Candidate | None:
+def true_fit(sel: SelectionResult, truth_spec: str) -> eg.inference.Candidate | None:
     """The candidate with the true structure (a reference, not a choice: its fit on the log,
     actionable or not; None when it is not a candidate)."""
     spec = eg.parse_model(truth_spec).cleared().spec()

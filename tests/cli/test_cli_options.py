@@ -172,7 +172,7 @@ def test_old_and_new_spellings_give_the_same_result(tmp_path, capsys) -> None:
     rng = np.random.default_rng(5)
     x = np.cumsum(rng.normal(0, 1e-3, 20000)) + rng.normal(0, 0.1, 20000)
     f = tmp_path / "x.h5"
-    eg.save_log(f, {"gyro_x": x}, 100.0, units={"gyro_x": "deg/s"})
+    eg.io.save_log(f, {"gyro_x": x}, 100.0, units={"gyro_x": "deg/s"})
     assert main(["wv", str(f), "--json", "--alpha", "0.1"]) == 0
     out, err = capsys.readouterr()
     assert err == "gmwm wv: warning: --alpha is deprecated: use --confidence 0.9 (= 1 - alpha)\n"
@@ -196,7 +196,7 @@ def test_virtual_tau_and_its_old_spelling(tmp_path, capsys) -> None:
     for k in range(2):
         f = tmp_path / f"s{k}.h5"
         x = rng.normal(0, 0.1 * (k + 1), 8192) + np.cumsum(rng.normal(0, 1e-3, 8192))
-        eg.save_log(f, {"gyro_x": x}, 100.0, units={"gyro_x": "deg/s"})
+        eg.io.save_log(f, {"gyro_x": x}, 100.0, units={"gyro_x": "deg/s"})
         files.append(str(f))
     argv = ["virtual", *files, "--model", "WN+RW", "--shared", "WN,RW", "--json"]
     assert main([*argv, "--scale", "1.28"]) == 0

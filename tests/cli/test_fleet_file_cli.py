@@ -91,7 +91,7 @@ def test_batch_export_reads_the_logs_without_the_warmup_it_dropped(tmp_path, cap
         gyro = eg.parse_model("WN(1e-6) + RW(1e-12)").simulate(n, rng=rng)
         accel = eg.parse_model("WN(1e-4) + RW(1e-9)").simulate(n, rng=rng)
         path = tmp_path / f"unit{seed}.h5"
-        eg.save_log(
+        eg.io.save_log(
             path, {"gyro_x": gyro + 1e-2 * np.exp(-t / 60.0), "accel_x": accel}, fs,
             units={"gyro_x": "rad/s", "accel_x": "m/s^2"},
         )  # fmt: skip

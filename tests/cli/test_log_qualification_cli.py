@@ -26,8 +26,8 @@ def files(tmp_path_factory):
     warm = x + 0.5 * np.exp(-t / 30.0)
     shock = x.copy()
     shock[60_000:60_030] += rng.normal(size=30)
-    eg.save_log(d / "warm.h5", {"gyro_x": warm}, FS, units={"gyro_x": "deg/s"})
-    eg.save_log(d / "shock.h5", {"gyro_x": shock}, FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(d / "warm.h5", {"gyro_x": warm}, FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(d / "shock.h5", {"gyro_x": shock}, FS, units={"gyro_x": "deg/s"})
     temp = 25 + 10 * (1 - np.exp(-t / 200)) + 2 * np.sin(2 * np.pi * t / 300)
     y = x + 2e-3 * temp  # 7.2 deg/h per degC
     csv = d / "thermal.csv"
@@ -289,7 +289,7 @@ def test_channels_fit_runs_the_log_check_and_drops_the_warmup(files, tmp_path, c
     y = x.copy()
     y[30_000:30_030] += np.random.default_rng(10).normal(size=30)
     path = tmp_path / "two.h5"
-    eg.save_log(
+    eg.io.save_log(
         path,
         {"gyro_x": log["gyro_x"], "gyro_y": y},
         FS,

@@ -41,7 +41,7 @@ def thermal(tmp_path_factory):
         c: m.simulate(N, fs=FS, rng=11 + k) + s * temp for k, (c, s) in enumerate(PLANTED.items())
     }
     chans["temperature"] = temp
-    eg.save_log(
+    eg.io.save_log(
         path, chans, FS, units={"gyro_x": "deg/s", "gyro_y": "deg/s", "temperature": "degC"}
     )
     return path
@@ -108,7 +108,7 @@ def test_channels_fit_follows_auto_and_a_named_channel(thermal, capsys, tmp_path
     log = eg.load_log(thermal)
     rng = np.random.default_rng(4)
     flat = eg.parse_model(SPEC).simulate(N, fs=FS, rng=rng)
-    eg.save_log(
+    eg.io.save_log(
         tmp_path / "z.h5",
         {"gyro_x": log["gyro_x"], "gyro_z": flat, "temperature": log["temperature"]},
         FS,

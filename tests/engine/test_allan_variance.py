@@ -27,7 +27,7 @@ def textbook_avar(x: np.ndarray, m: int) -> float:
 
 def exact_av(model: eg.Model, fs: float, n: int = 2**20) -> AllanVariance:
     """The model-implied octave Allan variance (no noise), as an AllanVariance."""
-    ms = 2 ** np.arange(eg.default_levels(n), dtype=np.int64)
+    ms = 2 ** np.arange(eg.wv.default_levels(n), dtype=np.int64)
     av = 2.0 * model.wv(2 * ms, fs)
     return AllanVariance(
         tau_samples=ms,
@@ -133,7 +133,7 @@ def test_to_dict_and_table_are_ready(series):
     av = allan_variance(series, fs=10.0, unit="deg/s")
     d = json.loads(json.dumps(av.to_dict(), allow_nan=False))
     assert d["adev"][0] == pytest.approx(math.sqrt(d["avar"][0]))
-    assert len(d["tau_s"]) == len(av) == eg.default_levels(series.size)
+    assert len(d["tau_s"]) == len(av) == eg.wv.default_levels(series.size)
     assert "ADEV [deg/s]" in av.table()
 
 
@@ -159,7 +159,7 @@ def test_avsm_reads_the_ieee_coefficients_on_exact_curves(truth, region, rtol):
     assert est.method == "AVSM"
     assert est.params == pytest.approx(model.values(), rel=rtol)
     # the line's reading is the datasheet coefficient (docs/conventions.md, units)
-    ds = {r["symbol"]: r for r in eg.datasheet(model, FS)}
+    ds = {r["symbol"]: r for r in eg.units.datasheet(model, FS)}
     reading = est.details["lines"][truth.code]["reading"]
     key = {"WN": "N", "QN": "Q", "DR": "R", "RW": "K"}[truth.code]
     assert reading["value"] == pytest.approx(ds[key]["value"], rel=rtol)

@@ -147,7 +147,7 @@ def test_paths_globs_and_same_named_logs(fleet, tmp_path):
 
 def test_select_picks_a_sub_model_per_channel(fleet):
     res = eg.fit_batch([str(fleet / "unit[12].h5")], select="WN+RW+DR", workers=1)
-    allowed = {m.spec() for m in eg.submodels("WN+RW+DR")}
+    allowed = {m.spec() for m in eg.inference.submodels("WN+RW+DR")}
     for lf in res.fitted:
         for r in lf.fits.values():
             assert r.model.cleared().spec() in allowed and "WN" in r.model.spec()

@@ -89,7 +89,7 @@ def test_wrong_arw_flagged_above_at_small_scales(sims):
 
 def test_verdict_invariants(sims):
     wv = sims[1]
-    ds = eg.parse_datasheet("arw=0.35 deg/sqrt(h), bi=2 deg/h")
+    ds = eg.inference.parse_datasheet("arw=0.35 deg/sqrt(h), bi=2 deg/h")
     chk = eg.check_datasheet(wv, ds, fit=eg.fit_gmwm(wv, "QN+WN+RW"))
     lo, hi, d = chk.ci_low, chk.ci_high, chk.datasheet_wv
     for j, v in enumerate(chk.verdict):
@@ -119,20 +119,20 @@ def test_verdict_invariants(sims):
 
 
 def test_parse_spellings_and_units():
-    a = eg.parse_datasheet("arw=0.3 deg/sqrt(h)")
-    assert eg.parse_datasheet("arw=3e-1deg/sqrt(h)").values == a.values  # no space needed
-    b = eg.parse_datasheet("n=0.005 (deg/s)/sqrt(Hz)")
-    c = eg.parse_datasheet("ARW = 0.3 °/√hr")
+    a = eg.inference.parse_datasheet("arw=0.3 deg/sqrt(h)")
+    assert eg.inference.parse_datasheet("arw=3e-1deg/sqrt(h)").values == a.values  # no space needed
+    b = eg.inference.parse_datasheet("n=0.005 (deg/s)/sqrt(Hz)")
+    c = eg.inference.parse_datasheet("ARW = 0.3 °/√hr")
     want = 0.3 / 60 * D2R  # rad/s/sqrt(Hz)
     for x in (a, b, c):
         assert x.kind == "gyroscope"
         assert x.values["N"] == pytest.approx(want, rel=1e-12)
-    acc = eg.parse_datasheet("vrw=0.2 m/s/sqrt(h), bi=0.2 mg, accrw=0.1 m/s/h/sqrt(h)")
+    acc = eg.inference.parse_datasheet("vrw=0.2 m/s/sqrt(h), bi=0.2 mg, accrw=0.1 m/s/h/sqrt(h)")
     assert acc.kind == "accelerometer"
     assert acc.values["N"] == pytest.approx(0.2 / 60, rel=1e-12)
     assert acc.values["B"] == pytest.approx(0.2e-3 * 9.80665, rel=1e-12)
     assert acc.values["K"] == pytest.approx(0.1 / 216000, rel=1e-12)
-    rrw = eg.parse_datasheet("rrw=20 deg/h/sqrt(h)")
+    rrw = eg.inference.parse_datasheet("rrw=20 deg/h/sqrt(h)")
     assert rrw.values["K"] == pytest.approx(20 / 216000 * D2R, rel=1e-12)
     # in a log in deg/s the model has sigma2 = N^2 fs (N in deg/s/sqrt(Hz))
     m = a.model(FS, "deg/s")
@@ -157,18 +157,18 @@ def test_parse_spellings_and_units():
     ],
 )
 def test_parse_errors(text, msg):
-    with pytest.raises(eg.DatasheetError, match=msg):
-        eg.parse_datasheet(text)
+    with pytest.raises(eg.errors.DatasheetError, match=msg):
+        eg.inference.parse_datasheet(text)
 
 
 def test_unit_errors(sims):
     wv = sims[0]
-    with pytest.raises(eg.DatasheetError, match="accelerometer"):
+    with pytest.raises(eg.errors.DatasheetError, match="accelerometer"):
         eg.check_datasheet(wv, "vrw=0.2 m/s/sqrt(h)")
     nounit = eg.wavelet_variance(_simulate(0, 5000), fs=FS)
-    with pytest.raises(eg.DatasheetError, match="unit"):
+    with pytest.raises(eg.errors.DatasheetError, match="unit"):
         eg.check_datasheet(nounit, DS_TEXT)
-    with pytest.raises(eg.DatasheetError, match="level"):
+    with pytest.raises(eg.errors.DatasheetError, match="level"):
         eg.check_datasheet(wv, DS_TEXT, level=1.5)
 
 
@@ -186,7 +186,7 @@ def _fit_nk(fit) -> tuple[float, float]:
 def test_reader_round_trip_kalibr(tmp_path, gyro_fit):
     path = tmp_path / "imu.yaml"
     eg.export(path, {"gyro_x": gyro_fit}, "kalibr", allow_partial=True, projection="fit")
-    ds = eg.read_datasheet(path, channel="gyro_x")
+    ds = eg.inference.read_datasheet(path, channel="gyro_x")
     n, k = _fit_nk(gyro_fit)
     assert ds.kind == "gyroscope"
     assert ds.values["N"] == pytest.approx(n, rel=1e-9)
@@ -200,9 +200,9 @@ def test_reader_round_trip_kalibr(tmp_path, gyro_fit):
 def test_reader_round_trip_reports(tmp_path, gyro_fit, fmt, suffix):
     path = tmp_path / f"report{suffix}"
     eg.export(path, {"gyro_x": gyro_fit}, fmt)
-    ds = eg.read_datasheet(path)
+    ds = eg.inference.read_datasheet(path)
     # the file's only channel is read whatever the log's channel is called
-    assert eg.read_datasheet(path, channel="gyro_y").values == ds.values
+    assert eg.inference.read_datasheet(path, channel="gyro_y").values == ds.values
     n, k = _fit_nk(gyro_fit)
     assert ds.values["N"] == pytest.approx(n, rel=1e-9)
     assert ds.values["K"] == pytest.approx(k, rel=1e-9)
@@ -210,10 +210,10 @@ def test_reader_round_trip_reports(tmp_path, gyro_fit, fmt, suffix):
 
 
 def test_reader_round_trip_own_json(tmp_path):
-    ds = eg.parse_datasheet("arw=0.3 deg/sqrt(h), bi=5 deg/h, q=1e-4 deg")
+    ds = eg.inference.parse_datasheet("arw=0.3 deg/sqrt(h), bi=5 deg/h, q=1e-4 deg")
     p = tmp_path / "ds.json"
     p.write_text(json.dumps(ds.to_dict()))
-    back = eg.read_datasheet(p)
+    back = eg.inference.read_datasheet(p)
     assert back.kind == ds.kind
     for s, v in ds.values.items():
         assert back.values[s] == pytest.approx(v, rel=1e-12)
@@ -222,32 +222,32 @@ def test_reader_round_trip_own_json(tmp_path):
 def test_reader_errors_name_file_and_key(tmp_path):
     bad = tmp_path / "imu.yaml"
     bad.write_text("update_rate: 100.0\ngyroscope_noise_density: abc\n")
-    with pytest.raises(eg.DatasheetError, match=r"imu\.yaml.*gyroscope_noise_density"):
-        eg.read_datasheet(bad)
+    with pytest.raises(eg.errors.DatasheetError, match=r"imu\.yaml.*gyroscope_noise_density"):
+        eg.inference.read_datasheet(bad)
     both = tmp_path / "both.yaml"
     both.write_text(
         "update_rate: 100.0\ngyroscope_noise_density: 1.0e-4\naccelerometer_noise_density: 1.0e-3\n"
     )
-    with pytest.raises(eg.DatasheetError, match="choose one"):
-        eg.read_datasheet(both)
-    assert eg.read_datasheet(both, kind="accelerometer").values == {"N": 1e-3}
-    with pytest.raises(eg.DatasheetError, match="cannot read"):
-        eg.read_datasheet(tmp_path / "missing.yaml")
+    with pytest.raises(eg.errors.DatasheetError, match="choose one"):
+        eg.inference.read_datasheet(both)
+    assert eg.inference.read_datasheet(both, kind="accelerometer").values == {"N": 1e-3}
+    with pytest.raises(eg.errors.DatasheetError, match="cannot read"):
+        eg.inference.read_datasheet(tmp_path / "missing.yaml")
     other = tmp_path / "x.json"
     other.write_text('{"schema": "other"}')
-    with pytest.raises(eg.DatasheetError, match=r"x\.json.*unknown JSON"):
-        eg.read_datasheet(other)
+    with pytest.raises(eg.errors.DatasheetError, match=r"x\.json.*unknown JSON"):
+        eg.inference.read_datasheet(other)
     txt = tmp_path / "notes.txt"
     txt.write_text("hello")
-    with pytest.raises(eg.DatasheetError, match="unknown datasheet file"):
-        eg.read_datasheet(txt)
+    with pytest.raises(eg.errors.DatasheetError, match="unknown datasheet file"):
+        eg.inference.read_datasheet(txt)
 
 
 # --------------------------------------------------------------------------- CLI
 @pytest.fixture(scope="module")
 def sim_log(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("check") / "sim.h5"
-    eg.save_log(path, {"gyro_x": _simulate(7, 100_000)}, FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(path, {"gyro_x": _simulate(7, 100_000)}, FS, units={"gyro_x": "deg/s"})
     return path
 
 
@@ -284,7 +284,7 @@ def test_cli_json(capsys, sim_log):
 
 def test_cli_datasheet_file(capsys, sim_log, tmp_path):
     p = tmp_path / "ds.json"
-    p.write_text(json.dumps(eg.parse_datasheet(DS_TEXT).to_dict()))
+    p.write_text(json.dumps(eg.inference.parse_datasheet(DS_TEXT).to_dict()))
     assert main(["check", str(sim_log), "--datasheet-file", str(p), "--json"]) == 0
     d = json.loads(capsys.readouterr()[0])
     tau = np.asarray(d["tau_samples"], float)
@@ -369,7 +369,7 @@ def test_gyroscope_and_accelerometer_items_together(tmp_path):
     """A full datasheet (this once failed with "'vrw' gives N a second time"): each
     channel is checked against its own sensor's part; bi may come once per sensor."""
     text = "arw=2 deg/sqrt(h), bi=25.2 deg/h, vrw=0.2 m/s/sqrt(h), bi=0.2 mg"
-    spec = eg.parse_datasheet(text)
+    spec = eg.inference.parse_datasheet(text)
     assert spec.kinds == ("gyroscope", "accelerometer")
     gyro, acc = spec.for_kind("gyroscope"), spec.for_kind("accelerometer")
     # 2 deg/sqrt(h) = 2/60 deg/s/sqrt(Hz) = 5.8178e-4 rad/s/sqrt(Hz); 0.2 m/s/sqrt(h) =
@@ -387,12 +387,14 @@ def test_gyroscope_and_accelerometer_items_together(tmp_path):
     # the check of one kind uses that kind's values: WV of WN N^2/dt / tau in the signal unit
     n_deg = 2 / 60
     assert chk_g.components["WN"][0] == pytest.approx(n_deg**2 * 100.0 / 2, rel=1e-9)
-    with pytest.raises(eg.DatasheetError, match="no accelerometer value"):
-        eg.parse_datasheet("arw=2 deg/sqrt(h)").for_kind("accelerometer")
+    with pytest.raises(eg.errors.DatasheetError, match="no accelerometer value"):
+        eg.inference.parse_datasheet("arw=2 deg/sqrt(h)").for_kind("accelerometer")
     saved = tmp_path / "ds.json"  # the saved form keeps both parts
     saved.write_text(json.dumps(spec.to_dict()))
-    assert eg.read_datasheet(saved, kind="accelerometer").values == pytest.approx(acc.values)
-    assert eg.read_datasheet(saved, kind="gyroscope").values == pytest.approx(gyro.values)
+    assert eg.inference.read_datasheet(saved, kind="accelerometer").values == pytest.approx(
+        acc.values
+    )
+    assert eg.inference.read_datasheet(saved, kind="gyroscope").values == pytest.approx(gyro.values)
 
 
 @pytest.mark.parametrize(
@@ -402,13 +404,13 @@ def test_gyroscope_and_accelerometer_items_together(tmp_path):
 def test_bias_instability_declared_as_the_adev_minimum(text):
     """A vendor's in-run bias stability is the ADEV minimum itself: its floor is drawn at
     25.2 deg/h, not at 0.664 x 25.2 = 16.7 deg/h as for an IEEE B."""
-    spec = eg.parse_datasheet(text)
-    ieee = eg.parse_datasheet("bi=25.2 deg/h")
+    spec = eg.inference.parse_datasheet(text)
+    ieee = eg.inference.parse_datasheet("bi=25.2 deg/h")
     assert spec.bi_convention == "adev_min" and ieee.bi_convention == "ieee"
     floor = math.sqrt(2 * spec.floor_wv("deg/s")) * 3600  # ADEV of the floor, deg/h
     assert floor == pytest.approx(25.2, rel=1e-12)
     assert math.sqrt(2 * ieee.floor_wv("deg/s")) * 3600 == pytest.approx(
-        25.2 * eg.BI_FACTOR, rel=1e-12
+        25.2 * eg.units.BI_FACTOR, rel=1e-12
     )
     assert "ADEV minimum 25.2 deg/h" in spec.describe()
-    assert eg.parse_datasheet("bi=25.2 deg/h (ieee)").bi_convention == "ieee"
+    assert eg.inference.parse_datasheet("bi=25.2 deg/h (ieee)").bi_convention == "ieee"

@@ -55,7 +55,7 @@ def six(tmp_path_factory: pytest.TempPathFactory) -> Path:
         c: (eg.WN(sigma2=s2) + eg.RW(gamma2=g2)).simulate(N, fs=FS, rng=i)
         for i, (c, (_, s2, g2)) in enumerate(TRUTH.items())
     }
-    return eg.save_log(
+    return eg.io.save_log(
         tmp_path_factory.mktemp("exp") / "six.h5",
         chans,
         FS,
@@ -399,7 +399,7 @@ def test_cli_export_counts_with_scale(tmp_path: Path, capsys) -> None:
         c: np.round(rng.normal(0, 40, 50_000)).astype(np.int16)
         for c in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
     }
-    p = eg.save_log(tmp_path / "counts.h5", counts, 100.0)
+    p = eg.io.save_log(tmp_path / "counts.h5", counts, 100.0)
     argv = [
         "export",
         str(p),

@@ -88,7 +88,7 @@ def test_defect_1_imu1_gyro_x_was_below_the_data(real_data) -> None:
         ("estimate", wv.variance, True),
         ("high", wv.ci_high, True),
     ):
-        p = eg.project(fit, "kalibr", channel="gyro_x", ci=None, data=data)
+        p = eg.formats.project(fit, "kalibr", channel="gyro_x", ci=None, data=data)
         s2 = (p.value("N") / DEG) ** 2 * log.fs
         g2 = (p.value("K") / DEG) ** 2 / log.fs
         fw = s2 / tau + g2 * (tau**2 + 2) / (12 * tau)

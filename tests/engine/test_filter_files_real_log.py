@@ -69,7 +69,7 @@ def test_every_format_round_trips_through_check_and_keeps_its_claim(
             continue
         if fmt == "ros-imu":  # claims the white part only: WV >= that of the white terms
             assert "NOT the bias terms" in text
-            p = eg.project(r, "WN", ci=None, channel=ch)
+            p = eg.formats.project(r, "WN", ci=None, channel=ch)
             f_si = math.pi / 180 if kind == "gyroscope" else 9.80665
             n_file = spec.values["N"]
             assert math.isclose(n_file, p.value("N"), rel_tol=1e-9)

@@ -254,7 +254,7 @@ def test_every_fit_result_shares_one_base_with_the_same_fields() -> None:
     x = truth.simulate(2**15, fs=100.0, rng=3)
     wv = eg.wavelet_variance(x, fs=100.0)
     g = eg.fit_gmwm(wv, "GM+WN")
-    r = eg.fit_replicates([wv, eg.wavelet_variance(x[:10_000], fs=100.0)], "GM+WN")
+    r = eg.fit.fit_replicates([wv, eg.wavelet_variance(x[:10_000], fs=100.0)], "GM+WN")
     for res in (g, r):
         assert isinstance(res, FitResult) and res.weights == "ci"
         assert isinstance(res.omega, np.ndarray) and res.omega.ndim == 2

@@ -128,7 +128,7 @@ def _write_units(tmp_path, make) -> list[str]:
         x = eg.parse_model(SIM_SPEC).simulate(N_SIM, rng=rng)
         chans = make(t, x)
         path = tmp_path / f"unit{seed}.h5"
-        eg.save_log(path, chans, FS, units={"gyro_x": "rad/s", "imu_temp": "degC"})
+        eg.io.save_log(path, chans, FS, units={"gyro_x": "rad/s", "imu_temp": "degC"})
         paths.append(str(path))
     return paths
 
@@ -215,7 +215,7 @@ def test_prepared_log_refuses_a_changed_file(tmp_path):
     fitted it) is refused by name in one line, not read as the fitted signal."""
     paths = _write_units(tmp_path, lambda t, x: {"gyro_x": x})
     lf = fit_log(paths[0], model="WN+RW", channels=["gyro_x"])
-    eg.save_log(paths[0], {"gyro_x": np.zeros(1000) + 1.0}, FS)
+    eg.io.save_log(paths[0], {"gyro_x": np.zeros(1000) + 1.0}, FS)
     with pytest.raises(ExportError, match=r"unit1\.h5: 1,000 samples now, 131,072 when it"):
         export_fleet(None, [lf], "kalibr", allow_partial=True, ci=None)
 

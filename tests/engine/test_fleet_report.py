@@ -241,8 +241,8 @@ def test_every_anchor_leads_to_a_section_and_each_unit_has_its_own(sim_report):
 def test_gather_report_takes_existing_fits_without_refitting(sim_fleet):
     log = eg.load_log(str(sim_fleet / "unit0.h5"))
     lf = eg.fit_log(log, model="WN+RW")
-    given = eg.gather_report(log, fits=lf.fits, export_format=None)
-    fresh = eg.gather_report(log, model="WN+RW", export_format=None)
+    given = eg.reporting.gather_report(log, fits=lf.fits, export_format=None)
+    fresh = eg.reporting.gather_report(log, model="WN+RW", export_format=None)
     for ch in ("gx", "gy"):
         assert given.channels[ch].fit is lf.fits[ch]  # the very object: nothing refitted
         a, b = given.channels[ch], fresh.channels[ch]
@@ -250,9 +250,9 @@ def test_gather_report_takes_existing_fits_without_refitting(sim_fleet):
         assert [(i.low, i.high) for i in a.intervals] == [(i.low, i.high) for i in b.intervals]
     assert given.provenance["fits_given"] and not fresh.provenance["fits_given"]
     with pytest.raises(TypeError, match="model cannot be given with fits="):
-        eg.gather_report(log, fits=lf.fits, model="WN")
+        eg.reporting.gather_report(log, fits=lf.fits, model="WN")
     with pytest.raises(TypeError, match="does not have"):
-        eg.gather_report(log, fits={"nope": lf.fits["gx"]})
+        eg.reporting.gather_report(log, fits={"nope": lf.fits["gx"]})
 
 
 @pytest.mark.slow  # a second fleet fitted and rendered through the CLI: 36 s of CPU

@@ -123,7 +123,7 @@ def test_a_wn_at_zero_beside_a_disguised_gm_still_gives_n_with_interval():
 
 
 def test_fit_carries_the_table_in_json_and_summary():
-    spec = eg.parse_datasheet("arw=0.3 deg/sqrt(h), rrw=3 deg/h/sqrt(h)")
+    spec = eg.inference.parse_datasheet("arw=0.3 deg/sqrt(h), rrw=3 deg/h/sqrt(h)")
     x = spec.model(FS, "deg/s").simulate(2**15, rng=np.random.default_rng(1), fs=FS)
     res = eg.fit_gmwm(eg.wavelet_variance(x, fs=FS, unit="deg/s"), "WN+RW")
     d = res.to_dict()["ieee"]

@@ -69,7 +69,7 @@ def test_adis_bias_instability_in_both_conventions(gyro_fits):
         t = fits["GM+WN+QN+RW"].ieee
         b, amin, adata = t["B"], t["ADEV_min"], t["ADEV_data"]
         assert b.datasheet_unit == amin.datasheet_unit == adata.datasheet_unit == "deg/h"
-        assert b.datasheet_value == pytest.approx(amin.datasheet_value / eg.BI_FACTOR)
+        assert b.datasheet_value == pytest.approx(amin.datasheet_value / eg.units.BI_FACTOR)
         assert math.isfinite(amin.tau_s) and 1.0 < amin.tau_s < 5000.0
         assert math.isfinite(adata.tau_s) and adata.low < adata.value < adata.high
         assert 12.0 < amin.datasheet_value < 36.0, (name, amin.datasheet_value)

@@ -139,8 +139,8 @@ def test_model_string_round_trip_and_identifiability() -> None:
 
 
 def test_units_transform_and_slider_come_from_its_declaration() -> None:
-    assert eg.param_unit("MA1", "theta", "deg/s") == "1 (per sample)"
-    assert eg.param_unit("MA1", "sigma2", "deg/s") == "(deg/s)^2"
+    assert eg.units.param_unit("MA1", "theta", "deg/s") == "1 (per sample)"
+    assert eg.units.param_unit("MA1", "sigma2", "deg/s") == "(deg/s)^2"
     ma = MA1(theta=-0.3, sigma2=2e-3)
     u = ma.to_unconstrained()
     np.testing.assert_allclose(u, [math.atanh(-0.3), math.log(2e-3)])
@@ -160,7 +160,7 @@ def test_datasheet_rows_and_back() -> None:
     assert vals["N"] == pytest.approx(math.sqrt(1e-2 * 1.2**2 / fs), rel=1e-12)
     back = process_from_values("MA1", vals, fs)
     assert back.theta == pytest.approx(0.2) and back.sigma2 == pytest.approx(1e-2, rel=1e-12)
-    rows = eg.datasheet(ma + eg.RW(1e-9), fs, "deg/s")
+    rows = eg.units.datasheet(ma + eg.RW(1e-9), fs, "deg/s")
     by_symbol = {(r["label"], r["symbol"], r["unit"]): r["value"] for r in rows}
     # the white noise it adds at long scales reads as an angle random walk: 60 N deg/sqrt(h)
     assert by_symbol[("MA1", "ARW", "deg/sqrt(h)")] == pytest.approx(60 * vals["N"], rel=1e-12)
@@ -219,7 +219,7 @@ def test_armav_recovers_theta_and_sigma2(theta: float) -> None:
     est = np.zeros((reps, 2))
     for i in range(reps):
         wv = eg.wavelet_variance(model.simulate(2**14, fs=100.0, rng=700 + i), fs=100.0)
-        res = eg.fit_armav(wv, "MA1+RW")
+        res = eg.fit.fit_armav(wv, "MA1+RW")
         assert res.converged and "MA1.theta" not in res.at_bound
         est[i] = res.params["MA1.theta"], res.params["MA1.sigma2"]
     se = est.std(axis=0, ddof=1) / math.sqrt(reps)
@@ -241,7 +241,7 @@ def test_armav_of_gm_plus_ma1_is_at_or_below_the_truth_and_the_gmwm_estimate() -
     def objective(m: eg.Model) -> float:
         return float(np.sum(w * (np.log10(wv.variance) - np.log10(m.wv(tau, wv.fs))) ** 2))
 
-    res = eg.fit_armav(wv, "GM+MA1+RW")
+    res = eg.fit.fit_armav(wv, "GM+MA1+RW")
     assert res.objective == pytest.approx(objective(res.model), rel=1e-12)
     assert res.objective <= objective(truth)
     assert res.objective <= objective(eg.fit_gmwm(wv, "GM+MA1+RW").model)
@@ -309,7 +309,7 @@ def test_shared_ma1_implied_wccv_against_monte_carlo() -> None:
     reps, levels = 100, 8
     sims = np.array(
         [
-            eg.wv_matrix(
+            eg.wv.wv_matrix(
                 mm.simulate(2**12, rng=r), channels=["a", "b"], levels=levels, ci=False
             ).values
             for r in range(reps)
@@ -368,9 +368,9 @@ def test_replicate_fit_starts_from_given_values_of_either_sign() -> None:
     wvs = [
         eg.wavelet_variance(model.simulate(2**14, fs=100.0, rng=40 + i), fs=100.0) for i in range(3)
     ]
-    res = eg.fit_replicates(wvs, model)
+    res = eg.fit.fit_replicates(wvs, model)
     assert res.params["MA1.theta"] == pytest.approx(-0.3, abs=0.05)
-    assert res.objective <= eg.fit_replicates(wvs, "MA1+RW").objective * (1 + 1e-9)
+    assert res.objective <= eg.fit.fit_replicates(wvs, "MA1+RW").objective * (1 + 1e-9)
 
 
 def test_on_the_adis_gyros_the_armav_and_the_multivariate_fit_take_an_ma1(real_data: Path) -> None:
@@ -387,10 +387,10 @@ def test_on_the_adis_gyros_the_armav_and_the_multivariate_fit_take_an_ma1(real_d
     own = {}
     for c in axes:
         wv = log.wavelet_variance(c)
-        ma, qw = eg.fit_armav(wv, "MA1+RW"), eg.fit_armav(wv, "QN+WN+RW")
+        ma, qw = eg.fit.fit_armav(wv, "MA1+RW"), eg.fit.fit_armav(wv, "QN+WN+RW")
         assert ma.objective <= qw.objective * (1 + 1e-9), c
         own[c] = eg.fit_gmwm(wv, "MA1+RW").params["MA1.theta"]
-    wvm = eg.wv_matrix({c: np.asarray(log[c]) for c in axes}, channels=axes, fs=log.fs)
+    wvm = eg.wv.wv_matrix({c: np.asarray(log[c]) for c in axes}, channels=axes, fs=log.fs)
     indep = eg.fit_mgmwm(wvm, eg.MultiModel(axes, "MA1+RW"))
     for c in axes:
         assert indep.params[f"{c}.MA1.theta"] == pytest.approx(own[c], abs=1e-4)

@@ -71,7 +71,7 @@ def test_wccv_of_a_series_with_itself_is_its_wv():
     np.testing.assert_allclose(c.correlation, 1.0, rtol=1e-12)
     # the matrix: diagonal = the WV with the same eta3 intervals, bit for bit up to order
     y = np.random.default_rng(2).standard_normal(x.size)
-    m = eg.wv_matrix({"a": x, "b": y, "c": x})
+    m = eg.wv.wv_matrix({"a": x, "b": y, "c": x})
     for name, series in (("a", x), ("b", y)):
         ref = eg.wavelet_variance(series)
         got = m.wv(name)
@@ -86,11 +86,11 @@ def test_wccv_units_are_spelled_like_the_wv_units():
     their WV (the pair used to build "(g)^2" by hand)."""
     rng = np.random.default_rng(4)
     xy = rng.standard_normal((4096, 2))
-    m = eg.wv_matrix(xy, channels=["a", "b"], units=["g", "g"])
+    m = eg.wv.wv_matrix(xy, channels=["a", "b"], units=["g", "g"])
     assert m.pair("a", "b").unit == "g^2" == m.wv("a").unit + "^2"
-    m2 = eg.wv_matrix(xy, channels=["a", "b"], units=["deg/s", "deg/s"])
+    m2 = eg.wv.wv_matrix(xy, channels=["a", "b"], units=["deg/s", "deg/s"])
     assert m2.pair("a", "b").unit == "(deg/s)^2"
-    m3 = eg.wv_matrix(xy, channels=["a", "b"], units=["g", "m/s^2"])
+    m3 = eg.wv.wv_matrix(xy, channels=["a", "b"], units=["g", "m/s^2"])
     assert m3.pair("a", "b").unit == "g*m/s^2"
 
 
@@ -98,7 +98,7 @@ def test_wv_matrix_is_symmetric_bilinear_and_consistent_with_pairs():
     rng = np.random.default_rng(3)
     x, z = rng.standard_normal((2, 4096))
     y = x + rng.standard_normal(4096)
-    m = eg.wv_matrix(np.column_stack([x, y, z]), channels=["x", "y", "z"], fs=10.0)
+    m = eg.wv.wv_matrix(np.column_stack([x, y, z]), channels=["x", "y", "z"], fs=10.0)
     assert m.channels == ("x", "y", "z") and m.k == 3 and m.fs == 10.0
     np.testing.assert_array_equal(m.values, np.transpose(m.values, (0, 2, 1)))
     pair = eg.wavelet_cross_covariance(x, y, fs=10.0)
@@ -123,7 +123,7 @@ def test_wccv_of_independent_channels_is_zero_within_its_interval():
     for _ in range(reps):
         e = rng.standard_normal((n, 2))
         x = rng.standard_normal((n, 2)) + np.cumsum(e * 0.03, axis=0)  # WN + RW, independent
-        m = eg.wv_matrix(x)
+        m = eg.wv.wv_matrix(x)
         lw = np.array([c == "lag-window" for c in m.ci_method])
         hits.append(((m.ci_low[:, 0, 1] <= 0) & (0 <= m.ci_high[:, 0, 1]))[lw])
         vals.append(m.values[lw, 0, 1])
@@ -141,7 +141,7 @@ def test_wccv_of_independent_channels_is_zero_within_its_interval():
 
 
 def test_gaussian_edf_intervals_at_the_top_levels_are_wide_enough():
-    m = eg.wv_matrix(np.random.default_rng(4).standard_normal((3000, 2)))
+    m = eg.wv.wv_matrix(np.random.default_rng(4).standard_normal((3000, 2)))
     top = [i for i, c in enumerate(m.ci_method) if c == "gaussian-edf"]
     assert top and top[-1] == m.n_levels - 1 and m.bandwidth[top[0]] == 0
     assert np.all(m.ci_high[top, 0, 1] - m.ci_low[top, 0, 1] > 0)
@@ -173,7 +173,7 @@ def test_implied_wv_and_wccv_of_shared_processes_against_monte_carlo():
     sims = []
     for r in range(reps):
         x = mm.simulate(n, fs=fs, rng=r)
-        sims.append(eg.wv_matrix(x, channels=["a", "b"], fs=fs, levels=levels, ci=False).values)
+        sims.append(eg.wv.wv_matrix(x, channels=["a", "b"], fs=fs, levels=levels, ci=False).values)
     sims = np.array(sims)
     tau = 2.0 ** np.arange(1, levels + 1)
     implied = mm.implied(tau, fs)
@@ -283,7 +283,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
         nl={"GM": 0.5},
     )
     x = truth.simulate(50_000, fs=5.0, rng=8)
-    wvm = eg.wv_matrix(x, channels=["a", "b"], fs=5.0)
+    wvm = eg.wv.wv_matrix(x, channels=["a", "b"], fs=5.0)
     res = eg.fit_mgmwm(wvm, truth.cleared())
     for beta in np.geomspace(0.01, 20, 60):
         fixed = MultiModel(["a", "b"], "GM+WN+RW", shared=["GM"], nl={"GM": float(beta)})
@@ -292,7 +292,7 @@ def test_mgmwm_reaches_the_minimum_over_the_shared_beta():
         assert prob.profile(u) >= res.objective * (1 - 1e-9)
 
 
-def kkt(res: eg.MGMWMResult, label: str) -> tuple[float, float, float]:
+def kkt(res: eg.multivariate.MGMWMResult, label: str) -> tuple[float, float, float]:
     """(min eigenvalue of the gradient G, <G, Sigma>, scale) for a shared RW with diagonal
     weights: first-order optimality of min f(Sigma) s.t. Sigma PSD is G PSD, G Sigma = 0."""
     w, r = res.moment_weights, res.wvm.values - res.implied
@@ -317,7 +317,7 @@ def test_psd_constraint_active_gives_a_psd_optimum():
         shared=["RW"],
         cov={"RW": rw_cov([1e-2] * 3, [[1, 0.999, 0.99], [0.999, 1, 0.995], [0.99, 0.995, 1]])},
     )
-    wvm = eg.wv_matrix(truth.simulate(20_000, rng=1), channels=["a", "b", "c"])
+    wvm = eg.wv.wv_matrix(truth.simulate(20_000, rng=1), channels=["a", "b", "c"])
     res = eg.fit_mgmwm(wvm, truth.cleared())
     assert res.psd_active and "RW.cov (singular)" in res.at_bound
     cov = res.covariance("RW")
@@ -341,7 +341,7 @@ def test_psd_constraint_active_gives_a_psd_optimum():
         assert f >= res.objective * (1 - 1e-9)
 
 
-def boundary_case(name: str) -> tuple[eg.WVMatrix, MultiModel]:
+def boundary_case(name: str) -> tuple[eg.wv.WVMatrix, MultiModel]:
     """Shared processes absent from the data (covariance 0 at the optimum) or perfectly
     correlated (rank 1): the PSD constraint is active at almost every evaluation."""
     rng = np.random.default_rng(0)
@@ -354,11 +354,11 @@ def boundary_case(name: str) -> tuple[eg.WVMatrix, MultiModel]:
         chans = ["u", "w", "z"][:k]
         data = {c: x[:, i] for i, c in enumerate(chans)}
         shared = ["WN", "RW"] if name == "WN and RW" else ["RW"]
-    wvm = eg.wv_matrix(data, channels=chans, fs=100.0)
+    wvm = eg.wv.wv_matrix(data, channels=chans, fs=100.0)
     return wvm, MultiModel(chans, "GM+WN+RW", shared=shared)
 
 
-def shared_kkt(res: eg.MGMWMResult, label: str, basis) -> tuple[float, float, float]:
+def shared_kkt(res: eg.multivariate.MGMWMResult, label: str, basis) -> tuple[float, float, float]:
     """As :func:`kkt`, for any shared linear process with WV shape ``basis(tau)``; the scale
     is the Cauchy-Schwarz bound of the gradient's entries (G may be 0 up to rounding)."""
     w, r = res.moment_weights, res.wvm.values - res.implied
@@ -486,7 +486,7 @@ def test_psd_inner_solve_fallback_agrees_with_the_certified_path(monkeypatch):
 
 def test_without_shared_processes_mgmwm_is_the_univariate_fits():
     x = three_gyros().simulate(2**15, rng=5)
-    m = eg.wv_matrix(x, channels=["g1", "g2", "g3"])
+    m = eg.wv.wv_matrix(x, channels=["g1", "g2", "g3"])
     res = eg.fit_mgmwm(m, MultiModel(m.channels, "GM+WN+RW"))
     for c in m.channels:
         uni = eg.fit_gmwm(m.wv(c), "GM+WN+RW")
@@ -507,7 +507,7 @@ def test_mgmwm_result_has_the_fit_result_interface():
     from engine.fit.result import FitResult, ParamRecord, Summary
 
     x = three_gyros().simulate(2**13, rng=6)
-    m = eg.wv_matrix(x, channels=["g1", "g2", "g3"], levels=9)
+    m = eg.wv.wv_matrix(x, channels=["g1", "g2", "g3"], levels=9)
     res = eg.fit_mgmwm(m, MultiModel(m.channels, "WN+RW", shared=["RW"]))
     assert isinstance(res, FitResult) and res.weights == "ci"
     assert res.omega.shape == (6 * 9, 6 * 9)
@@ -526,7 +526,7 @@ def test_mgmwm_result_has_the_fit_result_interface():
     assert {p["full_name"]: p["value"] for p in d["params"]} == res.params
     cov_ab = next(p for p in d["params"] if p["full_name"] == "RW.cov[g1,g3]")
     assert cov_ab["channels"] == ["g1", "g3"] and cov_ab["shared"] and cov_ab["label"] == "RW"
-    t = eg.DependenceTest(0.5, 0.04, 2.0, 1.5, ("RW",), 99)
+    t = eg.multivariate.DependenceTest(0.5, 0.04, 2.0, 1.5, ("RW",), 99)
     assert isinstance(t.summary(), Summary) and str(t) == (
         "test of dependence (RW shared vs independent): D = 0.5, p = 0.04 "
         "(parametric bootstrap, B = 99)"
@@ -586,8 +586,8 @@ def test_mgmwm_intervals_of_a_shared_covariance_cover_the_truth():
 def test_efficient_weights_and_the_moment_covariance():
     mm = three_gyros()
     x = mm.simulate(2**13, rng=2)
-    m = eg.wv_matrix(x, channels=list(mm.channels), levels=8)
-    v = eg.moment_covariance(mm, m)
+    m = eg.wv.wv_matrix(x, channels=list(mm.channels), levels=8)
+    v = eg.multivariate.moment_covariance(mm, m)
     assert v.shape == (6 * 8, 6 * 8) and np.allclose(v, v.T)
     assert np.linalg.eigvalsh(v)[0] > 0
     # the WV block is the univariate model covariance of the channel
@@ -597,7 +597,7 @@ def test_efficient_weights_and_the_moment_covariance():
     # Monte Carlo check of one WCCV variance and its covariance with a WV
     sims = np.array(
         [
-            eg.wv_matrix(mm.simulate(2**13, rng=50 + r), levels=8, ci=False).values
+            eg.wv.wv_matrix(mm.simulate(2**13, rng=50 + r), levels=8, ci=False).values
             for r in range(150)
         ]
     )
@@ -612,8 +612,8 @@ def test_dependence_test_detects_shared_drift_and_not_independent_channels():
     kw = dict(B=19, seed=1)
     dep = shared_rw(["a", "b"], 1e-2, 0.8)
     ind = shared_rw(["a", "b"], 1e-2, 0)
-    t_dep = eg.dependence_test(dep.simulate(2**13, rng=1), dep.cleared(), **kw)
-    t_ind = eg.dependence_test(ind.simulate(2**13, rng=2), ind.cleared(), **kw)
+    t_dep = eg.multivariate.dependence_test(dep.simulate(2**13, rng=1), dep.cleared(), **kw)
+    t_ind = eg.multivariate.dependence_test(ind.simulate(2**13, rng=2), ind.cleared(), **kw)
     assert t_dep.p_value == pytest.approx(1 / 20) and t_dep.statistic > 0
     assert t_ind.p_value > 0.1
     assert t_dep.labels == ("RW",) and t_dep.B == 19
@@ -632,9 +632,9 @@ def test_dependence_test_detects_shared_drift_and_not_independent_channels():
 def test_dependence_test_reports_progress_and_can_be_aborted():
     dep = shared_rw(["a", "b"], 1e-2, 0.5)
     x = dep.simulate(2**11, rng=4)
-    plain = eg.dependence_test(x, dep.cleared(), B=5, seed=3)
+    plain = eg.multivariate.dependence_test(x, dep.cleared(), B=5, seed=3)
     calls = []
-    seen = eg.dependence_test(
+    seen = eg.multivariate.dependence_test(
         x, dep.cleared(), B=5, seed=3, progress=lambda done, total: calls.append((done, total))
     )
     assert calls == [(i, 5) for i in range(1, 6)]
@@ -650,10 +650,10 @@ def test_dependence_test_reports_progress_and_can_be_aborted():
 
     calls.clear()
     with pytest.raises(Cancelled):
-        eg.dependence_test(x, dep.cleared(), B=5, seed=3, progress=cancel)
+        eg.multivariate.dependence_test(x, dep.cleared(), B=5, seed=3, progress=cancel)
     assert calls == [(1, 5), (2, 5)]
     # the app's one-replicate-at-a-time call keeps working, with the same numbers
-    wvm = eg.wv_matrix(x, channels=["a", "b"])
+    wvm = eg.wv.wv_matrix(x, channels=["a", "b"])
     h1 = dep.cleared()
     h0 = h1.without_dependence().cleared()
     fit0 = eg.fit_mgmwm(wvm, h0)
@@ -676,7 +676,7 @@ def adis_wvs(real_data: Path) -> list[eg.WaveletVariance]:
 
 def test_replicate_fit_of_the_six_adis_logs_lies_between_the_individual_fits(adis_wvs):
     spec = "2*GM+WN+RW"
-    joint = eg.fit_replicates(adis_wvs, spec)
+    joint = eg.fit.fit_replicates(adis_wvs, spec)
     singles = [eg.fit_gmwm(w, spec) for w in adis_wvs]
     assert joint.converged and len(joint.objectives) == 6
     assert joint.objective == pytest.approx(sum(joint.objectives))
@@ -705,10 +705,10 @@ def test_replicates_of_one_series_give_its_fit_and_accept_raw_series():
     )
     wv = eg.wavelet_variance(x, fs=10.0)
     one = eg.fit_gmwm(wv, "GM+WN")
-    both = eg.fit_replicates([wv, wv], "GM+WN")
+    both = eg.fit.fit_replicates([wv, wv], "GM+WN")
     for name, v in one.params.items():
         assert both.params[name] == pytest.approx(v, rel=1e-4)
-    raw = eg.fit_replicates([x, x[:15_000]], "GM+WN", fs=10.0)
+    raw = eg.fit.fit_replicates([x, x[:15_000]], "GM+WN", fs=10.0)
     assert [w.n for w in raw.wvs] == [20_000, 15_000] and raw.fs == 10.0
 
 
@@ -721,13 +721,13 @@ def test_bad_inputs_give_clear_errors():
     with pytest.raises(ValueError, match=r"different lengths \(1000 and 999"):
         eg.wavelet_cross_covariance(x, y)
     with pytest.raises(ValueError, match="a: 1000, b: 999"):
-        eg.wv_matrix({"a": x, "b": y})
+        eg.wv.wv_matrix({"a": x, "b": y})
     with pytest.raises(ValueError, match="at least 2 channels, got 1"):
-        eg.wv_matrix({"a": x, "b": x}, channels=["a"])
+        eg.wv.wv_matrix({"a": x, "b": x}, channels=["a"])
     with pytest.raises(KeyError, match="unknown channel 'c'; the channels are a, b"):
-        eg.wv_matrix({"a": x, "b": x}, channels=["a", "c"])
+        eg.wv.wv_matrix({"a": x, "b": x}, channels=["a", "c"])
     with pytest.raises(ValueError, match="channel 'b'.*NaN"):
-        eg.wv_matrix({"a": x, "b": np.where(np.arange(1000) == 5, np.nan, x)})
+        eg.wv.wv_matrix({"a": x, "b": np.where(np.arange(1000) == 5, np.nan, x)})
     with pytest.raises(ModelError, match="at least 2 channels"):
         MultiModel(["a"], "WN+RW")
     with pytest.raises(ModelError, match="not positive definite.*smallest eigenvalue"):
@@ -754,7 +754,7 @@ def test_bad_inputs_give_clear_errors():
         MultiModel(["a", "b"], {"a": "GM(beta=1)", "b": "GM(beta=2)"}, shared=["GM"])
     with pytest.raises(ModelError, match="cannot simulate"):
         MultiModel(["a", "b"], "WN+RW", shared=["RW"]).simulate(10)
-    m = eg.wv_matrix({"a": x, "b": rng.standard_normal(1000)})
+    m = eg.wv.wv_matrix({"a": x, "b": rng.standard_normal(1000)})
     with pytest.raises(FitError, match="channel.*c are not in the WV matrix"):
         eg.fit_mgmwm(m, MultiModel(["a", "c"], "WN"))
     with pytest.raises(FitError, match="channel b is constant"):
@@ -765,9 +765,9 @@ def test_bad_inputs_give_clear_errors():
         eg.fit_mgmwm(m, "WN+RW")
     wv = eg.wavelet_variance(x)
     with pytest.raises(FitError, match="at least 2 recordings"):
-        eg.fit_replicates([wv], "WN")
+        eg.fit.fit_replicates([wv], "WN")
     with pytest.raises(FitError, match="replicate 2 has fs = 2 Hz"):
-        eg.fit_replicates([wv, eg.wavelet_variance(x, fs=2.0)], "WN")
+        eg.fit.fit_replicates([wv, eg.wavelet_variance(x, fs=2.0)], "WN")
 
 
 # -------------------------------------------------------------------------------------------
@@ -777,7 +777,9 @@ def test_cli_fit_channels_and_replicates(tmp_path, capsys):
     mm = shared_rw(["gx", "gy"], 3e-2, 0.7)
     x = mm.simulate(2**14, rng=1)
     path = tmp_path / "imu.h5"
-    eg.save_log(path, {"gx": x[:, 0], "gy": x[:, 1]}, 100.0, units={"gx": "deg/s", "gy": "deg/s"})
+    eg.io.save_log(
+        path, {"gx": x[:, 0], "gy": x[:, 1]}, 100.0, units={"gx": "deg/s", "gy": "deg/s"}
+    )
     assert (
         cli_main(
             [

@@ -111,7 +111,7 @@ def test_dask_is_imported_only_when_a_cluster_is_asked_for():
 
     code = (
         "import sys, engine as eg, engine.cli.batch, engine.cli.core; eg.fit_batch; "
-        "eg.param_intervals; eg.run_slope_study; eg.dependence_test; "
+        "eg.param_intervals; eg.run_slope_study; eg.multivariate.dependence_test; "
         "print('dask' in sys.modules, 'distributed' in sys.modules)"
     )
     root = Path(__file__).resolve().parents[2]
@@ -150,8 +150,8 @@ def test_bootstrap_intervals_are_identical_on_every_executor(wn_rw_fit, dask_ex)
     # the comparison can fail: another seed gives other intervals
     assert eg.param_intervals(wn_rw_fit, method="bootstrap", B=16, seed=6) != ref
     # and the bootstrap V of the asymptotic intervals too
-    v_ref = eg.wv_cov_bootstrap(wn_rw_fit.model, wn_rw_fit.wv, B=8, seed=1)
-    v_dask = eg.wv_cov_bootstrap(wn_rw_fit.model, wn_rw_fit.wv, B=8, seed=1, executor=dask_ex)
+    v_ref = eg.fit.wv_cov_bootstrap(wn_rw_fit.model, wn_rw_fit.wv, B=8, seed=1)
+    v_dask = eg.fit.wv_cov_bootstrap(wn_rw_fit.model, wn_rw_fit.wv, B=8, seed=1, executor=dask_ex)
     np.testing.assert_array_equal(v_dask, v_ref)
 
 
@@ -192,14 +192,14 @@ def _dep_data():
 
 def test_dependence_test_is_identical_on_dask_and_seeded_per_replicate(dask_ex):
     x, model = _dep_data()
-    ref = eg.dependence_test(x, model, B=6, seed=3)
+    ref = eg.multivariate.dependence_test(x, model, B=6, seed=3)
     calls = []
-    got = eg.dependence_test(
+    got = eg.multivariate.dependence_test(
         x, model, B=6, seed=3, executor=dask_ex, progress=lambda d, t: calls.append((d, t))
     )
     assert got == ref and sorted(calls) == [(d, 6) for d in range(1, 7)]
     # seeded per replicate, not per worker: replicate b is the same whatever B
-    more = eg.dependence_test(x, model, B=9, seed=3, workers=2)
+    more = eg.multivariate.dependence_test(x, model, B=9, seed=3, workers=2)
     assert more.bootstrap[:6] == ref.bootstrap and len(set(more.bootstrap)) == 9
 
 

@@ -159,7 +159,7 @@ def test_gmwm_plan_from_a_datasheet_a_fit_and_a_pilot_log(tmp_path, capsys):
     assert tg["K"]["hours"] == pytest.approx(tg["K"]["samples"] / 100 / 3600)
     assert d["record_samples"] == max(tg["K"]["samples"], tg["N"]["samples"])
     # the same model from a fit's JSON, and from a pilot log fitted first
-    m = eg.parse_datasheet(ds).model(100.0, "deg/s")
+    m = eg.inference.parse_datasheet(ds).model(100.0, "deg/s")
     x = m.simulate(2**16, fs=100.0, rng=np.random.default_rng(3))
     log = tmp_path / "pilot.csv"
     np.savetxt(log, x[:, None], header="gyro_x", comments="")
@@ -216,7 +216,9 @@ def test_a_parameter_the_log_barely_informs_gets_a_wide_interval_not_a_zero_widt
     ~1e-20 of the white noise's. The sandwich's inverse is scaled to a unit diagonal first, so
     the interval is as wide as it is (a plain pseudo-inverse dropped the direction and gave
     K = 8.080228018e-9 +- 1e-18, a zero-width interval)."""
-    m = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(200.0, "deg/s")
+    m = eg.inference.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(
+        200.0, "deg/s"
+    )
     k = plan_precision(m, 200.0, 128, unit="deg/s")["K"]
     assert k.high / k.low > 1e6
     n = plan_precision(m, 200.0, 128, unit="deg/s")["N"]
@@ -376,7 +378,7 @@ def test_the_bias_instability_is_planned_from_40_times_its_averaging_time():
     assert d["targets"][0]["valid_from_samples"] == plan.floor_from
     # a WN+RW gyro (tactical: 0.01 deg/sqrt(h), 0.1 deg/h/sqrt(h) at 20 Hz): the floor at
     # sqrt(3) N / K = 624 s, to the 1.3 % the Haar WV's discrete RW shape puts between them
-    ds = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)")
+    ds = eg.inference.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)")
     tact = plan_run(ds.model(20.0, "deg/s"), 20.0, "B within 30 %, K within 30 %", unit="deg/s")
     n_deg = 0.01 / 60  # deg/s/sqrt(Hz)
     k_deg = 0.1 / 216000  # deg/s/sqrt(s)
@@ -624,7 +626,9 @@ def test_the_share_of_fits_without_a_floor_agrees_with_monte_carlo():
     within the 99.9 % binomial band of the plan's (+-7.9 points). The normal in the log
     coordinates of the intervals gives 0 %, the delta method of a linearised edge condition
     3-5 times too many on the consumer gyro."""
-    tact = eg.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(20.0, "deg/s")
+    tact = eg.inference.parse_datasheet("arw=0.01 deg/sqrt(h), rrw=0.1 deg/h/sqrt(h)").model(
+        20.0, "deg/s"
+    )
     fs, n, reps = 20.0, 80_000, 300
     p = no_floor_share(tact, fs, n)
     assert 0.19 < p < 0.25

@@ -172,7 +172,7 @@ def test_psd_integrates_to_the_variance_of_the_haar_coefficients(code):
 @pytest.mark.parametrize("code", sorted(PROCESS_TYPES))
 def test_datasheet_values_round_trip(code):
     p = EXAMPLES[code]
-    vals = eg.process_values(p, FS)
+    vals = eg.units.process_values(p, FS)
     assert set(vals) == {q.symbol for q in p.quantities}
     back = type(p).from_datasheet(vals, FS)
     np.testing.assert_allclose(
@@ -189,7 +189,7 @@ def test_phi_and_the_non_linear_parameter_are_inverse_maps(code):
     # the fit's basis is basis_scale(phi) times the AR1 WV per unit innovation variance
     tau = 2.0 ** np.arange(1, 8)
     np.testing.assert_allclose(
-        p.basis(tau, FS, phi), p.basis_scale(phi) * eg.ar1_wv(tau, phi, 1.0), rtol=1e-12
+        p.basis(tau, FS, phi), p.basis_scale(phi) * eg.models.ar1_wv(tau, phi, 1.0), rtol=1e-12
     )
 
 

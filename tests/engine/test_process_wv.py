@@ -78,14 +78,14 @@ def test_ar1_wv_is_stable_near_unit_root():
     """phi -> 1: the closed form cancels; the series branch must agree with the limit."""
     tau = 2.0 ** np.arange(1, 15)
     x = 1e-10  # phi = exp(-x); the AR1 departs from the RW limit by about 0.4 x tau
-    v = eg.ar1_wv(tau, math.exp(-x), 1.0)
+    v = eg.models.ar1_wv(tau, math.exp(-x), 1.0)
     limit_rw = (tau**2 + 2) / (12 * tau)  # AR1 -> RW with gamma2 = sigma2
     np.testing.assert_allclose(v, limit_rw, rtol=1e-5)
     # continuity across the switch between the series and the closed form (x tau = 2e-3)
     for t in (2.0**10, 2.0**16):
         xs = 2e-3 / t
-        lo = eg.ar1_wv(np.array([t]), math.exp(-xs * (1 - 1e-9)))[0]
-        hi = eg.ar1_wv(np.array([t]), math.exp(-xs * (1 + 1e-9)))[0]
+        lo = eg.models.ar1_wv(np.array([t]), math.exp(-xs * (1 - 1e-9)))[0]
+        hi = eg.models.ar1_wv(np.array([t]), math.exp(-xs * (1 + 1e-9)))[0]
         assert lo == pytest.approx(hi, rel=1e-8)
 
 
@@ -102,15 +102,15 @@ def test_ar1_wv_against_high_precision():
     tau = 2.0 ** np.arange(1, 24)
     for phi in (-0.9, 0.3, 0.9, 0.99, 0.9999, 1 - 1e-6, 1 - 1e-9):
         expected = np.array([float(ref(t, phi)) for t in tau])
-        np.testing.assert_allclose(eg.ar1_wv(tau, phi), expected, rtol=1e-9)
+        np.testing.assert_allclose(eg.models.ar1_wv(tau, phi), expected, rtol=1e-9)
 
 
 def test_ar1_wv_vectorised_over_phi():
     phis = np.array([0.1, 0.5, 0.99, 0.999999])
-    out = eg.ar1_wv(TAU, phis, 2.0)
+    out = eg.models.ar1_wv(TAU, phis, 2.0)
     assert out.shape == (4, TAU.size)
     for i, p in enumerate(phis):
-        np.testing.assert_allclose(out[i], eg.ar1_wv(TAU, float(p), 2.0), rtol=1e-12)
+        np.testing.assert_allclose(out[i], eg.models.ar1_wv(TAU, float(p), 2.0), rtol=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -257,7 +257,7 @@ def valid_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
     ch = {"gyro_x": rng.normal(size=64), "accel_z": rng.normal(size=64)}
     out = {}
     for ext in (".h5", ".csv", ".npy"):
-        out[ext] = eg.save_log(d / f"v{ext}", ch, 100.0, units={"gyro_x": "rad/s"}).read_bytes()
+        out[ext] = eg.io.save_log(d / f"v{ext}", ch, 100.0, units={"gyro_x": "rad/s"}).read_bytes()
     np.savez(d / "v.npz", gyro_x=ch["gyro_x"], fs=100.0)
     out[".npz"] = (d / "v.npz").read_bytes()
     stamps = (np.arange(64) * 5_000_000 + 10**9).astype(np.int64)
@@ -498,7 +498,7 @@ def small_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
         for c in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
     }
     units = {c: "deg/s" if c.startswith("gyro") else "g" for c in chans}
-    return eg.save_log(p, chans, 100.0, units=units)
+    return eg.io.save_log(p, chans, 100.0, units=units)
 
 
 def _run(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:

@@ -122,11 +122,11 @@ def test_polished_refit_reaches_the_searched_minimum() -> None:
     wv = eg.wavelet_variance(x.simulate(2**16, fs=100.0, rng=np.random.default_rng(7)), fs=100.0)
     first = eg.fit_gmwm(wv, "2*GM+WN")
     k = wv.n_levels - 3
-    omega = np.linalg.inv(eg.wv_cov(first)[:k, :k])
+    omega = np.linalg.inv(eg.fit.wv_cov(first)[:k, :k])
     full = eg.fit_gmwm(wv, "2*GM+WN", weights=omega, levels=k)
     polished = eg.fit_gmwm(wv, first.model, weights=omega, levels=k, optima={}, polish=True)
     assert polished.objective == pytest.approx(full.objective, rel=1e-8)
-    start = eg.gmwm_objective(wv.truncate(k), first.model, omega)
+    start = eg.fit.gmwm_objective(wv.truncate(k), first.model, omega)
     assert polished.objective <= start
 
 
@@ -143,7 +143,7 @@ def test_ranking_j_column_is_the_full_searchs(real_data, channel: str) -> None:
     ranking = eg.rank_models(wv, max_model="2*GM+WN+QN+RW+DR")
     fitted = [c for c in ranking.candidates if c.result is not None]
     largest = max(fitted, key=lambda c: (c.n_params, -c.objective))
-    vmat = eg.wv_cov(largest.result)
+    vmat = eg.fit.wv_cov(largest.result)
     checked = 0
     for c in fitted:
         if not math.isfinite(c.j_stat):

@@ -185,7 +185,7 @@ def test_slope_guides_read_the_datasheet_values(demo_report):
     # four times the averaging time: half (WN) and twice (RW) the deviation
     assert math.isclose(g["WN"].adev(np.array([4.0]))[0], g["WN"].value / 2)
     assert math.isclose(g["RW"].adev(np.array([12.0]))[0], 2 * g["RW"].value)
-    assert math.isclose(g["BI"].value, eg.BI_FACTOR * g["BI"].datasheet_value)
+    assert math.isclose(g["BI"].value, eg.units.BI_FACTOR * g["BI"].datasheet_value)
 
 
 def test_welch_psd_of_white_noise_is_flat_at_2_sigma2_over_fs():
@@ -254,7 +254,7 @@ def test_failed_channel_is_listed_not_dropped(tmp_path):
     """A constant channel has no fit: the report lists it with the reason."""
     x = np.random.default_rng(1).normal(size=4096)
     path = tmp_path / "two.h5"
-    eg.save_log(path, {"gyro_x": x, "gyro_y": np.zeros(4096)}, 100.0, units={"gyro_x": "deg/s"})
+    eg.io.save_log(path, {"gyro_x": x, "gyro_y": np.zeros(4096)}, 100.0, units={"gyro_x": "deg/s"})
     page = eg.report(path, tmp_path / "two.html", model="WN", export_format=None)
     rep = json.loads(parse(page).data_json)
     assert rep["channels"]["gyro_x"]["fit"]["model"] == "WN"

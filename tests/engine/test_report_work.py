@@ -52,7 +52,7 @@ def test_fleet_unit_log_check_is_made_once_and_reported(tmp_path, monkeypatch):
     for k in range(2):
         x = eg.parse_model("WN(1e-6) + RW(1e-12)").simulate(2**13, rng=np.random.default_rng(k))
         p = tmp_path / f"unit{k}.h5"
-        eg.save_log(p, {"gyro_x": x}, 100.0, units={"gyro_x": "rad/s"})
+        eg.io.save_log(p, {"gyro_x": x}, 100.0, units={"gyro_x": "rad/s"})
         paths.append(str(p))
     checked = []
     real = engine.io.qualify_log

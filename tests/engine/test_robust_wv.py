@@ -15,7 +15,7 @@ import engine.wv.robust as rwv
 from engine.wv import max_levels, robust_scale_biweight
 from engine.wv._kernel import cumsum_demeaned
 
-C = eg.biweight_constant(0.6)
+C = eg.wv.biweight_constant(0.6)
 
 
 def _a(c: float) -> float:
@@ -74,7 +74,7 @@ def coefficients(x: np.ndarray, j: int) -> np.ndarray:
 
 def test_gaussian_psi2_mean_matches_quadrature():
     for eff in (0.6, 0.8, 0.9):
-        c = eg.biweight_constant(eff)
+        c = eg.wv.biweight_constant(eff)
         assert rwv.gaussian_psi2_mean(c) == pytest.approx(_a(c), rel=1e-12)
 
 
@@ -242,8 +242,8 @@ def test_progress_called_once_per_level_in_order():
 def test_level_count_accepts_r_count_with_one_coefficient_at_the_last_level():
     n = 2**12
     x = np.random.default_rng(4).standard_normal(n)
-    assert eg.default_levels(n) == 11 and max_levels(n) == 12
-    assert max_levels(n + 1) == eg.default_levels(n + 1) == 12
+    assert eg.wv.default_levels(n) == 11 and max_levels(n) == 12
+    assert max_levels(n + 1) == eg.wv.default_levels(n + 1) == 12
     wv = eg.wavelet_variance(x, levels=12, robust=True)
     assert wv.n_coef[-1] == 1
     w = coefficients(x, 12)

@@ -121,7 +121,7 @@ def test_fixed_gives_the_result_of_the_given_values():
     wv = eg.wavelet_variance(x, fs=100.0)
     res = eg.fit_gmwm(wv, truth, fixed=True)
     assert res.model == truth and res.method == "fixed"
-    assert res.objective == pytest.approx(eg.gmwm_objective(wv, truth), rel=1e-12)
+    assert res.objective == pytest.approx(eg.fit.gmwm_objective(wv, truth), rel=1e-12)
     assert res.objective >= eg.fit_gmwm(wv, "GM+WN").objective
     with pytest.raises(eg.FitError, match="fixed=True"):
         eg.fit_gmwm(wv, "GM+WN", fixed=True)

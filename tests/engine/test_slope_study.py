@@ -67,7 +67,7 @@ def test_conversions_agree_with_the_engine_datasheet(sensor):
     model = table1_model(sensor)
     rows = {
         (r["quantity"], r["unit"]): r["value"]
-        for r in eg.datasheet(model, STUDY_FS, TABLE_I[sensor]["unit"])
+        for r in eg.units.datasheet(model, STUDY_FS, TABLE_I[sensor]["unit"])
     }
     key = {
         "WN": "angle random walk" if sensor == "gyro" else "velocity random walk",

@@ -23,7 +23,7 @@ def test_linear_values_are_half_the_tightest_ratio(wv: eg.WaveletVariance) -> No
     samples). Each guess is half the largest value whose curve stays below the empirical WV."""
     tau = wv.tau_samples.astype(float)
     nu = wv.variance
-    got = eg.starting_values(eg.parse_model("WN+RW+DR"), wv)
+    got = eg.fit.starting_values(eg.parse_model("WN+RW+DR"), wv)
     assert set(got) == {"WN.sigma2", "RW.gamma2", "DR.omega"}
     assert got["WN.sigma2"] == pytest.approx(0.5 * np.min(nu * tau), rel=1e-12)
     assert got["RW.gamma2"] == pytest.approx(0.5 * np.min(nu * 12 * tau / (tau**2 + 2)), rel=1e-12)
@@ -34,13 +34,13 @@ def test_correlation_times_spread_geometrically(wv: eg.WaveletVariance) -> None:
     """Two nonlinear processes: correlation times tau_J / 4 (the slowest, first) and 2 samples;
     a GM's beta is fs / T, an AR1's phi is exp(-1 / T)."""
     t_slow, t_fast = wv.tau_samples[-1] / 4.0, 2.0
-    got = eg.starting_values(eg.parse_model("GM+AR1"), wv)
+    got = eg.fit.starting_values(eg.parse_model("GM+AR1"), wv)
     assert got["GM.beta"] == pytest.approx(wv.fs / t_slow, rel=1e-12)
     assert got["AR1.phi"] == pytest.approx(math.exp(-1.0 / t_fast), rel=1e-12)
-    two = eg.starting_values(eg.parse_model("2*GM"), wv)
+    two = eg.fit.starting_values(eg.parse_model("2*GM"), wv)
     assert two["GM_1.beta"] == pytest.approx(wv.fs / t_slow, rel=1e-12)
     assert two["GM_2.beta"] == pytest.approx(wv.fs / t_fast, rel=1e-12)
-    one = eg.starting_values(eg.parse_model("AR1"), wv)  # one: the slowest only
+    one = eg.fit.starting_values(eg.parse_model("AR1"), wv)  # one: the slowest only
     assert one["AR1.phi"] == pytest.approx(math.exp(-1.0 / t_slow), rel=1e-12)
 
 
@@ -52,7 +52,7 @@ def test_each_guessed_curve_touches_half_the_empirical_wv(
     WV at every scale and exactly half at its binding scale; the guessed model's WV stays
     below (number of processes) / 2 times the empirical WV and reaches half of it somewhere."""
     model = eg.parse_model(spec)
-    vals = eg.starting_values(model, wv)
+    vals = eg.fit.starting_values(model, wv)
     assert set(vals) == {
         f"{lab}.{n}"
         for lab, p in zip(model.labels, model.processes, strict=True)
@@ -79,7 +79,7 @@ def test_ma1_theta_is_read_off_the_two_smallest_scales(theta: float) -> None:
     fit's objective (GMWM and ARMAV), and a GM beside it keeps the correlation-time start."""
     truth = eg.parse_model(f"MA1(theta={theta}, sigma2=1e-2) + RW(gamma2=1e-9)")
     wv = eg.wavelet_variance(truth.simulate(2**14, fs=100.0, rng=21), fs=100.0)
-    got = eg.starting_values(eg.parse_model("MA1+RW"), wv)
+    got = eg.fit.starting_values(eg.parse_model("MA1+RW"), wv)
     assert got["MA1.theta"] == pytest.approx(theta, abs=0.05)
     r = wv.variance[1] / wv.variance[0]
     t = got["MA1.theta"]  # on a grid of step 0.01: the ratio within a step's change of it
@@ -91,11 +91,11 @@ def test_ma1_theta_is_read_off_the_two_smallest_scales(theta: float) -> None:
             for lab, p in zip(eg.parse_model("MA1+RW").labels, started, strict=True)
         )
     )
-    for fit in (eg.fit_gmwm, eg.fit_armav):
+    for fit in (eg.fit_gmwm, eg.fit.fit_armav):
         plain, from_start = fit(wv, "MA1+RW"), fit(wv, model)
         assert from_start.objective <= plain.objective * (1 + 1e-9)
         assert from_start.params["MA1.theta"] == pytest.approx(theta, abs=0.05)
-    both = eg.starting_values(eg.parse_model("GM+MA1+RW"), wv)
+    both = eg.fit.starting_values(eg.parse_model("GM+MA1+RW"), wv)
     assert both["MA1.theta"] == got["MA1.theta"]
     assert both["GM.beta"] == pytest.approx(wv.fs / (wv.tau_samples[-1] / 4.0), rel=1e-12)
 
@@ -106,16 +106,16 @@ def test_gmwm_objective_is_the_fits_objective_and_a_weighted_sum(wv: eg.WaveletV
     for spec in ("WN+RW", "GM+WN"):
         for weights in ("ci", "identity"):
             fit = eg.fit_gmwm(wv, spec, weights=weights)
-            got = eg.gmwm_objective(wv, fit.model, weights)
+            got = eg.fit.gmwm_objective(wv, fit.model, weights)
             assert got == pytest.approx(fit.objective, rel=1e-12, abs=0)
     model = eg.parse_model("WN(sigma2=0.01)+RW(gamma2=1e-6)")
     tau = wv.tau_samples.astype(float)
     nu = 0.01 / tau + 1e-6 * (tau**2 + 2) / (12 * tau)
     w = 1.0 / (wv.ci_high - wv.ci_low) ** 2
     want = float(np.sum(w * (wv.variance - nu) ** 2))
-    assert eg.gmwm_objective(wv, model) == pytest.approx(want, rel=1e-12)
-    assert eg.gmwm_objective(wv, "WN(sigma2=0.01)+RW(gamma2=1e-6)") == pytest.approx(
+    assert eg.fit.gmwm_objective(wv, model) == pytest.approx(want, rel=1e-12)
+    assert eg.fit.gmwm_objective(wv, "WN(sigma2=0.01)+RW(gamma2=1e-6)") == pytest.approx(
         want, rel=1e-12
     )
     ident = float(np.sum((wv.variance - nu) ** 2))
-    assert eg.gmwm_objective(wv, model, "identity") == pytest.approx(ident, rel=1e-12)
+    assert eg.fit.gmwm_objective(wv, model, "identity") == pytest.approx(ident, rel=1e-12)

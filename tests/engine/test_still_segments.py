@@ -37,7 +37,7 @@ def test_pooled_is_the_coefficient_weighted_mean() -> None:
     rng = np.random.default_rng(1)
     pieces = [rng.normal(size=n) for n in (3000, 700, 40)]
     wv = pooled_wavelet_variance(pieces, levels=8)
-    per = [eg.wavelet_variance(p, levels=min(8, eg.default_levels(p.size))) for p in pieces]
+    per = [eg.wavelet_variance(p, levels=min(8, eg.wv.default_levels(p.size))) for p in pieces]
     for j in range(8):
         m = [w.n_coef[j] for w in per if w.n_levels > j]
         v = [w.variance[j] for w in per if w.n_levels > j]

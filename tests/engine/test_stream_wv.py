@@ -77,7 +77,7 @@ def test_two_dimensional_npy_columns(tmp_path: Path, order: str, monkeypatch) ->
 
 
 def test_hdf5_dataset_attributes_and_objects(tmp_path: Path, signal: np.ndarray) -> None:
-    p = eg.save_log(
+    p = eg.io.save_log(
         tmp_path / "s.h5", {"gyro_x": signal, "gyro_y": -signal}, 100.0, units={"gyro_x": "deg/s"}
     )
     got = wavelet_variance_stream(p, dataset="gyro_x", block=1 << 14)
@@ -154,7 +154,7 @@ def test_progress_callback(tmp_path: Path) -> None:
 
 
 def test_cli_stream(tmp_path: Path, signal: np.ndarray, capsys) -> None:
-    p = eg.save_log(tmp_path / "s.h5", {"gyro_x": signal}, 100.0, units={"gyro_x": "deg/s"})
+    p = eg.io.save_log(tmp_path / "s.h5", {"gyro_x": signal}, 100.0, units={"gyro_x": "deg/s"})
     assert main(["wv", str(p), "--json"]) == 0
     ref = json.loads(capsys.readouterr().out)
     assert main(["wv", str(p), "--stream", "--json"]) == 0
@@ -193,7 +193,7 @@ def test_integer_counts_with_scale_are_exact(tmp_path: Path) -> None:
         "gyro_x": rng.integers(-32768, 32767, 4000).astype(np.int16),
         "accel_z": rng.integers(-(2**31), 2**31 - 1, 4000).astype(np.int32),
     }
-    p = eg.save_log(tmp_path / "c.h5", counts, 200.0)
+    p = eg.io.save_log(tmp_path / "c.h5", counts, 200.0)
     log = eg.load_log(p, scale=0.05)
     for k, c in counts.items():
         assert log[k].dtype == np.float64

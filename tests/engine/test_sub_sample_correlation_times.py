@@ -32,7 +32,7 @@ def wn_equivalent(q: eg.Process, fs: float) -> float:
     return q.sigma2 / (1 - q.phi) ** 2
 
 
-def sub_sample_terms(res: eg.FitResult, fs: float) -> dict[str, eg.Process]:
+def sub_sample_terms(res: eg.fit.FitResult, fs: float) -> dict[str, eg.Process]:
     """The fitted AR1/GM terms with a positive variance and a correlation time < 1 sample."""
     out = {}
     for lab, q in zip(res.model.labels, res.model.processes, strict=True):
@@ -71,8 +71,8 @@ def test_exact_wv_of_a_fast_gm_is_flagged_and_wn_absorbs_it():
     assert not wn.warnings
     # the summary and the JSON carry the warning; the GMWFM (identity and log10) too
     assert res.warnings[0] in res.summary() and res.to_dict()["warnings"] == res.warnings
-    assert eg.fit_gmwfm(wv, "GM+WN", f="identity").warnings == res.warnings
-    armav = eg.fit_armav(wv, "GM+WN")
+    assert eg.fit.fit_gmwfm(wv, "GM+WN", f="identity").warnings == res.warnings
+    armav = eg.fit.fit_armav(wv, "GM+WN")
     assert armav.params["GM.beta"] == pytest.approx(500.0, rel=1e-3)
     assert len(armav.warnings) == 1 and "shorter than one sample" in armav.warnings[0]
 
@@ -150,7 +150,7 @@ def test_adis_sub_sample_gm_is_flagged_with_the_data_white_level(adis_gyro_x):
     plateau = adis_gyro_x.variance[5] * adis_gyro_x.tau_samples[5]
     assert equiv == pytest.approx(plateau, rel=0.06)
     # GMWFM (log10, the ARMAV) reaches the same sub-sample term and flags it too
-    armav = eg.fit_armav(adis_gyro_x, "2*GM+WN+RW")
+    armav = eg.fit.fit_armav(adis_gyro_x, "2*GM+WN+RW")
     assert armav.params["GM_2.beta"] > adis_gyro_x.fs
     assert [w.split(":")[0] for w in armav.warnings] == ["GM_2"]
 
@@ -163,7 +163,7 @@ def test_adis_replicates_beta_177_is_flagged(real_data: Path):
         )
         for k in (1, 2, 3)
     ]
-    res = eg.fit_replicates(wvs, "2*GM+WN+RW")
+    res = eg.fit.fit_replicates(wvs, "2*GM+WN+RW")
     assert res.params["GM_2.beta"] == pytest.approx(177, abs=2)
     assert res.params["WN.sigma2"] == 0.0
     assert [w.split(":")[0] for w in res.warnings] == ["GM_2"]
@@ -213,7 +213,7 @@ def test_app_state_shows_the_warning(tmp_path):
     rng = np.random.default_rng(4)
     n = 2**16
     x = eg.GM(200.0, 1.0).simulate(n, rng, fs=FS) + eg.WN(0.2).simulate(n, rng)
-    path = eg.save_log(tmp_path / "fast.h5", {"gyro_x": x}, fs=FS)
+    path = eg.io.save_log(tmp_path / "fast.h5", {"gyro_x": x}, fs=FS)
     s = AppState()
     assert s.load_path(path), s.error
     assert s.set_model("GM+WN")

@@ -228,7 +228,7 @@ def test_gmwm_export_applies_the_tail_factors_and_no_tails_turns_them_off(real_d
     """`gmwm export` of adis16405_imu1 accel_y (WN+RW, Kalibr): by default the file's header
     names the tail factor (x2.18 at 20.48 s) and its random walk K is the tail-bound one (x2.10
     over the data bound alone, docs/filters.md "Tails"); with --no-tails the header has no
-    tails line and K is the data bound's alone, the value of eg.project without tails."""
+    tails line and K is the data bound's alone, the value of eg.formats.project without tails."""
     log = eg.load_log(real_data / "adis16405_imu1.h5")
     fit = eg.fit_gmwm(log.wavelet_variance("accel_y"), "WN+RW")
     k_data = project(fit, "WN+RW", ci=None).value("K")

@@ -15,7 +15,7 @@ def rows(model, fs, unit):
     """``{(label, quantity): (value, unit)}`` of the datasheet rows."""
     return {
         (r["label"], r["quantity"]): (r["value"], r["unit"])
-        for r in eg.datasheet(eg.parse_model(model), fs, unit)
+        for r in eg.units.datasheet(eg.parse_model(model), fs, unit)
     }
 
 
@@ -28,7 +28,7 @@ def test_gyro_white_noise_and_random_walk_in_datasheet_units():
     k = math.sqrt(1e-12 * fs)  # (deg/s)/sqrt(s) = deg/s^2/sqrt(Hz)
     assert d[("RW", "rate random walk")][0] == pytest.approx(216000 * k)
     assert d[("RW", "rate random walk")][1] == "deg/h/sqrt(h)"
-    native = [r for r in eg.datasheet(eg.parse_model("RW(gamma2=1e-12)"), fs, "deg/s")][0]
+    native = [r for r in eg.units.datasheet(eg.parse_model("RW(gamma2=1e-12)"), fs, "deg/s")][0]
     assert (native["symbol"], native["unit"]) == ("K", "deg/s^2/sqrt(Hz)")
     assert native["value"] == pytest.approx(k, rel=1e-12)
 
@@ -73,10 +73,10 @@ def test_allan_variance_shape_of_white_noise_matches_n_squared_over_t():
 
 
 def test_param_units():
-    assert eg.param_unit("WN", "sigma2", "deg/s") == "(deg/s)^2"
-    assert eg.param_unit("GM", "sigma2_gm", "g") == "g^2"
-    assert eg.param_unit("GM", "beta", "g") == "1/s"
-    assert eg.param_unit("DR", "omega", "m/s^2") == "m/s^2 per sample"
+    assert eg.units.param_unit("WN", "sigma2", "deg/s") == "(deg/s)^2"
+    assert eg.units.param_unit("GM", "sigma2_gm", "g") == "g^2"
+    assert eg.units.param_unit("GM", "beta", "g") == "1/s"
+    assert eg.units.param_unit("DR", "omega", "m/s^2") == "m/s^2 per sample"
 
 
 @pytest.mark.parametrize(

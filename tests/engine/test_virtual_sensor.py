@@ -32,7 +32,7 @@ def test_weights_sum_to_one_and_no_feasible_perturbation_does_better():
         for _ in range(20):
             a = rng.standard_normal((k, k + 2))
             n = a @ a.T
-            w = eg.optimal_weights(n)
+            w = eg.multivariate.optimal_weights(n)
             assert w.sum() == pytest.approx(1.0, abs=1e-12)
             best = w @ n @ w
             one = np.ones(k)
@@ -46,14 +46,14 @@ def test_weights_sum_to_one_and_no_feasible_perturbation_does_better():
 def test_equal_independent_sensors_get_one_over_k_and_wv_over_k():
     for k in (2, 4, 6):
         s = 3.7e-4
-        w = eg.optimal_weights(s * np.eye(k))
+        w = eg.multivariate.optimal_weights(s * np.eye(k))
         np.testing.assert_allclose(w, np.full(k, 1.0 / k), rtol=1e-12)
         assert w @ (s * np.eye(k)) @ w == pytest.approx(s / k, rel=1e-12)
 
 
 def test_two_independent_sensors_get_inverse_variance_weights():
     a, b = 1.0e-3, 4.0e-3
-    w = eg.optimal_weights(np.diag([a, b]))
+    w = eg.multivariate.optimal_weights(np.diag([a, b]))
     np.testing.assert_allclose(w, [b / (a + b), a / (a + b)], rtol=1e-12)  # 0.8, 0.2
     assert w @ np.diag([a, b]) @ w == pytest.approx(a * b / (a + b), rel=1e-12)
 
@@ -61,7 +61,7 @@ def test_two_independent_sensors_get_inverse_variance_weights():
 def test_negative_correlation_beats_the_average_by_the_analytic_margin():
     a, b, c = 1.0, 4.0, -1.2  # correlation -0.6
     n = np.array([[a, c], [c, b]])
-    w = eg.optimal_weights(n)
+    w = eg.multivariate.optimal_weights(n)
     assert w[0] == pytest.approx((b - c) / (a + b - 2 * c), rel=1e-12)
     opt = w @ n @ w
     assert opt == pytest.approx((a * b - c * c) / (a + b - 2 * c), rel=1e-12)  # 0.3459
@@ -69,23 +69,23 @@ def test_negative_correlation_beats_the_average_by_the_analytic_margin():
     assert avg - opt == pytest.approx(0.65 - 2.56 / 7.4, rel=1e-12)
     # equal variances with exchangeable correlation: the average is the optimum (no gain)
     n_eq = 2.0 * (0.7 * np.eye(3) + 0.3)
-    np.testing.assert_allclose(eg.optimal_weights(n_eq), np.full(3, 1 / 3), rtol=1e-12)
+    np.testing.assert_allclose(eg.multivariate.optimal_weights(n_eq), np.full(3, 1 / 3), rtol=1e-12)
 
 
 def test_singular_and_bad_matrices():
     # perfectly correlated sensors of different size: a zero-variance combination exists
     n = np.outer([1.0, 2.0], [1.0, 2.0])
-    w = eg.optimal_weights(n)
+    w = eg.multivariate.optimal_weights(n)
     assert w.sum() == pytest.approx(1.0) and w @ n @ w == pytest.approx(0.0, abs=1e-12)
     np.testing.assert_allclose(w, [2.0, -1.0], atol=1e-9)  # 2 x1 - x2 cancels the noise
     with pytest.raises(ValueError, match="square"):
-        eg.optimal_weights(np.ones(3))
+        eg.multivariate.optimal_weights(np.ones(3))
     with pytest.raises(ValueError, match="symmetric"):
-        eg.optimal_weights([[1.0, 0.5], [0.0, 1.0]])
+        eg.multivariate.optimal_weights([[1.0, 0.5], [0.0, 1.0]])
     with pytest.raises(ValueError, match="non-positive variance"):
-        eg.optimal_weights([[1.0, 0.0], [0.0, 0.0]])
+        eg.multivariate.optimal_weights([[1.0, 0.0], [0.0, 0.0]])
     with pytest.raises(ValueError, match="sum to 1"):
-        eg.virtual_signal(np.zeros((10, 2)), [0.5, 0.6])
+        eg.multivariate.virtual_signal(np.zeros((10, 2)), [0.5, 0.6])
 
 
 def test_target_levels_and_band_matrix():
@@ -125,7 +125,7 @@ def test_virtual_model_is_w_sigma_w_process_by_process():
         nl={"GM_1": 0.5},
     )
     w = np.array([0.7, 0.3])
-    vm = eg.virtual_model(mm, w, FS)
+    vm = eg.multivariate.virtual_model(mm, w, FS)
     tau = 2.0 ** np.arange(1, 18)
     n = mm.implied(tau, FS)
     np.testing.assert_allclose(vm.wv(tau, FS), np.einsum("p,jpq,q->j", w, n, w), rtol=1e-12)
@@ -149,20 +149,20 @@ def test_wv_of_the_combined_signal_is_w_nhat_w():
     )
     x = mm.simulate(5000, fs=FS, rng=2) + np.array([1.0, -3.0, 20.0])  # offsets (turn-on bias)
     w = np.array([0.5, 0.2, 0.3])
-    v = eg.virtual_signal(x, w)
+    v = eg.multivariate.virtual_signal(x, w)
     np.testing.assert_allclose(v, x @ w, rtol=1e-14)
-    wvm = eg.wv_matrix(x, channels=list("abc"), fs=FS)
+    wvm = eg.wv.wv_matrix(x, channels=list("abc"), fs=FS)
     wv = eg.wavelet_variance(v, fs=FS)
     np.testing.assert_allclose(wv.variance, np.einsum("p,jpq,q->j", w, wvm.values, w), rtol=1e-9)
     log = eg.ImuLog(channels=dict(zip("abc", x.T, strict=True)), fs=FS)
-    np.testing.assert_allclose(eg.virtual_signal(log, w), v, rtol=1e-14)
+    np.testing.assert_allclose(eg.multivariate.virtual_signal(log, w), v, rtol=1e-14)
     with pytest.raises(ValueError, match="give 3 weights"):
-        eg.virtual_signal(log, [0.5, 0.5])
+        eg.multivariate.virtual_signal(log, [0.5, 0.5])
     # replicates of different lengths: cut to the shortest; a log by channel names
-    assert eg.virtual_signal([x[:, 0], x[:100, 1]], [0.5, 0.5]).size == 100
-    assert eg.virtual_signal(dict(zip("abc", x.T, strict=True)), w, channels=list("abc"))[
-        3
-    ] == pytest.approx(x[3] @ w)
+    assert eg.multivariate.virtual_signal([x[:, 0], x[:100, 1]], [0.5, 0.5]).size == 100
+    assert eg.multivariate.virtual_signal(
+        dict(zip("abc", x.T, strict=True)), w, channels=list("abc")
+    )[3] == pytest.approx(x[3] @ w)
 
 
 # -------------------------------------------------------------------------------------------
@@ -211,10 +211,10 @@ def _monte_carlo(name: str, reps: int = 8, n: int = 1 << 14) -> dict:
     out = {"inside": [], "conf_inside": [], "ratio_emp": [], "weights": [], "truth": truth}
     for _ in range(reps):
         x = truth.simulate(n, fs=FS, rng=g)
-        wvm = eg.wv_matrix(x, channels=["a", "b"], fs=FS)
+        wvm = eg.wv.wv_matrix(x, channels=["a", "b"], fs=FS)
         res = eg.fit_mgmwm(wvm, structure)
         vs = eg.virtual_sensor(res)
-        emp = eg.wavelet_variance(eg.virtual_signal(x, vs.weights), fs=FS).variance
+        emp = eg.wavelet_variance(eg.multivariate.virtual_signal(x, vs.weights), fs=FS).variance
         np.testing.assert_allclose(emp, vs.empirical, rtol=1e-9)
         out["inside"].append((emp >= vs.ci_low) & (emp <= vs.ci_high))
         # the truth's WV of the same combination, inside the delta-method interval
@@ -247,7 +247,7 @@ def test_monte_carlo_combined_wv_inside_the_implied_interval(name):
     truth = mc["truth"]
     n_true = truth.implied(mc["tau"], FS)
     m, a = band_matrix(n_true, np.arange(n_true.shape[0]))
-    w_true = eg.optimal_weights(m)
+    w_true = eg.multivariate.optimal_weights(m)
     np.testing.assert_allclose(np.mean(mc["weights"], axis=0), w_true, atol=0.08)
     # the true-model gain over the average, and the Monte Carlo mean gain of the data
     true_gain = np.mean(np.einsum("p,jpq,q->j", w_true, n_true, w_true) / a)
@@ -270,7 +270,7 @@ def test_virtual_sensor_of_a_fit_scale_band_and_export(tmp_path):
     sc = SCENARIOS["negative GM"]
     truth = MultiModel(["a", "b"], sc["per"], shared=sc["shared"], cov=sc["cov"], nl=sc["nl"])
     x = truth.simulate(1 << 14, fs=FS, rng=5)
-    wvm = eg.wv_matrix(x, channels=["a", "b"], fs=FS, units=["deg/s", "deg/s"])
+    wvm = eg.wv.wv_matrix(x, channels=["a", "b"], fs=FS, units=["deg/s", "deg/s"])
     res = eg.fit_mgmwm(wvm, MultiModel(["a", "b"], "GM+WN", shared=["GM", "WN"]))
     one = eg.virtual_sensor(res, scale=0.64)
     j = one.target_levels[0]
@@ -333,10 +333,10 @@ def test_interval_is_the_moment_covariance_of_w_nhat_w():
         },
     )
     x = truth.simulate(1 << 13, fs=FS, rng=4)
-    wvm = eg.wv_matrix(x, channels=k3, fs=FS)
+    wvm = eg.wv.wv_matrix(x, channels=k3, fs=FS)
     res = eg.fit_mgmwm(wvm, truth.cleared())
     vs = eg.virtual_sensor(res, band=(0.05, 5.0))
-    v = eg.moment_covariance(res.model, wvm)
+    v = eg.multivariate.moment_covariance(res.model, wvm)
     w, nj = vs.weights, wvm.n_levels
     pairs = [(p, q) for p in range(3) for q in range(p, 3)]
     c = np.array([w[p] * w[q] * (1.0 if p == q else 2.0) for p, q in pairs])
@@ -386,13 +386,15 @@ def array_files(tmp_path_factory) -> list[Path]:
     out = []
     for i in range(2):
         p = d / f"unit{i + 1}.h5"
-        eg.save_log(p, {"gyro_x": x[:, i]}, fs=FS, units={"gyro_x": "deg/s"})
+        eg.io.save_log(p, {"gyro_x": x[:, i]}, fs=FS, units={"gyro_x": "deg/s"})
         out.append(p)
-    eg.save_log(d / "short.h5", {"gyro_x": x[:5000, 1]}, fs=FS, units={"gyro_x": "deg/s"})
-    eg.save_log(d / "fast.h5", {"gyro_x": x[:, 1]}, fs=2 * FS, units={"gyro_x": "deg/s"})
-    eg.save_log(d / "rad.h5", {"gyro_x": x[:, 1]}, fs=FS, units={"gyro_x": "rad/s"})
+    eg.io.save_log(d / "short.h5", {"gyro_x": x[:5000, 1]}, fs=FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(d / "fast.h5", {"gyro_x": x[:, 1]}, fs=2 * FS, units={"gyro_x": "deg/s"})
+    eg.io.save_log(d / "rad.h5", {"gyro_x": x[:, 1]}, fs=FS, units={"gyro_x": "rad/s"})
     both = d / "both.h5"
-    eg.save_log(both, {"g1": x[:, 0], "g2": x[:, 1]}, fs=FS, units={"g1": "deg/s", "g2": "deg/s"})
+    eg.io.save_log(
+        both, {"g1": x[:, 0], "g2": x[:, 1]}, fs=FS, units={"g1": "deg/s", "g2": "deg/s"}
+    )
     return [*out, both]
 
 
@@ -450,7 +452,7 @@ def test_cli_virtual_says_the_gain_out_of_sample_and_the_fits_warnings(tmp_path,
     files = []
     for i in range(2):
         files.append(str(tmp_path / f"u{i}.h5"))
-        eg.save_log(files[-1], {"gyro_x": x[:, i]}, fs=FS, units={"gyro_x": "deg/s"})
+        eg.io.save_log(files[-1], {"gyro_x": x[:, i]}, fs=FS, units={"gyro_x": "deg/s"})
     argv = ["virtual", *files, "--model", "GM+WN+RW", "--shared", "WN,RW"]
     assert main([*argv, "--json"]) == 0
     cap = capsys.readouterr()
@@ -484,7 +486,7 @@ def adis_virtual(real_data: Path) -> tuple:
     for k in range(1, 7):
         log = eg.load_log(real_data / f"adis16405_imu{k}.h5", channel="gyro_x")
         data[f"imu{k}"] = log["gyro_x"][: 1 << 18]  # 2621 s of each: a few seconds in all
-    wvm = eg.wv_matrix(data, fs=FS, units=["deg/s"] * 6)
+    wvm = eg.wv.wv_matrix(data, fs=FS, units=["deg/s"] * 6)
     res = eg.fit_mgmwm(wvm, MultiModel(list(data), "WN+RW", shared=["WN", "RW"]))
     return data, res, eg.virtual_sensor(res)
 
@@ -499,7 +501,7 @@ def test_adis_virtual_gyro_weights_and_gains(adis_virtual):
     # the average of six nearly independent sensors: about 1/6 of a single one's WV
     assert vs.gain_vs_best < 0.25
     # the WV of the combined series is the engine's WV of the weighted mean of the logs
-    v = eg.virtual_signal(data, vs.weights, channels=list(data))
+    v = eg.multivariate.virtual_signal(data, vs.weights, channels=list(data))
     emp = eg.wavelet_variance(v, fs=FS).variance
     np.testing.assert_allclose(emp, vs.empirical, rtol=1e-9)
     # data weights (no model) agree with the model's to a few percent
@@ -546,7 +548,7 @@ def _gain_monte_carlo(wn: np.ndarray, rho: float, reps: int, seed: int) -> np.nd
     out = []
     for _ in range(reps):
         x = truth.simulate(n, fs=FS, rng=g)
-        wvm = eg.wv_matrix(x, channels=names, fs=FS)
+        wvm = eg.wv.wv_matrix(x, channels=names, fs=FS)
         vs = eg.virtual_sensor(eg.fit_mgmwm(wvm, structure), scale=10.24, confidence=False)
         n_true = _true_matrix(wn, rw, wvm.tau_samples)
         sel = vs.target_levels

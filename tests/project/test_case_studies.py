@@ -94,7 +94,7 @@ def test_array_shared_ar1():
 
     case = _load("case_array")
     log = eg.load_log(case.ADIS)
-    wvm = eg.wv_matrix(log, channels=case.CHANNELS)
+    wvm = eg.wv.wv_matrix(log, channels=case.CHANNELS)
     shared = mv.fit_mgmwm(wvm, mv.MultiModel(case.CHANNELS, case.MODEL, shared=["AR1_2"]))
     indep = mv.fit_mgmwm(wvm, mv.MultiModel(case.CHANNELS, case.MODEL))
     sh = shared.shared["AR1_2"]

@@ -34,8 +34,8 @@ REQUIRED = [
     ("engine.formats.projection", "project"),
     ("engine.reporting", "report"),
     ("engine.batch", "fit_batch"),
-    # every latent process, in the module that defines it (engine.PROCESS_TYPES)
-    *[(cls.__module__, code) for code, cls in eg.PROCESS_TYPES.items()],
+    # every latent process, in the module that defines it (engine.models.PROCESS_TYPES)
+    *[(cls.__module__, code) for code, cls in eg.models.PROCESS_TYPES.items()],
 ]
 
 MODULES = sorted({m for m, _ in REQUIRED})
@@ -66,11 +66,11 @@ def test_required_are_public() -> None:
 def test_every_process_type_required() -> None:
     """A new process type needs its own example: the list above names every one, each
     resolved in the module that defines it."""
-    listed = {q for m, q in REQUIRED if q in eg.PROCESS_TYPES}
-    assert listed == set(eg.PROCESS_TYPES), sorted(set(eg.PROCESS_TYPES) ^ listed)
+    listed = {q for m, q in REQUIRED if q in eg.models.PROCESS_TYPES}
+    assert listed == set(eg.models.PROCESS_TYPES), sorted(set(eg.models.PROCESS_TYPES) ^ listed)
     for m, q in REQUIRED:
-        if q in eg.PROCESS_TYPES:
-            assert _resolve(m, q) is eg.PROCESS_TYPES[q]
+        if q in eg.models.PROCESS_TYPES:
+            assert _resolve(m, q) is eg.models.PROCESS_TYPES[q]
 
 
 def test_required_examples_run_not_skipped() -> None:
