@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from param.parameterized import batch_call_watchers
+
 from gmwm_app.data import (
     COMPENSATION,
     PreparedQuery,
@@ -175,6 +177,13 @@ class QueryMixin(StateFields):
         """
         if prepared is None:
             prepared = self.prepare_query(query, default_source, default_path)
+        # the data, then the model: one call of each watcher, with the final values (a page's
+        # first draw redraws each of its parts once, not once per step)
+        with batch_call_watchers(self):
+            return self._apply_query(prepared)
+
+    def _apply_query(self, prepared: PreparedQuery) -> bool:
+        """:meth:`from_query`'s steps (the data, the weights, the model) on prepared data."""
         s = prepared.settings
         problems = list(prepared.problems)
         if prepared.loaded is not None:

@@ -213,3 +213,28 @@ def test_a_callback_of_one_session_changes_no_other_page(app_demo: Path) -> None
     pn.state._remove_busy_event("gmwm-test")
     assert not pn.state.busy
     assert events == []  # no page shows the process's busy state (was 2 changes per page)
+
+
+def test_a_pages_first_data_wake_each_part_once(app_demo: Path) -> None:
+    """The data and the model a URL names reach the page in one dispatch: each watcher of
+    the state (a part of the page) runs once, with the final values. It ran twice (the data
+    without the model, then the model), so the first draw of a page made twice the Panel
+    updates on the server loop. The state is the one of the two steps done one by one."""
+    q = {"source": "demo", "channel": "gyro_y", "model": "WN+RW"}
+    s = AppState()
+    prepared = s.prepare_query(q, "demo", "")
+    calls: list[list[str]] = []
+    names = ["wv", "channel", "filename", "model", "result", "loads"]
+    s.param.watch(lambda *events: calls.append(sorted(e.name for e in events)), names)
+    assert s.from_query(q, prepared=prepared), s.error
+    assert calls == [sorted(names)]
+    steps = AppState()
+    assert steps.load_demo() and steps.select_channel("gyro_y") and steps.set_model("WN+RW")
+    assert (s.channel, s.model.spec(), s.error) == ("gyro_y", "WN+RW", "")
+    assert dict(s.result.params) == pytest.approx(dict(steps.result.params), rel=1e-12)
+    # a model the data cannot take: the data are shown, the message says why, in one dispatch
+    calls.clear()
+    bad, bq = AppState(), {**q, "model": "WN+WN"}
+    bad.param.watch(lambda *events: calls.append(sorted(e.name for e in events)), names)
+    assert not bad.from_query(bq, prepared=bad.prepare_query(bq, "demo", ""))
+    assert len(calls) == 1 and bad.channel == "gyro_y" and "2 WN terms" in bad.error

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import asyncio
+import inspect
 import logging
+from concurrent.futures import Future
 from typing import Any
 
 import panel as pn
 import pytest
 
 from gmwm_app import _panel_compat as compat
-from gmwm_app.jobs import Jobs
+from gmwm_app.jobs import Jobs, LoopTurns
 
 
 def test_a_job_applies_its_result_then_runs_done() -> None:
@@ -65,6 +68,90 @@ def test_a_page_load_turns_the_indicator_on_and_off_and_installs() -> None:
     seen.clear()
     jobs.load("Reading x", lambda: int("x"))
     assert seen[1][0] == "failed" and seen[1][1] == "Reading x" and seen[2][1] is False
+
+
+class _ServedDoc:
+    """What :class:`Jobs` uses of a served Bokeh document, on an asyncio loop: a next-tick
+    callback runs in a later iteration of the loop, as on Bokeh's server."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.session_context = object()
+
+    def on_session_destroyed(self, fn: Any) -> None:
+        pass
+
+    def add_next_tick_callback(self, fn: Any) -> None:
+        if inspect.iscoroutinefunction(fn):
+            self.loop.create_task(fn())
+        else:
+            self.loop.call_soon(fn)
+
+
+def _served_results(n_sessions: int, cancel: int | None = None) -> list[tuple[str, Any, int]]:
+    """``n_sessions`` served sessions whose page loads came back together (each a finished
+    future, as the data read while the page loaded): what ran on the loop, as (what, value,
+    the loop iteration it ran in), with session ``cancel``'s job cancelled while it waits."""
+    loop = asyncio.new_event_loop()
+    iteration = [0]
+    seen: list[tuple[str, Any, int]] = []
+
+    def tick() -> None:  # runs once per iteration of the loop (call_soon: the next one)
+        iteration[0] += 1
+        loop.call_soon(tick)
+
+    tasks: list[asyncio.Task] = []
+
+    def start() -> None:
+        for i in range(n_sessions):
+            jobs = Jobs(doc=_ServedDoc(loop))
+            assert jobs.served
+            read: Future = Future()
+            read.set_result(i)
+            before = asyncio.all_tasks(loop)
+            jobs.run(
+                read,
+                lambda out: seen.append(("apply", out, iteration[0])),
+                done=lambda i=i: seen.append(("done", i, iteration[0])),
+            )
+            tasks.extend(asyncio.all_tasks(loop) - before)  # the session's job
+
+    async def main() -> None:
+        nonlocal cancel
+        loop.call_soon(tick)
+        loop.call_soon(start)
+        for _ in range(200):
+            await asyncio.sleep(0)
+            if cancel is not None and LoopTurns.of(loop).waiting >= 2:
+                tasks[cancel].cancel()  # the last one: it waits for its turn
+                cancel = None
+            if sum(w == "done" for w, *_ in seen) == n_sessions:
+                return
+        raise AssertionError(f"not every job ended: {seen}")
+
+    try:
+        loop.run_until_complete(main())
+    finally:
+        loop.close()
+    return seen
+
+
+def test_served_results_are_applied_one_per_loop_iteration_in_order() -> None:
+    """Nine pages whose data came back together: their results are applied in the order they
+    came, each in an iteration of the server loop of its own (so that the loop reads the
+    requests that arrived between two of them), never back to back in one iteration."""
+    seen = _served_results(9)
+    applied = [(v, it) for w, v, it in seen if w == "apply"]
+    assert [v for v, _ in applied] == list(range(9))  # first come, first served
+    its = [it for _, it in applied]
+    assert all(b > a for a, b in zip(its, its[1:], strict=False)), its  # one per iteration
+    assert [v for w, v, _ in seen if w == "done"] == list(range(9))
+
+
+def test_a_session_closed_while_waiting_its_turn_still_runs_done() -> None:
+    seen = _served_results(4, cancel=3)
+    assert sorted(v for w, v, _ in seen if w == "done") == [0, 1, 2, 3]
+    assert [v for w, v, _ in seen if w == "apply"] == [0, 1, 2]
 
 
 def test_panel_internals_were_checked_for_the_installed_panel() -> None:
