@@ -27,10 +27,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode
 
-import h5py
-import numpy as np
 import pytest
 from conftest import served_app
+from loadlogs import write_log
 
 from gmwm_app.state import AppState
 
@@ -46,23 +45,11 @@ _MINE: list[weakref.ref] = []  # the apps of the sessions this module opened
 MODEL = "WN+RW"
 
 
-def _write_log(path: Path, seed: int, n: int = 20_000, fs: float = 100.0) -> Path:
-    """Two channels whose white-noise level differs per file (so a mix-up shows in the fit)."""
-    rng = np.random.default_rng(seed)
-    with h5py.File(path, "w") as f:
-        for i, name in enumerate(("gyro_x", "gyro_y")):
-            sigma = 1e-3 * (1 + seed) * (1 + i)
-            x = rng.normal(0, sigma, n) + np.cumsum(rng.normal(0, 1e-5, n))
-            f.create_dataset(name, data=x).attrs["units"] = "deg/s"
-        f.attrs["fs_hz"] = fs
-    return path
-
-
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     d = tmp_path_factory.mktemp("load")
-    files = [_write_log(d / f"log_{i}.h5", i) for i in range(N_SESSIONS)]
-    heavy = _write_log(d / "heavy.h5", 99, n=400_000)
+    files = [write_log(d / f"log_{i}.h5", i) for i in range(N_SESSIONS)]
+    heavy = write_log(d / "heavy.h5", 99, n=400_000)
     ref = {}
     for f in files:  # the reference fits, one session at a time
         s = AppState()

@@ -37,20 +37,7 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-
-def _write_log(path: Path, seed: int, n: int = 20_000) -> Path:
-    """The load test's logs: two channels, 100 Hz."""
-    import h5py
-    import numpy as np
-
-    rng = np.random.default_rng(seed)
-    with h5py.File(path, "w") as f:
-        for i, name in enumerate(("gyro_x", "gyro_y")):
-            sigma = 1e-3 * (1 + seed) * (1 + i)
-            x = rng.normal(0, sigma, n) + np.cumsum(rng.normal(0, 1e-5, n))
-            f.create_dataset(name, data=x).attrs["units"] = "deg/s"
-        f.attrs["fs_hz"] = 100.0
-    return path
+from loadlogs import write_log  # noqa: E402
 
 
 def _get(url: str) -> None:
@@ -135,8 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     meter = _LoopMeter()
     meter.install()
     tmp = Path(tempfile.mkdtemp(prefix="bench_loop_"))
-    files = [_write_log(tmp / f"log_{i}.h5", i) for i in range(8)]
-    heavy = _write_log(tmp / "heavy.h5", 99, n=400_000)
+    files = [write_log(tmp / f"log_{i}.h5", i) for i in range(8)]
+    heavy = write_log(tmp / "heavy.h5", 99, n=400_000)
     queries = [{"source": "path", "path": str(heavy), "model": "WN+RW"}] + [
         {"source": "path", "path": str(f), "channel": "gyro_y", "model": "WN+RW"} for f in files
     ]
