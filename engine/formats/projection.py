@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..fit import GMWMResult
-from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model
+from ..models import Model
 from ..units import SI_UNIT, ExportError, si_factor
 from .bound import (
     POINTS_PER_OCTAVE,
@@ -386,7 +386,8 @@ def _values(sol: dict[str, Any], consumer: str, fs: float, f_si: float) -> dict[
 def _with_u(model: Model, free: list[tuple[int, str]], u: np.ndarray) -> Model:
     procs = list(model.processes)
     for (i, name), ui in zip(free, u, strict=True):
-        procs[i] = procs[i].with_values(**{name: FROM_UNCONSTRAINED[name](float(ui))})
+        value = procs[i].params()[name].from_unconstrained(float(ui))
+        procs[i] = procs[i].with_values(**{name: value})
     return Model(tuple(procs))
 
 
@@ -900,8 +901,9 @@ def _intervals(
     cov = _COV.get(fit)
     if cov is None:  # a fit is immutable: its covariance is computed once
         cov = _COV[fit] = param_cov(fit, wv_cov_model(fit.model, fit.wv), free)
+    procs = fit.model.processes
     u0 = np.array(
-        [TO_UNCONSTRAINED[nm](float(getattr(fit.model.processes[i], nm))) for i, nm in free]
+        [procs[i].params()[nm].to_unconstrained(float(getattr(procs[i], nm))) for i, nm in free]
     )
     names = [k for k in CONSUMER_PARAMS[cons] if vals.get(k, 0) > 0]
     steps = [1e-4 * max(1.0, abs(float(u))) for u in u0]

@@ -26,7 +26,7 @@ from ..fit.asymptotic import free_params, param_cov, wv_cov_model
 from ..fit.covariance import inverse_cov
 from ..fit.ieee import IEEE_KEYS, IeeeTable, ieee_table, white_share
 from ..fit.result import FitError
-from ..models import FROM_UNCONSTRAINED, TO_UNCONSTRAINED, Model, Process, parse_model
+from ..models import Model, Process, parse_model
 from ..units import allan_floor
 from ..wv import WaveletVariance
 from ..wv.classical import default_levels
@@ -734,7 +734,12 @@ def no_floor_share(model: Model | str, fs: float, n: int, *, draws: int = 2000) 
         return math.nan
     free = free_params(pf)
     cov = param_cov(pf, pf.vmat, free)
-    u0 = np.array([TO_UNCONSTRAINED[nm](float(getattr(m.processes[i], nm))) for i, nm in free])
+    u0 = np.array(
+        [
+            m.processes[i].params()[nm].to_unconstrained(float(getattr(m.processes[i], nm)))
+            for i, nm in free
+        ]
+    )
     u = np.random.default_rng(0).multivariate_normal(u0, cov, size=draws, method="eigh")
     col = {key: k for k, key in enumerate(free)}
     # the Allan times of allan_floor's grid, as WV scales (tau = 2 m samples)
@@ -742,19 +747,21 @@ def no_floor_share(model: Model | str, fs: float, n: int, *, draws: int = 2000) 
     wv = np.zeros((draws, tau.size))
     for i, p in enumerate(m.processes):
         h0 = p.linear_coef()
-        lin = "omega" if p.code == "DR" else p.param_names[-1]
+        spec = p.params()
+        lin = p.param_names[-1]  # the linear coefficient's parameter (Process.linear_coef)
         h = np.full(draws, h0)
         if (i, lin) in col:  # linear in the coefficient: its first-order change, clipped
             k = col[(i, lin)]
             e = 1e-6 * max(1.0, abs(u0[k]))
-            up = p.with_values(**{lin: FROM_UNCONSTRAINED[lin](u0[k] + e)}).linear_coef()
+            up = p.with_values(**{lin: spec[lin].from_unconstrained(u0[k] + e)}).linear_coef()
             h = np.maximum(h0 + (up - h0) / e * (u[:, k] - u0[k]), 0.0)
         if p.nonlinear is None:
             wv += h[:, None] * p.basis(tau, pf.fs)[None, :]
             continue
         nl = np.full(draws, float(getattr(p, p.nonlinear)))
         if (i, p.nonlinear) in col:
-            nl = np.array([FROM_UNCONSTRAINED[p.nonlinear](v) for v in u[:, col[(i, p.nonlinear)]]])
+            to_nl = spec[p.nonlinear].from_unconstrained
+            nl = np.array([to_nl(v) for v in u[:, col[(i, p.nonlinear)]]])
         phis = np.array([p.phi_from_nl(v, pf.fs) for v in nl])
         wv += h[:, None] * p.basis_many(tau, pf.fs, phis)
     wv = np.where(np.isfinite(wv) & (wv > 0), wv, np.inf)
