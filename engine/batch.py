@@ -36,6 +36,7 @@ from ._files import open_regular, read_regular, write_atomic
 from ._jsonutil import json_ready
 from ._parallel import executor_workers, parallel_map
 from ._version import __version__
+from .errors import ExportError
 from .fit import FitError, GMWMResult, fit_gmwm
 from .formats.common import csv_cells
 from .models import ModelError, parse_model
@@ -174,7 +175,6 @@ class LogFit:
         """
         from .inference.temperature import compensate_channels
         from .io import drop_warmup
-        from .units import ExportError
 
         if self.resumed:
             raise ExportError(
@@ -905,7 +905,6 @@ def export_fleet(
     """
     from .formats import export
     from .io import log_of
-    from .units import ExportError
 
     fitted = [lf for lf in logs if lf.ok]
     if not fitted:
