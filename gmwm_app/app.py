@@ -220,6 +220,8 @@ class GMWMApp(pn.viewable.Viewer):
         # (Panel holds the document in a job's continuation only if asked; a widget's or a
         # button's callback is not held: 19 messages a click before)
         self.state.batch = partial(pn.io.hold, self.jobs.doc)
+        if self.served:  # the state's own background work (intervals) runs as the session's job
+            self.state.offload = self.jobs.run
         self._location = pn.state.location if self.served else None
         self._build_widgets()
         self._build_layout()
@@ -542,8 +544,8 @@ class GMWMApp(pn.viewable.Viewer):
         s = self.state
         self.tables.update(s)
         show = bool(s.show_intervals and s.result is not None and not s.whatif)
-        if show:
-            self.selection.ensure_inference(s.result)
+        if show:  # the state's intervals (computed off the loop, drawn when installed)
+            s.ensure_inference(s.result)
         badge = jtest_badge(s.inference(), pending=True) if show else ""
         self.jtest_pane.param.update(object=badge, visible=bool(badge))
         self.intervals_check.value = s.show_intervals  # (an unchanged value wakes no one)

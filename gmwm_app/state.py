@@ -60,7 +60,7 @@ from gmwm_app.data import (
 )
 from gmwm_app.fit_export import ExportMixin
 from gmwm_app.query import QueryMixin
-from gmwm_app.selection_state import Inference, SelectionMixin
+from gmwm_app.selection_state import Inference, Offload, SelectionMixin
 from gmwm_app.whatif import SliderSpec, WhatIfMixin
 from gmwm_app.wv_cache import WVCache, WVKey, wv_from_cache
 
@@ -232,6 +232,10 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
+        self._inference_pending: set[int] = set()  # ids of fits whose inference is running
+        #: How a front end runs work off its event loop (:data:`Offload`; the app: its job
+        #: runner); None runs it at once (tests, notebooks).
+        self.offload: Offload | None = None
         self._reverting = False  # a failed compensation switch is being put back
         self.param.watch(self._compensate_changed, "compensate")
 

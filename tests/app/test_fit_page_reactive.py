@@ -124,6 +124,46 @@ def test_state_updates_of_widgets_echo_no_action(app: Any, monkeypatch: pytest.M
 
 
 # ---------------------------------------------------------------------------------------------
+# the Fit tab's intervals are the state's
+# ---------------------------------------------------------------------------------------------
+def _interval_numbers(intervals: Any) -> tuple[list[str], np.ndarray]:
+    return [i.name for i in intervals], np.array([(i.value, i.low, i.high) for i in intervals])
+
+
+def _check_fit_tab_intervals(app: Any) -> None:
+    """Intervals shown on the Fit tab: computed by the state, no other tab built, and the
+    numbers of the engine's asymptotic 95 % intervals of the fit shown."""
+    s = app.state
+    assert s.set_show_intervals(True)
+    assert list(app.lazy_views) == []  # the Model selection tab was not built for them
+    inf = s.inference()
+    assert inf is not None and inf.result is s.result and s.inferred is inf
+    ref = eg.inference.param_intervals(s.result, method="asymptotic", level=0.95)
+    (names, got), (ref_names, want) = _interval_numbers(inf.intervals), _interval_numbers(ref)
+    assert names == ref_names == list(s.result.params)
+    np.testing.assert_array_equal(got, want)  # the same numbers, bit for bit
+    shown = app.tables.param_source.data
+    n = len(ref)  # the model's rows come first, then the IEEE quantities
+    assert list(shown["low"][:n]) == [state_mod.format_value(i.low) for i in ref]
+    assert list(shown["high"][:n]) == [state_mod.format_value(i.high) for i in ref]
+    assert np.all((want[:, 1] < want[:, 0]) & (want[:, 0] < want[:, 2]))  # estimate inside
+
+
+def test_the_fit_tabs_intervals_are_owned_by_the_state(app: Any) -> None:
+    assert app.state.set_model("GM+WN+RW"), app.state.error
+    _check_fit_tab_intervals(app)
+    # the Model selection tab, opened later, reads the same cached intervals
+    assert app.selection.state.inference() is app.state.inferred
+
+
+def test_the_fit_tabs_intervals_on_a_real_log(app: Any, real_data: Path) -> None:
+    s = app.state
+    assert s.load_path(real_data / "adis16405_imu1.h5"), s.error
+    assert s.select_channel("gyro_x") and s.set_model("WN+RW"), s.error
+    _check_fit_tab_intervals(app)
+
+
+# ---------------------------------------------------------------------------------------------
 # failures reach the page and the log
 # ---------------------------------------------------------------------------------------------
 def test_a_failed_wv_job_is_shown_and_logged(
