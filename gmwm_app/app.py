@@ -18,8 +18,11 @@ State and page: :class:`GMWMApp` is a :class:`panel.viewable.Viewer` around the 
 :class:`~gmwm_app.state.AppState`; each part of the Fit tab depends on the state parameters
 it draws (``param.depends(..., watch=True)`` for the in-place Bokeh updates, parameter
 references and ``param.depends`` methods as the text panes' objects), so an action redraws
-what it changed, each part once. Widgets drive the state through its actions only when
-their value differs from the state's, so the state's own updates of a widget are no-ops.
+what it changed, each part once. The widgets of the state's plain parameters (weights,
+what-if, intervals, temperature compensation) are built from them (``Widget.from_param``:
+Panel links the two both ways, and the state reacts to a change itself); the data widgets
+(channel, fs, robust) start a job or a checked action, and drive the state only when their
+value differs from the state's, so the state's own updates of them are no-ops.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
@@ -169,7 +172,7 @@ _DATA_INFO = (
     "fs_source",
 )
 #: ... the fit summary line.
-_SUMMARY = ("wv", "model", "result", "whatif", "whatif_values", "weights")
+_SUMMARY = ("wv", "model", "result", "whatif", "whatif_values")  # (weights: by the refit)
 #: ... the file names of the downloads (:meth:`AppState.export_filename`).
 _FILENAMES = ("filename", "channel", "model")
 #: ... the URL (:meth:`AppState.to_query`).
@@ -339,13 +342,12 @@ class GMWMApp(pn.viewable.Viewer):
             self.tables.datasheet, sizing_mode="stretch_width", margin=(5, 10)
         )
         # 95% intervals in the parameter table and the J-test badge (computed off the loop)
-        self.intervals_check = pn.widgets.Checkbox(
+        self.intervals_check = pn.widgets.Checkbox.from_param(
+            s.param.show_intervals,
             label="Intervals (95%, asymptotic) and goodness of fit",
-            value=s.show_intervals,
             css_classes=["gmwm-intervals"],
             margin=(0, 10),
         )
-        self.intervals_check.param.watch(self._on_intervals, "value")
         self.jtest_pane = pn.pane.HTML("", margin=(0, 10), visible=False)
         # session download/restore, Kalibr and datasheet exports, time-gap box
         self.session_panel = SessionPanel(self.state, self.jobs)
@@ -548,7 +550,6 @@ class GMWMApp(pn.viewable.Viewer):
             s.ensure_inference(s.result)
         badge = jtest_badge(s.inference(), pending=True) if show else ""
         self.jtest_pane.param.update(object=badge, visible=bool(badge))
-        self.intervals_check.value = s.show_intervals  # (an unchanged value wakes no one)
 
     @_on_state(*_SELECTION)
     @redraws("the model selection")
@@ -773,10 +774,6 @@ class GMWMApp(pn.viewable.Viewer):
             return
         if not self.state.set_fs(event.new):
             self._sync_data_widgets()  # put the old fs back
-
-    def _on_intervals(self, event: Any) -> None:
-        if bool(event.new) != self.state.show_intervals:
-            self.state.set_show_intervals(bool(event.new))
 
     def _export_json(self) -> io.StringIO:
         return io.StringIO(self.state.export_json())

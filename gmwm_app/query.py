@@ -109,11 +109,12 @@ class QueryMixin(StateFields):
                 )
         if "weights" in q:
             w = q["weights"].strip().lower()
-            if w in ("ci", "identity", "efficient"):
+            allowed = list(self.param.weights.objects)
+            if w in allowed:
                 out["weights"] = w
             else:
                 out["problems"].append(
-                    f"weights={q['weights']!r} in the link is not ci, identity or efficient"
+                    f"weights={q['weights']!r} in the link is not one of {', '.join(allowed)}"
                 )
         if "model" in q:
             out["model"] = q["model"].strip()
