@@ -175,8 +175,9 @@ _DATA_INFO = (
 _SUMMARY = ("wv", "model", "result", "whatif", "whatif_values")  # (weights: by the refit)
 #: ... the file names of the downloads (:meth:`AppState.export_filename`).
 _FILENAMES = ("filename", "channel", "model")
-#: ... the URL (:meth:`AppState.to_query`).
-_QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "weights", "model")
+#: ... the URL's data and model (:meth:`AppState.to_query`; the plain parameters,
+#: :attr:`AppState.URL_SYNCED`, are Panel's: :meth:`GMWMApp.link_url`).
+_QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "model")
 #: ... the temperature compensation switch (shown with a temperature channel beside the
 #: channel, disabled with the reason when it cannot be used).
 _COMPENSATION = ("temperature_channel", "compensation_unavailable")
@@ -213,6 +214,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.views = WVFigures()
         self.ready = False
         self._last_query: dict[str, str] | None = None
+        self._url_linked = False  # the URL follows the state (link_url)
         self.last_refresh_s = 0.0  # the last WV plot redraw (s), the bulk of a redraw
         self.busy = False
         self._query: dict[str, Any] = {}
@@ -619,14 +621,41 @@ class GMWMApp(pn.viewable.Viewer):
         self.download.filename = name
         self.views.save_tool.filename = name[:-5].replace("+", "_")
 
+    def link_url(self, location: Any) -> None:
+        """Keep the page's URL (a :class:`panel.io.location.Location`) in step with the state,
+        from the first data shown on (:meth:`_settled`).
+
+        The plain parameters (:attr:`AppState.URL_SYNCED`) are synced both ways by Panel
+        (``location.sync``): a change of the state writes them, a change of the URL sets them
+        (a value the parameter refuses is reported as the link's problem). The data and the
+        model are written by :meth:`_sync_url`, and read once, when the page opens
+        (:meth:`prefetch`, :meth:`start`).
+        """
+        self._location = location
+        location.sync(self.state, dict(self.state.URL_SYNCED), on_error=self._url_refused)
+        self._url_linked = True
+        self._sync_url()
+
+    def _url_refused(self, values: dict[str, Any]) -> None:
+        """Values of the URL's plain parameters that the state refuses: the link's problems
+        (those of the link the page opened with were reported when it was read)."""
+        if self._url_linked:
+            s = self.state
+            problems = s.parse_query({s.URL_SYNCED[k]: v for k, v in values.items()})["problems"]
+            s.report_error("; ".join(problems) or f"the link's {', '.join(values)} not used")
+
     @_on_state(*_QUERY)
     def _sync_url(self) -> None:
-        if not self.ready or self._location is None:
+        """Write the data and the model into the URL (Panel writes the plain parameters)."""
+        if not self.ready or self._location is None or not self._url_linked:
             return
-        q = self.state.to_query()
+        synced = set(self.state.URL_SYNCED.values())
+        q = {k: v for k, v in self.state.to_query().items() if k not in synced}
         if q != self._last_query:
             self._last_query = q
-            self._location.search = "?" + urlencode(q, safe="*/")
+            now = self._location.query_params
+            kept = {k: str(now[k]) for k in self.state.URL_SYNCED.values() if k in now}
+            self._location.search = "?" + urlencode({**q, **kept}, safe="*/")
 
     # -------------------------------------------------------------------------------------
     # heavy work off the event loop (gmwm_app.jobs)
@@ -656,6 +685,8 @@ class GMWMApp(pn.viewable.Viewer):
 
     def _settled(self) -> None:
         self.ready = True
+        if not self._url_linked and self._location is not None:
+            self.link_url(self._location)
         self._sync_url()
 
     def prefetch(self) -> Future:
