@@ -18,8 +18,11 @@ State and page: :class:`GMWMApp` is a :class:`panel.viewable.Viewer` around the 
 :class:`~gmwm_app.state.AppState`; each part of the Fit tab depends on the state parameters
 it draws (``param.depends(..., watch=True)`` for the in-place Bokeh updates, parameter
 references and ``param.depends`` methods as the text panes' objects), so an action redraws
-what it changed, each part once. Widgets drive the state through its actions only when
-their value differs from the state's, so the state's own updates of a widget are no-ops.
+what it changed, each part once. The widgets of the state's plain parameters (weights,
+what-if, intervals, temperature compensation) are built from them (``Widget.from_param``:
+Panel links the two both ways, and the state reacts to a change itself); the data widgets
+(channel, fs, robust) start a job or a checked action, and drive the state only when their
+value differs from the state's, so the state's own updates of them are no-ops.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
@@ -169,11 +172,12 @@ _DATA_INFO = (
     "fs_source",
 )
 #: ... the fit summary line.
-_SUMMARY = ("wv", "model", "result", "whatif", "whatif_values", "weights")
+_SUMMARY = ("wv", "model", "result", "whatif", "whatif_values")  # (weights: by the refit)
 #: ... the file names of the downloads (:meth:`AppState.export_filename`).
 _FILENAMES = ("filename", "channel", "model")
-#: ... the URL (:meth:`AppState.to_query`).
-_QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "weights", "model")
+#: ... the URL's data and model (:meth:`AppState.to_query`; the plain parameters,
+#: :attr:`AppState.URL_SYNCED`, are Panel's: :meth:`GMWMApp.link_url`).
+_QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "model")
 #: ... the temperature compensation switch (shown with a temperature channel beside the
 #: channel, disabled with the reason when it cannot be used).
 _COMPENSATION = ("temperature_channel", "compensation_unavailable")
@@ -210,6 +214,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.views = WVFigures()
         self.ready = False
         self._last_query: dict[str, str] | None = None
+        self._url_linked = False  # the URL follows the state (link_url)
         self.last_refresh_s = 0.0  # the last WV plot redraw (s), the bulk of a redraw
         self.busy = False
         self._query: dict[str, Any] = {}
@@ -220,6 +225,8 @@ class GMWMApp(pn.viewable.Viewer):
         # (Panel holds the document in a job's continuation only if asked; a widget's or a
         # button's callback is not held: 19 messages a click before)
         self.state.batch = partial(pn.io.hold, self.jobs.doc)
+        if self.served:  # the state's own background work (intervals) runs as the session's job
+            self.state.offload = self.jobs.run
         self._location = pn.state.location if self.served else None
         self._build_widgets()
         self._build_layout()
@@ -337,13 +344,12 @@ class GMWMApp(pn.viewable.Viewer):
             self.tables.datasheet, sizing_mode="stretch_width", margin=(5, 10)
         )
         # 95% intervals in the parameter table and the J-test badge (computed off the loop)
-        self.intervals_check = pn.widgets.Checkbox(
+        self.intervals_check = pn.widgets.Checkbox.from_param(
+            s.param.show_intervals,
             label="Intervals (95%, asymptotic) and goodness of fit",
-            value=s.show_intervals,
             css_classes=["gmwm-intervals"],
             margin=(0, 10),
         )
-        self.intervals_check.param.watch(self._on_intervals, "value")
         self.jtest_pane = pn.pane.HTML("", margin=(0, 10), visible=False)
         # session download/restore, Kalibr and datasheet exports, time-gap box
         self.session_panel = SessionPanel(self.state, self.jobs)
@@ -542,11 +548,10 @@ class GMWMApp(pn.viewable.Viewer):
         s = self.state
         self.tables.update(s)
         show = bool(s.show_intervals and s.result is not None and not s.whatif)
-        if show:
-            self.selection.ensure_inference(s.result)
+        if show:  # the state's intervals (computed off the loop, drawn when installed)
+            s.ensure_inference(s.result)
         badge = jtest_badge(s.inference(), pending=True) if show else ""
         self.jtest_pane.param.update(object=badge, visible=bool(badge))
-        self.intervals_check.value = s.show_intervals  # (an unchanged value wakes no one)
 
     @_on_state(*_SELECTION)
     @redraws("the model selection")
@@ -616,14 +621,41 @@ class GMWMApp(pn.viewable.Viewer):
         self.download.filename = name
         self.views.save_tool.filename = name[:-5].replace("+", "_")
 
+    def link_url(self, location: Any) -> None:
+        """Keep the page's URL (a :class:`panel.io.location.Location`) in step with the state,
+        from the first data shown on (:meth:`_settled`).
+
+        The plain parameters (:attr:`AppState.URL_SYNCED`) are synced both ways by Panel
+        (``location.sync``): a change of the state writes them, a change of the URL sets them
+        (a value the parameter refuses is reported as the link's problem). The data and the
+        model are written by :meth:`_sync_url`, and read once, when the page opens
+        (:meth:`prefetch`, :meth:`start`).
+        """
+        self._location = location
+        location.sync(self.state, dict(self.state.URL_SYNCED), on_error=self._url_refused)
+        self._url_linked = True
+        self._sync_url()
+
+    def _url_refused(self, values: dict[str, Any]) -> None:
+        """Values of the URL's plain parameters that the state refuses: the link's problems
+        (those of the link the page opened with were reported when it was read)."""
+        if self._url_linked:
+            s = self.state
+            problems = s.parse_query({s.URL_SYNCED[k]: v for k, v in values.items()})["problems"]
+            s.report_error("; ".join(problems) or f"the link's {', '.join(values)} not used")
+
     @_on_state(*_QUERY)
     def _sync_url(self) -> None:
-        if not self.ready or self._location is None:
+        """Write the data and the model into the URL (Panel writes the plain parameters)."""
+        if not self.ready or self._location is None or not self._url_linked:
             return
-        q = self.state.to_query()
+        synced = set(self.state.URL_SYNCED.values())
+        q = {k: v for k, v in self.state.to_query().items() if k not in synced}
         if q != self._last_query:
             self._last_query = q
-            self._location.search = "?" + urlencode(q, safe="*/")
+            now = self._location.query_params
+            kept = {k: str(now[k]) for k in self.state.URL_SYNCED.values() if k in now}
+            self._location.search = "?" + urlencode({**q, **kept}, safe="*/")
 
     # -------------------------------------------------------------------------------------
     # heavy work off the event loop (gmwm_app.jobs)
@@ -653,6 +685,8 @@ class GMWMApp(pn.viewable.Viewer):
 
     def _settled(self) -> None:
         self.ready = True
+        if not self._url_linked and self._location is not None:
+            self.link_url(self._location)
         self._sync_url()
 
     def prefetch(self) -> Future:
@@ -771,10 +805,6 @@ class GMWMApp(pn.viewable.Viewer):
             return
         if not self.state.set_fs(event.new):
             self._sync_data_widgets()  # put the old fs back
-
-    def _on_intervals(self, event: Any) -> None:
-        if bool(event.new) != self.state.show_intervals:
-            self.state.set_show_intervals(bool(event.new))
 
     def _export_json(self) -> io.StringIO:
         return io.StringIO(self.state.export_json())

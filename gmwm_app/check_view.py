@@ -102,33 +102,42 @@ class CheckView(TabView):
     ----------
     panel : panel.layout.Column
         The tab's content.
-    result : DatasheetCheck or None
-        What is shown.
-    kind : str
-        The channel's sensor kind (``""`` when its unit is unknown).
-    texts : list of str
-        The values of the fields, as typed (the widgets show them).
-    file_spec : DatasheetSpec or None
-        The uploaded file's exact values, until a field is edited.
     """
 
     slug = "check"
 
+    result = param.ClassSelector(
+        class_=eg.inference.DatasheetCheck,
+        default=None,
+        allow_None=True,
+        doc="The check shown (None while there is none).",
+    )
+    kind = param.String(
+        default="",
+        doc="The channel's sensor kind, 'gyroscope' or 'accelerometer' ('' when its unit is "
+        "neither's): the fields follow it.",
+    )
+    texts = param.List(default=["", "", "", ""], item_type=str, doc="The fields' values, as typed.")
+    file_spec = param.ClassSelector(
+        class_=eg.inference.DatasheetSpec,
+        default=None,
+        allow_None=True,
+        doc="The uploaded file's exact values (checked instead of the fields' 4 digits), "
+        "until a field is edited.",
+    )
+
     def __init__(self, state: AppState, jobs: Jobs, **params: Any) -> None:
         super().__init__(state, jobs, **params)
-        self.result: Any = None
-        self.kind = ""
-        self.texts = [""] * 4
-        self.file_spec: eg.inference.DatasheetSpec | None = None
-        self._key: Any = None
         for build in (self._build_widgets, self._build_figures, self._build_table):
             build()
         self._build_layout()
         self.refresh()
 
-    @param.depends("state.wv", "state.result", "state.unit", watch=True)
+    @param.depends("state.wv", "state.result", "state.unit", "texts", "file_spec", watch=True)
     def _on_state(self) -> None:
-        """The channel's WV, its unit or the Fit tab's fit changed."""
+        """What the check reads changed: the channel's WV, its unit, the Fit tab's fit, the
+        datasheet's values (once per update, however many of them it changed; not at all
+        for an unchanged value)."""
         super()._on_state()
 
     # ------------------------------------------------------------------------------------
@@ -246,9 +255,7 @@ class CheckView(TabView):
         texts = list(self.texts)
         for key, text in values.items():
             texts[keys.index(key)] = str(text)
-        self.file_spec = None
         self._set_texts(texts)
-        self.refresh(force=True)
 
     def load_file(self, data: bytes, filename: str) -> None:
         """Read datasheet values from an uploaded file into the fields (message on error)."""
@@ -269,10 +276,8 @@ class CheckView(TabView):
         if self.kind and spec.kind != self.kind:
             self._show([f"{filename} is a {spec.kind}'s datasheet; the channel is a {self.kind}"])
             return
-        self.file_spec = spec  # the file's exact values, until a field is edited
-        self._set_texts(self._file_texts(spec))
         self.message.visible = False
-        self.refresh(force=True)
+        self._set_texts(self._file_texts(spec), spec)  # its exact values, until a field is edited
 
     # ------------------------------------------------------------------------------------
     # callbacks (thin)
@@ -281,9 +286,9 @@ class CheckView(TabView):
         """A field was edited (idempotent: the echo of :meth:`_set_texts` is a no-op)."""
         if event.new == self.texts[i]:
             return
-        self.texts[i] = event.new
-        self.file_spec = None  # the user's values now
-        self._safely(self.refresh, True)
+        texts = list(self.texts)
+        texts[i] = event.new
+        self._set_texts(texts)  # the user's values now
 
     def _on_upload(self, event: Any) -> None:
         if event.new:
@@ -306,9 +311,16 @@ class CheckView(TabView):
                 out.append(_fmt(v * DISPLAY[(spec.kind, sym)].factor))
         return out
 
-    def _set_texts(self, texts: list[str]) -> None:
-        """The fields' values: first the view's, then the widgets' (whose echo is a no-op)."""
-        self.texts = list(texts)
+    def _set_texts(
+        self, texts: list[str], file_spec: eg.inference.DatasheetSpec | None = None
+    ) -> None:
+        """The datasheet's values (and the file's spec, None for typed values): one update,
+        one check."""
+        self.param.update(texts=list(texts), file_spec=file_spec)
+
+    @param.depends("texts", watch=True)
+    def _show_texts(self) -> None:
+        """The fields show the values (their echo in :meth:`_on_input` is a no-op)."""
         for w, text in zip(self.inputs, self.texts, strict=True):
             w.value = text
 
@@ -320,10 +332,11 @@ class CheckView(TabView):
             kind = ""
         if kind == self.kind:
             return
-        self.kind = kind
+        fields = FIELDS.get(kind, [])
+        texts = [DEFAULTS[kind][key] for key, _s, _u in fields] if kind else list(self.texts)
+        with param.parameterized.discard_events(self):  # (called by the draw that uses them)
+            self.param.update(kind=kind, texts=texts)
         if kind:
-            fields = FIELDS[kind]
-            self.texts = [DEFAULTS[kind][key] for key, _s, _u in fields]
             for w, text, (key, _s, unit) in zip(self.inputs, self.texts, fields, strict=True):
                 # one update, after self.texts: the value's echo in _on_input is a no-op
                 w.param.update(label=f"{key.upper()} [{unit}]", value=text, disabled=False)
@@ -345,13 +358,9 @@ class CheckView(TabView):
         return eg.inference.DatasheetSpec.from_values(items, source="app")
 
     def _draw(self, force: bool) -> None:
-        """Recompute when the data, the fit or the values changed."""
+        """Check the datasheet (called when what it reads changed: :meth:`_on_state`)."""
         s = self.state
         self._sync_kind()
-        key = (s.wv, s.result, s.unit, self.kind, tuple(self.texts), self.file_spec)
-        if key == self._key and not force:
-            return
-        self._key = key
         if s.wv is None:
             self._clear(["load a log first"])
             return

@@ -5,9 +5,10 @@ fixed pool, each with a remove button: an add or a remove creates no new Bokeh m
 the what-if sliders generated from the parameters (:meth:`AppState.slider_specs`), also
 from a pool.
 
-Each part depends on the state parameters it shows (``param.depends(..., watch=True)``); a
-widget drives the state only with a value that differs from the state's, so that the
-panel's own updates of its widgets are no-ops.
+Each part depends on the state parameters it shows (``param.depends(..., watch=True)``); the
+weights choice and the what-if switch are the state's own parameters (``from_param``); the
+spec and the sliders drive the state only with a value that differs from the state's, so
+that the panel's own updates of its widgets are no-ops.
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ __all__ = ["ModelPanel", "N_POOL"]
 N_POOL = N_INITIAL_COMPONENTS
 
 
-#: The weights choice of the fit (label, value of ``AppState.weights``).
-_WEIGHTS = (("ci weights", "ci"), ("efficient", "efficient"))
+#: The labels of the weights choice of the fit: label -> value of ``AppState.weights``.
+_WEIGHTS = {"ci weights": "ci", "identity": "identity", "efficient": "efficient"}
 
 _WEIGHTS_HELP = (
     "ci: Omega = diag(1/(ci_high - ci_low)^2), the R package's default. efficient: two "
@@ -91,21 +92,20 @@ class ModelPanel(pn.viewable.Viewer):
             label="Remove all", color="light", width=100, margin=(3, 3)
         )
         self.clear_button.on_click(self._clear)
-        self.weights_select = pn.widgets.RadioButtonGroup(
-            label="Weights",
-            options=dict(_WEIGHTS),
-            value=state.weights if state.weights in dict(_WEIGHTS).values() else "ci",
+        # the state's own parameters (a change of the weights refits: AppState._weights_changed)
+        self.weights_select = pn.widgets.RadioButtonGroup.from_param(
+            state.param.weights,
+            options=_WEIGHTS,
             color="default",
             description=_WEIGHTS_HELP,
             css_classes=["gmwm-weights"],
             margin=(3, 10),
         )
-        self.weights_select.param.watch(self._on_weights, "value")
-
-        self.whatif_toggle = pn.widgets.Checkbox(
-            label="What if: move the parameters by hand", value=False, css_classes=["gmwm-whatif"]
+        self.whatif_toggle = pn.widgets.Checkbox.from_param(
+            state.param.whatif,
+            label="What if: move the parameters by hand",
+            css_classes=["gmwm-whatif"],
         )
-        self.whatif_toggle.param.watch(self._on_whatif, "value")
         self.sliders = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
         self._slider_pool: list[pn.widgets.FloatSlider] = []
         self._slider_specs: list[SliderSpec] = []
@@ -159,18 +159,9 @@ class ModelPanel(pn.viewable.Viewer):
     def refresh(self) -> None:
         """Bring every widget in line with the state (no new Bokeh models); also puts back a
         widget whose value the state refused."""
-        self._sync_choices()
         self._sync_spec()
         self._refresh_process_list()
         self._refresh_sliders()
-
-    @param.depends("state.whatif", "state.weights", watch=True)
-    @redraws("the what-if and weights choices")
-    def _sync_choices(self) -> None:
-        s = self.state
-        self.whatif_toggle.value = s.whatif
-        if s.weights in dict(_WEIGHTS).values():
-            self.weights_select.value = s.weights
 
     @param.depends("state.model", watch=True)
     @redraws("the model spec")
@@ -302,16 +293,6 @@ class ModelPanel(pn.viewable.Viewer):
         )
         if not self.state.set_model(spec or ""):
             self._sync_spec()  # put the spec back (the state did not change)
-
-    def _on_weights(self, event: Any) -> None:
-        if event.new == self.state.weights:
-            return
-        if not self.state.set_weights(event.new):
-            self._sync_choices()  # put the choice back (the state did not change)
-
-    def _on_whatif(self, event: Any) -> None:
-        if bool(event.new) != self.state.whatif:
-            self.state.set_whatif(bool(event.new))
 
     def _on_slider(self, slot: int, x: float) -> None:
         # The state holds the value, the slider a position: the two do not round-trip exactly

@@ -7,7 +7,7 @@ state's parameters, ``read``, ``precompute``, ``install``, ``set_model`` and ``_
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from param.parameterized import batch_call_watchers
 
@@ -31,6 +31,16 @@ class QueryMixin(StateFields):
     """URL query methods of :class:`gmwm_app.state.AppState`."""
 
     param: Any
+
+    #: The state's plain parameters in a served page's URL: query key by parameter. Their
+    #: query value is the parameter's own, they are always in the URL, and the state reacts to
+    #: a change of them by itself (the weights refit), so Panel keeps them in step both ways
+    #: (``pn.state.location.sync``, :meth:`gmwm_app.app.GMWMApp.link_url`). The data and the
+    #: model are not plain: a change reads a file or computes a WV first, and their keys come
+    #: and go (``path``, ``temperature``, ``model``), which a synced key cannot; they are
+    #: :meth:`to_query`'s and :meth:`from_query`'s. :meth:`to_query` lists every key (a
+    #: session file keeps the whole link).
+    URL_SYNCED: ClassVar[dict[str, str]] = {"weights": "weights"}
 
     def to_query(self) -> dict[str, str]:
         """The shareable state as URL query parameters (all strings).
@@ -109,11 +119,12 @@ class QueryMixin(StateFields):
                 )
         if "weights" in q:
             w = q["weights"].strip().lower()
-            if w in ("ci", "identity", "efficient"):
+            allowed = list(self.param.weights.objects)
+            if w in allowed:
                 out["weights"] = w
             else:
                 out["problems"].append(
-                    f"weights={q['weights']!r} in the link is not ci, identity or efficient"
+                    f"weights={q['weights']!r} in the link is not one of {', '.join(allowed)}"
                 )
         if "model" in q:
             out["model"] = q["model"].strip()

@@ -10,6 +10,7 @@ tab, the J-test badge) and the Fit tab's parameter table.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -20,7 +21,17 @@ import engine as eg
 from gmwm_app.data import message_of
 from gmwm_app.limits import check_candidates
 
-__all__ = ["Inference", "SelectionMixin", "N_INFERENCES"]
+__all__ = ["Inference", "SelectionMixin", "N_INFERENCES", "Offload"]
+
+log = logging.getLogger(__name__)
+
+#: How a front end runs work off its event loop: ``offload(work, apply, fail, done)`` runs
+#: ``work()`` in a worker, then ``apply(result)`` or ``fail(error)``, then ``done()``, on the
+#: loop (the app: :meth:`gmwm_app.jobs.Jobs.run`).
+Offload = Callable[
+    [Callable[[], Any], Callable[[Any], Any], Callable[[BaseException], Any], Callable[[], Any]],
+    Any,
+]
 
 if TYPE_CHECKING:  # the state's names this mixin uses (AppState defines them)
     from gmwm_app.state_fields import StateFields
@@ -48,7 +59,9 @@ class SelectionMixin(StateFields):
     wv: eg.WaveletVariance | None
     weights: str
     result: eg.GMWMResult | None
+    offload: Offload | None
     _inference: dict[int, Inference]
+    _inference_pending: set[int]
 
     def ranking_candidates(self, spec: str) -> list[str]:
         """The parts of a ranking's text, checked (quick, on the loop: a ranking is refused
@@ -141,6 +154,48 @@ class SelectionMixin(StateFields):
         res = self.result if result is None else result
         inf = self._inference.get(id(res)) if res is not None else None
         return inf if inf is not None and inf.result is res else None
+
+    def ensure_inference(self, result: eg.GMWMResult | None = None) -> bool:
+        """Start computing the intervals and J-test of a fit (the current one by default)
+        unless they are cached or being computed; :meth:`install_inference` shows them.
+
+        The state owns them, whichever view asks (the Fit tab's parameter table, the Model
+        selection tab's comparison): the work runs through :attr:`offload` when a front end
+        set it, else at once. A failure is reported in :attr:`error`.
+
+        Returns
+        -------
+        bool
+            True when they are cached already (or were computed at once).
+        """
+        res = self.result if result is None else result
+        if res is None or self.inference(res) is not None:
+            return res is not None
+        key = id(res)
+        if key in self._inference_pending:
+            return False
+
+        def fail(e: BaseException) -> None:
+            if isinstance(e, ValueError):  # bad input: the message says it all
+                log.warning("intervals: %s", e)
+            else:
+                log.error("intervals: job failed", exc_info=e)
+            self._fail(f"Could not compute the intervals: {message_of(e)}")
+
+        if self.offload is None:  # tests, notebooks: at once
+            try:
+                return self.install_inference(self.compute_inference(res))
+            except ValueError as e:
+                fail(e)
+                return False
+        self._inference_pending.add(key)
+        self.offload(
+            lambda: self.compute_inference(res),
+            self.install_inference,
+            fail,
+            lambda: self._inference_pending.discard(key),
+        )
+        return False
 
     def set_show_intervals(self, on: bool) -> bool:
         """Show (or hide) the interval columns and the goodness-of-fit badge."""

@@ -208,7 +208,6 @@ class SelectionView(TabView):
         self._cancel = jobs.abandon_on_close(threading.Event())  # stops when the session ends
         self._shown_selection: Any = None
         self._compare_key: Any = None
-        self._pending: set[int] = set()  # ids of fits whose inference is being computed
         self._throttle = ProgressThrottle()  # at most ~10 updates a second
 
         self.max_input = pn.widgets.TextInput(
@@ -422,40 +421,6 @@ class SelectionView(TabView):
             self.status.object = "Cancelling ..."
 
     # ------------------------------------------------------------------------------------
-    # intervals and J-test (Fit tab and comparison), cached per fit
-    # ------------------------------------------------------------------------------------
-    def ensure_inference(self, result: Any) -> bool:
-        """Start computing the intervals and J-test of a fit unless cached or running.
-
-        Returns True when they are cached already.
-        """
-        if result is None or self.state.inference(result) is not None:
-            return result is not None
-        if id(result) in self._pending:
-            return False
-        state = self.state
-
-        def fail(e: BaseException) -> None:
-            self._log_job_error(e)
-            state.report_error(f"Could not compute the intervals: {_message(e)}")
-
-        if not self.jobs.served:  # tests, notebooks: at once
-            try:
-                return state.install_inference(state.compute_inference(result))
-            except ValueError as e:
-                fail(e)
-                return False
-        self._pending.add(id(result))
-
-        self.jobs.run(
-            lambda: state.compute_inference(result),
-            self._guarded(state.install_inference),
-            self._guarded(fail),
-            lambda: self._pending.discard(id(result)),
-        )
-        return False
-
-    # ------------------------------------------------------------------------------------
     # state -> widgets
     # ------------------------------------------------------------------------------------
     def _draw(self, force: bool) -> None:
@@ -542,7 +507,7 @@ class SelectionView(TabView):
         if same:
             redraw_table(self.compare_table)
         for res in missing:  # after the rows: without a server this refreshes at once
-            self.ensure_inference(res)
+            self.state.ensure_inference(res)  # the state's, shared with the Fit tab
 
     def _on_row(self, _attr: str, _old: Any, new: list[int]) -> None:
         """A click on a ranked row: load that model into the builder and refit."""

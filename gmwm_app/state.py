@@ -60,12 +60,13 @@ from gmwm_app.data import (
 )
 from gmwm_app.fit_export import ExportMixin
 from gmwm_app.query import QueryMixin
-from gmwm_app.selection_state import Inference, SelectionMixin
+from gmwm_app.selection_state import Inference, Offload, SelectionMixin
 from gmwm_app.whatif import SliderSpec, WhatIfMixin
 from gmwm_app.wv_cache import WVCache, WVKey, wv_from_cache
 
 __all__ = [
     "AppState",
+    "WEIGHTS",
     "Inference",
     "PROCESS_CODES",
     "demo_path",
@@ -80,6 +81,9 @@ PROCESS_CODES: tuple[str, ...] = tuple(eg.models.PROCESS_TYPES)
 
 #: Readable names of the processes (for the process list): each process's own.
 PROCESS_NAMES: dict[str, str] = {c: cls.display_name for c, cls in eg.models.PROCESS_TYPES.items()}
+
+#: The GMWM weights a session can fit with (:func:`engine.fit_gmwm`'s ``weights``).
+WEIGHTS: tuple[str, ...] = ("ci", "identity", "efficient")
 
 #: Sources a session can load from.
 SOURCES: tuple[str, ...] = ("demo", "upload", "path", "scenario")
@@ -157,10 +161,13 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     )
     whatif = param.Boolean(default=False, doc="Draw the what-if values instead of the fit.")
     whatif_values = param.Dict(default={}, doc="What-if values by unique parameter name.")
-    weights = param.String(
+    weights: param.Selector[str] = param.Selector(
         default="ci",
+        objects=list(WEIGHTS),
+        label="Weights",
         doc="GMWM weighting: 'ci' (the R default), 'identity' or 'efficient' (two-step, "
-        "Omega = V^-1 with V from the first fit's model).",
+        "Omega = V^-1 with V from the first fit's model). Set by its widget, a URL or "
+        ":meth:`AppState.set_weights`, it refits the model (:meth:`AppState._weights_changed`).",
     )
     # model selection and inference (see gmwm_app/selection_view.py)
     selection = param.Parameter(default=None, doc="Last WVIC ranking (SelectionResult).")
@@ -232,8 +239,13 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self.wvm_computations = 0  # WV/WCCV matrices computed (multi-channel view)
         self.wv_computations = 0  # how many WVs this session computed (for tests/diagnostics)
         self._inference: dict[int, Inference] = {}  # per fit (id of the GMWMResult)
-        self._reverting = False  # a failed compensation switch is being put back
+        self._inference_pending: set[int] = set()  # ids of fits whose inference is running
+        #: How a front end runs work off its event loop (:data:`Offload`; the app: its job
+        #: runner); None runs it at once (tests, notebooks).
+        self.offload: Offload | None = None
+        self._reverting = False  # a refused choice (compensation, weights) is being put back
         self.param.watch(self._compensate_changed, "compensate")
+        self.param.watch(self._weights_changed, "weights")
 
     # ---------------------------------------------------------------------------------
     # helpers
@@ -692,17 +704,33 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         return {"model": shown, "result": result, "whatif_values": values}
 
     def set_weights(self, weights: str) -> bool:
-        """Switch the GMWM weights (``"ci"``, ``"identity"`` or ``"efficient"``) and refit."""
+        """Switch the GMWM weights (one of :data:`WEIGHTS`) and refit: the choice and its fit
+        in one update."""
 
         def run() -> bool:
-            if weights not in ("ci", "identity", "efficient"):
-                raise ValueError(f"unknown weights {weights!r}: use ci, identity or efficient")
+            if weights not in WEIGHTS:
+                raise ValueError(f"unknown weights {weights!r}: use {', '.join(WEIGHTS)}")
             if self.wv is None or not len(self.model):
                 self._publish(weights=weights)
                 return True
             return self._apply_model(self.model, weights=weights)  # the choice and its fit
 
         return self._guard("Could not switch the weights", run)
+
+    def _weights_changed(self, event: Any) -> None:
+        """The weights changed alone (by their widget, a restored session): refit with them
+        (nothing to do when the fit shown already has them, e.g. :meth:`set_weights`); a
+        refit that fails puts the previous weights back."""
+        res = self.result
+        if self._reverting or res is None or res.weights == self.weights or self.wv is None:
+            return
+        if not self._guard("Could not switch the weights", lambda: self._apply_model(self.model)):
+            if self.result is res:  # nothing refitted: the choice (and its widget) go back
+                self._reverting = True
+                try:
+                    self.weights = event.old
+                finally:
+                    self._reverting = False
 
     def set_model(self, model: eg.Model | str) -> bool:
         """Replace the model (a Model or a spec like ``"WN+RW+2*GM"``) and refit.

@@ -175,3 +175,36 @@ def test_browser_typed_value_redraws_the_check(server: str, new_tab: Any) -> Non
     assert "inside" in t.table_text(".gmwm-check-table")  # the GMWM column
     assert page.get_by_text("ARW 0.9 deg/sqrt(h)").first.is_visible()
     assert t.errors == [], t.errors
+
+
+def test_the_datasheet_values_are_typed_parameters_checked_once_per_change(
+    app: Any, view: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gmwm_app import check_view
+
+    checks: list[Any] = []
+    real = eg.check_datasheet
+
+    def counted(*args: Any, **kw: Any) -> Any:
+        checks.append(args[1])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(check_view.eg, "check_datasheet", counted)
+    s = app.state
+    # the values as a parameter: set alone, they are checked (once) and the fields show them
+    view.texts = ["0.4", "12", "", ""]
+    assert len(checks) == 1 and [w.value for w in view.inputs] == ["0.4", "12", "", ""]
+    tau = np.asarray(s.wv.tau_samples, float)
+    np.testing.assert_allclose(view.wv_src.data["ds"], _hand_wv(tau, s.fs, 0.4, 12.0), rtol=1e-10)
+    view.texts = ["0.4", "12", "", ""]  # the same values: nothing to check
+    assert len(checks) == 1
+    with pytest.raises(TypeError):  # typed: a list of the fields' texts
+        view.texts = [0.4, 12.0, None, None]
+    assert view.texts == ["0.4", "12", "", ""] and len(checks) == 1
+    # a datasheet set as the file's spec: its exact values are checked, once
+    spec = eg.inference.DatasheetSpec.from_values({"arw": (0.25, "deg/sqrt(h)")}, source="test")
+    view.file_spec = spec
+    assert len(checks) == 2 and checks[-1] is spec and view.result.datasheet is spec
+    # a change of the data the tab does not read (a message of the page): no check
+    s.report_error("something else")
+    assert len(checks) == 2

@@ -124,6 +124,117 @@ def test_state_updates_of_widgets_echo_no_action(app: Any, monkeypatch: pytest.M
 
 
 # ---------------------------------------------------------------------------------------------
+# widgets of the state's own parameters: linked both ways, one redraw per change
+# ---------------------------------------------------------------------------------------------
+def test_the_weights_are_a_choice_of_their_allowed_values(app_state: AppState) -> None:
+    s = app_state
+    assert list(s.param.weights.objects) == ["ci", "identity", "efficient"]
+    with pytest.raises(ValueError, match="weights"):
+        s.weights = "optimal"
+    assert s.weights == "ci"
+    assert not s.set_weights("optimal") and "unknown weights 'optimal'" in s.error
+    got = s.parse_query({"weights": "optimal"})
+    assert "weights" not in got and got["problems"] == [
+        "weights='optimal' in the link is not one of ci, identity, efficient"
+    ]
+
+
+def test_weights_widget_and_state_follow_each_other_with_one_refit(
+    app: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gmwm_app import app as app_mod
+
+    s, widget = app.state, app.model_panel.weights_select
+    assert s.set_model("WN+RW"), s.error
+    plot = _count(monkeypatch, app.views, "update")
+    tables = _count(monkeypatch, app.tables, "update")
+    summary = _count(monkeypatch, app_mod, "fit_summary")
+    fits = _count(monkeypatch, eg, "fit_gmwm")
+    # widget -> state: the weights and their fit, each part drawn once
+    widget.value = "efficient"
+    assert s.weights == "efficient" and s.result.weights == "efficient", s.error
+    assert (len(fits), len(plot), len(tables), len(summary)) == (1, 1, 1, 1)
+    # state -> widget, the parameter set alone (a restored session): refitted once too
+    s.weights = "identity"
+    assert widget.value == "identity" and s.result.weights == "identity"
+    assert (len(fits), len(plot), len(tables), len(summary)) == (2, 2, 2, 2)
+    # the action: the choice and its fit in one update, no second fit
+    assert s.set_weights("ci")
+    assert widget.value == "ci" and s.result.weights == "ci"
+    assert (len(fits), len(plot), len(tables), len(summary)) == (3, 3, 3, 3)
+    # a refit that fails puts the choice back, in the state and in the widget
+    before = s.result
+
+    def refuse(*_a: Any, **_k: Any) -> Any:
+        raise ValueError("no fit today")
+
+    monkeypatch.setattr(eg, "fit_gmwm", refuse)
+    widget.value = "efficient"
+    assert s.weights == "ci" == widget.value and s.result is before
+    assert "no fit today" in s.error
+
+
+def test_toggles_and_state_follow_each_other(app: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    s = app.state
+    assert s.set_model("WN+RW"), s.error
+    plot = _count(monkeypatch, app.views, "update")
+    tables = _count(monkeypatch, app.tables, "update")
+    whatif, intervals = app.model_panel.whatif_toggle, app.intervals_check
+    whatif.value = True  # widget -> state: the curves follow the what-if values
+    assert s.whatif and app.model_panel.sliders.visible
+    assert (len(plot), len(tables)) == (1, 1)
+    s.set_whatif(False)  # state -> widget
+    assert whatif.value is False and not app.model_panel.sliders.visible
+    assert (len(plot), len(tables)) == (2, 2)
+    intervals.value = True  # the tables (with the intervals computed at once here), no plot
+    assert s.show_intervals and s.inference() is not None and app.jtest_pane.visible
+    assert len(plot) == 2
+    s.set_show_intervals(False)
+    assert intervals.value is False and not app.jtest_pane.visible
+    assert len(plot) == 2
+
+
+# ---------------------------------------------------------------------------------------------
+# the Fit tab's intervals are the state's
+# ---------------------------------------------------------------------------------------------
+def _interval_numbers(intervals: Any) -> tuple[list[str], np.ndarray]:
+    return [i.name for i in intervals], np.array([(i.value, i.low, i.high) for i in intervals])
+
+
+def _check_fit_tab_intervals(app: Any) -> None:
+    """Intervals shown on the Fit tab: computed by the state, no other tab built, and the
+    numbers of the engine's asymptotic 95 % intervals of the fit shown."""
+    s = app.state
+    assert s.set_show_intervals(True)
+    assert list(app.lazy_views) == []  # the Model selection tab was not built for them
+    inf = s.inference()
+    assert inf is not None and inf.result is s.result and s.inferred is inf
+    ref = eg.inference.param_intervals(s.result, method="asymptotic", level=0.95)
+    (names, got), (ref_names, want) = _interval_numbers(inf.intervals), _interval_numbers(ref)
+    assert names == ref_names == list(s.result.params)
+    np.testing.assert_array_equal(got, want)  # the same numbers, bit for bit
+    shown = app.tables.param_source.data
+    n = len(ref)  # the model's rows come first, then the IEEE quantities
+    assert list(shown["low"][:n]) == [state_mod.format_value(i.low) for i in ref]
+    assert list(shown["high"][:n]) == [state_mod.format_value(i.high) for i in ref]
+    assert np.all((want[:, 1] < want[:, 0]) & (want[:, 0] < want[:, 2]))  # estimate inside
+
+
+def test_the_fit_tabs_intervals_are_owned_by_the_state(app: Any) -> None:
+    assert app.state.set_model("GM+WN+RW"), app.state.error
+    _check_fit_tab_intervals(app)
+    # the Model selection tab, opened later, reads the same cached intervals
+    assert app.selection.state.inference() is app.state.inferred
+
+
+def test_the_fit_tabs_intervals_on_a_real_log(app: Any, real_data: Path) -> None:
+    s = app.state
+    assert s.load_path(real_data / "adis16405_imu1.h5"), s.error
+    assert s.select_channel("gyro_x") and s.set_model("WN+RW"), s.error
+    _check_fit_tab_intervals(app)
+
+
+# ---------------------------------------------------------------------------------------------
 # failures reach the page and the log
 # ---------------------------------------------------------------------------------------------
 def test_a_failed_wv_job_is_shown_and_logged(
