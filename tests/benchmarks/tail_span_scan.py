@@ -2,7 +2,7 @@
 no WN+RW file of unit 1 can do at 100 s (docs/filters.md, "The tails' span").
 
     python tests/benchmarks/tail_span_scan.py span [--kinds accel]
-    python tests/benchmarks/tail_span_scan.py defaults [--kinds gyro accel]
+    python tests/benchmarks/tail_span_scan.py defaults [--kinds gyro accel] [--horizons 40 100 0]
     python tests/benchmarks/tail_span_scan.py scale
 
 The cells are those of ``bench_filter.py --recorded --control-runs 0`` (the same filter,
@@ -13,8 +13,8 @@ most 5 % of epochs above the band).
 
 ``span``: the horizon 4 aiding intervals, the tail factors at the scales ``H / k .. H`` for
 k = 2, 4 (``engine.formats.tails.TAIL_SPAN``), 8, 16 and on the whole band (the code before),
-and none. ``defaults``: one horizon for every aiding interval (40, 100, 400, 1000 s, and none
-given: the log length with the factors on the whole band, the default). ``scale``: fixes every
+and none. ``defaults``: one horizon for every aiding interval (``--horizons``, s; 0: none
+given, the log length with the factors on the whole band, the default). ``scale``: fixes every
 100 s, the file of the horizon 400 s times ``a`` on N and ``b`` on K, on unit 1 and units 2-6.
 """
 
@@ -138,6 +138,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("what", choices=["span", "defaults", "scale"])
     ap.add_argument("--kinds", nargs="+", default=None, choices=list(KINDS))
+    ap.add_argument("--horizons", nargs="+", type=float, default=[40.0, 100.0, 400.0, 1000.0, 0.0])
     args = ap.parse_args()
     data = real_data_dir()
     logs = [eg.load_log(data / f"adis16405_imu{i}.h5") for i in range(1, 7)]
@@ -178,7 +179,7 @@ def main() -> None:
             counts.append(("none", n))
             tails_mod.TAIL_SPAN = 4.0
         else:
-            for h0 in (40.0, 100.0, 400.0, 1000.0, None):
+            for h0 in [h or None for h in args.horizons]:
                 name = "no horizon (the log)" if h0 is None else f"H = {h0:g} s"
                 n = table(kind, name, lambda t, h0=h0: h0, lambda h, tf=kind.tails: tf)
                 counts.append((f"{kname}, {name}", n))
