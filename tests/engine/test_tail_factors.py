@@ -406,10 +406,10 @@ def test_a_filter_aided_every_100_s_is_not_wasted_by_the_bursts_at_20_to_41_s(re
 @pytest.mark.real_data
 def test_a_filter_aided_every_10_s_keeps_the_bursts_factors(real_data):
     """Unit 1's accelerometers x and y with a horizon of 40 s (4 x 10 s): the factors apply
-    at 10-40 s, where the bursts are (1.97 and 2.18 at 20.48 s; accel_z's, 2.02, is at 40.96 s,
-    beyond this band), so the file is above the data bound alone at the same horizon (the 10 s cells: 12.9-19.6 % of
-    epochs above the band without the factors, 3.2-3.7 % with them; docs/filters.md, "The
-    tails' span"); with a horizon of 400 s (4 x 100 s) none of them applies."""
+    at 10-40 s, where the bursts are (1.97 and 2.18 at 20.48 s; accel_z's, 2.02, is at 40.96
+    s, beyond this band), so the file is above the data bound alone at the same horizon (the
+    10 s cells: 12.9-19.6 % of epochs above the band without the factors, 3.2-3.7 % with them;
+    docs/filters.md, "The tails' span"); with a horizon of 400 s (4 x 100 s) none applies."""
     log = eg.load_log(real_data / "adis16405_imu1.h5")
     for ch in ("accel_x", "accel_y"):
         fit = eg.fit_gmwm(log.wavelet_variance(ch), "WN+RW")
