@@ -341,5 +341,7 @@ def add_horizon_option(group: Any, when: str = "", default: str = "the log lengt
         "--horizon",
         type=positive(float, "--horizon"),
         help=f"{when}the longest time (s) your filter runs without aiding (a GNSS outage, a "
-        f"visual dropout): the longest WV scale the bound covers (default: {default})",
+        f"visual dropout): the longest WV scale the bound covers, and the tail factors apply "
+        f"from a quarter of it (advised: 4 aiding intervals; default: {default}, the tail "
+        "factors at every scale)",
     )

@@ -115,7 +115,8 @@ class ExportOptions:
         over-bounded (default), the projection rule alone, or the fit's own terms one by one.
     horizon_s : float [s], optional
         The longest time the filter runs unaided: the longest WV scale the bound covers
-        (default the log length).
+        (default the log length); given, the tail factors apply at the scales from
+        ``horizon_s / TAIL_SPAN`` to it only (:func:`~engine.formats.tails.tail_band`).
     band : (float, float) [s], optional
         The WV scales ``(low, high)`` the bound covers, ``0 < low <= high`` (default two
         filter steps to the horizon).

@@ -39,7 +39,7 @@ from .bound import (
 )
 from .catalog import CONSUMER_PARAMS, FORMAT_CONSUMERS
 from .options import DATA_BOUNDS
-from .tails import TailFactors
+from .tails import TAIL_SPAN, TailFactors, tail_band
 
 __all__ = [
     "DATA_BOUNDS",
@@ -230,6 +230,10 @@ class Projection:
         The largest tail factor (:mod:`engine.formats.tails`) applied to the data bound in the
         band, its scale (s; nan when none exceeds 1) and the quantile's two-sided level (nan:
         no tail factors).
+    tail_band : (float, float) or None
+        The scales (s) at which the tail factors apply when a horizon was given
+        (:func:`~.tails.tail_band`: those near it); None: every scale of the band, or no tail
+        factors.
     """
 
     channel: str
@@ -255,6 +259,7 @@ class Projection:
     tail_factor: float = 1.0
     tail_tau_s: float = math.nan
     tail_level: float = math.nan
+    tail_band: tuple[float, float] | None = None
 
     def value(self, name: str) -> float:
         """The exported value of parameter ``name``."""
@@ -323,13 +328,23 @@ class Projection:
             "  " + "; ".join(f"{k} -> {v}" for k, v in self.assignment.items()),
         ]
         if math.isfinite(self.tail_level):
+            where, scales = (
+                ("at every dyadic scale of the band", "of the band")
+                if self.tail_band is None
+                else (
+                    f"at the dyadic scales tau = {self.tail_band[0]:.4g} .. "
+                    f"{self.tail_band[1]:.4g} s (those within x{TAIL_SPAN:g} of the horizon)",
+                    f"tau = {self.tail_band[0]:.4g} .. {self.tail_band[1]:.4g} s (those within "
+                    f"x{TAIL_SPAN:g} of the horizon)",
+                )
+            )
             lines.append(
                 "  tails: the data bound's variance x"
                 f"{self.tail_factor:.3g} at tau = {self.tail_tau_s:.4g} s (the largest tail "
                 f"factor: the Gaussian {100 * self.tail_level:g} % quantile of the file covers "
-                "the data's Haar coefficients' at every dyadic scale of the band)"
+                f"the data's Haar coefficients' {where})"
                 if math.isfinite(self.tail_tau_s)
-                else "  tails: no scale of the band needs more than the data bound's variance "
+                else f"  tails: no scale {scales} needs more than the data bound's variance "
                 f"(the data's {100 * self.tail_level:g} % quantiles are Gaussian's or less)"
             )
         lines += [f"  {p.describe()}" for p in self.params.values()]
@@ -367,6 +382,7 @@ class Projection:
                     "factor": self.tail_factor,
                     "tau_s": self.tail_tau_s if math.isfinite(self.tail_tau_s) else None,
                 }
+                | ({} if self.tail_band is None else {"band_s": list(self.tail_band)})
             ),
         }
 
@@ -408,6 +424,7 @@ class _Setup:
     use: str
     floor: tuple[np.ndarray, np.ndarray] | None
     tail: tuple[float, float, float]
+    tail_band: tuple[float, float]
     conf: float | None
     tau_h: float
 
@@ -465,15 +482,18 @@ def _setup(
         floor = (td[inb], wd[inb])
         tau = np.unique(np.concatenate([tau, td[inb]]))
     tail = (1.0, math.nan, math.nan)
+    tband = (math.nan, math.nan)
     if tails is not None:
         if not math.isclose(float(tails.fs), fs, rel_tol=1e-9):
             raise ExportError(
                 f"tails were computed at {tails.fs:g} Hz, the fit at {fs:g} Hz: compute them "
                 "from the signal the fit was made from"
             )
-        if floor is not None:
-            floor = (floor[0], floor[1] * tails.at(floor[0]))
-            tf, tt = tails.largest(float(floor[0][0] / fs), float(floor[0][-1] / fs))
+        if floor is not None and floor[0].size:
+            # the scales near the horizon given (all of the band without one): tails.TAIL_SPAN
+            tband = tail_band(float(floor[0][0] / fs), float(floor[0][-1] / fs), horizon_s)
+            floor = (floor[0], floor[1] * tails.at(floor[0], *tband))
+            tf, tt = tails.largest(*tband)
             tail = (tf, tt, float(tails.level))
     conf = None if confidence is None else float(confidence)
     tau_h = hz * fs
@@ -482,8 +502,9 @@ def _setup(
     if tc is not None and not (math.isfinite(float(tc)) and float(tc) > 0):
         raise ExportError(f"tc must be a positive correlation time in s, got {tc!r}")
     return _Setup(
-        cons, fs, fs_f, n, hz, hi_s, sensor, f_si, si_unit, tau, use, floor, tail, conf, tau_h
-    )
+        cons, fs, fs_f, n, hz, hi_s, sensor, f_si, si_unit, tau, use, floor, tail, tband, conf,
+        tau_h,
+    )  # fmt: skip
 
 
 def log_inflation_at_tc(
@@ -707,7 +728,7 @@ def _project(
             fl = 0.0 if floor is None else float(floor_at(fine[j : j + 1], *floor)[0])
             if fl > 0 and fl >= cw[j] * (1.0 - 1e-3):
                 dom = f"the empirical WV's {_DATA_WORDS[use]}"
-                ft = 1.0 if tails is None else float(tails.at(fine[j : j + 1])[0])
+                ft = 1.0 if tails is None else float(tails.at(fine[j : j + 1], *st.tail_band)[0])
                 if ft > 1.0:
                     dom += f" x tail factor {ft:.3g}"
             binding[names[i]] = (float(fine[j] / fs), f"bounds {dom}")
@@ -831,6 +852,7 @@ def _project(
         tail_factor=tail[0],
         tail_tau_s=tail[1],
         tail_level=tail[2],
+        tail_band=None if horizon_s is None or not math.isfinite(tail[2]) else st.tail_band,
     )
 
 

@@ -32,6 +32,19 @@ right variance has a narrower core), so no factor; at 0.99 the factors are at mo
 factors are 1.5-3.6 at 10-41 s on the accelerometers and at most 1.05 on the gyros, the cells
 1.2-2.4 % above with a mean NEES of 0.71-0.75. The level was chosen on that benchmark, and is a
 parameter.
+
+Span. A filter aided every ``T`` s integrates its errors over ``T`` and, through its bias
+state, over a few ``T``; a burst shorter than that is averaged with the quiet time around it.
+So the tail factors matter for the scales near the filter's horizon, not below: when the
+horizon ``H`` is given (``project(..., horizon_s=H)``, ``gmwm export --horizon``) they apply at
+the scales ``H / TAIL_SPAN .. H`` only (:func:`tail_band`), and the data bound alone below.
+With ``TAIL_SPAN = 4`` and the advised horizon of 4 aiding intervals that is the scales from
+one aiding interval to the horizon. On the ADIS16405 accelerometers (bursts at 10-41 s) the
+tails at 20-41 s then serve a filter aided every 10 s and no longer force the file of one aided
+every 100 s up at 100-1000 s (docs/filters.md, "The tails' span": 15 of 18 accelerometer cells
+with a horizon of 4 aiding intervals against 12; a span of 2 or 8 gives the same cells, 16 lets
+the 20-41 s bump back into the 100 s cells). Without a horizon (the aiding unknown) they apply
+at every scale of the band.
 """
 
 from __future__ import annotations
@@ -50,10 +63,37 @@ from ..wv import as_series, iter_sampled_haar_coefficients
 if TYPE_CHECKING:
     from ..io import ImuLog
 
-__all__ = ["TAIL_LEVEL", "TailFactors", "quantile_factor", "tail_factors", "log_tail_factors"]
+__all__ = [
+    "TAIL_LEVEL",
+    "TAIL_SPAN",
+    "TailFactors",
+    "quantile_factor",
+    "tail_band",
+    "tail_factors",
+    "log_tail_factors",
+]
 
 #: Default two-sided level of the quantile the file must cover (module docstring).
 TAIL_LEVEL = 0.999
+
+#: With a horizon ``H`` given, the tail factors apply at the scales ``H / TAIL_SPAN .. H``
+#: (module docstring, "Span").
+TAIL_SPAN = 4.0
+
+
+def tail_band(lo_s: float, hi_s: float, horizon_s: float | None) -> tuple[float, float]:
+    """The scales (s) of a bound's band ``lo_s .. hi_s`` at which the tail factors apply: the
+    whole band without a horizon, else ``max(lo_s, horizon_s / TAIL_SPAN) .. hi_s`` (module
+    docstring, "Span"; empty, ``lo > hi``, when the band ends below ``horizon_s / TAIL_SPAN``).
+
+    >>> tail_band(0.02, 400.0, 400.0)
+    (100.0, 400.0)
+    >>> tail_band(0.02, 1e4, None)
+    (0.02, 10000.0)
+    """
+    if horizon_s is None:
+        return float(lo_s), float(hi_s)
+    return max(float(lo_s), float(horizon_s) / TAIL_SPAN), float(hi_s)
 
 
 @functools.lru_cache(maxsize=16)
@@ -170,13 +210,18 @@ class TailFactors:
     confidence: float | None = 0.95
     channel: str = field(default="")
 
-    def at(self, tau: Any) -> np.ndarray:
+    def at(self, tau: Any, lo_s: float = 0.0, hi_s: float = math.inf) -> np.ndarray:
         """The factor at scales ``tau`` (log samples): the scale's own at a dyadic scale of
-        this object, 1 elsewhere."""
+        this object within ``lo_s .. hi_s`` (s; :func:`tail_band`), 1 elsewhere."""
         t = np.asarray(tau, float)
         out = np.ones_like(t)
         i = np.clip(np.searchsorted(self.tau_samples, t), 0, self.tau_samples.size - 1)
-        hit = np.isclose(self.tau_samples[i], t, rtol=1e-9, atol=0.0)
+        ts = t / self.fs
+        hit = (
+            np.isclose(self.tau_samples[i], t, rtol=1e-9, atol=0.0)
+            & (ts >= lo_s * (1 - 1e-9))
+            & (ts <= hi_s * (1 + 1e-9))
+        )
         out[hit] = self.factor[i[hit]]
         return out
 
