@@ -25,6 +25,7 @@ from bokeh.plotting import figure
 import engine as eg
 from engine.units import squared
 
+from .boundary import report
 from .state import format_value
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -54,9 +55,11 @@ def redraws(what: str) -> Callable[[_F], _F]:
     state (a watcher).
 
     A failure while drawing is a bug of the view, not of the state change that woke it: it is
-    logged with its traceback and shown on the page as a display error (through the state's
-    ``report_error``, on the object's ``state``), and never raised into the action that
-    changed the state (which succeeded). The method then returns None.
+    logged with its traceback and shown on the page as a display error (the error boundary,
+    :func:`gmwm_app.boundary.report`, through the state's ``report_error``, on the object's
+    ``state``), and never raised into the action that changed the state (which succeeded):
+    param calls the state's watchers one after the other, and one raising would stop the
+    others from drawing. The method then returns None.
 
     Parameters
     ----------
@@ -69,9 +72,14 @@ def redraws(what: str) -> Callable[[_F], _F]:
         def draw(self: Any) -> Any:  # no other arguments: param.depends reads the signature
             try:
                 return fn(self)
-            except Exception as e:  # see the docstring: logged and shown, never raised
-                log.exception("drawing %s failed", what)
-                self.state.report_error(f"Display error in {what}: {type(e).__name__}: {e}")
+            except Exception as e:  # a watcher's boundary: the state's other watchers still run
+                shown = f"Display error in {what}: {type(e).__name__}: {e}"
+                report(
+                    e,
+                    f"drawing {what} failed",
+                    lambda _m: self.state.report_error(shown),
+                    expected=(),
+                )
                 return None
 
         return draw  # type: ignore[return-value]
