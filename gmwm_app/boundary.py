@@ -27,7 +27,7 @@ import panel as pn
 
 from gmwm_app.data import message_of
 
-__all__ = ["EXPECTED", "describe", "report", "handle", "attach", "install"]
+__all__ = ["EXPECTED", "describe", "report", "watcher", "handle", "attach", "install"]
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +97,27 @@ def report(
     else:
         show(message)
     return message
+
+
+def watcher(
+    fn: Callable[..., Any],
+    action: str,
+    show: Callable[[BaseException], Any],
+    *args: Any,
+) -> Any:
+    """Run a watcher of the session state, ``fn(*args)``; a failure is :func:`report`-ed (a
+    bug: with its traceback) and shown by ``show(error)``, and None returned.
+
+    param calls the watchers of one state change one after the other: a view's failure
+    raised would keep the others from drawing a change that succeeded, so a view's watcher
+    stops its own failure here (``views.redraws``, ``TabView._safely``).
+    """
+    try:
+        return fn(*args)
+    except Exception as e:  # a watcher's boundary: the state's other watchers still run
+        failure = e  # (``e`` is unbound after the block)
+        report(failure, action, lambda _message: show(failure), expected=())
+        return None
 
 
 def handle(err: BaseException) -> None:

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import panel as pn
 import param
 
-from .boundary import report
+from .boundary import watcher
 from .state import AppState, state_param
 from .views import hidden_alert
 
@@ -157,16 +157,7 @@ class TabView(pn.viewable.Viewer):
         after the other: a tab's failure raised would stop the other parts of the page from
         drawing the change (which succeeded).
         """
-        try:
-            fn(*args)
-        except Exception as e:  # a watcher's boundary: the state's other watchers still run
-            report(
-                e, f"{self.slug} tab: refresh failed", partial(self._show_failure, e), expected=()
-            )
-
-    def _show_failure(self, err: BaseException, _message: str) -> None:
-        """The boundary's ``show`` of a tab: the tab's own words (:meth:`_failed`)."""
-        self._failed(err)
+        watcher(fn, f"{self.slug} tab: refresh failed", self._failed, *args)
 
     def _log_job_error(self, err: BaseException) -> None:
         """Log the exception of a background job (a traceback unless a ValueError)."""

@@ -11,9 +11,9 @@ plain data for the widgets of ``app.py``.
 from __future__ import annotations
 
 import functools
-import logging
 import math
 from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
@@ -25,7 +25,7 @@ from bokeh.plotting import figure
 import engine as eg
 from engine.units import squared
 
-from .boundary import report
+from .boundary import watcher
 from .state import format_value
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -44,8 +44,6 @@ __all__ = [
     "fit_summary",
     "add_renderer",
 ]
-
-log = logging.getLogger(__name__)
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -70,17 +68,13 @@ def redraws(what: str) -> Callable[[_F], _F]:
     def decorate(fn: _F) -> _F:
         @functools.wraps(fn)
         def draw(self: Any) -> Any:  # no other arguments: param.depends reads the signature
-            try:
-                return fn(self)
-            except Exception as e:  # a watcher's boundary: the state's other watchers still run
-                shown = f"Display error in {what}: {type(e).__name__}: {e}"
-                report(
-                    e,
-                    f"drawing {what} failed",
-                    lambda _m: self.state.report_error(shown),
-                    expected=(),
-                )
-                return None
+            return watcher(
+                partial(fn, self),
+                f"drawing {what} failed",
+                lambda e: self.state.report_error(
+                    f"Display error in {what}: {type(e).__name__}: {e}"
+                ),
+            )
 
         return draw  # type: ignore[return-value]
 
