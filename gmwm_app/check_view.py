@@ -283,11 +283,15 @@ class CheckView(TabView):
             return
         self.texts[i] = event.new
         self.file_spec = None  # the user's values now
-        self._safely(self.refresh, True)
+        # the redraw changes Bokeh models (the figures' sources): with the session's document
+        # lock, which Panel does not hold while it runs a widget's callback (a bad value's
+        # cleared figures raised "_pending_writes should be non-None" instead of a message)
+        self.jobs.locked(partial(self._safely, self.refresh, True))
 
     def _on_upload(self, event: Any) -> None:
         if event.new:
-            self._safely(self.load_file, event.new, self.upload.filename or "datasheet.yaml")
+            name = self.upload.filename or "datasheet.yaml"
+            self.jobs.locked(partial(self._safely, self.load_file, event.new, name))
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views
