@@ -18,6 +18,7 @@ with its traceback.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import weakref
 from collections.abc import Callable
@@ -38,8 +39,12 @@ EXPECTED: tuple[type[BaseException], ...] = (ValueError, OSError)
 #: What a failure is reported as when no action is named.
 DEFAULT_ACTION = "Could not update the page"
 
-#: Each session's document -> how a message is shown in that session (its page's error).
-_SESSIONS: weakref.WeakKeyDictionary[Any, Callable[[str], Any]] = weakref.WeakKeyDictionary()
+#: Each session's document -> how a message is shown in that session (its page's error), held
+#: weakly (a bound method as a WeakMethod): the session's state refers to its document, and a
+#: strong reference here would keep every ended session alive.
+_SESSIONS: weakref.WeakKeyDictionary[Any, Callable[[], Callable[[str], Any] | None]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def describe(
@@ -91,7 +96,8 @@ def report(
         log.error("%s", message, exc_info=err)
     if show is None:
         doc = pn.state.curdoc
-        show = _SESSIONS.get(doc) if doc is not None else None
+        ref = _SESSIONS.get(doc) if doc is not None else None
+        show = ref() if ref is not None else None
     if show is None:
         log.warning("no session to show it to: %s", message)
     else:
@@ -133,7 +139,7 @@ def attach(doc: Any, show: Callable[[str], Any]) -> None:
     the failures of Panel callbacks are logged only.
     """
     if doc is not None:
-        _SESSIONS[doc] = show
+        _SESSIONS[doc] = weakref.WeakMethod(show) if inspect.ismethod(show) else (lambda: show)
 
 
 def install() -> None:

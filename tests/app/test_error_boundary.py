@@ -11,8 +11,10 @@ tick comes at once.
 from __future__ import annotations
 
 import asyncio
+import gc
 import inspect
 import logging
+import weakref
 from typing import Any
 
 import panel as pn
@@ -245,3 +247,26 @@ def test_typing_abc_in_the_datasheet_check_shows_a_message_and_keeps_working(app
     view.inputs[0].value = "0.5"
     assert view.result is not None and view.message.alert_type == "info"
     assert "ARW 0.5 deg/sqrt(h)" in view.status.object
+
+
+def test_the_boundary_keeps_no_ended_session_alive() -> None:
+    # a session's page refers to its document (the state's hold, the jobs): the boundary holds
+    # the page's show method weakly, so an ended session's document and page can go
+    class Page:
+        def __init__(self, doc: Document) -> None:
+            self.doc = doc
+            self.shown: list[str] = []
+
+        def show(self, message: str) -> None:
+            self.shown.append(message)
+
+    doc = Document()
+    page = Page(doc)
+    boundary.attach(doc, page.show)
+    with set_curdoc(doc):
+        boundary.report(ValueError("bad value"), "Setting fs")
+    assert page.shown == ["Setting fs: bad value"]
+    gone = weakref.ref(doc)
+    del doc, page
+    gc.collect()
+    assert gone() is None
