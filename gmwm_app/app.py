@@ -48,6 +48,7 @@ if __package__ in (None, ""):  # run as a script by `panel serve gmwm_app/app.py
 import panel as pn  # noqa: E402
 import param  # noqa: E402
 
+from gmwm_app import boundary  # noqa: E402
 from gmwm_app._panel_compat import light_text_updates  # noqa: E402
 from gmwm_app.jobs import Jobs  # noqa: E402
 from gmwm_app.model_panel import ModelPanel  # noqa: E402
@@ -72,6 +73,8 @@ from gmwm_app.wv_figures import WVFigures  # noqa: E402
 __all__ = ["GMWMApp", "app_of", "create_app", "live_apps", "set_listed"]
 
 log = logging.getLogger(__name__)
+
+boundary.install()  # the process's Panel exception handler (create_app sets it per session too)
 
 pn.extension("filedropper", notifications=False)
 
@@ -234,6 +237,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.jobs.failed = self._load_failed
         self.jobs.settled = self._settled
         self.jobs.install = self.install
+        boundary.attach(self.jobs.doc, self.state.report_error)  # this session's failures
         self.refresh()
         _APPS[self] = next(_SERIAL)
 
@@ -500,11 +504,7 @@ class GMWMApp(pn.viewable.Viewer):
     def _on_tab(self, event: Any) -> None:
         title = self._titles[event.new]
         if title in self._lazy_factories and title not in self.lazy_views:
-            try:
-                self.open_view(title)
-            except Exception as e:  # a view that fails to build must not end the session
-                log.exception("building tab %s failed", title)
-                self.state.report_error(f"Could not open {title}: {type(e).__name__}: {e}")
+            self.open_view(title)  # a failure: Panel's callback -> gmwm_app.boundary
         for name, view in self.lazy_views.items():
             view.active = self._shown(name)
 
@@ -674,11 +674,7 @@ class GMWMApp(pn.viewable.Viewer):
                 w.disabled = on
 
     def _load_failed(self, message: str, err: BaseException) -> None:
-        what = str(err)
-        if not isinstance(err, (ValueError, OSError)):  # not a file's or an input's fault
-            log.error("%s: unexpected %s", message, type(err).__name__, exc_info=err)
-            what = f"unexpected {type(err).__name__}: {err}"
-        self.state.report_error(f"{message}: {what}")
+        boundary.report(err, message, self.state.report_error)
         self.session_panel.failed(err)  # time gaps: offer the longest segment
         if self.upload.value:
             self.upload.value = {}  # free a refused upload's bytes (a retry keeps its own)
@@ -834,6 +830,7 @@ def create_app(
     panel.template.BootstrapTemplate
         The page; its ``gmwm_app`` attribute is the :class:`GMWMApp`.
     """
+    boundary.install()  # Panel's exception handler: every failure shown in its session
     app = GMWMApp(default_source=source, default_path=path)
     page = app.view()
     page.gmwm_app = app  # type: ignore[attr-defined]

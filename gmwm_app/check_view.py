@@ -288,11 +288,16 @@ class CheckView(TabView):
             return
         texts = list(self.texts)
         texts[i] = event.new
-        self._set_texts(texts)  # the user's values now
+        # the user's values now; the check they trigger redraws Bokeh models (the figures'
+        # sources): with the session's document lock, which Panel does not hold while it runs a
+        # widget's callback (a bad value's cleared figures raised "_pending_writes should be
+        # non-None" instead of a message)
+        self.jobs.locked(partial(self._safely, self._set_texts, texts))
 
     def _on_upload(self, event: Any) -> None:
         if event.new:
-            self._safely(self.load_file, event.new, self.upload.filename or "datasheet.yaml")
+            name = self.upload.filename or "datasheet.yaml"
+            self.jobs.locked(partial(self._safely, self.load_file, event.new, name))
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views

@@ -1,8 +1,9 @@
 """What a filter will assume, shown in the export menu before the download (issue 23 item 6).
 
 For a filter format, every fitted channel is projected onto the format's consumer noise model
-by the engine (:func:`engine.formats.project`, the call the filter formats make: the rule, the
-bound, 95 % intervals); the app only draws and tabulates the result:
+by the engine, as the export computes the file's numbers with the same options
+(:func:`engine.formats.projections`: the rule, the bound, 95 % intervals, the tail factors,
+KF-GINS's one T_c); the app only draws and tabulates the result:
 
 * :func:`preview_projections`: the projections of the session's fits for one format;
 * :func:`preview_table`: the exported numbers with their intervals, factors and binding scales
@@ -24,69 +25,37 @@ import panel as pn
 from bokeh.models.annotations import BoxAnnotation, Span
 from bokeh.plotting import figure
 
-from engine.formats import FORMAT_CONSUMERS, Projection, TailFactors, log_tail_factors, project
+from engine.formats import FORMAT_CONSUMERS, Projection, projections
 from engine.io import ImuLog
 
 __all__ = ["preview_projections", "preview_table", "preview_figure", "ExportPreview"]
 
 
-def preview_projections(
-    fits: Mapping[str, Any],
-    fmt: str,
-    *,
-    units: Mapping[str, str] | None = None,
-    filter_rate: float | None = None,
-    bound: bool = True,
-    data: str = "low",
-    horizon_s: float | None = None,
-    tails: Mapping[str, TailFactors] | None = None,
-) -> dict[str, Projection]:
-    """The projection of each fit onto ``fmt``'s consumer model, as the export computes it.
+def preview_projections(fits: Mapping[str, Any], fmt: str, **options: Any) -> dict[str, Projection]:
+    """The projection of each fit onto ``fmt``'s consumer model, as the export computes it:
+    :func:`engine.formats.projections` with the download's options.
 
     Parameters
     ----------
     fits : mapping of channel to GMWMResult
     fmt : str
-        A filter format (a key of :data:`engine.formats.FORMAT_CONSUMERS`).
-    units : mapping of channel to unit, optional
-        The signal units (default each WV's).
-    filter_rate : float, optional
-        The filter's rate (Hz; default the log's).
-    bound : bool
-        Over-bound the projection (the export's default); False: the projection rule alone.
-    data, horizon_s
-        What of the empirical WV the bound covers and the horizon (s) of the band, as
-        :func:`engine.formats.project` (defaults: the lower 95 % limit, the log length).
-    tails : mapping of channel to TailFactors, optional
-        The loaded log's tail factors (:func:`engine.formats.log_tail_factors`), applied to
-        the data bound as the export applies them; default none.
+        A format of :data:`engine.formats.FORMATS`.
+    **options
+        The export's options (:class:`engine.formats.ExportOptions`: ``units``,
+        ``filter_rate`` [Hz], ``projection``, ``data``, ``horizon_s`` [s], ``log`` and
+        ``tails`` for the loaded log's tail factors ...).
 
     Returns
     -------
     dict of channel to Projection
-        Empty for a format that is not a filter format.
+        Empty for a report, or the fit's own terms (``projection="fit"``).
 
     Raises
     ------
     ExportError
-        A fit the consumer cannot take (the message says why).
+        A fit the consumer cannot take, or a bad option (the message says why).
     """
-    if fmt not in FORMAT_CONSUMERS:
-        return {}
-    return {
-        ch: project(
-            r,
-            fmt,
-            fs_filter=filter_rate,
-            bound=bound,
-            channel=ch,
-            unit=(units or {}).get(ch, r.wv.unit) or "",
-            data=data,
-            horizon_s=horizon_s,
-            tails=(tails or {}).get(ch),
-        )
-        for ch, r in fits.items()
-    }
+    return projections(fits, fmt, **options)
 
 
 def _g(v: float) -> str:
@@ -164,12 +133,6 @@ class ExportPreview:
         self.projections: dict[str, Projection] = {}
         self._key: tuple[Any, ...] | None = None
 
-    @staticmethod
-    def _tail_factors(log: ImuLog | None, fits: Mapping[str, Any]) -> dict[str, TailFactors] | None:
-        """The tail factors of ``log``'s fitted channels (the engine keeps them per log, so
-        the download that follows the preview does not compute them again)."""
-        return None if log is None else log_tail_factors(log, list(fits))
-
     def panel(self) -> Any:
         """The preview's layout."""
         return pn.Column(self.toggle, self.note, self.plot_box, self.table, margin=0)
@@ -231,14 +194,11 @@ class ExportPreview:
                 fmt,
                 units=units,
                 filter_rate=filter_rate,
-                bound=projection == "bound",
+                projection=projection,
                 data=data,
                 horizon_s=horizon_s,
-                tails=(
-                    self._tail_factors(log, fits)
-                    if tails and projection == "bound" and data != "none"
-                    else None
-                ),
+                log=log,
+                tails=tails,
             )
         except ValueError as e:  # eg.GmwmError (ExportError ...) or numpy's
             self.note.object = f"Cannot project the fits for {fmt}: {e}"

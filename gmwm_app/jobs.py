@@ -4,7 +4,8 @@ Every view of a session gets the same :class:`Jobs` (with the session state) ins
 page object. A job is a callable run in the shared worker pool (:data:`EXECUTOR`; numpy
 releases the GIL there, so the server loop and the other sessions stay free); its result is
 applied with the session's document lock on the server loop, a failure is handed to the
-job's ``fail`` (an in-page message, never a traceback), a newer job of the same key
+job's ``fail`` (an in-page message, never a traceback; without one, to the error boundary,
+:mod:`gmwm_app.boundary`), a newer job of the same key
 supersedes a running one (the stale result is dropped), and :meth:`Jobs.cancel` drops a
 running job's result. Outside a server (tests, scripts) a job is waited for.
 
@@ -43,6 +44,7 @@ from bokeh.document import Document
 from panel.io.state import set_curdoc
 from panel.io.state import state as pn_state
 
+from gmwm_app.boundary import report
 from gmwm_app.limits import current as current_limits
 
 __all__ = [
@@ -229,7 +231,7 @@ class Jobs:
         for fn in self._on_close:
             try:
                 fn()
-            except Exception:  # the others still run
+            except Exception:  # Bokeh's session-end callback: the others must still run
                 log.exception("a session-end callback failed")
 
     def on_close(self, fn: Callable[[], Any]) -> None:
@@ -266,17 +268,10 @@ class Jobs:
         if not self.served:
             fn()
             return
-        doc = self._served_doc()
-
-        def run() -> None:
-            with set_curdoc(doc):
-                try:
-                    fn()
-                except Exception as e:  # never leave the loop with an exception: say so
-                    log.exception("page callback failed")
-                    self.failed("Could not update the page", e)
-
-        doc.add_next_tick_callback(run)
+        # Panel's execute: a failure goes to the error boundary (gmwm_app.boundary), shown in
+        # this session, never raised into the loop
+        with set_curdoc(self._served_doc()):
+            pn_state.execute(fn, schedule=True)
 
     def spawn(self, coro_fn: Callable[[], Any]) -> None:
         """Start an async job: on the server loop when served, else run it to completion."""
@@ -348,7 +343,9 @@ class Jobs:
             The computation (no Bokeh or state changes in it), or a future already running.
         apply, fail, done : callable
             Run with the document lock on the loop; ``fail`` gets the exception (default:
-            logged); ``done`` runs in every case, after them.
+            the error boundary, :func:`gmwm_app.boundary.report`: logged and shown in the
+            session); ``done`` runs in every case, after them. A failure of ``apply``,
+            ``fail`` or ``done`` on the loop reaches the error boundary too.
         key : str, optional
             Jobs of one key supersede each other: only the latest one's ``apply``/``fail``
             runs.
@@ -375,7 +372,7 @@ class Jobs:
             err: BaseException | None = None
             try:
                 out = work.result() if isinstance(work, Future) else work()
-            except Exception as e:  # handed to fail
+            except Exception as e:  # the jobs' failure hook: handed to fail (or the boundary)
                 err = e
             self._finish(key, ticket, out, err, apply, fail, done)
             return ticket
@@ -412,7 +409,7 @@ class Jobs:
             if done is not None:
                 self.locked(done)
             raise
-        except Exception as e:  # handed to fail: shown in the page
+        except Exception as e:  # a worker thread's top: handed to fail (or the boundary)
             err = e
         try:
             await LoopTurns.of().wait()  # one result per loop iteration (module docstring)
@@ -438,8 +435,8 @@ class Jobs:
                     apply(out)
                 elif fail is not None:
                     fail(err)
-                else:
-                    log.error("job failed: %s: %s", type(err).__name__, err)
+                else:  # the jobs' failure hook: logged and shown in the session
+                    report(err, "A computation failed")
         finally:
             if done is not None:
                 done()

@@ -3,15 +3,15 @@
 :func:`session_report` hands the session's loaded log and its fit to the engine
 (:func:`engine.reporting.gather_report` with ``fits=``: the fit is reported as it is, nothing is
 refitted; :func:`engine.reporting.render_html` draws the page); :func:`report_file` is the
-download button's callback: the page as a file, or, when it cannot be made, the reason as the
-page's error message (and a short HTML file saying it), never an exception.
+download button's callback: the page as a file, or, when it cannot be made (no log, no fit, an
+engine error), the reason as the page's error message (and a short HTML file saying it); any
+other failure is a bug, which Panel hands to the app's error boundary (:mod:`gmwm_app.boundary`).
 """
 
 from __future__ import annotations
 
 import html
 import io
-import logging
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,8 +20,6 @@ from gmwm_app.data import message_of, temperature_fit_of
 from gmwm_app.state import AppState
 
 __all__ = ["session_report", "report_filename", "report_file"]
-
-log = logging.getLogger(__name__)
 
 
 def session_report(state: AppState) -> str:
@@ -62,9 +60,7 @@ def report_file(state: AppState) -> io.StringIO:
     as the page's error (:meth:`AppState.report_error`) and written in the file."""
     try:
         page = session_report(state)
-    except Exception as e:  # the page must keep working: a message, not a traceback
-        if not isinstance(e, ValueError):
-            log.exception("report of the session failed")
+    except ValueError as e:  # no log or no fit, or an engine error (GmwmError): say why
         msg = f"Download report: {message_of(e)}"
         state.report_error(msg)
         page = (

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import panel as pn
 import param
 
-from engine.formats import FORMATS, export, misfit
+from engine.formats import FORMATS, Format, export, misfit
 from engine.io import ImuLog
 from engine.session import Session, session_from_json, session_to_json
 from gmwm_app.data import LoadedData, compensation_mode, fitted_log
@@ -50,6 +50,7 @@ __all__ = [
     "export_fits",
     "fit_units",
     "is_gap_error",
+    "fleet_note",
     "SessionPanel",
 ]
 
@@ -375,6 +376,22 @@ PROJECTIONS = {
 }
 
 
+def fleet_note(f: Format) -> str:
+    """What the export menu says of one file for several units of a sensor model, from the
+    format's record (:attr:`engine.formats.Format.fleet_file`); empty for a report."""
+    if not f.is_filter:
+        return ""
+    if f.fleet_file:
+        return (
+            f" One {f.name} file for several units of this sensor: "
+            f"`gmwm batch LOG1 LOG2 ... --export {f.name} -o DIR`."
+        )
+    return (
+        f" No fleet file for {f.name}: its Gauss-Markov bias has a correlation time per unit; "
+        "export each unit's own file."
+    )
+
+
 def is_gap_error(err: BaseException | str) -> bool:
     """True for the loader's "time gaps, choose a segment" error."""
     return _GAP_MARK in str(err)
@@ -599,6 +616,7 @@ class SessionPanel(pn.viewable.Viewer):
         self.fits_note.object = (
             f"Channels fitted in this session: **{names}**. Filter formats need a gyroscope "
             "and an accelerometer: show another channel and fit it to add it."
+            + fleet_note(f)
             + bad
             + "".join(f"\n\n**Warning:** {line}" for line in disagree)
         )

@@ -321,19 +321,17 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self._publish(notice=notice, **({"error": ""} if clear_error else {}))
 
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool:
-        """Run ``fn``; an exception becomes a message in :attr:`error` (never raised).
+        """Run ``fn``; an error the action expects (bad input, an unreadable file: an engine
+        error or another ``ValueError``, ``KeyError``, ``OSError``, ``TypeError``,
+        ``IndexError``) becomes a message in :attr:`error` and False.
 
-        The errors an action expects (bad input, unreadable file) are reported as they are;
-        anything else is a bug: logged with its traceback, and still shown on the page, as an
-        "unexpected" error (the session keeps working).
+        Anything else is a bug and is raised: the app's error boundary
+        (:mod:`gmwm_app.boundary`) logs it with its traceback and shows it in the session.
         """
         try:
             return fn()
         except (ValueError, KeyError, OSError, TypeError, IndexError) as e:
             return self._fail(f"{action}: {message_of(e)}")
-        except Exception as e:  # the UI must keep working
-            log.exception("unexpected error while: %s", action)
-            return self._fail(f"{action}: unexpected {type(e).__name__}: {e}")
 
     # ---------------------------------------------------------------------------------
     # reading (thread-safe: no parameter changes)

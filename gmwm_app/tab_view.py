@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import panel as pn
 import param
 
+from .boundary import watcher
 from .state import AppState, state_param
 from .views import hidden_alert
 
@@ -149,15 +150,14 @@ class TabView(pn.viewable.Viewer):
         self.show_message([f"Display error: {type(err).__name__}: {err}"], level="danger")
 
     def _safely(self, fn: Callable[..., Any], *args: Any) -> None:
-        """Run ``fn(*args)``; an exception is logged and shown in the tab, not raised."""
-        try:
-            fn(*args)
-        except Exception as e:  # a display problem must not break the session: say so
-            log.exception("%s tab: refresh failed", self.slug)
-            try:
-                self._failed(e)
-            except Exception:  # the message itself failed: the log has both
-                log.exception("%s tab: showing the failure failed", self.slug)
+        """Run ``fn(*args)``; an exception is logged and shown in the tab
+        (:func:`gmwm_app.boundary.report`), not raised.
+
+        The tab's refresh is a watcher of the state, and param calls the state's watchers one
+        after the other: a tab's failure raised would stop the other parts of the page from
+        drawing the change (which succeeded).
+        """
+        watcher(fn, f"{self.slug} tab: refresh failed", self._failed, *args)
 
     def _log_job_error(self, err: BaseException) -> None:
         """Log the exception of a background job (a traceback unless a ValueError)."""

@@ -11,9 +11,9 @@ plain data for the widgets of ``app.py``.
 from __future__ import annotations
 
 import functools
-import logging
 import math
 from collections.abc import Callable
+from functools import partial
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
@@ -25,6 +25,7 @@ from bokeh.plotting import figure
 import engine as eg
 from engine.units import squared
 
+from .boundary import watcher
 from .state import format_value
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -44,8 +45,6 @@ __all__ = [
     "add_renderer",
 ]
 
-log = logging.getLogger(__name__)
-
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
@@ -54,9 +53,11 @@ def redraws(what: str) -> Callable[[_F], _F]:
     state (a watcher).
 
     A failure while drawing is a bug of the view, not of the state change that woke it: it is
-    logged with its traceback and shown on the page as a display error (through the state's
-    ``report_error``, on the object's ``state``), and never raised into the action that
-    changed the state (which succeeded). The method then returns None.
+    logged with its traceback and shown on the page as a display error (the error boundary,
+    :func:`gmwm_app.boundary.report`, through the state's ``report_error``, on the object's
+    ``state``), and never raised into the action that changed the state (which succeeded):
+    param calls the state's watchers one after the other, and one raising would stop the
+    others from drawing. The method then returns None.
 
     Parameters
     ----------
@@ -67,12 +68,13 @@ def redraws(what: str) -> Callable[[_F], _F]:
     def decorate(fn: _F) -> _F:
         @functools.wraps(fn)
         def draw(self: Any) -> Any:  # no other arguments: param.depends reads the signature
-            try:
-                return fn(self)
-            except Exception as e:  # see the docstring: logged and shown, never raised
-                log.exception("drawing %s failed", what)
-                self.state.report_error(f"Display error in {what}: {type(e).__name__}: {e}")
-                return None
+            return watcher(
+                partial(fn, self),
+                f"drawing {what} failed",
+                lambda e: self.state.report_error(
+                    f"Display error in {what}: {type(e).__name__}: {e}"
+                ),
+            )
 
         return draw  # type: ignore[return-value]
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from .._files import write_atomic
+from ..formats.catalog import FORMATS
 from .common import (
     CHANNELS_HELP,
     CliError,
@@ -151,7 +152,7 @@ def add_fleet_export_options(bt: argparse.ArgumentParser) -> None:
         metavar="FORMAT",
         help="with -o DIR: write DIR/fleet.<suffix>, one filter file for every fitted unit: "
         "per axis the largest N and K of the units' own default exports, so that no unit is "
-        "overconfident (WN+RW formats such as kalibr, openvins, px4, and ros-imu; "
+        f"overconfident ({', '.join(n for n, f in FORMATS.items() if f.fleet_file)}; "
         "docs/filters.md, One file for a fleet)",
     )
     add_filter_rate_option(g, "with --export: ")
@@ -161,10 +162,7 @@ def add_fleet_export_options(bt: argparse.ArgumentParser) -> None:
 def _fleet_format(name: str) -> Any:
     """The :class:`engine.formats.Format` of ``--export`` (a filter format), else a usage
     error naming the choices."""
-    from ..formats import FORMATS
-    from ..formats.noise import FLEET_CONSUMERS
-
-    ok = {n: f for n, f in FORMATS.items() if f.consumer in FLEET_CONSUMERS}
+    ok = {n: f for n, f in FORMATS.items() if f.fleet_file}
     if name not in ok:
         raise usage_error(
             f"--export takes a filter format whose bias is a random walk or that has none "

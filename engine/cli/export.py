@@ -311,6 +311,8 @@ def format_options_help() -> str:
         said += flags(own) if own else ("" if f.is_filter else "none")
         if f.needs_filter_rate:
             said += "; --filter-rate required"
+        if f.fleet_file:
+            said += "; a fleet file with gmwm batch --export"
         lines += textwrap.wrap(
             f"{f.name}: {said}",
             88,

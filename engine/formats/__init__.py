@@ -19,7 +19,8 @@ the formats it writes.
 * :mod:`.catalog`: the formats by name (:data:`FORMATS`), records of their consumer model,
   capabilities and the options their writer reads, importing no writer; :mod:`.options`:
   :class:`ExportOptions`, the typed options every writer takes; :mod:`.registry`:
-  :func:`export`.
+  :func:`export` and :func:`projections` (what a filter file will assume, as the export
+  computes it).
 
 The names are imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`), so that a
 module that needs one helper (``engine.formats.common``) does not load every writer.
@@ -40,7 +41,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".io.kalibr": ("read_kalibr",),
     "report": ("fit_report", "write_report", "curves_csv"),
     "catalog": ("FORMATS", "Format", "register", "FORMAT_CONSUMERS"),
-    "registry": ("export",),
+    "registry": ("export", "projections"),
     "options": ("ExportOptions", "DATA_BOUNDS"),
     "noise": ("ImuNoise", "imu_noise"),
     "projection": (
@@ -68,7 +69,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
         misfit,
         project,
     )
-    from .registry import export  # noqa: F401
+    from .registry import export, projections  # noqa: F401
     from .report import curves_csv, fit_report, write_report  # noqa: F401
     from .tails import TailFactors, log_tail_factors, tail_factors  # noqa: F401
 

@@ -24,6 +24,7 @@ __all__ = [
     "FORMATS",
     "FORMAT_CONSUMERS",
     "CONSUMER_PARAMS",
+    "FLEET_CONSUMERS",
     "VALUE_KINDS",
     "FILTER_OPTIONS",
     "register",
@@ -35,6 +36,12 @@ CONSUMER_PARAMS: dict[str, tuple[str, ...]] = {
     "WN+GM": ("N", "sigma_b", "T_c"),
     "WN": ("N",),
 }
+
+#: The consumer models a fleet file can be written for (:attr:`Format.fleet_file`): their WV
+#: grows with each of their parameters, so per axis the largest N and K over the units bound
+#: every unit. Not a Gauss-Markov bias: its T_c differs per unit, and the largest sigma_b at
+#: another unit's T_c does not bound (docs/filters.md, "One file for a fleet").
+FLEET_CONSUMERS = ("WN+RW", "WN")
 
 #: The values of :attr:`Format.values`: how a filter format's numbers relate to a rate.
 VALUE_KINDS = {
@@ -101,6 +108,9 @@ class Format:
         A key of :data:`VALUE_KINDS` (None for the reports).
     needs_filter_rate : bool
         The file is wrong without the filter's rate (``filter_rate`` required).
+    fleet_file : bool
+        (Read from the consumer model.) One file can be written for a fleet of units
+        (:data:`FLEET_CONSUMERS`).
     bias : str
         The consumer's bias model in words (``"random walk"``, ``"Gauss-Markov, one T_c per
         file"`` ...); ``""`` for none.
@@ -108,6 +118,12 @@ class Format:
         The :class:`~engine.formats.options.ExportOptions` fields the writer reads besides the
         context (``intervals``, ``log``, ``units``, ``source``): what ``gmwm export --help``
         lists for the format; an option given that is not here is named in one warning.
+    noise : callable or str or None
+        A filter format's numbers: ``noise(fits, options, allow_partial) ->``
+        :class:`~engine.formats.noise.ImuNoise`, whose ``projections`` are what the file
+        writes (:func:`engine.formats.projections`, the app's preview); None: the one call
+        most filter writers make, :func:`~engine.formats.noise.noise_for` with the format's
+        name as the consumer. Or where it is (``"MODULE:FUNCTION"``; :attr:`noise_of`).
     """
 
     name: str
@@ -120,6 +136,7 @@ class Format:
     needs_filter_rate: bool = False
     bias: str = ""
     options: tuple[str, ...] = ()
+    noise: Callable[..., Any] | str | None = None
 
     @property
     def writer(self) -> Writer:
@@ -131,10 +148,27 @@ class Format:
         """The reader of the format's files, or None (its module imported on first use)."""
         return None if self.read is None else _resolve(self.read)
 
+    @property
+    def noise_of(self) -> Callable[..., Any]:
+        """:attr:`noise` as a function ``(fits, options, allow_partial) -> ImuNoise`` (its
+        module imported on first use)."""
+        if self.noise is not None:
+            return _resolve(self.noise)
+        noise_for = _resolve("noise:noise_for")
+        return lambda fits, o, allow_partial: noise_for(
+            fits, self.description, o, allow_partial=allow_partial, consumer=self.name
+        )
+
     def takes(self, option: str) -> bool:
         """The writer reads ``option`` (an :class:`~engine.formats.options.ExportOptions`
         field): one of :attr:`options` or of the context every format accepts."""
         return option in self.options or option in CONTEXT
+
+    @property
+    def fleet_file(self) -> bool:
+        """The format can be written for a fleet (``export(..., fleet=...)``, ``gmwm batch
+        --export``): a filter format whose consumer model is one of :data:`FLEET_CONSUMERS`."""
+        return self.consumer in FLEET_CONSUMERS
 
     @property
     def is_filter(self) -> bool:
@@ -292,6 +326,7 @@ for _fmt in (
         "density",
         bias=f"{_GM}, one T_c for the whole file",
         options=(*FILTER_OPTIONS, "scale_factor_std_ppm"),
+        noise="ins:kfgins_noise",
     ),
     Format(
         "ros-imu",

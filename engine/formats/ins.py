@@ -33,11 +33,11 @@ import numpy as np
 from ..fit import GMWMResult
 from ..units import DISPLAY
 from .common import text_lines, yaml_float
-from .noise import noise_for
+from .noise import ImuNoise, noise_for
 from .options import ExportOptions
 from .projection import log_inflation_at_tc
 
-__all__ = ["MGAL", "kfgins_yaml", "ros_imu_yaml"]
+__all__ = ["MGAL", "kfgins_noise", "kfgins_yaml", "ros_imu_yaml"]
 
 MGAL = 1e-5  # m/s^2 in one milligal (1 Gal = 1 cm/s^2)
 _HOUR = 3600.0  # s
@@ -47,25 +47,54 @@ def _flow(vals: list[float]) -> str:
     return "[" + ", ".join(yaml_float(v) for v in vals) + "]"
 
 
-def kfgins_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
-    """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
-    one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
+def _kfgins(
+    fits: Mapping[str, GMWMResult], o: ExportOptions, allow_partial: bool = False
+) -> tuple[ImuNoise, dict[str, float], float | None]:
+    """The KF-GINS numbers, each channel's own ``T_c`` (s, by ``<sensor>_<axis>``) and, with
+    the bound, the file's one ``T_c`` (s): the least total inflation over the channels, each
+    channel bounded at it (a first pass without intervals gives the channels' own ``T_c``)."""
     bounded = o.projection == "bound"
-    # with the bound, a first pass without intervals gives each channel's own T_c
     nz = noise_for(
         fits,
         "KF-GINS imunoise",
         dataclasses.replace(o, ci=None) if bounded else o,
+        allow_partial=allow_partial,
         consumer="kf-gins",
     )
     nz.need("T_c", "the KF-GINS export", "fit a model with a GM term, e.g. GM+WN or GM+WN+RW")
+    own = {
+        f"{k}_{ax}": v
+        for k in ("gyroscope", "accelerometer")
+        if k in nz.values
+        for ax, v in nz.values[k]["T_c"].items()
+    }
+    if not bounded:
+        return nz, own, None
+    tc = _least_total_tc(fits, o, sorted(set(own.values())))
+    nz = noise_for(
+        fits, "KF-GINS imunoise", o, allow_partial=allow_partial, consumer="kf-gins", tc=tc
+    )
+    return nz, own, tc
+
+
+def kfgins_noise(
+    fits: Mapping[str, GMWMResult], o: ExportOptions, allow_partial: bool = False
+) -> ImuNoise:
+    """The KF-GINS file's projections (its record's :attr:`~engine.formats.Format.noise`):
+    with the bound, every channel's at the file's one ``T_c``; without it, each channel's own
+    (the file then takes the largest ``T_c`` and keeps each driving noise)."""
+    return _kfgins(fits, o, allow_partial)[0]
+
+
+def kfgins_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
+    """KF-GINS ``imunoise`` block (YAML): per-axis ``arw``, ``vrw``, ``gbstd``, ``abstd`` and
+    one ``corrtime``. Needs a GM (or AR1) term in every channel's model."""
+    nz, own, tc_bound = _kfgins(fits, o)
     ss = float(o.scale_factor_std_ppm or 1000.0)
 
     g, a = "gyroscope", "accelerometer"
-    own = {f"{k}_{ax}": v for k in (g, a) for ax, v in nz.values[k]["T_c"].items()}
-    if bounded:
-        tc = _least_total_tc(fits, o, sorted(set(own.values())))
-        nz = noise_for(fits, "KF-GINS imunoise", o, consumer="kf-gins", tc=tc)
+    if tc_bound is not None:
+        tc = tc_bound
         how = (
             f"one T_c = {tc:.6g} s for every bias (KF-GINS's one corrtime): the least total "
             "inflation over the channels; each gbstd/abstd bounds its channel at that T_c"

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import warnings as _warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +27,7 @@ from ..fit import GMWMResult
 from ..io.log import channel_axis
 from ..models import WN
 from ..units import ExportError, datasheet_rows, si_factor
+from .catalog import FLEET_CONSUMERS, FORMATS
 from .kalibr import kalibr_imu
 from .options import PROJECTIONS, ExportOptions, FleetUnit, check_inflate
 from .projection import Projection, consumer_of, project
@@ -169,7 +170,7 @@ def imu_noise(
     if projection not in PROJECTIONS:
         raise ExportError(f"projection must be one of {', '.join(PROJECTIONS)}, got {projection!r}")
     if projection == "fit":
-        return _fit_noise(fits, units, f, source, fmt, allow_partial, fs_filter)
+        return _fit_noise(fits, units, f, source, fmt, allow_partial, fs_filter, consumer)
     cons = consumer_of(consumer)
     if not fits:
         raise ExportError("no fitted channel to export")
@@ -229,12 +230,7 @@ def imu_noise(
         d.setdefault("B", {})[ax] = (
             _row(rows, "model", "bias instability (Allan floor, SI)", "B") * f
         )
-    if len(vals) < 2 and not allow_partial:
-        raise ExportError(
-            f"the filter file needs gyroscope and accelerometer noise; the fits give only "
-            f"{' and '.join(vals)} ({', '.join(fits)}). Add the other channels, or allow a "
-            "partial file (allow_partial=True)"
-        )
+    _both_sensors(vals, fits, allow_partial, consumer)
     models = sorted({r.model.spec() for r in fits.values()})
     p0 = next(iter(projs.values()))
     what = (
@@ -266,6 +262,33 @@ def imu_noise(
     return out
 
 
+def _both_sensors(
+    kinds: Collection[str], fits: Mapping[str, GMWMResult], allow_partial: bool, consumer: str
+) -> None:
+    """Refuse a file of one sensor (``kinds``: the sensors the fits give) unless
+    ``allow_partial``; the message offers ``allow_partial`` only where it applies: not for a
+    format whose record does not take it (:meth:`~engine.formats.Format.takes`; ``consumer``
+    a format or a consumer model name).
+
+    Raises
+    ------
+    ExportError
+        Fewer than the two sensors (gyroscope and accelerometer) without ``allow_partial``.
+    """
+    if len(kinds) >= 2 or allow_partial:
+        return
+    f = FORMATS.get(consumer.strip().lower())
+    hint = (
+        ", or allow a partial file (allow_partial=True)"
+        if f is None or f.takes("allow_partial")
+        else f" (the {f.name} format takes no partial file)"
+    )
+    raise ExportError(
+        f"the filter file needs gyroscope and accelerometer noise; the fits give only "
+        f"{' and '.join(sorted(kinds))} ({', '.join(fits)}). Add the other channels{hint}"
+    )
+
+
 def _fit_noise(
     fits: Mapping[str, GMWMResult],
     units: Mapping[str, str] | None,
@@ -274,11 +297,13 @@ def _fit_noise(
     fmt: str,
     allow_partial: bool,
     fs_filter: float | None = None,
+    consumer: str = "WN+RW",
 ) -> ImuNoise:
     """``projection="fit"``: N and K as :func:`~engine.formats.kalibr.kalibr_imu` extracts
     them (K from the GM driving noise when a model has no RW, with a warning), the most
     persistent GM term's numbers."""
-    kal = kalibr_imu(fits, units=units, source=source, allow_partial=allow_partial)
+    kal = kalibr_imu(fits, units=units, source=source, allow_partial=True)
+    _both_sensors({k.partition("_")[0] for k in kal.per_axis}, fits, allow_partial, consumer)
     vals: dict[str, dict[str, dict[str, float]]] = {}
     for key, axes in kal.per_axis.items():
         kind, _, what = key.partition("_")
@@ -364,11 +389,6 @@ def noise_for(
     return fleet_noise(units, fmt)
 
 
-#: The consumer models (:attr:`engine.formats.Format.consumer`) a fleet file can be written
-#: for: their WV grows with each of N and K, so the largest over the units bounds every unit.
-FLEET_CONSUMERS = ("WN+RW", "WN")
-
-
 def fleet_noise(units: Sequence[tuple[str, ImuNoise]], fmt: str = "") -> ImuNoise:
     """The fleet file's numbers: per sensor and axis the largest N and K (and per-sample
     ``sigma2``, Allan floor ``B``) over the units' own bounded numbers.
@@ -385,20 +405,16 @@ def fleet_noise(units: Sequence[tuple[str, ImuNoise]], fmt: str = "") -> ImuNois
     fmt : str
         The format's name for messages.
 
+    Which formats can be written for a fleet is their record's
+    (:attr:`engine.formats.Format.fleet_file`, checked by :func:`engine.formats.export`): the
+    units' numbers here are WN+RW or white noise.
+
     Raises
     ------
     ExportError
-        A Gauss-Markov consumer (its T_c differs per unit: the largest sigma_b at another
-        unit's T_c does not bound), or a unit without an axis of the first.
+        A unit without an axis of the first.
     """
     (src0, nz0), rest = units[0], units[1:]
-    if any("T_c" in q for _, nz in units for q in nz.values.values()):
-        raise ExportError(
-            f"{fmt or 'this format'}: a fleet file takes, per axis, the largest white noise "
-            "and random walk of the units (the WN+RW formats and sensor_msgs/Imu); its "
-            "Gauss-Markov bias has a correlation time per unit, which one value cannot bound: "
-            "export each unit's own file (gmwm export LOG)"
-        )
     vals: dict[str, dict[str, dict[str, float]]] = {}
     lines: list[str] = []
     for kind, qs in nz0.values.items():

@@ -27,6 +27,7 @@ from .datasheet import datasheet_csv, datasheet_table, datasheet_text
 from .kalibr import KalibrImu, kalibr_imu
 from .noise import FleetUnit, noise_for
 from .options import ExportOptions
+from .projection import Projection
 from .report import curves_csv, fit_report
 from .tails import log_tail_factors
 
@@ -39,6 +40,8 @@ __all__ = [
     "VALUE_KINDS",
     "register",
     "export",
+    "prepared_options",
+    "projections",
     "kalibr_text",
     "json_text",
     "curves_text",
@@ -136,6 +139,114 @@ def curves_text(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     return curves_csv(fits)
 
 
+def prepared_options(
+    fits: Mapping[str, GMWMResult],
+    fmt: str,
+    *,
+    fleet: Sequence[tuple[str, Mapping[str, GMWMResult], ImuLog | None]] = (),
+    **options: Any,
+) -> tuple[Format, ExportOptions]:
+    """The format's record and the options its writer gets, as :func:`export` makes them:
+    checked once (one :class:`~engine.errors.ExportError` naming a bad or unknown option, a
+    fleet the record does not take, a missing filter rate; a :class:`UserWarning` naming an
+    option the format does not read), with the context filled in (the rostopic, the tail
+    factors of the logs, the fleet's units). Parameters as :func:`export`.
+    """
+    f = FORMATS.get(fmt)
+    if f is None:
+        raise ExportError(f"unknown export format {fmt!r}: use one of {', '.join(FORMATS)}")
+    unknown = [k for k in options if k not in ExportOptions.names() or k == "fleet"]
+    if unknown:
+        raise ExportError(
+            f"unknown export option(s) {', '.join(unknown)}: the options are "
+            f"{', '.join(n for n in ExportOptions.names() if n != 'fleet')} and fleet"
+        )
+    if "source" in options:
+        options["source"] = source_text(options["source"])
+    o = ExportOptions(**options)
+    if o.inflate != 1.0 and "inflate" not in f.options:
+        raise ExportError(
+            f"inflate= is for filter formats; the {f.description} reports the fit itself "
+            "(inflate 1)"
+        )
+    if fleet and f.is_filter and not f.fleet_file:
+        raise ExportError(
+            f"{fmt}: a fleet file takes, per axis, the largest white noise and random walk of "
+            f"the units (the formats {', '.join(n for n, g in FORMATS.items() if g.fleet_file)}"
+            f"); the {f.consumer} consumer's Gauss-Markov bias has a correlation time per "
+            "unit, which one value cannot bound: export each unit's own file (gmwm export LOG)"
+        )
+    if fleet and ("fleet" not in f.options or o.projection == "fit"):
+        raise ExportError(
+            f"a fleet file is a filter format's bounded numbers: {fmt!r} with projection "
+            f"{o.projection!r} takes one unit's fits (export each unit on its own)"
+        )
+    if f.needs_filter_rate and o.filter_rate is None:
+        raise ExportError(
+            f"the {fmt} export needs the filter rate in Hz its EKF predicts at (filter_rate=...):"
+            " its noise parameters are per filter step"
+        )
+    ignored = o.ignored_by(fmt, f.options)
+    if ignored:
+        warnings.warn(ignored, UserWarning, stacklevel=3)
+
+    def tail_map(log: ImuLog | None, unit_fits: Mapping[str, GMWMResult]) -> Any:
+        return (
+            log_tail_factors(log, unit_fits)
+            if o.tails
+            and log is not None
+            and o.projection == "bound"
+            and o.data != "none"
+            # the formats whose projection has a data bound (not sensor_msgs/Imu's white part)
+            and (f.consumer not in (None, "WN") or fmt == "json")
+            else None
+        )
+
+    topic = o.log.meta.get("topic") if o.log is not None else None
+    o = dataclasses.replace(
+        o,
+        rostopic=o.rostopic or topic or "/imu0",
+        tail_factors=tail_map(o.log, fits),
+        fleet=tuple(FleetUnit(str(src), fs_, tail_map(lg, fs_)) for src, fs_, lg in fleet),
+    )
+    return f, o
+
+
+def projections(fits: Mapping[str, GMWMResult], fmt: str, **options: Any) -> dict[str, Projection]:
+    """The projection of each fit onto a filter format's consumer model, as :func:`export`
+    computes the file's numbers with the same options (its checks, tail factors and the
+    format's own numbers, :attr:`Format.noise`: KF-GINS's one ``T_c``), without writing the
+    file: what the app's export preview shows.
+
+    A file of one sensor is projected too (the file itself may need both). Empty for a report
+    and for ``projection="fit"`` (the fit's own terms: nothing is projected).
+
+    Parameters
+    ----------
+    fits : mapping of channel name to GMWMResult
+    fmt : str
+        A name of :data:`FORMATS`.
+    **options
+        As :func:`export` (the fields of :class:`~engine.formats.ExportOptions`).
+
+    Returns
+    -------
+    dict of channel to Projection
+
+    Raises
+    ------
+    ExportError
+        As :func:`export`: a bad option, or a fit the consumer cannot take.
+    """
+    f = FORMATS.get(fmt)
+    if f is not None and not f.is_filter:
+        return {}
+    f, o = prepared_options(fits, fmt, **options)
+    if o.projection == "fit":
+        return {}
+    return dict(f.noise_of(fits, o, True).projections)
+
+
 def export(
     path: str | os.PathLike[str] | None,
     fits: Mapping[str, GMWMResult],
@@ -163,7 +274,8 @@ def export(
         the **fleet file**: per axis the largest N and K of every unit's own export (each with
         its tail factors from its log), so that no unit is exported overconfident
         (:func:`engine.formats.noise.fleet_noise`; docs/filters.md, "One file for a fleet").
-        Refused by the reports and the Gauss-Markov formats, and with ``projection="fit"``.
+        Refused by the reports, by the formats whose record says no
+        (:attr:`Format.fleet_file`: the Gauss-Markov ones) and with ``projection="fit"``.
     **options
         The fields of :class:`engine.formats.ExportOptions`, each documented there with its
         unit and default: ``intervals``, ``log``, ``units``, ``source`` (what the fits are),
@@ -197,56 +309,7 @@ def export(
     gyroscope_noise_density 9.906e-05
     gyroscope_random_walk 7.675e-06
     """
-    f = FORMATS.get(fmt)
-    if f is None:
-        raise ExportError(f"unknown export format {fmt!r}: use one of {', '.join(FORMATS)}")
-    unknown = [k for k in options if k not in ExportOptions.names() or k == "fleet"]
-    if unknown:
-        raise ExportError(
-            f"unknown export option(s) {', '.join(unknown)}: the options are "
-            f"{', '.join(n for n in ExportOptions.names() if n != 'fleet')} and fleet"
-        )
-    if "source" in options:
-        options["source"] = source_text(options["source"])
-    o = ExportOptions(**options)
-    if o.inflate != 1.0 and "inflate" not in f.options:
-        raise ExportError(
-            f"inflate= is for filter formats; the {f.description} reports the fit itself "
-            "(inflate 1)"
-        )
-    if fleet and ("fleet" not in f.options or o.projection == "fit"):
-        raise ExportError(
-            f"a fleet file is a filter format's bounded numbers: {fmt!r} with projection "
-            f"{o.projection!r} takes one unit's fits (export each unit on its own)"
-        )
-    if f.needs_filter_rate and o.filter_rate is None:
-        raise ExportError(
-            f"the {fmt} export needs the filter rate in Hz its EKF predicts at (filter_rate=...):"
-            " its noise parameters are per filter step"
-        )
-    ignored = o.ignored_by(fmt, f.options)
-    if ignored:
-        warnings.warn(ignored, UserWarning, stacklevel=2)
-
-    def tail_map(log: ImuLog | None, unit_fits: Mapping[str, GMWMResult]) -> Any:
-        return (
-            log_tail_factors(log, unit_fits)
-            if o.tails
-            and log is not None
-            and o.projection == "bound"
-            and o.data != "none"
-            # the formats whose projection has a data bound (not sensor_msgs/Imu's white part)
-            and (f.consumer not in (None, "WN") or fmt == "json")
-            else None
-        )
-
-    topic = o.log.meta.get("topic") if o.log is not None else None
-    o = dataclasses.replace(
-        o,
-        rostopic=o.rostopic or topic or "/imu0",
-        tail_factors=tail_map(o.log, fits),
-        fleet=tuple(FleetUnit(str(src), fs_, tail_map(lg, fs_)) for src, fs_, lg in fleet),
-    )
+    f, o = prepared_options(fits, fmt, fleet=fleet, **options)
     text = f.writer(fits, o)
     if path is not None:
         write_atomic(path, text)  # the one write of every format (engine._files)

@@ -8,6 +8,7 @@ the GMWM curve the Fit tab's fit.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
@@ -147,7 +148,9 @@ def test_engine_check_is_the_views(app: Any, view: Any) -> None:
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.browser
 @pytest.mark.browser_tour
-def test_browser_typed_value_redraws_the_check(server: str, new_tab: Any) -> None:
+def test_browser_typed_value_redraws_the_check(
+    server: str, new_tab: Any, caplog: pytest.LogCaptureFixture
+) -> None:
     from test_in_browser import TIMEOUT_MS, _app_for
 
     t = new_tab().open(f"{server}?model=GM%2BWN%2BRW")
@@ -174,6 +177,17 @@ def test_browser_typed_value_redraws_the_check(server: str, new_tab: Any) -> Non
     t.wait_for(lambda: "above" in t.table_text(".gmwm-check-table"), "the verdicts")
     assert "inside" in t.table_text(".gmwm-check-table")  # the GMWM column
     assert page.get_by_text("ARW 0.9 deg/sqrt(h)").first.is_visible()
+    assert t.errors == [], t.errors
+    # a value that is not a number: the message in the page, not the previous check, and no
+    # failure in the server's log (it was "_pending_writes should be non-None")
+    box.fill("abc")
+    box.press("Enter")
+    t.wait_for(
+        lambda: view.result is None and view.message.object == "ARW: 'abc' is not a number",
+        "the message in the session",
+    )
+    page.get_by_text("ARW: 'abc' is not a number").first.wait_for(timeout=TIMEOUT_MS)
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
     assert t.errors == [], t.errors
 
 

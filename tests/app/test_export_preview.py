@@ -108,9 +108,12 @@ def test_preview_functions_on_their_own(app_demo: Path) -> None:
     fig = preview_figure(p)
     assert fig.x_scale.__class__.__name__ == "LogScale"
     assert math.isclose(p.band[0], 2 / 250.0, rel_tol=1e-9) or p.band[0] >= 2 / log.fs
+    # the export's checks come first (a channel's unit), then the projection's reason
     with pytest.raises(Exception, match="N > 0"):
         preview_projections(
-            {"g": eg.fit_gmwm(eg.wavelet_variance(log["gyro_x"], fs=log.fs), "RW")}, "ros-imu"
+            {"gyro_x": eg.fit_gmwm(eg.wavelet_variance(log["gyro_x"], fs=log.fs), "RW")},
+            "ros-imu",
+            units={"gyro_x": "deg/s"},
         )
 
 
@@ -136,3 +139,49 @@ def test_projection_choice_reaches_the_preview_and_the_file(app_demo: Path) -> N
     # the fit's own white noise: N = sqrt(sigma2 / fs), deg -> rad
     n_fit = math.sqrt(gyro.params["WN.sigma2"] / s.fs) * math.pi / 180
     assert d["gyroscope_noise_density"] == pytest.approx(n_fit, rel=1e-9)
+
+
+@pytest.mark.parametrize("projection", ["bound", "plain"])
+def test_preview_and_written_file_agree_for_every_format(app_demo: Path, projection, monkeypatch):
+    """The preview is the engine's ``projections``, computed as the file's numbers are: for
+    every filter format, each channel's projection is the one the writer last computed for it
+    (KF-GINS: at the file's one T_c; sensor_msgs/Imu: without the tail factors the others
+    apply), with the loaded log's tail factors."""
+    import engine as eg
+    from engine.formats import FORMATS
+    from engine.formats import noise as noise_mod
+
+    log = eg.load_log(app_demo)
+    fits = {
+        ch: eg.fit_gmwm(eg.wavelet_variance(log[ch], fs=log.fs), "GM+WN+RW")
+        for ch in ("gyro_x", "accel_x")
+    }
+    seen: dict[str, object] = {}
+    real = noise_mod.project
+
+    def spy(res, consumer, **kw):  # type: ignore[no-untyped-def]
+        p = real(res, consumer, **kw)
+        seen[kw["channel"]] = p
+        return p
+
+    monkeypatch.setattr(noise_mod, "project", spy)
+    checked = []
+    for name, f in FORMATS.items():
+        if not f.is_filter:
+            assert preview_projections(fits, name, units=dict(log.units)) == {}
+            continue
+        kw = {"filter_rate": 100.0} if f.needs_filter_rate else {}
+        kw |= {"log": log, "tails": True, "projection": projection, "units": dict(log.units)}
+        pv = preview_projections(fits, name, **kw)
+        seen.clear()
+        eg.export(None, fits, name, **kw)  # the file
+        assert set(pv) == set(seen) == set(fits), name
+        for ch, p in pv.items():
+            w = seen[ch]
+            assert p.consumer == w.consumer and p.band == w.band, (name, ch)
+            np.testing.assert_array_equal(p.consumer_wv, w.consumer_wv)
+            for q, wq in zip(p.params.values(), w.params.values(), strict=True):
+                assert (q.name, q.value, q.binds) == (wq.name, wq.value, wq.binds), (name, ch)
+                np.testing.assert_array_equal([q.low, q.high], [wq.low, wq.high])
+        checked.append(name)
+    assert len(checked) == sum(f.is_filter for f in FORMATS.values()) >= 11

@@ -12,6 +12,7 @@ import panel as pn
 import pytest
 
 from gmwm_app import _panel_compat as compat
+from gmwm_app import boundary
 from gmwm_app.jobs import Jobs, LoopTurns
 
 
@@ -289,14 +290,20 @@ def test_a_failing_page_update_reaches_the_page_and_the_log(
         def on_session_destroyed(self, *callbacks: Any) -> None:  # Jobs registers its end
             pass
 
-    jobs = Jobs(ServedDoc())
+    doc = ServedDoc()
+    jobs = Jobs(doc)
     shown: list[str] = []
-    jobs.failed = lambda message, err: shown.append(f"{message}: {err}")
+    # the session's page, as the app attaches it to the error boundary (gmwm_app.boundary)
+    boundary.install()
+    boundary.attach(doc, shown.append)
 
     def broken() -> None:
         raise RuntimeError("a figure could not be drawn")
 
-    with caplog.at_level(logging.ERROR, logger="gmwm_app.jobs"):
+    with caplog.at_level(logging.ERROR, logger="gmwm_app.boundary"):
         jobs.locked(broken)  # no exception leaves the loop
-    assert shown == ["Could not update the page: a figure could not be drawn"]
-    assert "page callback failed" in caplog.text and "RuntimeError" in caplog.text
+    assert shown == [
+        "Could not update the page: unexpected RuntimeError: a figure could not be drawn"
+    ]
+    assert "could not be drawn" in caplog.text and "RuntimeError" in caplog.text
+    assert any(r.exc_info for r in caplog.records)  # with its traceback

@@ -306,5 +306,9 @@ def test_the_cli_words_engine_messages_in_its_flags(capsys, tmp_path):
     assert main([*args, "--channels", "gyro_x", "--format", "kalibr"]) == 2
     err = capsys.readouterr().err
     assert "only gyroscope" in err and "(--partial)" in err
+    # a format that takes no --partial is not offered it
+    assert main([*args, "--channels", "gyro_x", "--format", "openvins"]) == 2
+    err = capsys.readouterr().err
+    assert "only gyroscope" in err and "partial" in err and "--partial" not in err
     assert main(["fit", demo, "--channel", "gyro_x", "--model", "WN", "--levels", "99"]) == 2
     assert "--levels 99 is out of range" in capsys.readouterr().err

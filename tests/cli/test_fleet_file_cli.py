@@ -13,6 +13,7 @@ import yaml
 
 import engine as eg
 from engine.cli import main
+from engine.formats import FORMATS
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:
@@ -104,3 +105,14 @@ def test_batch_export_reads_the_logs_without_the_warmup_it_dropped(tmp_path, cap
     assert code == 0, err
     fleet = yaml.safe_load((out / "fleet.yaml").read_text())
     assert fleet["gyroscope_noise_density"] == pytest.approx(1e-4, rel=0.03)
+
+
+def test_the_help_lists_the_formats_whose_record_takes_a_fleet(capsys):
+    # gmwm batch --export's help reads Format.fleet_file (gmwm export's per-format list too:
+    # tests/engine/test_format_records.py)
+    fleet = [n for n, f in FORMATS.items() if f.fleet_file]
+    assert "kalibr" in fleet and "gazebo" not in fleet
+    with pytest.raises(SystemExit):
+        main(["batch", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"overconfident ({', '.join(fleet)}; docs/filters.md" in text

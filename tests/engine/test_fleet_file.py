@@ -13,6 +13,7 @@ data). The slow test runs the filter on the six units' recorded accelerometers w
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -21,6 +22,7 @@ import yaml
 
 import engine as eg
 from engine.batch import export_fleet, fit_log
+from engine.formats import FORMATS
 from engine.formats.tails import log_tail_factors
 from engine.units import ExportError, si_factor
 
@@ -93,6 +95,32 @@ def test_fleet_file_refuses_what_it_cannot_bound(sim_units, fmt, kw, match):
     a, b = sim_units
     with pytest.raises(ExportError, match=match):
         eg.export(None, a, fmt, ci=None, fleet=[("b.h5", b, None)], **kw)
+
+
+def test_the_format_record_says_which_formats_take_a_fleet(sim_units, monkeypatch):
+    # the record's capability (Format.fleet_file) is what export does: a fleet file is written
+    # for exactly the filter formats that declare it, and the others are refused by export
+    # from the record, before their writer runs
+    a, b = sim_units
+    filters = {n: f for n, f in FORMATS.items() if f.is_filter}
+    declared = {n for n, f in filters.items() if f.fleet_file}
+    assert declared == {n for n, f in filters.items() if f.consumer in ("WN+RW", "WN")}
+    assert {"kalibr", "openvins", "px4", "ros-imu"} <= declared
+    assert not declared & {"gazebo", "gz-sim", "kf-gins"}
+    for name, f in filters.items():
+        kw = {"filter_rate": FS} if f.needs_filter_rate else {}
+        if name in declared:
+            assert eg.export(None, a, name, ci=None, fleet=[("b.h5", b, None)], **kw)
+    ran: list[str] = []
+    for name, f in filters.items():
+        kw = {"filter_rate": FS} if f.needs_filter_rate else {}
+        if name in declared:
+            continue
+        spy = dataclasses.replace(f, write=lambda fits, o, name=name: ran.append(name) or "")
+        monkeypatch.setitem(FORMATS, name, spy)
+        with pytest.raises(ExportError, match="correlation time per unit"):
+            eg.export(None, a, name, ci=None, fleet=[("b.h5", b, None)], **kw)
+    assert ran == []  # refused by the record, not inside the writers
 
 
 def test_fleet_unit_without_a_channel_is_named(sim_units):

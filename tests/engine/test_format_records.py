@@ -133,5 +133,6 @@ def test_export_help_lists_the_options_each_record_names():
             own
         ), (f.name, said)
         assert ("--filter-rate required" in said) == f.needs_filter_rate, f.name
+        assert ("a fleet file with gmwm batch --export" in said) == f.fleet_file, f.name
     assert "px4: the filter options and --vehicle-id; --filter-rate required" in text
     assert "csv: none" in text
