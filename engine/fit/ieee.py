@@ -255,16 +255,11 @@ def _one(cls: type[Process]) -> Callable[[Model, float], float]:
 
 
 def _floor(n_levels: int) -> Callable[[Model, float], float]:
-    """The model's Allan-deviation minimum over ``n_levels`` levels, remembered per model: B
-    and ``ADEV_min`` are the same floor, and the delta method evaluates both at the same
-    shifted models."""
-    seen: dict[tuple[Model, float], float] = {}
+    """The model's Allan-deviation minimum over ``n_levels`` levels (B and ``ADEV_min`` are
+    the same floor, which :func:`engine.units.allan_floor` remembers per model)."""
 
     def adev_min(m: Model, fs: float) -> float:
-        key = (m, fs)
-        if key not in seen:
-            seen[key] = float(allan_floor(m, fs, n_levels)["adev_min"])
-        return seen[key]
+        return float(allan_floor(m, fs, n_levels)["adev_min"])
 
     return adev_min
 
