@@ -27,6 +27,7 @@ __all__ = [
     "spectral_density",
     "frequency_grid",
     "wv_cov_model",
+    "inverse_cov",
     "coefficient_cross_cov",
     "mean_coefficient_cov",
     "drift_share",
@@ -126,6 +127,15 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
 #: The last closed-form ``C`` per spectrum, with its levels (a few entries: one per model a
 #: caller asks about in turn, e.g. a run plan's lengths).
 _C_SEEN: dict[tuple[float, float, float, tuple[tuple[float, float], ...]], np.ndarray] = {}
+
+
+def inverse_cov(v: np.ndarray) -> np.ndarray:
+    """Symmetric inverse of a covariance, with eigenvalues floored for stability: the efficient
+    GMWM's weights ``Omega = V^-1`` (the GMWM paper, Corollary 1)."""
+    vals, vecs = np.linalg.eigh((v + v.T) / 2)
+    vals = np.maximum(vals, vals.max() * 1e-12)
+    inv = (vecs / vals) @ vecs.T
+    return (inv + inv.T) / 2
 
 
 def _closed_form_of(
