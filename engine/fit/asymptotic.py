@@ -626,6 +626,25 @@ def asymptotic_bounds(res: Any, vmat: np.ndarray, level: float) -> list[tuple[fl
     return out
 
 
+@functools.lru_cache(maxsize=256)
+def _shifted(
+    model: Model, free: tuple[tuple[int, str], ...]
+) -> tuple[tuple[float, Model, Model], ...]:
+    """The delta method's central differences: per free parameter, its step in the
+    unconstrained coordinates (:func:`_steps`) and the models one step up and one step down.
+    Remembered per model: a run plan evaluates the IEEE table of one model at every length it
+    tries (:func:`engine.inference.planning.plan_run`: a sixth of its CPU)."""
+    fr = list(free)
+    u0 = _u0(model, fr)
+    out = []
+    for k, h in enumerate(_steps(model, fr, u0)):
+        up, dn = u0.copy(), u0.copy()
+        up[k] += h
+        dn[k] -= h
+        out.append((h, _set(model, fr, up), _set(model, fr, dn)))
+    return tuple(out)
+
+
 def delta_bounds(
     res: Any,
     fns: Sequence[Callable[[Model, float], float]],
@@ -665,26 +684,14 @@ def delta_bounds(
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - degenerate V
         return [(math.nan, math.nan)] * len(fns)
     z = NormalDist().inv_cdf(0.5 + level / 2)
-    u0 = _u0(res.model, free)
-    steps = _steps(res.model, free, u0)
-    shifted = []
-    for k, h in enumerate(steps):
-        up, dn = u0.copy(), u0.copy()
-        up[k] += h
-        dn[k] -= h
-        shifted.append((_set(res.model, free, up), _set(res.model, free, dn)))
+    shifted = _shifted(res.model, tuple(free))
     out = []
     for fn in fns:
         g0 = fn(res.model, res.fs)
         if not (math.isfinite(g0) and g0 > 0):
             out.append((math.nan, math.nan))
             continue
-        d = np.array(
-            [
-                (fn(a, res.fs) - fn(b, res.fs)) / (2 * h)
-                for (a, b), h in zip(shifted, steps, strict=True)
-            ]
-        )
+        d = np.array([(fn(a, res.fs) - fn(b, res.fs)) / (2 * h) for h, a, b in shifted])
         var = float(d @ cov @ d)
         if not (math.isfinite(var) and var > 0):
             out.append((math.nan, math.nan))
