@@ -534,16 +534,28 @@ def _steps(model: Model, free: list[tuple[int, str]], u0: np.ndarray) -> list[fl
 def jacobian(res: Any, free: list[tuple[int, str]] | None = None) -> np.ndarray:
     """d nu / d u (J x p) at the estimate, u the unconstrained coordinates of free parameters."""
     free = free_params(res) if free is None else free
-    u0 = _u0(res.model, free)
-    tau = res.wv.tau_samples
-    jac = np.empty((tau.size, len(free)))
+    tau = tuple(res.wv.tau_samples.tolist())
+    return _jacobian(res.model, tuple(free), tau, res.fs).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _jacobian(
+    model: Model, free: tuple[tuple[int, str], ...], scales: tuple[float, ...], fs: float
+) -> np.ndarray:
+    """:func:`jacobian` of a model at the scales ``scales`` (samples), remembered: a run plan
+    asks for it at every length it tries, and it depends on the number of levels only."""
+    fr = list(free)
+    u0 = _u0(model, fr)
+    tau = np.asarray(scales)
+    jac = np.empty((tau.size, len(fr)))
     # a model's WV is the sum of its processes' (Model.wv): a step in one parameter moves only
     # its process's term, so the difference is taken of that term alone (no Model rebuilt)
-    for k, ((i, name), h) in enumerate(zip(free, _steps(res.model, free, u0), strict=True)):
-        proc, spec = res.model.processes[i], _spec(res.model, i, name)
+    for k, ((i, name), h) in enumerate(zip(fr, _steps(model, fr, u0), strict=True)):
+        proc, spec = model.processes[i], _spec(model, i, name)
         up = proc.with_values(**{name: spec.from_unconstrained(float(u0[k] + h))})
         dn = proc.with_values(**{name: spec.from_unconstrained(float(u0[k] - h))})
-        jac[:, k] = (up.wv(tau, res.fs) - dn.wv(tau, res.fs)) / (2 * h)
+        jac[:, k] = (up.wv(tau, fs) - dn.wv(tau, fs)) / (2 * h)
+    jac.flags.writeable = False
     return jac
 
 
