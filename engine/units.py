@@ -16,7 +16,7 @@ import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
-from functools import partial
+from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -297,6 +297,10 @@ class DatasheetRow:
 def allan_floor(model: Model, fs: float, n_levels: int, *, points_per_octave: int = 16) -> dict:
     """Minimum of the model-implied Allan deviation over the analysed scales.
 
+    Remembered per (model, fs, levels, points): an IEEE table's delta method evaluates it at
+    the same shifted models for B and ``ADEV_min``, and a run plan at every length with the
+    same number of levels (:func:`engine.inference.planning.plan_run`: a fifth of its CPU).
+
     Returns
     -------
     dict
@@ -304,6 +308,21 @@ def allan_floor(model: Model, fs: float, n_levels: int, *, points_per_octave: in
         (``adev_min / BI_FACTOR``, u), ``at_edge`` (True when the minimum is at the shortest or
         longest scale: no floor inside, an upper bound), ``T_range_s``.
     """
+    adev, t_s, at_edge, t_lo, t_hi = _allan_floor(model, fs, n_levels, points_per_octave)
+    return {
+        "adev_min": adev,
+        "T_s": t_s,
+        "bias_instability": adev / BI_FACTOR,
+        "at_edge": at_edge,
+        "T_range_s": [t_lo, t_hi],
+    }
+
+
+@lru_cache(maxsize=4096)
+def _allan_floor(
+    model: Model, fs: float, n_levels: int, points_per_octave: int
+) -> tuple[float, float, bool, float, float]:
+    """:func:`allan_floor`'s numbers: ADEV minimum, its T (s), at the edge, the T range (s)."""
     j = n_levels
     # Allan times T = m / fs, m = 2^(k) samples for k in [0, J - 1] -> WV at tau = 2m
     k = np.linspace(0.0, max(j - 1, 0), max(j - 1, 0) * points_per_octave + 1)
@@ -312,13 +331,8 @@ def allan_floor(model: Model, fs: float, n_levels: int, *, points_per_octave: in
     avar = np.where(np.isfinite(avar) & (avar > 0), avar, np.inf)
     i = int(np.argmin(avar))
     adev = float(math.sqrt(avar[i])) if math.isfinite(avar[i]) else math.nan
-    return {
-        "adev_min": adev,
-        "T_s": float(m[i] / fs),
-        "bias_instability": adev / BI_FACTOR,
-        "at_edge": bool(i == 0 or i == m.size - 1),
-        "T_range_s": [float(m[0] / fs), float(m[-1] / fs)],
-    }
+    at_edge = bool(i == 0 or i == m.size - 1)
+    return adev, float(m[i] / fs), at_edge, float(m[0] / fs), float(m[-1] / fs)
 
 
 def _map_iv(iv: tuple[float, float] | None, fn: Callable[[float], float]) -> tuple[float, float]:

@@ -19,7 +19,16 @@ import math
 from pathlib import Path
 from typing import Any
 
-from .common import CliError, add_confidence_option, add_log_options, positive, queue_warning
+from ..inference.datasheet_spec import parse_datasheet
+from ..inference.planning import parse_targets, plan_run
+from .common import (
+    CliError,
+    add_confidence_option,
+    add_log_options,
+    load_wv,
+    positive,
+    queue_warning,
+)
 
 __all__ = ["add_parser", "run"]
 
@@ -87,10 +96,6 @@ def _from_fit_json(path: str) -> tuple[str, float | None, str]:
 
 def run(args: argparse.Namespace) -> dict[str, Any] | str:
     """Run ``gmwm plan``."""
-    from ..fit import fit_gmwm
-    from ..inference.planning import parse_targets, plan_run
-    from .common import load_wv
-
     try:
         targets = parse_targets(args.target)
     except ValueError as e:
@@ -102,6 +107,8 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         if not args.model:
             raise CliError("a PILOT log needs --model, the model to fit to it (e.g. GM+WN+RW)")
         args.input = args.pilot
+        from ..fit import fit_gmwm  # this input only (the fit's search and its process pool)
+
         args.levels, args.robust, args.eff = None, False, 0.6
         wv, name = load_wv(args)
         res = fit_gmwm(wv, args.model, weights="efficient")
@@ -117,8 +124,6 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
         fs = fs if fs is not None else fs_json
         unit = unit if unit is not None else unit_json
     elif args.datasheet:
-        from ..inference.datasheet_check import parse_datasheet  # this input only (engine.io)
-
         if fs is None or not unit:
             raise CliError("--datasheet needs --fs and --units (e.g. --fs 100 --units deg/s)")
         spec = parse_datasheet(args.datasheet)

@@ -20,8 +20,11 @@
   the slope method) and the table that compares them;
 * :mod:`engine.fit._varpro`: the one variable-projection search all the fits use.
 
-The replicate, GMWFM and estimate modules are imported on first use (PEP 562), so that
-``import engine.fit`` stays fast for the ``gmwm`` command.
+Every name is imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`), so that
+a module that needs one part of the package loads that part only: the run planner
+(``gmwm plan``) uses the asymptotic covariance and the IEEE table, not the fit's search, its
+starting values or the bootstrap's process pool (docs/performance.md, "The gmwm command's
+start").
 """
 
 from __future__ import annotations
@@ -29,25 +32,32 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .._lazy import lazy_attributes
-from .asymptotic import param_cov, wv_cov_model
-from .covariance import V_DEFAULTS, VOptions, wv_cov, wv_cov_bootstrap, wv_cov_data
-from .gmwm import GMWMResult, fit_efficient, fit_gmwm, gmwm_objective, weight_matrix
-from .ieee import IeeeQuantity, IeeeTable, ieee_table
-from .result import FitError, FitResult, ParamRecord, ParamTable, Summary
-from .start import starting_values
 
+#: Each module of the package and the public names it defines, in ``__all__`` order.
 _LAZY: dict[str, tuple[str, ...]] = {
+    "gmwm": ("fit_gmwm", "fit_efficient", "GMWMResult", "weight_matrix", "gmwm_objective"),
+    "ieee": ("IeeeTable", "IeeeQuantity", "ieee_table"),
+    "covariance": ("wv_cov", "wv_cov_data", "wv_cov_bootstrap", "VOptions", "V_DEFAULTS"),
+    "asymptotic": ("wv_cov_model", "param_cov"),
+    "start": ("starting_values",),
+    "result": ("FitError", "FitResult", "ParamRecord", "ParamTable", "Summary"),
     "replicates": ("fit_replicates", "ReplicateResult"),
     "gmwfm": ("fit_gmwfm", "fit_armav", "GMWFMResult"),
     "estimate": ("MethodEstimate", "from_gmwm", "compare_table"),
 }
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of _LAZY)
+    from .asymptotic import param_cov, wv_cov_model  # noqa: F401
+    from .covariance import V_DEFAULTS, VOptions, wv_cov, wv_cov_bootstrap, wv_cov_data  # noqa: F401
     from .estimate import MethodEstimate, compare_table, from_gmwm  # noqa: F401
     from .gmwfm import GMWFMResult, fit_armav, fit_gmwfm  # noqa: F401
+    from .gmwm import GMWMResult, fit_efficient, fit_gmwm, gmwm_objective, weight_matrix  # noqa: F401
+    from .ieee import IeeeQuantity, IeeeTable, ieee_table  # noqa: F401
     from .replicates import ReplicateResult, fit_replicates  # noqa: F401
+    from .result import FitError, FitResult, ParamRecord, ParamTable, Summary  # noqa: F401
+    from .start import starting_values  # noqa: F401
 
-__getattr__, __dir__, _lazy_names = lazy_attributes(__name__, _LAZY, globals())
+__getattr__, __dir__, _ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "fit_gmwm",
@@ -71,5 +81,12 @@ __all__ = [
     "ParamRecord",
     "ParamTable",
     "Summary",
-    *_lazy_names,
+    "fit_replicates",
+    "ReplicateResult",
+    "fit_gmwfm",
+    "fit_armav",
+    "GMWFMResult",
+    "MethodEstimate",
+    "from_gmwm",
+    "compare_table",
 ]

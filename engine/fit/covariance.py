@@ -30,7 +30,6 @@ __all__ = [
     "wv_cov_data",
     "wv_cov_bootstrap",
     "wv_cov",
-    "inverse_cov",
     "VOptions",
     "V_DEFAULTS",
     "v_options",
@@ -161,17 +160,6 @@ def wv_cov_bootstrap(
     items = [(model, wv.n, wv.fs, wv.n_levels, wv.robust, wv.eff, s) for s in seeds]
     sims = np.array(parallel_map(_boot_wv, items, workers, executor=executor))
     return np.cov(sims, rowvar=False)
-
-
-# ------------------------------------------------------------------------------------------
-# efficient GMWM
-# ------------------------------------------------------------------------------------------
-def inverse_cov(v: np.ndarray) -> np.ndarray:
-    """Symmetric inverse of a covariance, with eigenvalues floored for stability."""
-    vals, vecs = np.linalg.eigh((v + v.T) / 2)
-    vals = np.maximum(vals, vals.max() * 1e-12)
-    inv = (vecs / vals) @ vecs.T
-    return (inv + inv.T) / 2
 
 
 class _FittedWV(Protocol):

@@ -39,8 +39,8 @@ from ._varpro import (
     sqrt_weight,
     start_coordinates,
 )
-from .asymptotic import asymptotic_bounds, wv_cov_model
-from .covariance import VOptions, inverse_cov, v_options, wv_cov
+from .asymptotic import asymptotic_bounds, inverse_cov, wv_cov_model
+from .covariance import VOptions, v_options, wv_cov
 from .ieee import IeeeTable, ieee_table
 from .result import FitError, OneWVFit, ParamTable, UnivariateFit
 

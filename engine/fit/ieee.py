@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Any, Protocol
 
 import numpy as np
@@ -203,8 +204,12 @@ class IeeeTable:
         return [f"  IEEE quantities ({pct} intervals):", *out] if out else []
 
 
+@lru_cache(maxsize=4096)
 def white_share(model: Model, fs: float) -> tuple[float, tuple[str, ...]]:
     """White-noise variance per sample of a fitted model, disguised share included.
+
+    Remembered per (model, fs): the delta method evaluates N at the same shifted models for
+    every length a run plan tries.
 
     ``s2 = sigma2(WN) + sum S(0)`` over the AR1/GM terms whose correlation time is below
     one sample (``TC_FLAG``): at every Haar scale such a term acts as white noise of variance
@@ -255,16 +260,11 @@ def _one(cls: type[Process]) -> Callable[[Model, float], float]:
 
 
 def _floor(n_levels: int) -> Callable[[Model, float], float]:
-    """The model's Allan-deviation minimum over ``n_levels`` levels, remembered per model: B
-    and ``ADEV_min`` are the same floor, and the delta method evaluates both at the same
-    shifted models."""
-    seen: dict[tuple[Model, float], float] = {}
+    """The model's Allan-deviation minimum over ``n_levels`` levels (B and ``ADEV_min`` are
+    the same floor, which :func:`engine.units.allan_floor` remembers per model)."""
 
     def adev_min(m: Model, fs: float) -> float:
-        key = (m, fs)
-        if key not in seen:
-            seen[key] = float(allan_floor(m, fs, n_levels)["adev_min"])
-        return seen[key]
+        return float(allan_floor(m, fs, n_levels)["adev_min"])
 
     return adev_min
 

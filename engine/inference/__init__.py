@@ -25,7 +25,9 @@
   chi-square with ``J - p`` degrees of freedom.
 * Model selection (:func:`rank_models`, WVIC) in :mod:`engine.inference.selection`.
 * Datasheet check (:func:`check_datasheet`, :func:`read_datasheet`): a manufacturer's noise
-  model against the empirical WV, scale by scale (:mod:`engine.inference.datasheet_check`).
+  model against the empirical WV, scale by scale (:mod:`engine.inference.datasheet_check`);
+  the datasheet's values as a model (:class:`DatasheetSpec`, :func:`parse_datasheet`:
+  :mod:`engine.inference.datasheet_spec`).
 * Planning a log's length (:func:`plan_run`) in :mod:`engine.inference.planning`.
 
 The names are imported on first use (PEP 562, :func:`engine._lazy.lazy_attributes`): ``gmwm
@@ -46,12 +48,11 @@ _LAZY: dict[str, tuple[str, ...]] = {
     "datasheet_check": (
         "check_datasheet",
         "read_datasheet",
-        "parse_datasheet",
-        "DatasheetSpec",
         "DatasheetCheck",
         "DatasheetError",
         "DATASHEET_KEYS",
     ),
+    "datasheet_spec": ("parse_datasheet", "DatasheetSpec"),
     "planning": ("plan_run", "plan_precision", "parse_targets", "PlanTarget", "RunPlan"),
 }
 
@@ -60,11 +61,10 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs (the names of
         DATASHEET_KEYS,
         DatasheetCheck,
         DatasheetError,
-        DatasheetSpec,
         check_datasheet,
-        parse_datasheet,
         read_datasheet,
     )
+    from .datasheet_spec import DatasheetSpec, parse_datasheet  # noqa: F401
     from .intervals import ParamInterval, param_intervals  # noqa: F401
     from .jtest import JTest, j_test  # noqa: F401
     from .planning import PlanTarget, RunPlan, parse_targets, plan_precision, plan_run  # noqa: F401

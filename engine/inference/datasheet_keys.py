@@ -3,7 +3,8 @@
 ``arw=0.3 deg/sqrt(h)``: :data:`DATASHEET_KEYS` maps a key to its datasheet symbol (N, K, B,
 Q), :data:`UNITS` the accepted spellings of each symbol's units to SI (from the one unit table,
 :mod:`engine.units`), :func:`convert_value` turns one value into SI. Used by
-:mod:`engine.inference.datasheet_check` (parsing, reading files).
+:mod:`engine.inference.datasheet_spec` (parsing) and :mod:`engine.inference.datasheet_check`
+(reading files).
 """
 
 from __future__ import annotations

@@ -22,8 +22,8 @@ import numpy as np
 from .._jsonutil import FieldsDict
 from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
-from ..fit.asymptotic import drift_share, free_params, wv_cov_model
-from ..fit.covariance import inverse_cov, v_options, wv_cov
+from ..fit.asymptotic import drift_share, free_params, inverse_cov, wv_cov_model
+from ..fit.covariance import v_options, wv_cov
 from ..models import Model
 from ..wv import WaveletVariance, wavelet_variance
 

@@ -22,8 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ..fit.asymptotic import free_params, param_cov, wv_cov_model
-from ..fit.covariance import inverse_cov
+from ..fit.asymptotic import free_params, inverse_cov, param_cov, wv_cov_model
 from ..fit.ieee import IEEE_KEYS, IeeeTable, ieee_table, white_share
 from ..fit.result import FitError
 from ..models import Model, Process, parse_model
@@ -612,10 +611,10 @@ def plan_run(
         longest_n = max([4 * n for n in required.values() if n is not None], default=0)
         top = min(n_max, max(longest_n, int(3600 * fs)))
         secs = 60.0 * 2.0 ** np.arange(0, 64)
-        grid = np.unique(np.round(secs[secs * fs <= top] * fs).astype(np.int64))
+        grid = _sorted_unique(np.round(secs[secs * fs <= top] * fs).astype(np.int64))
         grid = grid[grid >= 64] if grid.size else np.array([min(top, 64)], dtype=np.int64)
     else:
-        grid = np.unique(np.asarray(lengths, dtype=np.int64))
+        grid = _sorted_unique(np.asarray(lengths, dtype=np.int64))
     if grid.size == 0 or grid[0] < 16:
         raise ValueError("plan_run needs lengths of at least 16 samples")
     tables = tuple(table(int(n)) for n in grid)
@@ -640,6 +639,12 @@ def plan_run(
         drift_why,
         boundary,
     )
+
+
+def _sorted_unique(a: np.ndarray) -> np.ndarray:
+    """The distinct lengths of ``a``, increasing (``np.unique``, whose NumPy 2 version imports
+    ``numpy.ma``, a twentieth of a second of the ``gmwm plan`` command)."""
+    return np.array(sorted(set(a.tolist())), dtype=np.int64)
 
 
 def _valid_from(m: Model, fs: float) -> tuple[int, str]:

@@ -34,8 +34,8 @@ import numpy as np
 from .._parallel import parallel_map
 from ..fit import FitError, GMWMResult, fit_gmwm
 from ..fit._varpro import TC_FLAG
-from ..fit.asymptotic import free_params, jacobian
-from ..fit.covariance import inverse_cov, wv_cov
+from ..fit.asymptotic import free_params, inverse_cov, jacobian
+from ..fit.covariance import wv_cov
 from ..models import WN, Model, ModelError, Process, parse_model
 from ..wv import WaveletVariance, wavelet_variance
 from .jtest import LEVELS_RULE, calibration_note, efficient_j, jtest_levels

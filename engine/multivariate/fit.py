@@ -219,7 +219,7 @@ def fit_mgmwm(
     if not efficient:
         return _fit(wvm, model, w, None, wname, t0)
     first = _fit(wvm, model, w, None, "ci", t0)
-    from ..fit.covariance import inverse_cov
+    from ..fit.asymptotic import inverse_cov
 
     omega = inverse_cov(moment_covariance(first.model, wvm))
     return _fit(wvm, first.model, w, omega, "efficient", t0)

@@ -19,8 +19,7 @@ import numpy as np
 
 import engine as eg
 from engine.fit import fit_efficient
-from engine.fit.asymptotic import frequency_grid, spectral_density, wv_cov_model
-from engine.fit.covariance import inverse_cov
+from engine.fit.asymptotic import frequency_grid, inverse_cov, spectral_density, wv_cov_model
 from engine.models import Model
 
 MODELS = [

@@ -1,16 +1,20 @@
-"""CPU time of `gmwm plan`, the whole command, against a reference measured in the same run.
+"""CPU and wall time of `gmwm plan`, the whole command, against a same-run reference.
 
-Each command runs in a fresh interpreter (``python -m engine.cli plan ...``), ``--reps`` times;
-its CPU time (user + sys of the child, ``os.wait4``) is the best (least) of the runs, the
-one least disturbed by the machine's load; the commands run in turn, one run of each per round. The
+Each command runs in a fresh interpreter, ``--reps`` times: as ``python -m engine.cli plan ...``
+and through the installed entry point (the ``gmwm`` script beside the interpreter, which
+imports ``engine.cli`` from this tree through ``PYTHONPATH``). Its CPU time (user + sys of
+the child, ``os.wait4``) and its wall time are the best (least) of the runs, the ones least
+disturbed by the machine's load; the commands run in turn, one run of each per round. The
 reference is a fresh interpreter that imports numpy (``python -c "import numpy"``): a fixed
-cost outside the project, so the ratio is comparable between machines and loads. A second
+cost outside the project, so the ratio is comparable between machines and loads. A last
 column splits off what the command spends after its imports: the same plan timed with
 ``time.process_time`` in a child that imported what the command imports first.
 
 Examples (docs/planning.md): the WN+RW datasheet example of the guide, and a consumer MEMS
 gyro ``GM+WN+RW`` with three targets (N, K, B). ``--tree DIR`` adds the same commands run on
-another checkout (e.g. the main tree before a change), in the same run.
+another checkout (e.g. the main tree before a change), in the same run. Byte code is written
+and used as an installed package's is (``PYTHONDONTWRITEBYTECODE`` is dropped for the
+children; ``--pycache DIR`` keeps it out of the trees, default a directory under /tmp).
 
 Usage::
 
@@ -20,9 +24,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -55,31 +61,43 @@ EXAMPLES = {
 _AFTER_IMPORTS = """
 import sys, time
 from engine.cli import main
-import engine.cli.common, engine.cli.plan, engine.fit, engine.inference, engine.inference.planning
+import engine.cli.common, engine.cli.plan, engine.fit.ieee, engine.inference.planning
 t = time.process_time()
 main(["plan", *sys.argv[1:]])
 print(f"@@{time.process_time() - t}", file=sys.stderr)
 """
 
 
-def child_cpu(argv: list[str], tree: Path) -> tuple[float, str]:
-    """CPU seconds (user + sys) of one child process, and its stderr."""
-    env = {**os.environ, "PYTHONPATH": str(tree)}
+def _env(tree: Path, pycache: Path) -> dict[str, str]:
+    env = {**os.environ, "PYTHONPATH": str(tree), "PYTHONPYCACHEPREFIX": str(pycache)}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
+def child_times(argv: list[str], tree: Path, pycache: Path) -> tuple[float, float, str]:
+    """CPU seconds (user + sys) and wall seconds of one child process, and its stderr."""
+    t0 = time.perf_counter()
     p = subprocess.Popen(
-        argv, env=env, cwd=tree, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+        argv,
+        env=_env(tree, pycache),
+        cwd=tree,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     err = p.stderr.read() if p.stderr else ""
     _, status, ru = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t0
     p.returncode = os.waitstatus_to_exitcode(status)
     if p.returncode != 0:
         raise SystemExit(f"{argv} failed ({p.returncode}): {err.strip()[-300:]}")
-    return ru.ru_utime + ru.ru_stime, err
+    return ru.ru_utime + ru.ru_stime, wall, err
 
 
-def after_imports(args: list[str], tree: Path, reps: int) -> float:
+def after_imports(args: list[str], tree: Path, pycache: Path, reps: int) -> float:
     vals = []
     for _ in range(reps):
-        _, err = child_cpu([sys.executable, "-c", _AFTER_IMPORTS, *args], tree)
+        _, _, err = child_times([sys.executable, "-c", _AFTER_IMPORTS, *args], tree, pycache)
         vals.append(float(err.rsplit("@@", 1)[1].split()[0]))
     return min(vals)
 
@@ -88,33 +106,54 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--tree", type=Path, help="another checkout to time the same commands on")
+    ap.add_argument("--pycache", type=Path, default=Path("/tmp/bench_plan_pycache"))
     a = ap.parse_args()
     trees = [("this tree", ROOT)] + ([("--tree", a.tree.resolve())] if a.tree else [])
+    # the installed entry point: the gmwm script beside this interpreter (not a pyenv shim,
+    # which runs a shell and pyenv first: about 0.1 s of CPU of its own)
+    script = Path(sys.executable).with_name("gmwm")
+    launchers = {"python -m engine.cli": [sys.executable, "-m", "engine.cli"]}
+    if script.exists():
+        launchers["gmwm"] = [str(script)]
     # every command once per round, in turn, so that a change of the machine's load reaches
     # all of them alike; the best of the rounds is kept
-    cmds: dict[tuple[str, str], tuple[list[str], Path]] = {
-        ("reference", ""): ([sys.executable, "-c", "import numpy"], ROOT),
-        ("gmwm --help", "this tree"): ([sys.executable, "-m", "engine.cli", "--help"], ROOT),
+    cmds: dict[tuple[str, str, str], tuple[list[str], Path]] = {
+        ("reference", "", ""): ([sys.executable, "-c", "import numpy"], ROOT),
     }
-    for label, tree in trees[1:]:
-        cmds["gmwm --help", label] = ([sys.executable, "-m", "engine.cli", "--help"], tree)
+    for label, tree in trees:
+        cmds["gmwm --help", "python -m engine.cli", label] = (
+            [sys.executable, "-m", "engine.cli", "--help"],
+            tree,
+        )
     for name, args in EXAMPLES.items():
-        for label, tree in trees:
-            cmds[name, label] = ([sys.executable, "-m", "engine.cli", "plan", *args], tree)
-    best = dict.fromkeys(cmds, float("inf"))
+        for how, launcher in launchers.items():
+            for label, tree in trees:
+                cmds[name, how, label] = ([*launcher, "plan", *args], tree)
+    best = {k: (math.inf, math.inf) for k in cmds}
     for _ in range(a.reps):
         for key, (argv, tree) in cmds.items():
-            best[key] = min(best[key], child_cpu(argv, tree)[0])
-    ref = best["reference", ""]
-    print(f"reference (python -c 'import numpy'): {ref:.3f} s of CPU, best of {a.reps}\n")
-    print("| command | tree | whole command: CPU | ratio to reference | plan after imports |")
-    print("|---|---|---|---|---|")
-    for (name, label), cpu in best.items():
+            cpu, wall, _ = child_times(argv, tree, a.pycache)
+            best[key] = (min(best[key][0], cpu), min(best[key][1], wall))
+    ref_cpu, ref_wall = best["reference", "", ""]
+    print(
+        f"reference (python -c 'import numpy'): {ref_cpu:.3f} s of CPU, {ref_wall:.3f} s wall, "
+        f"best of {a.reps}\n"
+    )
+    print(
+        "| command | run as | tree | CPU | wall | CPU / reference CPU | plan after imports (CPU) |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for (name, how, label), (cpu, wall) in best.items():
         if name == "reference":
             continue
         args = EXAMPLES.get(name)
-        inner = f"{after_imports(args, cmds[name, label][1], a.reps):.3f} s" if args else "-"
-        print(f"| {name} | {label} | {cpu:.2f} s | {cpu / ref:.2f} | {inner} |")
+        inner = "-"
+        if args and how == "python -m engine.cli":
+            inner = f"{after_imports(args, cmds[name, how, label][1], a.pycache, a.reps):.3f} s"
+        print(
+            f"| {name} | {how} | {label} | {cpu:.3f} s | {wall:.3f} s | {cpu / ref_cpu:.2f} "
+            f"| {inner} |"
+        )
 
 
 if __name__ == "__main__":

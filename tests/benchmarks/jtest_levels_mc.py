@@ -28,8 +28,7 @@ from scipy import stats
 
 import engine as eg
 from engine.fit import fit_gmwm
-from engine.fit.asymptotic import free_params, wv_cov_model
-from engine.fit.covariance import inverse_cov
+from engine.fit.asymptotic import free_params, inverse_cov, wv_cov_model
 
 FS = 100.0
 ETAS = (4, 8, 16)

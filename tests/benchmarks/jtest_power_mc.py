@@ -19,8 +19,7 @@ from scipy import stats
 
 import engine as eg
 from engine.fit import fit_gmwm
-from engine.fit.asymptotic import free_params, wv_cov_model
-from engine.fit.covariance import inverse_cov
+from engine.fit.asymptotic import free_params, inverse_cov, wv_cov_model
 from engine.inference.jtest import jtest_levels
 
 

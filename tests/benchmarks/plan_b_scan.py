@@ -38,7 +38,8 @@ import numpy as np
 from plan_mc import DATA, Z, adis_model, at_rate
 
 import engine as eg
-from engine.fit.covariance import inverse_cov, wv_cov
+from engine.fit.asymptotic import inverse_cov
+from engine.fit.covariance import wv_cov
 from engine.inference.planning import _planned_fit, plan_precision
 
 FITS = ("efficient", "oracle", "iterated")

@@ -4,7 +4,9 @@
   full parser's, without importing any sub-command's module;
 * ``gmwm X --help`` works for every sub-command and shows X's own options;
 * ``gmwm X ...`` imports X's module only: ``gmwm plan`` loads neither the export formats, the
-  reports nor the app (checked in ``sys.modules`` of a fresh interpreter, not by a timing).
+  reports nor the app, nor the fit's search, the bootstrap's process pool, the loaders,
+  PyYAML or ``numpy.ma`` (checked in ``sys.modules`` of a fresh interpreter, not by a timing:
+  tests/benchmarks/bench_plan.py times the command).
 """
 
 from __future__ import annotations
@@ -45,7 +47,8 @@ def _fresh(code: str) -> str:
 
 
 def _modules_after(argv: list[str]) -> set[str]:
-    """The modules of engine and gmwm_app loaded by ``gmwm ARGV`` in a fresh interpreter."""
+    """The modules loaded by ``gmwm ARGV`` in a fresh interpreter (all of them: the engine's,
+    the app's, the standard library's and the third parties')."""
     code = (
         "import contextlib, io, sys\n"
         "from engine.cli import main\n"
@@ -55,7 +58,7 @@ def _modules_after(argv: list[str]) -> set[str]:
         "    except SystemExit as e:\n"
         "        status = e.code\n"
         "print(status)\n"
-        "print(' '.join(m for m in sys.modules if m.split('.')[0] in ('engine', 'gmwm_app')))\n"
+        "print(' '.join(sys.modules))\n"
     )
     status, mods = _fresh(code).splitlines()[-2:]
     assert status == "0", f"gmwm {' '.join(argv)} exited with {status}"
@@ -134,3 +137,42 @@ def test_plan_loads_neither_the_formats_nor_the_reports_nor_the_app():
     heavy = {m for m in mods if m.startswith(("engine.formats.", "engine.reporting", "gmwm_app"))}
     assert heavy <= {"engine.formats.common"}, sorted(heavy)
     assert not {"engine.multivariate", "engine.teaching", "engine.batch"} & mods
+
+
+#: What ``gmwm plan`` does not need, for any of its inputs but a pilot log (which it fits): the
+#: fit's search and starting values, the bootstrap's process pool (multiprocessing and
+#: concurrent.futures, 0.04-0.1 s of imports), the loaders and PyYAML (read_datasheet's Kalibr
+#: files, 0.05-0.2 s), numpy.ma (np.unique's, 0.04 s) and the hmac of the secrets module.
+NOT_FOR_PLAN = {
+    "engine.fit.gmwm",
+    "engine.fit.start",
+    "engine.fit.covariance",
+    "engine._parallel",
+    "engine.io.log",
+    "engine.io.kalibr",
+    "engine.inference.datasheet_check",
+    "multiprocessing",
+    "concurrent.futures",
+    "yaml",
+    "numpy.ma",
+    "secrets",
+    "scipy",
+    "h5py",
+}
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        ["--model", "GM(beta=0.05, sigma2_gm=4e-6)+WN(sigma2=2.5e-5)+RW(gamma2=1e-10)"],
+        ["--datasheet", "arw=0.15 deg/sqrt(h), rrw=2 deg/h/sqrt(h)", "--units", "deg/s"],
+    ],
+    ids=["model", "datasheet"],
+)
+def test_plan_loads_only_what_the_plan_computes(source):
+    mods = _modules_after(
+        ["plan", *source, "--fs", "100", "--target", "K within 10 %, N within 1 %"]
+        + ["--hours", "0.5,1,2,10"]
+    )
+    assert {"engine.inference.planning", "engine.fit.asymptotic", "engine.fit.ieee"} <= mods
+    assert not NOT_FOR_PLAN & mods, sorted(NOT_FOR_PLAN & mods)

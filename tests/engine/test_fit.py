@@ -285,7 +285,8 @@ def test_efficient_weights_are_a_choice_of_fit_gmwm():
     """``fit_gmwm(weights="efficient")``: the ci fit, V implied by it, the refit with V^-1 (the
     GMWM paper, Corollary 1), step by step; ``fit_efficient`` is the same call."""
     from engine.fit import fit_efficient
-    from engine.fit.covariance import inverse_cov, wv_cov_data, wv_cov_model
+    from engine.fit.asymptotic import inverse_cov, wv_cov_model
+    from engine.fit.covariance import wv_cov_data
 
     rng = np.random.default_rng(3)
     x = rng.normal(scale=0.05, size=2**14) + np.cumsum(rng.normal(scale=1e-3, size=2**14))

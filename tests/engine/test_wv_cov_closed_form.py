@@ -14,8 +14,7 @@ import pytest
 import engine as eg
 import engine.fit._closed_form as cf
 from engine.fit import fit_efficient
-from engine.fit.asymptotic import spectral_density, wv_cov_model
-from engine.fit.covariance import inverse_cov
+from engine.fit.asymptotic import inverse_cov, spectral_density, wv_cov_model
 from engine.models import RW, Model
 
 

@@ -30,6 +30,7 @@ IMPORT_PATHS = {
         "engine.inference",
         "engine.inference.datasheet_check",
         "engine.inference.datasheet_keys",
+        "engine.inference.datasheet_spec",
     ),
     "SessionError": ("engine.errors", "engine.session"),
     "ReportError": ("engine.errors", "engine.reporting", "engine.reporting.render"),
