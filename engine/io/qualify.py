@@ -5,6 +5,9 @@ breaks that assumption and says, per finding, which samples are concerned and wh
 
 * **warm-up** (``"warmup"``): the first part of the log has a trend the rest does not have
   (the sensor settling after power-on); offers a start sample (:func:`drop_warmup`).
+* **warm-up wander** (``"wander"``): the bias wanders more in the first part of the log than
+  in the rest (the variance of the increments of block means, judged on the channel's sensor
+  triad); offers a start sample too.
 * **shocks** (``"shock"``): short windows with a cluster of large steps (a bump, a knock).
 * **motion** (``"motion"``): longer windows whose (clipped) variance departs from the log's.
 * **saturation** (``"saturation"``): samples piled up at the extreme values (clipping).
@@ -33,12 +36,32 @@ from typing import Any
 
 import numpy as np
 
-from .log import ImuLog
+from .log import ImuLog, channel_axis
 
-__all__ = ["Finding", "Qualification", "qualify_signal", "qualify_log", "drop_warmup", "KINDS"]
+__all__ = [
+    "Finding",
+    "Qualification",
+    "qualify_signal",
+    "qualify_log",
+    "drop_warmup",
+    "wander_test",
+    "wander_scan",
+    "triad_of",
+    "KINDS",
+]
 
 #: The kinds of finding, in the order they are listed.
-KINDS = ("warmup", "shock", "motion", "saturation", "periodic", "trend", "quantisation", "timing")
+KINDS = (
+    "warmup",
+    "wander",
+    "shock",
+    "motion",
+    "saturation",
+    "periodic",
+    "trend",
+    "quantisation",
+    "timing",
+)
 
 SHOCK_WINDOW = 128  # samples per window of the shock count
 SHOCK_K = 8.0  # a step beyond SHOCK_K robust SDs is an exceedance
@@ -47,6 +70,7 @@ MOTION_CLIP = 5.0  # steps clipped at MOTION_CLIP robust SDs
 Z_LIMIT = 8.0  # robust z beyond which a window departs
 ALPHA = 1e-3  # per-log false-alarm target of the count and spectrum tests (Bonferroni)
 _BLOCKS = 256  # block means of the warm-up and trend checks
+WANDER_ALPHA = 0.01  # per-log false-alarm target of the wander scan (Bonferroni over the scan)
 _MAX_RANGES = 20  # ranges listed per finding
 
 
@@ -152,8 +176,15 @@ class Qualification:
 
     @property
     def suggested_start(self) -> int:
-        """The first sample after every channel's warm-up (0 without a warm-up finding)."""
-        return max((int(f.values.get("start", 0)) for f in self.of_kind("warmup")), default=0)
+        """The first sample after every channel's warm-up, of the mean (``"warmup"``) or of the
+        bias wander (``"wander"``); 0 without such a finding."""
+        return max(
+            (
+                int(f.values.get("start", 0))
+                for f in self.of_kind("warmup") + self.of_kind("wander")
+            ),
+            default=0,
+        )
 
     def line(self) -> str:
         """One line: what was found, by kind, with the channels and the first samples."""
@@ -171,7 +202,7 @@ class Qualification:
             chans = ", ".join(dict.fromkeys(f.channel for f in fs if f.channel))
             first = min((f for f in fs if f.ranges), key=lambda f: f.ranges[0][0], default=None)
             where = ""
-            if kind == "warmup":
+            if kind in ("warmup", "wander"):
                 where = f": start at sample {self.suggested_start:,} (drop_warmup=True)"
             elif kind == "periodic":
                 freqs = sorted({round(f.values["frequency_hz"], 2) for f in fs})
@@ -505,6 +536,165 @@ def _warmup(x: np.ndarray, channel: str, unit: str) -> list[Finding]:
     ]
 
 
+def wander_scan(n: int, fs: float) -> list[tuple[int, int]]:
+    """The (block, blocks) pairs the wander check scans for a log of ``n`` samples at ``fs`` Hz.
+
+    The early part is ``T = n 2^(-k/2)`` samples, ``k = 4..10`` (a quarter to a 32nd of the
+    log, in half-octaves), cut into ``L`` = 8, 16 or 32 blocks of ``T // L`` samples; a block
+    is at least 32 samples and 1 s (the bias wander is a matter of seconds and longer).
+    Every choice follows from the log's length and rate; the scan's multiple testing is
+    accounted for by Bonferroni over its length (:func:`wander_test`).
+    """
+    shortest = max(32, math.ceil(fs))
+    out = []
+    for k in range(4, 11):
+        early = int(n * 2.0 ** (-k / 2))
+        for blocks in (8, 16, 32):
+            b = early // blocks
+            if b >= shortest:
+                out.append((b, blocks))
+    return out
+
+
+def _increments(c: np.ndarray, b: int) -> np.ndarray:
+    """Differences of consecutive means of blocks of ``b`` samples, from the cumulative sum
+    ``c`` (``c[0] = 0``) of a de-meaned series."""
+    k = (c.size - 1) // b
+    return np.diff(np.diff(c[: k * b + 1 : b]) / b)
+
+
+def wander_test(xs: list[np.ndarray], fs: float) -> tuple[float, int, int, int, list[float]] | None:
+    """Does the bias wander more in the first part of the log? The scan of the wander check.
+
+    Each series is first clipped at ``SHOCK_K`` robust SDs about its median (so that heavy
+    tails, spikes and bursts leave the block means alone). For
+    each (block ``b``, blocks ``L``) of :func:`wander_scan` and each series, the increments
+    ``e_k`` of consecutive ``b``-sample means, less their mean over the rest (a drift), give
+    ``R = mean(e_k^2, k < L - 1) / var(e_k, k >= L)``: the first ``L`` blocks' wander over the
+    rest's. Under a stationary model (WN, QN, RW, DR, GM, ...) ``R`` is about F-distributed;
+    the increments are correlated (-1/2 at lag 1 for white noise, 1/4 for a random walk), so
+    each degree of freedom count is divided by ``1 + 2 (rho_1^2 + rho_2^2)``, the rest's
+    autocorrelations (Satterthwaite). The series' one-sided p-values are pooled by Stouffer's
+    sum of normal scores, and the smallest over the scan is multiplied by the scan's length
+    (Bonferroni). The false-alarm rate on clean simulated logs is in ``docs/qualify.md``
+    (``tests/benchmarks/wander_mc.py``).
+
+    Parameters
+    ----------
+    xs : list of ndarray
+        The series judged together (a sensor triad), each of at least ``n`` samples; the first
+        ``n = min(len)`` are used.
+    fs : float
+        Sampling frequency (Hz).
+
+    Returns
+    -------
+    (p, b, L, start, ratios) or None
+        The scan-adjusted p-value (at most 1), the block (samples) and count of the most
+        significant early part, the first sample after the excess wander (a variance
+        change point of the increments at that block size, in the first quarter of the log)
+        and each series' variance ratio before that point against after it; None when the
+        log is too short for the scan.
+    """
+    from scipy import stats
+
+    n = min(int(x.size) for x in xs)
+    scan = wander_scan(n, fs)
+    if not scan:
+        return None
+    cs = []
+    for x in xs:
+        # the samples clipped at SHOCK_K robust SDs about their median: a heavy tail, a spike
+        # or a burst does not move the block means, and the wander (far smaller than the
+        # spread of the samples in a static log) is kept
+        y = np.asarray(x[:n], dtype=float)
+        med = float(np.median(y))
+        s = _robust_sd(y)
+        if s == 0.0:
+            return None
+        y = np.clip(y, med - SHOCK_K * s, med + SHOCK_K * s)
+        cs.append(np.concatenate([[0.0], np.cumsum(y - float(np.mean(y)))]))
+    best: tuple[float, int, int] | None = None
+    for b, blocks in scan:
+        z = 0.0
+        for c in cs:
+            e = _increments(c, b)
+            rest = e[blocks:]
+            e = e - float(np.mean(rest))
+            er = e[blocks:]
+            ss = float(er @ er)
+            if ss <= 0.0:
+                return None
+            rho2 = sum((float(er[k:] @ er[:-k]) / ss) ** 2 for k in (1, 2))
+            f = 1.0 + 2.0 * rho2
+            early = e[: blocks - 1]
+            # the early deviations are from the rest's mean: their variance is (1 + 1/n_r)
+            ratio = float(early @ early) / early.size / (ss / (er.size - 1) * (1 + 1 / er.size))
+            p = float(stats.f.sf(ratio, early.size / f, (er.size - 1) / f))
+            z += float(stats.norm.isf(min(max(p, 1e-300), 1.0)))
+        p_pool = float(stats.norm.sf(z / math.sqrt(len(cs))))
+        if best is None or p_pool < best[0]:
+            best = (p_pool, b, blocks)
+    assert best is not None
+    p_min, b, blocks = best
+    # where the excess ends: the split of the increments at this block size that maximises the
+    # Gaussian likelihood of two variances (pooled over the series), in the first quarter
+    es = []
+    for c in cs:
+        e = _increments(c, b)
+        es.append(e - float(np.mean(e[blocks:])))
+    m = es[0].size
+    ks = np.arange(2, max(3, m // 4 + 1))
+    ll = np.zeros(ks.size)
+    for e in es:
+        c2 = np.concatenate([[0.0], np.cumsum(e * e)])
+        v1 = c2[ks] / ks
+        v2 = (c2[-1] - c2[ks]) / (m - ks)
+        ll -= ks * np.log(np.maximum(v1, 1e-300)) + (m - ks) * np.log(np.maximum(v2, 1e-300))
+    k = int(ks[int(np.argmax(ll))])
+    start = (k + 1) * b  # increment k - 1 ends with block k
+    ratios = [float(np.mean(e[:k] ** 2) / np.mean(e[k:] ** 2)) for e in es]
+    return min(1.0, p_min * len(scan)), b, blocks, start, ratios
+
+
+def _wander(xs: dict[str, np.ndarray], fs: float, report: tuple[str, ...]) -> list[Finding]:
+    """The wander check on one sensor triad (``xs``: its channels), findings for ``report``."""
+    got = wander_test(list(xs.values()), fs)
+    if got is None:
+        return []
+    p, b, blocks, start, ratios = got
+    if p >= WANDER_ALPHA:
+        return []
+    names = list(xs)
+    pooled = f" ({', '.join(names)} pooled)" if len(names) > 1 else ""
+    out = []
+    for ch, r in zip(names, ratios, strict=True):
+        if ch not in report:
+            continue
+        out.append(
+            Finding(
+                "wander",
+                ch,
+                "warning",
+                ((0, start),),
+                f"warm-up wander: the bias wanders more in the first {start:,} samples "
+                f"({start / fs:.4g} s): the variance of the steps of {b / fs:.3g} s means is "
+                f"{r:.3g} times the rest's{pooled} (p = {p:.2g} over the scan)",
+                f"drop them (drop_warmup=True starts at sample {start:,}) or start the "
+                "recording later after turn-on",
+                1,
+                {
+                    "start": float(start),
+                    "ratio": r,
+                    "p": p,
+                    "block_s": b / fs,
+                    "early_s": b * blocks / fs,
+                },
+            )
+        )
+    return out
+
+
 def trend_test(x: np.ndarray, *, blocks: int = 64) -> tuple[float, float, float]:
     """Share of the variance of ``blocks`` block means a quadratic explains, its range over
     the log, and that range over the SD of the block-to-block steps of the residual.
@@ -583,7 +773,7 @@ def _timing(report: dict[str, Any] | None) -> list[Finding]:
 
 
 def qualify_signal(
-    x: np.ndarray, fs: float, *, channel: str = "x", unit: str = ""
+    x: np.ndarray, fs: float, *, channel: str = "x", unit: str = "", wander: bool = True
 ) -> list[Finding]:
     """Run every per-channel check on one signal.
 
@@ -595,6 +785,9 @@ def qualify_signal(
         Sampling frequency (Hz).
     channel, unit : str
         Names used in the messages.
+    wander : bool
+        Run the warm-up wander check on this signal alone (:func:`qualify_log` runs it on the
+        channel's sensor triad instead).
 
     Returns
     -------
@@ -620,6 +813,7 @@ def qualify_signal(
     dc = d - np.median(d)  # the steps about their centre (a drift's step is not a shock)
     found = (
         _warmup(x, channel, unit)
+        + (_wander({channel: x}, fs, (channel,)) if wander else [])
         + _shocks(dc, s, channel, unit)
         + _motion(dc, s, channel)
         + _saturation(x, channel, unit)
@@ -630,9 +824,26 @@ def qualify_signal(
     return found
 
 
+def triad_of(log: ImuLog, channel: str) -> list[str]:
+    """The channels of ``log`` in the sensor triad of ``channel``: the same name but for the
+    axis letter at its end (``gyro_x``, ``gyro_y``, ``gyro_z``) and the same unit; the channel
+    alone when its name ends in no axis letter."""
+    ax = channel_axis(channel)
+    if ax not in ("x", "y", "z") or not channel.lower().endswith(ax):
+        return [channel]
+    stem, unit = channel[:-1], log.unit_of(channel)
+    return [
+        c
+        for c in log.names
+        if c[:-1] == stem and c[-1:].lower() in "xyz" and log.unit_of(c) == unit
+    ]
+
+
 def qualify_log(log: ImuLog, channels: list[str] | None = None) -> Qualification:
-    """Check a loaded log before a fit: :func:`qualify_signal` per channel, and the loader's
-    time-column report.
+    """Check a loaded log before a fit: :func:`qualify_signal` per channel, the warm-up
+    wander per sensor triad (:func:`triad_of`: every channel of the log in the triad of a
+    channel checked is pooled, so that one channel gets the verdict of its triad), and the
+    loader's time-column report.
 
     Parameters
     ----------
@@ -650,7 +861,16 @@ def qualify_log(log: ImuLog, channels: list[str] | None = None) -> Qualification
     found: list[Finding] = []
     if not log.is_summary:
         for ch in names:
-            found += qualify_signal(log.channels[ch], log.fs, channel=ch, unit=log.unit_of(ch))
+            found += qualify_signal(
+                log.channels[ch], log.fs, channel=ch, unit=log.unit_of(ch), wander=False
+            )
+        for triad in dict.fromkeys(tuple(triad_of(log, ch)) for ch in names):
+            xs = {c: log.channels[c] for c in triad}
+            if all(np.all(np.isfinite(x)) and np.ptp(x) > 0 for x in xs.values()):
+                found += _wander(xs, log.fs, names)
+        # a wander that ends within a mean transient's cut adds nothing to it
+        cut = max((int(f.values["start"]) for f in found if f.kind == "warmup"), default=0)
+        found = [f for f in found if f.kind != "wander" or f.values["start"] > cut]
     found += _timing(log.meta.get("time_report"))
     order = {k: i for i, k in enumerate(KINDS)}
     found.sort(key=lambda f: order[f.kind])

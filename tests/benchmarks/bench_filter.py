@@ -4,7 +4,7 @@
     python tests/benchmarks/bench_filter.py --recorded [--minutes 20] [--fix 1 10 100]
         [--rates 100 200] [--models WN+RW GM+WN+RW 2*GM+WN+RW] [--kinds gyro accel]
         [--min-fixes 100] [--control-runs 100] [--no-tails] [--data low|estimate|high|none]
-        [--fleet | --own] [--control-runs 0] [--horizon-fixes 4]
+        [--fleet | --own] [--control-runs 0] [--horizon-fixes 4] [--drop-warmup]
 
 ``--recorded`` (issue 28): the error fed to the filter is the *recorded* ADIS16405 signal, not
 a simulation: the six units' logs (all channels), each channel minus its mean over the whole
@@ -73,6 +73,7 @@ from filtersim import (  # noqa: E402
 
 import engine as eg  # noqa: E402
 from engine.formats.tails import tail_factors  # noqa: E402
+from engine.io.qualify import drop_warmup, qualify_log  # noqa: E402
 
 #: channel -> (fix standard deviation in the integral's unit, that unit)
 CHANNELS = {"gyro_x": (0.01, "deg"), "accel_x": (1e-3, "g s")}
@@ -102,6 +103,13 @@ def main() -> None:
         "--minutes when needed, at most the log)",
     )
     ap.add_argument("--control-runs", type=int, default=100)
+    ap.add_argument(
+        "--drop-warmup",
+        action="store_true",
+        help="--recorded: each unit's log cut where its log check proposes for the sensor "
+        "triad (engine.io.qualify_log(...).suggested_start, gmwm --drop-warmup): the files "
+        "fitted on the cut log and the recorded errors from the cut",
+    )
     ap.add_argument(
         "--data",
         default="low",
@@ -254,7 +262,7 @@ def recorded(args: argparse.Namespace) -> None:
         sys.exit(f"bench_filter: the six ADIS16405 logs are needed in {data}")
     t_all = time.perf_counter()
     c_all = time.process_time()
-    logs = [eg.load_log(u) for u in units]
+    logs = logs_all = [eg.load_log(u) for u in units]
     fs = float(logs[0].fs)
     n_log = min(int(log.n) for log in logs)
     seg20 = int(round(60.0 * args.minutes * fs))
@@ -271,6 +279,11 @@ def recorded(args: argparse.Namespace) -> None:
         if kind not in args.kinds:
             continue
         fix_sigma = CHANNELS[f"{kind}_x"][0]
+        if args.drop_warmup:  # as gmwm --drop-warmup on this triad: fit and fly from the cut
+            cuts = [qualify_log(lg, list(chans)).suggested_start for lg in logs_all]
+            logs = [drop_warmup(lg, c) for lg, c in zip(logs_all, cuts, strict=True)]
+            n_log = min(int(lg.n) for lg in logs)
+            print(f"{kind}: cut at (s) " + ", ".join(f"{c / fs:g}" for c in cuts))
         errs: dict[tuple[int, str], np.ndarray] = {}
         for u, log in enumerate(logs):
             for ch in chans:

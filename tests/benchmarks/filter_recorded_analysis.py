@@ -6,6 +6,7 @@
     python tests/benchmarks/filter_recorded_analysis.py quantiles
     python tests/benchmarks/filter_recorded_analysis.py own gyro 100
     python tests/benchmarks/filter_recorded_analysis.py horizon accel 10 2*GM+WN+RW
+    python tests/benchmarks/filter_recorded_analysis.py checkcut gyro 100
 
 ``quantiles``: per ADIS16405 unit and channel, the ratio of the 0.95 and 0.99 quantiles of the
 absolute Haar coefficients at each scale 2^j (j = 1..15) to the Gaussian's (1.96 and 2.576 times
@@ -37,6 +38,12 @@ horizon equal to the aiding interval, and the same filter on errors simulated fr
 own WN+RW (the control, split the same way). Then the bias wander: per unit, the RMS of the
 differences of consecutive 100 s means in the first 1000 s and after, with the F test's
 p-value.
+
+``checkcut KIND T_FIX``: as ``own``, but each unit's log cut where its log check proposes
+(``qualify_log(...).suggested_start`` of the triad: the warm-up wander, 0 where nothing is
+found), as a user following the check's advice with ``--drop-warmup`` does: the files fitted
+on the cut log and the filter started at the cut, on the same number of samples per unit (the
+shortest cut log's), for the WN+RW and GM+WN+RW fits.
 
 ``horizon KIND T_FIX MODEL``: unit 1's default export of ``MODEL`` (per axis, 100 Hz) with the
 bound's horizon the log (the default) and 1, 2, 4 and 10 aiding intervals, with and without
@@ -326,6 +333,54 @@ def own(kind: str, t_fix: float, skip_s: float = 1000.0) -> None:
     print(f"\nCPU {time.process_time() - t0:.0f} s")
 
 
+def check_cut(kind: str, t_fix: float) -> None:
+    """The ``checkcut`` table (module docstring)."""
+    from engine.io.qualify import qualify_log
+
+    sys.path.insert(0, str(REPO / "tests" / "benchmarks"))
+    from bench_filter import CHANNELS as FIX
+    from bench_filter import bias_prior
+    from filter_fleet_spread import unit_exports
+
+    t0 = time.process_time()
+    logs = _logs()
+    chans = tuple(f"{kind}_{a}" for a in "xyz")
+    fix_sigma = FIX[f"{kind}_x"][0]
+    cuts = [qualify_log(log, list(chans)).suggested_start for log in logs]
+    keep = min(int(log.n) - c for log, c in zip(logs, cuts, strict=True))
+    print(f"{kind}: the log check's cut per unit (s): " + ", ".join(f"{c / FS:g}" for c in cuts))
+    print(f"filter on {keep / FS:g} s per unit from its cut\n")
+    cut_logs = [
+        eg.ImuLog({ch: np.asarray(log[ch], float)[c:] for ch in chans}, FS, units=dict(log.units))
+        for log, c in zip(logs, cuts, strict=True)
+    ]
+    errs = {}
+    for u, lg in enumerate(cut_logs):
+        for ch in chans:
+            x = np.asarray(lg[ch], float)[:keep]
+            errs[(u, ch)] = x - x.mean()
+    pb0 = bias_prior([e[None, :] for e in errs.values()], int(1200 * FS), FS)
+    m = int(round(t_fix * FS))
+    print("| model | errors from | mean NEES | above band ± s.e. | criterion met |")
+    print("|---|---|---|---|---|")
+    for model in ("WN+RW", "GM+WN+RW"):
+        ex = unit_exports(cut_logs, chans, model)
+        nees = {
+            k: run_recorded(e[None, :], ex[k], fs=FS, hold=1, t_fix_s=t_fix,
+                            fix_sigma=fix_sigma, pb0=pb0, seed=1 + k[0]).nees
+            for k, e in errs.items()
+        }  # fmt: skip
+        groups = [("unit 1", [0]), ("units 2-6", [1, 2, 3, 4, 5])]
+        groups += [(f"unit {u + 1} alone", [u]) for u in range(1, 6)]
+        for who, us in groups:
+            v = np.mean([nees[(u, ch)] for u in us for ch in chans], axis=0)
+            frac, se, _ = block_fraction(v > nees_band(1, len(us) * len(chans))[1], m)
+            ok = "yes" if 0.5 <= v.mean() <= 1.3 and frac <= 0.05 else "NO"
+            print(f"| {model} | {who} | {v.mean():.3f} | {100 * frac:.1f} ± {100 * se:.1f} % "
+                  f"| {ok} |", flush=True)  # fmt: skip
+    print(f"\nCPU {time.process_time() - t0:.0f} s")
+
+
 def horizon(kind: str, t_fix: float, model: str) -> None:
     """The ``horizon`` table (module docstring)."""
     sys.path.insert(0, str(REPO / "tests" / "benchmarks"))
@@ -384,6 +439,8 @@ if __name__ == "__main__":
         quantiles_table()
     elif sys.argv[1:2] == ["horizon"] and len(sys.argv) == 5:
         horizon(sys.argv[2], float(sys.argv[3]), sys.argv[4])
+    elif sys.argv[1:2] == ["checkcut"] and len(sys.argv) == 4:
+        check_cut(sys.argv[2], float(sys.argv[3]))
     elif sys.argv[1:2] == ["own"] and len(sys.argv) == 4:
         own(sys.argv[2], float(sys.argv[3]))
     elif sys.argv[1:2] == ["cells"] and len(sys.argv) >= 4:
