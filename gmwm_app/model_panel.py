@@ -1,7 +1,8 @@
 """The model builder and the what-if sliders of the sidebar (one per session).
 
-One add button per process, a text spec, the list of the model's processes (rows from a
-fixed pool, each with a remove button: an add or a remove creates no new Bokeh model), and
+One add button per process, a text spec, the list of the model's processes (rows from a pool
+that grows to the largest model shown, each with a remove button: a remove, or an add within
+that size, creates no new Bokeh model), and
 the what-if sliders generated from the parameters (:meth:`AppState.slider_specs`), also
 from a pool.
 
@@ -27,9 +28,9 @@ from gmwm_app.wv_figures import N_INITIAL_COMPONENTS
 
 __all__ = ["ModelPanel", "N_POOL"]
 
-#: Process rows created up front, as many as the component curves the page starts with
-#: (more are added if a model grows beyond: 4 Bokeh models each, a page opens faster with
-#: fewer).
+#: Process rows created up front, as many as the component curves the page starts with (none:
+#: a page opens with an empty model); a row is added when a model first needs it and kept
+#: for later models (8 Bokeh models each).
 N_POOL = N_INITIAL_COMPONENTS
 
 
@@ -180,7 +181,8 @@ class ModelPanel(pn.viewable.Viewer):
     @param.depends("state.model", watch=True)
     @redraws("the process list")
     def _refresh_process_list(self) -> None:
-        """One row per process from a fixed pool (no new Bokeh models on add/remove)."""
+        """One row per process from a pool that grows to the largest model shown (no new Bokeh
+        models on a remove, nor on an add within that size)."""
         s = self.state
         key = tuple(s.model.labels)
         if key == self._proc_key:

@@ -43,9 +43,10 @@ __all__ = ["WVFigures", "N_COMPONENTS", "N_INITIAL_COMPONENTS"]
 
 #: Size of the pool of component renderers (a model with more processes draws the first ones).
 N_COMPONENTS = 12
-#: Component renderers built with the page; the pool grows up to :data:`N_COMPONENTS` when a
-#: model has more processes (8 models each: a page opens faster with fewer).
-N_INITIAL_COMPONENTS = 6
+#: Component renderers built with the page: none, since a page opens with an empty model (the
+#: demo's first view draws no model curve); the pool grows up to :data:`N_COMPONENTS` as a
+#: model needs them (8 Bokeh models each, 48 on every page when it started at 6).
+N_INITIAL_COMPONENTS = 0
 
 
 def _positive(a: np.ndarray) -> np.ndarray:
