@@ -68,7 +68,8 @@ class WVFigures:
     Attributes
     ----------
     figure, residual : bokeh.plotting.figure
-        Main log-log plot and the residual strip below it (they share the x range).
+        Main log-log plot and the residual strip below it (they share the x range; the strip
+        is built on first use).
     emp, alt, total, resid : ColumnDataSource
         Empirical WV (robust one when robust is on), classical WV (robust mode only), model
         total on a fine grid, residual ratio.
@@ -204,7 +205,18 @@ class WVFigures:
         p.add_tools(self.emp_hover, self.model_hover)
         self.figure = p
         self.save_tool = p.select_one(SaveTool)
+        self._residual: Any = None
 
+    @property
+    def residual(self) -> Any:
+        """The residual strip, built on first use: a page opens with no model to compare the
+        WV with, so its first view has no strip (59 Bokeh models)."""
+        if self._residual is None:
+            self._residual = self._residual_figure()
+        return self._residual
+
+    def _residual_figure(self) -> Any:
+        p = self.figure
         r = log_figure(
             "residual_plot",
             "Residuals: empirical / model, with the 95% interval",
@@ -264,7 +276,7 @@ class WVFigures:
                 },
             )
         )
-        self.residual = r
+        return r
 
     # ------------------------------------------------------------------------------------
     @staticmethod

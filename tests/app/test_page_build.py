@@ -34,12 +34,13 @@ from gmwm_app.model_panel import N_POOL
 from gmwm_app.state import AppState
 from gmwm_app.wv_figures import N_COMPONENTS, N_INITIAL_COMPONENTS
 
-#: Bokeh models of a page's initial document: 283 measured (Panel 1.9.4, Bokeh 3.9.2, the
+#: Bokeh models of a page's initial document: 243 measured (Panel 1.9.4, Bokeh 3.9.2, the
 #: Fit tab and the sidebar; the other tabs are placeholders until shown). It was 434 before
 #: the Fit tab's glyphs lost their unused selected/muted copies and the component pool
-#: started at 6 renderers instead of 12, and 355 before the component curves and process
-#: rows were built only when a model needs them (the page opens with an empty model).
-MAX_PAGE_MODELS = 290
+#: started at 6 renderers instead of 12, and 355 before the component curves, the process
+#: rows and the residual strip were built only when a model needs them (the page opens with
+#: an empty model).
+MAX_PAGE_MODELS = 250
 
 
 @pytest.fixture
@@ -89,9 +90,12 @@ def test_page_built_with_one_walk_and_bounded(app_demo: Path, counted: dict) -> 
 
 def test_first_view_builds_no_model_curve_or_process_row(app_demo: Path, counted: dict) -> None:
     # the page opens with the demo and an empty model: its first view draws no component
-    # curve and lists no process, so none of their Bokeh models is built; the first add
-    # builds one curve and one row, a remove hides them, the next add shows them again
+    # curve, no residual strip and lists no process, so none of their Bokeh models is built;
+    # the first add builds one curve, one row and the strip, a remove hides them, the next
+    # add shows them again
     doc, app = _build_page()
+    assert doc.get_model_by_name("wv_plot") is not None
+    assert doc.get_model_by_name("residual_plot") is None and not app.resid_box.visible
     v, panel = app.views, app.model_panel
     assert len(app.state.model) == 0 and app.state.wv is not None
     assert v.comps == v.comp_renderers == v.comp_items == []
@@ -106,10 +110,12 @@ def test_first_view_builds_no_model_curve_or_process_row(app_demo: Path, counted
     assert app.state.add_process("WN"), app.state.error
     assert len(v.comp_renderers) == 1 and v.comp_renderers[0].visible
     assert len(panel.process_list.objects) == 2 and panel.process_list.objects[1].visible
+    assert doc.get_model_by_name("residual_plot") is v.residual and app.resid_box.visible
     n1 = len(list(doc.models))
     assert n1 > n0
     assert app.state.remove_process(0)
     assert not v.comp_renderers[0].visible and not panel.process_list.objects[1].visible
+    assert not app.resid_box.visible
     assert app.state.add_process("RW")  # the kept curve and row, no new model
     assert len(v.comp_renderers) == 1 and len(list(doc.models)) == n1
 
