@@ -117,19 +117,8 @@ class ModelPanel(pn.viewable.Viewer):
         self._phi_format = CustomJSTickFormatter(
             code="return (1 - Math.pow(10, tick)).toPrecision(6)"
         )
-        self.reset_button = pn.widgets.Button(
-            label="Back to the fit", color="light", width=130, margin=(3, 3)
-        )
-        self.reset_button.on_click(lambda _e: self._reset_whatif())
-        self.fit_button = pn.widgets.Button(
-            label="Fit from here",
-            color="primary",
-            width=130,
-            margin=(3, 3),
-            description="Refit using the slider values as a starting point",
-        )
-        self.fit_button.on_click(lambda _e: self._fit_from_whatif())
-        self.whatif_buttons = pn.Row(self.reset_button, self.fit_button, visible=False)
+        # "Back to the fit" and "Fit from here": built the first time what-if is on
+        self.whatif_buttons = pn.Row(visible=False)
 
     def sidebar(self) -> list[Any]:
         """The sidebar's "Model" and "What if" sections."""
@@ -237,6 +226,8 @@ class ModelPanel(pn.viewable.Viewer):
         """What-if sliders from the parameter specs, from a pool of slider widgets."""
         s = self.state
         on = bool(s.whatif and len(s.model))
+        if on and not self.whatif_buttons.objects:
+            self.whatif_buttons.extend(self._whatif_buttons())
         self.sliders.visible = on
         self.whatif_buttons.visible = on
         if not on:
@@ -283,6 +274,19 @@ class ModelPanel(pn.viewable.Viewer):
                 )
             elif w.visible:
                 w.visible = False
+
+    def _whatif_buttons(self) -> list[pn.widgets.Button]:
+        reset = pn.widgets.Button(label="Back to the fit", color="light", width=130, margin=(3, 3))
+        reset.on_click(lambda _e: self._reset_whatif())
+        fit = pn.widgets.Button(
+            label="Fit from here",
+            color="primary",
+            width=130,
+            margin=(3, 3),
+            description="Refit using the slider values as a starting point",
+        )
+        fit.on_click(lambda _e: self._fit_from_whatif())
+        return [reset, fit]
 
     def _add(self, code: str, _event: Any = None) -> None:
         self.state.add_process(code)

@@ -34,12 +34,12 @@ from gmwm_app.model_panel import N_POOL
 from gmwm_app.state import AppState
 from gmwm_app.wv_figures import N_COMPONENTS, N_INITIAL_COMPONENTS
 
-#: Bokeh models of a page's initial document: 243 measured (Panel 1.9.4, Bokeh 3.9.2, the
+#: Bokeh models of a page's initial document: 240 measured (Panel 1.9.4, Bokeh 3.9.2, the
 #: Fit tab and the sidebar; the other tabs are placeholders until shown). It was 434 before
 #: the Fit tab's glyphs lost their unused selected/muted copies and the component pool
 #: started at 6 renderers instead of 12, and 355 before the component curves, the process
-#: rows and the residual strip were built only when a model needs them (the page opens with
-#: an empty model).
+#: rows, the residual strip and the what-if buttons were built only when first shown (the
+#: page opens with an empty model and what-if off).
 MAX_PAGE_MODELS = 250
 
 
@@ -106,6 +106,7 @@ def test_first_view_builds_no_model_curve_or_process_row(app_demo: Path, counted
     ]
     assert curves == []
     assert panel.process_list.objects == [panel.empty_model_note]
+    assert panel.whatif_buttons.objects == []  # built the first time what-if is on
     n0 = len(list(doc.models))
     assert app.state.add_process("WN"), app.state.error
     assert len(v.comp_renderers) == 1 and v.comp_renderers[0].visible
@@ -118,6 +119,9 @@ def test_first_view_builds_no_model_curve_or_process_row(app_demo: Path, counted
     assert not app.resid_box.visible
     assert app.state.add_process("RW")  # the kept curve and row, no new model
     assert len(v.comp_renderers) == 1 and len(list(doc.models)) == n1
+    assert app.state.set_whatif(True)
+    labels = [b.label for b in panel.whatif_buttons.objects]
+    assert labels == ["Back to the fit", "Fit from here"] and panel.whatif_buttons.visible
 
 
 def test_process_rows_grow_past_the_initial_pool(app_demo: Path, counted: dict) -> None:
