@@ -161,7 +161,8 @@ def _least_total_tc(fits: Mapping[str, GMWMResult], o: ExportOptions, own: list[
 def ros_imu_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """``sensor_msgs/Imu`` covariance fields (YAML): diagonal per-sample WN variances in SI
     (``inflate**2`` applied), ``orientation_covariance[0] = -1``."""
-    nz = noise_for(fits, "sensor_msgs/Imu covariances", o, allow_partial=True, consumer="ros-imu")
+    # one sensor is enough: the record says so (Format.partial)
+    nz = noise_for(fits, "sensor_msgs/Imu covariances", o, consumer="ros-imu")
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines.append(
         f"# per-sample variance of the white noise at {nz.rate:g} Hz (the consumer's IMU rate), "
