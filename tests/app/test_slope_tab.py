@@ -330,15 +330,19 @@ def test_browser_scenario_fills_the_table(
             assert format_value(math.sqrt(1e-3 / 100.0)) in text  # the truth's N
             assert page.get_by_text("Why the slope method goes wrong").first.is_visible()
             assert t.errors == [], t.errors
-            # "Clear regions": the table and the session's result go, with no failure in the
-            # server's log (the button's callback redraws the figure's sources under the
-            # document lock; without it: "_pending_writes should be non-None")
+            # "Clear regions": the slope readings go and the page says what to do, with no
+            # failure in the server's log (the button's callback runs under the document lock)
             page.get_by_role("button", name="Clear regions").click()
-            t.wait_for(lambda: view.regions == {} and view.result is None, "no regions")
             t.wait_for(
-                lambda: format_value(n_avsm) not in t.table_text(".gmwm-slope-table"),
-                "the readings gone from the page",
+                lambda: (
+                    view.regions == {}
+                    and view.result is not None
+                    and not view.result.regions
+                    and "AVSM" not in view.result.estimates
+                ),
+                "the result without regions",
             )
+            page.get_by_text("drag over the points of the plot").first.wait_for(timeout=TIMEOUT_MS)
             assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
             assert t.errors == [], t.errors
         finally:
