@@ -292,12 +292,12 @@ class CheckView(TabView):
         # sources): with the session's document lock, which Panel does not hold while it runs a
         # widget's callback (a bad value's cleared figures raised "_pending_writes should be
         # non-None" instead of a message)
-        self.jobs.locked(partial(self._safely, self._set_texts, texts))
+        self._locked(self._set_texts, texts)
 
     def _on_upload(self, event: Any) -> None:
         if event.new:
             name = self.upload.filename or "datasheet.yaml"
-            self.jobs.locked(partial(self._safely, self.load_file, event.new, name))
+            self._locked(self.load_file, event.new, name)
 
     # ------------------------------------------------------------------------------------
     # state -> computation -> views

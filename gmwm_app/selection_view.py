@@ -265,7 +265,8 @@ class SelectionView(TabView):
         self.compare_a = pn.widgets.Select(label="Compare A", options=[], width=230)
         self.compare_b = pn.widgets.Select(label="with B", options=[], width=230)
         for w in (self.compare_a, self.compare_b):
-            w.param.watch(lambda _e: self._safely(self.refresh_compare), "value")
+            # the comparison redraws figure sources: under the document lock (TabView._locked)
+            w.param.watch(lambda _e: self._locked(self.refresh_compare), "value")
         self.fig_a = _DecompFigure("compare_a")
         self.fig_b = _DecompFigure(
             "compare_b", self.fig_a.figure.x_range, self.fig_a.figure.y_range

@@ -324,7 +324,8 @@ def export_fits(
     state : AppState
         The session (its units, file name and, for a ROS bag, its IMU topic).
     fits : mapping of channel to GMWMResult
-        The fits to export (the filter formats need a gyroscope and an accelerometer).
+        The fits to export (a filter format needs a gyroscope and an accelerometer unless
+        it writes a partial file: ``Format.needs_both_sensors``).
     fmt : str
         A name of :data:`engine.formats.FORMATS`.
     inflate : float
@@ -374,6 +375,19 @@ PROJECTIONS = {
     "Projected only": "plain",
     "The fit's own terms": "fit",
 }
+
+
+def sensors_note(f: Format) -> str:
+    """What the export menu says of the sensors a format's file needs, from its record: a
+    gyroscope and an accelerometer (:attr:`engine.formats.Format.needs_both_sensors`), or
+    nothing for a format that writes a partial file (one sensor; the app asks Kalibr for the
+    axes fitted) and for a report."""
+    if not f.needs_both_sensors:
+        return ""
+    return (
+        f" {f.name} needs a gyroscope and an accelerometer: show another channel and fit it "
+        "to add it."
+    )
 
 
 def fleet_note(f: Format) -> str:
@@ -614,8 +628,8 @@ class SessionPanel(pn.viewable.Viewer):
             opts, bad = {}, f"\n\n**Not exported:** {e}"
         self.format_download.disabled = not self._fits or bool(bad)
         self.fits_note.object = (
-            f"Channels fitted in this session: **{names}**. Filter formats need a gyroscope "
-            "and an accelerometer: show another channel and fit it to add it."
+            f"Channels fitted in this session: **{names}**."
+            + sensors_note(f)
             + fleet_note(f)
             + bad
             + "".join(f"\n\n**Warning:** {line}" for line in disagree)

@@ -157,7 +157,8 @@ class SlopeView(TabView):
         self.clear_button = pn.widgets.Button(
             label="Clear regions", color="light", width=130, margin=(22, 5, 5, 5)
         )
-        self.clear_button.on_click(lambda _e: self.clear_regions())
+        # clearing redraws the figure's sources: under the document lock (TabView._locked)
+        self.clear_button.on_click(lambda _e: self._locked(self.clear_regions))
         self.explain = hidden_alert("info", css_classes=["gmwm-scenario-why"])
         self.status = pn.pane.Markdown(
             "",

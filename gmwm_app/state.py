@@ -39,6 +39,7 @@ import param
 import engine as eg
 from engine.inference.temperature import find_temperature
 from engine.io import ImuLog
+from gmwm_app.boundary import EXPECTED
 from gmwm_app.data import (
     COMPENSATION,
     LoadedData,
@@ -322,15 +323,16 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
 
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool:
         """Run ``fn``; an error the action expects (bad input, an unreadable file: an engine
-        error or another ``ValueError``, ``KeyError``, ``OSError``, ``TypeError``,
-        ``IndexError``) becomes a message in :attr:`error` and False.
+        error, :class:`engine.errors.GmwmError`, or another ``ValueError`` or ``OSError``:
+        :data:`gmwm_app.boundary.EXPECTED`) becomes a message in :attr:`error` and False.
 
-        Anything else is a bug and is raised: the app's error boundary
-        (:mod:`gmwm_app.boundary`) logs it with its traceback and shows it in the session.
+        Anything else (a ``KeyError``, ``TypeError``, ``IndexError`` ...) is a bug and is
+        raised: the app's error boundary (:mod:`gmwm_app.boundary`) logs it with its traceback
+        and shows it in the session as unexpected.
         """
         try:
             return fn()
-        except (ValueError, KeyError, OSError, TypeError, IndexError) as e:
+        except EXPECTED as e:
             return self._fail(f"{action}: {message_of(e)}")
 
     # ---------------------------------------------------------------------------------
@@ -788,7 +790,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         def run() -> bool:
             procs = list(self.model.processes)
             if not 0 <= index < len(procs):
-                raise IndexError(
+                raise eg.ModelError(  # bad input: a message, not a bug's traceback
                     f"there is no process number {index + 1} (the model has {len(procs)})"
                 )
             del procs[index]

@@ -159,6 +159,13 @@ class TabView(pn.viewable.Viewer):
         """
         watcher(fn, f"{self.slug} tab: refresh failed", self._failed, *args)
 
+    def _locked(self, fn: Callable[..., Any], *args: Any) -> None:
+        """:meth:`_safely` with the session's document lock (:meth:`Jobs.locked`): for a
+        widget's callback that changes Bokeh models (figure sources, titles). Panel runs a
+        widget's callback without the lock, and Bokeh refuses such a change there ("_pending_
+        writes should be non-None", and the failure could not be shown either)."""
+        self.jobs.locked(partial(self._safely, fn, *args))
+
     def _log_job_error(self, err: BaseException) -> None:
         """Log the exception of a background job (a traceback unless a ValueError)."""
         if isinstance(err, ValueError):  # bad input: the message says it all

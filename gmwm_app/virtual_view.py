@@ -116,7 +116,9 @@ class VirtualView:
             label="each scale relative to the average's WV", value=True, margin=(30, 10, 5, 10)
         )
         for w in (self.target_input, self.relative):
-            w.param.watch(lambda _e: self._safely(self.refresh), "value")
+            # a bad target clears the figures' sources at once: under the document lock
+            # (Panel runs a widget's callback without it; TabView._locked)
+            w.param.watch(lambda _e: self.jobs.locked(partial(self._safely, self.refresh)), "value")
         self.alert = hidden_alert("danger")
         self.info = pn.pane.Markdown("", sizing_mode="stretch_width", margin=(0, 10))
         sci = ScientificFormatter(precision=4)

@@ -119,9 +119,12 @@ class WhatIfMixin(StateFields):
         def run() -> bool:
             if name not in self.model.param_names:
                 raise ValueError(f"the model has no parameter {name!r}")
-            v = float(value)
+            try:
+                v = float(value)  # a slider's number, a field's text, or None (cleared)
+            except (TypeError, ValueError):
+                v = math.nan
             if not math.isfinite(v):
-                raise ValueError(f"{name} must be a finite number, got {value}")
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
             self.whatif_model({name: v})  # validates the value (e.g. beta > 0)
             self._publish(whatif_values={**self.whatif_values, name: v}, error="")
             return True

@@ -168,7 +168,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex.add_argument(
         "--partial",
         action="store_true",
-        help="Kalibr: allow a file with only gyroscope or only accelerometer keys",
+        help=partial_help(),
     )
     ex.add_argument("--json", action="store_true", help="print one JSON object (what was written)")
     add_log_options(ex)
@@ -287,6 +287,30 @@ def run(args: argparse.Namespace) -> dict[str, Any] | str:
     )
 
 
+def sensors_words(f: Any) -> str:
+    """What ``gmwm export --help`` says of the sensors a format's file needs, from its record
+    (:attr:`engine.formats.Format.partial`, :attr:`~engine.formats.Format.needs_both_sensors`);
+    empty for a report."""
+    if f.needs_both_sensors:
+        return "; needs a gyroscope and an accelerometer"
+    if f.partial:
+        return "; one sensor is enough (a partial file)"
+    if f.is_filter:  # takes allow_partial
+        return "; one sensor with --partial"
+    return ""
+
+
+def partial_help() -> str:
+    """The help of ``--partial``: the formats that take it and those that write a partial file
+    without it, from the records."""
+    takes = [f.name for f in FORMATS.values() if f.is_filter and f.takes("allow_partial")]
+    always = [f.name for f in FORMATS.values() if f.is_filter and f.partial]
+    return (
+        f"{', '.join(takes)}: allow a file with only gyroscope or only accelerometer values "
+        f"({', '.join(always)} write one without it; the other filter formats need both)"
+    )
+
+
 def format_options_help() -> str:
     """The epilog of ``gmwm export --help``: the options each format reads, from the format
     records (:attr:`engine.formats.Format.options`), in the command's flags."""
@@ -311,6 +335,7 @@ def format_options_help() -> str:
         said += flags(own) if own else ("" if f.is_filter else "none")
         if f.needs_filter_rate:
             said += "; --filter-rate required"
+        said += sensors_words(f)
         if f.fleet_file:
             said += "; a fleet file with gmwm batch --export"
         lines += textwrap.wrap(

@@ -111,6 +111,12 @@ class Format:
     fleet_file : bool
         (Read from the consumer model.) One file can be written for a fleet of units
         (:data:`FLEET_CONSUMERS`).
+    partial : bool
+        The writer writes a partial file (one sensor) without being asked: the fits of a
+        gyroscope alone (or an accelerometer alone) give a file whose other sensor is left
+        out or marked not fitted (``matlab``, ``ros-imu``). False: a filter file needs a
+        gyroscope and an accelerometer, unless the format takes ``allow_partial`` and it is
+        given (``kalibr``; :attr:`needs_both_sensors`).
     bias : str
         The consumer's bias model in words (``"random walk"``, ``"Gauss-Markov, one T_c per
         file"`` ...); ``""`` for none.
@@ -134,6 +140,7 @@ class Format:
     consumer: str | None = None
     values: str | None = None
     needs_filter_rate: bool = False
+    partial: bool = False
     bias: str = ""
     options: tuple[str, ...] = ()
     noise: Callable[..., Any] | str | None = None
@@ -169,6 +176,12 @@ class Format:
         """The format can be written for a fleet (``export(..., fleet=...)``, ``gmwm batch
         --export``): a filter format whose consumer model is one of :data:`FLEET_CONSUMERS`."""
         return self.consumer in FLEET_CONSUMERS
+
+    @property
+    def needs_both_sensors(self) -> bool:
+        """A filter format that writes no file of one sensor, whatever the options: it neither
+        writes a partial file (:attr:`partial`) nor takes ``allow_partial``."""
+        return self.is_filter and not self.partial and not self.takes("allow_partial")
 
     @property
     def is_filter(self) -> bool:
@@ -291,6 +304,7 @@ for _fmt in (
         ".m",
         "WN+RW",
         "density",
+        partial=True,
         bias=_RW,
         options=FILTER_OPTIONS,
     ),
@@ -336,6 +350,7 @@ for _fmt in (
         ".yaml",
         "WN",
         "per-sample",
+        partial=True,
         options=FILTER_OPTIONS,
     ),
     Format(

@@ -68,8 +68,8 @@ def _kfgins(
         if k in nz.values
         for ax, v in nz.values[k]["T_c"].items()
     }
-    if not bounded:
-        return nz, own, None
+    if not bounded:  # the largest T_c, each channel's driving noise kept: what the file writes
+        return _at_one_tc(nz, max(own.values())), own, None
     tc = _least_total_tc(fits, o, sorted(set(own.values())))
     nz = noise_for(
         fits, "KF-GINS imunoise", o, allow_partial=allow_partial, consumer="kf-gins", tc=tc
@@ -77,12 +77,26 @@ def _kfgins(
     return nz, own, tc
 
 
+def _at_one_tc(nz: ImuNoise, tc: float) -> ImuNoise:
+    """The unbounded KF-GINS numbers at the file's one ``T_c`` (s), each channel's driving
+    noise ``2 sigma_b^2 / T_c`` kept: ``sigma_b`` x ``sqrt(tc / its own T_c)``, in the values
+    and in the projections (:meth:`~engine.formats.Projection.at_tc_keeping_q`: what the
+    preview shows is what the file writes)."""
+    why = f"the file's one T_c = {tc:.6g} s (the largest), driving noise kept"
+    values = {k: dict(q) for k, q in nz.values.items()}
+    for d in values.values():
+        d["sigma_gm"] = {ax: v * math.sqrt(tc / d["T_c"][ax]) for ax, v in d["sigma_gm"].items()}
+        d["T_c"] = dict.fromkeys(d["T_c"], tc)
+    projs = {ch: p.at_tc_keeping_q(tc, why) for ch, p in nz.projections.items()}
+    return dataclasses.replace(nz, values=values, projections=projs)
+
+
 def kfgins_noise(
     fits: Mapping[str, GMWMResult], o: ExportOptions, allow_partial: bool = False
 ) -> ImuNoise:
-    """The KF-GINS file's projections (its record's :attr:`~engine.formats.Format.noise`):
-    with the bound, every channel's at the file's one ``T_c``; without it, each channel's own
-    (the file then takes the largest ``T_c`` and keeps each driving noise)."""
+    """The KF-GINS file's numbers and projections (its record's
+    :attr:`~engine.formats.Format.noise`): every channel's at the file's one ``T_c``, with the
+    bound the least total inflation, without it the largest, each driving noise kept."""
     return _kfgins(fits, o, allow_partial)[0]
 
 
@@ -99,14 +113,8 @@ def kfgins_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
             f"one T_c = {tc:.6g} s for every bias (KF-GINS's one corrtime): the least total "
             "inflation over the channels; each gbstd/abstd bounds its channel at that T_c"
         )
-    else:
+    else:  # nz is at the largest T_c already (_at_one_tc)
         tc = max(own.values())
-        for k in (g, a):
-            d = nz.values[k]
-            d["sigma_gm"] = {
-                ax: v * math.sqrt(tc / d["T_c"][ax]) for ax, v in d["sigma_gm"].items()
-            }
-            d["T_c"] = dict.fromkeys(d["T_c"], tc)
         how = (
             f"one T_c = {tc:.6g} s (the largest; KF-GINS's one corrtime), each channel's "
             "driving noise 2 sigma^2 / T_c kept (gbstd/abstd x sqrt(T_c / its own T_c))"
@@ -161,7 +169,8 @@ def _least_total_tc(fits: Mapping[str, GMWMResult], o: ExportOptions, own: list[
 def ros_imu_yaml(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """``sensor_msgs/Imu`` covariance fields (YAML): diagonal per-sample WN variances in SI
     (``inflate**2`` applied), ``orientation_covariance[0] = -1``."""
-    nz = noise_for(fits, "sensor_msgs/Imu covariances", o, allow_partial=True, consumer="ros-imu")
+    # one sensor is enough: the record says so (Format.partial)
+    nz = noise_for(fits, "sensor_msgs/Imu covariances", o, consumer="ros-imu")
     lines = [f"# {c}" for c in nz.header] + [f"# warning: {w}" for w in nz.warnings]
     lines.append(
         f"# per-sample variance of the white noise at {nz.rate:g} Hz (the consumer's IMU rate), "

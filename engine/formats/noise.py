@@ -266,18 +266,19 @@ def _both_sensors(
     kinds: Collection[str], fits: Mapping[str, GMWMResult], allow_partial: bool, consumer: str
 ) -> None:
     """Refuse a file of one sensor (``kinds``: the sensors the fits give) unless
-    ``allow_partial``; the message offers ``allow_partial`` only where it applies: not for a
-    format whose record does not take it (:meth:`~engine.formats.Format.takes`; ``consumer``
-    a format or a consumer model name).
+    ``allow_partial`` or the format's record says its writer writes a partial file
+    (:attr:`~engine.formats.Format.partial`); the message offers ``allow_partial`` only where
+    it applies: not for a format whose record does not take it
+    (:meth:`~engine.formats.Format.takes`; ``consumer`` a format or a consumer model name).
 
     Raises
     ------
     ExportError
         Fewer than the two sensors (gyroscope and accelerometer) without ``allow_partial``.
     """
-    if len(kinds) >= 2 or allow_partial:
-        return
     f = FORMATS.get(consumer.strip().lower())
+    if len(kinds) >= 2 or allow_partial or (f is not None and f.partial):
+        return
     hint = (
         ", or allow a partial file (allow_partial=True)"
         if f is None or f.takes("allow_partial")

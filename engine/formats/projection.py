@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import weakref
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any
 
@@ -294,6 +294,39 @@ class Projection:
             "max": float(r[j]),
             "max_tau_s": float(self.tau_s[ok][j]),
         }
+
+    def at_tc_keeping_q(self, tc: float, why: str) -> Projection:
+        """This Gauss-Markov (``WN+GM``) projection at the correlation time ``tc`` (s) with its
+        driving noise ``q = 2 sigma_b^2 / T_c`` kept: ``sigma_b`` times ``sqrt(tc / T_c)``,
+        the consumer's WV recomputed (the rest unchanged). What a file with one ``T_c`` for
+        every channel writes unbounded (KF-GINS's largest ``T_c``): ``why`` says so in the
+        two parameters' ``binds``; their intervals are not computed (nan: the file's ``T_c``
+        is another channel's).
+
+        Raises
+        ------
+        ExportError
+            Not a ``WN+GM`` projection, or ``tc`` not a positive time.
+        """
+        if "T_c" not in self.params:
+            raise ExportError(f"{self.channel}: a {self.consumer} projection has no T_c")
+        if not (math.isfinite(tc) and tc > 0):
+            raise ExportError(f"tc must be a positive correlation time in s, got {tc!r}")
+        own, sb = self.params["T_c"], self.params["sigma_b"]
+        value = sb.value * math.sqrt(tc / own.value)
+        nan = math.nan
+        params = dict(self.params)
+        params["T_c"] = replace(
+            own, value=tc, factor=tc / own.plain if own.plain > 0 else nan, binds=why,
+            binding_tau_s=nan, low=nan, high=nan,
+        )  # fmt: skip
+        params["sigma_b"] = replace(
+            sb, value=value, factor=value / sb.plain if sb.plain > 0 else nan, binds=why,
+            binding_tau_s=nan, low=nan, high=nan,
+        )  # fmt: skip
+        x = np.array([self.value("N") ** 2 * self.fs, value**2])  # per-sample variances
+        cwv = columns(self.consumer, self.tau_s * self.fs, self.fs, tc) @ x
+        return replace(self, params=params, consumer_wv=cwv)
 
     def header_lines(self) -> list[str]:
         """Comment lines: what was projected, bounded, and each value with its interval."""

@@ -51,7 +51,8 @@ def matlab_m(fits: Mapping[str, GMWMResult], o: ExportOptions) -> str:
     """A runnable MATLAB script: ``gyroparams``/``accelparams`` with per-axis (x, y, z)
     ``NoiseDensity`` = N, ``RandomWalk`` = K, ``BiasInstability`` = B (SI), and an
     ``imuSensor`` at the log's rate (an axis not fitted gets the max over fitted ones)."""
-    nz = noise_for(fits, "MATLAB gyroparams/accelparams", o, allow_partial=True, consumer="matlab")
+    # one sensor is enough: the record says so (Format.partial)
+    nz = noise_for(fits, "MATLAB gyroparams/accelparams", o, consumer="matlab")
     lines = [f"% {c}" for c in nz.header] + [f"% warning: {w}" for w in nz.warnings]
     lines.append(f"fs = {nz.rate!r};  % Hz, the IMU rate (the log's unless --filter-rate)")
     ctor = {

@@ -143,6 +143,37 @@ def test_an_unexpected_failure_of_an_action_reaches_the_boundary(
     assert a.state.set_model("WN+RW") and a.state.error == ""
 
 
+@pytest.mark.parametrize("bug", [KeyError("gyro_q"), TypeError("bad operand"), IndexError("3")])
+def test_a_key_type_or_index_error_of_an_action_is_a_bug_not_a_bad_input(
+    app_demo: Any,
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+    bug: Exception,
+) -> None:
+    # an action's guard takes what a user causes (an engine error, ValueError, OSError) and
+    # lets the rest reach the boundary: logged with its traceback, shown as unexpected
+    a, doc = _session(app_demo)
+
+    def broken(*_a: Any, **_kw: Any) -> None:
+        raise bug
+
+    monkeypatch.setattr(AppState, "_fit_or_none", broken)
+    with pytest.raises(type(bug)):
+        a.state.set_model("WN+RW")
+    with caplog.at_level(logging.ERROR):
+        _as_panel_runs_it(doc, lambda: a.state.set_model("WN+RW"))
+    name = type(bug).__name__
+    assert a.state.error.startswith(f"Could not update the page: unexpected {name}: ")
+    assert any(r.exc_info for r in caplog.records if name in r.getMessage())
+    # bad input still is a message of the action, with no traceback
+    monkeypatch.undo()
+    assert a.state.set_model("WN+RW") and a.state.error == ""
+    assert not a.state.set_model("XX+WN") and a.state.error.startswith("Could not set the model")
+    assert not a.state.remove_process(7) and "no process number 8" in a.state.error
+    assert not a.state.set_whatif_value("WN.sigma2", None)  # type: ignore[arg-type]
+    assert "must be a finite number, got None" in a.state.error
+
+
 def test_a_failed_job_without_its_own_fail_is_shown_in_its_session_only(
     caplog: pytest.LogCaptureFixture,
 ) -> None:

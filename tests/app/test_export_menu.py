@@ -37,3 +37,17 @@ def test_the_menu_says_what_the_record_says_of_a_fleet_file(app: Any) -> None:
             assert f"--export {name} -o DIR" in note, name
         else:
             assert f"No fleet file for {name}" in note and "correlation time per unit" in note
+
+
+def test_the_two_sensor_note_is_shown_only_for_formats_that_need_both(app: Any) -> None:
+    # kalibr (the app asks for the axes fitted), matlab and ros-imu write a one-sensor file
+    s, sp = app.state, app.session_panel
+    assert s.set_model("WN+RW"), s.error
+    for name, f in FORMATS.items():
+        sp.format_select.value = name
+        said = "needs a gyroscope and an accelerometer" in sp.fits_note.object
+        assert said == f.needs_both_sensors, name
+        if name in ("kalibr", "matlab", "ros-imu"):  # and the file of the gyroscope is written
+            assert not said, name
+            text = sp.format_download.callback().getvalue()
+            assert "could not export" not in text and "gyro" in text.lower(), (name, s.error)

@@ -145,8 +145,9 @@ def test_projection_choice_reaches_the_preview_and_the_file(app_demo: Path) -> N
 def test_preview_and_written_file_agree_for_every_format(app_demo: Path, projection, monkeypatch):
     """The preview is the engine's ``projections``, computed as the file's numbers are: for
     every filter format, each channel's projection is the one the writer last computed for it
-    (KF-GINS: at the file's one T_c; sensor_msgs/Imu: without the tail factors the others
-    apply), with the loaded log's tail factors."""
+    (KF-GINS: at the file's one T_c, unbounded the largest with each driving noise kept;
+    sensor_msgs/Imu: without the tail factors the others apply), with the loaded log's tail
+    factors."""
     import engine as eg
     from engine.formats import FORMATS
     from engine.formats import noise as noise_mod
@@ -174,10 +175,20 @@ def test_preview_and_written_file_agree_for_every_format(app_demo: Path, project
         kw |= {"log": log, "tails": True, "projection": projection, "units": dict(log.units)}
         pv = preview_projections(fits, name, **kw)
         seen.clear()
-        eg.export(None, fits, name, **kw)  # the file
+        text = eg.export(None, fits, name, **kw)  # the file
         assert set(pv) == set(seen) == set(fits), name
         for ch, p in pv.items():
             w = seen[ch]
+            if name == "kf-gins" and projection == "plain":
+                # the file rescales each channel's own projection (the spy's) to its one T_c,
+                # the largest, keeping the driving noise: the preview shows the file's T_c
+                tc = yaml.safe_load(text)["imunoise"]["corrtime"] * 3600.0
+                own = max(seen[c].value("T_c") for c in seen)
+                assert p.value("T_c") == pytest.approx(tc, rel=1e-12) == own
+                r = math.sqrt(tc / w.value("T_c"))
+                assert p.value("sigma_b") == pytest.approx(w.value("sigma_b") * r, rel=1e-12)
+                assert p.value("N") == w.value("N")
+                continue
             assert p.consumer == w.consumer and p.band == w.band, (name, ch)
             np.testing.assert_array_equal(p.consumer_wv, w.consumer_wv)
             for q, wq in zip(p.params.values(), w.params.values(), strict=True):

@@ -7,6 +7,7 @@ skip, except in CI (env ``CI`` set), where they fail: CI must install chromium.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -237,7 +238,9 @@ def test_exports(server: str, new_tab: Callable[[], Tab]) -> None:
 
 
 @pytest.mark.browser_tour
-def test_model_selection_tab_ranks_and_loads_a_row(server: str, new_tab: Callable[[], Tab]) -> None:
+def test_model_selection_tab_ranks_and_loads_a_row(
+    server: str, new_tab: Callable[[], Tab], caplog: pytest.LogCaptureFixture
+) -> None:
     t = new_tab().open(server + "?channel=gyro_y&model=WN")
     page = t.page
     t.wait_for(lambda: "sigma2" in t.table_text(), "the WN fit")
@@ -259,6 +262,16 @@ def test_model_selection_tab_ranks_and_loads_a_row(server: str, new_tab: Callabl
     t.wait_for(lambda: t.table_text(".gmwm-ranking").count("+") >= 4, "the ranked rows")
     models = list(app.selection.source.data["model"])
     assert len(models) == 7 and all(m in t.table_text(".gmwm-ranking") for m in models)
+    # "with B": another candidate changed in the page is compared, its parameters in the
+    # page's table, and nothing fails in the server's log (the picker's callback redraws the
+    # figures' sources under the document lock; without it: "_pending_writes should be
+    # non-None", logged by the error boundary)
+    view = app.selection
+    other = next(m for m in models if m not in (view.compare_a.value, view.compare_b.value))
+    page.get_by_label("with B").select_option(label=other)
+    t.wait_for(lambda: view.compare_b.value == other, "the pick in the session")
+    t.wait_for(lambda: f"B: {other}" in t.table_text(".gmwm-compare"), "B's rows in the page")
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
     # click the third row (the table is unsorted: data order = rank order)
     page.locator(".gmwm-ranking .slick-row").nth(2).locator(".slick-cell").nth(1).click()
     t.wait_for(lambda: app.state.model.spec() == models[2], "the row's model in the builder")

@@ -10,6 +10,7 @@ method is off the way the scenario says.
 from __future__ import annotations
 
 import json
+import logging
 import math
 from pathlib import Path
 from typing import Any
@@ -290,7 +291,9 @@ def test_pure_helpers_curves_and_table_rows() -> None:
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.browser
 @pytest.mark.browser_tour
-def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
+def test_browser_scenario_fills_the_table(
+    app_demo_file: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app
     from test_in_browser import TIMEOUT_MS, Tab, _app_for
@@ -326,6 +329,21 @@ def test_browser_scenario_fills_the_table(app_demo_file: Path) -> None:
             text = t.table_text(".gmwm-slope-table")
             assert format_value(math.sqrt(1e-3 / 100.0)) in text  # the truth's N
             assert page.get_by_text("Why the slope method goes wrong").first.is_visible()
+            assert t.errors == [], t.errors
+            # "Clear regions": the slope readings go and the page says what to do, with no
+            # failure in the server's log (the button's callback runs under the document lock)
+            page.get_by_role("button", name="Clear regions").click()
+            t.wait_for(
+                lambda: (
+                    view.regions == {}
+                    and view.result is not None
+                    and not view.result.regions
+                    and "AVSM" not in view.result.estimates
+                ),
+                "the result without regions",
+            )
+            page.get_by_text("drag over the points of the plot").first.wait_for(timeout=TIMEOUT_MS)
+            assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
             assert t.errors == [], t.errors
         finally:
             b.close()

@@ -10,6 +10,7 @@ test reads the served view: the weights shown, a new criterion, a bad one, the d
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 from pathlib import Path
@@ -178,7 +179,9 @@ def numbers(text: str) -> list[float]:
 
 @pytest.mark.browser
 @pytest.mark.browser_tour
-def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Path) -> None:
+def test_browser_view_shows_the_weights_recomputes_and_exports(
+    app_demo_file: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     from _browser import launch, require_chromium
     from conftest import served_app
     from test_in_browser import TIMEOUT_MS, Tab
@@ -272,6 +275,10 @@ def test_browser_view_shows_the_weights_recomputes_and_exports(app_demo_file: Pa
             wait_for(lambda: not table(), "the table to empty")
             assert v.virtual.sensor is None and "'abc'" in v.virtual.error
             assert page.get_by_text("Traceback").count() == 0
+            # and no failure in the server's log: the field's callback clears the figures'
+            # sources under the document lock (without it: "_pending_writes should be
+            # non-None", logged by the error boundary)
+            assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text
             # a band: the message goes, the band's weights are shown
             criterion("1:10")
             band = eg.virtual_sensor(fit, relative=True, confidence=False, band=(1.0, 10.0))

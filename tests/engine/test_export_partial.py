@@ -2,10 +2,14 @@
 
 Most filter formats need a gyroscope and an accelerometer and refuse the fits of one sensor;
 the message offers ``allow_partial`` (``--partial``) only for a format whose record takes it
-(:meth:`engine.formats.Format.takes`): to the others the option does nothing.
+(:meth:`engine.formats.Format.takes`): to the others the option does nothing. A format whose
+record says it writes a partial file (:attr:`engine.formats.Format.partial`: matlab, ros-imu)
+writes the sensor fitted without being asked, and its writer reads that from the record.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
@@ -53,3 +57,30 @@ def test_the_partial_hint_is_given_only_where_the_format_takes_it(gyro_only, pro
     assert {"kalibr", "openvins", "px4", "gazebo"} <= set(refused), projection
     # and where it is offered, taking it writes the file
     assert eg.export(None, gyro_only, "kalibr", ci=None, allow_partial=True, projection=projection)
+
+
+def _written(fits: dict, fmt: str) -> bool:
+    kw = {"filter_rate": FS} if FORMATS[fmt].needs_filter_rate else {}
+    try:
+        eg.export(None, fits, fmt, ci=None, **kw)
+    except ExportError as e:
+        assert "gyroscope and accelerometer" in str(e) or "needs T_c" in str(e), (fmt, e)
+        return False
+    return True
+
+
+def test_a_one_sensor_file_is_written_exactly_by_the_formats_whose_record_says_partial(
+    gyro_only,
+) -> None:
+    written = {fmt for fmt in FILTERS if _written(gyro_only, fmt)}
+    assert written == {n for n, f in FORMATS.items() if f.partial} == {"matlab", "ros-imu"}
+    assert not any(FORMATS[n].needs_both_sensors for n in written)
+
+
+@pytest.mark.parametrize("fmt", ["matlab", "ros-imu"])
+def test_the_writer_reads_partial_from_the_record(gyro_only, monkeypatch, fmt) -> None:
+    # the record is the owner: declared not partial, the same writer refuses one sensor
+    monkeypatch.setitem(FORMATS, fmt, dataclasses.replace(FORMATS[fmt], partial=False))
+    with pytest.raises(ExportError, match="needs gyroscope and accelerometer noise"):
+        eg.export(None, gyro_only, fmt, ci=None)
+    assert FORMATS[fmt].needs_both_sensors

@@ -23,6 +23,7 @@ import engine as eg
 from engine.cli import main
 from engine.formats import FORMATS, export
 from engine.formats.readers import read_check_file, read_filter_noise
+from engine.units import si_factor
 
 MODELS = ("WN+RW", "2*GM+WN+RW")
 FILTERS = [k for k, f in FORMATS.items() if f.is_filter]
@@ -181,3 +182,28 @@ def test_kf_gins_one_bias_model_bounds_every_channel(real_data, tmp_path) -> Non
         fw = spec.model(log.fs, log.units[ch]).wv(tau[band], log.fs)
         target = np.maximum(r.model.wv(tau[band], log.fs), np.asarray(r.wv.ci_low)[band])
         assert np.all(fw >= target * (1 - 1e-6)), (ch, (fw / target).min())
+
+
+@pytest.mark.real_data
+def test_kf_gins_unbounded_projections_are_what_the_file_writes(adis, tmp_path) -> None:
+    """Without the bound KF-GINS's file takes the largest T_c and keeps each channel's driving
+    noise; the projections (what the app's preview shows, ``engine.formats.projections``)
+    carry the same T_c, sigma_b and consumer WV as the file read back. Before: each channel's
+    own T_c and sigma_b (gyro_x's and accel_x's T_c differ on ADIS imu1)."""
+    log, all_fits = adis
+    fits = all_fits["2*GM+WN+RW"]
+    projs = eg.formats.projections(fits, "kf-gins", projection="plain", ci=None, log=log)
+    path, text = _write(tmp_path, fits, "kf-gins", projection="plain", log=log)
+    tc = yaml.safe_load(text)["imunoise"]["corrtime"] * 3600.0
+    own = []
+    for ch, p in projs.items():
+        kind = "gyroscope" if ch.startswith("gyro") else "accelerometer"
+        spec = read_check_file(path, channel=ch, kind=kind, fs=log.fs)
+        ((tc_file, _sigma_b),) = spec.gm
+        assert p.value("T_c") == pytest.approx(tc, rel=1e-9) == tc_file
+        own.append(p.params["T_c"].plain)
+        # the file's WV (its N and its Gauss-Markov bias, read back) is the preview's
+        fw = spec.model(log.fs, log.units[ch]).wv(p.tau_s * log.fs, log.fs)
+        si = si_factor(log.units[ch])[1]
+        np.testing.assert_allclose(p.consumer_wv, fw * si**2, rtol=1e-6)
+    assert tc == pytest.approx(max(own), rel=1e-9) and min(own) < 0.9 * max(own)

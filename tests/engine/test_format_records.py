@@ -134,5 +134,22 @@ def test_export_help_lists_the_options_each_record_names():
         ), (f.name, said)
         assert ("--filter-rate required" in said) == f.needs_filter_rate, f.name
         assert ("a fleet file with gmwm batch --export" in said) == f.fleet_file, f.name
+        # the sensors a file needs: the record's partial / needs_both_sensors
+        assert ("needs a gyroscope and an accelerometer" in said) == f.needs_both_sensors
+        assert ("one sensor is enough (a partial file)" in said) == f.partial, f.name
     assert "px4: the filter options and --vehicle-id; --filter-rate required" in text
     assert "csv: none" in text
+
+
+def test_the_partial_help_names_the_formats_from_their_records():
+    sub = next(a for a in build_parser(["export"])._actions if a.dest == "command")
+    assert isinstance(sub.choices, dict)
+    partial = next(a for a in sub.choices["export"]._actions if a.dest == "partial")
+    # kalibr takes --partial; matlab and ros-imu write a one-sensor file without it
+    assert [k for k, f in FORMATS.items() if f.partial] == ["matlab", "ros-imu"]
+    assert partial.help == (
+        "kalibr: allow a file with only gyroscope or only accelerometer values "
+        "(matlab, ros-imu write one without it; the other filter formats need both)"
+    )
+    both = {k for k, f in FORMATS.items() if f.needs_both_sensors}
+    assert both == {k for k, f in FORMATS.items() if f.is_filter} - {"kalibr", "matlab", "ros-imu"}
