@@ -14,6 +14,7 @@ from param.parameterized import batch_call_watchers
 from gmwm_app.data import (
     COMPENSATION,
     PreparedQuery,
+    channel_names,
     check_fs,
     compensation_mode,
     message_of,
@@ -188,6 +189,8 @@ class QueryMixin(StateFields):
         """
         if prepared is None:
             prepared = self.prepare_query(query, default_source, default_path)
+        if prepared.loaded is not None:  # the new channels offered now, not in the batch
+            self.offer_channels(channel_names(prepared.loaded.log))
         # the data, then the model: one call of each watcher, with the final values (a page's
         # first draw redraws each of its parts once, not once per step)
         with batch_call_watchers(self):

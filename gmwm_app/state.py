@@ -350,9 +350,8 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         names = changes.get("channels")
         choice = self.param.channel
         with self.batch():
-            if names is not None:  # the old and the new channels while the value changes: a
-                # widget of the choice never falls back on a first option in between
-                choice.objects = list(dict.fromkeys([*names, *choice.objects]))
+            if names is not None:
+                self.offer_channels(names)
             was, self._publishing = self._publishing, True
             try:
                 self.param.update(**changes)
@@ -364,6 +363,16 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
                     self._shown = {n: getattr(self, n) for n in DATA_CHOICES}
             if again:
                 self.param.trigger("error")
+
+    def offer_channels(self, names: Sequence[str]) -> None:
+        """Add ``names`` to the choices of :attr:`channel` (the old ones stay until the
+        channels change): while the value changes, old and new are valid, so a widget of the
+        choice never falls back on a first option in between. Called before the watchers of
+        the change run (:meth:`from_query` batches them: then before its batch)."""
+        choice = self.param.channel
+        union = list(dict.fromkeys([*names, *choice.objects]))
+        if union != list(choice.objects):
+            choice.objects = union
 
     def report_error(self, message: str) -> bool:
         """Show ``message`` as the error of the page (state otherwise unchanged) and log it;

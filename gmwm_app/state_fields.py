@@ -10,7 +10,7 @@ compatible type.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
 import engine as eg
@@ -65,6 +65,7 @@ class StateFields(Protocol):
         compensate: str | bool | None = None,
     ) -> bool: ...
     def set_model(self, model: eg.Model | str) -> bool: ...
+    def offer_channels(self, names: Sequence[str]) -> None: ...
     def display_objective(self) -> float | None: ...
     def warnings(self) -> list[str]: ...
 

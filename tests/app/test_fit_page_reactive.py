@@ -218,6 +218,21 @@ def test_the_data_widgets_are_built_from_the_states_parameters(app: Any) -> None
     assert app.channel_select.value == "q"
 
 
+def test_a_rendered_channel_widget_keeps_the_links_channel(app: Any) -> None:
+    """With its Bokeh model (a served page), a Select whose value is not among its options
+    falls back on the first one; the link's data are installed with their watchers batched
+    (from_query): the new channels must be offered before, or the session ends on the first."""
+    s = app.state
+    root = app.channel_select.get_root(Document())
+    other = s.read("upload", data=_csv(("p", "q", "r")), filename="pqr.csv")
+    assert s.install(other, channel="r"), s.error
+    assert (s.channel, app.channel_select.value, root.value) == ("r", "r", "r")
+    assert s.from_query({"channel": "gyro_y", "model": "WN"}), s.error
+    assert (s.channel, app.channel_select.value, root.value) == ("gyro_y",) * 3
+    assert s.wv is not None and s.result is not None and s.result.wv is s.wv
+    assert [v for v, _ in root.options] == list(s.channels) == list(s.param.channel.objects)
+
+
 def test_channel_widget_and_state_follow_each_other_with_one_wv_job(
     app: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
