@@ -173,7 +173,7 @@ _DATA_INFO = (
 #: ... the fit summary line.
 _SUMMARY = ("wv", "model", "result", "whatif", "whatif_values")  # (weights: by the refit)
 #: ... the file names of the downloads (:meth:`AppState.export_filename`).
-_FILENAMES = ("filename", "channel", "model")
+_FILENAMES = ("filename", "wv", "model")  # (the channel shown: that of the WV)
 #: ... the URL's data and model (:meth:`AppState.to_query`; the plain parameters,
 #: :attr:`AppState.URL_SYNCED`, are Panel's: :meth:`GMWMApp.link_url`).
 _QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "model")

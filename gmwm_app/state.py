@@ -287,7 +287,6 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         self.wv_job: WVJob | None = None
         self._reverting = False  # a refused choice (compensation, weights) is being put back
         self._publishing = False  # the state's own update is being made
-        #: The data choices shown (those of the WV): a choice that differs is a request.
         self._shown: dict[str, Any] = {n: getattr(self, n) for n in DATA_CHOICES}
         self.param.watch(self._compensate_changed, "compensate")
         self.param.watch(self._weights_changed, "weights")
@@ -353,16 +352,27 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             if names is not None:
                 self.offer_channels(names)
             was, self._publishing = self._publishing, True
+            before = self._shown
+            if not changes.keys().isdisjoint(("wv", *DATA_CHOICES)):  # (read by the watchers)
+                self._shown = {n: changes.get(n, getattr(self, n)) for n in DATA_CHOICES}
             try:
                 self.param.update(**changes)
+            except BaseException:
+                self._shown = before
+                raise
             finally:
                 self._publishing = was
                 if names is not None:
                     choice.objects = list(names) or [""]
-                if not changes.keys().isdisjoint(("wv", *DATA_CHOICES)):
-                    self._shown = {n: getattr(self, n) for n in DATA_CHOICES}
             if again:
                 self.param.trigger("error")
+
+    @property
+    def shown(self) -> dict[str, Any]:
+        """The data choices (:data:`DATA_CHOICES`) of the WV shown: equal to the parameters
+        except while a choice set alone has its WV computed (a choice that differs from them
+        is a request, :meth:`_data_changed`)."""
+        return dict(self._shown)
 
     def offer_channels(self, names: Sequence[str]) -> None:
         """Add ``names`` to the choices of :attr:`channel` (the old ones stay until the

@@ -46,6 +46,9 @@ class StateFields(Protocol):
     error: str
     precompute: Callable[..., None]
 
+    @property
+    def shown(self) -> dict[str, Any]: ...
+
     # methods of AppState
     def _publish(self, **changes: Any) -> None: ...
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool: ...

@@ -7,6 +7,7 @@ Counts, not timings: a part's redraws are counted by wrapping the object it call
 
 from __future__ import annotations
 
+import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -259,6 +260,29 @@ def test_channel_widget_and_state_follow_each_other_with_one_wv_job(
     # the action itself: no job, the widget follows
     assert s.select_channel("gyro_x"), s.error
     assert app.channel_select.value == "gyro_x" and (len(jobs), len(plot)) == (3, 4)
+
+
+def test_exports_describe_the_data_shown_while_a_channels_wv_is_computed(app: Any) -> None:
+    """On a served page the WV job ends later: meanwhile the channel chosen is not yet the
+    data's, and the exports (JSON, file names) describe the WV and fit shown."""
+    s = app.state
+    assert s.set_model("WN+RW"), s.error
+    pending: list[Any] = []
+    s.wv_job = lambda message, work, apply, fail: pending.append((message, work, apply))
+    wv, res = s.wv, s.result
+    app.channel_select.value = "accel_x"  # the job starts, and waits
+    assert s.channel == "accel_x" and s.wv is wv and s.result is res
+    assert [m for m, _, _ in pending] == ["Computing the wavelet variance of accel_x"]
+    data = json.loads(app._export_json().getvalue())["data"]
+    assert data["channel"] == "gyro_x" == s.shown["channel"] and data["unit"] == "deg/s"
+    assert "_gyro_x_" in app.download.filename and "_gyro_x_" in s.export_filename()
+    _, work, apply = pending[0]
+    work(lambda j, n: None)  # the worker, then the loop's continuation
+    apply(None)
+    assert s.wv is not wv and s.result.wv is s.wv and s.shown["channel"] == "accel_x"
+    data = json.loads(app._export_json().getvalue())["data"]
+    assert data["channel"] == "accel_x" and data["unit"] == "m/s^2"
+    assert "_accel_x_" in app.download.filename
 
 
 def test_robust_widget_and_state_follow_each_other_with_one_wv_job(
