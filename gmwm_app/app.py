@@ -19,10 +19,10 @@ State and page: :class:`GMWMApp` is a :class:`panel.viewable.Viewer` around the 
 it draws (``param.depends(..., watch=True)`` for the in-place Bokeh updates, parameter
 references and ``param.depends`` methods as the text panes' objects), so an action redraws
 what it changed, each part once. The widgets of the state's plain parameters (weights,
-what-if, intervals, temperature compensation) are built from them (``Widget.from_param``:
-Panel links the two both ways, and the state reacts to a change itself); the data widgets
-(channel, fs, robust) start a job or a checked action, and drive the state only when their
-value differs from the state's, so the state's own updates of them are no-ops.
+what-if, intervals, temperature compensation, and the data's channel, fs and robust WV) are
+built from them (``Widget.from_param``: Panel links the two both ways, and the state reacts to
+a change itself: a refit, or a WV computed as a job, :meth:`AppState._data_changed`). The parts
+drawn from the data follow the WV, which the channel, fs and robust choices change.
 
 Serve with ``gmwm-app`` / ``python -m gmwm_app``, or ``panel serve gmwm_app/app.py``.
 """
@@ -136,12 +136,12 @@ def set_listed(app: GMWMApp, listed: bool) -> None:
         _APPS.pop(app, None)
 
 
-#: The state parameters the WV plot and the residual strip draw.
+#: The state parameters the WV plot and the residual strip draw (the channel, fs and the
+#: robust choice through the WV: set alone by their widgets, they are drawn with their WV).
 _PLOT = (
     "wv",
     "wv_raw",
     "unit",
-    "channel",
     "filename",
     "model",
     "result",
@@ -152,7 +152,6 @@ _PLOT = (
 _TABLES = (
     "wv",
     "unit",
-    "fs",
     "model",
     "result",
     "whatif",
@@ -160,8 +159,6 @@ _TABLES = (
     "show_intervals",
     "inferred",
 )
-#: ... the data widgets (channel, fs, robust).
-_DATA_WIDGETS = ("channels", "channel", "fs", "robust")
 #: ... the data description.
 _DATA_INFO = (
     "wv",
@@ -171,13 +168,12 @@ _DATA_INFO = (
     "source",
     "n",
     "duration_s",
-    "fs",
     "fs_source",
 )
 #: ... the fit summary line.
 _SUMMARY = ("wv", "model", "result", "whatif", "whatif_values")  # (weights: by the refit)
 #: ... the file names of the downloads (:meth:`AppState.export_filename`).
-_FILENAMES = ("filename", "channel", "model")
+_FILENAMES = ("filename", "wv", "model")  # (the channel shown: that of the WV)
 #: ... the URL's data and model (:meth:`AppState.to_query`; the plain parameters,
 #: :attr:`AppState.URL_SYNCED`, are Panel's: :meth:`GMWMApp.link_url`).
 _QUERY = ("source", "path", "channel", "fs", "robust", "compensate", "model")
@@ -230,6 +226,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.state.batch = partial(pn.io.hold, self.jobs.doc)
         if self.served:  # the state's own background work (intervals) runs as the session's job
             self.state.offload = self.jobs.run
+        self.state.wv_job = self._wv_job  # ... and its WVs as page loads (indicator, progress)
         self._location = pn.state.location if self.served else None
         self._build_widgets()
         self._build_layout()
@@ -269,27 +266,20 @@ class GMWMApp(pn.viewable.Viewer):
             label="Load path", color="default", sizing_mode="stretch_width"
         )
         self.path_button.on_click(self._on_path)
-        self.channel_select = pn.widgets.Select(
-            label="Channel", options=[], sizing_mode="stretch_width"
+        # the data choices: the state's own parameters, which it shows itself when they
+        # change (AppState._data_changed: a WV job for the channel and the robust WV)
+        self.channel_select = pn.widgets.Select.from_param(
+            s.param.channel, sizing_mode="stretch_width"
         )
-        self.channel_select.param.watch(self._on_channel, "value")
-        self.fs_input = pn.widgets.FloatInput(
-            label="Sampling frequency fs [Hz]",
-            value=None,
-            start=0.0,
-            sizing_mode="stretch_width",
-            format="0[.]########",
+        self.fs_input = pn.widgets.FloatInput.from_param(
+            s.param.fs, sizing_mode="stretch_width", format="0[.]########"
         )
-        self.fs_input.param.watch(self._on_fs, "value")
         self.data_info = pn.pane.Markdown(
             "", sizing_mode="stretch_width", styles={"font-size": "13px"}, margin=(0, 10)
         )
-        self.robust_check = pn.widgets.Checkbox(
-            label="Robust WV (Tukey biweight, 60% efficiency), beside the classical one",
-            value=s.robust,
-            css_classes=["gmwm-robust"],
+        self.robust_check = pn.widgets.Checkbox.from_param(
+            s.param.robust, css_classes=["gmwm-robust"]
         )
-        self.robust_check.param.watch(self._on_robust, "value")
         # the state's own parameter (auto / always / off): a change refits on the
         # compensated or the raw WV
         self.compensate_choice = pn.widgets.Select.from_param(
@@ -520,7 +510,6 @@ class GMWMApp(pn.viewable.Viewer):
             self._draw_plot()
             self._draw_segments()
             self._draw_tables()
-            self._sync_data_widgets()
             self._sync_compensation()
             self._sync_filenames()
             self._show_warnings()
@@ -539,7 +528,7 @@ class GMWMApp(pn.viewable.Viewer):
         self.resid_box.visible = shown
         self.last_refresh_s = time.perf_counter() - t0
 
-    @_on_state("wv", "channel", "filename")
+    @_on_state("wv", "filename")
     @redraws("the still segments")
     def _draw_segments(self) -> None:
         self.segments.update(self.state.log, self.state.channel)
@@ -560,22 +549,6 @@ class GMWMApp(pn.viewable.Viewer):
     def _refresh_selection(self) -> None:
         if "Model selection" in self.lazy_views:
             self.selection.refresh()
-
-    @_on_state(*_DATA_WIDGETS)
-    @redraws("the data widgets")
-    def _sync_data_widgets(self) -> None:
-        s = self.state
-        # options and value in one update: the widget's watcher (_on_channel) runs once, with
-        # the final value, which is the state's (no intermediate first option of a new log)
-        chan: dict[str, Any] = {}
-        if list(self.channel_select.options) != list(s.channels):
-            chan["options"] = list(s.channels)
-        if s.channel:
-            chan["value"] = s.channel
-        self.channel_select.param.update(**chan)
-        if s.fs is not None:
-            self.fs_input.value = s.fs
-        self.robust_check.value = s.robust
 
     @_on_state(*_COMPENSATION)
     @redraws("the temperature compensation switch")
@@ -763,46 +736,22 @@ class GMWMApp(pn.viewable.Viewer):
             if self.upload.value:
                 self.upload.value = {}  # free an upload's bytes
 
-    # widget -> state: only a value that differs from the state's is an action (the state's own
-    # updates of the widgets come back here as no-ops)
-    def _on_channel(self, event: Any) -> None:
-        if not event.new or event.new == self.state.channel:
-            return
-        ch = event.new
-        self.jobs.load(
-            f"Computing the wavelet variance of {ch}",
-            lambda report: self.state.warm(ch, progress=report),
-            lambda _out: self._held(self.state.select_channel, ch),
-            progress=True,
-        )
-
-    def _on_robust(self, event: Any) -> None:
-        if bool(event.new) == self.state.robust:
-            return
-        rob = bool(event.new)
-        what = "robust" if rob else "classical"
-        self.jobs.load(
-            f"Computing the {what} wavelet variance",
-            lambda report: self.state.warm(robust=rob, progress=report),
-            lambda _out: self._held(self._after_robust, rob),
-            progress=True,
-        )
+    def _wv_job(
+        self,
+        message: str,
+        work: Callable[[Callable[[int, int], object]], Any],
+        apply: Callable[[Any], Any],
+        fail: Callable[[BaseException], Any],
+    ) -> None:
+        """The state's WV jobs (:data:`gmwm_app.state.WVJob`): page loads with the loading
+        indicator and the levels' progress, applied under the session's hold."""
+        self.jobs.load(message, work, partial(self._held, apply), progress=True, fail=fail)
 
     def _held(self, action: Callable[..., Any], *args: Any) -> Any:
         """Run a job's continuation under the session's hold (:attr:`AppState.batch`): the
         state changes it makes, each held already, reach the browser together."""
         with self.state.batch():
             return action(*args)
-
-    def _after_robust(self, rob: bool) -> None:
-        if not self.state.set_robust(rob):
-            self._sync_data_widgets()  # put the checkbox back (the state did not change)
-
-    def _on_fs(self, event: Any) -> None:
-        if event.new is None or event.new == self.state.fs:
-            return
-        if not self.state.set_fs(event.new):
-            self._sync_data_widgets()  # put the old fs back
 
     def _export_json(self) -> io.StringIO:
         return io.StringIO(self.state.export_json())

@@ -64,7 +64,7 @@ class ExportMixin(StateFields):
         """A file name for the JSON export, e.g. ``gmwm_demo_imu_gyro_x_2GM+WN+RW.json``."""
         stem = Path(self.filename or "data").stem
         spec = self.model.spec().replace("*", "") or "wv"
-        return f"gmwm_{stem}_{self.channel or 'none'}_{spec}.json"
+        return f"gmwm_{stem}_{self.shown['channel'] or 'none'}_{spec}.json"
 
 
 def _json_default(o: Any) -> Any:

@@ -451,11 +451,13 @@ class Jobs:
         apply: Callable[[Any], Any] | None = None,
         *,
         progress: bool = False,
+        fail: Callable[[BaseException], Any] | None = None,
     ) -> int:
         """Read data in a worker with the page's loading indicator on, then apply them.
 
         ``apply`` defaults to the page's :attr:`install`. A later load supersedes an
-        earlier one; a failure goes to the page's :attr:`failed` hook. With ``progress``,
+        earlier one; a failure goes to ``fail`` if given, else to the page's :attr:`failed`
+        hook. With ``progress``,
         ``work`` is called as ``work(report)``: the worker calls ``report(j, J)`` as step
         ``j`` of ``J`` ends (e.g. a WV level), and the indicator's text becomes
         ``"<message>: level j of J"`` on the loop, while this load is the latest one.
@@ -468,7 +470,7 @@ class Jobs:
         return self.run(
             work,
             apply if apply is not None else self.install,
-            lambda e: self.failed(message, e),
+            fail if fail is not None else (lambda e: self.failed(message, e)),
             self._settle,
             key="page-load",
         )

@@ -110,12 +110,12 @@ class MultiView(TabView):
         self._build_layout()
         self.refresh()
 
-    @param.depends("state.wv", "state.fs", "state.robust", "state.compensate", watch=True)
+    @param.depends("state.wv", "state.compensate", watch=True)
     def _on_state(self) -> None:
         """New data (every load sets a new WV: the log itself is no parameter), another
-        sampling frequency, the robust WV (a notice here), or the temperature compensation
-        switched (the channels' WVs and WCCVs are then of the compensated or the raw
-        signals)."""
+        sampling frequency or the robust WV (a notice here: each comes with its WV), or the
+        temperature compensation switched (the channels' WVs and WCCVs are then of the
+        compensated or the raw signals)."""
         super()._on_state()
 
     def _visible(self) -> bool:

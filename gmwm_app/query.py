@@ -14,6 +14,7 @@ from param.parameterized import batch_call_watchers
 from gmwm_app.data import (
     COMPENSATION,
     PreparedQuery,
+    channel_names,
     check_fs,
     compensation_mode,
     message_of,
@@ -188,6 +189,8 @@ class QueryMixin(StateFields):
         """
         if prepared is None:
             prepared = self.prepare_query(query, default_source, default_path)
+        if prepared.loaded is not None:  # the new channels offered now, not in the batch
+            self.offer_channels(channel_names(prepared.loaded.log))
         # the data, then the model: one call of each watcher, with the final values (a page's
         # first draw redraws each of its parts once, not once per step)
         with batch_call_watchers(self):
@@ -225,19 +228,22 @@ class QueryMixin(StateFields):
         return True
 
     def data_info(self) -> dict[str, Any]:
-        """Description of the data (for exports and the info panel)."""
+        """Description of the data shown (for exports and the info panel): the channel, fs and
+        robust choice of the WV shown (:attr:`shown`; a choice whose WV is still being
+        computed is not yet the data's)."""
+        shown = self.shown
         return {
             "source": self.source,
             "file": self.filename,
             "path": self.path,
-            "channel": self.channel,
+            "channel": shown["channel"],
             "channels": list(self.channels),
-            "fs_hz": self.fs,
+            "fs_hz": shown["fs"],
             "fs_source": self.fs_source,
             "n_samples": self.n,
             "duration_s": self.duration_s,
             "unit": self.unit,
-            "robust_wv": self.robust,
+            "robust_wv": shown["robust"],
             "temperature_compensated": bool(self.wv_raw is not None),
             "temperature_compensation": self.compensate,
             "wv_summary_file": self.is_summary,

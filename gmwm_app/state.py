@@ -89,6 +89,24 @@ WEIGHTS: tuple[str, ...] = ("ci", "identity", "efficient")
 #: Sources a session can load from.
 SOURCES: tuple[str, ...] = ("demo", "upload", "path", "scenario")
 
+#: The data choices a widget sets alone, each shown by the state itself
+#: (:meth:`AppState._data_changed`): the channel and the robust WV by a WV job, fs at once.
+DATA_CHOICES: tuple[str, ...] = ("channel", "fs", "robust")
+
+#: How a front end computes a WV off its event loop with its progress shown:
+#: ``wv_job(message, work, apply, fail)`` calls ``work(report)`` in a worker (``report(j, J)``
+#: as level ``j`` of ``J`` is done), then ``apply(result)`` or ``fail(error)`` on the loop (the
+#: app: :meth:`gmwm_app.jobs.Jobs.load` with ``progress``).
+WVJob = Callable[
+    [
+        str,
+        Callable[[Callable[[int, int], object]], Any],
+        Callable[[Any], Any],
+        Callable[[BaseException], Any],
+    ],
+    Any,
+]
+
 
 def demo_path() -> Path:
     """Path of the bundled demo log (package data: :func:`engine.demo.demo_path`).
@@ -138,14 +156,35 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
     )
     filename = param.String(default="", doc="Name of the loaded file.")
     channels = param.List(default=[], item_type=str, doc="Channel names of the loaded log.")
-    channel = param.String(default="", doc="Selected channel.")
-    fs = param.Number(default=None, allow_None=True, doc="Sampling frequency (Hz).")
+    channel: param.Selector[str] = param.Selector(
+        default="",
+        objects=[""],
+        check_on_set=True,
+        label="Channel",
+        doc="Selected channel, one of :attr:`channels` (its choices follow the loaded log; '' "
+        "before one is). Set by its widget or a test alone, the state computes its WV as a "
+        "job (:attr:`AppState.wv_job`) and shows it (:meth:`AppState._data_changed`).",
+    )
+    fs = param.Number(
+        default=None,
+        allow_None=True,
+        bounds=(0.0, None),
+        inclusive_bounds=(False, True),
+        label="Sampling frequency fs [Hz]",
+        doc="Sampling frequency (Hz). Set alone (by its widget), the WV is re-labelled; a value "
+        ":meth:`AppState.set_fs` refuses is reported and the previous one put back.",
+    )
     fs_source = param.String(default="", doc="Where fs came from: file, time column, user ...")
     n = param.Integer(default=0, doc="Samples of the selected channel.")
     duration_s = param.Number(default=0.0, doc="Duration of the selected channel (s).")
     unit = param.String(default="", doc="Unit of the selected channel.")
     is_summary = param.Boolean(default=False, doc="The file holds WV summaries, no raw data.")
-    robust = param.Boolean(default=False, doc="Robust (Tukey biweight) WV.")
+    robust = param.Boolean(
+        default=False,
+        label="Robust WV (Tukey biweight, 60% efficiency), beside the classical one",
+        doc="Robust (Tukey biweight) WV. Set alone (by its widget), the state computes it as a "
+        "job (:attr:`AppState.wv_job`) and shows it.",
+    )
     wv = param.ClassSelector(
         class_=eg.WaveletVariance,
         default=None,
@@ -244,9 +283,15 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         #: How a front end runs work off its event loop (:data:`Offload`; the app: its job
         #: runner); None runs it at once (tests, notebooks).
         self.offload: Offload | None = None
+        #: How a front end computes a WV off its event loop with its progress shown
+        #: (:data:`WVJob`; the app: its job runner's page load); None computes it at once.
+        self.wv_job: WVJob | None = None
         self._reverting = False  # a refused choice (compensation, weights) is being put back
+        self._publishing = False  # the state's own update is being made
+        self._shown: dict[str, Any] = {n: getattr(self, n) for n in DATA_CHOICES}
         self.param.watch(self._compensate_changed, "compensate")
         self.param.watch(self._weights_changed, "weights")
+        self.param.watch(self._data_changed, list(DATA_CHOICES))
 
     # ---------------------------------------------------------------------------------
     # helpers
@@ -302,10 +347,43 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         no watcher): a repeated failure is reported as often as it happens.
         """
         again = bool(changes.get("error")) and changes["error"] == self.error
+        names = changes.get("channels")
+        choice = self.param.channel
         with self.batch():
-            self.param.update(**changes)
+            if names is not None:
+                self.offer_channels(names)
+            was, self._publishing = self._publishing, True
+            before = self._shown
+            if not changes.keys().isdisjoint(("wv", *DATA_CHOICES)):  # (read by the watchers)
+                self._shown = {n: changes.get(n, getattr(self, n)) for n in DATA_CHOICES}
+            try:
+                self.param.update(**changes)
+            except BaseException:
+                self._shown = before
+                raise
+            finally:
+                self._publishing = was
+                if names is not None:
+                    choice.objects = list(names) or [""]
             if again:
                 self.param.trigger("error")
+
+    @property
+    def shown(self) -> dict[str, Any]:
+        """The data choices (:data:`DATA_CHOICES`) of the WV shown: equal to the parameters
+        except while a choice set alone has its WV computed (a choice that differs from them
+        is a request, :meth:`_data_changed`)."""
+        return dict(self._shown)
+
+    def offer_channels(self, names: Sequence[str]) -> None:
+        """Add ``names`` to the choices of :attr:`channel` (the old ones stay until the
+        channels change): while the value changes, old and new are valid, so a widget of the
+        choice never falls back on a first option in between. Called before the watchers of
+        the change run (:meth:`from_query` batches them: then before its batch)."""
+        choice = self.param.channel
+        union = list(dict.fromkeys([*names, *choice.objects]))
+        if union != list(choice.objects):
+            choice.objects = union
 
     def report_error(self, message: str) -> bool:
         """Show ``message`` as the error of the page (state otherwise unchanged) and log it;
@@ -624,6 +702,76 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             return self._switch_wv(wv, robust=bool(robust))
 
         return self._guard("Could not switch the robust WV", run)
+
+    def _data_changed(self, *events: Any) -> None:
+        """A data choice (:data:`DATA_CHOICES`) set alone, by its widget: show it. fs
+        re-labels the WV at once; a channel or the robust WV is computed as a job
+        (:attr:`wv_job`), then shown. A choice the state refuses (a bad fs, a WV that cannot be
+        computed) is reported in one line and the previous values are put back (and so
+        their widgets)."""
+        # the state's own update (also one whose watchers run later, batched), or a put-back
+        old = {n: v for n, v in self._shown.items() if getattr(self, n) != v}
+        if self._publishing or self._reverting or not old:
+            return
+        ch, rob = self.channel, self.robust
+        if "fs" in old or self._log is None:  # fs, or no log: at once (no WV to compute)
+            self._shown_or_restored(old, lambda: self._show_choices(old, ch, rob))
+            return
+        kind = "robust" if rob else "classical"
+        what = (
+            f"the wavelet variance of {ch}" if "channel" in old else f"the {kind} wavelet variance"
+        )
+        message = f"Computing {what}"
+
+        def work(report: Callable[[int, int], object]) -> None:
+            self.warm(ch, robust=rob, progress=report)
+
+        def apply(_out: Any) -> None:
+            if (self.channel, self.robust) == (ch, rob):  # (not superseded by another choice)
+                self._shown_or_restored(old, lambda: self._show_choices(old, ch, rob))
+
+        def fail(err: BaseException) -> None:
+            self._restore(old)
+            if not isinstance(err, (ValueError, KeyError, OSError, TypeError, IndexError)):
+                raise err  # a bug: the app's error boundary
+            self._fail(f"Could not show {what}: {message_of(err)}")
+
+        if self.wv_job is not None:
+            self.wv_job(message, work, apply, fail)
+            return
+        try:
+            work(lambda j, n: None)
+        except (ValueError, KeyError, OSError, TypeError, IndexError) as e:
+            fail(e)
+            return
+        apply(None)
+
+    def _show_choices(self, old: dict[str, Any], channel: str, robust: bool) -> bool:
+        """Show the choices set (``old``: their previous values): fs first, then the channel
+        or the robust WV (computed here unless cached)."""
+        if "fs" in old and not self.set_fs(cast(float, self.fs)):  # (None: refused there)
+            return False
+        if "channel" in old:
+            return self.select_channel(channel)
+        return "robust" not in old or self.set_robust(robust)
+
+    def _shown_or_restored(self, old: dict[str, Any], show: Callable[[], bool]) -> None:
+        """Run ``show``; if it refuses (or fails), put the ``old`` choices back."""
+        shown = False
+        try:
+            shown = show()
+        finally:
+            if not shown:
+                self._restore(old)
+
+    def _restore(self, old: dict[str, Any]) -> None:
+        """Put the choices ``old`` back (no action: the state's own put-back)."""
+        self._reverting = True
+        try:
+            with self.batch():
+                self.param.update(**old)
+        finally:
+            self._reverting = False
 
     def _switch_wv(
         self, wv: eg.WaveletVariance, msgs: list[str] | None = None, **changes: Any

@@ -10,7 +10,7 @@ compatible type.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
 import engine as eg
@@ -46,6 +46,9 @@ class StateFields(Protocol):
     error: str
     precompute: Callable[..., None]
 
+    @property
+    def shown(self) -> dict[str, Any]: ...
+
     # methods of AppState
     def _publish(self, **changes: Any) -> None: ...
     def _guard(self, action: str, fn: Callable[[], bool]) -> bool: ...
@@ -65,6 +68,7 @@ class StateFields(Protocol):
         compensate: str | bool | None = None,
     ) -> bool: ...
     def set_model(self, model: eg.Model | str) -> bool: ...
+    def offer_channels(self, names: Sequence[str]) -> None: ...
     def display_objective(self) -> float | None: ...
     def warnings(self) -> list[str]: ...
 

@@ -7,6 +7,7 @@ Counts, not timings: a part's redraws are counted by wrapping the object it call
 
 from __future__ import annotations
 
+import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -198,6 +199,137 @@ def test_toggles_and_state_follow_each_other(app: Any, monkeypatch: pytest.Monke
     assert len(plot) == 2
 
 
+def test_the_data_widgets_are_built_from_the_states_parameters(app: Any) -> None:
+    """Channel, fs and robust: widgets of the state's parameters (labels and choices declared
+    there), the channel's choices those of the loaded log."""
+    s = app.state
+    assert app.channel_select.name == s.param.channel.label == "Channel"
+    assert app.fs_input.name == s.param.fs.label == "Sampling frequency fs [Hz]"
+    assert app.robust_check.name == s.param.robust.label
+    assert list(s.param.channel.objects) == list(s.channels) == list(app.channel_select.options)
+    assert app.fs_input.start == 0.0 and s.param.fs.bounds == (0.0, None)
+    with pytest.raises(ValueError, match="not accept 'gyro_q'"):
+        s.channel = "gyro_q"  # a channel of no log loaded
+    with pytest.raises(ValueError, match="greater than 0"):
+        s.fs = -1.0
+    # a new log: the choices follow it, and the state's own update starts no WV job
+    loaded = s.read("upload", data=_csv(("p", "q", "r")), filename="pqr.csv")
+    assert s.install(loaded, channel="q"), s.error
+    assert list(s.param.channel.objects) == ["p", "q", "r"] == list(app.channel_select.options)
+    assert app.channel_select.value == "q"
+
+
+def test_a_rendered_channel_widget_keeps_the_links_channel(app: Any) -> None:
+    """With its Bokeh model (a served page), a Select whose value is not among its options
+    falls back on the first one; the link's data are installed with their watchers batched
+    (from_query): the new channels must be offered before, or the session ends on the first."""
+    s = app.state
+    root = app.channel_select.get_root(Document())
+    other = s.read("upload", data=_csv(("p", "q", "r")), filename="pqr.csv")
+    assert s.install(other, channel="r"), s.error
+    assert (s.channel, app.channel_select.value, root.value) == ("r", "r", "r")
+    assert s.from_query({"channel": "gyro_y", "model": "WN"}), s.error
+    assert (s.channel, app.channel_select.value, root.value) == ("gyro_y",) * 3
+    assert s.wv is not None and s.result is not None and s.result.wv is s.wv
+    assert [v for v, _ in root.options] == list(s.channels) == list(s.param.channel.objects)
+
+
+def test_channel_widget_and_state_follow_each_other_with_one_wv_job(
+    app: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    s = app.state
+    assert s.set_model("WN+RW"), s.error
+    jobs = _count(monkeypatch, app.jobs, "load")
+    plot = _count(monkeypatch, app.views, "update")
+    tables = _count(monkeypatch, app.tables, "update")
+    wvs = _count(monkeypatch, state_mod, "compute_wv")
+    # widget -> state: one WV job (inline without a server), the WV and fit shown once
+    app.channel_select.value = "accel_x"
+    assert s.channel == "accel_x" and s.wv.n == s.n and s.unit == "m/s^2", s.error
+    assert s.result is not None and s.result.wv is s.wv
+    assert (len(jobs), len(wvs), len(plot), len(tables)) == (1, 1, 1, 1)
+    assert app.status.object == "" and not app.busy  # the job's indicator came and went
+    # state -> widget, the parameter set alone: the state starts the job itself
+    s.channel = "gyro_y"
+    assert app.channel_select.value == "gyro_y" and s.wv is not None
+    assert s.result is not None and s.result.wv is s.wv
+    assert (len(jobs), len(wvs), len(plot), len(tables)) == (2, 2, 2, 2)
+    # back to a channel computed already: a job, no WV computed
+    app.channel_select.value = "accel_x"
+    assert s.channel == "accel_x" and (len(jobs), len(wvs), len(plot)) == (3, 2, 3)
+    # the action itself: no job, the widget follows
+    assert s.select_channel("gyro_x"), s.error
+    assert app.channel_select.value == "gyro_x" and (len(jobs), len(plot)) == (3, 4)
+
+
+def test_exports_describe_the_data_shown_while_a_channels_wv_is_computed(app: Any) -> None:
+    """On a served page the WV job ends later: meanwhile the channel chosen is not yet the
+    data's, and the exports (JSON, file names) describe the WV and fit shown."""
+    s = app.state
+    assert s.set_model("WN+RW"), s.error
+    pending: list[Any] = []
+    s.wv_job = lambda message, work, apply, fail: pending.append((message, work, apply))
+    wv, res = s.wv, s.result
+    app.channel_select.value = "accel_x"  # the job starts, and waits
+    assert s.channel == "accel_x" and s.wv is wv and s.result is res
+    assert [m for m, _, _ in pending] == ["Computing the wavelet variance of accel_x"]
+    data = json.loads(app._export_json().getvalue())["data"]
+    assert data["channel"] == "gyro_x" == s.shown["channel"] and data["unit"] == "deg/s"
+    assert "_gyro_x_" in app.download.filename and "_gyro_x_" in s.export_filename()
+    _, work, apply = pending[0]
+    work(lambda j, n: None)  # the worker, then the loop's continuation
+    apply(None)
+    assert s.wv is not wv and s.result.wv is s.wv and s.shown["channel"] == "accel_x"
+    data = json.loads(app._export_json().getvalue())["data"]
+    assert data["channel"] == "accel_x" and data["unit"] == "m/s^2"
+    assert "_accel_x_" in app.download.filename
+
+
+def test_robust_widget_and_state_follow_each_other_with_one_wv_job(
+    app: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    s = app.state
+    jobs = _count(monkeypatch, app.jobs, "load")
+    plot = _count(monkeypatch, app.views, "update")
+    app.robust_check.value = True  # widget -> state
+    assert s.robust and s.wv.robust, s.error
+    assert (len(jobs), len(plot)) == (1, 1)
+    s.robust = False  # state -> widget: the classical WV shown again (carried by the robust)
+    assert app.robust_check.value is False and not s.wv.robust
+    assert (len(jobs), len(plot)) == (2, 2)
+
+
+def test_fs_widget_relabels_at_once_and_a_refused_fs_is_put_back(
+    app: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    s = app.state
+    assert s.set_model("GM+WN"), s.error
+    fs0, tau0, beta0 = s.fs, s.wv.tau_s.copy(), s.result.params["GM.beta"]
+    jobs = _count(monkeypatch, app.jobs, "load")
+    plot = _count(monkeypatch, app.views, "update")
+    tables = _count(monkeypatch, app.tables, "update")
+    app.fs_input.value = fs0 / 2  # widget -> state: re-labelled, no job, one redraw
+    assert s.fs == fs0 / 2 and s.fs_source == "user", s.error
+    np.testing.assert_allclose(s.wv.tau_s, 2 * tau0)
+    assert s.result.params["GM.beta"] == pytest.approx(beta0 / 2, rel=1e-6)
+    assert (len(jobs), len(plot), len(tables)) == (0, 1, 1)
+    s.fs = fs0  # state -> widget
+    assert app.fs_input.value == fs0 and s.wv.fs == fs0 and s.fs_source == "file"
+    assert (len(jobs), len(plot), len(tables)) == (0, 2, 2)
+    # refused (above the largest sampling frequency the engine accepts): one line, and the
+    # previous value back in the state and in the widget; nothing redrawn
+    wv = s.wv
+    app.fs_input.value = 2e9
+    assert s.error.count("\n") == 0 and "Could not set the sampling frequency" in s.error
+    assert "2e+09" in s.error or "2000000000" in s.error
+    assert s.fs == fs0 == app.fs_input.value and s.wv is wv
+    assert (len(plot), len(tables)) == (2, 2)
+    assert app.alert.visible
+    # the session keeps working: the next change is shown and clears the message
+    app.fs_input.value = 2 * fs0
+    assert s.fs == 2 * fs0 and s.wv.fs == 2 * fs0 and s.error == ""
+
+
 # ---------------------------------------------------------------------------------------------
 # the Fit tab's intervals are the state's
 # ---------------------------------------------------------------------------------------------
@@ -261,6 +393,7 @@ def test_a_failed_wv_job_is_shown_and_logged(
     assert any("3 NaN values" in r.getMessage() for r in caplog.records)
     assert calls == ["accel_x"]  # computed once (warm), not again by select_channel
     assert s.channel == "gyro_x"  # the session keeps its channel
+    assert app.channel_select.value == "gyro_x"  # ... and its widget shows it
 
 
 def test_a_failed_precompute_is_reported_once_and_logged(
