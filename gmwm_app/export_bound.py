@@ -1,4 +1,4 @@
-"""The export menu's bound options (issue 28): what of the data a filter file bounds besides the
+"""The export menu's bound options: what of the data a filter file bounds besides the
 fitted model (``data``: the empirical WV's lower 95 % limit, its estimate, its upper limit or
 nothing), over which horizon (the longest time the filter runs unaided) and whether the data
 bound covers the data's heavy tails, the engine's ``engine.export(..., data=, horizon_s=,

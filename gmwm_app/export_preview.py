@@ -1,4 +1,4 @@
-"""What a filter will assume, shown in the export menu before the download (issue 23 item 6).
+"""What a filter will assume, shown in the export menu before the download.
 
 For a filter format, every fitted channel is projected onto the format's consumer noise model
 by the engine, as the export computes the file's numbers with the same options

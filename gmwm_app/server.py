@@ -271,7 +271,7 @@ class RequestShape(NamedTuple):
     location; the server-side copies of the four keep the placeholder's). A class whose browsers
     use another name than the expected one (an IP address for a host name) gets the pages
     built ahead all the same (with the host in the shape, the pool was released and rebuilt
-    for it: 30 pages at once went from p95 1.18 s to 21.4 s, issue #33).
+    for it: 30 pages at once went from p95 1.18 s to 21.4 s).
     """
 
     path: str

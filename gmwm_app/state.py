@@ -818,11 +818,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         before = self.wv
         if not self._guard("Could not switch the temperature compensation", run):
             if self.wv is before:  # nothing switched: the switch (and its widget) go back
-                self._reverting = True
-                try:
-                    self.compensate = event.old
-                finally:
-                    self._reverting = False
+                self._restore({"compensate": event.old})
 
     # ---------------------------------------------------------------------------------
     # model actions
@@ -874,11 +870,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             return
         if not self._guard("Could not switch the weights", lambda: self._apply_model(self.model)):
             if self.result is res:  # nothing refitted: the choice (and its widget) go back
-                self._reverting = True
-                try:
-                    self.weights = event.old
-                finally:
-                    self._reverting = False
+                self._restore({"weights": event.old})
 
     def set_model(self, model: eg.Model | str) -> bool:
         """Replace the model (a Model or a spec like ``"WN+RW+2*GM"``) and refit.

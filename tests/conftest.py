@@ -172,6 +172,23 @@ def app(app_demo: Path) -> Any:
 
 
 @pytest.fixture
+def datasheet_checks(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+    """The datasheet specs the app's Datasheet check tab checks, in order (the engine's
+    ``check_datasheet`` counted where the tab calls it)."""
+    from gmwm_app import check_view
+
+    checks: list[Any] = []
+    real = eg.check_datasheet
+
+    def counted(*args: Any, **kw: Any) -> Any:
+        checks.append(args[1])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(check_view.eg, "check_datasheet", counted)
+    return checks
+
+
+@pytest.fixture
 def app_state(app_demo: Path):
     """A fresh session state with the demo log loaded."""
     from gmwm_app.state import AppState

@@ -98,7 +98,7 @@ def wv_cov_model(model: Model, wv: WaveletVariance) -> np.ndarray:
       ``1 / eff`` times the classical one for uncorrelated coefficients and less for
       correlated ones (the coarse levels).
 
-    Without these two parts (before issue 27) the J-test rejected the true model in 36-39 % of
+    Without these two parts the J-test rejected the true model in 36-39 % of
     robust GM+WN logs (2^16 samples) and in 18 % of WN+RW+DR logs with a strong drift (2^20)
     at 5 %: ``docs/jtest.md``.
 

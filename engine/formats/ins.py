@@ -15,7 +15,7 @@
   T_c`` kept (``sigma_b`` scaled by ``sqrt(T_c / T_c,own)``), which bounds each channel's GM
   spectrum at every frequency. (Pairing the largest ``T_c`` with each channel's own
   ``sigma_b`` lowers ``q``: the file's WV was 0.065-0.15 of the fitted WV at 160-5000 s on
-  the ADIS16405 gyros, issue 28.)
+  the ADIS16405 gyros.)
 * ``sensor_msgs/Imu`` (ROS message definition): row-major 3x3 covariances (x, y, z) of the
   measurement in (rad/s)^2 and (m/s^2)^2; ``orientation_covariance[0] = -1`` when the message
   has no orientation. We write the per-sample variance of the white noise at the log's rate,

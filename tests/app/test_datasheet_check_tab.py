@@ -192,18 +192,9 @@ def test_browser_typed_value_redraws_the_check(
 
 
 def test_the_datasheet_values_are_typed_parameters_checked_once_per_change(
-    app: Any, view: Any, monkeypatch: pytest.MonkeyPatch
+    app: Any, view: Any, datasheet_checks: list[Any]
 ) -> None:
-    from gmwm_app import check_view
-
-    checks: list[Any] = []
-    real = eg.check_datasheet
-
-    def counted(*args: Any, **kw: Any) -> Any:
-        checks.append(args[1])
-        return real(*args, **kw)
-
-    monkeypatch.setattr(check_view.eg, "check_datasheet", counted)
+    checks = datasheet_checks
     s = app.state
     # the values as a parameter: set alone, they are checked (once) and the fields show them
     view.texts = ["0.4", "12", "", ""]

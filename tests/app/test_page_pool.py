@@ -68,7 +68,7 @@ def pooled(app_demo_file: Path) -> Iterator[dict[str, Any]]:
         with served_app(
             app_demo_file,
             # the pages are built for "localhost" and every test opens them by "127.0.0.1":
-            # browsers may use another name than the one expected (issue #33)
+            # browsers may use another name than the one expected
             lambda port: server.create_application(prebuild=POOL, host=f"localhost:{port}"),
             # a page request without its websocket (most tests here) counts as a session
             # opening, which pauses the refill until Bokeh discards it
@@ -291,7 +291,7 @@ def test_query_builds_on_demand(pooled: dict[str, Any]) -> None:
 def test_other_host_name_gets_the_pages_built_ahead(pooled: dict[str, Any]) -> None:
     """Browsers that use another name for the server (``localhost`` where ``127.0.0.1`` was
     expected, an address for a host name) get the pages built ahead: nothing is released or
-    rebuilt (issue #33: a class with another host name lost the pool, p95 1.18 s -> 21.4 s).
+    rebuilt (a class with another host name lost the pool, p95 1.18 s -> 21.4 s).
     The session's own request is the one with its host; Chromium's location is its own."""
     pool = pooled["pool"]
     _wait(lambda: len(pool) >= 2, "two pages in the pool")

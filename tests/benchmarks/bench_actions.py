@@ -18,7 +18,7 @@ Each row gives the wall time (median and max over ``--repeat`` rounds; a tab ope
 first time once per page, so its rounds are fresh pages) and the server's CPU time for the
 action (this process's CPU time: the server and the Playwright client, which is small), with
 a same-run reference: the smallest round trip (a button that replaces one line's data).
-Target (issue #30): every action within 0.5 s.
+Target: every action within 0.5 s.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ Measures, with the server in this process and Debian chromium driven by Playwrig
 (d) the add-a-process latency of one tab while another tab computes a robust WV of 1e6
     samples (heavy work runs off the event loop).
 
-Targets (issue 3): (a) < 250 ms, (b) fit < 30 ms, (c) < 1 s.
+Targets: (a) < 250 ms, (b) fit < 30 ms, (c) < 1 s.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Local process pool against a Dask LocalCluster, for the Monte Carlo study and a batch of logs,
-and the scaling to N workers on paper (issue 16).
+and the scaling to N workers on paper.
 
 Run: ``python tests/benchmarks/bench_dask.py [--reps 8] [--n 1e6] [--logs 8] [--samples 2e5]
 [--workers 2]``. The LocalCluster's workers are warmed (their imports) before each timing;

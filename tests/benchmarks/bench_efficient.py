@@ -1,4 +1,4 @@
-"""Efficient GMWM against the WV itself (issue 22, item 1). Run from the repository root:
+"""Efficient GMWM against the WV itself. Run from the repository root:
 
     python tests/benchmarks/bench_efficient.py [--n 6.3e6] [--repeat 3] [--no-old]
 

@@ -1,4 +1,4 @@
-"""Export speed (issue 30): CPU time of ``eg.export`` per format for the six demo channels.
+"""Export speed: CPU time of ``eg.export`` per format for the six demo channels.
 
 Run: ``python tests/benchmarks/bench_export.py [--model 2*GM+WN+RW] [--repeat 3] [--log PATH]``.
 

@@ -1,4 +1,4 @@
-"""Proof in a filter (issue 23, item 4): are exported noise numbers consistent in a Kalman filter?
+"""Proof in a filter: are exported noise numbers consistent in a Kalman filter?
 
     python tests/benchmarks/bench_filter.py [--runs 100] [--minutes 20] [--fix 1 10 100]
     python tests/benchmarks/bench_filter.py --recorded [--minutes 20] [--fix 1 10 100]
@@ -6,7 +6,7 @@
         [--min-fixes 100] [--control-runs 100] [--no-tails] [--data low|estimate|high|none]
         [--fleet | --own] [--control-runs 0] [--horizon-fixes 4] [--drop-warmup]
 
-``--recorded`` (issue 28): the error fed to the filter is the *recorded* ADIS16405 signal, not
+``--recorded``: the error fed to the filter is the *recorded* ADIS16405 signal, not
 a simulation: the six units' logs (all channels), each channel minus its mean over the whole
 log (the turn-on bias, removed as a calibration would), cut into segments of ``--minutes`` or
 of ``--min-fixes`` fix intervals, the longer (at most the log: fixes every 100 s take the whole
@@ -91,7 +91,7 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=20.0)
     ap.add_argument("--fix", type=float, nargs="+", default=[1.0, 10.0, 100.0])
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--recorded", action="store_true", help="the recorded errors (issue 28)")
+    ap.add_argument("--recorded", action="store_true", help="the recorded errors")
     ap.add_argument("--rates", type=float, nargs="+", default=[100.0])
     ap.add_argument("--models", nargs="+", default=["WN+RW", "GM+WN+RW", "2*GM+WN+RW"])
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))

@@ -1,4 +1,4 @@
-"""Size of the J-test: how often it rejects the TRUE model at 5 % (issue 22, item 2). Run from
+"""Size of the J-test: how often it rejects the TRUE model at 5 %. Run from
 the repository root:
 
     python tests/benchmarks/bench_jtest.py [--reps 400] [--lengths 15,17] [--models all]

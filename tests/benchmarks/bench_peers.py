@@ -1,4 +1,4 @@
-"""Accuracy against the tools people use instead, side by side (issue 22, item 6).
+"""Accuracy against the tools people use instead, side by side.
 
 Run from the repository root (the peers are in the ``bench`` extra):
 

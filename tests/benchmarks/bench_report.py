@@ -1,4 +1,4 @@
-"""Report speed (issue 30): CPU time of a calibration report and of a fleet report.
+"""Report speed: CPU time of a calibration report and of a fleet report.
 
 Run: ``nice -n 10 python tests/benchmarks/bench_report.py [--log PATH] [--fleet GLOB ...]
 [--model GM+WN+RW] [--no-select] [--no-fleet] [--stages]``.

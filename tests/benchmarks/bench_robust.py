@@ -1,4 +1,4 @@
-"""Robust WV benchmark (issue #13 item 2). Run: ``python tests/benchmarks/bench_robust.py [--n N]``.
+"""Robust WV benchmark. Run: ``python tests/benchmarks/bench_robust.py [--n N]``.
 
 Prints, for a series of N samples (default 6.3e6, WN + RW + drift), best-of-``--repeat`` times of
 the classical WV, the robust WV and their ratio, measured in the same run with the BLAS pool

@@ -1,4 +1,4 @@
-"""Model selection against white noise in disguise (issue 22, item 7). Run from the repository
+"""Model selection against white noise in disguise. Run from the repository
 root:
 
     python tests/benchmarks/bench_selection.py [--logs 100] [--n 16384] [--max-model 2*GM+WN+RW]

@@ -1,4 +1,4 @@
-"""Streaming WV benchmark (issue 7). Run: ``python tests/benchmarks/bench_stream.py``.
+"""Streaming WV benchmark. Run: ``python tests/benchmarks/bench_stream.py``.
 
 Writes a log of ``--n`` samples (default 1e8: 800 MB as float64) to a ``.npy`` or HDF5 file in
 the temporary directory, in chunks (the generator itself holds a few MB), then computes the

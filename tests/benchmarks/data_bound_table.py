@@ -1,4 +1,4 @@
-"""Before/after of the data bound (issue 28) on the six ADIS16405 logs.
+"""Before/after of the data bound on the six ADIS16405 logs.
 
     python tests/benchmarks/data_bound_table.py
 

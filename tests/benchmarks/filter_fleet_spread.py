@@ -1,4 +1,4 @@
-"""Can one filter file serve a fleet? The unit-to-unit spread against the NEES window (issue 28).
+"""Can one filter file serve a fleet? The unit-to-unit spread against the NEES window.
 
     python tests/benchmarks/filter_fleet_spread.py [--kinds accel gyro] [--models WN+RW]
         [--fix 100] [--grid 13] [--seed 1]

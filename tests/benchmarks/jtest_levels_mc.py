@@ -1,4 +1,4 @@
-"""Which levels the J-test may use: rejections of the TRUE model at 5 % by levels rule (issue 27).
+"""Which levels the J-test may use: rejections of the TRUE model at 5 % by levels rule.
 
     nice -n 10 python tests/benchmarks/jtest_levels_mc.py fit SPEC LOG2N ROBUST REPS SEED
     nice -n 10 python tests/benchmarks/jtest_levels_mc.py truth SPEC LOG2N ROBUST REPS SEED

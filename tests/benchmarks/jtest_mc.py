@@ -1,5 +1,5 @@
 """Size of the J-test with a robust WV and with drifts: how often it rejects the TRUE model at
-5 % (issue 27, item 6). Run from the repository root (CPU per log, measured 2026-11-28:
+5 %. Run from the repository root (CPU per log, measured 2026-11-28:
 0.17 s for the strong drift at 2^20, 0.25 s for slow GM+WN+RW at 2^17, 2-3 s for the robust
 settings at 2^17-2^18):
 

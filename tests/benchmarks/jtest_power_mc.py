@@ -1,4 +1,4 @@
-"""Power of the J-test under the old and the present levels rule, on the same logs (issue 27).
+"""Power of the J-test under the old and the present levels rule, on the same logs.
 
     nice -n 10 python tests/benchmarks/jtest_power_mc.py TRUTH TESTED LOG2N ROBUST REPS SEED
 

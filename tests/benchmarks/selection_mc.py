@@ -1,4 +1,4 @@
-"""Model selection judged by what a filter needs (issue 27, item 5). Run from the repository
+"""Model selection judged by what a filter needs. Run from the repository
 root:
 
     nice -n 10 python tests/benchmarks/selection_mc.py [--logs 100] [--max-model FAMILY]
