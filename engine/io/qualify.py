@@ -391,6 +391,11 @@ def _saturation(x: np.ndarray, channel: str, unit: str) -> list[Finding]:
     return out
 
 
+#: A step below this fraction of the per-sample noise SD is the storage's resolution, not the
+#: sensor's: rounding adds less than 1e-5 of the sample variance (``r^2 / 12``), so no QN term.
+STORAGE_STEP = 0.01
+
+
 def _quantisation(d: np.ndarray, s: float, channel: str, unit: str) -> list[Finding]:
     """The output step (every nonzero step an integer multiple of the smallest) and ties."""
     nz = np.abs(d[d != 0])
@@ -401,7 +406,18 @@ def _quantisation(d: np.ndarray, s: float, channel: str, unit: str) -> list[Find
     if float(np.max(np.abs(r - np.rint(r)))) > 0.02:
         return []
     ties = float(np.mean(d == 0))
-    coarse = q > s / math.sqrt(2)  # the step exceeds the white-noise SD of a sample
+    r = q / (s / math.sqrt(2))  # the step over the white-noise SD of a sample
+    if r < STORAGE_STEP:
+        # the storage's resolution (a float32 column: 9.5e-7 m/s^2 at 1 g): rounding adds
+        # r^2 / 12 of the sample variance, nothing a QN term could resolve
+        action = (
+            f"nothing to do: rounding to this step adds {100 * r * r / 12:.2g} % to the sample "
+            "variance, no QN term needed"
+        )
+    else:
+        action = "include QN in the model" + (
+            "; the step is coarse: the shortest scales are mostly quantisation" if r > 1 else ""
+        )
     return [
         Finding(
             "quantisation",
@@ -409,15 +425,10 @@ def _quantisation(d: np.ndarray, s: float, channel: str, unit: str) -> list[Find
             "info",
             (),
             f"quantised in steps of {q:.6g} {unit} ({100 * ties:.3g} % of consecutive samples "
-            f"tie; step = {q / (s / math.sqrt(2)):.3g} x the noise SD per sample)",
-            "include QN in the model"
-            + (
-                "; the step is coarse: the shortest scales are mostly quantisation"
-                if coarse
-                else ""
-            ),
+            f"tie; step = {r:.3g} x the noise SD per sample)",
+            action,
             0,
-            {"step": q, "ties": ties, "step_over_sd": q / (s / math.sqrt(2))},
+            {"step": q, "ties": ties, "step_over_sd": r},
         )
     ]
 

@@ -108,6 +108,25 @@ def test_quantisation_step_and_ties():
     assert not [f for f in qualify_signal(rng.normal(size=N), FS) if f.kind == "quantisation"]
 
 
+def test_a_float32_columns_resolution_asks_for_no_qn_term():
+    """A gravity-offset accelerometer stored as float32 (the demo's accel_z) has a step of
+    2^-20 m/s^2 = 9.54e-7 at 9.8 m/s^2: the storage's, not the sensor's. Rounding adds
+    r^2 / 12 of the sample variance (r = step / SD), so the finding must not ask for a QN
+    term, while a step of 0.5 SD (a real output resolution) still does."""
+    rng = np.random.default_rng(11)
+    sd = 0.014  # m/s^2 per sample
+    x = (9.80665 + sd * rng.normal(size=N)).astype(np.float32).astype(float)
+    (q,) = [f for f in qualify_signal(x, FS, unit="m/s^2") if f.kind == "quantisation"]
+    assert q.values["step"] == 2.0**-20  # float32's spacing in [8, 16)
+    r = q.values["step_over_sd"]
+    assert r == pytest.approx(2.0**-20 / sd, rel=0.05)
+    assert "no QN term" in q.action and "include QN" not in q.action
+    assert f"{100 * r * r / 12:.2g} %" in q.action
+    coarse = np.round(sd * rng.normal(size=N) / (0.5 * sd)) * (0.5 * sd)
+    (q,) = [f for f in qualify_signal(coarse, FS) if f.kind == "quantisation"]
+    assert q.action == "include QN in the model"
+
+
 def test_planted_line_frequency_and_amplitude():
     rng = np.random.default_rng(6)
     x = clean(rng) + 0.02 * np.sin(2 * np.pi * 13.3 * np.arange(N) / FS)
