@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import inspect
 import json
 import math
 import os
@@ -54,7 +55,9 @@ __all__ = [
 ]
 
 SCHEMA = "gmwm-session/1"
-_LOAD_KEYS = ("channel", "fs", "segment", "scale", "units", "topic")
+#: The options a session can record: :func:`engine.io.load_log`'s keywords (the log is read
+#: again with them), but the file's ``name`` in messages.
+_LOAD_KEYS = tuple(k for k in inspect.signature(load_log).parameters if k not in ("path", "name"))
 
 
 def _arr(v: Any, dtype: Any = float) -> np.ndarray:

@@ -313,6 +313,15 @@ class GMWMApp(pn.viewable.Viewer):
         self.alert = hidden_alert("danger", s.param.error)
         self.notice = hidden_alert("info", s.param.notice)
         self.log_check = hidden_alert("secondary", s.param.log_check)  # engine.io.qualify
+        # the check's offer: drop the warm-up it found (engine.io.drop_warmup), as --drop-warmup
+        start = param.rx(s.param.warmup_start)
+        self.drop_warmup_button = pn.widgets.Button(
+            label=start.rx.pipe(lambda n: f"Drop the warm-up: keep from sample {n:,}"),
+            visible=start.rx.bool(),
+            color="warning",
+            margin=(0, 10),
+        )
+        self.drop_warmup_button.on_click(self._on_drop_warmup)
         self.temperature = hidden_alert("info", s.param.temperature)  # compensated signal
         self.warning = hidden_alert("warning")  # (_show_warnings)
         self.status = pn.pane.Markdown(
@@ -408,6 +417,7 @@ class GMWMApp(pn.viewable.Viewer):
                 *self.session_panel.main(),
                 self.notice,
                 self.log_check,
+                self.drop_warmup_button,
                 self.temperature,
                 self.warning,
                 self.status,
@@ -726,6 +736,15 @@ class GMWMApp(pn.viewable.Viewer):
         self.jobs.load(
             f"Reading {path}",
             partial(self.state.read_and_warm, "path", path=path, segments=segments),
+        )
+
+    def _on_drop_warmup(self, _event: Any = None) -> None:
+        n = self.state.warmup_start
+        if n <= 0:
+            return
+        self.jobs.load(
+            f"Dropping the first {n:,} samples (warm-up)",
+            partial(self.state.without_warmup, self.session_panel.load_options),
         )
 
     def install(self, loaded: Any) -> None:

@@ -29,7 +29,8 @@ from engine.inference.temperature import (
     find_temperature,
     fit_log_temperature,
 )
-from engine.io import ImuLog, qualify_log
+from engine.io import ImuLog, Qualification, qualify_log
+from engine.io import drop_warmup as drop_warmup_of
 from engine.wv import check_fs as engine_check_fs
 from gmwm_app.hdf5_guard import check_hdf5, is_hdf5
 from gmwm_app.limits import check_path, check_upload_size
@@ -53,6 +54,7 @@ __all__ = [
     "shared_wvs",
     "clear_shared",
     "log_check_line",
+    "warmup_start",
     "temperature_fit_of",
     "temperature_line",
     "compensated_series",
@@ -240,6 +242,7 @@ def read_source(
     segment: str | None = None,
     demo: Path | None = None,
     segments: str | None = None,
+    drop_warmup: int = 0,
 ) -> LoadedData:
     """Read a log from a source. Heavy; touches no state, safe in a worker thread.
 
@@ -252,6 +255,9 @@ def read_source(
         or ``"START:STOP,..."`` samples (``engine.load_log``'s ``segments``).
     demo : Path
         The demo log (``gmwm_app.state.demo_path()``).
+    drop_warmup : int
+        Samples dropped from the start as a warm-up (:func:`engine.io.drop_warmup`), after
+        ``segment``; 0 keeps them.
 
     Raises
     ------
@@ -306,11 +312,15 @@ def read_source(
         raise ValueError(f"unknown data source {source!r}: use demo, upload or path")
     if not out.log.is_summary and not out.log.channels:
         raise ValueError(f"{out.name} has no data channel")
+    if drop_warmup:  # a new log: none of the whole log's WVs (the demo's shared ones) apply
+        out = LoadedData(drop_warmup_of(out.log, drop_warmup), out.source, out.name, out.path)
     out.elapsed_s = time.perf_counter() - t0
     if segment:
         out.load["segment"] = segment
     if segments:
         out.load["segments"] = segments
+    if drop_warmup:
+        out.load["drop_warmup"] = int(drop_warmup)
     return out
 
 
@@ -522,24 +532,38 @@ def wv_matrix_of(
 
 
 #: The log check's line per log and channel, computed once per loaded log (it dies with it).
-_CHECKS: weakref.WeakKeyDictionary[ImuLog, dict[str, str]] = weakref.WeakKeyDictionary()
+_CHECKS: weakref.WeakKeyDictionary[ImuLog, dict[str, Qualification]] = weakref.WeakKeyDictionary()
 _CHECKS_LOCK = threading.Lock()
 
 
-def log_check_line(lg: ImuLog, channel: str) -> str:
-    """What the log check (:func:`engine.io.qualify_log`) found in one channel, in one line;
-    ``""`` for a clean channel or a WV summary (no samples). Cached per log and channel."""
+def _log_check(lg: ImuLog, channel: str) -> Qualification | None:
+    """The log check (:func:`engine.io.qualify_log`) of one channel; None for a WV summary
+    (no samples). Cached per log and channel."""
     if lg.is_summary:
-        return ""
+        return None
     with _CHECKS_LOCK:
         done = _CHECKS.setdefault(lg, {})
         if channel in done:
             return done[channel]
     q = qualify_log(lg, [channel])
-    line = q.line() if q.findings or q.dropped else ""
     with _CHECKS_LOCK:
-        done[channel] = line
-    return line
+        done[channel] = q
+    return q
+
+
+def log_check_line(lg: ImuLog, channel: str) -> str:
+    """What the log check (:func:`engine.io.qualify_log`) found in one channel, in one line;
+    ``""`` for a clean channel or a WV summary (no samples). Cached per log and channel."""
+    q = _log_check(lg, channel)
+    return q.line() if q is not None and (q.findings or q.dropped) else ""
+
+
+def warmup_start(lg: ImuLog, channel: str) -> int:
+    """The first sample after the warm-up the log check found in one channel (of the mean or
+    of the bias wander, its triad judged together: :attr:`Qualification.suggested_start`);
+    0 without one."""
+    q = _log_check(lg, channel)
+    return q.suggested_start if q is not None else 0
 
 
 #: The temperature fit per log, channel and whether it is forced (``always``), or why there

@@ -156,6 +156,10 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
         raise ValueError(f"{name}: {e}; edit 'compensate' in the file or remove it") from None
     segment = sess.load.get("segment")
     segment = segment if isinstance(segment, str) else None
+    drop = sess.load.get("drop_warmup")  # samples dropped as a warm-up ("Drop the warm-up")
+    drop = drop if isinstance(drop, int) and not isinstance(drop, bool) and drop > 0 else 0
+    segs = sess.load.get("segments")  # a flight's still segments ("auto" or START:STOP,...)
+    segs = segs if isinstance(segs, str) else None
     plan = RestorePlan(sess, None)
     fname = app.get("filename") or Path(sess.data_path).name
     if source == "upload":
@@ -167,7 +171,7 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
     if source == "scenario":  # a teaching scenario: deterministic, simulated again
         key = str(app.get("scenario") or sess.data_path.removeprefix("scenario:"))
         try:
-            loaded = AppState.read("scenario", path=key)
+            loaded = AppState.read("scenario", path=key, drop_warmup=drop)
         except ValueError as e:
             plan.problems.append(
                 f"the session's teaching scenario {key!r} could not be simulated: {e}"
@@ -197,9 +201,11 @@ def prepare_restore(text: str | bytes, name: str = "<upload>") -> RestorePlan:
                 f"{why} since the session was saved: the model was fitted again on the current data"
             )
         if source == "demo" and Path(path).resolve() == demo_path().resolve():
-            loaded = AppState.read("demo", segment=segment)
+            loaded = AppState.read("demo", segment=segment, drop_warmup=drop, segments=segs)
         else:
-            loaded = AppState.read("path", path=path, segment=segment)
+            loaded = AppState.read(
+                "path", path=path, segment=segment, drop_warmup=drop, segments=segs
+            )
     except ValueError as e:
         plan.problems.append(f"the session's data file could not be read: {e}")
         return plan
@@ -704,6 +710,11 @@ class SessionPanel(pn.viewable.Viewer):
             self.restore_input.value = None  # the same file can be restored again
 
         self.jobs.load(f"Restoring the session {name}", partial(prepare_restore, data, name), apply)
+
+    @property
+    def load_options(self) -> dict[str, Any]:
+        """The ``load_log`` options the data shown were read with (a copy)."""
+        return dict(self._load)
 
     def loaded(self, loaded: LoadedData) -> None:
         """Remember the load options of newly installed data (for the session file)."""

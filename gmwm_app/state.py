@@ -39,6 +39,7 @@ import param
 import engine as eg
 from engine.inference.temperature import find_temperature
 from engine.io import ImuLog
+from engine.io import drop_warmup as drop_warmup_of
 from gmwm_app.boundary import EXPECTED
 from gmwm_app.data import (
     COMPENSATION,
@@ -57,6 +58,7 @@ from gmwm_app.data import (
     temperature_line,
     temperature_unusable,
     unit_of,
+    warmup_start,
     wv_matrix_of,
 )
 from gmwm_app.fit_export import ExportMixin
@@ -230,6 +232,12 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         default="",
         doc="What the log check (engine.io.qualify_log) found in the channel shown, one line; "
         "empty for a clean log or a WV summary.",
+    )
+    warmup_start = param.Integer(
+        default=0,
+        bounds=(0, None),
+        doc="The first sample after the warm-up the log check found in the channel shown (of "
+        "the mean or of the bias wander), 0 without one: what 'Drop the warm-up' keeps from.",
     )
     temperature = param.String(
         default="",
@@ -436,6 +444,30 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
             raise
         self.precompute(loaded, self.channel, None, self.robust, self.compensate)
         return loaded
+
+    def without_warmup(self, load: dict[str, Any] | None = None) -> LoadedData:
+        """The data shown without the warm-up the log check found (:attr:`warmup_start`
+        samples dropped, :func:`engine.io.drop_warmup`), with the WV the session will show
+        computed (worker-thread safe, no state change; :meth:`install` makes it the session's).
+
+        ``load``: the options the data shown were read with; the result's ``load`` adds the
+        samples dropped (in all), so that a saved session reads the same samples again.
+
+        Raises
+        ------
+        ValueError
+            No data, or no warm-up found in the channel shown.
+        """
+        with self._lock:
+            lg = self._log
+        start = self.warmup_start
+        if lg is None or lg.is_summary or start <= 0:
+            raise ValueError("the log check found no warm-up to drop in the channel shown")
+        out = LoadedData(drop_warmup_of(lg, start), self.source, self.filename, self.path)
+        out.load = {**(load or {})}
+        out.load["drop_warmup"] = int(out.load.get("drop_warmup", 0)) + start
+        self.precompute(out, self.channel, None, self.robust, self.compensate)
+        return out
 
     def warm(
         self,
@@ -647,6 +679,7 @@ class AppState(QueryMixin, WhatIfMixin, SelectionMixin, ExportMixin, param.Param
         return {
             **info,
             "log_check": log_check_line(lg, ch),
+            "warmup_start": warmup_start(lg, ch),
             "temperature": temperature_line(lg, ch, compensate),
             "temperature_channel": tname or "",
             "compensation_unavailable": temperature_unusable(lg, ch),

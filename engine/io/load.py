@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import operator
 import os
 import struct
 import tempfile
@@ -40,6 +41,7 @@ from .dataflash import DATAFLASH_MAGIC, is_dataflash_text, read_dataflash
 from .hdf5 import H5_EXT, read_h5
 from .log import ImuLog, LoadError, pick_channel
 from .npy import read_npy, read_npz
+from .qualify import drop_warmup as drop_warmup_of
 from .segments import with_segments
 from .text import read_text
 from .ulog import ULOG_MAGIC, read_ulog
@@ -69,6 +71,7 @@ def load_log(
     units: str | Mapping[str, str] | None = None,
     topic: str | None = None,
     segments: str | Sequence[tuple[int, int]] | None = None,
+    drop_warmup: int = 0,
 ) -> ImuLog:
     """Load a static IMU log (or a wavelet-variance summary file).
 
@@ -119,6 +122,10 @@ def load_log(
         Analyse only these sample ranges of a flight log (``"auto"``: its still segments,
         :func:`engine.io.segments.still_segments`, found on every channel before ``channel``
         selects one): the log's :meth:`~ImuLog.wavelet_variance` pools their WVs.
+    drop_warmup : int, optional
+        Samples dropped from the start as a warm-up, after ``segment`` and ``segments``
+        (:func:`engine.io.qualify.drop_warmup`; the log check's
+        :attr:`~engine.io.qualify.Qualification.suggested_start`); 0 keeps every sample.
 
     Returns
     -------
@@ -142,6 +149,30 @@ def load_log(
     >>> log.fs, log.n, list(log.channels)[:3]
     (100.0, 200000, ['gyro_x', 'gyro_y', 'gyro_z'])
     """
+    if drop_warmup:
+        try:
+            start = -1 if isinstance(drop_warmup, bool) else operator.index(drop_warmup)
+        except TypeError:
+            start = -1
+        if start < 0:
+            raise LoadError(
+                f"drop_warmup must be a number of samples (0 or more), got {drop_warmup!r}"
+            )
+        whole = load_log(
+            path,
+            name=name,
+            channel=channel,
+            fs=fs,
+            segment=segment,
+            scale=scale,
+            units=units,
+            topic=topic,
+            segments=segments,
+        )
+        try:
+            return drop_warmup_of(whole, start)
+        except ValueError as e:
+            raise LoadError(f"'{whole.source}': drop_warmup: {e}") from None
     if segments is not None:
         whole = load_log(
             path, name=name, fs=fs, segment=segment, scale=scale, units=units, topic=topic

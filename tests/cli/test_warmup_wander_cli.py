@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
+from loadlogs import write_wander_triad
 
-import engine as eg
 from engine.cli import main
 
 FS = 100.0
@@ -16,15 +15,8 @@ N = 200_000
 
 def test_fit_reports_the_wander_and_drop_warmup_cuts_it(tmp_path, capsys):
     # three axes whose RW innovation variance is 8 times larger in the first 300 s of 2000 s
-    rng = np.random.default_rng(3)
-    g = np.full(N, 1e-8)
-    g[: int(300 * FS)] *= 8.0
-    chans = {
-        f"gyro_{a}": rng.normal(scale=0.1, size=N) + np.cumsum(rng.normal(size=N) * np.sqrt(g))
-        for a in "xyz"
-    }
     path = tmp_path / "wander.h5"
-    eg.io.save_log(path, chans, FS, units=dict.fromkeys(chans, "deg/s"))
+    write_wander_triad(path, N, FS)
     args = ["fit", str(path), "--channel", "gyro_y", "--model", "WN+RW", "--json"]
     assert main(args) == 0
     out, err = capsys.readouterr()

@@ -125,3 +125,29 @@ def test_adis_gyros_warm_up_wander(real_data):
     assert 0.01 <= ps[1] <= 0.1 and ps[6] > 0.5, ps
     mtig = eg.load_log(real_data / "mtig_cont_imu1.h5")
     assert not qualify_log(mtig).of_kind("wander")
+
+
+def test_load_log_drops_a_warm_up_and_a_session_reads_the_same_samples_again(tmp_path):
+    """``load_log(drop_warmup=k)`` is the log without its first k samples (the log check's
+    suggested start, as ``--drop-warmup`` and the app's offer cut it), and a session that
+    records it reads the same samples again."""
+    from engine import session as sessions
+    from engine.io.qualify import drop_warmup
+
+    demo = eg.demo_path()
+    whole = eg.load_log(demo)
+    cut = eg.load_log(demo, drop_warmup=12_345)
+    ref = drop_warmup(whole, 12_345)
+    assert cut.n == whole.n - 12_345 and cut.meta["dropped_warmup"] == 12_345
+    for name in whole.channels:
+        np.testing.assert_array_equal(cut.channels[name], ref.channels[name])
+        np.testing.assert_array_equal(cut.channels[name], whole.channels[name][12_345:])
+    one = eg.load_log(demo, channel="gyro_y", drop_warmup=100)  # with the other options
+    np.testing.assert_array_equal(one.channels["gyro_y"], whole.channels["gyro_y"][100:])
+    for bad in (-1, 1.5, True, "100"):
+        with pytest.raises(eg.LoadError, match="drop_warmup must be a number of samples"):
+            eg.load_log(demo, drop_warmup=bad)
+    with pytest.raises(eg.LoadError, match="drop_warmup"):
+        eg.load_log(demo, drop_warmup=whole.n)
+    path = sessions.save_session(tmp_path / "s.json", data_path=demo, load={"drop_warmup": 12_345})
+    assert sessions.load_session(path).reload_log().n == whole.n - 12_345
