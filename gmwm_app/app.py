@@ -333,6 +333,9 @@ class GMWMApp(pn.viewable.Viewer):
         self.plot_pane = pn.pane.Bokeh(
             self.views.figure, sizing_mode="stretch_width", margin=(5, 10)
         )
+        self.resid_pane = pn.pane.Bokeh(
+            self.views.residual, sizing_mode="stretch_width", margin=(0, 10)
+        )
         self.summary = pn.pane.Markdown(
             self._summary_text, sizing_mode="stretch_width", margin=(0, 10)
         )
@@ -405,8 +408,7 @@ class GMWMApp(pn.viewable.Viewer):
         )
         # visibility and loading are set on layouts, not on the Bokeh panes (Panel 1.9.4
         # fails on Layoutable changes of a Bokeh pane: "Bokeh.stylesheets items must be str")
-        # the residual strip is built the first time a model is drawn (_draw_plot)
-        self.resid_box = pn.Column(sizing_mode="stretch_width", margin=0, visible=False)
+        self.resid_box = pn.Column(self.resid_pane, sizing_mode="stretch_width", margin=0)
         self.segments = SegmentsStrip()  # a flight analysed on its still segments
         self.plot_box = pn.Column(
             self.plot_pane, self.resid_box, self.segments.box, sizing_mode="stretch_width", margin=0
@@ -531,11 +533,7 @@ class GMWMApp(pn.viewable.Viewer):
         t0 = time.perf_counter()
         s = self.state
         self.views.update(s)
-        shown = s.display_model() is not None
-        if shown and not self.resid_box.objects:
-            strip = pn.pane.Bokeh(self.views.residual, sizing_mode="stretch_width", margin=(0, 10))
-            self.resid_box.append(strip)
-        self.resid_box.visible = shown
+        self.resid_box.visible = s.display_model() is not None
         self.last_refresh_s = time.perf_counter() - t0
 
     @_on_state("wv", "filename")

@@ -1,8 +1,7 @@
 """The model builder and the what-if sliders of the sidebar (one per session).
 
-One add button per process, a text spec, the list of the model's processes (rows from a pool
-that grows to the largest model shown, each with a remove button: a remove, or an add within
-that size, creates no new Bokeh model), and
+One add button per process, a text spec, the list of the model's processes (rows from a
+fixed pool, each with a remove button: an add or a remove creates no new Bokeh model), and
 the what-if sliders generated from the parameters (:meth:`AppState.slider_specs`), also
 from a pool.
 
@@ -29,9 +28,9 @@ from gmwm_app.wv_figures import N_INITIAL_COMPONENTS
 
 __all__ = ["ModelPanel", "N_POOL"]
 
-#: Process rows created up front, as many as the component curves the page starts with (none:
-#: a page opens with an empty model); a row is added when a model first needs it and kept
-#: for later models (8 Bokeh models each).
+#: Process rows created up front, as many as the component curves the page starts with
+#: (more are added if a model grows beyond: 4 Bokeh models each, a page opens faster with
+#: fewer).
 N_POOL = N_INITIAL_COMPONENTS
 
 
@@ -117,8 +116,19 @@ class ModelPanel(pn.viewable.Viewer):
         self._phi_format = CustomJSTickFormatter(
             code="return (1 - Math.pow(10, tick)).toPrecision(6)"
         )
-        # "Back to the fit" and "Fit from here": built the first time what-if is on
-        self.whatif_buttons = pn.Row(visible=False)
+        self.reset_button = pn.widgets.Button(
+            label="Back to the fit", color="light", width=130, margin=(3, 3)
+        )
+        self.reset_button.on_click(lambda _e: self._reset_whatif())
+        self.fit_button = pn.widgets.Button(
+            label="Fit from here",
+            color="primary",
+            width=130,
+            margin=(3, 3),
+            description="Refit using the slider values as a starting point",
+        )
+        self.fit_button.on_click(lambda _e: self._fit_from_whatif())
+        self.whatif_buttons = pn.Row(self.reset_button, self.fit_button, visible=False)
 
     def sidebar(self) -> list[Any]:
         """The sidebar's "Model" and "What if" sections."""
@@ -161,8 +171,7 @@ class ModelPanel(pn.viewable.Viewer):
     @param.depends("state.model", watch=True)
     @redraws("the process list")
     def _refresh_process_list(self) -> None:
-        """One row per process from a pool that grows to the largest model shown (no new Bokeh
-        models on a remove, nor on an add within that size)."""
+        """One row per process from a fixed pool (no new Bokeh models on add/remove)."""
         s = self.state
         key = tuple(s.model.labels)
         if key == self._proc_key:
@@ -217,8 +226,6 @@ class ModelPanel(pn.viewable.Viewer):
         """What-if sliders from the parameter specs, from a pool of slider widgets."""
         s = self.state
         on = bool(s.whatif and len(s.model))
-        if on and not self.whatif_buttons.objects:
-            self.whatif_buttons.extend(self._whatif_buttons())
         self.sliders.visible = on
         self.whatif_buttons.visible = on
         if not on:
@@ -265,19 +272,6 @@ class ModelPanel(pn.viewable.Viewer):
                 )
             elif w.visible:
                 w.visible = False
-
-    def _whatif_buttons(self) -> list[pn.widgets.Button]:
-        reset = pn.widgets.Button(label="Back to the fit", color="light", width=130, margin=(3, 3))
-        reset.on_click(lambda _e: self._reset_whatif())
-        fit = pn.widgets.Button(
-            label="Fit from here",
-            color="primary",
-            width=130,
-            margin=(3, 3),
-            description="Refit using the slider values as a starting point",
-        )
-        fit.on_click(lambda _e: self._fit_from_whatif())
-        return [reset, fit]
 
     def _add(self, code: str, _event: Any = None) -> None:
         self.state.add_process(code)

@@ -43,10 +43,9 @@ __all__ = ["WVFigures", "N_COMPONENTS", "N_INITIAL_COMPONENTS"]
 
 #: Size of the pool of component renderers (a model with more processes draws the first ones).
 N_COMPONENTS = 12
-#: Component renderers built with the page: none, since a page opens with an empty model (the
-#: demo's first view draws no model curve); the pool grows up to :data:`N_COMPONENTS` as a
-#: model needs them (8 Bokeh models each, 48 on every page when it started at 6).
-N_INITIAL_COMPONENTS = 0
+#: Component renderers built with the page; the pool grows up to :data:`N_COMPONENTS` when a
+#: model has more processes (8 models each: a page opens faster with fewer).
+N_INITIAL_COMPONENTS = 6
 
 
 def _positive(a: np.ndarray) -> np.ndarray:
@@ -68,8 +67,7 @@ class WVFigures:
     Attributes
     ----------
     figure, residual : bokeh.plotting.figure
-        Main log-log plot and the residual strip below it (they share the x range; the strip
-        is built on first use).
+        Main log-log plot and the residual strip below it (they share the x range).
     emp, alt, total, resid : ColumnDataSource
         Empirical WV (robust one when robust is on), classical WV (robust mode only), model
         total on a fine grid, residual ratio.
@@ -205,18 +203,7 @@ class WVFigures:
         p.add_tools(self.emp_hover, self.model_hover)
         self.figure = p
         self.save_tool = p.select_one(SaveTool)
-        self._residual: Any = None
 
-    @property
-    def residual(self) -> Any:
-        """The residual strip, built on first use: a page opens with no model to compare the
-        WV with, so its first view has no strip (59 Bokeh models)."""
-        if self._residual is None:
-            self._residual = self._residual_figure()
-        return self._residual
-
-    def _residual_figure(self) -> Any:
-        p = self.figure
         r = log_figure(
             "residual_plot",
             "Residuals: empirical / model, with the 95% interval",
@@ -276,7 +263,7 @@ class WVFigures:
                 },
             )
         )
-        return r
+        self.residual = r
 
     # ------------------------------------------------------------------------------------
     @staticmethod

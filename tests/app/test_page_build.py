@@ -24,7 +24,6 @@ import numpy as np
 import pytest
 from bokeh.document import Document
 from bokeh.document.models import DocumentModelManager
-from bokeh.models import GlyphRenderer
 
 import engine as eg
 from gmwm_app import _panel_compat as compat
@@ -34,13 +33,11 @@ from gmwm_app.model_panel import N_POOL
 from gmwm_app.state import AppState
 from gmwm_app.wv_figures import N_COMPONENTS, N_INITIAL_COMPONENTS
 
-#: Bokeh models of a page's initial document: 240 measured (Panel 1.9.4, Bokeh 3.9.2, the
+#: Bokeh models of a page's initial document: 342 measured (Panel 1.9.4, Bokeh 3.9.2, the
 #: Fit tab and the sidebar; the other tabs are placeholders until shown). It was 434 before
 #: the Fit tab's glyphs lost their unused selected/muted copies and the component pool
-#: started at 6 renderers instead of 12, and 355 before the component curves, the process
-#: rows, the residual strip and the what-if buttons were built only when first shown (the
-#: page opens with an empty model and what-if off).
-MAX_PAGE_MODELS = 250
+#: started at 6 renderers instead of 12.
+MAX_PAGE_MODELS = 360
 
 
 @pytest.fixture
@@ -86,42 +83,6 @@ def test_page_built_with_one_walk_and_bounded(app_demo: Path, counted: dict) -> 
     app.open_view("Slope method")
     assert set(app.lazy_views) == {"Slope method"}
     assert len(list(doc.models)) > sizes[1]
-
-
-def test_first_view_builds_no_model_curve_or_process_row(app_demo: Path, counted: dict) -> None:
-    # the page opens with the demo and an empty model: its first view draws no component
-    # curve, no residual strip and lists no process, so none of their Bokeh models is built;
-    # the first add builds one curve, one row and the strip, a remove hides them, the next
-    # add shows them again
-    doc, app = _build_page()
-    assert doc.get_model_by_name("wv_plot") is not None
-    assert doc.get_model_by_name("residual_plot") is None and not app.resid_box.visible
-    v, panel = app.views, app.model_panel
-    assert len(app.state.model) == 0 and app.state.wv is not None
-    assert v.comps == v.comp_renderers == v.comp_items == []
-    curves = [
-        r.data_source.name
-        for r in doc.models
-        if isinstance(r, GlyphRenderer) and (r.data_source.name or "").startswith("component")
-    ]
-    assert curves == []
-    assert panel.process_list.objects == [panel.empty_model_note]
-    assert panel.whatif_buttons.objects == []  # built the first time what-if is on
-    n0 = len(list(doc.models))
-    assert app.state.add_process("WN"), app.state.error
-    assert len(v.comp_renderers) == 1 and v.comp_renderers[0].visible
-    assert len(panel.process_list.objects) == 2 and panel.process_list.objects[1].visible
-    assert doc.get_model_by_name("residual_plot") is v.residual and app.resid_box.visible
-    n1 = len(list(doc.models))
-    assert n1 > n0
-    assert app.state.remove_process(0)
-    assert not v.comp_renderers[0].visible and not panel.process_list.objects[1].visible
-    assert not app.resid_box.visible
-    assert app.state.add_process("RW")  # the kept curve and row, no new model
-    assert len(v.comp_renderers) == 1 and len(list(doc.models)) == n1
-    assert app.state.set_whatif(True)
-    labels = [b.label for b in panel.whatif_buttons.objects]
-    assert labels == ["Back to the fit", "Fit from here"] and panel.whatif_buttons.visible
 
 
 def test_process_rows_grow_past_the_initial_pool(app_demo: Path, counted: dict) -> None:

@@ -313,29 +313,14 @@ class Session:
             self.cpus.append(self.cpu())
 
     def _index(self, doc: Any) -> None:
-        """Ids of the watched models in the page's document (see :meth:`_scan`); the page
-        must have the empirical WV's source and the "+ GM" button."""
+        """Ids of the watched models: data sources by name, the "+ GM" and remove buttons."""
+        removes = []
         self.n_models = sum(1 for _ in _walk(doc))
-        self._scan(doc)
-        missing = {"empirical", "add_gm"} - set(self.ids)
-        if missing:
-            raise RuntimeError(f"models not found in the document: {sorted(missing)}")
-
-    def _scan(self, obj: Any) -> None:
-        """Ids of the watched models among those serialised in ``obj`` (the document, or a
-        change that adds models: the component curves and the process rows are built when a
-        model first needs them): data sources by name, the "+ GM" and remove buttons."""
-        removes = [self.ids["remove_first"]] if "remove_first" in self.ids else []
-        for o in _walk(obj):
+        for o in _walk(doc):
             attrs = _entries(o.get("attributes", {}))
             name, label = attrs.get("name"), attrs.get("label")
             if o.get("name") == "ColumnDataSource" and name in ("empirical", "component_0"):
                 self.ids[name] = o["id"]
-                labels = _entries(attrs.get("data")).get("label")
-                if name == "component_0" and self._events is not None and labels:
-                    # a curve built by the change arrives with its data
-                    first = labels[0] if isinstance(labels, list) else None
-                    self._events.put_nowait(("component_0", first))
             button = str(o.get("name", "")).endswith("Button")  # Panel's or Bokeh's
             if button and label == "+ GM":
                 self.ids["add_gm"] = o["id"]
@@ -343,6 +328,9 @@ class Session:
                 removes.append(o["id"])
         if removes:  # the first process row's remove button (document order)
             self.ids["remove_first"] = min(removes, key=lambda i: int(re.sub(r"\D", "", i) or 0))
+        missing = {"empirical", "component_0", "add_gm"} - set(self.ids)
+        if missing:
+            raise RuntimeError(f"models not found in the document: {sorted(missing)}")
 
     async def _next_message(self) -> Any:
         while True:
@@ -382,7 +370,6 @@ class Session:
                 msg = await self._next_message()
                 if msg.msgtype != "PATCH-DOC":
                     continue
-                self._scan(msg.content)  # models added by the change
                 for ev in msg.content.get("events", []):
                     self._observe(ev)
         except Exception as e:
@@ -540,12 +527,7 @@ async def measure_clicks(
         await _single(srv.url, timeout)  # warm-up
         probe = Session(srv.url + "?channel=gyro_x&model=WN%2BRW")
         await probe.open(timeout)
-        deadline = time.perf_counter() + timeout  # its model's curves and rows, then built
-        while not probe.error and not {"component_0", "remove_first"} <= set(probe.ids):
-            if time.perf_counter() > deadline:
-                break
-            await asyncio.sleep(0.1)
-        if probe.error or not {"component_0", "remove_first"} <= set(probe.ids):
+        if probe.error or "remove_first" not in probe.ids:
             raise RuntimeError(f"the clicking session did not open: {probe.error or 'no remove'}")
         await asyncio.sleep(0.5)
         idle = await _clicks(probe, clicks, timeout, None)
